@@ -1,0 +1,6 @@
+"""gnssacc: INS/GNSS state estimation with GNSS-derived acceleration aiding.
+
+Implements the error-state EKF of Versano & Klein, "Enhanced INS/GNSS State Estimation using
+GNSS-Based Acceleration Measurements", with recorded-run ingestion, metrics and reports.
+"""
+__version__ = "0.1.0"

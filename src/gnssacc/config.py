@@ -1,0 +1,297 @@
+"""Run configuration: one TOML file, documented defaults, named presets.
+
+Precedence: built-in defaults < preset (``--preset NAME``) < user file (``--config FILE``).
+Every key is in physical units named in the key itself (``_deg_rth`` = deg/sqrt(h),
+``_mps_rth`` = m/s/sqrt(h), ``_deg_h`` = deg/h, ``_mg`` = milli-g); internally everything is SI.
+Vector keys take a scalar (same for all axes) or a list of three numbers (x, y, z of the IMU /
+body frame, or N, E, D for navigation-frame quantities).
+
+An example with every key at its default is printed by ``gnssacc config --show`` and listed in
+the README.
+"""
+from __future__ import annotations
+
+import copy
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .rotations import euler_to_dcm
+
+G0 = 9.80665  # standard gravity, for milli-g [m/s^2]
+DEG = np.pi / 180.0
+
+#: Built-in defaults. Comments double as the documentation of each key.
+DEFAULTS: dict[str, dict] = {
+    "imu": {
+        # Angle random walk of each gyro [deg/sqrt(h)] (white rate noise).
+        "gyro_arw_deg_rth": 0.3,
+        # Velocity random walk of each accelerometer [m/s/sqrt(h)] (white specific-force noise).
+        "accel_vrw_mps_rth": 0.1,
+        # Bias instability [deg/h] and [mg]; with bias_correlation_time_s they set the bias
+        # random-walk density q = 2 sigma^2 / tau of the filter's random-walk bias states.
+        "gyro_bias_instability_deg_h": 10.0,
+        "accel_bias_instability_mg": 0.5,
+        "bias_correlation_time_s": 300.0,
+        # 1-sigma of the biases at start-up (turn-on bias) [deg/h] and [mg].
+        "gyro_bias_sigma0_deg_h": 100.0,
+        "accel_bias_sigma0_mg": 20.0,
+    },
+    "mounting": {
+        # Rotation from IMU axes to body (FRD) axes as roll, pitch, yaw [deg]:
+        # f_body = R(roll, pitch, yaw) @ f_imu. An upside-down IMU is [180, 0, 0].
+        "imu_to_body_rpy_deg": [0.0, 0.0, 0.0],
+        # Added to every IMU time stamp to put it on the GNSS clock [s]. A logger that stamps IMU
+        # samples 0.1 s late needs -0.1.
+        "imu_time_offset_s": 0.0,
+    },
+    "gnss": {
+        # Antenna position relative to the IMU, body frame FRD [m].
+        "lever_arm_b_m": [0.0, 0.0, 0.0],
+        # 1-sigma N, E, D [m] for fixes that carry no uncertainty of their own.
+        "default_sigma_m": [3.0, 3.0, 5.0],
+    },
+    "accel": {
+        # Number m of fixes in the least-squares acceleration window (>= 3).
+        "window": 3,
+        # The window is reset when two consecutive fixes are further apart than this [s].
+        "max_gap_s": 2.5,
+        # Fixed 1-sigma N, E, D [m/s^2] for the GNSS-derived acceleration. Empty: propagate the
+        # fix covariances through B (the default), Sigma_a = sum_j B_j^2 Sigma_p_j.
+        "sigma_mps2": [],
+        # Average the specific force over this many seconds before the epoch (0 = the paper's
+        # choice: the sample at the epoch).
+        "specific_force_avg_s": 0.0,
+    },
+    "init": {
+        # Self-initialisation (used when the source gives no initial state).
+        # A start is static when the gyro norm stays below this [deg/s] ...
+        "static_gyro_max_dps": 2.0,
+        # ... and the specific-force norm's std below this [m/s^2] ...
+        "static_accel_std_max_mps2": 0.1,
+        # ... for at least this long [s].
+        "static_min_s": 2.0,
+        # Yaw is taken from the GNSS course once the fitted speed exceeds this [m/s] ...
+        "course_min_speed_mps": 1.0,
+        # ... using a straight-line fit over this many seconds of fixes.
+        "course_fit_s": 4.0,
+        # Floors on the self-initialised sigmas (roll/pitch, yaw [deg], velocity [m/s]).
+        "roll_pitch_sigma_min_deg": 1.0,
+        "yaw_sigma_min_deg": 3.0,
+        "vel_sigma_min_mps": 0.3,
+    },
+    "ekf": {
+        # Order of the transition-matrix series Phi = I + F dt (+ (F dt)^2 / 2 for 2).
+        "phi_order": 1,
+        # Reject a position fix whose normalised innovation squared exceeds this (0 = never).
+        "position_gate_nis": 0.0,
+    },
+    "quality": {
+        # Flag straight-line (interpolated) IMU stretches lasting at least this long [s].
+        "interp_min_s": 0.2,
+        # ... where every channel's second difference stays below this (absolute, SI units).
+        "interp_tol": 1e-6,
+        # A gap is an IMU interval longer than this many median intervals.
+        "gap_factor": 3.0,
+        # Frozen or saturated channels must last this many samples to be flagged.
+        "stuck_min_samples": 5,
+        # Over flagged spans the estimators add process noise as if the rate / specific force
+        # were wrong by this 1-sigma for the whole span [deg/s], [m/s^2].
+        "suspect_gyro_sigma_dps": 20.0,
+        "suspect_accel_sigma_mps2": 2.0,
+    },
+    "data": {
+        # Largest fraction of NaN/inf rows a table may have before it is an error (0..1).
+        "max_bad_fraction": 0.01,
+    },
+}
+
+PRESETS = ("kitti",)
+
+
+def _vec3(value, key: str, where: str) -> np.ndarray:
+    arr = np.atleast_1d(np.asarray(value, float))
+    if arr.size == 1:
+        arr = np.repeat(arr, 3)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise InputError(where, f"{key} must be a number or a list of three numbers, got {value!r}")
+    return arr
+
+
+def _merge(base: dict, update: dict, where: str) -> None:
+    for section, values in update.items():
+        if section not in base or not isinstance(values, dict):
+            raise InputError(where, f"unknown config section [{section}] (known: {', '.join(base)})")
+        for key, value in values.items():
+            if key not in base[section]:
+                raise InputError(where, f"unknown config key [{section}] {key} "
+                                        f"(known: {', '.join(base[section])})")
+            base[section][key] = value
+
+
+def _read_toml(path: Path, where: str) -> dict:
+    try:
+        return tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise InputError(where, "config file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(where, f"not valid TOML: {exc}") from None
+
+
+@dataclass
+class RunConfig:
+    """A fully resolved configuration (raw values plus SI-unit accessors).
+
+    Attributes
+    ----------
+    values : dict
+        Section -> key -> value, as in the TOML files.
+    sources : list of str
+        Where the values came from, in order of precedence.
+    """
+
+    values: dict
+    sources: list
+
+    def __getitem__(self, section: str) -> dict:
+        return self.values[section]
+
+    # --- IMU noise in SI units -------------------------------------------------------------
+    @property
+    def gyro_psd(self) -> np.ndarray:
+        """White gyro noise PSD per axis [rad^2/s]."""
+        return (_vec3(self["imu"]["gyro_arw_deg_rth"], "gyro_arw_deg_rth", "config") * DEG / 60.0) ** 2
+
+    @property
+    def accel_psd(self) -> np.ndarray:
+        """White accelerometer noise PSD per axis [(m/s^2)^2/s]."""
+        return (_vec3(self["imu"]["accel_vrw_mps_rth"], "accel_vrw_mps_rth", "config") / 60.0) ** 2
+
+    @property
+    def gyro_bias_rw_psd(self) -> np.ndarray:
+        """Gyro bias random-walk PSD per axis [(rad/s)^2/s]."""
+        s = _vec3(self["imu"]["gyro_bias_instability_deg_h"], "gyro_bias_instability_deg_h", "config")
+        return 2.0 * (s * DEG / 3600.0) ** 2 / float(self["imu"]["bias_correlation_time_s"])
+
+    @property
+    def accel_bias_rw_psd(self) -> np.ndarray:
+        """Accelerometer bias random-walk PSD per axis [(m/s^2)^2/s]."""
+        s = _vec3(self["imu"]["accel_bias_instability_mg"], "accel_bias_instability_mg", "config")
+        return 2.0 * (s * 1e-3 * G0) ** 2 / float(self["imu"]["bias_correlation_time_s"])
+
+    @property
+    def gyro_bias_sigma0(self) -> np.ndarray:
+        """Initial gyro bias 1-sigma per axis [rad/s]."""
+        return _vec3(self["imu"]["gyro_bias_sigma0_deg_h"], "gyro_bias_sigma0_deg_h", "config") * DEG / 3600.0
+
+    @property
+    def accel_bias_sigma0(self) -> np.ndarray:
+        """Initial accelerometer bias 1-sigma per axis [m/s^2]."""
+        return _vec3(self["imu"]["accel_bias_sigma0_mg"], "accel_bias_sigma0_mg", "config") * 1e-3 * G0
+
+    # --- geometry ------------------------------------------------------------------------------
+    @property
+    def R_bi(self) -> np.ndarray:
+        """Rotation from IMU axes to body axes (``f_b = R_bi @ f_imu``)."""
+        rpy = _vec3(self["mounting"]["imu_to_body_rpy_deg"], "imu_to_body_rpy_deg", "config") * DEG
+        return euler_to_dcm(*rpy)
+
+    @property
+    def lever_arm_b(self) -> np.ndarray:
+        """GNSS antenna position relative to the IMU in the body frame [m]."""
+        return _vec3(self["gnss"]["lever_arm_b_m"], "lever_arm_b_m", "config")
+
+    @property
+    def accel_sigma_override(self) -> np.ndarray | None:
+        """Fixed acceleration-measurement 1-sigma N, E, D [m/s^2], or ``None`` to propagate."""
+        v = self["accel"]["sigma_mps2"]
+        if v is None or (isinstance(v, list) and len(v) == 0):
+            return None
+        return _vec3(v, "accel.sigma_mps2", "config")
+
+    def to_toml(self) -> str:
+        """The resolved configuration as TOML text (for ``gnssacc config --show`` and outputs)."""
+        lines = [f"# resolved from: {', '.join(self.sources)}"]
+        for section, values in self.values.items():
+            lines.append(f"\n[{section}]")
+            for key, value in values.items():
+                lines.append(f"{key} = {_toml_value(value)}")
+        return "\n".join(lines) + "\n"
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, str):
+        return '"' + value + '"'
+    return repr(value)
+
+
+def preset_path(name: str):
+    """Path-like of a packaged preset TOML file."""
+    if name not in PRESETS:
+        raise InputError(f"--preset {name}", f"unknown preset (known: {', '.join(PRESETS)})")
+    return resources.files("gnssacc") / "presets" / f"{name}.toml"
+
+
+def load_config(preset: str | None = None, path: str | Path | None = None,
+                overrides: dict | None = None) -> RunConfig:
+    """Resolve the run configuration.
+
+    Parameters
+    ----------
+    preset : str, optional
+        A packaged preset name (e.g. ``"kitti"``).
+    path : str or Path, optional
+        A user TOML file; its keys override the preset's.
+    overrides : dict, optional
+        Section -> key -> value applied last (used by tests and the API).
+
+    Returns
+    -------
+    RunConfig
+
+    Raises
+    ------
+    InputError
+        Unknown preset, missing or malformed file, unknown section or key.
+    """
+    values = copy.deepcopy(DEFAULTS)
+    sources = ["defaults"]
+    if preset:
+        ref = preset_path(preset)
+        _merge(values, tomllib.loads(ref.read_text()), f"preset {preset}")
+        sources.append(f"preset {preset}")
+    if path:
+        _merge(values, _read_toml(Path(path), str(path)), str(path))
+        sources.append(str(path))
+    if overrides:
+        _merge(values, overrides, "overrides")
+        sources.append("overrides")
+    cfg = RunConfig(values, sources)
+    _validate(cfg, sources[-1])
+    return cfg
+
+
+def _validate(cfg: RunConfig, where: str) -> None:
+    # Touch every derived quantity so malformed values fail now, naming the file.
+    for name in ("gyro_psd", "accel_psd", "gyro_bias_rw_psd", "accel_bias_rw_psd", "gyro_bias_sigma0",
+                 "accel_bias_sigma0", "R_bi", "lever_arm_b", "accel_sigma_override"):
+        try:
+            getattr(cfg, name)
+        except InputError as exc:
+            raise InputError(where, exc.problem) from None
+    if int(cfg["accel"]["window"]) < 3:
+        raise InputError(where, "[accel] window must be at least 3 fixes (a quadratic has three parameters)")
+    if float(cfg["imu"]["bias_correlation_time_s"]) <= 0:
+        raise InputError(where, "[imu] bias_correlation_time_s must be positive")
+    if int(cfg["ekf"]["phi_order"]) not in (1, 2):
+        raise InputError(where, "[ekf] phi_order must be 1 or 2")
+    if not 0.0 <= float(cfg["data"]["max_bad_fraction"]) <= 1.0:
+        raise InputError(where, "[data] max_bad_fraction must be between 0 and 1")

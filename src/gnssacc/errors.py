@@ -1,0 +1,30 @@
+"""Errors and warnings raised for bad input: one clear line naming the file and the problem."""
+from __future__ import annotations
+
+import warnings
+
+
+class InputError(Exception):
+    """Bad or unusable input data or configuration.
+
+    Parameters
+    ----------
+    where : str
+        The file (or source name) the problem is in.
+    problem : str
+        One line saying what is wrong and, where possible, how to fix it.
+    """
+
+    def __init__(self, where: str, problem: str):
+        self.where = str(where)
+        self.problem = problem
+        super().__init__(f"{self.where}: {problem}")
+
+
+class DataWarning(UserWarning):
+    """Something in the input was repaired or dropped; the message says what and how much."""
+
+
+def warn_data(where: str, problem: str) -> None:
+    """Emit a :class:`DataWarning` naming the file and the repair that was made."""
+    warnings.warn(f"{where}: {problem}", DataWarning, stacklevel=2)

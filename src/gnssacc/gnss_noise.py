@@ -1,0 +1,148 @@
+"""Synthetic GNSS fixes for sources with truth: seeded noise profiles and outages.
+
+Profiles (1-sigma, metres, N/E/D):
+
+``white``
+    iid Gaussian, 3 / 3 / 5.
+``gm``
+    first-order Gauss-Markov, tau = 60 s, 2.5 / 2.5 / 4, plus white 0.5 / 0.5 / 0.8.
+``none``
+    the truth itself (for tests).
+
+The sigma attached to each fix (what the estimators are told) is the profile's total
+stationary 1-sigma per axis.
+"""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from .errors import InputError
+from .run import GnssFixes, RecordedRun, Truth
+
+PROFILES = {
+    "white": {"gm_sigma": np.zeros(3), "tau_s": 60.0, "white_sigma": np.array([3.0, 3.0, 5.0])},
+    "gm": {"gm_sigma": np.array([2.5, 2.5, 4.0]), "tau_s": 60.0, "white_sigma": np.array([0.5, 0.5, 0.8])},
+    "none": {"gm_sigma": np.zeros(3), "tau_s": 60.0, "white_sigma": np.zeros(3)},
+}
+
+
+def noise_ned(t: np.ndarray, profile: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Draw a noise sequence for fix times ``t``.
+
+    Parameters
+    ----------
+    t : ndarray, shape (M,)
+        Fix times [s], increasing.
+    profile : {"white", "gm", "none"}
+    seed : int
+
+    Returns
+    -------
+    noise : ndarray, shape (M, 3)
+        NED position errors [m].
+    sigma : ndarray, shape (3,)
+        Total stationary 1-sigma per axis [m].
+    """
+    if profile not in PROFILES:
+        raise InputError("--noise", f"unknown noise profile {profile!r} (known: {', '.join(PROFILES)})")
+    p = PROFILES[profile]
+    rng = np.random.default_rng(seed)
+    white = rng.standard_normal((len(t), 3)) * p["white_sigma"]
+    gm = np.zeros((len(t), 3))
+    if np.any(p["gm_sigma"] > 0):
+        gm[0] = rng.standard_normal(3) * p["gm_sigma"]
+        decay = np.exp(-np.diff(t) / p["tau_s"])
+        drive = rng.standard_normal((len(t) - 1, 3))
+        for k in range(1, len(t)):
+            a = decay[k - 1]
+            gm[k] = a * gm[k - 1] + np.sqrt(1.0 - a * a) * p["gm_sigma"] * drive[k - 1]
+    sigma = np.sqrt(p["gm_sigma"] ** 2 + p["white_sigma"] ** 2)
+    return gm + white, sigma
+
+
+def fixes_from_truth(run: RecordedRun, truth: Truth, profile: str, seed: int,
+                     p_antenna_n: np.ndarray | None = None) -> GnssFixes:
+    """Make noisy fixes at the truth epochs.
+
+    Parameters
+    ----------
+    run : RecordedRun
+        Supplies the tangent-plane origin.
+    truth : Truth
+    profile : str
+        Noise profile name.
+    seed : int
+    p_antenna_n : ndarray, shape (K, 3), optional
+        NED offset from the truth point to the antenna [m] (``R_nb @ lever_arm_b``).
+    """
+    p_n = run.origin.to_ned(truth.lat, truth.lon, truth.h)
+    if p_antenna_n is not None:
+        p_n = p_n + p_antenna_n
+    noise, sigma = noise_ned(truth.t, profile, seed)
+    lat, lon, h = run.origin.to_llh(p_n + noise)
+    sig = np.tile(np.where(sigma > 0, sigma, 0.01), (len(truth.t), 1))
+    return GnssFixes(truth.t.copy(), lat, lon, h, sig)
+
+
+_SPAN = re.compile(r"^\s*([0-9.]+)\s*:\s*([0-9.]+)\s*$")
+
+
+def parse_outages(spec: str | None, every: str | None, duration_s: float) -> list[tuple[float, float]]:
+    """Outage windows in seconds from the run start.
+
+    Parameters
+    ----------
+    spec : str or None
+        ``"START:LEN[,START:LEN...]"``.
+    every : str or None
+        ``"PERIOD:LEN"``: a LEN-second outage at the end of every PERIOD-second block, i.e.
+        ``[k*PERIOD - LEN, k*PERIOD)`` for k = 1, 2, ..., so the first block starts with GNSS.
+    duration_s : float
+        Run duration [s].
+
+    Returns
+    -------
+    list of (start, end)
+    """
+    spans = []
+    for text, flag in ((spec, "--outage"), (every, "--outage-every")):
+        if not text:
+            continue
+        parts = text.split(",") if flag == "--outage" else [text]
+        for part in parts:
+            m = _SPAN.match(part)
+            if not m:
+                raise InputError(flag, f"cannot read {part!r}: expected START:LEN in seconds, e.g. 120:30")
+            a, b = float(m.group(1)), float(m.group(2))
+            if b <= 0:
+                raise InputError(flag, f"outage length must be positive in {part!r}")
+            if flag == "--outage":
+                spans.append((a, a + b))
+            else:
+                if b >= a:
+                    raise InputError(flag, f"outage length {b} s must be shorter than the period {a} s")
+                k = 1
+                while k * a - b < duration_s:
+                    spans.append((k * a - b, k * a))
+                    k += 1
+    return sorted(spans)
+
+
+def in_spans(t_rel: np.ndarray, spans: list[tuple[float, float]]) -> np.ndarray:
+    """Boolean mask of times (relative to the run start) inside any ``[start, end)`` span."""
+    mask = np.zeros(len(t_rel), bool)
+    for a, b in spans:
+        mask |= (t_rel >= a) & (t_rel < b)
+    return mask
+
+
+def apply_outages(run: RecordedRun, spans: list[tuple[float, float]]) -> RecordedRun:
+    """Drop the fixes inside the outage spans; record the spans in ``run.meta['outages']``."""
+    if not spans:
+        return run
+    keep = ~in_spans(run.gnss.t - run.t_start, spans)
+    if not np.any(keep):
+        raise InputError(run.where, "the outages remove every GNSS fix")
+    return run.with_gnss(run.gnss.select(keep), outages=[list(s) for s in spans])

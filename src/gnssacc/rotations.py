@@ -1,0 +1,87 @@
+"""Rotation helpers: skew matrices, rotation vectors, roll/pitch/yaw.
+
+Convention: ``R_nb`` maps body-frame vectors into the navigation frame, ``v_n = R_nb @ v_b``.
+Euler angles are roll, pitch, yaw [rad] in the aerospace Z-Y-X sequence:
+``R_nb = Rz(yaw) @ Ry(pitch) @ Rx(roll)``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def skew(v):
+    """Skew-symmetric matrix ``[v x]`` with ``skew(a) @ b == cross(a, b)``."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def rotvec_to_dcm(phi):
+    """Rotation matrix of a rotation vector [rad] (Rodrigues' formula, exact)."""
+    phi = np.asarray(phi, float)
+    angle = np.linalg.norm(phi)
+    K = skew(phi)
+    if angle < 1e-8:
+        return np.eye(3) + K + 0.5 * K @ K
+    return np.eye(3) + np.sin(angle) / angle * K + (1.0 - np.cos(angle)) / angle**2 * K @ K
+
+
+def dcm_to_rotvec(R):
+    """Rotation vector [rad] of a rotation matrix (inverse of :func:`rotvec_to_dcm`)."""
+    R = np.asarray(R, float)
+    c = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
+    angle = np.arccos(c)
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if angle < 1e-6:
+        return 0.5 * w
+    if np.pi - angle < 1e-6:
+        # Near pi the antisymmetric part vanishes: use the symmetric part instead.
+        axis = np.sqrt(np.maximum((np.diag(R) + 1.0) / 2.0, 0.0))
+        k = int(np.argmax(axis))
+        for j in range(3):
+            if j != k:
+                axis[j] = (R[k, j] + R[j, k]) / (4.0 * axis[k])
+        return angle * axis / np.linalg.norm(axis)
+    return angle / (2.0 * np.sin(angle)) * w
+
+
+def euler_to_dcm(roll, pitch, yaw):
+    """``R_nb`` from roll, pitch, yaw [rad] (Z-Y-X sequence)."""
+    cr, sr = np.cos(roll), np.sin(roll)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    return np.array([
+        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+        [-sp, cp * sr, cp * cr],
+    ])
+
+
+def dcm_to_euler(R_nb):
+    """Roll, pitch, yaw [rad] of ``R_nb``; works on one matrix or a stack ``(..., 3, 3)``."""
+    R_nb = np.asarray(R_nb, float)
+    roll = np.arctan2(R_nb[..., 2, 1], R_nb[..., 2, 2])
+    pitch = -np.arcsin(np.clip(R_nb[..., 2, 0], -1.0, 1.0))
+    yaw = np.arctan2(R_nb[..., 1, 0], R_nb[..., 0, 0])
+    return roll, pitch, yaw
+
+
+def euler_error_jacobian(roll, pitch, yaw):
+    """Map a navigation-frame attitude error to roll/pitch/yaw errors.
+
+    With the filter's convention ``R_nb_est = (I + [phi x]) R_nb_true`` the Euler-angle errors
+    are ``d_euler = J @ phi``, ``J = E^-1`` with ``E = [Rz Ry e_x, Rz e_y, e_z]`` (the matrix
+    that maps Z-Y-X Euler-angle rates to an angular rate resolved in n).
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+        Rows: roll, pitch, yaw errors [rad] per component of ``phi`` [rad].
+    """
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    E = np.array([[cy * cp, -sy, 0.0], [sy * cp, cy, 0.0], [-sp, 0.0, 1.0]])
+    return np.linalg.inv(E)
+
+
+def wrap_angle(a):
+    """Wrap angles [rad] into [-pi, pi)."""
+    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
