@@ -1,0 +1,197 @@
+r"""GNSS-derived acceleration (Versano & Klein, Sec. III) and its measurement Jacobian H_a.
+
+This is the one implementation of the least-squares acceleration and of the H_a blocks; the
+EKF update and the smoother's acceleration factor both call it.
+
+Least squares
+-------------
+For a window of ``m`` fixes at times ``t_j`` with ``dt_j = t_j - t_0`` the motion model
+``p(t_j) = p_0 + v_0 dt_j + a dt_j^2 / 2`` gives the design matrix ``A = [1, dt_j, dt_j^2/2]``
+(paper eq. A) and ``B = row_3[(A^T A)^{-1} A^T]`` (paper eq. acc); per axis ``a~ = B p``. For
+three uniformly spaced fixes ``B = [1, -2, 1] / dt^2``, the second difference.
+
+Noise: fixes are independent with diagonal NED covariances ``Sigma_j``, so
+``Sigma_a = sum_j B_j^2 Sigma_j`` (exact for independent fixes). Correlated (e.g. Gauss-Markov)
+GNSS errors largely cancel in ``B p`` (``sum_j B_j = 0``), so this propagated covariance is
+conservative for them; a fixed sigma can be configured instead.
+
+Measurement model and attitude-error convention
+-----------------------------------------------
+The EKF's error state is ``dx = [dp, dv, phi, b_a, b_g]`` = estimate minus truth, with the
+attitude error ``phi`` resolved in n and defined by ``R_nb_est = (I + [phi x]) R_nb_true``, and
+``b_a`` the residual accelerometer bias, ``f_est = f_true + b_a``. The innovation is predicted
+minus measured, ``dz = a_pred - a~`` (the paper's ``dz_a = R a^b - a~^n``), with
+``a_pred = R_nb_est f_est + g^n``. To first order
+
+    a_pred - a_true = -[(R_nb f) x] phi + R_nb b_a,
+
+so ``H_a = [0, 0, -[(R_nb f) x], R_nb, 0]`` and ``-[(R_nb f) x] = -R_nb [f x] R_nb^T``.
+
+The paper prints ``H_a = [0, 0, R_nb [f x], -R_nb, 0]``. That is exactly ``-1`` times ours once
+``phi`` is resolved in the body frame (``phi_b = R_nb^T phi``): the paper's form is the
+Jacobian of the measured-minus-predicted residual w.r.t. a body-frame estimate-minus-truth
+attitude error. Both give the same Kalman correction; :func:`paper_H_a_blocks` returns the
+printed form and the tests check the mapping.
+"""
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from .rotations import skew
+
+
+def design_matrix(t: np.ndarray) -> np.ndarray:
+    """Design matrix ``A`` (m x 3) for fix times ``t`` [s], referenced to ``t[0]``."""
+    dt = np.asarray(t, float) - float(t[0])
+    return np.column_stack([np.ones_like(dt), dt, 0.5 * dt * dt])
+
+
+def acceleration_row(t: np.ndarray) -> np.ndarray:
+    """Row ``B`` (m,) such that the least-squares acceleration is ``B @ p`` [1/s^2].
+
+    Parameters
+    ----------
+    t : ndarray, shape (m,)
+        Fix times [s], m >= 3, not all equal; need not be uniform.
+    """
+    A = design_matrix(t)
+    # Scale time to O(1) before solving so (A^T A) is well conditioned for any window length.
+    scale = max(float(t[-1] - t[0]), 1e-9)
+    A_s = A * np.array([1.0, 1.0 / scale, 1.0 / scale**2])
+    pinv_s = np.linalg.solve(A_s.T @ A_s, A_s.T)
+    return pinv_s[2] / scale**2
+
+
+def ls_acceleration(t: np.ndarray, p_n: np.ndarray, sigma_ned: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares acceleration of a window of fixes and its covariance.
+
+    Parameters
+    ----------
+    t : ndarray, shape (m,)
+        Fix times [s].
+    p_n : ndarray, shape (m, 3)
+        Fix positions in a local NED tangent frame [m].
+    sigma_ned : ndarray, shape (m, 3)
+        1-sigma of each fix along N, E, D [m].
+
+    Returns
+    -------
+    a_n : ndarray, shape (3,)
+        Acceleration in NED [m/s^2].
+    cov : ndarray, shape (3, 3)
+        Its covariance, ``sum_j B_j^2 diag(sigma_j^2)`` [m^2/s^4].
+    """
+    B = acceleration_row(t)
+    a_n = B @ np.asarray(p_n, float)
+    cov = np.diag((B[:, None] ** 2 * np.asarray(sigma_ned, float) ** 2).sum(axis=0))
+    return a_n, cov
+
+
+@dataclass
+class AccelMeasurement:
+    """One GNSS-derived acceleration, valid at the newest fix of its window.
+
+    Attributes
+    ----------
+    t : float
+        Time of the newest fix [s] (the epoch at which the update is applied).
+    a_n : ndarray, shape (3,)
+        Acceleration in NED [m/s^2].
+    cov : ndarray, shape (3, 3)
+        Covariance [m^2/s^4].
+    t_window : ndarray, shape (m,)
+        The fix times used.
+    """
+
+    t: float
+    a_n: np.ndarray
+    cov: np.ndarray
+    t_window: np.ndarray
+
+
+class AccelWindow:
+    """Sliding buffer of the last ``m`` fixes producing GNSS-derived accelerations.
+
+    A measurement is produced only once the buffer holds ``m`` fixes (the paper's rule); the
+    buffer is cleared when two consecutive fixes are more than ``max_gap_s`` apart (an outage),
+    so no estimate spans a gap.
+
+    Parameters
+    ----------
+    m : int
+        Window length in fixes (>= 3).
+    max_gap_s : float
+        Largest allowed interval between consecutive fixes [s].
+    sigma_override : ndarray, shape (3,), optional
+        Fixed 1-sigma N, E, D [m/s^2] replacing the propagated covariance.
+    """
+
+    def __init__(self, m: int = 3, max_gap_s: float = 2.5, sigma_override: np.ndarray | None = None):
+        if m < 3:
+            raise ValueError("the acceleration window needs at least 3 fixes")
+        self.m, self.max_gap_s = int(m), float(max_gap_s)
+        self.sigma_override = None if sigma_override is None else np.asarray(sigma_override, float)
+        self._buf: deque = deque(maxlen=self.m)
+        self.resets = 0
+
+    def push(self, t: float, p_n: np.ndarray, sigma_ned: np.ndarray) -> AccelMeasurement | None:
+        """Add a fix; return a measurement when the window is full, else ``None``."""
+        if self._buf and t - self._buf[-1][0] > self.max_gap_s:
+            self._buf.clear()
+            self.resets += 1
+        self._buf.append((float(t), np.asarray(p_n, float), np.asarray(sigma_ned, float)))
+        if len(self._buf) < self.m:
+            return None
+        ts = np.array([b[0] for b in self._buf])
+        ps = np.array([b[1] for b in self._buf])
+        ss = np.array([b[2] for b in self._buf])
+        a_n, cov = ls_acceleration(ts, ps, ss)
+        if self.sigma_override is not None:
+            cov = np.diag(self.sigma_override**2)
+        return AccelMeasurement(float(t), a_n, cov, ts)
+
+
+def predicted_acceleration(R_nb: np.ndarray, f_b: np.ndarray, g_n: np.ndarray) -> np.ndarray:
+    """Acceleration in n predicted by the INS, ``a^n = R_nb f_b + g^n`` [m/s^2]."""
+    return R_nb @ f_b + g_n
+
+
+def H_a_blocks(R_nb: np.ndarray, f_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Non-zero blocks of H_a under the EKF's convention (see module docstring).
+
+    Parameters
+    ----------
+    R_nb : ndarray, shape (3, 3)
+        Estimated body-to-NED rotation.
+    f_b : ndarray, shape (3,)
+        Bias-corrected specific force, body frame [m/s^2].
+
+    Returns
+    -------
+    d_phi : ndarray, shape (3, 3)
+        ``d a_pred / d phi = -[(R_nb f_b) x]`` [m/s^2/rad].
+    d_ba : ndarray, shape (3, 3)
+        ``d a_pred / d b_a = R_nb``.
+    """
+    return -skew(R_nb @ f_b), R_nb.copy()
+
+
+def H_a(R_nb: np.ndarray, f_b: np.ndarray) -> np.ndarray:
+    """Full 3x15 acceleration measurement matrix ``[0, 0, d_phi, d_ba, 0]``."""
+    d_phi, d_ba = H_a_blocks(R_nb, f_b)
+    H = np.zeros((3, 15))
+    H[:, 6:9] = d_phi
+    H[:, 9:12] = d_ba
+    return H
+
+
+def paper_H_a_blocks(R_nb: np.ndarray, f_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The blocks as printed in the paper, ``(R_nb [f x], -R_nb)``.
+
+    They equal ``-(H_a_blocks)`` with the attitude block acting on a body-frame error
+    ``phi_b = R_nb^T phi``: ``paper_dphi @ R_nb^T == -d_phi`` and ``paper_dba == -d_ba``.
+    """
+    return R_nb @ skew(f_b), -R_nb

@@ -1,0 +1,148 @@
+"""Self-initialisation from the data: position and velocity from GNSS, roll/pitch by
+accelerometer levelling, yaw from the GNSS course (body x assumed forward).
+
+The filter starts at the centre of the first window of fixes (``init.course_fit_s`` long)
+whose straight-line fit shows the vehicle moving faster than ``init.course_min_speed_mps``.
+Every sigma is derived from the fit covariances and the levelling residuals, floored by the
+``[init]`` minimums, so the filter starts honest rather than optimistic.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .config import DEG, RunConfig
+from .earth import gravity_n
+from .errors import InputError
+from .gnss_accel import acceleration_row
+from .run import InitialState, RecordedRun
+
+#: Prior 1-sigma of a ground vehicle's mean acceleration over the levelling window [m/s^2],
+#: used to shrink the (noisy) GNSS-fitted acceleration towards zero.
+_ACCEL_PRIOR_SIGMA = 1.0
+
+
+def static_start(run: RecordedRun, cfg: RunConfig) -> float | None:
+    """End time [s] of a static period at the start of the run, or ``None`` if there is none."""
+    c = cfg["init"]
+    imu = run.imu
+    moving = (np.linalg.norm(imu.omega_ib_b, axis=1) > c["static_gyro_max_dps"] * DEG)
+    first_move = int(np.argmax(moving)) if np.any(moving) else len(imu)
+    # The specific-force norm must also be steady: check its std over one-second blocks.
+    f_norm = np.linalg.norm(imu.f_b[:first_move], axis=1)
+    dt = np.median(np.diff(imu.t))
+    block = max(int(round(1.0 / dt)), 2)
+    end = first_move
+    for i in range(0, first_move - block + 1, block):
+        if np.std(f_norm[i:i + block]) > c["static_accel_std_max_mps2"]:
+            end = i
+            break
+    # Count samples rather than elapsed time, so a data gap cannot pass for a static period.
+    if end == 0 or end * dt < c["static_min_s"]:
+        return None
+    return float(imu.t[end - 1])
+
+
+def _line_fit(t: np.ndarray, p: np.ndarray, sigma: np.ndarray, t_ref: float):
+    """Straight-line fit of positions; value and rate at ``t_ref`` with 1-sigma per axis."""
+    A = np.column_stack([np.ones_like(t), t - t_ref])
+    out_p, out_v, sp, sv = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    for i in range(3):
+        W = 1.0 / sigma[:, i] ** 2
+        N = A.T @ (A * W[:, None])
+        cov = np.linalg.inv(N)
+        x = cov @ (A.T @ (W * p[:, i]))
+        out_p[i], out_v[i] = x
+        sp[i], sv[i] = np.sqrt(np.diag(cov))
+    return out_p, out_v, sp, sv
+
+
+def _level(f_b: np.ndarray, a_b: np.ndarray) -> tuple[float, float]:
+    """Roll and pitch from the mean specific force with the body acceleration removed."""
+    g_b = a_b - f_b  # gravity direction seen in the body frame (points down)
+    roll = np.arctan2(g_b[1], g_b[2])
+    pitch = np.arctan2(-g_b[0], np.hypot(g_b[1], g_b[2]))
+    return float(roll), float(pitch)
+
+
+def initialise(run: RecordedRun, cfg: RunConfig) -> InitialState:
+    """Initial state from the data (used when the source gives none).
+
+    Parameters
+    ----------
+    run : RecordedRun
+    cfg : RunConfig
+
+    Returns
+    -------
+    InitialState
+
+    Raises
+    ------
+    InputError
+        When the vehicle never moves fast enough to take yaw from the GNSS course.
+    """
+    c = cfg["init"]
+    gnss = run.gnss
+    p_n = run.origin.to_ned(gnss.lat, gnss.lon, gnss.h)
+    win = float(c["course_fit_s"])
+    t_static_end = static_start(run, cfg)
+    for k in range(len(gnss)):
+        sel = (gnss.t >= gnss.t[k]) & (gnss.t <= gnss.t[k] + win) & (gnss.t >= run.t_start)
+        if sel.sum() < 3:
+            continue
+        t_w = gnss.t[sel]
+        t_ref = 0.5 * (t_w[0] + t_w[-1])
+        if t_ref >= run.t_end:
+            break
+        p0, v0, sp, sv = _line_fit(t_w, p_n[sel], gnss.sigma_ned[sel], t_ref)
+        speed = float(np.hypot(v0[0], v0[1]))
+        if speed < c["course_min_speed_mps"] or speed < 3.0 * float(np.hypot(sv[0], sv[1])):
+            continue
+        yaw = float(np.arctan2(v0[1], v0[0]))
+        sigma_yaw = max(float(np.hypot(sv[0], sv[1])) / speed, c["yaw_sigma_min_deg"] * DEG)
+        roll, pitch, sigma_tilt, how = _attitude(run, cfg, t_w, p_n[sel], gnss.sigma_ned[sel], yaw, t_static_end)
+        lat, lon, h = run.origin.to_llh(p0)
+        return InitialState(
+            t=t_ref, lat=float(lat), lon=float(lon), h=float(h), v_n=v0,
+            rpy=np.array([roll, pitch, yaw]),
+            sigma_pos_m=np.maximum(sp, 0.1),
+            sigma_vel_mps=np.maximum(sv, c["vel_sigma_min_mps"]),
+            sigma_att_rad=np.array([sigma_tilt, sigma_tilt, sigma_yaw]),
+            how=f"self-initialised at t={t_ref:.2f} s: position/velocity from a line fit over "
+                f"{sel.sum()} fixes, yaw from GNSS course ({speed:.1f} m/s), {how}",
+        )
+    raise InputError(run.where, f"cannot initialise: the GNSS track never shows a speed above "
+                                f"{c['course_min_speed_mps']} m/s clearly above its noise, so yaw is unknown; "
+                                f"provide an initial state (init.json) or lower [init] course_min_speed_mps")
+
+
+def _attitude(run, cfg, t_w, p_w, s_w, yaw, t_static_end):
+    """Roll, pitch and their 1-sigma; static levelling when possible, else moving levelling."""
+    c = cfg["init"]
+    imu = run.imu
+    g = gravity_n(run.gnss.lat[0], run.gnss.h[0])[2]
+    if t_static_end is not None:
+        sel = imu.t <= t_static_end
+        roll, pitch = _level(imu.f_b[sel].mean(axis=0), np.zeros(3))
+        # Levelling precision from the specific-force scatter; the vehicle may settle after the
+        # static period ends, which the floor covers.
+        sigma = np.std(imu.f_b[sel][:, :2], axis=0).max() / np.sqrt(sel.sum()) / g
+        return roll, pitch, max(sigma, c["roll_pitch_sigma_min_deg"] * DEG), "roll/pitch from a static start"
+    sel = (imu.t >= t_w[0]) & (imu.t <= t_w[-1])
+    if sel.sum() < 2:
+        sel = np.abs(imu.t - t_w.mean()) <= 0.5
+    f_mean = imu.f_b[sel].mean(axis=0)
+    # Mean acceleration from a quadratic fit of the same fixes, shrunk towards zero by a prior
+    # (a ground vehicle's mean acceleration over a few seconds is rarely above ~1 m/s^2).
+    B = acceleration_row(t_w)
+    a_fit = B @ p_w
+    var_fit = (B[:, None] ** 2 * s_w**2).sum(axis=0)
+    w = _ACCEL_PRIOR_SIGMA**2 / (_ACCEL_PRIOR_SIGMA**2 + var_fit)
+    a_n = w * a_fit
+    var_a = w * var_fit
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    a_b = np.array([cy * a_n[0] + sy * a_n[1], -sy * a_n[0] + cy * a_n[1], a_n[2]])
+    roll, pitch = _level(f_mean, a_b)
+    sigma = float(np.sqrt(var_a[:2].max())) / g
+    return roll, pitch, max(sigma, c["roll_pitch_sigma_min_deg"] * DEG), \
+        "roll/pitch by levelling while moving (GNSS-fitted acceleration removed)"
