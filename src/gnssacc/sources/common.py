@@ -1,0 +1,180 @@
+"""Helpers shared by all sources: the IMU mounting, a fast CSV table reader, range checks.
+
+Every source must pass its IMU samples through :func:`apply_mounting` exactly once, so that the
+``[mounting]`` configuration means the same thing whatever the data came from.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..config import RunConfig
+from ..errors import InputError, warn_data
+from ..run import ImuData, drop_nonfinite
+
+
+def apply_mounting(imu: ImuData, cfg: RunConfig) -> ImuData:
+    """Rotate IMU-axis samples into the body frame and put their times on the GNSS clock.
+
+    Parameters
+    ----------
+    imu : ImuData
+        Samples in the IMU's own axes (FRD-labelled: a source that reads FLU data converts to
+        FRD first) with time stamps on the IMU clock.
+    cfg : RunConfig
+        ``mounting.imu_to_body_rpy_deg`` (via ``cfg.R_bi``, ``x_b = R_bi @ x_imu``) and
+        ``mounting.imu_time_offset_s`` [s], added to every time stamp.
+
+    Returns
+    -------
+    ImuData
+        A new object: body-frame (FRD) specific force [m/s^2] and angular rate [rad/s], times on
+        the GNSS clock [s].
+    """
+    R_bi = cfg.R_bi
+    try:
+        offset_s = float(cfg["mounting"]["imu_time_offset_s"])
+    except (TypeError, ValueError):
+        raise InputError("config", "[mounting] imu_time_offset_s must be a number of seconds") from None
+    if not np.isfinite(offset_s):
+        raise InputError("config", "[mounting] imu_time_offset_s must be finite")
+    # Row vectors: x_b^T = x_imu^T R_bi^T.
+    return ImuData(np.asarray(imu.t, float) + offset_s,
+                   np.asarray(imu.f_b, float) @ R_bi.T,
+                   np.asarray(imu.omega_ib_b, float) @ R_bi.T)
+
+
+def check_degrees(lat_deg: np.ndarray, lon_deg: np.ndarray, t: np.ndarray, where: str, what: str) -> None:
+    """Raise :class:`InputError` if a latitude or longitude [deg] is out of range.
+
+    ``|lat| <= 90`` and ``|lon| <= 360`` (longitudes in 0..360 are accepted). The message names
+    the first offending time stamp.
+    """
+    for name, values, limit in (("latitude", lat_deg, 90.0), ("longitude", lon_deg, 360.0)):
+        bad = np.flatnonzero(np.abs(values) > limit)
+        if bad.size:
+            k = int(bad[0])
+            raise InputError(where, f"{what} {name} out of range: {values[k]:.6g} deg at t = {t[k]:.6f} s "
+                                    f"(|{name}| must be <= {limit:g} deg); {bad.size} such row(s)")
+
+
+def _read_text(path: Path) -> str:
+    try:
+        # utf-8-sig: spreadsheets often start CSV files with a byte-order mark.
+        return path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise InputError(str(path), "file not found") from None
+    except IsADirectoryError:
+        raise InputError(str(path), "is a directory, expected a CSV file") from None
+    except UnicodeDecodeError:
+        raise InputError(str(path), "not a UTF-8 text file (expected comma-separated values)") from None
+
+
+def _header_names(line: str) -> list[str]:
+    return [c.strip().strip('"\'').strip().lower() for c in line.split(",")]
+
+
+def _parse_slowly(data: list[str], line_no: np.ndarray, usecols: list[int], names: list[str],
+                  where: str) -> np.ndarray:
+    """Cell-by-cell parse, only used when the fast parser refused the file.
+
+    Empty cells become NaN (missing values, later dropped with a warning); any other
+    non-numeric cell is an error naming its line and column.
+    """
+    out = np.empty((len(data), len(usecols)))
+    for r, line in enumerate(data):
+        cells = line.split(",")
+        for c, j in enumerate(usecols):
+            cell = cells[j].strip()
+            if not cell:
+                out[r, c] = np.nan
+                continue
+            try:
+                out[r, c] = float(cell)
+            except ValueError:
+                raise InputError(where, f"non-numeric value {cell[:40]!r} in column '{names[j]}' at line "
+                                        f"{line_no[r]}") from None
+    return out
+
+
+def read_table(path, required: Sequence[str], optional: Sequence[str] = (),
+               max_bad_fraction: float = 0.01) -> dict[str, np.ndarray]:
+    """Read a comma-separated table with a header line into float columns.
+
+    Header names are matched case-insensitively after stripping blanks and quotes; column order
+    is free and extra columns are ignored (they may hold anything). Blank lines and lines whose
+    first non-blank character is ``#`` are skipped anywhere in the file. Empty cells count as
+    missing (NaN). Rows with NaN/inf in a column that is read are dropped with a
+    :class:`~gnssacc.errors.DataWarning` giving the count (see :func:`gnssacc.run.drop_nonfinite`).
+    A truncated last line (fewer cells than the header, as left by a logger that stopped
+    mid-write) is dropped with a warning.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file.
+    required : sequence of str
+        Lower-case column names that must be present.
+    optional : sequence of str
+        Lower-case column names returned only when present.
+    max_bad_fraction : float
+        Largest tolerated fraction of NaN/inf rows (``data.max_bad_fraction``).
+
+    Returns
+    -------
+    dict of str to ndarray
+        One float array of shape (rows,) per required column and per optional column found.
+        A file with a header but no data rows gives empty arrays (callers decide if that is
+        an error).
+
+    Raises
+    ------
+    InputError
+        Missing or empty file, missing required columns (named, with the header found), a
+        repeated column name, a row with the wrong number of cells or a non-numeric cell (with
+        its line number), too many NaN/inf rows.
+    """
+    path = Path(path)
+    where = str(path)
+    lines = _read_text(path).splitlines()
+    kept = [i for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")]
+    if not kept:
+        raise InputError(where, f"empty file: no header line (expected columns {', '.join(required)})")
+    names = _header_names(lines[kept[0]])
+    wanted = list(required) + [c for c in optional if c in names]
+    missing = [c for c in required if c not in names]
+    if missing:
+        raise InputError(where, f"missing required column(s) {', '.join(missing)}; header found: "
+                                f"{', '.join(names)} (the first non-comment line must be the header)")
+    repeated = sorted({c for c in wanted if names.count(c) > 1})
+    if repeated:
+        raise InputError(where, f"column(s) {', '.join(repeated)} appear more than once in the header")
+    usecols = [names.index(c) for c in wanted]
+
+    line_no = np.asarray(kept[1:], int) + 1              # 1-based file line numbers of data rows
+    data = [lines[i] for i in kept[1:]]
+    data, line_no = _check_cell_counts(data, line_no, len(names), where)
+    if not data:
+        return {c: np.empty(0) for c in wanted}
+    try:
+        table = np.loadtxt(data, delimiter=",", usecols=usecols, ndmin=2, dtype=float, comments=None)
+    except ValueError:
+        table = _parse_slowly(data, line_no, usecols, names, where)
+    table = drop_nonfinite(table, where, path.stem, float(max_bad_fraction))
+    return {c: np.ascontiguousarray(table[:, k]) for k, c in enumerate(wanted)}
+
+
+def _check_cell_counts(data: list[str], line_no: np.ndarray, n_cols: int, where: str):
+    """Every data row must have as many cells as the header (a truncated last row is dropped)."""
+    n_commas = np.fromiter((line.count(",") for line in data), int, len(data))
+    bad = np.flatnonzero(n_commas != n_cols - 1)
+    if bad.size == 1 and bad[0] == len(data) - 1 and n_commas[-1] < n_cols - 1:
+        warn_data(where, f"dropped the truncated last line {line_no[-1]} ({n_commas[-1] + 1} of {n_cols} cells)")
+        return data[:-1], line_no[:-1]
+    if bad.size:
+        k = int(bad[0])
+        raise InputError(where, f"line {line_no[k]} has {n_commas[k] + 1} cells but the header has {n_cols}; "
+                                f"{bad.size} such line(s)")
+    return data, line_no
