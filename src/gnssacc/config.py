@@ -68,6 +68,13 @@ DEFAULTS: dict[str, dict] = {
         "specific_force_avg_s": 0.0,
     },
     "init": {
+        # Initial 1-sigma overrides; empty = use the source's init.json or the self-initialiser's
+        # own (data-derived) sigmas. Position N/E/D [m], velocity N/E/D [m/s], roll/pitch and
+        # yaw [deg].
+        "pos_sigma_m": [],
+        "vel_sigma_mps": [],
+        "roll_pitch_sigma_deg": [],
+        "yaw_sigma_deg": [],
         # Self-initialisation (used when the source gives no initial state).
         # A start is static when the gyro norm stays below this [deg/s] ...
         "static_gyro_max_dps": 2.0,
@@ -213,6 +220,20 @@ class RunConfig:
             return None
         return _vec3(v, "accel.sigma_mps2", "config")
 
+    def initial_sigma_overrides(self) -> dict:
+        """Configured initial sigmas in SI units: keys ``pos``, ``vel`` (3,), ``roll_pitch``, ``yaw`` [rad]."""
+        c, out = self["init"], {}
+        for key, name, scale in (("pos_sigma_m", "pos", 1.0), ("vel_sigma_mps", "vel", 1.0)):
+            if c[key] not in ([], None):
+                out[name] = _vec3(c[key], f"[init] {key}", "config") * scale
+        for key, name in (("roll_pitch_sigma_deg", "roll_pitch"), ("yaw_sigma_deg", "yaw")):
+            if c[key] not in ([], None):
+                v = float(c[key])
+                if not v > 0:
+                    raise InputError("config", f"[init] {key} must be a positive number of degrees")
+                out[name] = v * DEG
+        return out
+
     def to_toml(self) -> str:
         """The resolved configuration as TOML text (for ``gnssacc config --show`` and outputs)."""
         lines = [f"# resolved from: {', '.join(self.sources)}"]
@@ -282,9 +303,11 @@ def load_config(preset: str | None = None, path: str | Path | None = None,
 def _validate(cfg: RunConfig, where: str) -> None:
     # Touch every derived quantity so malformed values fail now, naming the file.
     for name in ("gyro_psd", "accel_psd", "gyro_bias_rw_psd", "accel_bias_rw_psd", "gyro_bias_sigma0",
-                 "accel_bias_sigma0", "R_bi", "lever_arm_b", "accel_sigma_override"):
+                 "accel_bias_sigma0", "R_bi", "lever_arm_b", "accel_sigma_override", "initial_sigma_overrides"):
         try:
-            getattr(cfg, name)
+            value = getattr(cfg, name)
+            if callable(value):
+                value()
         except InputError as exc:
             raise InputError(where, exc.problem) from None
     if int(cfg["accel"]["window"]) < 3:

@@ -42,8 +42,14 @@ class _State:
 
 
 def _initial_state(init: InitialState, cfg: RunConfig) -> _State:
+    over = cfg.initial_sigma_overrides()
+    att = np.array(init.sigma_att_rad, float)
+    if "roll_pitch" in over:
+        att[:2] = over["roll_pitch"]
+    if "yaw" in over:
+        att[2] = over["yaw"]
     P = np.zeros((15, 15))
-    sig = np.concatenate([init.sigma_pos_m, init.sigma_vel_mps, init.sigma_att_rad,
+    sig = np.concatenate([over.get("pos", init.sigma_pos_m), over.get("vel", init.sigma_vel_mps), att,
                           cfg.accel_bias_sigma0, cfg.gyro_bias_sigma0])
     P[np.diag_indices(15)] = sig**2
     return _State(np.array([init.lat, init.lon, init.h]), np.array(init.v_n, float).copy(), init.R_nb.copy(),
@@ -149,7 +155,7 @@ def default_output_times(run: RecordedRun) -> np.ndarray:
 
 def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_times: np.ndarray | None = None,
             quality: QualityReport | None = None, init: InitialState | None = None,
-            store_P: bool = False, show_progress: bool = False) -> NavSolution:
+            store_P: bool = False, record_innovations: bool = False, show_progress: bool = False) -> NavSolution:
     """Run the EKF over a recorded run.
 
     Parameters
@@ -169,6 +175,9 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
         Overrides ``run.init`` and self-initialisation.
     store_P : bool
         Keep the full covariance at every output epoch.
+    record_innovations : bool
+        Keep every update's time and normalised innovation squared in ``stats`` (``nis_pos_t``,
+        ``nis_pos``, ``nis_acc_t``, ``nis_acc``), e.g. for tuning.
     show_progress : bool
         Show a progress bar (only on a terminal).
 
@@ -211,8 +220,8 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
     ev_idx = np.concatenate([np.arange(len(gnss)), np.arange(len(out_t))])
     order = np.lexsort((ev_kind, ev_t))
     rec = _Recorder(len(out_t), store_P)
-    stats = {"n_pos_updates": 0, "n_acc_updates": 0, "n_pos_rejected": 0, "nis_pos": [], "nis_acc": [],
-             "init": init.how, "t_init": t0}
+    stats = {"n_pos_updates": 0, "n_acc_updates": 0, "n_pos_rejected": 0, "init": init.how, "t_init": t0}
+    nis = {"pos": [], "pos_t": [], "acc": [], "acc_t": []}
 
     for e in progress(order, desc=method, enable=show_progress):
         t_e, kind, i = ev_t[e], ev_kind[e], ev_idx[e]
@@ -229,12 +238,13 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
             rec.add(t_e, s)
             continue
         dz, H = _position_innovation(s, gnss.lat[i], gnss.lon[i], gnss.h[i], lever)
-        nis = _update(s, dz, H, np.diag(gnss.sigma_ned[i] ** 2), gate)
-        if nis < 0:
+        nis_p = _update(s, dz, H, np.diag(gnss.sigma_ned[i] ** 2), gate)
+        if nis_p < 0:
             stats["n_pos_rejected"] += 1
         else:
             stats["n_pos_updates"] += 1
-            stats["nis_pos"].append(nis)
+            nis["pos"].append(nis_p)
+            nis["pos_t"].append(t_e)
         if use_acc and meas is not None:
             f_b = _specific_force_at(imu_t, f_imu, t_e, f_avg) - s.b_a
             a_pred = predicted_acceleration(s.R_nb, f_b, gravity_n(s.pos[0], s.pos[2]))
@@ -242,14 +252,17 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
             H = np.zeros((3, 15))
             H[:, 6:9] = d_phi
             H[:, 9:12] = d_ba
-            stats["nis_acc"].append(_update(s, a_pred - meas.a_n, H, meas.cov))
+            nis["acc"].append(_update(s, a_pred - meas.a_n, H, meas.cov))
+            nis["acc_t"].append(t_e)
             stats["n_acc_updates"] += 1
 
     runtime = time.perf_counter() - wall0
-    for key in ("nis_pos", "nis_acc"):
-        vals = np.asarray(stats.pop(key))
+    for key in ("pos", "acc"):
+        vals = np.asarray(nis[key])
         # Normalised innovation squared per degree of freedom: ~1 for a consistent filter.
-        stats[key + "_mean"] = float(vals.mean() / 3.0) if vals.size else None
+        stats[f"nis_{key}_mean"] = float(vals.mean() / 3.0) if vals.size else None
+        if record_innovations:
+            stats[f"nis_{key}"] = vals / 3.0
+            stats[f"nis_{key}_t"] = np.asarray(nis[key + "_t"])
     stats["accel_window_resets"] = window.resets
-    stats["quality"] = quality.summary()
     return rec.solution(method, runtime, stats)

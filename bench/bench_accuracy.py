@@ -1,0 +1,72 @@
+"""Accuracy of the EKF methods on the KITTI default over noise seeds (the paper's PRMSE).
+
+For each GNSS noise profile (white, gm), with and without ``--outage-every 60:20``, runs
+``ekf`` and ``ekf-acc`` over seeds and prints mean / min / max PRMSE [m], the outage-only
+PRMSE, the mean improvement of ``ekf-acc`` over ``ekf`` with the number of seeds where it
+helped, and the raw GNSS PRMSE for reference.
+
+Usage::
+
+    python bench/bench_accuracy.py [--seeds 0-9] [--jobs 2] [--preset kitti] [SOURCE]
+"""
+from __future__ import annotations
+
+import argparse
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+
+METHODS = ("ekf", "ekf-acc")
+
+
+def _one(args):
+    source, preset, noise, outage, seed = args
+    from gnssacc.config import load_config
+    from gnssacc.metrics import gnss_score, score
+    from gnssacc.pipeline import load_source, run_methods, with_outages
+
+    cfg = load_config(preset)
+    run = with_outages(load_source(source, cfg, noise=noise, seed=seed), None, outage)
+    sols = run_methods(run, cfg, list(METHODS))
+    out = {"gnss": gnss_score(run).prmse_m}
+    for m, s in sols.items():
+        sc = score(run, s)
+        out[m] = (sc.prmse_m, sc.prmse_outage_m)
+    return (noise, outage, seed), out
+
+
+def _stats(v):
+    v = np.asarray([x for x in v if x is not None], float)
+    return f"{v.mean():6.2f} {v.min():6.2f} {v.max():6.2f}" if v.size else "     -      -      -"
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("source", nargs="?", default="kitti")
+    ap.add_argument("--seeds", default="0-9")
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--preset", default="kitti")
+    args = ap.parse_args()
+    lo, hi = (int(x) for x in args.seeds.split("-"))
+    seeds = range(lo, hi + 1)
+    cases = [(args.source, args.preset, n, o, s) for n in ("white", "gm") for o in (None, "60:20") for s in seeds]
+    with ProcessPoolExecutor(args.jobs) as ex:
+        results = dict(ex.map(_one, cases))
+    print(f"{args.source}, preset {args.preset}, seeds {args.seeds}: PRMSE [m] mean/min/max")
+    print(f"{'noise':6s} {'outages':8s} {'method':8s} {'PRMSE mean/min/max':>20s} {'outage-only PRMSE':>20s} "
+          f"{'acc gain [%] mean (helped)':>27s}")
+    for noise in ("white", "gm"):
+        for outage in (None, "60:20"):
+            rows = [results[(noise, outage, s)] for s in seeds]
+            for m in METHODS:
+                gain = ""
+                if m == "ekf-acc":
+                    g = [100 * (r["ekf"][0] - r[m][0]) / r["ekf"][0] for r in rows]
+                    gain = f"{np.mean(g):+.2f} ({sum(x > 0 for x in g)}/{len(g)})"
+                print(f"{noise:6s} {outage or '-':8s} {m:8s} {_stats([r[m][0] for r in rows]):>20s} "
+                      f"{_stats([r[m][1] for r in rows]):>20s} {gain:>27s}")
+            print(f"{noise:6s} {outage or '-':8s} {'gnss':8s} {_stats([r['gnss'] for r in rows]):>20s}")
+
+
+if __name__ == "__main__":
+    main()

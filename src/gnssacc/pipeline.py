@@ -1,0 +1,152 @@
+"""One comparison run: load a source, make its GNSS, run the methods, score, write outputs.
+
+Used by the CLI (``gnssacc run``), the benchmarks and the notebooks, so that all of them
+compute the same numbers the same way.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import time
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+
+from . import mechanization
+from .config import RunConfig
+from .ekf import run_ekf
+from .errors import InputError
+from .gnss_noise import apply_outages, fixes_from_truth, parse_outages
+from .metrics import gnss_score, score
+from .quality import QualityReport, check_imu
+from .report import format_table, metrics_dict, plot_errors, plot_trajectory, write_json, write_trajectory_csv
+from .run import RecordedRun
+from .solution import NavSolution
+
+#: Estimators by method id: callables ``(run, cfg, method, quality=..., show_progress=...) -> NavSolution``.
+METHODS = {"ekf": run_ekf, "ekf-acc": run_ekf}
+DEFAULT_METHODS = ("ekf", "ekf-acc")
+
+
+def parse_methods(text: str | None) -> list[str]:
+    """Method ids from a comma-separated list, checked against :data:`METHODS`."""
+    if not text:
+        return list(DEFAULT_METHODS)
+    ids = [m.strip() for m in text.split(",") if m.strip()]
+    bad = [m for m in ids if m not in METHODS]
+    if bad or not ids:
+        raise InputError("--methods", f"unknown method(s) {', '.join(bad) or '(none)'}; known: {', '.join(METHODS)}")
+    return ids
+
+
+def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None, seed: int = 0,
+                imu_frame: str = "frd") -> RecordedRun:
+    """Load a run from a source spec.
+
+    Parameters
+    ----------
+    source : str or None
+        ``None`` or ``"kitti"``: the KITTI sequence in the gtsam wheel. A directory: a CSV run
+        directory (``imu.csv``, ``gnss.csv``, optional ``truth.csv``, ``init.json``).
+    cfg : RunConfig
+    noise : str, optional
+        GNSS noise profile. For KITTI it defaults to ``white``. For a CSV directory, giving it
+        replaces ``gnss.csv`` with truth + noise at the truth epochs (needs ``truth.csv``).
+    seed : int
+        Noise seed.
+    imu_frame : {"frd", "flu"}
+        Axes of a CSV directory's ``imu.csv``.
+    """
+    if source in (None, "kitti"):
+        from .sources.kitti import load_kitti
+        return load_kitti(cfg, noise or "white", seed)
+    path = Path(source)
+    if not path.exists():
+        raise InputError(source, "no such file or directory")
+    if path.is_dir():
+        from .sources.csvdir import load_csv_run
+        run = load_csv_run(path, cfg, imu_frame=imu_frame)
+        if noise is not None:
+            if run.truth is None:
+                raise InputError(str(path), "--noise makes fixes from the truth, but the run has no truth.csv")
+            run = run.with_gnss(fixes_from_truth(run, run.truth, noise, seed), noise=noise, seed=seed)
+        return run
+    raise InputError(source, "not a run directory (expected a folder with imu.csv and gnss.csv); "
+                             "ROS bags are not supported yet")
+
+
+def with_outages(run: RecordedRun, outage: str | None, outage_every: str | None) -> RecordedRun:
+    """Apply ``--outage`` / ``--outage-every`` to the run's GNSS."""
+    return apply_outages(run, parse_outages(outage, outage_every, run.duration_s))
+
+
+def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, quality: QualityReport | None = None,
+                show_progress: bool = False) -> dict[str, NavSolution]:
+    """Run each method on the same run and data-quality findings."""
+    quality = quality or check_imu(run.imu, cfg)
+    return {m: METHODS[m](run, cfg, m, quality=quality, show_progress=show_progress) for m in methods}
+
+
+def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, show_progress: bool = False) -> tuple[dict, dict]:
+    """Run and score the methods.
+
+    Returns
+    -------
+    metrics : dict
+        The content of ``metrics.json``.
+    solutions : dict of NavSolution
+    """
+    jit_s = mechanization.warm_up()
+    t0 = time.perf_counter()
+    quality = check_imu(run.imu, cfg)
+    quality_s = time.perf_counter() - t0
+    sols = run_methods(run, cfg, methods, quality=quality, show_progress=show_progress)
+    scores = {m: score(run, s) for m, s in sols.items()}
+    extra = {"jit_compile_s": jit_s, "quality_check_s": quality_s, "quality": quality.to_dict(),
+             "config_sources": cfg.sources}
+    return metrics_dict(run, sols, scores, gnss_score(run), extra), sols
+
+
+def default_out_dir(run: RecordedRun) -> Path:
+    return Path("gnssacc-out") / f"{run.name}-{datetime.now().strftime('%Y%m%d-%H%M%S')}"
+
+
+def write_outputs(out_dir: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict, cfg: RunConfig,
+                  plots: bool = True) -> Path:
+    """Write all outputs into ``out_dir`` atomically.
+
+    Files are first written to a temporary folder beside ``out_dir`` and moved in only when
+    all of them exist, so an interrupted run never leaves a half-written result.
+    """
+    out_dir = Path(out_dir)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".gnssacc-partial-", dir=out_dir.parent))
+    try:
+        for mid, sol in sols.items():
+            write_trajectory_csv(sol, tmp / f"trajectory_{mid}.csv")
+        (tmp / "config.toml").write_text(cfg.to_toml())
+        if plots:
+            plot_errors(run, sols, tmp / "errors.png") if run.truth is not None else None
+            plot_trajectory(run, sols, tmp / "trajectory.png")
+        (tmp / "table.txt").write_text(format_table(metrics) + "\n")
+        write_json(metrics, tmp / "metrics.json")  # last: its presence marks a complete result
+        if out_dir.exists():
+            for f in sorted(tmp.iterdir()):
+                os.replace(f, out_dir / f.name)
+            tmp.rmdir()
+        else:
+            os.replace(tmp, out_dir)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+    return out_dir
+
+
+def prmse_summary(values: list[float]) -> dict:
+    """Mean / min / max of a list of PRMSE values [m] (used by the benchmarks)."""
+    arr = np.asarray([v for v in values if v is not None], float)
+    if arr.size == 0:
+        return {"mean": None, "min": None, "max": None, "n": 0}
+    return {"mean": float(arr.mean()), "min": float(arr.min()), "max": float(arr.max()), "n": int(arr.size)}

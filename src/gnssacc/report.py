@@ -1,0 +1,140 @@
+"""Outputs a user can plot or feed to other tools: comparison table, metrics.json,
+per-method trajectory CSV, and the error / trajectory figures."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .metrics import Score, improvement_pct, position_errors
+from .run import RecordedRun
+from .solution import NavSolution
+
+#: Baseline of each aided method, for the improvement column.
+BASELINES = {"ekf-acc": "ekf", "smoother-acc": "smoother"}
+
+TRAJECTORY_COLUMNS = (
+    ["t", "lat_deg", "lon_deg", "h_m", "vn", "ve", "vd", "roll_deg", "pitch_deg", "yaw_deg",
+     "bax_mps2", "bay_mps2", "baz_mps2", "bgx_dph", "bgy_dph", "bgz_dph"] + list(NavSolution.SIGMA_NAMES))
+
+_RAD2DEG = 180.0 / np.pi
+_RPS2DPH = _RAD2DEG * 3600.0
+
+
+def trajectory_table(sol: NavSolution) -> np.ndarray:
+    """The rows of ``trajectory_<id>.csv`` (see :data:`TRAJECTORY_COLUMNS`); degrees at this edge."""
+    sig = sol.sigma.copy()
+    sig[:, 6:9] *= _RAD2DEG
+    sig[:, 12:15] *= _RPS2DPH
+    return np.column_stack([sol.t, np.degrees(sol.lat), np.degrees(sol.lon), sol.h, sol.v_n, np.degrees(sol.rpy),
+                            sol.b_a, sol.b_g * _RPS2DPH, sig])
+
+
+def write_trajectory_csv(sol: NavSolution, path: Path) -> None:
+    """Write one solution as CSV with a header row (units in the column names)."""
+    fmt = ["%.6f", "%.9f", "%.9f", "%.4f"] + ["%.5g"] * (len(TRAJECTORY_COLUMNS) - 4)
+    np.savetxt(path, trajectory_table(sol), delimiter=",", header=",".join(TRAJECTORY_COLUMNS), comments="",
+               fmt=fmt)
+
+
+def metrics_dict(run: RecordedRun, sols: dict[str, NavSolution], scores: dict[str, Score], gnss: Score,
+                 extra: dict) -> dict:
+    """The content of ``metrics.json``."""
+    methods = {}
+    for mid, sol in sols.items():
+        sc = scores[mid]
+        base = BASELINES.get(mid)
+        methods[mid] = {
+            "prmse_m": sc.prmse_m, "hrmse_m": sc.hrmse_m, "prmse_outage_m": sc.prmse_outage_m,
+            "rpy_rmse_deg": sc.rpy_rmse_deg, "n_epochs": sc.n_epochs,
+            "improvement_pct": improvement_pct(scores[base].prmse_m, sc.prmse_m) if base in scores else None,
+            "runtime_s": sol.runtime_s,
+            "realtime_factor": run.duration_s / sol.runtime_s if sol.runtime_s > 0 else None,
+            "stats": sol.stats,
+        }
+    return {"source": run.name, "where": run.where, "duration_s": run.duration_s,
+            "gnss_prmse_m": gnss.prmse_m, "gnss_hrmse_m": gnss.hrmse_m, "n_fixes": len(run.gnss),
+            "meta": run.meta, "methods": methods, **extra}
+
+
+def write_json(data: dict, path: Path) -> None:
+    path.write_text(json.dumps(data, indent=2, default=_json_default) + "\n")
+
+
+def _json_default(obj):
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    return str(obj)
+
+
+def _fmt(x, spec: str) -> str:
+    return "-" if x is None else format(x, spec)
+
+
+def format_table(metrics: dict) -> str:
+    """The comparison table printed by ``gnssacc run``."""
+    outage = any(m["prmse_outage_m"] is not None for m in metrics["methods"].values())
+    head = ["method", "PRMSE [m]", "HRMSE [m]"] + (["outage PRMSE [m]"] if outage else []) + \
+        ["acc gain [%]", "wall [s]", "real-time x"]
+    rows = []
+    for mid, m in metrics["methods"].items():
+        rows.append([mid, _fmt(m["prmse_m"], ".2f"), _fmt(m["hrmse_m"], ".2f")] +
+                    ([_fmt(m["prmse_outage_m"], ".2f")] if outage else []) +
+                    [_fmt(m["improvement_pct"], "+.1f"), f"{m['runtime_s']:.3f}", _fmt(m["realtime_factor"], ".0f")])
+    if metrics.get("gnss_prmse_m") is not None:
+        rows.append(["gnss (raw fixes)", _fmt(metrics["gnss_prmse_m"], ".2f"), _fmt(metrics["gnss_hrmse_m"], ".2f")] +
+                    (["-"] if outage else []) + ["-", "-", "-"])
+    widths = [max(len(str(r[i])) for r in rows + [head]) for i in range(len(head))]
+    line = lambda r: "  ".join(str(c).rjust(w) if i else str(c).ljust(w) for i, (c, w) in enumerate(zip(r, widths)))
+    return "\n".join([line(head), line(["-" * w for w in widths])] + [line(r) for r in rows])
+
+
+def plot_errors(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> None:
+    """Position error norm vs time for all methods, outages shaded."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    for mid, sol in sols.items():
+        err, t = position_errors(run, sol)
+        ax.plot(t - run.t_start, np.linalg.norm(err, axis=1), lw=1, label=mid)
+    for a, b in run.meta.get("outages") or []:
+        ax.axvspan(a, b, color="0.85", zorder=0)
+    ax.set_xlabel("time since start [s]")
+    ax.set_ylabel("3-D position error [m]")
+    ax.set_title(f"{run.name}: position error (grey: GNSS outages)")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_trajectory(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> None:
+    """North/east track of each method with the truth and the GNSS fixes."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 7.5))
+    fx = run.origin.to_ned(run.gnss.lat, run.gnss.lon, run.gnss.h)
+    ax.plot(fx[:, 1], fx[:, 0], ".", ms=2.5, color="0.6", label="GNSS fixes")
+    if run.truth is not None:
+        tr = run.origin.to_ned(run.truth.lat, run.truth.lon, run.truth.h)
+        ax.plot(tr[:, 1], tr[:, 0], "k-", lw=1.5, label="truth")
+    for mid, sol in sols.items():
+        p = run.origin.to_ned(sol.lat, sol.lon, sol.h)
+        ax.plot(p[:, 1], p[:, 0], lw=1, label=mid)
+    ax.set_xlabel("east [m]")
+    ax.set_ylabel("north [m]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_title(f"{run.name}: track (origin {np.degrees(run.origin.lat0):.5f}, {np.degrees(run.origin.lon0):.5f} deg)")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

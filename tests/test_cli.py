@@ -1,0 +1,167 @@
+"""The gnssacc command end to end: outputs, and one clear line with exit code 2 for bad input."""
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gnssacc.cli import main
+from gnssacc.sources.csvdir import write_csv_run
+from gnssacc.sources.sim import simulate
+
+REQUIRED_COLUMNS = ["t", "lat_deg", "lon_deg", "h_m", "vn", "ve", "vd", "roll_deg", "pitch_deg", "yaw_deg"]
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    path = tmp_path_factory.mktemp("simrun") / "run"
+    write_csv_run(simulate("car", duration_s=120.0, imu_grade="industrial", noise="white", seed=2), path)
+    return path
+
+
+def _run_cli(args, capsys):
+    code = main([str(a) for a in args])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_run_on_csv_dir_writes_all_outputs(run_dir, tmp_path, capsys):
+    out = tmp_path / "res"
+    code, stdout, stderr = _run_cli(["run", run_dir, "--methods", "ekf,ekf-acc", "--out", out], capsys)
+    assert code == 0, stderr
+    for name in ("metrics.json", "trajectory_ekf.csv", "trajectory_ekf-acc.csv", "errors.png", "trajectory.png"):
+        assert (out / name).is_file(), name
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["source"] == "run" and m["duration_s"] == pytest.approx(120.0, abs=0.1)
+    for mid in ("ekf", "ekf-acc"):
+        entry = m["methods"][mid]
+        assert entry["prmse_m"] < m["gnss_prmse_m"]
+        assert entry["hrmse_m"] <= entry["prmse_m"] and entry["runtime_s"] > 0
+    # The table names every method with its PRMSE as in metrics.json.
+    for mid in ("ekf", "ekf-acc"):
+        line = next(ln for ln in stdout.splitlines() if ln.startswith(mid + " "))
+        assert f"{m['methods'][mid]['prmse_m']:.2f}" in line
+    with open(out / "trajectory_ekf.csv") as fh:
+        rows = list(csv.reader(fh))
+    header = rows[0]
+    assert header[:10] == REQUIRED_COLUMNS
+    for col in ("sn_m", "se_m", "sd_m", "sroll_deg", "syaw_deg", "sbax_mps2", "sbgz_dph"):
+        assert col in header
+    data = np.array(rows[1:], float)
+    assert len(data) == m["methods"]["ekf"]["n_epochs"]
+    assert np.all(np.diff(data[:, 0]) > 0) and np.all(np.isfinite(data))
+
+
+def test_noise_and_outages_on_a_run_with_truth(run_dir, tmp_path, capsys):
+    out = tmp_path / "res"
+    code, stdout, stderr = _run_cli(["run", run_dir, "--methods", "ekf", "--noise", "gm", "--seed", "3",
+                                     "--outage", "40:15", "--out", out, "--no-plots"], capsys)
+    assert code == 0, stderr
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["meta"]["noise"] == "gm" and m["meta"]["outages"] == [[40.0, 55.0]]
+    assert m["methods"]["ekf"]["prmse_outage_m"] is not None
+    assert "outage PRMSE" in stdout
+
+
+def _write(path, text):
+    path.write_text(text)
+    return path
+
+
+def _bad(capsys, args):
+    code, stdout, stderr = _run_cli(args, capsys)
+    lines = [ln for ln in stderr.splitlines() if ln.startswith("gnssacc: error:")]
+    assert code == 2
+    assert len(lines) == 1 and "Traceback" not in stderr
+    return lines[0]
+
+
+def test_missing_source(tmp_path, capsys):
+    line = _bad(capsys, ["run", tmp_path / "nope"])
+    assert "nope" in line and "no such" in line
+
+
+def _copy_run(run_dir, tmp_path):
+    dst = tmp_path / "r"
+    dst.mkdir()
+    for f in run_dir.iterdir():
+        (dst / f.name).write_bytes(f.read_bytes())
+    return dst
+
+
+def test_missing_file_and_columns(run_dir, tmp_path, capsys):
+    d = _copy_run(run_dir, tmp_path)
+    (d / "gnss.csv").unlink()
+    assert "gnss.csv" in _bad(capsys, ["run", d, "--out", tmp_path / "o"])
+    _write(d / "gnss.csv", "t,lat_deg,h_m\n0,32,50\n")
+    line = _bad(capsys, ["run", d, "--out", tmp_path / "o"])
+    assert "gnss.csv" in line and "lon_deg" in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_time_going_backwards(run_dir, tmp_path, capsys):
+    d = _copy_run(run_dir, tmp_path)
+    lines = (d / "imu.csv").read_text().splitlines()
+    lines[500], lines[501] = lines[501], lines[500]
+    _write(d / "imu.csv", "\n".join(lines) + "\n")
+    line = _bad(capsys, ["run", d])
+    assert "imu.csv" in line and "backwards" in line
+
+
+def test_no_gnss_fix(run_dir, tmp_path, capsys):
+    d = _copy_run(run_dir, tmp_path)
+    header = (d / "gnss.csv").read_text().splitlines()[0]
+    _write(d / "gnss.csv", header + "\n")
+    line = _bad(capsys, ["run", d])
+    assert "gnss.csv" in line
+
+
+def test_nan_rows_dropped_with_warning_or_error_above_fraction(run_dir, tmp_path, capsys):
+    d = _copy_run(run_dir, tmp_path)
+    lines = (d / "imu.csv").read_text().splitlines()
+    header = next(ln for ln in lines if not ln.startswith("#"))
+    n_cols = len(header.split(","))
+    for k in (100, 2000, 4000):
+        lines[k] = ",".join([lines[k].split(",")[0]] + ["nan"] * (n_cols - 1))
+    _write(d / "imu.csv", "\n".join(lines) + "\n")
+    code, stdout, stderr = _run_cli(["run", d, "--methods", "ekf", "--out", tmp_path / "o", "--no-plots"], capsys)
+    assert code == 0
+    assert "warning" in stderr and "imu.csv" in stderr and "3 " in stderr
+    cfg = _write(tmp_path / "strict.toml", "[data]\nmax_bad_fraction = 0.0001\n")
+    line = _bad(capsys, ["run", d, "--config", cfg])
+    assert "imu.csv" in line and "NaN" in line
+
+
+def test_bad_config(tmp_path, capsys):
+    cfg = _write(tmp_path / "c.toml", "[imu]\ngyro_arw = 3\n")
+    line = _bad(capsys, ["run", "--config", cfg])
+    assert "c.toml" in line and "gyro_arw" in line
+    assert "--methods" in _bad(capsys, ["run", "--methods", "ekf,kalman"])
+    assert "--outage" in _bad(capsys, ["run", "--outage", "abc"])
+
+
+def test_console_script_and_default_source(tmp_path):
+    """`gnssacc run` with no argument: the KITTI default, through the installed entry point."""
+    res = subprocess.run([sys.executable, "-m", "gnssacc.cli", "run", "--out", str(tmp_path / "k"), "--no-plots"],
+                         capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert "kitti" in res.stdout and "ekf-acc" in res.stdout
+    m = json.loads((tmp_path / "k" / "metrics.json").read_text())
+    assert m["source"] == "kitti" and m["methods"]["ekf"]["prmse_m"] < m["gnss_prmse_m"]
+
+
+def test_config_show_round_trips(tmp_path, capsys):
+    code, stdout, _ = _run_cli(["config", "--show", "--preset", "kitti"], capsys)
+    assert code == 0
+    f = _write(tmp_path / "resolved.toml", stdout)
+    code2, stdout2, _ = _run_cli(["config", "--config", f], capsys)
+    assert code2 == 0
+    assert stdout.splitlines()[1:] == stdout2.splitlines()[1:]
+
+
+def test_sim_command_writes_a_loadable_run(tmp_path, capsys):
+    code, stdout, _ = _run_cli(["sim", tmp_path / "s", "--scenario", "ugv", "--duration", "60"], capsys)
+    assert code == 0 and (tmp_path / "s" / "imu.csv").is_file() and (tmp_path / "s" / "truth.csv").is_file()

@@ -1,0 +1,91 @@
+"""Earth model and frame conversions against published WGS-84 values and round trips."""
+import numpy as np
+import pytest
+
+from gnssacc import earth
+from gnssacc.rotations import (dcm_to_euler, dcm_to_rotvec, euler_error_jacobian, euler_to_dcm, rotvec_to_dcm,
+                               skew)
+
+
+def test_normal_gravity_published_values():
+    # WGS-84 (NIMA TR8350.2): equatorial and polar normal gravity on the ellipsoid.
+    assert earth.normal_gravity(0.0, 0.0) == pytest.approx(9.7803253359, abs=1e-9)
+    assert earth.normal_gravity(np.pi / 2, 0.0) == pytest.approx(9.8321849378, abs=1e-9)
+    # Free-air gradient near the surface is about -3.086e-6 s^-2.
+    g0, g1 = earth.normal_gravity(np.radians(45), 0.0), earth.normal_gravity(np.radians(45), 100.0)
+    assert (g1 - g0) / 100.0 == pytest.approx(-3.086e-6, rel=2e-3)
+
+
+def test_radii_of_curvature():
+    R_M, R_N = earth.radii(0.0)
+    assert R_N == pytest.approx(earth.A)
+    assert R_M == pytest.approx(earth.A * (1 - earth.E2))
+    R_M, R_N = earth.radii(np.pi / 2)
+    assert R_M == pytest.approx(R_N)  # at the pole both equal a^2 / b
+    assert R_N == pytest.approx(earth.A**2 / earth.B)
+
+
+def test_ecef_known_points():
+    np.testing.assert_allclose(earth.llh_to_ecef(0.0, 0.0, 0.0), [earth.A, 0, 0], atol=1e-9)
+    np.testing.assert_allclose(earth.llh_to_ecef(np.pi / 2, 0.0, 0.0), [0, 0, earth.B], atol=1e-6)
+    np.testing.assert_allclose(earth.llh_to_ecef(0.0, np.pi / 2, 100.0), [0, earth.A + 100, 0], atol=1e-6)
+
+
+def test_llh_ecef_round_trip():
+    rng = np.random.default_rng(0)
+    lat = rng.uniform(-np.pi / 2 + 1e-3, np.pi / 2 - 1e-3, 200)
+    lon = rng.uniform(-np.pi, np.pi, 200)
+    h = rng.uniform(-400, 9000, 200)
+    lat2, lon2, h2 = earth.ecef_to_llh(earth.llh_to_ecef(lat, lon, h))
+    np.testing.assert_allclose(lat2, lat, atol=1e-11)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (lon2 - lon))), 0, atol=1e-11)
+    np.testing.assert_allclose(h2, h, atol=1e-5)
+
+
+def test_tangent_frame_round_trip_and_axes():
+    frame = earth.LocalTangentFrame(np.radians(49.0), np.radians(8.4), 110.0)
+    p = np.array([[100.0, -50.0, 3.0], [-2000.0, 1500.0, -20.0]])
+    np.testing.assert_allclose(frame.to_ned(*frame.to_llh(p)), p, atol=1e-6)
+    # A small step north increases latitude by dN / (R_M + h); east by dE / ((R_N + h) cos lat).
+    lat, lon, h = frame.to_llh([1.0, 0.0, 0.0])
+    R_M, R_N = earth.radii(np.radians(49.0))
+    assert lat - np.radians(49.0) == pytest.approx(1.0 / (R_M + 110.0), rel=1e-6)
+    lat, lon, h = frame.to_llh([0.0, 1.0, 0.0])
+    assert lon - np.radians(8.4) == pytest.approx(1.0 / ((R_N + 110.0) * np.cos(np.radians(49.0))), rel=1e-6)
+    assert frame.to_llh([0.0, 0.0, -5.0])[2] == pytest.approx(115.0, abs=1e-6)
+
+
+def test_rates():
+    np.testing.assert_allclose(earth.earth_rate_n(0.0), [earth.OMEGA_IE, 0, 0])
+    R_M, R_N = earth.radii(0.3)
+    w = earth.transport_rate_n(0.3, 0.0, np.array([10.0, 20.0, 0.0]))
+    np.testing.assert_allclose(w, [20 / R_N, -10 / R_M, -20 * np.tan(0.3) / R_N])
+
+
+def test_rotation_helpers():
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        rpy = rng.uniform([-np.pi, -1.5, -np.pi], [np.pi, 1.5, np.pi])
+        R = euler_to_dcm(*rpy)
+        np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+        np.testing.assert_allclose(dcm_to_euler(R), rpy, atol=1e-12)
+        phi = rng.normal(size=3) * rng.uniform(0, 3)
+        np.testing.assert_allclose(dcm_to_rotvec(rotvec_to_dcm(phi)) if np.linalg.norm(phi) < np.pi else 0,
+                                   phi if np.linalg.norm(phi) < np.pi else 0, atol=1e-10)
+    np.testing.assert_allclose(skew([1, 2, 3]) @ [4, 5, 6], np.cross([1, 2, 3], [4, 5, 6]))
+    # Near-pi rotations recover the angle and the (sign-ambiguous) axis.
+    axis = np.array([1.0, 2.0, -2.0]) / 3.0
+    v = dcm_to_rotvec(rotvec_to_dcm(axis * (np.pi - 1e-9)))
+    assert abs(abs(v @ axis) - (np.pi - 1e-9)) < 1e-6
+
+
+def test_euler_error_jacobian_by_finite_differences():
+    rpy = np.array([0.2, -0.3, 2.0])
+    R = euler_to_dcm(*rpy)
+    J = euler_error_jacobian(*rpy)
+    eps = 1e-7
+    for i in range(3):
+        phi = np.zeros(3)
+        phi[i] = eps
+        d = (np.array(dcm_to_euler(rotvec_to_dcm(phi) @ R)) - np.array(dcm_to_euler(rotvec_to_dcm(-phi) @ R))) / (2 * eps)
+        np.testing.assert_allclose(d, J[:, i], atol=1e-6)

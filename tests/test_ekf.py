@@ -1,0 +1,134 @@
+"""Mechanization and EKF against simulated runs with known truth, and the KITTI integration test."""
+import numpy as np
+import pytest
+
+from gnssacc import earth, mechanization as mech
+from gnssacc.config import load_config
+from gnssacc.ekf import run_ekf
+from gnssacc.metrics import gnss_score, score
+from gnssacc.rotations import dcm_to_rotvec, euler_to_dcm
+from gnssacc.sources.sim import grade_config, simulate
+
+
+def _free_inertial(run, duration_s, b_a=np.zeros(3), b_g=np.zeros(3)):
+    """Integrate the run's IMU from the true initial state, no updates; return NED drift [m]."""
+    tr = run.truth
+    pos = np.array([tr.lat[0], tr.lon[0], tr.h[0]])
+    v_n = tr.v_n[0].copy()
+    R_nb = euler_to_dcm(*tr.rpy[0])
+    imu = run.imu
+    f = imu.f_b + b_a
+    w = imu.omega_ib_b + b_g
+    z3, zN = np.zeros(3), np.zeros(len(imu))
+    t0 = imu.t[0]
+    mech.propagate(imu.t, f, w, 1, t0, t0 + duration_s, pos, v_n, R_nb, z3, z3, np.eye(15), z3, z3, z3, z3, zN, zN,
+                   1, False)
+    k = int(np.argmin(np.abs(tr.t - (t0 + duration_s))))
+    frame = earth.LocalTangentFrame(tr.lat[k], tr.lon[k], tr.h[k])
+    return frame.to_ned(*pos)
+
+
+def test_stationary_perfect_imu_stays_put():
+    run = simulate("static", duration_s=65.0, imu_grade="perfect", noise="none", seed=0)
+    drift = _free_inertial(run, 60.0)
+    assert np.linalg.norm(drift) < 1e-3  # 1 mm over 60 s
+
+
+def test_stationary_biased_imu_drifts_as_theory_says():
+    run = simulate("static", duration_s=65.0, imu_grade="perfect", noise="none", seed=0, initial_yaw_deg=0.0)
+    t = 60.0
+    # Accelerometer bias along body x (= north at yaw 0): dp_N = b t^2 / 2 (Schuler term < 0.1 %).
+    b = 1e-3 * 9.80665
+    drift = _free_inertial(run, t, b_a=np.array([b, 0.0, 0.0]))
+    assert drift[0] == pytest.approx(0.5 * b * t**2, rel=5e-3)
+    assert abs(drift[1]) < 0.01 * abs(drift[0])
+    # Gyro bias about body x tilts the platform: east error g b t^3 / 6.
+    bg = np.radians(10.0) / 3600.0
+    drift = _free_inertial(run, t, b_g=np.array([bg, 0.0, 0.0]))
+    g = earth.normal_gravity(run.truth.lat[0], run.truth.h[0])
+    assert drift[1] == pytest.approx(g * bg * t**3 / 6.0, rel=0.02)
+
+
+def test_moving_perfect_imu_follows_truth():
+    run = simulate("car", duration_s=125.0, imu_grade="perfect", noise="none", seed=0)
+    assert np.linalg.norm(_free_inertial(run, 120.0)) < 0.05
+
+
+def _nees(run, sol):
+    """Normalised estimation error squared per dof over position, velocity and attitude."""
+    tr = run.truth
+    idx = np.searchsorted(tr.t, sol.t)
+    p_true = run.origin.to_ned(tr.lat[idx], tr.lon[idx], tr.h[idx])
+    p_est = run.origin.to_ned(sol.lat, sol.lon, sol.h)
+    out = []
+    for i in range(len(sol)):
+        e = np.empty(9)
+        e[0:3] = p_est[i] - p_true[i]
+        e[3:6] = sol.v_n[i] - tr.v_n[idx[i]]
+        e[6:9] = dcm_to_rotvec(euler_to_dcm(*sol.rpy[i]) @ euler_to_dcm(*tr.rpy[idx[i]]).T)
+        out.append(e @ np.linalg.solve(sol.P[i][:9, :9], e) / 9.0)
+    return np.array(out)
+
+
+@pytest.mark.parametrize("method", ["ekf", "ekf-acc"])
+def test_ekf_on_simulated_car_beats_gnss_and_is_consistent(method):
+    cfg = load_config(overrides={"imu": grade_config("industrial")})
+    nees, gains = [], []
+    for seed in range(3):
+        run = simulate("car", duration_s=300.0, imu_grade="industrial", noise="white", seed=seed)
+        sol = run_ekf(run, cfg, method, store_P=True)
+        sc, raw = score(run, sol), gnss_score(run)
+        gains.append(sc.prmse_m / raw.prmse_m)
+        # Skip the first 60 s of convergence from the self-initialised state.
+        nees.append(_nees(run, sol)[sol.t - sol.t[0] > 60.0].mean())
+        assert sol.stats["n_pos_updates"] > 250
+        if method == "ekf-acc":
+            assert sol.stats["n_acc_updates"] > 250
+    assert max(gains) < 0.7, gains
+    # The mean NEES per dof over three runs of ~240 correlated epochs: consistent within a factor 2.
+    assert 0.5 < np.mean(nees) < 2.0, nees
+
+
+def test_ekf_estimates_the_heading_and_biases_of_a_simulated_ugv():
+    cfg = load_config(overrides={"imu": grade_config("industrial")})
+    run = simulate("ugv", duration_s=400.0, imu_grade="industrial", noise="white", seed=5)
+    sol = run_ekf(run, cfg, "ekf-acc")
+    sc = score(run, sol)
+    assert sc.prmse_m < gnss_score(run).prmse_m
+    yaw_sigma_deg = np.degrees(sol.sigma[-1, 8])
+    assert sc.rpy_rmse_deg[2] < 10.0 and yaw_sigma_deg < 10.0
+    # The final z-gyro bias estimate is within 3 sigma of the truth.
+    b_true = run.meta["true_bias_g"][-1, 2]
+    assert abs(sol.b_g[-1, 2] - b_true) < 3 * sol.sigma[-1, 14] + 1e-6
+
+
+def test_suspect_spans_get_inflated_noise():
+    """Interpolated IMU stretches increase the attitude sigma versus the same run unflagged."""
+    from gnssacc.quality import QualityReport, Span, check_imu
+
+    cfg = load_config(overrides={"imu": grade_config("industrial")})
+    run = simulate("turns", duration_s=120.0, imu_grade="industrial", noise="white", seed=1)
+    clean = check_imu(run.imu, cfg)
+    assert not clean.spans
+    i0, i1 = 5000, 5150
+    flagged = QualityReport([Span("interpolated", run.imu.t[i0], run.imu.t[i1 - 1], i0, i1, "all", "test")],
+                            len(run.imu), 0.01, 0.01)
+    t_out = np.array([run.imu.t[i1]])
+    a = run_ekf(run, cfg, "ekf", quality=clean, output_times=t_out)
+    b = run_ekf(run, cfg, "ekf", quality=flagged, output_times=t_out)
+    assert b.sigma[0, 8] > 2 * a.sigma[0, 8]
+
+
+def test_kitti_integration():
+    from gnssacc.pipeline import load_source
+
+    cfg = load_config("kitti")
+    run = load_source("kitti", cfg, noise="white", seed=0)
+    raw = gnss_score(run).prmse_m
+    assert 6.0 < raw < 7.2
+    for method in ("ekf", "ekf-acc"):
+        sol = run_ekf(run, cfg, method)
+        sc = score(run, sol)
+        assert sc.prmse_m < 0.7 * raw, (method, sc.prmse_m)
+        assert sc.n_epochs > 460
+        assert 0.5 < sol.stats["nis_pos_mean"] < 1.5
