@@ -72,14 +72,20 @@ def main():
     print("\nMemory (peak traced by tracemalloc during run_ekf, inputs excluded):")
     sim_cfg = load_config(overrides={"imu": grade_config("industrial")})
     print(f"{'run length [s]':>15s} {'outputs':>8s} {'peak [MiB]':>11s}")
+    peaks = {}
     for duration in (600.0, 6000.0):
         srun = simulate("car", duration_s=duration, imu_grade="industrial", seed=0)
         sq = check_imu(srun.imu, sim_cfg)
         for n_out in (10, "1 Hz"):
             t_out = srun.truth.t[:: max(len(srun.truth.t) // 10, 1)][:10] if n_out == 10 else srun.truth.t
             mib = peak_mib(lambda: run_ekf(srun, sim_cfg, "ekf-acc", quality=sq, output_times=t_out))
+            peaks[(duration, len(t_out))] = mib
             print(f"{duration:15.0f} {len(t_out):8d} {mib:11.2f}")
-    print("(same number of outputs -> same peak whatever the run length: memory grows with the stored output only)")
+    (d0, n0), (d1, n1) = (600.0, 10), (6000.0, 10)
+    print(f"10x longer run, same 10 outputs: {peaks[(d1, n1)] / peaks[(d0, n0)]:.2f}x peak memory")
+    big = max(peaks, key=lambda k: k[1])
+    per_row = (peaks[big] - peaks[(big[0], 10)]) * 2**20 / (big[1] - 10)
+    print(f"cost per stored output epoch: {per_row:.0f} bytes")
 
 
 if __name__ == "__main__":

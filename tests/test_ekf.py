@@ -19,10 +19,10 @@ def _free_inertial(run, duration_s, b_a=np.zeros(3), b_g=np.zeros(3)):
     imu = run.imu
     f = imu.f_b + b_a
     w = imu.omega_ib_b + b_g
-    z3, zN = np.zeros(3), np.zeros(len(imu))
+    z3, no_seg = np.zeros(3), np.zeros(0, np.int64)
     t0 = imu.t[0]
-    mech.propagate(imu.t, f, w, 1, t0, t0 + duration_s, pos, v_n, R_nb, z3, z3, np.eye(15), z3, z3, z3, z3, zN, zN,
-                   1, False)
+    mech.propagate(imu.t, f, w, 1, t0, t0 + duration_s, pos, v_n, R_nb, z3, z3, np.eye(15), z3, z3, z3, z3, no_seg,
+                   no_seg, np.zeros((0, 3)), np.zeros((0, 3)), 1, False)
     k = int(np.argmin(np.abs(tr.t - (t0 + duration_s))))
     frame = earth.LocalTangentFrame(tr.lat[k], tr.lon[k], tr.h[k])
     return frame.to_ned(*pos)

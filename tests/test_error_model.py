@@ -94,6 +94,6 @@ def test_sparse_covariance_propagation_equals_dense(order):
     P = P0.copy()
     dt = 0.01
     z = np.zeros(3)
-    _propagate_cov(P, F, np.empty((9, 15)), R, dt, z, z, z, z, 0.0, 0.0, order)
+    _propagate_cov(P, F, np.empty((9, 15)), R, dt, z, z, z, z, order)
     Phi = np.eye(15) + F * dt + (0.5 * (F * dt) @ (F * dt) if order == 2 else 0.0)
     np.testing.assert_allclose(P, Phi @ P0 @ Phi.T, rtol=1e-12, atol=1e-12)

@@ -112,26 +112,42 @@ def test_report_summary_and_json(cfg):
     assert d["dt_median_s"] == pytest.approx(0.01, rel=0.05)
 
 
-def test_inflation_psd_integrates_to_sigma_T_squared(cfg):
+@pytest.mark.parametrize("mode", ["fixed", "local"])
+def test_inflation_psd_integrates_to_sigma_T_squared(cfg, mode):
+    from gnssacc.config import load_config
+
+    cfg = load_config(overrides={"quality": {"suspect_sigma_mode": mode}})
     imu, _ = _with_defects()
     rep = check_imu(imu, cfg)
     q_gyro, q_accel = inflation_psd(imu, rep, cfg)
-    assert q_gyro.shape == q_accel.shape == (len(imu),)
+    assert q_gyro.shape == q_accel.shape == (len(imu), 3)
     dt = np.diff(imu.t, prepend=imu.t[0])          # sample k holds over (t[k-1], t[k]]
-    sg = cfg["quality"]["suspect_gyro_sigma_dps"] * DEG
-    sa = cfg["quality"]["suspect_accel_sigma_mps2"]
+    cap_g = cfg["quality"]["suspect_gyro_sigma_dps"] * DEG
+    cap_a = cfg["quality"]["suspect_accel_sigma_mps2"]
+    clean = ~rep.suspect_mask(len(imu))
+    w = cfg["quality"]["suspect_local_window_s"]
     for s in rep.spans:
         sl = slice(s.i_start, s.i_end)
         T = s.t_end - s.t_start
+        if mode == "fixed":
+            sg, sa = np.full(3, cap_g), np.full(3, cap_a)
+        else:
+            # Independent recomputation: std of the clean neighbours within w seconds, capped.
+            near = (np.abs(imu.t - s.t_start) <= w) | (np.abs(imu.t - s.t_end) <= w)
+            near |= (imu.t >= s.t_start - w) & (imu.t <= s.t_end + w)
+            idx = np.flatnonzero(near & clean)
+            idx = idx[(idx < s.i_start) | (idx >= s.i_end)]
+            sg = np.minimum(imu.omega_ib_b[idx].std(axis=0), cap_g)
+            sa = np.minimum(imu.f_b[idx].std(axis=0), cap_a)
+            assert np.all(sg < cap_g)  # quiet channels get far less than the cap
         if s.channels != "ax":
-            assert np.sum(q_gyro[sl] * dt[sl]) == pytest.approx((sg * T) ** 2, rel=1e-9)
+            np.testing.assert_allclose(np.sum(q_gyro[sl] * dt[sl, None], axis=0), (sg * T) ** 2, rtol=1e-9)
         if s.channels != "gz":
-            assert np.sum(q_accel[sl] * dt[sl]) == pytest.approx((sa * T) ** 2, rel=1e-9)
+            np.testing.assert_allclose(np.sum(q_accel[sl] * dt[sl, None], axis=0), (sa * T) ** 2, rtol=1e-9)
     # A clipped gyro does not de-weight the accelerometers, and vice versa.
     gz = rep.of_kind("saturated")[0]
     assert q_accel[gz.i_start:gz.i_end].max() == 0.0 and q_gyro[4000:4008].max() == 0.0
-    mask = rep.suspect_mask(len(imu))
-    assert np.all(q_gyro[~mask] == 0) and np.all(q_accel[~mask] == 0)
+    assert np.all(q_gyro[clean] == 0) and np.all(q_accel[clean] == 0)
 
 
 # --- the real KITTI file shipped with gtsam --------------------------------------------------------

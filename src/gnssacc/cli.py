@@ -33,7 +33,9 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--outage-every", default=None, metavar="PERIOD:LEN",
                    help="drop GNSS for LEN s at the end of every PERIOD s")
     r.add_argument("--config", default=None, help="run configuration TOML (see 'gnssacc config --show')")
-    r.add_argument("--preset", default=None, choices=PRESETS, help="named configuration preset")
+    r.add_argument("--preset", default=None, choices=PRESETS + ("none",),
+                   help="named configuration preset (the KITTI source uses 'kitti' unless told otherwise; "
+                        "'none': built-in defaults)")
     r.add_argument("--imu-frame", choices=["frd", "flu"], default="frd", help="axes of a CSV run's imu.csv")
     r.add_argument("--out", default=None, help="output folder (default ./gnssacc-out/<source>-<timestamp>/)")
     r.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
@@ -60,14 +62,18 @@ def _cmd_run(args) -> int:
     from .report import format_table
 
     methods = parse_methods(args.methods)
-    cfg = load_config(args.preset, args.config)
+    preset = args.preset
+    if preset is None and args.source in (None, "kitti"):
+        preset = "kitti"
+    cfg = load_config(None if preset == "none" else preset, args.config)
     run = load_source(args.source, cfg, noise=args.noise, seed=args.seed, imu_frame=args.imu_frame)
     run = with_outages(run, args.outage, args.outage_every)
     metrics, sols = compare(run, cfg, methods, show_progress=True)
     out = write_outputs(Path(args.out) if args.out else default_out_dir(run), run, sols, metrics, cfg,
                         plots=not args.no_plots)
     print(f"{run.name}: {run.duration_s:.1f} s, {len(run.imu)} IMU samples, {len(run.gnss)} GNSS fixes"
-          + (f", noise {run.meta['noise']} seed {run.meta['seed']}" if "noise" in run.meta else ""))
+          + (f", noise {run.meta['noise']} seed {run.meta['seed']}" if "noise" in run.meta else "")
+          + f"; config: {', '.join(cfg.sources)}")
     for line in _quality_lines(metrics):
         print(line)
     print()

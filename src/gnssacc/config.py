@@ -106,8 +106,13 @@ DEFAULTS: dict[str, dict] = {
         "gap_factor": 3.0,
         # Frozen or saturated channels must last this many samples to be flagged.
         "stuck_min_samples": 5,
-        # Over flagged spans the estimators add process noise as if the rate / specific force
-        # were wrong by this 1-sigma for the whole span [deg/s], [m/s^2].
+        # Over flagged spans the estimators add process noise, per IMU channel, as if the rate /
+        # specific force were wrong by an unknown constant of 1-sigma s for the whole span.
+        # "local": s = the channel's standard deviation over the clean samples within
+        # suspect_local_window_s before and after the span (how much that channel really varies
+        # there), capped by the sigmas below. "fixed": s = the sigmas below on every channel.
+        "suspect_sigma_mode": "local",
+        "suspect_local_window_s": 2.0,
         "suspect_gyro_sigma_dps": 20.0,
         "suspect_accel_sigma_mps2": 2.0,
     },
@@ -316,5 +321,7 @@ def _validate(cfg: RunConfig, where: str) -> None:
         raise InputError(where, "[imu] bias_correlation_time_s must be positive")
     if int(cfg["ekf"]["phi_order"]) not in (1, 2):
         raise InputError(where, "[ekf] phi_order must be 1 or 2")
+    if cfg["quality"]["suspect_sigma_mode"] not in ("local", "fixed"):
+        raise InputError(where, '[quality] suspect_sigma_mode must be "local" or "fixed"')
     if not 0.0 <= float(cfg["data"]["max_bad_fraction"]) <= 1.0:
         raise InputError(where, "[data] max_bad_fraction must be between 0 and 1")

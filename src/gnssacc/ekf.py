@@ -23,7 +23,7 @@ from .earth import gravity_n, radii
 from .gnss_accel import AccelWindow, H_a_blocks, predicted_acceleration
 from .initialise import initialise
 from .progress import progress
-from .quality import QualityReport, check_imu, inflation_psd
+from .quality import QualityReport, check_imu, inflation_segments
 from .rotations import dcm_to_euler, euler_error_jacobian, rotvec_to_dcm, skew
 from .run import InitialState, RecordedRun
 from .solution import NavSolution
@@ -106,6 +106,13 @@ def _specific_force_at(imu_t, f_imu, t, avg_s):
         return f_imu[k]
     k0 = int(np.searchsorted(imu_t, t - avg_s, side="left"))
     return f_imu[k0:k + 1].mean(axis=0)
+
+
+def _suspect_at(imu_t, t, avg_s, seg_i0, seg_i1) -> bool:
+    """Whether any IMU sample used for the specific force at ``t`` lies in a suspect segment."""
+    k = min(int(np.searchsorted(imu_t, t, side="left")), len(imu_t) - 1)
+    k0 = int(np.searchsorted(imu_t, t - avg_s, side="left")) if avg_s > 0 else k
+    return bool(np.any((seg_i0 <= k) & (seg_i1 > k0)))
 
 
 class _Recorder:
@@ -192,7 +199,7 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
     init = init or run.init or initialise(run, cfg)
     if quality is None:
         quality = check_imu(run.imu, cfg)
-    extra_g, extra_a = inflation_psd(run.imu, quality, cfg)
+    seg_i0, seg_i1, seg_qg, seg_qa = inflation_segments(run.imu, quality, cfg)
     imu_t = np.ascontiguousarray(run.imu.t, float)
     f_imu = np.ascontiguousarray(run.imu.f_b, float)
     w_imu = np.ascontiguousarray(run.imu.omega_ib_b, float)
@@ -220,7 +227,8 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
     ev_idx = np.concatenate([np.arange(len(gnss)), np.arange(len(out_t))])
     order = np.lexsort((ev_kind, ev_t))
     rec = _Recorder(len(out_t), store_P)
-    stats = {"n_pos_updates": 0, "n_acc_updates": 0, "n_pos_rejected": 0, "init": init.how, "t_init": t0}
+    stats = {"n_pos_updates": 0, "n_acc_updates": 0, "n_pos_rejected": 0, "n_acc_skipped_suspect_imu": 0,
+             "init": init.how, "t_init": t0}
     nis = {"pos": [], "pos_t": [], "acc": [], "acc_t": []}
 
     for e in progress(order, desc=method, enable=show_progress):
@@ -233,7 +241,7 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
                 continue
         if t_e > t_cur:
             k, t_cur = mech.propagate(imu_t, f_imu, w_imu, k, t_cur, t_e, s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, s.P,
-                                      q_a, q_g, q_ba, q_bg, extra_a, extra_g, phi_order, True)
+                                      q_a, q_g, q_ba, q_bg, seg_i0, seg_i1, seg_qa, seg_qg, phi_order, True)
         if kind == 1:
             rec.add(t_e, s)
             continue
@@ -246,6 +254,10 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
             nis["pos"].append(nis_p)
             nis["pos_t"].append(t_e)
         if use_acc and meas is not None:
+            if _suspect_at(imu_t, t_e, f_avg, seg_i0, seg_i1):
+                # The specific force the update would use is fabricated or damaged data.
+                stats["n_acc_skipped_suspect_imu"] += 1
+                continue
             f_b = _specific_force_at(imu_t, f_imu, t_e, f_avg) - s.b_a
             a_pred = predicted_acceleration(s.R_nb, f_b, gravity_n(s.pos[0], s.pos[2]))
             d_phi, d_ba = H_a_blocks(s.R_nb, f_b)

@@ -16,6 +16,9 @@ from .errors import InputError
 from .gnss_accel import acceleration_row
 from .run import InitialState, RecordedRun
 
+#: Longest static start examined for levelling [s]; more adds nothing and costs memory.
+_STATIC_SEARCH_S = 300.0
+
 #: Prior 1-sigma of a ground vehicle's mean acceleration over the levelling window [m/s^2],
 #: used to shrink the (noisy) GNSS-fitted acceleration towards zero.
 _ACCEL_PRIOR_SIGMA = 1.0
@@ -25,11 +28,12 @@ def static_start(run: RecordedRun, cfg: RunConfig) -> float | None:
     """End time [s] of a static period at the start of the run, or ``None`` if there is none."""
     c = cfg["init"]
     imu = run.imu
-    moving = (np.linalg.norm(imu.omega_ib_b, axis=1) > c["static_gyro_max_dps"] * DEG)
-    first_move = int(np.argmax(moving)) if np.any(moving) else len(imu)
+    n = int(np.searchsorted(imu.t, imu.t[0] + _STATIC_SEARCH_S))
+    moving = (np.linalg.norm(imu.omega_ib_b[:n], axis=1) > c["static_gyro_max_dps"] * DEG)
+    first_move = int(np.argmax(moving)) if np.any(moving) else n
     # The specific-force norm must also be steady: check its std over one-second blocks.
     f_norm = np.linalg.norm(imu.f_b[:first_move], axis=1)
-    dt = np.median(np.diff(imu.t))
+    dt = np.median(np.diff(imu.t[:max(n, 2)]))
     block = max(int(round(1.0 / dt)), 2)
     end = first_move
     for i in range(0, first_move - block + 1, block):
@@ -86,9 +90,9 @@ def initialise(run: RecordedRun, cfg: RunConfig) -> InitialState:
     p_n = run.origin.to_ned(gnss.lat, gnss.lon, gnss.h)
     win = float(c["course_fit_s"])
     t_static_end = static_start(run, cfg)
-    for k in range(len(gnss)):
-        sel = (gnss.t >= gnss.t[k]) & (gnss.t <= gnss.t[k] + win) & (gnss.t >= run.t_start)
-        if sel.sum() < 3:
+    for k in range(int(np.searchsorted(gnss.t, run.t_start)), len(gnss)):
+        sel = slice(k, int(np.searchsorted(gnss.t, gnss.t[k] + win, side="right")))
+        if sel.stop - sel.start < 3:
             continue
         t_w = gnss.t[sel]
         t_ref = 0.5 * (t_w[0] + t_w[-1])
@@ -109,7 +113,7 @@ def initialise(run: RecordedRun, cfg: RunConfig) -> InitialState:
             sigma_vel_mps=np.maximum(sv, c["vel_sigma_min_mps"]),
             sigma_att_rad=np.array([sigma_tilt, sigma_tilt, sigma_yaw]),
             how=f"self-initialised at t={t_ref:.2f} s: position/velocity from a line fit over "
-                f"{sel.sum()} fixes, yaw from GNSS course ({speed:.1f} m/s), {how}",
+                f"{sel.stop - sel.start} fixes, yaw from GNSS course ({speed:.1f} m/s), {how}",
         )
     raise InputError(run.where, f"cannot initialise: the GNSS track never shows a speed above "
                                 f"{c['course_min_speed_mps']} m/s clearly above its noise, so yaw is unknown; "
@@ -122,16 +126,16 @@ def _attitude(run, cfg, t_w, p_w, s_w, yaw, t_static_end):
     imu = run.imu
     g = gravity_n(run.gnss.lat[0], run.gnss.h[0])[2]
     if t_static_end is not None:
-        sel = imu.t <= t_static_end
-        roll, pitch = _level(imu.f_b[sel].mean(axis=0), np.zeros(3))
+        f_static = imu.f_b[:int(np.searchsorted(imu.t, t_static_end, side="right"))]
+        roll, pitch = _level(f_static.mean(axis=0), np.zeros(3))
         # Levelling precision from the specific-force scatter; the vehicle may settle after the
         # static period ends, which the floor covers.
-        sigma = np.std(imu.f_b[sel][:, :2], axis=0).max() / np.sqrt(sel.sum()) / g
+        sigma = np.std(f_static[:, :2], axis=0).max() / np.sqrt(len(f_static)) / g
         return roll, pitch, max(sigma, c["roll_pitch_sigma_min_deg"] * DEG), "roll/pitch from a static start"
-    sel = (imu.t >= t_w[0]) & (imu.t <= t_w[-1])
-    if sel.sum() < 2:
-        sel = np.abs(imu.t - t_w.mean()) <= 0.5
-    f_mean = imu.f_b[sel].mean(axis=0)
+    i0, i1 = np.searchsorted(imu.t, [t_w[0], t_w[-1]], side="left")
+    if i1 - i0 < 2:
+        i0, i1 = np.searchsorted(imu.t, [t_w.mean() - 0.5, t_w.mean() + 0.5])
+    f_mean = imu.f_b[i0:max(i1, i0 + 1)].mean(axis=0)
     # Mean acceleration from a quadratic fit of the same fixes, shrunk towards zero by a prior
     # (a ground vehicle's mean acceleration over a few seconds is rarely above ~1 m/s^2).
     B = acceleration_row(t_w)

@@ -189,7 +189,7 @@ _NZ_V = (0, 12)    # velocity rows: dp, dv, phi, b_a
 
 
 @njit(cache=True)
-def _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, extra_a, extra_g, phi_order):
+def _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order):
     """P <- Phi P Phi^T + Q with Phi = I + F dt (+ (F dt)^2 / 2) and Q = G Qc G^T dt.
 
     For the first-order case ``Phi P Phi^T = P + dt (F P + P F^T) + dt^2 F P F^T`` is evaluated
@@ -232,7 +232,7 @@ def _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, extra_a, extra_g, ph
                     v = P[i, j] + dt * A[i, j]
                 P[i, j] = v
                 P[j, i] = v
-    # G Qc G^T: R diag(q) R^T for the white sensor noise, plus isotropic inflation.
+    # G Qc G^T: R diag(q) R^T for the white sensor noise (body axes).
     for i in range(3):
         for j in range(3):
             sa = 0.0
@@ -242,15 +242,28 @@ def _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, extra_a, extra_g, ph
                 sg += R_nb[i, k] * q_g[k] * R_nb[j, k]
             P[3 + i, 3 + j] += sa * dt
             P[6 + i, 6 + j] += sg * dt
-        P[3 + i, 3 + i] += extra_a * dt
-        P[6 + i, 6 + i] += extra_g * dt
         P[9 + i, 9 + i] += q_ba[i] * dt
         P[12 + i, 12 + i] += q_bg[i] * dt
 
 
 @njit(cache=True)
+def _segment_index(k, seg_i0, seg_i1):
+    """Index of the disjoint sorted segment ``[i0, i1)`` containing sample ``k``, or -1."""
+    lo, hi = 0, seg_i0.shape[0]
+    while lo < hi:  # first segment whose end is beyond k
+        mid = (lo + hi) // 2
+        if seg_i1[mid] <= k:
+            lo = mid + 1
+        else:
+            hi = mid
+    if lo < seg_i0.shape[0] and seg_i0[lo] <= k:
+        return lo
+    return -1
+
+
+@njit(cache=True)
 def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
-              q_a, q_g, q_ba, q_bg, extra_a, extra_g, phi_order, with_cov):
+              q_a, q_g, q_ba, q_bg, seg_i0, seg_i1, seg_qa, seg_qg, phi_order, with_cov):
     """Propagate nominal state and covariance from ``t_cur`` to ``t_to`` (in place).
 
     Parameters
@@ -266,8 +279,10 @@ def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
         Nominal state and covariance, updated in place.
     q_a, q_g, q_ba, q_bg : ndarray (3,)
         Noise PSDs: accel [(m/s^2)^2/s], gyro [rad^2/s], bias random walks.
-    extra_a, extra_g : ndarray (N,)
-        Per-sample additive PSDs for suspect IMU data (data-quality inflation).
+    seg_i0, seg_i1 : ndarray (S,) of int
+    seg_qa, seg_qg : ndarray (S, 3)
+        Data-quality inflation as disjoint sample segments ``[i0, i1)`` with additive accel and
+        gyro PSDs per body axis (:func:`gnssacc.quality.inflation_segments`).
     phi_order : int
         1 or 2.
     with_cov : bool
@@ -282,6 +297,8 @@ def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
     f = np.empty(3)
     w = np.empty(3)
     A = np.empty((9, 15))
+    qa_k = np.empty(3)
+    qg_k = np.empty(3)
     while t_cur < t_to and k < n:
         t_end = t_imu[k] if t_imu[k] < t_to else t_to
         dt = t_end - t_cur
@@ -291,7 +308,11 @@ def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
                 w[i] = w_imu[k, i] - b_g[i]
             if with_cov:
                 F = system_matrix(pos, v_n, R_nb, f)
-                _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, extra_a[k], extra_g[k], phi_order)
+                j = _segment_index(k, seg_i0, seg_i1)
+                for i in range(3):
+                    qa_k[i] = q_a[i] + (seg_qa[j, i] if j >= 0 else 0.0)
+                    qg_k[i] = q_g[i] + (seg_qg[j, i] if j >= 0 else 0.0)
+                _propagate_cov(P, F, A, R_nb, dt, qa_k, qg_k, q_ba, q_bg, phi_order)
             strapdown_step(pos, v_n, R_nb, f, w, dt)
         t_cur = t_end
         if t_cur >= t_imu[k]:
@@ -307,6 +328,8 @@ def warm_up() -> float:
     t = np.array([0.0, 0.01, 0.02])
     fw = np.zeros((3, 3))
     zeros3 = np.zeros(3)
+    seg_i = np.zeros(1, np.int64)
     propagate(t, fw, fw, 1, 0.0, 0.015, np.array([0.5, 0.1, 0.0]), zeros3.copy(), np.eye(3), zeros3, zeros3,
-              np.eye(15), zeros3, zeros3, zeros3, zeros3, np.zeros(3), np.zeros(3), 1, True)
+              np.eye(15), zeros3, zeros3, zeros3, zeros3, seg_i, seg_i + 1, np.zeros((1, 3)), np.zeros((1, 3)), 1,
+              True)
     return time.perf_counter() - t0

@@ -263,46 +263,91 @@ def check_imu(imu: ImuData, cfg: RunConfig) -> QualityReport:
 
 
 def inflation_psd(imu: ImuData, report: QualityReport, cfg: RunConfig) -> tuple[np.ndarray, np.ndarray]:
-    """Extra white-noise PSD per IMU sample, to de-weight suspect samples in the estimators.
+    """Extra white-noise PSD per IMU sample and channel, to de-weight suspect samples.
 
-    Over a flagged span of duration ``T`` the rate (specific force) is treated as wrong by an
-    unknown constant of 1-sigma ``sigma``, which leaves an angle (velocity) error of variance
-    ``(sigma T)^2`` at the end of the span. The estimators only take white noise, so the same
-    end-of-span variance is expressed as white noise of PSD ``q = sigma^2 T`` on every sample of
-    the span: ``sum_k q dt_k = sigma^2 T * T``. Estimators add ``q[k] * dt_k`` to the gyro
-    (accelerometer) noise variance of sample ``k``.
+    Over a flagged span of duration ``T`` each channel's reading is treated as wrong by an
+    unknown constant of 1-sigma ``s``, which leaves an angle (velocity) error of variance
+    ``(s T)^2`` at the end of the span. The estimators only take white noise, so the same
+    end-of-span variance is expressed as white noise of PSD ``q = s^2 T`` on every sample of the
+    span: ``sum_k q dt_k = s^2 T * T``. Estimators add ``q[k] * dt_k`` to the variance of
+    sample ``k`` on that body axis.
 
-    Saturated spans inflate only the sensor that clipped (gyro for ``g*``, accelerometer for
-    ``a*``); all other kinds inflate both. Where spans overlap the larger PSD is kept, so a
-    sample is not counted twice.
-
-    Parameters
-    ----------
-    imu : ImuData
-        The samples the report was made from (only its length is used).
-    report : QualityReport
-    cfg : RunConfig
-        ``quality.suspect_gyro_sigma_dps`` [deg/s] and ``quality.suspect_accel_sigma_mps2`` [m/s^2].
+    ``s`` per channel (``quality.suspect_sigma_mode``): ``"local"``, the channel's standard
+    deviation over the clean samples within ``quality.suspect_local_window_s`` on both sides of
+    the span, capped by ``suspect_gyro_sigma_dps`` / ``suspect_accel_sigma_mps2`` (a car's roll
+    rate barely varies around a turn, its yaw rate does, and the inflation follows); ``"fixed"``,
+    those caps on every channel. Saturated spans inflate only the sensor that clipped (gyro for
+    ``g*``, accelerometer for ``a*``); all other kinds inflate both. Where spans overlap the
+    larger PSD is kept, so a sample is not counted twice.
 
     Returns
     -------
-    q_gyro_extra : ndarray, shape (N,)
-        Additive gyro white-noise PSD [rad^2/s] (same on all three axes).
-    q_accel_extra : ndarray, shape (N,)
-        Additive accelerometer white-noise PSD [(m/s^2)^2/s].
+    q_gyro_extra : ndarray, shape (N, 3)
+        Additive gyro white-noise PSD per body axis [rad^2/s].
+    q_accel_extra : ndarray, shape (N, 3)
+        Additive accelerometer white-noise PSD per body axis [(m/s^2)^2/s].
+    """
+    i0, i1, seg_g, seg_a = inflation_segments(imu, report, cfg)
+    q_gyro = np.zeros((len(imu), 3))
+    q_accel = np.zeros((len(imu), 3))
+    for a, b, qg, qa in zip(i0, i1, seg_g, seg_a):
+        q_gyro[a:b] = qg
+        q_accel[a:b] = qa
+    return q_gyro, q_accel
+
+
+def _span_sigmas(imu: ImuData, span: Span, clean: np.ndarray, cfg: RunConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Per-channel 1-sigma (gyro [rad/s], accel [m/s^2]) of the error assumed over a span."""
+    cap_g = float(cfg["quality"]["suspect_gyro_sigma_dps"]) * DEG
+    cap_a = float(cfg["quality"]["suspect_accel_sigma_mps2"])
+    if cfg["quality"]["suspect_sigma_mode"] == "fixed":
+        return np.full(3, cap_g), np.full(3, cap_a)
+    w = float(cfg["quality"]["suspect_local_window_s"])
+    lo = int(np.searchsorted(imu.t, span.t_start - w))
+    hi = int(np.searchsorted(imu.t, span.t_end + w, side="right"))
+    around = np.arange(lo, hi)
+    around = around[clean[lo:hi] & ((around < span.i_start) | (around >= span.i_end))]
+    if around.size < 5:
+        return np.full(3, cap_g), np.full(3, cap_a)
+    return (np.minimum(imu.omega_ib_b[around].std(axis=0), cap_g),
+            np.minimum(imu.f_b[around].std(axis=0), cap_a))
+
+
+def inflation_segments(imu: ImuData, report: QualityReport, cfg: RunConfig):
+    """The inflation of :func:`inflation_psd` as non-overlapping sample segments.
+
+    Memory is proportional to the number of suspect spans, not to the run length; this is
+    what the estimators use.
+
+    Returns
+    -------
+    i0, i1 : ndarray of int, shape (S,)
+        Segment sample ranges ``[i0, i1)``, sorted and disjoint.
+    q_gyro, q_accel : ndarray, shape (S, 3)
+        Additive PSDs per body axis on each segment [rad^2/s], [(m/s^2)^2/s].
     """
     n = len(imu)
-    sigma_gyro = float(cfg["quality"]["suspect_gyro_sigma_dps"]) * DEG     # [rad/s]
-    sigma_accel = float(cfg["quality"]["suspect_accel_sigma_mps2"])         # [m/s^2]
-    q_gyro = np.zeros(n)
-    q_accel = np.zeros(n)
+    clean = ~report.suspect_mask(n) if report.spans else np.ones(n, bool)
+    spans = []
     for s in report.spans:
+        a, b = max(s.i_start, 0), min(s.i_end, n)
+        if b <= a:
+            continue
         T = max(s.duration_s, 0.0)
-        sl = slice(max(s.i_start, 0), min(s.i_end, n))
+        sg, sa = _span_sigmas(imu, s, clean, cfg)
         gyro = s.kind != "saturated" or s.channels.startswith("g")
         accel = s.kind != "saturated" or s.channels.startswith("a")
-        if gyro:
-            q_gyro[sl] = np.maximum(q_gyro[sl], sigma_gyro ** 2 * T)
-        if accel:
-            q_accel[sl] = np.maximum(q_accel[sl], sigma_accel ** 2 * T)
-    return q_gyro, q_accel
+        spans.append((a, b, sg**2 * T if gyro else np.zeros(3), sa**2 * T if accel else np.zeros(3)))
+    # Split at every span edge; on each elementary piece keep the largest PSD of the spans covering it.
+    edges = sorted({e for a, b, _, _ in spans for e in (a, b)})
+    i0, i1, q_g, q_a = [], [], [], []
+    for a, b in zip(edges[:-1], edges[1:]):
+        cover = [(qg, qa) for s0, s1, qg, qa in spans if s0 <= a and b <= s1]
+        if cover:
+            i0.append(a)
+            i1.append(b)
+            q_g.append(np.max([c[0] for c in cover], axis=0))
+            q_a.append(np.max([c[1] for c in cover], axis=0))
+    if not i0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3))
+    return np.array(i0, np.int64), np.array(i1, np.int64), np.array(q_g), np.array(q_a)
