@@ -23,7 +23,9 @@ def _parser() -> argparse.ArgumentParser:
                        description="Run the estimators on a run and print a comparison table. SOURCE: omitted or "
                                    "'kitti' for the KITTI sequence inside the gtsam wheel, or a CSV run directory.")
     r.add_argument("source", nargs="?", default=None, help="'kitti' (default) or a CSV run directory")
-    r.add_argument("--methods", default=None, help="comma-separated method ids (default: ekf,ekf-acc)")
+    r.add_argument("--methods", default=None,
+                   help="comma-separated method ids (default: ekf,ekf-acc,smoother,smoother-acc); each smoother "
+                        "method also reports its online estimate as <id>-online")
     r.add_argument("--seed", type=int, default=0, help="GNSS noise seed (default 0)")
     r.add_argument("--noise", choices=["white", "gm", "none"], default=None,
                    help="GNSS noise profile for sources with truth (KITTI default: white); for a CSV run it "

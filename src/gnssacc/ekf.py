@@ -21,9 +21,9 @@ from . import mechanization as mech
 from .config import RunConfig
 from .earth import gravity_n, radii
 from .gnss_accel import AccelWindow, H_a_blocks, predicted_acceleration
-from .initialise import initialise
+from .initialise import initial_sigmas, initialise
 from .progress import progress
-from .quality import QualityReport, check_imu, inflation_segments
+from .quality import QualityReport, check_imu, inflation_segments, touches_segments
 from .rotations import dcm_to_euler, euler_error_jacobian, rotvec_to_dcm, skew
 from .run import InitialState, RecordedRun
 from .solution import NavSolution
@@ -42,15 +42,9 @@ class _State:
 
 
 def _initial_state(init: InitialState, cfg: RunConfig) -> _State:
-    over = cfg.initial_sigma_overrides()
-    att = np.array(init.sigma_att_rad, float)
-    if "roll_pitch" in over:
-        att[:2] = over["roll_pitch"]
-    if "yaw" in over:
-        att[2] = over["yaw"]
+    sig_p, sig_v, sig_att = initial_sigmas(init, cfg)
     P = np.zeros((15, 15))
-    sig = np.concatenate([over.get("pos", init.sigma_pos_m), over.get("vel", init.sigma_vel_mps), att,
-                          cfg.accel_bias_sigma0, cfg.gyro_bias_sigma0])
+    sig = np.concatenate([sig_p, sig_v, sig_att, cfg.accel_bias_sigma0, cfg.gyro_bias_sigma0])
     P[np.diag_indices(15)] = sig**2
     return _State(np.array([init.lat, init.lon, init.h]), np.array(init.v_n, float).copy(), init.R_nb.copy(),
                   np.zeros(3), np.zeros(3), P)
@@ -97,22 +91,6 @@ def _position_innovation(s: _State, lat, lon, h, lever_arm_b):
     H[:, 0:3] = np.eye(3)
     H[:, 6:9] = -skew(l_n)
     return dz, H
-
-
-def _specific_force_at(imu_t, f_imu, t, avg_s):
-    """Specific force of the sample holding at ``t`` or its mean over ``[t - avg_s, t]``."""
-    k = min(int(np.searchsorted(imu_t, t, side="left")), len(imu_t) - 1)
-    if avg_s <= 0.0:
-        return f_imu[k]
-    k0 = int(np.searchsorted(imu_t, t - avg_s, side="left"))
-    return f_imu[k0:k + 1].mean(axis=0)
-
-
-def _suspect_at(imu_t, t, avg_s, seg_i0, seg_i1) -> bool:
-    """Whether any IMU sample used for the specific force at ``t`` lies in a suspect segment."""
-    k = min(int(np.searchsorted(imu_t, t, side="left")), len(imu_t) - 1)
-    k0 = int(np.searchsorted(imu_t, t - avg_s, side="left")) if avg_s > 0 else k
-    return bool(np.any((seg_i0 <= k) & (seg_i1 > k0)))
 
 
 class _Recorder:
@@ -254,11 +232,11 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
             nis["pos"].append(nis_p)
             nis["pos_t"].append(t_e)
         if use_acc and meas is not None:
-            if _suspect_at(imu_t, t_e, f_avg, seg_i0, seg_i1):
+            if touches_segments(*run.imu.sample_range(t_e, f_avg), seg_i0, seg_i1):
                 # The specific force the update would use is fabricated or damaged data.
                 stats["n_acc_skipped_suspect_imu"] += 1
                 continue
-            f_b = _specific_force_at(imu_t, f_imu, t_e, f_avg) - s.b_a
+            f_b = run.imu.specific_force_at(t_e, f_avg) - s.b_a
             a_pred = predicted_acceleration(s.R_nb, f_b, gravity_n(s.pos[0], s.pos[2]))
             d_phi, d_ba = H_a_blocks(s.R_nb, f_b)
             H = np.zeros((3, 15))

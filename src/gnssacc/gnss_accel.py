@@ -55,14 +55,29 @@ def acceleration_row(t: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     t : ndarray, shape (m,)
-        Fix times [s], m >= 3, not all equal; need not be uniform.
+        Fix times [s], m >= 3, at least three distinct; need not be uniform.
+
+    Notes
+    -----
+    ``B = e_3^T (A^T A)^{-1} A^T``. The 3x3 normal matrix is built from power sums of the time
+    offsets, scaled to O(1) by the window length for conditioning, and inverted by cofactors:
+    scalar arithmetic, because this runs at every GNSS epoch and numpy's per-call overhead
+    dominates for such small arrays.
     """
-    A = design_matrix(t)
-    # Scale time to O(1) before solving so (A^T A) is well conditioned for any window length.
-    scale = max(float(t[-1] - t[0]), 1e-9)
-    A_s = A * np.array([1.0, 1.0 / scale, 1.0 / scale**2])
-    pinv_s = np.linalg.solve(A_s.T @ A_s, A_s.T)
-    return pinv_s[2] / scale**2
+    t = [float(x) for x in t]
+    scale = max(t[-1] - t[0], 1e-9)
+    u = [(x - t[0]) / scale for x in t]
+    q = [0.5 * x * x for x in u]
+    s0, s1, s2 = float(len(u)), sum(u), sum(qq for qq in q)
+    s11, s12, s22 = sum(x * x for x in u), sum(x * qq for x, qq in zip(u, q)), sum(qq * qq for qq in q)
+    # N = [[s0, s1, s2], [s1, s11, s12], [s2, s12, s22]]; third row of N^-1 by cofactors.
+    c20 = s1 * s12 - s11 * s2
+    c21 = -(s0 * s12 - s1 * s2)
+    c22 = s0 * s11 - s1 * s1
+    det = s0 * (s11 * s22 - s12 * s12) - s1 * (s1 * s22 - s12 * s2) + s2 * c20
+    if abs(det) < 1e-12 * max(1.0, s0) ** 3:
+        raise ValueError("acceleration window needs at least three distinct fix times")
+    return np.array([(c20 + c21 * x + c22 * qq) / det for x, qq in zip(u, q)]) / scale**2
 
 
 def ls_acceleration(t: np.ndarray, p_n: np.ndarray, sigma_ned: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -145,9 +160,9 @@ class AccelWindow:
         self._buf.append((float(t), np.asarray(p_n, float), np.asarray(sigma_ned, float)))
         if len(self._buf) < self.m:
             return None
-        ts = np.array([b[0] for b in self._buf])
-        ps = np.array([b[1] for b in self._buf])
-        ss = np.array([b[2] for b in self._buf])
+        ts = np.fromiter((b[0] for b in self._buf), float, self.m)
+        ps = np.stack([b[1] for b in self._buf])
+        ss = np.stack([b[2] for b in self._buf])
         a_n, cov = ls_acceleration(ts, ps, ss)
         if self.sigma_override is not None:
             cov = np.diag(self.sigma_override**2)

@@ -24,6 +24,22 @@ _STATIC_SEARCH_S = 300.0
 _ACCEL_PRIOR_SIGMA = 1.0
 
 
+def initial_sigmas(init: InitialState, cfg: RunConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Initial 1-sigma of position [m], velocity [m/s] and attitude error (n frame) [rad].
+
+    The initial state's own sigmas, replaced by any ``[init]`` overrides of the configuration;
+    both estimators start from these.
+    """
+    over = cfg.initial_sigma_overrides()
+    att = np.array(init.sigma_att_rad, float)
+    if "roll_pitch" in over:
+        att[:2] = over["roll_pitch"]
+    if "yaw" in over:
+        att[2] = over["yaw"]
+    return (np.asarray(over.get("pos", init.sigma_pos_m), float), np.asarray(over.get("vel", init.sigma_vel_mps), float),
+            att)
+
+
 def static_start(run: RecordedRun, cfg: RunConfig) -> float | None:
     """End time [s] of a static period at the start of the run, or ``None`` if there is none."""
     c = cfg["init"]

@@ -25,9 +25,19 @@ from .report import format_table, metrics_dict, plot_errors, plot_trajectory, wr
 from .run import RecordedRun
 from .solution import NavSolution
 
-#: Estimators by method id: callables ``(run, cfg, method, quality=..., show_progress=...) -> NavSolution``.
-METHODS = {"ekf": run_ekf, "ekf-acc": run_ekf}
-DEFAULT_METHODS = ("ekf", "ekf-acc")
+def _ekf(run, cfg, method, **kw) -> dict[str, NavSolution]:
+    return {method: run_ekf(run, cfg, method, **kw)}
+
+
+def _smoother(run, cfg, method, **kw) -> dict[str, NavSolution]:
+    from .smoother import run_smoother  # gtsam import only when a smoother method is asked for
+    return run_smoother(run, cfg, method, **kw)
+
+
+#: Estimators by method id: ``(run, cfg, method, quality=..., show_progress=...) -> {id: NavSolution}``.
+#: A smoother method also returns its online estimate as ``<id>-online``.
+METHODS = {"ekf": _ekf, "ekf-acc": _ekf, "smoother": _smoother, "smoother-acc": _smoother}
+DEFAULT_METHODS = ("ekf", "ekf-acc", "smoother", "smoother-acc")
 
 
 def parse_methods(text: str | None) -> list[str]:
@@ -86,7 +96,10 @@ def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, quality
                 show_progress: bool = False) -> dict[str, NavSolution]:
     """Run each method on the same run and data-quality findings."""
     quality = quality or check_imu(run.imu, cfg)
-    return {m: METHODS[m](run, cfg, m, quality=quality, show_progress=show_progress) for m in methods}
+    out: dict[str, NavSolution] = {}
+    for m in methods:
+        out.update(METHODS[m](run, cfg, m, quality=quality, show_progress=show_progress))
+    return out
 
 
 def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, show_progress: bool = False) -> tuple[dict, dict]:

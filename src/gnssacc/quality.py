@@ -351,3 +351,8 @@ def inflation_segments(imu: ImuData, report: QualityReport, cfg: RunConfig):
     if not i0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3))
     return np.array(i0, np.int64), np.array(i1, np.int64), np.array(q_g), np.array(q_a)
+
+
+def touches_segments(k0: int, k1: int, seg_i0: np.ndarray, seg_i1: np.ndarray) -> bool:
+    """Whether samples ``[k0, k1)`` overlap any segment ``[i0, i1)`` of :func:`inflation_segments`."""
+    return bool(np.any((seg_i0 < k1) & (seg_i1 > k0)))

@@ -12,7 +12,7 @@ from .run import RecordedRun
 from .solution import NavSolution
 
 #: Baseline of each aided method, for the improvement column.
-BASELINES = {"ekf-acc": "ekf", "smoother-acc": "smoother"}
+BASELINES = {"ekf-acc": "ekf", "smoother-acc": "smoother", "smoother-acc-online": "smoother-online"}
 
 TRAJECTORY_COLUMNS = (
     ["t", "lat_deg", "lon_deg", "h_m", "vn", "ve", "vd", "roll_deg", "pitch_deg", "yaw_deg",

@@ -41,6 +41,17 @@ class ImuData:
     def select(self, mask) -> "ImuData":
         return ImuData(self.t[mask], self.f_b[mask], self.omega_ib_b[mask])
 
+    def sample_range(self, t: float, avg_s: float = 0.0) -> tuple[int, int]:
+        """Indices ``[k0, k1)`` of the samples covering ``[t - avg_s, t]`` (the one holding at ``t`` if 0)."""
+        k = min(int(np.searchsorted(self.t, t, side="left")), len(self.t) - 1)
+        k0 = int(np.searchsorted(self.t, t - avg_s, side="left")) if avg_s > 0 else k
+        return min(k0, k), k + 1
+
+    def specific_force_at(self, t: float, avg_s: float = 0.0) -> np.ndarray:
+        """Specific force [m/s^2] of the sample holding at ``t``, or its mean over ``[t - avg_s, t]``."""
+        k0, k1 = self.sample_range(t, avg_s)
+        return self.f_b[k0:k1].mean(axis=0)
+
 
 @dataclass
 class GnssFixes:
