@@ -28,20 +28,28 @@ def _run_cli(args, capsys):
     return code, out.out, out.err
 
 
+ALL_IDS = ("ekf", "ekf-acc", "smoother", "smoother-online", "smoother-acc", "smoother-acc-online")
+
+
 def test_run_on_csv_dir_writes_all_outputs(run_dir, tmp_path, capsys):
     out = tmp_path / "res"
-    code, stdout, stderr = _run_cli(["run", run_dir, "--methods", "ekf,ekf-acc", "--out", out], capsys)
+    code, stdout, stderr = _run_cli(["run", run_dir, "--out", out], capsys)  # default: all four methods
     assert code == 0, stderr
-    for name in ("metrics.json", "trajectory_ekf.csv", "trajectory_ekf-acc.csv", "errors.png", "trajectory.png"):
+    for name in ["metrics.json", "errors.png", "trajectory.png"] + [f"trajectory_{m}.csv" for m in ALL_IDS]:
         assert (out / name).is_file(), name
     m = json.loads((out / "metrics.json").read_text())
     assert m["source"] == "run" and m["duration_s"] == pytest.approx(120.0, abs=0.1)
-    for mid in ("ekf", "ekf-acc"):
+    assert set(m["methods"]) == set(ALL_IDS)
+    for mid in ALL_IDS:
         entry = m["methods"][mid]
         assert entry["prmse_m"] < m["gnss_prmse_m"]
         assert entry["hrmse_m"] <= entry["prmse_m"] and entry["runtime_s"] > 0
+    assert m["methods"]["smoother"]["prmse_m"] < m["methods"]["ekf"]["prmse_m"]
+    with open(out / "trajectory_smoother.csv") as fh:
+        sm_rows = list(csv.reader(fh))
+    assert sm_rows[0][:10] == REQUIRED_COLUMNS and np.all(np.isfinite(np.array(sm_rows[1:], float)))
     # The table names every method with its PRMSE as in metrics.json.
-    for mid in ("ekf", "ekf-acc"):
+    for mid in ALL_IDS:
         line = next(ln for ln in stdout.splitlines() if ln.startswith(mid + " "))
         assert f"{m['methods'][mid]['prmse_m']:.2f}" in line
     with open(out / "trajectory_ekf.csv") as fh:

@@ -69,9 +69,13 @@ class _ImuModel:
     def __init__(self, cfg: RunConfig, g: float, omega_ie_n: np.ndarray):
         self.cfg, self.g, self.omega = cfg, g, omega_ie_n
         self._cache: dict = {}
-        self.base = self.params(np.zeros(3), np.zeros(3))
+        self.base = self.params(np.zeros(3), np.zeros(3))  # first call fills the cache
 
-    def params(self, qa_extra: np.ndarray, qg_extra: np.ndarray) -> gtsam.PreintegrationCombinedParams:
+    def params(self, qa_extra: np.ndarray | None, qg_extra: np.ndarray | None) -> gtsam.PreintegrationCombinedParams:
+        if qa_extra is None and self._cache:
+            return self.base
+        qa_extra = np.zeros(3) if qa_extra is None else qa_extra
+        qg_extra = np.zeros(3) if qg_extra is None else qg_extra
         key = (tuple(np.round(qa_extra, 15)), tuple(np.round(qg_extra, 15)))
         if key not in self._cache:
             cfg = self.cfg
@@ -149,10 +153,17 @@ class _Smoother:
         self.params.setFactorization(str(sm["factorization"]).upper())
         self.params.setRelinearizeThreshold(float(sm["relinearize_threshold"]))
         self.params.relinearizeSkip = int(sm["relinearize_skip"])
+        # Reuse the slots of marginalised factors so the factor list stays bounded on long runs.
+        self.params.findUnusedFactorSlots = True
         self.isam = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
 
-    def reset(self) -> None:
+    def reset(self, robust: bool = False) -> None:
+        """A new, empty smoother; ``robust`` switches to QR factorization (returns whether it did)."""
+        switched = robust and self.params.getFactorization() != "QR"
+        if switched:
+            self.params.setFactorization("QR")
         self.isam = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
+        return switched
 
     def update(self, graph, values, stamps) -> None:
         ts = gtsam.FixedLagSmootherKeyTimestampMap()
@@ -165,9 +176,16 @@ class _Smoother:
         return (isam.calculateEstimatePose3(X(i)), isam.calculateEstimateVector(V(i)),
                 isam.calculateEstimateConstantBias(B(i)))
 
-    def covariances(self, i: int):
-        """Marginal covariances of X_i (6x6, tangent), V_i (3x3) and B_i (6x6)."""
+    def covariances(self, i: int, joint: bool = False):
+        """Marginal covariances of X_i (6x6, tangent), V_i (3x3) and B_i (6x6).
+
+        ``joint=True`` asks iSAM2 for the three at once, which is cheaper for old nodes deep in
+        the Bayes tree; single queries are cheaper for the newest node near the root.
+        """
         isam = self.isam
+        if joint:
+            full = isam.getISAM2().jointMarginalCovariance([X(i), V(i), B(i)]).fullMatrix()
+            return full[0:6, 0:6], full[6:9, 6:9], full[9:15, 9:15]
         return isam.marginalCovariance(X(i)), isam.marginalCovariance(V(i)), isam.marginalCovariance(B(i))
 
 
@@ -219,7 +237,7 @@ def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
     n = len(times)
     online, fixed = _Record(n), _Record(n)
     stats = {"n_nodes": n, "n_gps_factors": 0, "n_acc_factors": 0, "n_acc_skipped_suspect_imu": 0,
-             "n_ill_posed_recovered": 0, "init": init.how, "t_init": float(init.t), "lag_s": float(cfg["smoother"]["lag_s"])}
+             "n_ill_posed_recovered": 0, "factorization_switched_to_qr": False, "init": init.how, "t_init": float(init.t), "lag_s": float(cfg["smoother"]["lag_s"])}
 
     sig_p, sig_v, sig_att = initial_sigmas(init, cfg)
     R0 = init.R_nb
@@ -263,13 +281,19 @@ def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
     window_start = 0  # first node still in the current smoother (after a re-initialisation)
     oldest = 0        # oldest node whose fixed-lag estimate is not recorded yet
 
-    j = int(np.searchsorted(imu.t, times[0], side="right"))
+    # Samples of each node interval: (t_prev, t] is covered by samples [first[i], last[i]).
+    first = np.searchsorted(imu.t, times, side="right")
+    last = np.minimum(np.searchsorted(imu.t, times, side="left") + 1, len(imu.t))
+    suspect = (np.zeros(n, bool) if seg_i0.size == 0 else
+               np.array([touches_segments(first[i - 1], last[i], seg_i0, seg_i1) if i else False for i in range(n)]))
     for i in progress(range(1, n), desc=method, enable=show_progress):
         t_prev, t = times[i - 1], times[i]
         # Preintegrate the IMU over (t_prev, t], samples held over (t[k-1], t[k]].
-        j_start = j
-        k_end = min(int(np.searchsorted(imu.t, t, side="left")) + 1, len(imu.t))
-        qa_x, qg_x = _inflation_over(imu.t, j_start, k_end, t_prev, t, seg_i0, seg_i1, seg_qa, seg_qg)
+        j_start, k_end = int(first[i - 1]), int(last[i])
+        if suspect[i]:
+            qa_x, qg_x = _inflation_over(imu.t, j_start, k_end, t_prev, t, seg_i0, seg_i1, seg_qa, seg_qg)
+        else:
+            qa_x = qg_x = None
         pim = gtsam.PreintegratedCombinedMeasurements(model.params(qa_x, qg_x), bias)
         # Interval pieces: each sample's (t[k-1], t[k]] clipped to (t_prev, t].
         edges = np.clip(imu.t[j_start:k_end], t_prev, t)
@@ -277,7 +301,6 @@ def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
         for f_b, w_b, dt in zip(imu.f_b[j_start:k_end], imu.omega_ib_b[j_start:k_end], dts.tolist()):
             if dt > 0.0:
                 pim.integrateMeasurement(f_b, w_b, dt)
-        j = j_start + int(np.searchsorted(imu.t[j_start:k_end], t, side="right"))
 
         nav = pim.predict(gtsam.NavState(pose, vel), bias)
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
@@ -298,7 +321,7 @@ def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
         # Nodes about to leave the window: their fixed-lag estimate is the value they have now.
         oldest = max(oldest, window_start)
         while oldest < i and times[oldest] < t - smoother.lag:
-            fixed.put(oldest, *smoother.estimate(oldest), smoother.covariances(oldest))
+            fixed.put(oldest, *smoother.estimate(oldest), smoother.covariances(oldest, joint=True))
             oldest += 1
         stamps = [(X(i), t), (V(i), t), (B(i), t)]
         try:
@@ -307,44 +330,45 @@ def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
             if not _is_ill_posed(exc):
                 raise
             stats["n_ill_posed_recovered"] += 1
-            window_start = _reinitialise(smoother, i, t, nav, bias, online, fixed, window_start, graph, priors)
+            window_start = _reinitialise(smoother, i, times, online, fixed, window_start, graph, values, priors, stats)
         pose, vel, bias = smoother.estimate(i)
         online.put(i, pose, vel, bias, smoother.covariances(i))
 
     for m in range(window_start, n):
         if not fixed.done[m]:
-            fixed.put(m, *smoother.estimate(m), smoother.covariances(m))
+            fixed.put(m, *smoother.estimate(m), smoother.covariances(m, joint=True))
+    # What the smoother holds at the end: bounded by the lag, whatever the run length.
+    stats["final_window_variables"] = int(smoother.isam.getLinearizationPoint().size())
+    stats["final_factor_slots"] = int(smoother.isam.getFactors().size())
     runtime = time.perf_counter() - wall0
     return {method: fixed.solution(run, method, times, runtime, stats),
             method + "-online": online.solution(run, method + "-online", times, runtime, stats)}
 
 
-def _reinitialise(smoother, i, t, nav, bias, online, fixed, window_start, graph, priors) -> int:
-    """Restart the window at node ``i`` after an ill-posed update; return the new window start.
+def _reinitialise(smoother, i, times, online, fixed, window_start, graph, values, priors, stats) -> int:
+    """Restart the window after an ill-posed update of node ``i``; return the new window start.
 
-    Nodes of the abandoned window keep their online estimate as their fixed-lag estimate. Node
-    ``i`` starts from its IMU prediction with priors from the previous node's marginal
-    covariance (inflated x4 in variance), plus its own GNSS / acceleration factors.
+    The new window holds node ``i - 1`` with a prior from its online estimate and marginal
+    covariance (what the failed window knew about it), node ``i`` with all of its new factors
+    (IMU, GNSS, acceleration), so no measurement is lost. If the smoother used Cholesky
+    factorization it switches to QR, which tolerates the poor conditioning that stiff bias random
+    walks cause. Nodes of the abandoned window keep their online estimate as their fixed-lag one.
     """
     for m in range(window_start, i):
         if not fixed.done[m] and online.done[m]:
             fixed.copy_from(online, m)
-    prev_sigma = online.sigmas()[i - 1]
-    R = nav.pose().rotation().matrix()
-    att_n = np.maximum(prev_sigma[6:9], np.radians(1.0)) * 2.0
-    pos_n = np.maximum(prev_sigma[0:3], 1.0) * 2.0
-    c_pose = _pose_covariance_body(R, att_n, pos_n)
-    c_vel = np.diag((np.maximum(prev_sigma[3:6], 0.1) * 2.0) ** 2)
-    c_bias = np.diag((np.maximum(prev_sigma[9:15], 1e-6) * 2.0) ** 2)
-    p_graph, values = priors(i, nav.pose(), nav.velocity(), bias, c_pose, c_vel, c_bias)
-    # Keep the node's own measurements (GPS / acceleration), drop the IMU factor to the old window.
-    for f in range(graph.size()):
-        factor = graph.at(f)
-        if all(key in (X(i), V(i), B(i)) for key in factor.keys()):
-            p_graph.add(factor)
-    smoother.reset()
-    smoother.update(p_graph, values, [(X(i), t), (V(i), t), (B(i), t)])
-    return i
+    if smoother.reset(robust=True):
+        stats["factorization_switched_to_qr"] = True
+    p = i - 1
+    pose = gtsam.Pose3(gtsam.Rot3(online.R[p]), online.p_n[p])
+    bias = gtsam.imuBias.ConstantBias(online.bias[p, 0:3], online.bias[p, 3:6])
+    p_graph, p_values = priors(p, pose, online.v_n[p], bias, online.cov_pose[p], online.cov_vel[p],
+                               online.cov_bias[p])
+    p_graph.push_back(graph)
+    p_values.insert(values)
+    stamps = [(key(p), times[p]) for key in (X, V, B)] + [(key(i), times[i]) for key in (X, V, B)]
+    smoother.update(p_graph, p_values, stamps)
+    return p
 
 
 def _inflation_over(imu_t, k0, k1, t_a, t_b, seg_i0, seg_i1, seg_qa, seg_qg):
