@@ -257,12 +257,18 @@ def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
         values.insert(B(i), bias)
         return graph, values
 
+    has_lever = bool(np.any(lever != 0))
+    noise_cache: dict = {}
+
     def measurement_factors(graph, i, t):
         k = fix_at.get(float(t))
         if k is None:
             return None
-        noise = gtsam.noiseModel.Diagonal.Sigmas(gnss.sigma_ned[k])
-        if np.any(lever != 0):
+        sig = tuple(gnss.sigma_ned[k])
+        noise = noise_cache.get(sig)
+        if noise is None:  # most runs have a handful of distinct fix sigmas
+            noise = noise_cache[sig] = gtsam.noiseModel.Diagonal.Sigmas(gnss.sigma_ned[k])
+        if has_lever:
             graph.add(gtsam.GPSFactorArm(X(i), p_fix[k], lever, noise))
         else:
             graph.add(gtsam.GPSFactor(X(i), p_fix[k], noise))
@@ -281,6 +287,7 @@ def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
     window_start = 0  # first node still in the current smoother (after a re-initialisation)
     oldest = 0        # oldest node whose fixed-lag estimate is not recorded yet
 
+    imu_t, imu_f, imu_w = imu.t, imu.f_b, imu.omega_ib_b
     # Samples of each node interval: (t_prev, t] is covered by samples [first[i], last[i]).
     first = np.searchsorted(imu.t, times, side="right")
     last = np.minimum(np.searchsorted(imu.t, times, side="left") + 1, len(imu.t))
@@ -296,11 +303,12 @@ def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
             qa_x = qg_x = None
         pim = gtsam.PreintegratedCombinedMeasurements(model.params(qa_x, qg_x), bias)
         # Interval pieces: each sample's (t[k-1], t[k]] clipped to (t_prev, t].
-        edges = np.clip(imu.t[j_start:k_end], t_prev, t)
-        dts = np.diff(np.concatenate([[t_prev], edges]))
-        for f_b, w_b, dt in zip(imu.f_b[j_start:k_end], imu.omega_ib_b[j_start:k_end], dts.tolist()):
+        edges = np.clip(imu_t[j_start:k_end], t_prev, t)
+        dts = np.diff(edges, prepend=t_prev)
+        integrate = pim.integrateMeasurement
+        for f_b, w_b, dt in zip(imu_f[j_start:k_end], imu_w[j_start:k_end], dts.tolist()):
             if dt > 0.0:
-                pim.integrateMeasurement(f_b, w_b, dt)
+                integrate(f_b, w_b, dt)
 
         nav = pim.predict(gtsam.NavState(pose, vel), bias)
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
