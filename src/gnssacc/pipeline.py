@@ -141,7 +141,8 @@ def write_outputs(out_dir: Path, run: RecordedRun, sols: dict[str, NavSolution],
             write_trajectory_csv(sol, tmp / f"trajectory_{mid}.csv")
         (tmp / "config.toml").write_text(cfg.to_toml())
         if plots:
-            plot_errors(run, sols, tmp / "errors.png") if run.truth is not None else None
+            if run.truth is not None:  # errors need a reference
+                plot_errors(run, sols, tmp / "errors.png")
             plot_trajectory(run, sols, tmp / "trajectory.png")
         (tmp / "table.txt").write_text(format_table(metrics) + "\n")
         write_json(metrics, tmp / "metrics.json")  # last: its presence marks a complete result

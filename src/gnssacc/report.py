@@ -92,21 +92,20 @@ def format_table(metrics: dict) -> str:
     return "\n".join([line(head), line(["-" * w for w in widths])] + [line(r) for r in rows])
 
 
-def plot_errors(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> None:
-    """Position error norm vs time for all methods, outages shaded."""
+def _figure(figsize):
     import matplotlib
-    matplotlib.use("Agg")
+    matplotlib.use("Agg")  # files only; never needs a display
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(10, 4.5))
-    for mid, sol in sols.items():
-        err, t = position_errors(run, sol)
-        ax.plot(t - run.t_start, np.linalg.norm(err, axis=1), lw=1, label=mid)
-    for a, b in run.meta.get("outages") or []:
-        ax.axvspan(a, b, color="0.85", zorder=0)
-    ax.set_xlabel("time since start [s]")
-    ax.set_ylabel("3-D position error [m]")
-    ax.set_title(f"{run.name}: position error (grey: GNSS outages)")
+    return plt.subplots(figsize=figsize)
+
+
+def _finish(fig, ax, path: Path, xlabel: str, ylabel: str, title: str) -> None:
+    import matplotlib.pyplot as plt
+
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
@@ -114,13 +113,21 @@ def plot_errors(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> N
     plt.close(fig)
 
 
+def plot_errors(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> None:
+    """Position error norm vs time for all methods, outages shaded."""
+    fig, ax = _figure((10, 4.5))
+    for mid, sol in sols.items():
+        err, t = position_errors(run, sol)
+        ax.plot(t - run.t_start, np.linalg.norm(err, axis=1), lw=1, label=mid)
+    for a, b in run.meta.get("outages") or []:
+        ax.axvspan(a, b, color="0.85", zorder=0)
+    _finish(fig, ax, path, "time since start [s]", "3-D position error [m]",
+            f"{run.name}: position error (grey: GNSS outages)")
+
+
 def plot_trajectory(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> None:
     """North/east track of each method with the truth and the GNSS fixes."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7.5, 7.5))
+    fig, ax = _figure((7.5, 7.5))
     fx = run.origin.to_ned(run.gnss.lat, run.gnss.lon, run.gnss.h)
     ax.plot(fx[:, 1], fx[:, 0], ".", ms=2.5, color="0.6", label="GNSS fixes")
     if run.truth is not None:
@@ -129,12 +136,6 @@ def plot_trajectory(run: RecordedRun, sols: dict[str, NavSolution], path: Path) 
     for mid, sol in sols.items():
         p = run.origin.to_ned(sol.lat, sol.lon, sol.h)
         ax.plot(p[:, 1], p[:, 0], lw=1, label=mid)
-    ax.set_xlabel("east [m]")
-    ax.set_ylabel("north [m]")
     ax.set_aspect("equal", adjustable="datalim")
-    ax.set_title(f"{run.name}: track (origin {np.degrees(run.origin.lat0):.5f}, {np.degrees(run.origin.lon0):.5f} deg)")
-    ax.grid(alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(fig, ax, path, "east [m]", "north [m]",
+            f"{run.name}: track (origin {np.degrees(run.origin.lat0):.5f}, {np.degrees(run.origin.lon0):.5f} deg)")
