@@ -50,6 +50,30 @@ def _gravity(lat, h):
     return g, dg_dh
 
 
+# Small products are written out: numba's `@` goes through BLAS (and needs scipy), which costs
+# more than the arithmetic for 3x3 matrices.
+@njit(cache=True)
+def _mm(A, B):
+    n, m, p = A.shape[0], A.shape[1], B.shape[1]
+    C = np.zeros((n, p))
+    for i in range(n):
+        for k in range(m):
+            a = A[i, k]
+            if a != 0.0:
+                for j in range(p):
+                    C[i, j] += a * B[k, j]
+    return C
+
+
+@njit(cache=True)
+def _mv(A, x):
+    y = np.zeros(A.shape[0])
+    for i in range(A.shape[0]):
+        for k in range(A.shape[1]):
+            y[i] += A[i, k] * x[k]
+    return y
+
+
 @njit(cache=True)
 def _skew(v, out):
     out[0, 0] = 0.0
@@ -74,7 +98,7 @@ def _exp_so3(phi):
     else:
         a = np.sin(angle) / angle
         b = (1.0 - np.cos(angle)) / (angle * angle)
-    return np.eye(3) + a * K + b * (K @ K)
+    return np.eye(3) + a * K + b * _mm(K, K)
 
 
 @njit(cache=True)
@@ -97,8 +121,8 @@ def strapdown_step(pos, v_n, R_nb, f_b, omega_ib_b, dt):
     """
     w_ie, w_en, R_M, R_N = _rates(pos, v_n)
     g, _ = _gravity(pos[0], pos[2])
-    R_new = _exp_so3(-(w_ie + w_en) * dt) @ R_nb @ _exp_so3(omega_ib_b * dt)
-    f_n = 0.5 * (R_nb + R_new) @ f_b
+    R_new = _mm(_mm(_exp_so3(-(w_ie + w_en) * dt), R_nb), _exp_so3(omega_ib_b * dt))
+    f_n = _mv(0.5 * (R_nb + R_new), f_b)
     cor = np.cross(2.0 * w_ie + w_en, v_n)
     v_new = np.empty(3)
     for i in range(3):
@@ -158,10 +182,10 @@ def system_matrix(pos, v_n, R_nb, f_b):
     Vx = np.empty((3, 3))
     _skew(v_n, Vx)
     _skew(2.0 * w_ie + w_en, S)
-    Fvv = -S + Vx @ drho_dv
-    col_N = Vx @ (2.0 * dWie_dlat + drho_dlat) / rm
-    col_D = -(Vx @ drho_dh)
-    _skew(R_nb @ f_b, S)
+    Fvv = -S + _mm(Vx, drho_dv)
+    col_N = _mv(Vx, 2.0 * dWie_dlat + drho_dlat) / rm
+    col_D = -_mv(Vx, drho_dh)
+    _skew(_mv(R_nb, f_b), S)
     for i in range(3):
         for j in range(3):
             F[3 + i, 3 + j] = Fvv[i, j]
@@ -198,10 +222,10 @@ def _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order):
     """
     if phi_order == 2:
         Phi = F * dt
-        Phi = Phi + 0.5 * (Phi @ Phi)
+        Phi = Phi + 0.5 * _mm(Phi, Phi)
         for i in range(15):
             Phi[i, i] += 1.0
-        P[:, :] = Phi @ P @ Phi.T
+        P[:, :] = _mm(_mm(Phi, P), Phi.T.copy())
     else:
         # A = F P over the non-zero columns of each row of F.
         for i in range(9):
