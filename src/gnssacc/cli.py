@@ -41,6 +41,25 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--imu-frame", choices=["frd", "flu"], default="frd", help="axes of a CSV run's imu.csv")
     r.add_argument("--out", default=None, help="output folder (default ./gnssacc-out/<source>-<timestamp>/)")
     r.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    r.add_argument("--report", action="store_true",
+                   help="also write report.html (table, figures, per-state sigmas, data-quality findings)")
+    r.add_argument("--export", choices=["tum"], action="append", default=[],
+                   help="also export trajectories: 'tum' writes trajectory_<id>.tum and truth.tum for evo")
+
+    bch = sub.add_parser("bench", help="Monte-Carlo comparison over GNSS noise seeds",
+                         description="Run every method over noise seeds on one run and print the paper-style "
+                                     "table with mean, spread and a paired significance test of each -acc gain.")
+    bch.add_argument("source", nargs="?", default=None, help="'kitti' (default) or a CSV run directory with truth")
+    bch.add_argument("--seeds", default="0-9", help="e.g. 0-19 or 1,4,7 (default 0-9)")
+    bch.add_argument("--methods", default=None, help="comma-separated method ids (default: all four)")
+    bch.add_argument("--noise", choices=["white", "gm"], default="white")
+    bch.add_argument("--outage", default=None, metavar="START:LEN[,START:LEN...]")
+    bch.add_argument("--outage-every", default=None, metavar="PERIOD:LEN")
+    bch.add_argument("--config", default=None)
+    bch.add_argument("--preset", default=None, choices=PRESETS + ("none",))
+    bch.add_argument("--imu-frame", choices=["frd", "flu"], default="frd")
+    bch.add_argument("--jobs", type=int, default=1, help="parallel processes (default 1)")
+    bch.add_argument("--out", default=None, help="also write the per-seed results and the summary as JSON")
 
     c = sub.add_parser("config", help="show the resolved run configuration")
     c.add_argument("--show", action="store_true", help="print the configuration as TOML (default)")
@@ -64,15 +83,12 @@ def _cmd_run(args) -> int:
     from .report import format_table
 
     methods = parse_methods(args.methods)
-    preset = args.preset
-    if preset is None and args.source in (None, "kitti"):
-        preset = "kitti"
-    cfg = load_config(None if preset == "none" else preset, args.config)
+    cfg = load_config(_resolve_preset(args.preset, args.source), args.config)
     run = load_source(args.source, cfg, noise=args.noise, seed=args.seed, imu_frame=args.imu_frame)
     run = with_outages(run, args.outage, args.outage_every)
     metrics, sols = compare(run, cfg, methods, show_progress=True)
     out = write_outputs(Path(args.out) if args.out else default_out_dir(run), run, sols, metrics, cfg,
-                        plots=not args.no_plots)
+                        plots=not args.no_plots, report=args.report, export=tuple(args.export))
     print(f"{run.name}: {run.duration_s:.1f} s, {len(run.imu)} IMU samples, {len(run.gnss)} GNSS fixes"
           + (f", noise {run.meta['noise']} seed {run.meta['seed']}" if "noise" in run.meta else "")
           + f"; config: {', '.join(cfg.sources)}")
@@ -94,6 +110,38 @@ def _quality_lines(metrics: dict) -> list[str]:
         kinds.setdefault(s["kind"], []).append(s)
     parts = [f"{len(v)} {k} ({sum(s['t_end'] - s['t_start'] for s in v):.1f} s)" for k, v in kinds.items()]
     return ["IMU data quality: " + ", ".join(parts) + " - process noise inflated over these spans"]
+
+
+def _resolve_preset(preset: str | None, source: str | None) -> str | None:
+    """The KITTI source uses its preset unless another (or 'none') is asked for."""
+    if preset is None and source in (None, "kitti"):
+        preset = "kitti"
+    return None if preset == "none" else preset
+
+
+def _cmd_bench(args) -> int:
+    import json
+
+    from .montecarlo import format_summary, parse_seeds, run_bench, summarise
+    from .pipeline import parse_methods
+
+    methods = parse_methods(args.methods)
+    try:
+        seeds = parse_seeds(args.seeds)
+    except ValueError:
+        raise InputError("--seeds", f"cannot read {args.seeds!r}: expected e.g. 0-19 or 1,4,7") from None
+    preset = _resolve_preset(args.preset, args.source)
+    load_config(preset, args.config)  # fail early, in this process, on a bad configuration
+    results = run_bench(args.source, preset, args.config, args.noise, args.outage, args.outage_every, methods, seeds,
+                        jobs=max(args.jobs, 1), imu_frame=args.imu_frame)
+    table = summarise(results)
+    title = (f"{args.source or 'kitti'}: {len(seeds)} seeds, noise {args.noise}"
+             + (f", outages {args.outage or ''}{args.outage_every or ''}" if args.outage or args.outage_every else ""))
+    print(format_summary(table, title))
+    if args.out:
+        Path(args.out).write_text(json.dumps({"summary": table, "per_seed": {str(k): v for k, v in results.items()}},
+                                             indent=2) + "\n")
+    return 0
 
 
 def _cmd_config(args) -> int:
@@ -124,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     warnings.showwarning = _show_warning
     try:
-        return {"run": _cmd_run, "config": _cmd_config, "sim": _cmd_sim}[args.command](args)
+        return {"run": _cmd_run, "config": _cmd_config, "sim": _cmd_sim, "bench": _cmd_bench}[args.command](args)
     except InputError as exc:
         print(f"gnssacc: error: {exc.where}: {exc.problem}", file=sys.stderr)
         return 2

@@ -127,11 +127,14 @@ def default_out_dir(run: RecordedRun) -> Path:
 
 
 def write_outputs(out_dir: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict, cfg: RunConfig,
-                  plots: bool = True) -> Path:
+                  plots: bool = True, report: bool = False, export: tuple = ()) -> Path:
     """Write all outputs into ``out_dir`` atomically.
 
     Files are first written to a temporary folder beside ``out_dir`` and moved in only when
     all of them exist, so an interrupted run never leaves a half-written result.
+
+    ``report`` adds ``report.html`` (with ``sigmas.png``); ``export=("tum",)`` adds
+    ``trajectory_<id>.tum`` (and ``truth.tum``) for ``evo``.
     """
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
@@ -144,6 +147,15 @@ def write_outputs(out_dir: Path, run: RecordedRun, sols: dict[str, NavSolution],
             if run.truth is not None:  # errors need a reference
                 plot_errors(run, sols, tmp / "errors.png")
             plot_trajectory(run, sols, tmp / "trajectory.png")
+        if "tum" in export:
+            from .export import write_truth_tum, write_tum
+            for mid, sol in sols.items():
+                write_tum(sol, run, tmp / f"trajectory_{mid}.tum")
+            if run.truth is not None:
+                write_truth_tum(run, tmp / "truth.tum")
+        if report:
+            from .htmlreport import write_html_report
+            write_html_report(tmp, run, sols, metrics)
         (tmp / "table.txt").write_text(format_table(metrics) + "\n")
         write_json(metrics, tmp / "metrics.json")  # last: its presence marks a complete result
         if out_dir.exists():

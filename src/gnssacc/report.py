@@ -33,7 +33,9 @@ def trajectory_table(sol: NavSolution) -> np.ndarray:
 
 def write_trajectory_csv(sol: NavSolution, path: Path) -> None:
     """Write one solution as CSV with a header row (units in the column names)."""
-    fmt = ["%.6f", "%.9f", "%.9f", "%.4f"] + ["%.5g"] * (len(TRAJECTORY_COLUMNS) - 4)
+    # 1e-9 deg ~ 0.1 mm; velocities to 1e-4 m/s; angles to 1e-5 deg; biases and sigmas 6 significant digits.
+    fmt = (["%.6f", "%.9f", "%.9f", "%.4f"] + ["%.4f"] * 3 + ["%.5f"] * 3
+           + ["%.6g"] * (len(TRAJECTORY_COLUMNS) - 10))
     np.savetxt(path, trajectory_table(sol), delimiter=",", header=",".join(TRAJECTORY_COLUMNS), comments="",
                fmt=fmt)
 
@@ -92,12 +94,12 @@ def format_table(metrics: dict) -> str:
     return "\n".join([line(head), line(["-" * w for w in widths])] + [line(r) for r in rows])
 
 
-def _figure(figsize):
+def _figure(figsize, nrows: int = 1, ncols: int = 1, **kw):
     import matplotlib
     matplotlib.use("Agg")  # files only; never needs a display
     import matplotlib.pyplot as plt
 
-    return plt.subplots(figsize=figsize)
+    return plt.subplots(nrows, ncols, figsize=figsize, **kw)
 
 
 def _finish(fig, ax, path: Path, xlabel: str, ylabel: str, title: str) -> None:

@@ -1,0 +1,77 @@
+"""``gnssacc run --report``: an HTML page beside ``metrics.json`` with the comparison table, the
+figures, per-state 1-sigma histories and the data-quality findings. Figures are separate PNG
+files referenced by relative paths, so the folder can be moved or zipped as a whole."""
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+import numpy as np
+
+from .report import _figure, format_table
+from .run import RecordedRun
+from .solution import NavSolution
+
+#: (title, columns of NavSolution.sigma, scale to display units, unit)
+SIGMA_GROUPS = (
+    ("position", slice(0, 3), 1.0, "m", ("N", "E", "D")),
+    ("velocity", slice(3, 6), 1.0, "m/s", ("N", "E", "D")),
+    ("attitude", slice(6, 9), 180.0 / np.pi, "deg", ("roll", "pitch", "yaw")),
+    ("accelerometer bias", slice(9, 12), 1e3 / 9.80665, "mg", ("x", "y", "z")),
+    ("gyro bias", slice(12, 15), 180.0 / np.pi * 3600.0, "deg/h", ("x", "y", "z")),
+)
+
+
+def plot_sigmas(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> None:
+    """1-sigma of every error state vs time, one panel per state, one line per method."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = _figure((14, 14), 5, 3, sharex=True)
+    for row, (name, cols, scale, unit, labels) in enumerate(SIGMA_GROUPS):
+        for c, label in enumerate(labels):
+            ax = axes[row, c]
+            for mid, sol in sols.items():
+                ax.semilogy(sol.t - run.t_start, sol.sigma[:, cols][:, c] * scale, lw=1, label=mid)
+            ax.set_title(f"{name} {label} [{unit}]", fontsize=9)
+            ax.grid(alpha=0.3, which="both")
+    for ax in axes[-1]:
+        ax.set_xlabel("time since start [s]")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle(f"{run.name}: predicted 1-sigma per error state")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def write_html_report(folder: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict) -> Path:
+    """Write ``report.html`` (and ``sigmas.png``) into ``folder``; returns the page's path."""
+    folder = Path(folder)
+    plot_sigmas(run, sols, folder / "sigmas.png")
+    spans = metrics.get("quality", {}).get("spans", [])
+    rows = "".join(f"<tr><td>{html.escape(s['kind'])}</td><td>{s['t_start'] - run.t_start:.2f}</td>"
+                   f"<td>{s['t_end'] - s['t_start']:.2f}</td><td>{html.escape(str(s['channels']))}</td>"
+                   f"<td>{html.escape(str(s['note']))}</td></tr>" for s in spans)
+    quality = (f"<table><tr><th>kind</th><th>start [s]</th><th>length [s]</th><th>channels</th><th>note</th></tr>"
+               f"{rows}</table>" if spans else "<p>No suspect IMU spans.</p>")
+    inits = "".join(f"<li><b>{html.escape(m)}</b>: {html.escape(str(v['stats'].get('init', '')))}</li>"
+                    for m, v in metrics["methods"].items())
+    figures = "".join(f'<h2>{title}</h2><img src="{name}" alt="{title}">' for name, title in
+                      (("errors.png", "Position error"), ("trajectory.png", "Track"),
+                       ("sigmas.png", "Per-state 1-sigma")) if (folder / name).exists())
+    page = f"""<!doctype html>
+<html><head><meta charset="utf-8"><title>gnssacc report: {html.escape(run.name)}</title>
+<style>body{{font-family:sans-serif;max-width:1100px;margin:2em auto}} img{{max-width:100%}}
+table{{border-collapse:collapse}} td,th{{border:1px solid #ccc;padding:2px 6px;font-size:90%}}
+pre{{background:#f6f6f6;padding:1em}}</style></head><body>
+<h1>gnssacc report: {html.escape(run.name)}</h1>
+<p>Source: {html.escape(run.where)}<br>Duration {run.duration_s:.1f} s, {len(run.imu)} IMU samples,
+{len(run.gnss)} GNSS fixes. Configuration: {html.escape(', '.join(metrics.get('config_sources', [])))}.</p>
+<h2>Comparison</h2><pre>{html.escape(format_table(metrics))}</pre>
+<h2>Initialisation</h2><ul>{inits}</ul>
+<h2>IMU data quality</h2>{quality}
+{figures}
+</body></html>
+"""
+    path = folder / "report.html"
+    path.write_text(page)
+    return path
