@@ -21,8 +21,9 @@ def _parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("run", help="run and compare estimators on a recorded run",
                        description="Run the estimators on a run and print a comparison table. SOURCE: omitted or "
-                                   "'kitti' for the KITTI sequence inside the gtsam wheel, or a CSV run directory.")
-    r.add_argument("source", nargs="?", default=None, help="'kitti' (default) or a CSV run directory")
+                                   "'kitti' for the KITTI sequence inside the gtsam wheel, a ROS 1 .bag, a .mcap, a "
+                                   "ROS 2 bag directory, or a CSV run directory.")
+    r.add_argument("source", nargs="?", default=None, help="'kitti' (default), a bag, or a CSV run directory")
     r.add_argument("--methods", default=None,
                    help="comma-separated method ids (default: ekf,ekf-acc,smoother,smoother-acc); each smoother "
                         "method also reports its online estimate as <id>-online")
@@ -39,6 +40,12 @@ def _parser() -> argparse.ArgumentParser:
                    help="named configuration preset (the KITTI source uses 'kitti' unless told otherwise; "
                         "'none': built-in defaults)")
     r.add_argument("--imu-frame", choices=["frd", "flu"], default="frd", help="axes of a CSV run's imu.csv")
+    _bag_arguments(r)
+    r.add_argument("--time-source", choices=["header", "receive"], default="header",
+                   help="bag time stamps: message header (default) or bag receive time")
+    r.add_argument("--gnss-from-truth", type=float, default=None, metavar="RATE_HZ",
+                   help="bag whose only GNSS is an RTK reference: make the estimators' fixes by subsampling it at "
+                        "RATE_HZ and adding --noise (default white); the reference stays the truth")
     r.add_argument("--out", default=None, help="output folder (default ./gnssacc-out/<source>-<timestamp>/)")
     r.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     r.add_argument("--report", action="store_true",
@@ -61,6 +68,11 @@ def _parser() -> argparse.ArgumentParser:
     bch.add_argument("--jobs", type=int, default=1, help="parallel processes (default 1)")
     bch.add_argument("--out", default=None, help="also write the per-seed results and the summary as JSON")
 
+    ins = sub.add_parser("inspect", help="list a bag's topics and which ones gnssacc would use, and why")
+    ins.add_argument("bag", help="ROS 1 .bag, .mcap, or ROS 2 bag directory")
+    _bag_arguments(ins)
+    ins.add_argument("--config", default=None, help="configuration TOML (for [bag] fix_mappings of custom types)")
+
     c = sub.add_parser("config", help="show the resolved run configuration")
     c.add_argument("--show", action="store_true", help="print the configuration as TOML (default)")
     c.add_argument("--config", default=None)
@@ -78,13 +90,33 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def _bag_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--imu-topic", default=None, help="bag topic with sensor_msgs/Imu (default: auto-detect)")
+    p.add_argument("--gnss-topic", default=None, help="bag topic with the GNSS fixes (default: auto-detect)")
+    p.add_argument("--truth-topic", default=None, help="bag topic with a reference trajectory (optional)")
+
+
+def _cmd_inspect(args) -> int:
+    from .sources.rosbag import inspect_bag
+
+    path = Path(args.bag)
+    if not path.exists():
+        raise InputError(args.bag, "no such file or directory")
+    cfg = load_config(None, args.config)
+    print(inspect_bag(path, imu_topic=args.imu_topic, gnss_topic=args.gnss_topic, truth_topic=args.truth_topic,
+                      fix_mappings=cfg["bag"]["fix_mappings"]))
+    return 0
+
+
 def _cmd_run(args) -> int:
     from .pipeline import compare, default_out_dir, load_source, parse_methods, with_outages, write_outputs
     from .report import format_table
 
     methods = parse_methods(args.methods)
     cfg = load_config(_resolve_preset(args.preset, args.source), args.config)
-    run = load_source(args.source, cfg, noise=args.noise, seed=args.seed, imu_frame=args.imu_frame)
+    run = load_source(args.source, cfg, noise=args.noise, seed=args.seed, imu_frame=args.imu_frame,
+                      imu_topic=args.imu_topic, gnss_topic=args.gnss_topic, truth_topic=args.truth_topic,
+                      time_source=args.time_source, gnss_from_truth_hz=args.gnss_from_truth)
     run = with_outages(run, args.outage, args.outage_every)
     metrics, sols = compare(run, cfg, methods, show_progress=True)
     out = write_outputs(Path(args.out) if args.out else default_out_dir(run), run, sols, metrics, cfg,
@@ -172,7 +204,9 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     warnings.showwarning = _show_warning
     try:
-        return {"run": _cmd_run, "config": _cmd_config, "sim": _cmd_sim, "bench": _cmd_bench}[args.command](args)
+        commands = {"run": _cmd_run, "inspect": _cmd_inspect, "config": _cmd_config, "sim": _cmd_sim,
+                    "bench": _cmd_bench}
+        return commands[args.command](args)
     except InputError as exc:
         print(f"gnssacc: error: {exc.where}: {exc.problem}", file=sys.stderr)
         return 2

@@ -132,6 +132,16 @@ DEFAULTS: dict[str, dict] = {
         "suspect_gyro_sigma_dps": 20.0,
         "suspect_accel_sigma_mps2": 2.0,
     },
+    "bag": {
+        # Custom GNSS fix message types, by type name, e.g.
+        #   [bag.fix_mappings."mypkg/msg/MyFix"]
+        #   lat = "position.latitude"; lon = "position.longitude"; height = "position.altitude"
+        #   latlon_scale_deg = 1e-7; height_scale_m = 1e-3; sigma_n = "acc.h"; sigma_d = "acc.v"
+        # Keys: lat, lon, height (field paths), latlon_scale_deg, height_scale_m, sigma_n, sigma_e,
+        # sigma_d, sigma_scale_m, stamp, status, no_fix_values. The ROOAD layout
+        # (ubxtranslator/msg/hpposllh) is built in.
+        "fix_mappings": {},
+    },
     "data": {
         # Largest fraction of NaN/inf rows a table may have before it is an error (0..1).
         "max_bad_fraction": 0.01,
@@ -266,6 +276,8 @@ class RunConfig:
 
 
 def _toml_value(value) -> str:
+    if isinstance(value, dict):
+        return "{" + ", ".join(f'"{k}" = {_toml_value(v)}' for k, v in value.items()) + "}"
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, (list, tuple)):

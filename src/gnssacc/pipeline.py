@@ -51,14 +51,22 @@ def parse_methods(text: str | None) -> list[str]:
     return ids
 
 
+def is_bag(path: Path) -> bool:
+    """ROS 1 ``.bag``, bare ``.mcap``, or a ROS 2 bag directory (with ``metadata.yaml``)."""
+    return (path.is_file() and path.suffix in (".bag", ".mcap")) or (path.is_dir() and (path / "metadata.yaml").exists())
+
+
 def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None, seed: int = 0,
-                imu_frame: str = "frd") -> RecordedRun:
+                imu_frame: str = "frd", imu_topic: str | None = None, gnss_topic: str | None = None,
+                truth_topic: str | None = None, time_source: str = "header",
+                gnss_from_truth_hz: float | None = None) -> RecordedRun:
     """Load a run from a source spec.
 
     Parameters
     ----------
     source : str or None
-        ``None`` or ``"kitti"``: the KITTI sequence in the gtsam wheel. A directory: a CSV run
+        ``None`` or ``"kitti"``: the KITTI sequence in the gtsam wheel. A ROS 1 ``.bag``, a bare
+        ``.mcap`` or a ROS 2 bag directory: read through rosbags. Another directory: a CSV run
         directory (``imu.csv``, ``gnss.csv``, optional ``truth.csv``, ``init.json``).
     cfg : RunConfig
     noise : str, optional
@@ -68,6 +76,9 @@ def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None,
         Noise seed.
     imu_frame : {"frd", "flu"}
         Axes of a CSV directory's ``imu.csv``.
+    imu_topic, gnss_topic, truth_topic, time_source, gnss_from_truth_hz
+        Bag options (see :func:`gnssacc.sources.rosbag.load_bag_run`); for a bag, ``noise``
+        applies to the fixes made from the truth with ``gnss_from_truth_hz``.
     """
     if source in (None, "kitti"):
         from .sources.kitti import load_kitti
@@ -75,6 +86,11 @@ def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None,
     path = Path(source)
     if not path.exists():
         raise InputError(source, "no such file or directory")
+    if is_bag(path):
+        from .sources.rosbag import load_bag_run
+        return load_bag_run(path, cfg, imu_topic=imu_topic, gnss_topic=gnss_topic, truth_topic=truth_topic,
+                            time_source=time_source, gnss_from_truth_hz=gnss_from_truth_hz,
+                            noise=noise, seed=seed)
     if path.is_dir():
         from .sources.csvdir import load_csv_run
         run = load_csv_run(path, cfg, imu_frame=imu_frame)
@@ -83,8 +99,8 @@ def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None,
                 raise InputError(str(path), "--noise makes fixes from the truth, but the run has no truth.csv")
             run = run.with_gnss(fixes_from_truth(run, run.truth, noise, seed), noise=noise, seed=seed)
         return run
-    raise InputError(source, "not a run directory (expected a folder with imu.csv and gnss.csv); "
-                             "ROS bags are not supported yet")
+    raise InputError(source, "not a run: expected a CSV run directory (imu.csv, gnss.csv), a ROS 1 .bag, "
+                             "a .mcap file or a ROS 2 bag directory")
 
 
 def with_outages(run: RecordedRun, outage: str | None, outage_every: str | None) -> RecordedRun:
