@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from gnssacc.ekf import _position_innovation, _State
-from gnssacc.earth import gravity_n, radii
+from gnssacc.earth import radii
 from gnssacc.gnss_accel import (AccelWindow, H_a, H_a_blocks, acceleration_row, design_matrix, ls_acceleration,
                                 paper_H_a_blocks, predicted_acceleration)
 from gnssacc.rotations import euler_to_dcm, rotvec_to_dcm

@@ -131,6 +131,66 @@ class _Recorder:
                            None if self.P is None else self.P[:n])
 
 
+@dataclass
+class EkfSetup:
+    """Everything the EKF's event loop needs, prepared once (shared with analysis replays)."""
+
+    init: InitialState
+    state: _State
+    imu_t: np.ndarray
+    f_imu: np.ndarray
+    w_imu: np.ndarray
+    kernel_args: tuple      # noise PSDs, inflation segments, phi order, with_cov for mech.propagate
+    seg_i0: np.ndarray
+    seg_i1: np.ndarray
+    gate: float
+    lever_b: np.ndarray
+    f_avg_s: float
+    p_fix_n: np.ndarray     # fixes in the run's tangent frame [m]
+    window: AccelWindow
+    k: int                  # IMU index of the sample holding at init.t
+
+    @property
+    def t0(self) -> float:
+        return float(self.init.t)
+
+
+def prepare(run: RecordedRun, cfg: RunConfig, init: InitialState | None = None,
+            quality: QualityReport | None = None) -> EkfSetup:
+    """Initial state and covariance, IMU arrays, noise and inflation, acceleration window."""
+    init = init or run.init or initialise(run, cfg)
+    if quality is None:
+        quality = check_imu(run.imu, cfg)
+    seg_i0, seg_i1, seg_qg, seg_qa = inflation_segments(run.imu, quality, cfg)
+    imu_t = np.ascontiguousarray(run.imu.t, float)
+    kernel_args = (cfg.accel_psd, cfg.gyro_psd, cfg.accel_bias_rw_psd, cfg.gyro_bias_rw_psd, seg_i0, seg_i1, seg_qa,
+                   seg_qg, int(cfg["ekf"]["phi_order"]), True)
+    gnss = run.gnss
+    return EkfSetup(init, _initial_state(init, cfg), imu_t, np.ascontiguousarray(run.imu.f_b, float),
+                    np.ascontiguousarray(run.imu.omega_ib_b, float), kernel_args, seg_i0, seg_i1,
+                    float(cfg["ekf"]["position_gate_nis"]), cfg.lever_arm_b, float(cfg["accel"]["specific_force_avg_s"]),
+                    run.origin.to_ned(gnss.lat, gnss.lon, gnss.h),
+                    AccelWindow(int(cfg["accel"]["window"]), float(cfg["accel"]["max_gap_s"]), cfg.accel_sigma_override),
+                    int(np.searchsorted(imu_t, float(init.t), side="right")))
+
+
+def acceleration_model(run: RecordedRun, setup: EkfSetup, s: _State, t: float, meas):
+    """Innovation (predicted minus measured), H_a and R of the acceleration update at ``t``.
+
+    Returns ``None`` when the specific force it needs comes from a suspect IMU span
+    (fabricated or damaged data): the update is then skipped.
+    """
+    if touches_segments(*run.imu.sample_range(t, setup.f_avg_s), setup.seg_i0, setup.seg_i1):
+        return None
+    f_b = run.imu.specific_force_at(t, setup.f_avg_s) - s.b_a
+    a_pred = predicted_acceleration(s.R_nb, f_b, gravity_n(s.pos[0], s.pos[2]))
+    d_phi, d_ba = H_a_blocks(s.R_nb, f_b)
+    H = np.zeros((3, 15))
+    H[:, 6:9] = d_phi
+    H[:, 9:12] = d_ba
+    return a_pred - meas.a_n, H, meas.cov
+
+
 def default_output_times(run: RecordedRun) -> np.ndarray:
     """Truth epochs when there is truth, else GNSS epochs (before outages were applied)."""
     if run.truth is not None:
@@ -174,30 +234,12 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
         raise ValueError(f"unknown EKF method {method!r}; known: {', '.join(METHODS)}")
     use_acc = METHODS[method]
     wall0 = time.perf_counter()
-    init = init or run.init or initialise(run, cfg)
-    if quality is None:
-        quality = check_imu(run.imu, cfg)
-    seg_i0, seg_i1, seg_qg, seg_qa = inflation_segments(run.imu, quality, cfg)
-    imu_t = np.ascontiguousarray(run.imu.t, float)
-    f_imu = np.ascontiguousarray(run.imu.f_b, float)
-    w_imu = np.ascontiguousarray(run.imu.omega_ib_b, float)
-    q_a, q_g = cfg.accel_psd, cfg.gyro_psd
-    q_ba, q_bg = cfg.accel_bias_rw_psd, cfg.gyro_bias_rw_psd
-    phi_order = int(cfg["ekf"]["phi_order"])
-    gate = float(cfg["ekf"]["position_gate_nis"])
-    lever = cfg.lever_arm_b
-    f_avg = float(cfg["accel"]["specific_force_avg_s"])
-
-    s = _initial_state(init, cfg)
-    t0 = float(init.t)
-    k = int(np.searchsorted(imu_t, t0, side="right"))
+    setup = prepare(run, cfg, init, quality)
+    s, imu_t, kargs, t0, k = setup.state, setup.imu_t, setup.kernel_args, setup.t0, setup.k
     t_cur = t0
-
     out_t = default_output_times(run) if output_times is None else np.asarray(output_times, float)
     out_t = out_t[(out_t >= t0) & (out_t <= imu_t[-1])]
-    gnss = run.gnss
-    p_fix_n = run.origin.to_ned(gnss.lat, gnss.lon, gnss.h)
-    window = AccelWindow(int(cfg["accel"]["window"]), float(cfg["accel"]["max_gap_s"]), cfg.accel_sigma_override)
+    gnss, p_fix_n, window = run.gnss, setup.p_fix_n, setup.window
 
     # Events in time order; at equal times the GNSS update comes before the output.
     ev_t = np.concatenate([gnss.t, out_t])
@@ -206,7 +248,7 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
     order = np.lexsort((ev_kind, ev_t))
     rec = _Recorder(len(out_t), store_P)
     stats = {"n_pos_updates": 0, "n_acc_updates": 0, "n_pos_rejected": 0, "n_acc_skipped_suspect_imu": 0,
-             "init": init.how, "t_init": t0}
+             "init": setup.init.how, "t_init": t0}
     nis = {"pos": [], "pos_t": [], "acc": [], "acc_t": []}
 
     for e in progress(order, desc=method, enable=show_progress):
@@ -218,13 +260,13 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
             if t_e < t0:
                 continue
         if t_e > t_cur:
-            k, t_cur = mech.propagate(imu_t, f_imu, w_imu, k, t_cur, t_e, s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, s.P,
-                                      q_a, q_g, q_ba, q_bg, seg_i0, seg_i1, seg_qa, seg_qg, phi_order, True)
+            k, t_cur = mech.propagate(imu_t, setup.f_imu, setup.w_imu, k, t_cur, t_e, s.pos, s.v_n, s.R_nb, s.b_a,
+                                      s.b_g, s.P, *kargs)
         if kind == 1:
             rec.add(t_e, s)
             continue
-        dz, H = _position_innovation(s, gnss.lat[i], gnss.lon[i], gnss.h[i], lever)
-        nis_p = _update(s, dz, H, np.diag(gnss.sigma_ned[i] ** 2), gate)
+        dz, H = _position_innovation(s, gnss.lat[i], gnss.lon[i], gnss.h[i], setup.lever_b)
+        nis_p = _update(s, dz, H, np.diag(gnss.sigma_ned[i] ** 2), setup.gate)
         if nis_p < 0:
             stats["n_pos_rejected"] += 1
         else:
@@ -232,17 +274,11 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
             nis["pos"].append(nis_p)
             nis["pos_t"].append(t_e)
         if use_acc and meas is not None:
-            if touches_segments(*run.imu.sample_range(t_e, f_avg), seg_i0, seg_i1):
-                # The specific force the update would use is fabricated or damaged data.
+            model = acceleration_model(run, setup, s, t_e, meas)
+            if model is None:
                 stats["n_acc_skipped_suspect_imu"] += 1
                 continue
-            f_b = run.imu.specific_force_at(t_e, f_avg) - s.b_a
-            a_pred = predicted_acceleration(s.R_nb, f_b, gravity_n(s.pos[0], s.pos[2]))
-            d_phi, d_ba = H_a_blocks(s.R_nb, f_b)
-            H = np.zeros((3, 15))
-            H[:, 6:9] = d_phi
-            H[:, 9:12] = d_ba
-            nis["acc"].append(_update(s, a_pred - meas.a_n, H, meas.cov))
+            nis["acc"].append(_update(s, *model))
             nis["acc_t"].append(t_e)
             stats["n_acc_updates"] += 1
 

@@ -58,11 +58,8 @@ import numpy as np
 
 from . import mechanization as mech
 from .config import RunConfig
-from .earth import gravity_n
-from .ekf import _initial_state, _position_innovation, _update
-from .gnss_accel import AccelWindow, H_a_blocks, predicted_acceleration
-from .initialise import initialise
-from .quality import QualityReport, check_imu, inflation_segments, touches_segments
+from .ekf import _position_innovation, _update, acceleration_model, prepare
+from .quality import QualityReport
 from .rotations import dcm_to_euler, euler_error_jacobian, wrap_angle
 from .run import RecordedRun
 from .solution import NavSolution
@@ -358,31 +355,16 @@ def replay_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, with_ph
     if method not in ("ekf", "ekf-acc"):
         raise ValueError(f"replay_ekf replays 'ekf' or 'ekf-acc', not {method!r}")
     use_acc = method == "ekf-acc"
-    init = run.init or initialise(run, cfg)
-    if quality is None:
-        quality = check_imu(run.imu, cfg)
-    seg_i0, seg_i1, seg_qg, seg_qa = inflation_segments(run.imu, quality, cfg)
-    imu_t = np.ascontiguousarray(run.imu.t, float)
-    f_imu = np.ascontiguousarray(run.imu.f_b, float)
-    w_imu = np.ascontiguousarray(run.imu.omega_ib_b, float)
-    q_a, q_g, q_ba, q_bg = cfg.accel_psd, cfg.gyro_psd, cfg.accel_bias_rw_psd, cfg.gyro_bias_rw_psd
-    phi_order = int(cfg["ekf"]["phi_order"])
-    gate = float(cfg["ekf"]["position_gate_nis"])
-    lever = cfg.lever_arm_b
-    f_avg = float(cfg["accel"]["specific_force_avg_s"])
-
-    s = _initial_state(init, cfg)
-    t0 = float(init.t)
-    k = int(np.searchsorted(imu_t, t0, side="right"))
+    setup = prepare(run, cfg, quality=quality)
+    init, s, imu_t, f_imu, t0, k = setup.init, setup.state, setup.imu_t, setup.f_imu, setup.t0, setup.k
+    args, phi_order = setup.kernel_args, setup.kernel_args[8]
+    w_imu, lever, gate, window = setup.w_imu, setup.lever_b, setup.gate, setup.window
     t_cur = t0
-    gnss = run.gnss
-    p_fix_n = run.origin.to_ned(gnss.lat, gnss.lon, gnss.h)
-    window = AccelWindow(int(cfg["accel"]["window"]), float(cfg["accel"]["max_gap_s"]), cfg.accel_sigma_override)
+    gnss, p_fix_n = run.gnss, setup.p_fix_n
     P0 = s.P.copy()
     J0 = euler_error_jacobian(*init.rpy)
     epochs: list[GnssEpoch] = []
     t_stop = imu_t[-1] if t_end is None else min(float(t_end), imu_t[-1])
-    args = (q_a, q_g, q_ba, q_bg, seg_i0, seg_i1, seg_qa, seg_qg, phi_order, True)
     I15 = np.eye(15)
 
     for i in range(len(gnss)):
@@ -418,19 +400,13 @@ def replay_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, with_ph
         H_a = R_a = None
         acc_used = False
         if meas is not None:
-            suspect = touches_segments(*run.imu.sample_range(t_e, f_avg), seg_i0, seg_i1)
-            f_b = run.imu.specific_force_at(t_e, f_avg) - s.b_a
-            d_phi, d_ba = H_a_blocks(s.R_nb, f_b)
-            H_a = np.zeros((3, 15))
-            H_a[:, 6:9] = d_phi
-            H_a[:, 9:12] = d_ba
-            R_a = meas.cov
-            if use_acc and not suspect:
-                a_pred = predicted_acceleration(s.R_nb, f_b, gravity_n(s.pos[0], s.pos[2]))
-                _update(s, a_pred - meas.a_n, H_a, R_a)
-                acc_used = True
-            if suspect:
-                H_a = R_a = None  # the filter would not use it: no counterfactual either
+            # None on suspect IMU data: the filter would not use it, so no counterfactual either.
+            model = acceleration_model(run, setup, s, t_e, meas)
+            if model is not None:
+                dz_a, H_a, R_a = model
+                if use_acc:
+                    _update(s, dz_a, H_a, R_a)
+                    acc_used = True
         epochs.append(GnssEpoch(t_e, P_minus, s.P.copy(), H_p, R_p, H_a, R_a, J, Phi, pos_used, acc_used))
     return EkfReplay(method, epochs, P0, J0, t0, {"accel_window_resets": window.resets})
 
