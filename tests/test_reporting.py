@@ -58,6 +58,11 @@ def test_run_with_report_and_tum_export(run_dir, tmp_path, capsys):
     for name in ("errors.png", "trajectory.png", "sigmas.png"):
         assert (out / name).is_file() and f'src="{name}"' in page
     assert "IMU data quality" in page and "ekf" in page
+    # The observability section: motion shares that add up, and per-state variance shares.
+    assert "Observability" in page and "position + acceleration" in page
+    import re
+    shares = [float(x) for x in re.findall(r"<tr><td>(?:stationary|straight|accelerating|turning)</td><td>([0-9.]+)", page)]
+    assert len(shares) == 4 and sum(shares) == pytest.approx(100.0, abs=0.2)
     tum = np.loadtxt(out / "trajectory_ekf.tum")
     csv = np.genfromtxt(out / "trajectory_ekf.csv", delimiter=",", names=True)
     assert tum.shape == (len(csv), 8)

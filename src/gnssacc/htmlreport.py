@@ -43,8 +43,31 @@ def plot_sigmas(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> N
     plt.close(fig)
 
 
-def write_html_report(folder: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict) -> Path:
-    """Write ``report.html`` (and ``sigmas.png``) into ``folder``; returns the page's path."""
+def observability_html(run: RecordedRun, sols: dict[str, NavSolution], cfg) -> str:
+    """Motion context and, per state, the share of predicted variance each aiding removes (EKF)."""
+    from .motion import classify_motion
+    from .observability import STATE_NAMES, aiding_information, replay_ekf
+
+    ref = next((sols[m] for m in ("smoother", "smoother-acc", "ekf", "ekf-acc") if m in sols), None)
+    if ref is None:
+        return ""
+    fractions = classify_motion(run, ref).fractions()
+    motion = "".join(f"<tr><td>{html.escape(k)}</td><td>{100 * v:.1f}</td></tr>" for k, v in fractions.items())
+    summary = aiding_information(replay_ekf(run, cfg, "ekf-acc")).summary()
+    rows = "".join(f"<tr><td>{n}</td><td>{100 * summary[n]['pos']:.2f}</td><td>{100 * summary[n]['pos_acc']:.2f}</td>"
+                   f"</tr>" for n in STATE_NAMES)
+    return (f"<h2>Observability</h2><p>Motion context (from the IMU and the {html.escape(ref.method)} velocity):</p>"
+            f"<table><tr><th>motion</th><th>share of epochs [%]</th></tr>{motion}</table>"
+            "<p>Mean share of each state's predicted variance removed at a GNSS epoch, by the position update alone "
+            "and by position + GNSS-derived acceleration (the EKF's own matrices, epochs with an acceleration):</p>"
+            f"<table><tr><th>state</th><th>position [%]</th><th>position + acceleration [%]</th></tr>{rows}</table>")
+
+
+def write_html_report(folder: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict, cfg=None) -> Path:
+    """Write ``report.html`` (and ``sigmas.png``) into ``folder``; returns the page's path.
+
+    With ``cfg`` the page also gets the observability section (:func:`observability_html`).
+    """
     folder = Path(folder)
     plot_sigmas(run, sols, folder / "sigmas.png")
     spans = metrics.get("quality", {}).get("spans", [])
@@ -69,6 +92,7 @@ pre{{background:#f6f6f6;padding:1em}}</style></head><body>
 <h2>Comparison</h2><pre>{html.escape(format_table(metrics))}</pre>
 <h2>Initialisation</h2><ul>{inits}</ul>
 <h2>IMU data quality</h2>{quality}
+{observability_html(run, sols, cfg) if cfg is not None else ""}
 {figures}
 </body></html>
 """

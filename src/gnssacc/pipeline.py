@@ -171,7 +171,7 @@ def write_outputs(out_dir: Path, run: RecordedRun, sols: dict[str, NavSolution],
                 write_truth_tum(run, tmp / "truth.tum")
         if report:
             from .htmlreport import write_html_report
-            write_html_report(tmp, run, sols, metrics)
+            write_html_report(tmp, run, sols, metrics, cfg)
         (tmp / "table.txt").write_text(format_table(metrics) + "\n")
         write_json(metrics, tmp / "metrics.json")  # last: its presence marks a complete result
         if out_dir.exists():
