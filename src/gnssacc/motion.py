@@ -20,7 +20,9 @@ Classification, per IMU sample, in this order of precedence (thresholds in
    turn on the spot is turning.
 2. ``stationary``: the IMU is still -- gyro norm below ``still_gyro_dps`` and the standard
    deviation of the specific-force norm over ``still_window_s`` below ``still_accel_std_mps2``
-   (a ZUPT-style detector) -- *and* the estimated horizontal speed is below ``speed_mps``.
+   (a ZUPT-style detector) -- *and* the horizontal acceleration ``|R_nb f_b + g_n|_h`` is at
+   most ``accel_mps2`` (a smooth pull-away barely changes the specific-force norm) -- *and* the
+   estimated horizontal speed is below ``speed_mps``.
    The speed test is needed because an IMU cannot tell standing from driving at constant
    velocity without vibration (e.g. simulated data); the stillness test is needed because a
    GNSS-aided velocity estimate carries errors of a few tenths of a m/s with metre-level fixes.
@@ -195,7 +197,10 @@ def classify_motion(run: RecordedRun, sol: NavSolution, thresholds: MotionThresh
 
     label = np.full(len(ti), STRAIGHT, int)
     label[np.abs(along) > th.accel_mps2] = ACCELERATING
-    label[still & (speed < th.speed_mps)] = STATIONARY
+    # A smooth pull-away barely changes |f| and starts below the speed threshold: a vehicle is
+    # only stationary if its horizontal acceleration is small too.
+    level = np.hypot(a_n[:, 0], a_n[:, 1]) <= th.accel_mps2
+    label[still & level & (speed < th.speed_mps)] = STATIONARY
     label[np.abs(np.degrees(yaw_rate)) > th.yaw_rate_dps] = TURNING
     ctx = MotionContext(ti, label, speed, np.degrees(yaw_rate), along, cross, th)
     if t is None:
