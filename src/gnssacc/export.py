@@ -12,29 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .rotations import euler_to_dcm
+from .rotations import dcm_to_quaternion, euler_to_dcm
 from .run import RecordedRun
 from .solution import NavSolution
-
-
-def dcm_to_quaternion(R: np.ndarray) -> np.ndarray:
-    """Unit quaternion ``(qx, qy, qz, qw)`` of a rotation matrix (Shepperd's method), ``qw >= 0``."""
-    R = np.asarray(R, float)
-    tr = np.trace(R)
-    if tr > 0:
-        s = 2.0 * np.sqrt(tr + 1.0)
-        q = np.array([(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s])
-    else:
-        i = int(np.argmax(np.diag(R)))
-        j, k = (i + 1) % 3, (i + 2) % 3
-        s = 2.0 * np.sqrt(1.0 + R[i, i] - R[j, j] - R[k, k])
-        q = np.empty(4)
-        q[i] = 0.25 * s
-        q[j] = (R[j, i] + R[i, j]) / s
-        q[k] = (R[k, i] + R[i, k]) / s
-        q[3] = (R[k, j] - R[j, k]) / s
-    q /= np.linalg.norm(q)
-    return q if q[3] >= 0 else -q
 
 
 def _write(path: Path, t, p_n, rpy, origin_note: str) -> None:

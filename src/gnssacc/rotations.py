@@ -82,6 +82,56 @@ def euler_error_jacobian(roll, pitch, yaw):
     return np.linalg.inv(E)
 
 
+#: FRD <-> FLU body axes (a 180 deg roll; its own inverse): ``v_flu = FLU_FRD @ v_frd``.
+FLU_FRD = np.diag([1.0, -1.0, -1.0])
+#: NED <-> ENU world axes (swap N/E, flip the vertical; its own inverse): ``v_enu = ENU_NED @ v_ned``.
+ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def flu_to_frd(v_flu: np.ndarray) -> np.ndarray:
+    """Vectors ``(..., 3)`` from FLU to FRD body axes (ROS REP-103 to ours)."""
+    return np.asarray(v_flu, float) * np.array([1.0, -1.0, -1.0])
+
+
+def ros_to_R_nb(R_enu_flu: np.ndarray) -> np.ndarray:
+    """``R_nb`` (FRD body to NED) from a ROS orientation (FLU body to ENU)."""
+    return ENU_NED @ R_enu_flu @ FLU_FRD
+
+
+def R_nb_to_ros(R_nb: np.ndarray) -> np.ndarray:
+    """ROS orientation (FLU body to ENU) of ``R_nb`` (FRD body to NED)."""
+    return ENU_NED @ R_nb @ FLU_FRD
+
+
+def dcm_to_quaternion(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion ``(qx, qy, qz, qw)`` of a rotation matrix (Shepperd's method), ``qw >= 0``."""
+    R = np.asarray(R, float)
+    tr = np.trace(R)
+    if tr > 0:
+        s = 2.0 * np.sqrt(tr + 1.0)
+        q = np.array([(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s])
+    else:
+        i = int(np.argmax(np.diag(R)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * np.sqrt(1.0 + R[i, i] - R[j, j] - R[k, k])
+        q = np.empty(4)
+        q[i] = 0.25 * s
+        q[j] = (R[j, i] + R[i, j]) / s
+        q[k] = (R[k, i] + R[i, k]) / s
+        q[3] = (R[k, j] - R[j, k]) / s
+    q /= np.linalg.norm(q)
+    return q if q[3] >= 0 else -q
+
+
+def quaternion_to_dcm(x: float, y: float, z: float, w: float) -> np.ndarray:
+    """Rotation matrix of a quaternion ``(x, y, z, w)`` (normalised first)."""
+    n = np.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / n, y / n, z / n, w / n
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
 def wrap_angle(a):
     """Wrap angles [rad] into [-pi, pi)."""
     return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi

@@ -22,39 +22,15 @@ import numpy as np
 
 from ..earth import LocalTangentFrame
 from ..errors import InputError
-from ..rotations import euler_to_dcm
+from ..rotations import ENU_NED, FLU_FRD, R_nb_to_ros, dcm_to_quaternion, euler_to_dcm
 from ..run import RecordedRun
 
 KINDS = ("ros1-rooad", "ros2-sqlite3", "ros2-mcap", "mcap")
 LLH_MSG = "float64 lat\nfloat64 lon\nfloat64 height\n"
 HPPOSLLH_MSG = "ubxtranslator/llh llh\nubxtranslator/llh err\n"
-T_FLU_FRD = np.diag([1.0, -1.0, -1.0])
-T_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
 
-def _dcm_to_quat(R):
-    """(x, y, z, w) of a rotation matrix (Shepperd)."""
-    tr = np.trace(R)
-    if tr > 0:
-        s = 2.0 * np.sqrt(tr + 1.0)
-        w, x, y, z = 0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s
-    else:
-        i = int(np.argmax(np.diag(R)))
-        if i == 0:
-            s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
-            w, x, y, z = (R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s
-        elif i == 1:
-            s = 2.0 * np.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
-            w, x, y, z = (R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s
-        else:
-            s = 2.0 * np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
-            w, x, y, z = (R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s
-    return float(x), float(y), float(z), float(w)
-
-
-def ned_frd_to_enu_flu(R_nb):
-    """ROS orientation (FLU body -> ENU) of ``R_nb`` (FRD body -> NED)."""
-    return T_ENU_NED @ R_nb @ T_FLU_FRD
+ned_frd_to_enu_flu = R_nb_to_ros  # name kept for callers of this module
 
 
 def _ns(t: float) -> int:
@@ -163,7 +139,7 @@ def write_bag(run: RecordedRun, path, kind: str = "ros2-sqlite3", *, imu_topic: 
         R_ib = np.eye(3)
         if imu_mount_rpy_deg is not None:
             R_ib = euler_to_dcm(*np.radians(np.asarray(imu_mount_rpy_deg, float))).T
-        C = (T_FLU_FRD if imu_frame == "flu" else np.eye(3)) @ R_ib
+        C = (FLU_FRD if imu_frame == "flu" else np.eye(3)) @ R_ib
         with np.errstate(invalid="ignore"):       # NaN rows (bad-input tests) stay NaN
             f = imu.f_b @ C.T
             w = imu.omega_ib_b @ C.T
@@ -180,7 +156,7 @@ def write_bag(run: RecordedRun, path, kind: str = "ros2-sqlite3", *, imu_topic: 
             if with_orientation and tr is not None and tr.rpy is not None:
                 j = min(int(np.searchsorted(tr.t, imu.t[k])), len(tr.t) - 1)
                 R_n_imu = euler_to_dcm(*tr.rpy[j]) @ R_ib.T
-                q = ty.quat(_dcm_to_quat(ned_frd_to_enu_flu(R_n_imu)))
+                q = ty.quat(dcm_to_quaternion(ned_frd_to_enu_flu(R_n_imu)))
                 qcov = np.diag(np.radians([1.0, 1.0, 5.0]) ** 2).ravel()
             else:
                 q, qcov = ty.quat((0.0, 0.0, 0.0, 1.0)), noq
@@ -211,10 +187,10 @@ def write_bag(run: RecordedRun, path, kind: str = "ros2-sqlite3", *, imu_topic: 
         p_n = origin.to_ned(tr.lat, tr.lon, tr.h)
         for k in range(len(tr.t)):
             R = ned_frd_to_enu_flu(euler_to_dcm(*tr.rpy[k])) if tr.rpy is not None else np.eye(3)
-            v_flu = R.T @ (T_ENU_NED @ tr.v_n[k]) if tr.v_n is not None else np.zeros(3)
+            v_flu = R.T @ (ENU_NED @ tr.v_n[k]) if tr.v_n is not None else np.zeros(3)
             pose = T["geometry_msgs/msg/PoseWithCovariance"](
                 pose=T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](
-                    x=float(p_n[k, 1]), y=float(p_n[k, 0]), z=float(-p_n[k, 2])), orientation=ty.quat(_dcm_to_quat(R))),
+                    x=float(p_n[k, 1]), y=float(p_n[k, 0]), z=float(-p_n[k, 2])), orientation=ty.quat(dcm_to_quaternion(R))),
                 covariance=np.zeros(36))
             twist = T["geometry_msgs/msg/TwistWithCovariance"](
                 twist=T["geometry_msgs/msg/Twist"](linear=ty.vec3(v_flu), angular=ty.vec3(np.zeros(3))),
@@ -261,8 +237,8 @@ def write_bag(run: RecordedRun, path, kind: str = "ros2-sqlite3", *, imu_topic: 
                 streams.append(fix_msgs("truth", tr.t, tr.lat, tr.lon, tr.h, sig, fix_type))
         if imu_mount_rpy_deg is not None:
             add("tf", "/tf_static", "tf2_msgs/msg/TFMessage")
-            R_flu = T_FLU_FRD @ euler_to_dcm(*np.radians(np.asarray(imu_mount_rpy_deg, float))) @ T_FLU_FRD
-            q = _dcm_to_quat(R_flu)
+            R_flu = FLU_FRD @ euler_to_dcm(*np.radians(np.asarray(imu_mount_rpy_deg, float))) @ FLU_FRD
+            q = dcm_to_quaternion(R_flu)
             tf = T["geometry_msgs/msg/TransformStamped"](
                 header=ty.header(run.t_start + time_offset_s, "base_link"), child_frame_id=imu_frame_id,
                 transform=T["geometry_msgs/msg/Transform"](translation=ty.vec3(np.zeros(3)), rotation=ty.quat(q)))

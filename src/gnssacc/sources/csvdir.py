@@ -34,6 +34,7 @@ import numpy as np
 from ..config import DEG, RunConfig, _vec3
 from ..earth import LocalTangentFrame
 from ..errors import InputError
+from ..rotations import flu_to_frd
 from ..run import GnssFixes, ImuData, InitialState, RecordedRun, Truth, check_increasing
 from .common import apply_mounting, check_degrees, read_table
 
@@ -126,9 +127,7 @@ def _read_imu(path: Path, frame: str, max_bad: float) -> ImuData:
     f_imu = _columns(tab, IMU_COLUMNS[1:4])
     omega_imu = _columns(tab, IMU_COLUMNS[4:7])
     if frame == "flu":
-        # FLU -> FRD is a 180 deg roll: y and z change sign.
-        f_imu[:, 1:] *= -1.0
-        omega_imu[:, 1:] *= -1.0
+        f_imu, omega_imu = flu_to_frd(f_imu), flu_to_frd(omega_imu)
     return ImuData(tab["t"], f_imu, omega_imu)
 
 

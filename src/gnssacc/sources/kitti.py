@@ -26,6 +26,7 @@ from ..config import RunConfig
 from ..earth import LocalTangentFrame
 from ..errors import InputError
 from ..gnss_noise import fixes_from_truth
+from ..rotations import flu_to_frd
 from ..run import GnssFixes, ImuData, RecordedRun, Truth
 from .common import apply_mounting
 
@@ -68,8 +69,7 @@ def load_kitti(cfg: RunConfig, noise: str = "white", seed: int = 0) -> RecordedR
     folder = data_dir()
     imu_raw = np.loadtxt(folder / IMU_FILE, skiprows=1)
     gps = np.loadtxt(folder / GPS_FILE, skiprows=1, delimiter=",")
-    flu_to_frd = np.array([1.0, -1.0, -1.0])
-    imu = ImuData(imu_raw[:, 0], imu_raw[:, 2:5] * flu_to_frd, imu_raw[:, 5:8] * flu_to_frd)
+    imu = ImuData(imu_raw[:, 0], flu_to_frd(imu_raw[:, 2:5]), flu_to_frd(imu_raw[:, 5:8]))
     imu = apply_mounting(imu, cfg)
 
     origin = LocalTangentFrame(*np.radians(ORIGIN_LLH_DEG[:2]), ORIGIN_LLH_DEG[2])

@@ -39,7 +39,7 @@ from ..config import DEG, RunConfig, _vec3
 from ..earth import LocalTangentFrame
 from ..errors import InputError, warn_data
 from ..run import GnssFixes, ImuData, InitialState, RecordedRun, Truth, drop_nonfinite
-from ..rotations import dcm_to_euler
+from ..rotations import ENU_NED, FLU_FRD, dcm_to_euler, quaternion_to_dcm, ros_to_R_nb
 from .common import apply_mounting, check_degrees
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
@@ -76,8 +76,6 @@ INIT_SIGMA_ROLL_PITCH_DEG = 1.0
 INIT_SIGMA_YAW_DEG = 5.0
 INIT_VEL_FIT_S = 3.0
 
-T_NED_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-T_FLU_FRD = np.diag([1.0, -1.0, -1.0])
 
 
 def normalize_type(name: str) -> str:
@@ -531,17 +529,7 @@ def _custom_fix_row(msg, t, col: _Collector, m: dict, default_sigma: np.ndarray)
             float(_get(msg, m["height"])) * float(m["height_scale_m"]), *sig)
 
 
-def _quat_to_dcm(x, y, z, w):
-    n = np.sqrt(x * x + y * y + z * z + w * w)
-    x, y, z, w = x / n, y / n, z / n, w / n
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-
-
-def enu_flu_to_ned_frd(R_enu_flu: np.ndarray) -> np.ndarray:
-    """``R_nb`` (FRD body to NED) from a ROS orientation (FLU body to ENU)."""
-    return T_NED_ENU @ R_enu_flu @ T_FLU_FRD
+enu_flu_to_ned_frd = ros_to_R_nb  # name kept for callers of this module
 
 
 def _pose_row(msg, t, msgtype):
@@ -552,9 +540,9 @@ def _pose_row(msg, t, msgtype):
         twist = msg.twist.twist if msgtype == "nav_msgs/msg/Odometry" else None
     p, q = pose.position, pose.orientation
     if q.x or q.y or q.z or q.w:
-        R = enu_flu_to_ned_frd(_quat_to_dcm(q.x, q.y, q.z, q.w))
+        R = enu_flu_to_ned_frd(quaternion_to_dcm(q.x, q.y, q.z, q.w))
         rpy = dcm_to_euler(R)
-        v = T_NED_ENU @ _quat_to_dcm(q.x, q.y, q.z, q.w) @ np.array(
+        v = ENU_NED @ quaternion_to_dcm(q.x, q.y, q.z, q.w) @ np.array(
             [twist.linear.x, twist.linear.y, twist.linear.z]) if twist is not None else (np.nan,) * 3
     else:
         rpy, v = (np.nan,) * 3, (np.nan,) * 3
@@ -612,8 +600,8 @@ def _tf_mounting(reader, imu_frame_id: str, where: str):
             parent = tr.header.frame_id.lstrip("/")
             if tr.child_frame_id.lstrip("/") == child and parent in BASE_FRAMES:
                 q = tr.transform.rotation
-                R_flu = _quat_to_dcm(q.x, q.y, q.z, q.w)           # p_parent = R @ p_child
-                return T_FLU_FRD @ R_flu @ T_FLU_FRD, f"/tf_static {parent} -> {child}"
+                R_flu = quaternion_to_dcm(q.x, q.y, q.z, q.w)           # p_parent = R @ p_child
+                return FLU_FRD @ R_flu @ FLU_FRD, f"/tf_static {parent} -> {child}"
     return None
 
 
@@ -748,8 +736,8 @@ def load_bag_run(path, cfg: RunConfig, *, imu_topic: str | None = None, gnss_top
     good_q = np.isfinite(itab[:, 7:11]).all(axis=1)
     if len(itab) < 2:
         raise InputError(where, f"{what_imu}: {len(itab)} usable message(s), need at least two")
-    f_imu = itab[:, 1:4] @ T_FLU_FRD          # FLU -> FRD (diagonal: same as T @ x per row)
-    w_imu = itab[:, 4:7] @ T_FLU_FRD
+    f_imu = itab[:, 1:4] @ FLU_FRD          # FLU -> FRD (diagonal: same as T @ x per row)
+    w_imu = itab[:, 4:7] @ FLU_FRD
     if tf is not None:
         R_bi_tf, what_tf = tf
         f_imu, w_imu = f_imu @ R_bi_tf.T, w_imu @ R_bi_tf.T
@@ -853,7 +841,7 @@ def _initial_state(itab, good_q, imu: ImuData, gnss: GnssFixes, R_bi: np.ndarray
     qi = np.flatnonzero(good_q)
     j = int(qi[np.argmin(np.abs(imu.t[qi] - t0))])
     q = itab[j, 7:11]
-    R_n_imu = enu_flu_to_ned_frd(_quat_to_dcm(*q))
+    R_n_imu = enu_flu_to_ned_frd(quaternion_to_dcm(*q))
     R_nb = R_n_imu @ R_bi.T
     rpy = np.array(dcm_to_euler(R_nb))
     cov = itab[j, 11:14]       # roll, pitch, yaw variances of the IMU orientation (FLU axes)
