@@ -59,6 +59,7 @@ import numpy as np
 from . import mechanization as mech
 from .config import RunConfig
 from .ekf import _position_innovation, _update, acceleration_model, prepare
+from .metrics import truth_at
 from .quality import QualityReport
 from .rotations import dcm_to_euler, euler_error_jacobian, wrap_angle
 from .run import RecordedRun
@@ -144,9 +145,8 @@ def state_errors(run: RecordedRun, sol: NavSolution) -> np.ndarray:
     err = np.full((len(t), 15), np.nan)
     tr = run.truth
     if tr is not None:
-        inside = (t >= tr.t[0]) & (t <= tr.t[-1])
-        p_true = run.origin.to_ned(tr.lat, tr.lon, tr.h)
-        err[:, 0:3] = run.origin.to_ned(sol.lat, sol.lon, sol.h) - _interp_cols(t, tr.t, p_true)
+        p_true, inside = truth_at(run, t)
+        err[:, 0:3] = run.origin.to_ned(sol.lat, sol.lon, sol.h) - p_true
         if tr.v_n is not None:
             err[:, 3:6] = sol.v_n - _interp_cols(t, tr.t, tr.v_n)
         if tr.rpy is not None:
