@@ -12,7 +12,6 @@ import time
 from datetime import datetime
 from pathlib import Path
 
-import numpy as np
 
 from . import mechanization
 from .config import RunConfig
@@ -184,11 +183,3 @@ def write_outputs(out_dir: Path, run: RecordedRun, sols: dict[str, NavSolution],
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
     return out_dir
-
-
-def prmse_summary(values: list[float]) -> dict:
-    """Mean / min / max of a list of PRMSE values [m] (used by the benchmarks)."""
-    arr = np.asarray([v for v in values if v is not None], float)
-    if arr.size == 0:
-        return {"mean": None, "min": None, "max": None, "n": 0}
-    return {"mean": float(arr.mean()), "min": float(arr.min()), "max": float(arr.max()), "n": int(arr.size)}
