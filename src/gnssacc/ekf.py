@@ -20,10 +20,10 @@ import numpy as np
 from . import mechanization as mech
 from .config import RunConfig
 from .earth import gravity_n, radii
-from .gnss_accel import AccelWindow, H_a_blocks, predicted_acceleration
+from .gnss_accel import AccelWindow, H_a_blocks, measured_specific_force, predicted_acceleration
 from .initialise import initial_sigmas, initialise
 from .progress import progress
-from .quality import QualityReport, check_imu, inflation_segments, touches_segments
+from .quality import QualityReport, check_imu, inflation_segments
 from .rotations import dcm_to_euler, euler_error_jacobian, rotvec_to_dcm, skew
 from .run import InitialState, RecordedRun
 from .solution import NavSolution
@@ -180,9 +180,10 @@ def acceleration_model(run: RecordedRun, setup: EkfSetup, s: _State, t: float, m
     Returns ``None`` when the specific force it needs comes from a suspect IMU span
     (fabricated or damaged data): the update is then skipped.
     """
-    if touches_segments(*run.imu.sample_range(t, setup.f_avg_s), setup.seg_i0, setup.seg_i1):
+    f_meas = measured_specific_force(run.imu, t, setup.f_avg_s, setup.seg_i0, setup.seg_i1)
+    if f_meas is None:
         return None
-    f_b = run.imu.specific_force_at(t, setup.f_avg_s) - s.b_a
+    f_b = f_meas - s.b_a
     a_pred = predicted_acceleration(s.R_nb, f_b, gravity_n(s.pos[0], s.pos[2]))
     d_phi, d_ba = H_a_blocks(s.R_nb, f_b)
     H = np.zeros((3, 15))

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .quality import touches_segments
 from .rotations import skew
 
 
@@ -167,6 +168,20 @@ class AccelWindow:
         if self.sigma_override is not None:
             cov = np.diag(self.sigma_override**2)
         return AccelMeasurement(float(t), a_n, cov, ts)
+
+
+def measured_specific_force(imu, t: float, avg_s: float, seg_i0: np.ndarray, seg_i1: np.ndarray) -> np.ndarray | None:
+    """The specific force [m/s^2, body] an acceleration update at ``t`` compares with ``a~``.
+
+    The paper's choice, the sample holding at ``t`` (``avg_s = 0``), or its mean over
+    ``[t - avg_s, t]``. ``None`` when any of those samples lies in a suspect IMU segment
+    ``[seg_i0, seg_i1)`` (fabricated or damaged data): the update is then skipped. Both the EKF
+    update and the smoother's factor take their specific force from here.
+    """
+    k0, k1 = imu.sample_range(t, avg_s)
+    if touches_segments(k0, k1, seg_i0, seg_i1):
+        return None
+    return imu.f_b[k0:k1].mean(axis=0)
 
 
 def predicted_acceleration(R_nb: np.ndarray, f_b: np.ndarray, g_n: np.ndarray) -> np.ndarray:

@@ -47,11 +47,6 @@ class ImuData:
         k0 = int(np.searchsorted(self.t, t - avg_s, side="left")) if avg_s > 0 else k
         return min(k0, k), k + 1
 
-    def specific_force_at(self, t: float, avg_s: float = 0.0) -> np.ndarray:
-        """Specific force [m/s^2] of the sample holding at ``t``, or its mean over ``[t - avg_s, t]``."""
-        k0, k1 = self.sample_range(t, avg_s)
-        return self.f_b[k0:k1].mean(axis=0)
-
 
 @dataclass
 class GnssFixes:

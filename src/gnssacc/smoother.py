@@ -31,7 +31,7 @@ from gtsam.symbol_shorthand import B, V, X
 from .config import RunConfig
 from .earth import earth_rate_n, normal_gravity
 from .factors import gnss_accel_factor
-from .gnss_accel import AccelWindow
+from .gnss_accel import AccelWindow, measured_specific_force
 from .initialise import initial_sigmas, initialise
 from .progress import progress
 from .quality import QualityReport, check_imu, inflation_segments, touches_segments
@@ -320,10 +320,11 @@ def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
         if use_acc and k is not None:
             meas = window.push(t, p_fix[k], gnss.sigma_ned[k])
             if meas is not None:
-                if touches_segments(*imu.sample_range(t, f_avg), seg_i0, seg_i1):
+                f_meas = measured_specific_force(imu, t, f_avg, seg_i0, seg_i1)
+                if f_meas is None:
                     stats["n_acc_skipped_suspect_imu"] += 1
                 else:
-                    graph.add(gnss_accel_factor(X(i), B(i), imu.specific_force_at(t, f_avg), meas.a_n, g_n, meas.cov))
+                    graph.add(gnss_accel_factor(X(i), B(i), f_meas, meas.a_n, g_n, meas.cov))
                     stats["n_acc_factors"] += 1
 
         # Nodes about to leave the window: their fixed-lag estimate is the value they have now.
