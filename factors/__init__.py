@@ -1,4 +1,7 @@
 """GTSAM factors of gnssacc (installed as ``gnssacc.factors``)."""
 from .accel_factor import accel_error, gnss_accel_factor, smoother_jacobians_from_H_a
+from .gnss_error_factors import gauss_markov_factor, gnss_position_gm_factor
+from .prior_factor import joint_prior_factor
 
-__all__ = ["accel_error", "gnss_accel_factor", "smoother_jacobians_from_H_a"]
+__all__ = ["accel_error", "gauss_markov_factor", "gnss_accel_factor", "gnss_position_gm_factor",
+           "joint_prior_factor", "smoother_jacobians_from_H_a"]

@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from gnssacc.ekf import _position_innovation, _State
+from gnssacc.ekf import FilterState
+from gnssacc.measurements import position
 from gnssacc.earth import radii
 from gnssacc.gnss_accel import (AccelWindow, H_a, H_a_blocks, acceleration_row, design_matrix, ls_acceleration,
                                 paper_H_a_blocks, predicted_acceleration)
@@ -115,13 +116,14 @@ def test_H_p_with_lever_arm_by_finite_differences():
     R_M, R_N = radii(lat)
 
     def dz(err):
-        s = _State(np.array([lat + err[0] / (R_M + h), lon + err[1] / ((R_N + h) * np.cos(lat)), h - err[2]]),
+        s = FilterState(np.array([lat + err[0] / (R_M + h), lon + err[1] / ((R_N + h) * np.cos(lat)), h - err[2]]),
                    np.zeros(3), rotvec_to_dcm(err[6:9]) @ R, np.zeros(3), np.zeros(3), np.eye(15))
         # The measurement is the true antenna position (zero error).
         ant_n = R @ lever
         m_lat = lat + ant_n[0] / (R_M + h)
         m_lon = lon + ant_n[1] / ((R_N + h) * np.cos(lat))
-        return _position_innovation(s, m_lat, m_lon, h - ant_n[2], lever)
+        m = position(s, m_lat, m_lon, h - ant_n[2], np.ones(3), lever)
+        return m.dz, m.H
 
     _, H = dz(np.zeros(15))
     eps = np.array([0.1] * 3 + [0.0] * 3 + [1e-5] * 3 + [0.0] * 6)

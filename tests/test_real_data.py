@@ -27,7 +27,8 @@ from gnssacc.config import load_config
 from gnssacc.earth import LocalTangentFrame, ecef_to_llh
 from gnssacc.ekf import run_ekf
 from gnssacc.errors import InputError
-from gnssacc.initialise import _level, initialise, static_start
+from gnssacc.stationary import detect_stationary
+from gnssacc.yawbank import select_yaw
 from gnssacc.metrics import gnss_score, score
 from gnssacc.quality import check_imu
 from gnssacc.rotations import wrap_angle
@@ -159,25 +160,27 @@ def vn_ekf(vn_lckf, vn_cfg):
 
 def test_vn310_static_start_and_levelling_match_vn_attitude(vn_lckf, vn_cfg):
     run = vn_lckf.run
-    # The whole log is static (SOURCE.txt): the static period must cover it (1 s block granularity).
-    t_static_end = static_start(run, vn_cfg)
-    assert t_static_end is not None, "a static VN-310 log was not recognised as a static start"
-    assert t_static_end >= run.t_end - 1.0
-    # Levelling as the self-initialiser does it: the mean specific force over the static period.
-    n = int(np.searchsorted(run.imu.t, t_static_end, side="right"))
-    roll, pitch = _level(run.imu.f_b[:n].mean(axis=0), np.zeros(3))
+    # The whole log is static (SOURCE.txt): the stationary detector must find it (0.5 s blocks).
+    report = detect_stationary(run.imu, run.gnss, run.origin)
+    assert report.spans and report.spans[0].t_start - run.t_start < 1.0
+    assert report.spans[-1].t_end >= run.t_end - 1.0 and report.fraction > 0.9
+    # Levelling as the self-initialiser does it: roll/pitch of the static start.
+    bank = select_yaw(run, vn_cfg, report)
+    roll, pitch = np.degrees(bank.init.rpy[:2])
     # Reference: the VN-310's own attitude solution averaged over the log (independent code).
     vn_roll, vn_pitch = vn_lckf.att_rpy_deg[:, 0].mean(), vn_lckf.att_rpy_deg[:, 1].mean()
-    assert abs(np.degrees(roll) - vn_roll) < 0.5, (np.degrees(roll), vn_roll)
-    assert abs(np.degrees(pitch) - vn_pitch) < 0.5, (np.degrees(pitch), vn_pitch)
+    assert abs(roll - vn_roll) < 0.5, (roll, vn_roll)
+    assert abs(pitch - vn_pitch) < 0.5, (pitch, vn_pitch)
 
 
-def test_vn310_initialise_refuses_static_log_for_want_of_yaw(vn_lckf, vn_cfg):
-    # Yaw comes from the GNSS course; a static antenna has none, so the initialiser must refuse.
-    with pytest.raises(InputError) as exc:
-        initialise(vn_lckf.run, vn_cfg)
-    msg = str(exc.value).lower()
-    assert "speed" in msg and "yaw" in msg, msg
+def test_vn310_yaw_is_reported_undetermined_on_a_static_log(vn_lckf, vn_cfg):
+    # A static antenna and an IMU that never turns carry no yaw: the bank must say so and give a
+    # yaw sigma that covers its hypotheses instead of inventing a heading.
+    run = vn_lckf.run
+    bank = select_yaw(run, vn_cfg, detect_stationary(run.imu, run.gnss, run.origin))
+    assert bank.t_decided is None
+    assert "UNDETERMINED" in bank.init.how
+    assert np.degrees(bank.init.sigma_att_rad[2]) > 60.0
 
 
 # Data facts read off the raw time stamps (not from the package): the lckf IMU intervals are all
@@ -350,8 +353,8 @@ def test_comma_ublox_fixes_near_reference(comma):
 @pytest.mark.parametrize("method", METHODS)
 def test_comma_ekf_tracks_reference(method, comma, comma_ekf):
     run, sol = comma.run, comma_ekf[method]
-    assert "self-initialised" in sol.stats["init"]
-    assert sol.stats["t_init"] - run.t_start < 10.0              # moving from the start: yaw is quick
+    assert "moving start" in sol.stats["init"] and "yaw from a bank" in sol.stats["init"]
+    assert sol.stats["t_init"] - run.t_start < 0.5               # the filter starts with the recording
     assert len(sol) > 0.8 * len(comma.ref_t)
     if method == "ekf-acc":
         assert sol.stats["n_acc_updates"] > 0

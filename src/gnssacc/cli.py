@@ -37,8 +37,12 @@ def _parser() -> argparse.ArgumentParser:
                    help="drop GNSS for LEN s at the end of every PERIOD s")
     r.add_argument("--config", default=None, help="run configuration TOML (see 'gnssacc config --show')")
     r.add_argument("--preset", default=None, choices=PRESETS + ("none",),
-                   help="named configuration preset (the KITTI source uses 'kitti' unless told otherwise; "
-                        "'none': built-in defaults)")
+                   help="named configuration preset: an IMU grade (consumer, industrial, tactical: starting points "
+                        "for --tune auto) or kitti (the KITTI source uses 'kitti' unless told otherwise; 'none': "
+                        "built-in defaults)")
+    r.add_argument("--tune", choices=["auto", "none"], default=None,
+                   help="auto (default): identify every IMU noise key the config does not set (and the GNSS sigma "
+                        "scale) from the recording itself, write tuned.toml; none: use the configuration as given")
     r.add_argument("--imu-frame", choices=["frd", "flu"], default="frd", help="axes of a CSV run's imu.csv")
     _bag_arguments(r)
     r.add_argument("--time-source", choices=["header", "receive"], default="header",
@@ -64,6 +68,7 @@ def _parser() -> argparse.ArgumentParser:
     bch.add_argument("--outage-every", default=None, metavar="PERIOD:LEN")
     bch.add_argument("--config", default=None)
     bch.add_argument("--preset", default=None, choices=PRESETS + ("none",))
+    bch.add_argument("--tune", choices=["auto", "none"], default=None, help="noise identification per seed (default auto)")
     bch.add_argument("--imu-frame", choices=["frd", "flu"], default="frd")
     bch.add_argument("--jobs", type=int, default=1, help="parallel processes (default 1)")
     bch.add_argument("--out", default=None, help="also write the per-seed results and the summary as JSON")
@@ -118,14 +123,19 @@ def _cmd_run(args) -> int:
                       imu_topic=args.imu_topic, gnss_topic=args.gnss_topic, truth_topic=args.truth_topic,
                       time_source=args.time_source, gnss_from_truth_hz=args.gnss_from_truth)
     run = with_outages(run, args.outage, args.outage_every)
-    metrics, sols = compare(run, cfg, methods, show_progress=True)
-    out = write_outputs(Path(args.out) if args.out else default_out_dir(run), run, sols, metrics, cfg,
-                        plots=not args.no_plots, report=args.report, export=tuple(args.export))
+    metrics, sols, ident = compare(run, cfg, methods, tune=args.tune, show_progress=True)
+    tuned = ident.tuning.to_toml(ident.cfg) if ident.tuning is not None else None
+    out = write_outputs(Path(args.out) if args.out else default_out_dir(run), ident.run, sols, metrics, ident.cfg,
+                        plots=not args.no_plots, report=args.report, export=tuple(args.export), tuned_toml=tuned)
     print(f"{run.name}: {run.duration_s:.1f} s, {len(run.imu)} IMU samples, {len(run.gnss)} GNSS fixes"
           + (f", noise {run.meta['noise']} seed {run.meta['seed']}" if "noise" in run.meta else "")
           + f"; config: {', '.join(cfg.sources)}")
     for line in _quality_lines(metrics):
         print(line)
+    print(ident.stationary.summary())
+    print(f"start: {ident.init.how}")
+    if ident.tuning is not None:
+        print(ident.tuning.line())
     print()
     print(format_table(metrics))
     print(f"\n(one-off JIT compilation {metrics['jit_compile_s']:.2f} s, not included in wall times)")
@@ -165,7 +175,7 @@ def _cmd_bench(args) -> int:
     preset = _resolve_preset(args.preset, args.source)
     load_config(preset, args.config)  # fail early, in this process, on a bad configuration
     results = run_bench(args.source, preset, args.config, args.noise, args.outage, args.outage_every, methods, seeds,
-                        jobs=max(args.jobs, 1), imu_frame=args.imu_frame)
+                        jobs=max(args.jobs, 1), imu_frame=args.imu_frame, tune=args.tune)
     table = summarise(results)
     title = (f"{args.source or 'kitti'}: {len(seeds)} seeds, noise {args.noise}"
              + (f", outages {args.outage or ''}{args.outage_every or ''}" if args.outage or args.outage_every else ""))

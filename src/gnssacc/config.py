@@ -14,6 +14,7 @@ from __future__ import annotations
 import copy
 import tomllib
 from dataclasses import dataclass
+from dataclasses import fields as dataclass_fields
 from importlib import resources
 from pathlib import Path
 
@@ -21,6 +22,7 @@ import numpy as np
 
 from .errors import InputError
 from .rotations import euler_to_dcm
+from .stationary import StationaryParams
 
 G0 = 9.80665  # standard gravity, for milli-g [m/s^2]
 DEG = np.pi / 180.0
@@ -54,6 +56,15 @@ DEFAULTS: dict[str, dict] = {
         "lever_arm_b_m": [0.0, 0.0, 0.0],
         # 1-sigma N, E, D [m] for fixes that carry no uncertainty of their own.
         "default_sigma_m": [3.0, 3.0, 5.0],
+        # Every fix's 1-sigma is multiplied by this (receivers often state optimistic sigmas);
+        # identified from the innovations by the noise tuner unless set here.
+        "sigma_scale": 1.0,
+        # Time-correlated part of the fix errors (multipath, atmosphere): a first-order
+        # Gauss-Markov process per N, E, D axis with this 1-sigma [m] and correlation time [s],
+        # estimated by the EKF as three more states. 0: white fixes. The tuner adds it when the
+        # innovations show time-correlated errors.
+        "gm_sigma_m": 0.0,
+        "gm_tau_s": 60.0,
     },
     "accel": {
         # Number m of fixes in the least-squares acceleration window (>= 3).
@@ -75,20 +86,19 @@ DEFAULTS: dict[str, dict] = {
         "vel_sigma_mps": [],
         "roll_pitch_sigma_deg": [],
         "yaw_sigma_deg": [],
-        # Self-initialisation (used when the source gives no initial state).
-        # A start is static when the gyro norm stays below this [deg/s] ...
-        "static_gyro_max_dps": 2.0,
-        # ... and the specific-force norm's std below this [m/s^2] ...
-        "static_accel_std_max_mps2": 0.1,
-        # ... for at least this long [s].
-        "static_min_s": 2.0,
-        # Yaw is taken from the GNSS course once the fitted speed exceeds this [m/s] ...
-        "course_min_speed_mps": 1.0,
-        # ... using a straight-line fit over this many seconds of fixes.
+        # Self-initialisation (used when the source gives no initial state): the filter starts
+        # at the first IMU sample; yaw comes from a bank of this many hypotheses, each run
+        # through the EKF and scored by its innovation likelihood ...
+        "yaw_hypotheses": 12,
+        # ... from the start until this long after the vehicle starts to move [s] (doubled until
+        # the yaw is found or the run ends) ...
+        "yaw_horizon_s": 60.0,
+        # ... and found once the hypotheses agreeing with the best one hold this posterior mass.
+        "yaw_confidence": 0.99,
+        # Position/velocity of a moving start from a straight-line fit over this many seconds.
         "course_fit_s": 4.0,
-        # Floors on the self-initialised sigmas (roll/pitch, yaw [deg], velocity [m/s]).
+        # Floors on the self-initialised sigmas (roll/pitch [deg], velocity [m/s]).
         "roll_pitch_sigma_min_deg": 1.0,
-        "yaw_sigma_min_deg": 3.0,
         "vel_sigma_min_mps": 0.3,
     },
     "ekf": {
@@ -96,6 +106,43 @@ DEFAULTS: dict[str, dict] = {
         "phi_order": 1,
         # Reject a position fix whose normalised innovation squared exceeds this (0 = never).
         "position_gate_nis": 0.0,
+    },
+    "zupt": {
+        # Zero-velocity and zero-angular-rate updates (EKF) and factors (smoother) while IMU and
+        # GNSS agree that the vehicle stands still. false: paper-pure comparisons.
+        "enabled": True,
+        # One update every this many seconds inside a stationary span; the zero-rate update
+        # compares the mean gyro over the same interval [s].
+        "interval_s": 1.0,
+        # 1-sigma of the zero-velocity pseudo-measurement [m/s] (a parked vehicle's body sway).
+        "velocity_sigma_mps": 0.02,
+        # Reject a stationary update whose normalised innovation squared exceeds this (0 = never):
+        # a safety net against a wrong detection (chi-square, 3 dof: 30 has p ~ 1e-6).
+        "gate_nis": 30.0,
+    },
+    # Stationary detection thresholds: the fields of gnssacc.stationary.StationaryParams, whose
+    # docstring gives each one's unit and physical reason (windowed IMU statistics + GNSS agreement).
+    "stationary": {f.name: f.default for f in dataclass_fields(StationaryParams)},
+    "tune": {
+        # "auto": identify every IMU noise key (and gnss.sigma_scale) the configuration does not
+        # set, from stationary stretches and the innovation likelihood of the EKF; "none": use
+        # the configuration as given.
+        "mode": "auto",
+        # Budget of EKF passes of each maximum-likelihood search (the white-noise one and, when the
+        # innovations show time-correlated GNSS errors, the one with the Gauss-Markov model).
+        "max_evaluations": 50,
+        # Innovations scored: "position" (and stationary updates), or "position+accel" (the
+        # acceleration updates too, with the method ekf-acc).
+        "likelihood": "position",
+        # Width of the weak log-normal prior around the starting values [decades]: keeps the
+        # parameters the data barely inform from wandering.
+        "prior_decades": 1.0,
+        # ... and around a white-noise density measured on stationary stretches [decades]: that
+        # measurement is direct, while 1 Hz metre-level fixes hardly inform the white noise.
+        "stationary_prior_decades": 0.3,
+        # The covariance is propagated every this many IMU samples while tuning (speed; the
+        # likelihood changes by far less than its sampling noise).
+        "cov_every": 10,
     },
     "smoother": {
         # Fixed-lag window of the iSAM2 smoother [s].
@@ -148,7 +195,8 @@ DEFAULTS: dict[str, dict] = {
     },
 }
 
-PRESETS = ("kitti",)
+#: Packaged presets: IMU grades (documented starting points for the noise tuner) and KITTI.
+PRESETS = ("consumer", "industrial", "tactical", "kitti")
 
 
 def _vec3(value, key: str, where: str) -> np.ndarray:
@@ -171,6 +219,10 @@ def _merge(base: dict, update: dict, where: str) -> None:
             base[section][key] = value
 
 
+def _keys(tree: dict) -> set:
+    return {(sec, key) for sec, vals in tree.items() if isinstance(vals, dict) for key in vals}
+
+
 def _read_toml(path: Path, where: str) -> dict:
     try:
         return tomllib.loads(path.read_text())
@@ -190,10 +242,15 @@ class RunConfig:
         Section -> key -> value, as in the TOML files.
     sources : list of str
         Where the values came from, in order of precedence.
+    explicit : frozenset of (str, str)
+        Keys the user set (file or overrides), as opposed to defaults and presets.
     """
 
     values: dict
     sources: list
+    #: ``(section, key)`` pairs set by the user's file or overrides (never by a preset): the noise
+    #: tuner leaves these alone.
+    explicit: frozenset = frozenset()
 
     def __getitem__(self, section: str) -> dict:
         return self.values[section]
@@ -244,6 +301,16 @@ class RunConfig:
         return _vec3(self["gnss"]["lever_arm_b_m"], "lever_arm_b_m", "config")
 
     @property
+    def gnss_gm_sigma(self) -> np.ndarray:
+        """1-sigma of the GNSS Gauss-Markov error per N, E, D axis [m] (zeros: not modelled)."""
+        return _vec3(self["gnss"]["gm_sigma_m"], "gm_sigma_m", "config")
+
+    @property
+    def gnss_gm_tau(self) -> np.ndarray:
+        """Correlation time of the GNSS Gauss-Markov error per axis [s]."""
+        return _vec3(self["gnss"]["gm_tau_s"], "gm_tau_s", "config")
+
+    @property
     def accel_sigma_override(self) -> np.ndarray | None:
         """Fixed acceleration-measurement 1-sigma N, E, D [m/s^2], or ``None`` to propagate."""
         v = self["accel"]["sigma_mps2"]
@@ -265,23 +332,32 @@ class RunConfig:
                 out[name] = v * DEG
         return out
 
+    def with_values(self, updates: dict, source: str) -> "RunConfig":
+        """A copy with ``updates`` (section -> key -> value) applied, recorded as ``source``.
+
+        The updated keys do not become explicit: they were not set by the user.
+        """
+        values = copy.deepcopy(self.values)
+        _merge(values, updates, source)
+        return RunConfig(values, self.sources + [source], self.explicit)
+
     def to_toml(self) -> str:
         """The resolved configuration as TOML text (for ``gnssacc config --show`` and outputs)."""
         lines = [f"# resolved from: {', '.join(self.sources)}"]
         for section, values in self.values.items():
             lines.append(f"\n[{section}]")
             for key, value in values.items():
-                lines.append(f"{key} = {_toml_value(value)}")
+                lines.append(f"{key} = {toml_value(value)}")
         return "\n".join(lines) + "\n"
 
 
-def _toml_value(value) -> str:
+def toml_value(value) -> str:
     if isinstance(value, dict):
-        return "{" + ", ".join(f'"{k}" = {_toml_value(v)}' for k, v in value.items()) + "}"
+        return "{" + ", ".join(f'"{k}" = {toml_value(v)}' for k, v in value.items()) + "}"
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
     if isinstance(value, str):
         return '"' + value + '"'
     return repr(value)
@@ -305,7 +381,8 @@ def load_config(preset: str | None = None, path: str | Path | None = None,
     path : str or Path, optional
         A user TOML file; its keys override the preset's.
     overrides : dict, optional
-        Section -> key -> value applied last (used by tests and the API).
+        Section -> key -> value applied last (used by tests and the API); like the file's keys
+        they count as set explicitly (:attr:`RunConfig.explicit`).
 
     Returns
     -------
@@ -322,13 +399,17 @@ def load_config(preset: str | None = None, path: str | Path | None = None,
         ref = preset_path(preset)
         _merge(values, tomllib.loads(ref.read_text()), f"preset {preset}")
         sources.append(f"preset {preset}")
+    explicit = set()
     if path:
-        _merge(values, _read_toml(Path(path), str(path)), str(path))
+        user = _read_toml(Path(path), str(path))
+        _merge(values, user, str(path))
         sources.append(str(path))
+        explicit |= _keys(user)
     if overrides:
         _merge(values, overrides, "overrides")
         sources.append("overrides")
-    cfg = RunConfig(values, sources)
+        explicit |= _keys(overrides)
+    cfg = RunConfig(values, sources, frozenset(explicit))
     _validate(cfg, sources[-1])
     return cfg
 
@@ -343,6 +424,9 @@ def _validate(cfg: RunConfig, where: str) -> None:
                 value()
         except InputError as exc:
             raise InputError(where, exc.problem) from None
+    c = cfg["init"]
+    if int(c["yaw_hypotheses"]) < 4 or not float(c["yaw_horizon_s"]) > 0 or not 0.5 <= float(c["yaw_confidence"]) < 1:
+        raise InputError(where, "[init] yaw_hypotheses must be >= 4, yaw_horizon_s positive, yaw_confidence in [0.5, 1)")
     if int(cfg["accel"]["window"]) < 3:
         raise InputError(where, "[accel] window must be at least 3 fixes (a quadratic has three parameters)")
     if float(cfg["imu"]["bias_correlation_time_s"]) <= 0:
@@ -358,3 +442,20 @@ def _validate(cfg: RunConfig, where: str) -> None:
         raise InputError(where, "[smoother] lag_s and max_node_spacing_s must be positive")
     if not 0.0 <= float(cfg["data"]["max_bad_fraction"]) <= 1.0:
         raise InputError(where, "[data] max_bad_fraction must be between 0 and 1")
+    if not float(cfg["gnss"]["sigma_scale"]) > 0:
+        raise InputError(where, "[gnss] sigma_scale must be a positive number")
+    if np.any(cfg.gnss_gm_sigma < 0) or not np.all(cfg.gnss_gm_tau > 0):
+        raise InputError(where, "[gnss] gm_sigma_m must be >= 0 and gm_tau_s positive")
+    z = cfg["zupt"]
+    if not isinstance(z["enabled"], bool):
+        raise InputError(where, "[zupt] enabled must be true or false")
+    if not (float(z["interval_s"]) > 0 and float(z["velocity_sigma_mps"]) > 0 and float(z["gate_nis"]) >= 0):
+        raise InputError(where, "[zupt] interval_s and velocity_sigma_mps must be positive, gate_nis >= 0")
+    t = cfg["tune"]
+    if t["mode"] not in ("auto", "none"):
+        raise InputError(where, '[tune] mode must be "auto" or "none"')
+    if t["likelihood"] not in ("position", "position+accel"):
+        raise InputError(where, '[tune] likelihood must be "position" or "position+accel"')
+    if (int(t["max_evaluations"]) < 1 or int(t["cov_every"]) < 1 or not float(t["prior_decades"]) > 0
+            or not float(t["stationary_prior_decades"]) > 0):
+        raise InputError(where, "[tune] max_evaluations and cov_every must be >= 1, prior_decades positive")

@@ -1,96 +1,134 @@
-"""The paper's 15-state error-state EKF with GNSS position and GNSS-derived acceleration updates.
+"""The paper's 15-state error-state EKF with GNSS position and GNSS-derived acceleration updates,
+plus zero-velocity / zero-angular-rate updates while the vehicle stands still.
 
-Prediction runs through the numba kernel in :mod:`gnssacc.mechanization` at every IMU sample;
-updates happen at GNSS epochs: the position update with ``H_p = [I, 0, -[(R l_b) x], 0, 0]``
-(``l_b`` the antenna lever arm; ``H_p = [I 0 0 0 0]`` without one, as in the paper) and, for
-``ekf-acc``, the acceleration update with ``H_a`` from :mod:`gnssacc.gnss_accel`. Innovations
-are predicted minus measured and the error state is estimate minus truth, so the closed-loop
-feedback subtracts the estimated errors (paper: ``dx+ = K dz``, closed loop).
+Prediction runs through the numba kernel in :mod:`gnssacc.mechanization` at every IMU sample.
+Updates come from one event loop over GNSS epochs, stationary epochs and output epochs; every
+update is a :class:`gnssacc.measurements.Measurement` ``(dz, H, R)`` and goes through the same
+Joseph-form Kalman update (algebraically the paper's ``(I - K H) P`` for the optimal gain).
+Innovations are predicted minus measured and the error state is estimate minus truth, so the
+closed-loop feedback subtracts the estimated errors (paper: ``dx+ = K dz``, closed loop).
 
-The covariance update uses the Joseph form, algebraically equal to the paper's ``(I - K H) P``
-for the optimal gain and numerically safer.
+At a GNSS epoch the position update comes first; ``ekf-acc`` then applies the acceleration update
+with ``H_a`` from :mod:`gnssacc.gnss_accel`, evaluated at the state after the position update.
+An *observer* (see :class:`EkfObserver`) sees every epoch and update; the observability analysis
+uses it instead of a copy of this loop.
 """
 from __future__ import annotations
 
+import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import mechanization as mech
+from . import measurements as meas_models
 from .config import RunConfig
-from .earth import gravity_n, radii
-from .gnss_accel import AccelWindow, H_a_blocks, measured_specific_force, predicted_acceleration
-from .initialise import initial_sigmas, initialise
+from .earth import earth_rate_n, gravity_n
+from .gnss_accel import AccelWindow, measured_specific_force
+from .initialise import initial_sigmas
+from .kalman import joseph_update
+from .mechanization import Propagator, apply_correction
 from .progress import progress
 from .quality import QualityReport, check_imu, inflation_segments
-from .rotations import dcm_to_euler, euler_error_jacobian, rotvec_to_dcm, skew
+from .rotations import dcm_to_euler, euler_error_jacobian
 from .run import InitialState, RecordedRun
 from .solution import NavSolution
+from .zupt import StationaryEpochs, stationary_epochs
 
 METHODS = {"ekf": False, "ekf-acc": True}
+#: Event kinds of the loop, in the order they are handled at equal times.
+GNSS, STATIONARY, OUTPUT = 0, 1, 2
+_LOG_2PI = math.log(2.0 * math.pi)
 
 
 @dataclass
-class _State:
-    pos: np.ndarray   # lat, lon [rad], h [m]
-    v_n: np.ndarray   # [m/s]
-    R_nb: np.ndarray
-    b_a: np.ndarray   # accumulated accelerometer bias estimate [m/s^2]
-    b_g: np.ndarray   # accumulated gyro bias estimate [rad/s]
-    P: np.ndarray     # 15 x 15
+class FilterState:
+    """Nominal state and error covariance (updated in place by the loop).
 
-
-def _initial_state(init: InitialState, cfg: RunConfig) -> _State:
-    sig_p, sig_v, sig_att = initial_sigmas(init, cfg)
-    P = np.zeros((15, 15))
-    sig = np.concatenate([sig_p, sig_v, sig_att, cfg.accel_bias_sigma0, cfg.gyro_bias_sigma0])
-    P[np.diag_indices(15)] = sig**2
-    return _State(np.array([init.lat, init.lon, init.h]), np.array(init.v_n, float).copy(), init.R_nb.copy(),
-                  np.zeros(3), np.zeros(3), P)
-
-
-def _correct(s: _State, dx: np.ndarray) -> None:
-    """Closed-loop feedback of an estimated error (estimate minus truth) into the nominal state."""
-    R_M, R_N = radii(s.pos[0])
-    s.pos[0] -= dx[0] / (R_M + s.pos[2])
-    s.pos[1] -= dx[1] / ((R_N + s.pos[2]) * np.cos(s.pos[0]))
-    s.pos[2] += dx[2]
-    s.v_n -= dx[3:6]
-    s.R_nb = rotvec_to_dcm(-dx[6:9]) @ s.R_nb
-    # f_est = f_raw - b_a_hat carries the residual b_a; removing it means adding it to b_a_hat.
-    s.b_a += dx[9:12]
-    s.b_g += dx[12:15]
-
-
-def _update(s: _State, dz: np.ndarray, H: np.ndarray, R: np.ndarray, gate: float = 0.0) -> float:
-    """Kalman update with innovation ``dz`` (predicted minus measured); returns the NIS.
-
-    A positive ``gate`` rejects the update (returning ``-NIS``) when NIS exceeds it.
+    Attributes
+    ----------
+    pos : ndarray (3,)
+        lat, lon [rad], h [m].
+    v_n : ndarray (3,)
+        NED velocity [m/s].
+    R_nb : ndarray (3, 3)
+    b_a, b_g : ndarray (3,)
+        Accumulated bias estimates, body [m/s^2], [rad/s].
+    P : ndarray (15, 15) or (18, 18)
+        Error covariance, order ``[dp, dv, phi, b_a, b_g (, x_g)]``.
+    gm : ndarray (3,)
+        Estimated Gauss-Markov part of the GNSS fix error [m, NED] (zero without that model).
     """
-    PHt = s.P @ H.T
-    S = H @ PHt + R
-    S_inv = np.linalg.inv(S)
-    nis = float(dz @ S_inv @ dz)
-    if gate > 0.0 and nis > gate:
-        return -nis
-    K = PHt @ S_inv
-    _correct(s, K @ dz)
-    IKH = np.eye(15) - K @ H
-    s.P = IKH @ s.P @ IKH.T + K @ R @ K.T
-    return nis
+
+    pos: np.ndarray
+    v_n: np.ndarray
+    R_nb: np.ndarray
+    b_a: np.ndarray
+    b_g: np.ndarray
+    P: np.ndarray
+    gm: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
-def _position_innovation(s: _State, lat, lon, h, lever_arm_b):
-    """Antenna position predicted minus measured, in NED metres, and H_p."""
-    R_M, R_N = radii(s.pos[0])
-    l_n = s.R_nb @ lever_arm_b
-    dz = np.array([(s.pos[0] - lat) * (R_M + s.pos[2]), (s.pos[1] - lon) * (R_N + s.pos[2]) * np.cos(s.pos[0]),
-                   -(s.pos[2] - h)]) + l_n
-    H = np.zeros((3, 15))
-    H[:, 0:3] = np.eye(3)
-    H[:, 6:9] = -skew(l_n)
-    return dz, H
+def initial_state(init: InitialState, cfg: RunConfig) -> FilterState:
+    """The filter state at ``init.t``: the initial state, its sigmas and the bias priors."""
+    sig_p, sig_v, sig_att = initial_sigmas(init, cfg)
+    sig_ba = cfg.accel_bias_sigma0 if init.sigma_b_a is None else np.asarray(init.sigma_b_a, float)
+    sig_bg = cfg.gyro_bias_sigma0 if init.sigma_b_g is None else np.asarray(init.sigma_b_g, float)
+    gm = cfg.gnss_gm_sigma
+    P = np.diag(np.concatenate([sig_p, sig_v, sig_att, sig_ba, sig_bg] + ([gm] if np.any(gm > 0) else [])) ** 2)
+    if init.levelled:
+        _tie_tilt_to_accel_bias(P, init)
+    if np.any(gm > 0) and init.fit_window is not None:
+        # A start taken from the fixes carries their correlated error x_g: dp = x_g while the
+        # x_g state starts at zero (dx_g = -x_g), so the two are known only in sum.
+        P[0:3, 0:3] += np.diag(gm**2)
+        P[0:3, 15:18] = P[15:18, 0:3] = -np.diag(gm**2)
+    return FilterState(np.array([init.lat, init.lon, init.h]), np.array(init.v_n, float).copy(), init.R_nb.copy(),
+                       np.array(init.b_a, float).copy(), np.array(init.b_g, float).copy(), P)
+
+
+def _tie_tilt_to_accel_bias(P: np.ndarray, init: InitialState) -> None:
+    """Levelling makes ``-R_est^T g = f_mean = -R^T g + b_a``, so the tilt error is ``phi = M b_a``
+    with ``M = [[0, -1, 0], [1, 0, 0], [0, 0, 0]] R / g``: add that part of the tilt covariance and
+    its cross-covariance with the bias (in place), so the filter knows the combination that
+    matters for navigation, ``g phi - R b_a``, from the start."""
+    g = float(gravity_n(init.lat, init.h)[2])
+    M = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]) @ init.R_nb / g
+    MP = M @ P[9:12, 9:12]
+    P[6:9, 6:9] += MP @ M.T
+    P[6:9, 9:12] = MP
+    P[9:12, 6:9] = MP.T
+
+
+def correct(s: FilterState, dx: np.ndarray) -> None:
+    """Closed-loop feedback of an estimated error (estimate minus truth) into the nominal state."""
+    apply_correction(s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, s.gm, dx)
+
+
+def kalman_update(s: FilterState, m: meas_models.Measurement) -> tuple[float, float, bool, np.ndarray]:
+    """Joseph-form update; returns the NIS, the Gaussian log-likelihood of the innovation, whether
+    it was applied (a positive ``m.gate`` rejects it when NIS exceeds the gate) and the whitened
+    innovation."""
+    dx, nis, logdet, used, wz = joseph_update(s.P, m.H, m.R, np.asarray(m.dz, float), float(m.gate))
+    if used:
+        correct(s, dx)
+    return nis, -0.5 * (nis + logdet + len(m.dz) * _LOG_2PI), used, wz
+
+
+class EkfObserver:
+    """Sees the loop: override what you need. ``kind`` is ``"gnss"`` or ``"stationary"``."""
+
+    def start(self, setup: "EkfSetup") -> None:
+        """Once, before the loop (e.g. to switch on the propagator's transition matrices)."""
+
+    def before(self, t: float, kind: str, s: FilterState, prop: Propagator) -> None:
+        """After the prediction to an update epoch, before its updates."""
+
+    def update(self, t: float, m: meas_models.Measurement, nis: float, used: bool, s: FilterState) -> None:
+        """After each update (``used`` False: gated out, or evaluated only for the observer)."""
+
+    def after(self, t: float, kind: str, s: FilterState, prop: Propagator) -> None:
+        """After all updates of an epoch."""
 
 
 class _Recorder:
@@ -107,21 +145,17 @@ class _Recorder:
         self.P = np.empty((n, 15, 15)) if store_P else None
         self.n = 0
 
-    def add(self, t: float, s: _State) -> None:
+    def add(self, t: float, s: FilterState) -> None:
         i = self.n
-        self.t[i] = t
-        self.pos[i] = s.pos
-        self.v_n[i] = s.v_n
+        self.t[i], self.pos[i], self.v_n[i] = t, s.pos, s.v_n
         rpy = np.array(dcm_to_euler(s.R_nb))
-        self.rpy[i] = rpy
-        self.b_a[i] = s.b_a
-        self.b_g[i] = s.b_g
-        d = np.sqrt(np.maximum(np.diag(s.P), 0.0))
+        self.rpy[i], self.b_a[i], self.b_g[i] = rpy, s.b_a, s.b_g
+        d = np.sqrt(np.maximum(np.diag(s.P)[:15], 0.0))
         J = euler_error_jacobian(*rpy)
         d[6:9] = np.sqrt(np.maximum(np.diag(J @ s.P[6:9, 6:9] @ J.T), 0.0))
         self.sigma[i] = d
         if self.P is not None:
-            self.P[i] = s.P
+            self.P[i] = s.P[:15, :15]
         self.n += 1
 
     def solution(self, method: str, runtime_s: float, stats: dict) -> NavSolution:
@@ -131,24 +165,73 @@ class _Recorder:
                            None if self.P is None else self.P[:n])
 
 
+class _Tally:
+    """Per update kind: counts, NIS, log-likelihood (optionally every update's) and the lag-1
+    autocorrelation of the whitened innovations (white for a correct model)."""
+
+    def __init__(self, keep: bool):
+        self.keep = keep
+        self.prev = {k: None for k in meas_models.KINDS}
+        self.lag1 = {k: np.zeros(2) for k in meas_models.KINDS}   # sum w_k w_(k-1), sum w_k^2
+        self.n = {k: 0 for k in meas_models.KINDS}
+        self.rejected = {k: 0 for k in meas_models.KINDS}
+        self.nis_sum = {k: 0.0 for k in meas_models.KINDS}
+        self.dof = {k: 0 for k in meas_models.KINDS}
+        self.loglik = {k: 0.0 for k in meas_models.KINDS}
+        self.series = {k: ([], [], []) for k in meas_models.KINDS}   # t, NIS per dof, log-likelihood
+
+    def add(self, t: float, m: meas_models.Measurement, nis: float, loglik: float, used: bool, wz) -> None:
+        k = m.kind
+        if not used:
+            self.rejected[k] += 1
+            return
+        if self.prev[k] is not None:
+            self.lag1[k] += (float(wz @ self.prev[k]), float(wz @ wz))
+        self.prev[k] = wz
+        self.n[k] += 1
+        self.nis_sum[k] += nis
+        self.dof[k] += len(m.dz)
+        self.loglik[k] += loglik
+        if self.keep:
+            for lst, v in zip(self.series[k], (t, nis / len(m.dz), loglik)):
+                lst.append(v)
+
+    def stats(self) -> dict:
+        out = {}
+        for k in meas_models.KINDS:
+            out[f"n_{k}_updates"] = self.n[k]
+            out[f"n_{k}_rejected"] = self.rejected[k]
+            # Normalised innovation squared per degree of freedom: ~1 for a consistent filter.
+            out[f"nis_{k}_mean"] = self.nis_sum[k] / self.dof[k] if self.dof[k] else None
+            out[f"loglik_{k}"] = self.loglik[k]
+            # Whitened innovations of a correct model are white: ~0 here; a slowly varying
+            # error the model misses (too little IMU noise, correlated GNSS errors) makes it > 0.
+            out[f"acf1_{k}"] = float(self.lag1[k][0] / self.lag1[k][1]) if self.lag1[k][1] > 0 else None
+            if self.keep:
+                t, nis, ll = self.series[k]
+                out[f"nis_{k}_t"], out[f"nis_{k}"], out[f"loglik_{k}_series"] = (np.asarray(t), np.asarray(nis),
+                                                                                 np.asarray(ll))
+        return out
+
+
 @dataclass
 class EkfSetup:
-    """Everything the EKF's event loop needs, prepared once (shared with analysis replays)."""
+    """Everything the EKF's event loop needs, prepared once."""
 
     init: InitialState
-    state: _State
-    imu_t: np.ndarray
-    f_imu: np.ndarray
-    w_imu: np.ndarray
-    kernel_args: tuple      # noise PSDs, inflation segments, phi order, with_cov for mech.propagate
+    state: FilterState
+    prop: Propagator
     seg_i0: np.ndarray
     seg_i1: np.ndarray
     gate: float
     lever_b: np.ndarray
     f_avg_s: float
-    p_fix_n: np.ndarray     # fixes in the run's tangent frame [m]
+    p_fix_n: np.ndarray          # fixes in the run's tangent frame [m]
     window: AccelWindow
-    k: int                  # IMU index of the sample holding at init.t
+    k: int                       # IMU index of the sample holding at init.t
+    stationary: StationaryEpochs = field(default_factory=StationaryEpochs.empty)
+    zupt_sigma: float = 0.02
+    zupt_gate: float = 0.0
 
     @property
     def t0(self) -> float:
@@ -156,52 +239,79 @@ class EkfSetup:
 
 
 def prepare(run: RecordedRun, cfg: RunConfig, init: InitialState | None = None,
-            quality: QualityReport | None = None) -> EkfSetup:
-    """Initial state and covariance, IMU arrays, noise and inflation, acceleration window."""
-    init = init or run.init or initialise(run, cfg)
+            quality: QualityReport | None = None, stationary=None, cov_every: int = 1) -> EkfSetup:
+    """Initial state and covariance, IMU propagator with noise and inflation, acceleration window,
+    stationary epochs (``stationary``: a :class:`gnssacc.stationary.StationaryReport` or ``None``)."""
     if quality is None:
         quality = check_imu(run.imu, cfg)
-    seg_i0, seg_i1, seg_qg, seg_qa = inflation_segments(run.imu, quality, cfg)
-    imu_t = np.ascontiguousarray(run.imu.t, float)
-    kernel_args = (cfg.accel_psd, cfg.gyro_psd, cfg.accel_bias_rw_psd, cfg.gyro_bias_rw_psd, seg_i0, seg_i1, seg_qa,
-                   seg_qg, int(cfg["ekf"]["phi_order"]), True)
+    if init is None and run.init is None:
+        from .yawbank import self_initialise  # the bank runs this filter: imported here to avoid a cycle
+        init = self_initialise(run, cfg, stationary, quality)
+    init = init or run.init
+    segments = inflation_segments(run.imu, quality, cfg)
+    prop = Propagator(run.imu.t, run.imu.f_b, run.imu.omega_ib_b, cfg.accel_psd, cfg.gyro_psd, cfg.accel_bias_rw_psd,
+                      cfg.gyro_bias_rw_psd, segments, int(cfg["ekf"]["phi_order"]), cov_every,
+                      gm_tau_s=cfg.gnss_gm_tau, gm_sigma_m=cfg.gnss_gm_sigma)
+    z = cfg["zupt"]
+    epochs = (stationary_epochs(run.imu, stationary.spans, float(z["interval_s"]), cfg.gyro_psd)
+              if stationary is not None and z["enabled"] else StationaryEpochs.empty())
     gnss = run.gnss
-    return EkfSetup(init, _initial_state(init, cfg), imu_t, np.ascontiguousarray(run.imu.f_b, float),
-                    np.ascontiguousarray(run.imu.omega_ib_b, float), kernel_args, seg_i0, seg_i1,
+    return EkfSetup(init, initial_state(init, cfg), prop, segments[0], segments[1],
                     float(cfg["ekf"]["position_gate_nis"]), cfg.lever_arm_b, float(cfg["accel"]["specific_force_avg_s"]),
                     run.origin.to_ned(gnss.lat, gnss.lon, gnss.h),
                     AccelWindow(int(cfg["accel"]["window"]), float(cfg["accel"]["max_gap_s"]), cfg.accel_sigma_override),
-                    int(np.searchsorted(imu_t, float(init.t), side="right")))
+                    int(np.searchsorted(prop.t, float(init.t), side="right")), epochs,
+                    float(z["velocity_sigma_mps"]), float(z["gate_nis"]))
 
 
-def acceleration_model(run: RecordedRun, setup: EkfSetup, s: _State, t: float, meas):
-    """Innovation (predicted minus measured), H_a and R of the acceleration update at ``t``.
-
-    Returns ``None`` when the specific force it needs comes from a suspect IMU span
-    (fabricated or damaged data): the update is then skipped.
-    """
+def acceleration_model(run: RecordedRun, setup: EkfSetup, s: FilterState, t: float, acc):
+    """The acceleration update at ``t`` for the window measurement ``acc``, or ``None`` when the
+    specific force it needs comes from a suspect IMU span (fabricated or damaged data)."""
     f_meas = measured_specific_force(run.imu, t, setup.f_avg_s, setup.seg_i0, setup.seg_i1)
     if f_meas is None:
         return None
-    f_b = f_meas - s.b_a
-    a_pred = predicted_acceleration(s.R_nb, f_b, gravity_n(s.pos[0], s.pos[2]))
-    d_phi, d_ba = H_a_blocks(s.R_nb, f_b)
-    H = np.zeros((3, 15))
-    H[:, 6:9] = d_phi
-    H[:, 9:12] = d_ba
-    return a_pred - meas.a_n, H, meas.cov
+    return meas_models.acceleration(s, acc.a_n, acc.cov, f_meas, gravity_n(s.pos[0], s.pos[2]))
 
 
 def default_output_times(run: RecordedRun) -> np.ndarray:
-    """Truth epochs when there is truth, else GNSS epochs (before outages were applied)."""
-    if run.truth is not None:
-        return run.truth.t
-    return run.gnss.t
+    """Truth epochs when there is truth, else GNSS epochs (before outages were applied), plus the
+    first and last IMU sample so that the output spans the whole recording."""
+    base = run.truth.t if run.truth is not None else run.gnss.t
+    return np.union1d(base, [run.t_start, run.t_end])
+
+
+def _events(gnss_t: np.ndarray, stat_t: np.ndarray, out_t: np.ndarray):
+    """Event times, kinds and indices in time order (GNSS, then stationary, then output at equal times)."""
+    ev_t = np.concatenate([gnss_t, stat_t, out_t])
+    ev_kind = np.concatenate([np.full(len(gnss_t), GNSS), np.full(len(stat_t), STATIONARY), np.full(len(out_t), OUTPUT)])
+    ev_idx = np.concatenate([np.arange(len(gnss_t)), np.arange(len(stat_t)), np.arange(len(out_t))])
+    order = np.lexsort((ev_kind, ev_t))
+    return ev_t[order], ev_kind[order], ev_idx[order]
+
+
+def _gnss_measurements(run, setup, s, t, i, acc, use_acc, evaluate_acc, stats):
+    """The updates of a GNSS epoch, each built at the state left by the previous one."""
+    gnss = run.gnss
+    yield meas_models.position(s, gnss.lat[i], gnss.lon[i], gnss.h[i], gnss.sigma_ned[i], setup.lever_b, setup.gate), True
+    if acc is not None and (use_acc or evaluate_acc):
+        m = acceleration_model(run, setup, s, t, acc)
+        if m is None:
+            stats["n_acc_skipped_suspect_imu"] += 1 if use_acc else 0
+        else:
+            yield m, use_acc
+
+
+def _stationary_measurements(setup, s, j):
+    st = setup.stationary
+    yield meas_models.zero_velocity(s, setup.zupt_sigma, setup.zupt_gate), True
+    w_ie = earth_rate_n(s.pos[0])
+    yield meas_models.zero_rate(s, st.omega_mean_b[j], st.omega_var_b[j], w_ie, setup.zupt_gate), True
 
 
 def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_times: np.ndarray | None = None,
-            quality: QualityReport | None = None, init: InitialState | None = None,
-            store_P: bool = False, record_innovations: bool = False, show_progress: bool = False) -> NavSolution:
+            quality: QualityReport | None = None, init: InitialState | None = None, stationary=None,
+            store_P: bool = False, record_innovations: bool = False, observer: EkfObserver | None = None,
+            t_stop: float | None = None, cov_every: int = 1, show_progress: bool = False) -> NavSolution:
     """Run the EKF over a recorded run.
 
     Parameters
@@ -209,87 +319,89 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
     run : RecordedRun
     cfg : RunConfig
     method : {"ekf", "ekf-acc"}
-        ``ekf``: position updates only (the paper's baseline); ``ekf-acc``: position and
-        GNSS-derived acceleration updates (the paper's method).
+        ``ekf``: position updates (the paper's baseline); ``ekf-acc``: position and GNSS-derived
+        acceleration updates (the paper's method). Both add stationary updates when
+        ``stationary`` is given and ``[zupt] enabled``.
     output_times : ndarray, optional
         Epochs [s] at which to report the state (after any update at the same time). Default:
         :func:`default_output_times`. Epochs before the filter starts are skipped.
     quality : QualityReport, optional
-        Data-quality findings; computed with :func:`gnssacc.quality.check_imu` when omitted.
-        Suspect IMU spans get inflated process noise.
+        Data-quality findings (:func:`gnssacc.quality.check_imu` when omitted); suspect IMU
+        spans get inflated process noise.
     init : InitialState, optional
         Overrides ``run.init`` and self-initialisation.
+    stationary : gnssacc.stationary.StationaryReport, optional
+        Where the vehicle stands still (zero-velocity and zero-rate updates there).
     store_P : bool
         Keep the full covariance at every output epoch.
     record_innovations : bool
-        Keep every update's time and normalised innovation squared in ``stats`` (``nis_pos_t``,
-        ``nis_pos``, ``nis_acc_t``, ``nis_acc``), e.g. for tuning.
+        Keep every update's time, NIS per dof and log-likelihood in ``stats`` (``nis_<kind>_t``,
+        ``nis_<kind>``, ``loglik_<kind>_series`` for kind in pos, acc, zupt, zaru).
+    observer : EkfObserver, optional
+        Called at every update epoch; with an observer ``ekf`` also evaluates (without applying)
+        the acceleration update, for counterfactual analysis.
+    t_stop : float, optional
+        Stop after this time [s] (events later than it are ignored).
+    cov_every : int
+        Propagate the covariance every this many IMU samples (1: every sample, the default; the
+        noise tuner uses more for speed).
     show_progress : bool
         Show a progress bar (only on a terminal).
 
     Returns
     -------
     NavSolution
+        ``stats`` holds the update counts, NIS per dof and log-likelihood per update kind.
     """
     if method not in METHODS:
         raise ValueError(f"unknown EKF method {method!r}; known: {', '.join(METHODS)}")
     use_acc = METHODS[method]
     wall0 = time.perf_counter()
-    setup = prepare(run, cfg, init, quality)
-    s, imu_t, kargs, t0, k = setup.state, setup.imu_t, setup.kernel_args, setup.t0, setup.k
-    t_cur = t0
+    setup = prepare(run, cfg, init, quality, stationary, cov_every)
+    s, prop, t0, k = setup.state, setup.prop, setup.t0, setup.k
+    t_end = prop.t[-1] if t_stop is None else min(float(t_stop), prop.t[-1])
     out_t = default_output_times(run) if output_times is None else np.asarray(output_times, float)
-    out_t = out_t[(out_t >= t0) & (out_t <= imu_t[-1])]
-    gnss, p_fix_n, window = run.gnss, setup.p_fix_n, setup.window
-
-    # Events in time order; at equal times the GNSS update comes before the output.
-    ev_t = np.concatenate([gnss.t, out_t])
-    ev_kind = np.concatenate([np.zeros(len(gnss), int), np.ones(len(out_t), int)])
-    ev_idx = np.concatenate([np.arange(len(gnss)), np.arange(len(out_t))])
-    order = np.lexsort((ev_kind, ev_t))
+    out_t = out_t[(out_t >= t0) & (out_t <= t_end)]
+    ev_t, ev_kind, ev_idx = _events(run.gnss.t, setup.stationary.t, out_t)
     rec = _Recorder(len(out_t), store_P)
-    stats = {"n_pos_updates": 0, "n_acc_updates": 0, "n_pos_rejected": 0, "n_acc_skipped_suspect_imu": 0,
-             "init": setup.init.how, "t_init": t0}
-    nis = {"pos": [], "pos_t": [], "acc": [], "acc_t": []}
-
-    for e in progress(order, desc=method, enable=show_progress):
+    stats = {"n_acc_skipped_suspect_imu": 0, "init": setup.init.how, "t_init": t0}
+    tally = _Tally(record_innovations)
+    if observer is not None:
+        observer.start(setup)
+    t_cur = t0
+    for e in progress(range(len(ev_t)), desc=method, enable=show_progress):
         t_e, kind, i = ev_t[e], ev_kind[e], ev_idx[e]
-        if t_e > imu_t[-1]:
+        if t_e > t_end:
             break
-        if kind == 0:
-            meas = window.push(t_e, p_fix_n[i], gnss.sigma_ned[i])
-            if t_e < t0:
-                continue
+        acc = (setup.window.push(t_e, setup.p_fix_n[i], run.gnss.sigma_ned[i])
+               if kind == GNSS and (use_acc or observer is not None) else None)
+        if t_e < t0:
+            continue
         if t_e > t_cur:
-            k, t_cur = mech.propagate(imu_t, setup.f_imu, setup.w_imu, k, t_cur, t_e, s.pos, s.v_n, s.R_nb, s.b_a,
-                                      s.b_g, s.P, *kargs)
-        if kind == 1:
+            t_prev = t_cur
+            k, t_cur = prop.advance(s, k, t_cur, t_e)
+            s.gm *= np.exp(-(t_cur - t_prev) / prop.gm_tau)   # the estimated GNSS error decays
+        if kind == OUTPUT:
             rec.add(t_e, s)
             continue
-        dz, H = _position_innovation(s, gnss.lat[i], gnss.lon[i], gnss.h[i], setup.lever_b)
-        nis_p = _update(s, dz, H, np.diag(gnss.sigma_ned[i] ** 2), setup.gate)
-        if nis_p < 0:
-            stats["n_pos_rejected"] += 1
-        else:
-            stats["n_pos_updates"] += 1
-            nis["pos"].append(nis_p)
-            nis["pos_t"].append(t_e)
-        if use_acc and meas is not None:
-            model = acceleration_model(run, setup, s, t_e, meas)
-            if model is None:
-                stats["n_acc_skipped_suspect_imu"] += 1
-                continue
-            nis["acc"].append(_update(s, *model))
-            nis["acc_t"].append(t_e)
-            stats["n_acc_updates"] += 1
-
-    runtime = time.perf_counter() - wall0
-    for key in ("pos", "acc"):
-        vals = np.asarray(nis[key])
-        # Normalised innovation squared per degree of freedom: ~1 for a consistent filter.
-        stats[f"nis_{key}_mean"] = float(vals.mean() / 3.0) if vals.size else None
-        if record_innovations:
-            stats[f"nis_{key}"] = vals / 3.0
-            stats[f"nis_{key}_t"] = np.asarray(nis[key + "_t"])
-    stats["accel_window_resets"] = window.resets
-    return rec.solution(method, runtime, stats)
+        name = "gnss" if kind == GNSS else "stationary"
+        if observer is not None:
+            observer.before(t_e, name, s, prop)
+        models = (_gnss_measurements(run, setup, s, t_e, i, acc, use_acc, observer is not None, stats)
+                  if kind == GNSS else _stationary_measurements(setup, s, i))
+        for m, apply in models:
+            if apply:
+                nis, loglik, used, wz = kalman_update(s, m)
+                tally.add(t_e, m, nis, loglik, used, wz)
+            else:
+                nis, used = float("nan"), False
+            if observer is not None:
+                observer.update(t_e, m, nis, used, s)
+        if observer is not None:
+            observer.after(t_e, name, s, prop)
+    stats.update(tally.stats())
+    stats["n_pos_updates"], stats["n_acc_updates"] = tally.n["pos"], tally.n["acc"]
+    stats["n_pos_rejected"] = tally.rejected["pos"]
+    stats["accel_window_resets"] = setup.window.resets
+    stats["loglik"] = float(sum(tally.loglik.values()))
+    return rec.solution(method, time.perf_counter() - wall0, stats)

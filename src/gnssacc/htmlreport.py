@@ -63,6 +63,39 @@ def observability_html(run: RecordedRun, sols: dict[str, NavSolution], cfg) -> s
             f"<table><tr><th>state</th><th>position [%]</th><th>position + acceleration [%]</th></tr>{rows}</table>")
 
 
+def _fmt(x, spec: str = ".2f") -> str:
+    return "-" if x is None else format(x, spec)
+
+
+def consistency_html(metrics: dict) -> str:
+    """Per method: NIS per update kind, innovation whiteness, fix residual ratio, and the warnings."""
+    cons = metrics.get("consistency") or {}
+    if not cons:
+        return "<p>No consistency figures.</p>"
+    rows = "".join(
+        f"<tr><td>{html.escape(m)}</td>" + "".join(f"<td>{_fmt(c['nis'].get(k))}</td>" for k in ("pos", "acc", "zupt", "zaru"))
+        + f"<td>{_fmt(c.get('innovation_acf1'))}</td><td>{_fmt(c.get('fix_residual_ratio'))}</td>"
+        + f"<td>{'<br>'.join(html.escape(w) for w in c['warnings']) or 'none'}</td></tr>" for m, c in cons.items())
+    return ("<p>1 is consistent for every NIS figure (EKF: innovations; smoother: GNSS residuals against their "
+            "expectation); innovation autocorrelation near 0; fix residual ratio below 1.41 (an estimate as good as "
+            "the fixes and independent of them).</p><table><tr><th>method</th><th>NIS position</th>"
+            "<th>acceleration</th><th>zero velocity</th><th>zero rate</th><th>innovation autocorrelation</th>"
+            f"<th>fix residual ratio</th><th>warnings</th></tr>{rows}</table>")
+
+
+def tuning_html(metrics: dict) -> str:
+    """The identified noise values beside their starting values, with the NIS before and after."""
+    t = metrics.get("tuning")
+    if not t:
+        return "<p>The configuration was used as given (<code>--tune none</code>).</p>"
+    rows = "".join(f"<tr><td>{html.escape(sec)}.{html.escape(k)}</td><td>{html.escape(str(t['start'].get(f'{sec}.{k}', '-')))}"
+                   f"</td><td>{html.escape(str(v))}</td></tr>" for sec, vals in t["values"].items() for k, v in vals.items())
+    return (f"<p>{t['n_evaluations']} EKF passes in {t['seconds']:.1f} s; position NIS per dof {_fmt(t['nis_before'])} "
+            f"at the start, {_fmt(t['nis_after'])} tuned. Kept from the configuration: "
+            f"{html.escape(', '.join(t['fixed']) or 'nothing')}. Written to <code>tuned.toml</code>.</p>"
+            f"<table><tr><th>key</th><th>start</th><th>identified</th></tr>{rows}</table>")
+
+
 def write_html_report(folder: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict, cfg=None) -> Path:
     """Write ``report.html`` (and ``sigmas.png``) into ``folder``; returns the page's path.
 
@@ -76,8 +109,7 @@ def write_html_report(folder: Path, run: RecordedRun, sols: dict[str, NavSolutio
                    f"<td>{html.escape(str(s['note']))}</td></tr>" for s in spans)
     quality = (f"<table><tr><th>kind</th><th>start [s]</th><th>length [s]</th><th>channels</th><th>note</th></tr>"
                f"{rows}</table>" if spans else "<p>No suspect IMU spans.</p>")
-    inits = "".join(f"<li><b>{html.escape(m)}</b>: {html.escape(str(v['stats'].get('init', '')))}</li>"
-                    for m, v in metrics["methods"].items())
+    inits = html.escape(str(metrics.get("init") or next(iter(metrics["methods"].values()))["stats"].get("init", "")))
     figures = "".join(f'<h2>{title}</h2><img src="{name}" alt="{title}">' for name, title in
                       (("errors.png", "Position error"), ("trajectory.png", "Track"),
                        ("sigmas.png", "Per-state 1-sigma")) if (folder / name).exists())
@@ -90,7 +122,9 @@ pre{{background:#f6f6f6;padding:1em}}</style></head><body>
 <p>Source: {html.escape(run.where)}<br>Duration {run.duration_s:.1f} s, {len(run.imu)} IMU samples,
 {len(run.gnss)} GNSS fixes. Configuration: {html.escape(', '.join(metrics.get('config_sources', [])))}.</p>
 <h2>Comparison</h2><pre>{html.escape(format_table(metrics))}</pre>
-<h2>Initialisation</h2><ul>{inits}</ul>
+<h2>Consistency</h2>{consistency_html(metrics)}
+<h2>Noise identification</h2>{tuning_html(metrics)}
+<h2>Initialisation</h2><p>All methods start from the same state: {inits}</p>
 <h2>IMU data quality</h2>{quality}
 {observability_html(run, sols, cfg) if cfg is not None else ""}
 {figures}

@@ -102,42 +102,118 @@ def _exp_so3(phi):
 
 
 @njit(cache=True)
-def _rates(pos, v_n):
-    """Earth rate and transport rate in NED [rad/s], radii [m]."""
+def _rates(pos, v_n, w_ie_sign):
+    """Earth rate (times ``w_ie_sign``) and transport rate in NED [rad/s], radii [m]."""
     lat, h = pos[0], pos[2]
     R_M, R_N = _radii(lat)
-    w_ie = np.array([_W * np.cos(lat), 0.0, -_W * np.sin(lat)])
+    W = _W * w_ie_sign
+    w_ie = np.array([W * np.cos(lat), 0.0, -W * np.sin(lat)])
     w_en = np.array([v_n[1] / (R_N + h), -v_n[0] / (R_M + h), -v_n[1] * np.tan(lat) / (R_N + h)])
     return w_ie, w_en, R_M, R_N
 
 
 @njit(cache=True)
-def strapdown_step(pos, v_n, R_nb, f_b, omega_ib_b, dt):
+def _exp_so3_into(p0, p1, p2, out):
+    """``out = Exp([p x])`` by Rodrigues' formula, ``I + a K + b (p p^T - |p|^2 I)``, no allocation."""
+    th2 = p0 * p0 + p1 * p1 + p2 * p2
+    if th2 < 1e-16:
+        a, b = 1.0, 0.5
+    else:
+        th = np.sqrt(th2)
+        a = np.sin(th) / th
+        b = (1.0 - np.cos(th)) / th2
+    out[0, 0] = 1.0 + b * (p0 * p0 - th2)
+    out[1, 1] = 1.0 + b * (p1 * p1 - th2)
+    out[2, 2] = 1.0 + b * (p2 * p2 - th2)
+    out[0, 1] = -a * p2 + b * p0 * p1
+    out[1, 0] = a * p2 + b * p0 * p1
+    out[0, 2] = a * p1 + b * p0 * p2
+    out[2, 0] = -a * p1 + b * p0 * p2
+    out[1, 2] = -a * p0 + b * p1 * p2
+    out[2, 1] = a * p0 + b * p1 * p2
+
+
+@njit(cache=True)
+def _mm3_into(A, B, out):
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
+
+
+@njit(cache=True)
+def _strapdown(pos, v_n, R_nb, f_b, omega_ib_b, dt, w_ie_sign, work):
+    """:func:`strapdown_step` with a (3, 3, 3) work array: no allocation in the per-sample path."""
+    lat, h = pos[0], pos[2]
+    R_M, R_N = _radii(lat)
+    W = _W * w_ie_sign
+    wie0, wie2 = W * np.cos(lat), -W * np.sin(lat)
+    wen0, wen1, wen2 = v_n[1] / (R_N + h), -v_n[0] / (R_M + h), -v_n[1] * np.tan(lat) / (R_N + h)
+    g, _ = _gravity(lat, h)
+    E_n, E_b, T = work[0], work[1], work[2]
+    _exp_so3_into(-(wie0 + wen0) * dt, -wen1 * dt, -(wie2 + wen2) * dt, E_n)
+    _exp_so3_into(omega_ib_b[0] * dt, omega_ib_b[1] * dt, omega_ib_b[2] * dt, E_b)
+    _mm3_into(E_n, R_nb, T)
+    _mm3_into(T, E_b, E_n)                     # E_n now holds R_new
+    # Specific force rotated by the mean of the old and new attitude.
+    f0 = 0.5 * ((R_nb[0, 0] + E_n[0, 0]) * f_b[0] + (R_nb[0, 1] + E_n[0, 1]) * f_b[1] + (R_nb[0, 2] + E_n[0, 2]) * f_b[2])
+    f1 = 0.5 * ((R_nb[1, 0] + E_n[1, 0]) * f_b[0] + (R_nb[1, 1] + E_n[1, 1]) * f_b[1] + (R_nb[1, 2] + E_n[1, 2]) * f_b[2])
+    f2 = 0.5 * ((R_nb[2, 0] + E_n[2, 0]) * f_b[0] + (R_nb[2, 1] + E_n[2, 1]) * f_b[1] + (R_nb[2, 2] + E_n[2, 2]) * f_b[2])
+    # Coriolis (2 w_ie + w_en) x v.
+    c0, c1, c2 = 2.0 * wie0 + wen0, wen1, 2.0 * wie2 + wen2
+    vN, vE, vD = v_n[0], v_n[1], v_n[2]
+    nN = vN + (f0 - (c1 * vD - c2 * vE)) * dt
+    nE = vE + (f1 - (c2 * vN - c0 * vD)) * dt
+    nD = vD + (f2 - (c0 * vE - c1 * vN) + g) * dt
+    pos[0] += 0.5 * (vN + nN) / (R_M + h) * dt
+    pos[1] += 0.5 * (vE + nE) / ((R_N + h) * np.cos(pos[0])) * dt
+    pos[2] -= 0.5 * (vD + nD) * dt
+    v_n[0], v_n[1], v_n[2] = nN, nE, nD
+    for i in range(3):
+        for j in range(3):
+            R_nb[i, j] = E_n[i, j]
+
+
+@njit(cache=True)
+def apply_correction(pos, v_n, R_nb, b_a, b_g, gm, dx):
+    """Closed-loop feedback of an estimated error ``dx`` (estimate minus truth, order
+    ``[dp, dv, phi, b_a, b_g (, x_g)]``) into the nominal state, in place.
+
+    ``R_nb <- Exp(-phi) R_nb``; the biases are added because ``f_est = f_raw - b_a_hat`` carries
+    the residual ``b_a``.
+    """
+    R_M, R_N = _radii(pos[0])
+    pos[0] -= dx[0] / (R_M + pos[2])
+    pos[1] -= dx[1] / ((R_N + pos[2]) * np.cos(pos[0]))
+    pos[2] += dx[2]
+    E = np.empty((3, 3))
+    T = np.empty((3, 3))
+    _exp_so3_into(-dx[6], -dx[7], -dx[8], E)
+    _mm3_into(E, R_nb, T)
+    for i in range(3):
+        v_n[i] -= dx[3 + i]
+        b_a[i] += dx[9 + i]
+        b_g[i] += dx[12 + i]
+        for j in range(3):
+            R_nb[i, j] = T[i, j]
+    if dx.shape[0] > 15:
+        for i in range(3):
+            gm[i] -= dx[15 + i]
+
+
+@njit(cache=True)
+def strapdown_step(pos, v_n, R_nb, f_b, omega_ib_b, dt, w_ie_sign=1.0):
     """Advance the nominal state by ``dt`` [s] with a held IMU sample (in place).
 
     Attitude: ``R <- Exp(-omega_in dt) R Exp(omega_ib dt)`` (paper eq. 3); velocity: paper eq. 2
     with the specific force rotated by the mean of the old and new attitude; position: paper
-    eq. 1 with the trapezoidal velocity.
+    eq. 1 with the trapezoidal velocity. ``w_ie_sign = -1`` reverses the earth rate, which makes
+    the same equations integrate a time-reversed recording exactly.
     """
-    w_ie, w_en, R_M, R_N = _rates(pos, v_n)
-    g, _ = _gravity(pos[0], pos[2])
-    R_new = _mm(_mm(_exp_so3(-(w_ie + w_en) * dt), R_nb), _exp_so3(omega_ib_b * dt))
-    f_n = _mv(0.5 * (R_nb + R_new), f_b)
-    cor = np.cross(2.0 * w_ie + w_en, v_n)
-    v_new = np.empty(3)
-    for i in range(3):
-        v_new[i] = v_n[i] + (f_n[i] - cor[i]) * dt
-    v_new[2] += g * dt
-    vm = 0.5 * (v_n + v_new)
-    pos[0] += vm[0] / (R_M + pos[2]) * dt
-    pos[1] += vm[1] / ((R_N + pos[2]) * np.cos(pos[0])) * dt
-    pos[2] -= vm[2] * dt
-    v_n[:] = v_new
-    R_nb[:, :] = R_new
+    _strapdown(pos, v_n, R_nb, f_b, omega_ib_b, dt, w_ie_sign, np.empty((3, 3, 3)))
 
 
 @njit(cache=True)
-def system_matrix(pos, v_n, R_nb, f_b):
+def system_matrix(pos, v_n, R_nb, f_b, w_ie_sign=1.0):
     """Continuous-time error-state matrix F (15 x 15) at the current nominal state.
 
     Parameters
@@ -149,10 +225,13 @@ def system_matrix(pos, v_n, R_nb, f_b):
     R_nb : ndarray (3, 3)
     f_b : ndarray (3,)
         Bias-corrected specific force [m/s^2].
+    w_ie_sign : float
+        +1, or -1 for a time-reversed recording.
     """
     lat, h = pos[0], pos[2]
     vN, vE, vD = v_n[0], v_n[1], v_n[2]
-    w_ie, w_en, R_M, R_N = _rates(pos, v_n)
+    w_ie, w_en, R_M, R_N = _rates(pos, v_n, w_ie_sign)
+    W = _W * w_ie_sign
     g, dg_dh = _gravity(lat, h)
     rm, rn = R_M + h, R_N + h
     tl, cl, sl = np.tan(lat), np.cos(lat), np.sin(lat)
@@ -169,8 +248,8 @@ def system_matrix(pos, v_n, R_nb, f_b):
         F[i, 3 + i] = 1.0
 
     # Sensitivities of omega_ie + omega_en (d/dlat, d/dh) and of omega_en (d/dv).
-    dW_dlat = np.array([-_W * sl, 0.0, -_W * cl - vE / (rn * cl * cl)])
-    dWie_dlat = np.array([-_W * sl, 0.0, -_W * cl])
+    dW_dlat = np.array([-W * sl, 0.0, -W * cl - vE / (rn * cl * cl)])
+    dWie_dlat = np.array([-W * sl, 0.0, -W * cl])
     drho_dlat = np.array([0.0, 0.0, -vE / (rn * cl * cl)])
     drho_dh = np.array([-vE / rn**2, vN / rm**2, vE * tl / rn**2])
     drho_dv = np.zeros((3, 3))
@@ -271,6 +350,42 @@ def _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order):
 
 
 @njit(cache=True)
+def _propagate_gm(P, F, dt, gm_tau, gm_var):
+    """The GNSS Gauss-Markov error states (rows/columns 15.. of P): ``x_g' = a x_g + w``,
+    ``a = exp(-dt / tau)``, stationary variance ``gm_var``. Their cross-covariance with the
+    navigation states follows ``P_xg' = (I + F dt) P_xg a``; nothing couples them in F."""
+    n = P.shape[0]
+    for c in range(15, n):
+        a = np.exp(-dt / gm_tau[c - 15])
+        col = np.empty(15)
+        for i in range(15):
+            v = P[i, c]
+            if i < 9:
+                for k in range(15):
+                    v += dt * F[i, k] * P[k, c]
+            col[i] = a * v
+        for i in range(15):
+            P[i, c] = col[i]
+            P[c, i] = col[i]
+        for d in range(15, n):
+            P[c, d] *= a * np.exp(-dt / gm_tau[d - 15])
+        P[c, c] += gm_var[c - 15] * (1.0 - a * a)
+    for c in range(15, n):
+        for d in range(c + 1, n):
+            P[d, c] = P[c, d]
+
+
+@njit(cache=True)
+def _propagate_all(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order, gm_tau, gm_var):
+    """The 15 navigation states, then the GNSS error states when P has them."""
+    if P.shape[0] > 15:
+        _propagate_gm(P, F, dt, gm_tau, gm_var)  # needs only P_xg and F: order-independent
+        _propagate_cov(P[:15, :15], F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order)
+    else:
+        _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order)
+
+
+@njit(cache=True)
 def _segment_index(k, seg_i0, seg_i1):
     """Index of the disjoint sorted segment ``[i0, i1)`` containing sample ``k``, or -1."""
     lo, hi = 0, seg_i0.shape[0]
@@ -286,8 +401,20 @@ def _segment_index(k, seg_i0, seg_i1):
 
 
 @njit(cache=True)
+def _step_phi(Phi, F, dt, phi_order):
+    """Phi <- (I + F dt (+ (F dt)^2 / 2)) Phi: the error-state transition over one step."""
+    S = F * dt
+    if phi_order == 2:
+        S = S + 0.5 * _mm(S, S)
+    for i in range(15):
+        S[i, i] += 1.0
+    Phi[:, :] = _mm(S, Phi)
+
+
+@njit(cache=True)
 def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
-              q_a, q_g, q_ba, q_bg, seg_i0, seg_i1, seg_qa, seg_qg, phi_order, with_cov):
+              q_a, q_g, q_ba, q_bg, seg_i0, seg_i1, seg_qa, seg_qg, phi_order, with_cov, cov_every, Phi, with_phi,
+              w_ie_sign, gm_tau, gm_var):
     """Propagate nominal state and covariance from ``t_cur`` to ``t_to`` (in place).
 
     Parameters
@@ -311,6 +438,18 @@ def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
         1 or 2.
     with_cov : bool
         Propagate P too.
+    cov_every : int
+        Propagate P once every this many IMU samples (and always at ``t_to``) with the summed
+        interval and noise; 1 (the default everywhere but the noise tuner) is every sample.
+    Phi : ndarray (15, 15)
+        Transition-matrix accumulator, ``Phi <- Phi_step Phi`` per sample when ``with_phi``
+        (for the observability analysis; needs ``cov_every == 1``).
+    with_phi : bool
+    w_ie_sign : float
+        +1, or -1 to integrate a time-reversed recording (the earth then turns the other way).
+    gm_tau, gm_var : ndarray (3,)
+        Correlation time [s] and stationary variance [m^2] of the GNSS Gauss-Markov error states,
+        used when P has them (18 x 18).
 
     Returns
     -------
@@ -318,11 +457,18 @@ def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
         Updated sample index and time (``t_cur == t_to`` unless the IMU data ended first).
     """
     n = t_imu.shape[0]
+    if with_phi and P.shape[0] > 15:
+        with_phi = False  # the transition-matrix accumulator covers the 15 navigation states only
     f = np.empty(3)
     w = np.empty(3)
     A = np.empty((9, 15))
+    work = np.empty((3, 3, 3))
     qa_k = np.empty(3)
     qg_k = np.empty(3)
+    qa_int = np.zeros(3)
+    qg_int = np.zeros(3)
+    dt_acc = 0.0
+    count = 0
     while t_cur < t_to and k < n:
         t_end = t_imu[k] if t_imu[k] < t_to else t_to
         dt = t_end - t_cur
@@ -331,29 +477,102 @@ def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
                 f[i] = f_imu[k, i] - b_a[i]
                 w[i] = w_imu[k, i] - b_g[i]
             if with_cov:
-                F = system_matrix(pos, v_n, R_nb, f)
                 j = _segment_index(k, seg_i0, seg_i1)
                 for i in range(3):
-                    qa_k[i] = q_a[i] + (seg_qa[j, i] if j >= 0 else 0.0)
-                    qg_k[i] = q_g[i] + (seg_qg[j, i] if j >= 0 else 0.0)
-                _propagate_cov(P, F, A, R_nb, dt, qa_k, qg_k, q_ba, q_bg, phi_order)
-            strapdown_step(pos, v_n, R_nb, f, w, dt)
+                    qa_int[i] += (q_a[i] + (seg_qa[j, i] if j >= 0 else 0.0)) * dt
+                    qg_int[i] += (q_g[i] + (seg_qg[j, i] if j >= 0 else 0.0)) * dt
+                dt_acc += dt
+                count += 1
+                if count >= cov_every or t_end >= t_to:
+                    F = system_matrix(pos, v_n, R_nb, f, w_ie_sign)
+                    for i in range(3):
+                        qa_k[i] = qa_int[i] / dt_acc
+                        qg_k[i] = qg_int[i] / dt_acc
+                        qa_int[i] = 0.0
+                        qg_int[i] = 0.0
+                    _propagate_all(P, F, A, R_nb, dt_acc, qa_k, qg_k, q_ba, q_bg, phi_order, gm_tau, gm_var)
+                    if with_phi:
+                        _step_phi(Phi, F, dt_acc, phi_order)
+                    dt_acc = 0.0
+                    count = 0
+            _strapdown(pos, v_n, R_nb, f, w, dt, w_ie_sign, work)
         t_cur = t_end
         if t_cur >= t_imu[k]:
             k += 1
+    if with_cov and count > 0:  # the IMU data ended before t_to: flush what was accumulated
+        F = system_matrix(pos, v_n, R_nb, f, w_ie_sign)
+        for i in range(3):
+            qa_k[i] = qa_int[i] / dt_acc
+            qg_k[i] = qg_int[i] / dt_acc
+        _propagate_all(P, F, A, R_nb, dt_acc, qa_k, qg_k, q_ba, q_bg, phi_order, gm_tau, gm_var)
+        if with_phi:
+            _step_phi(Phi, F, dt_acc, phi_order)
     return k, t_cur
+
+
+class Propagator:
+    """The IMU samples and the noise model, bound once; :meth:`advance` moves a state in time.
+
+    Parameters
+    ----------
+    t, f_b, omega_ib_b : ndarray
+        IMU times [s] (N,), specific force [m/s^2] and angular rate [rad/s] (N, 3), body frame.
+    q_a, q_g, q_ba, q_bg : ndarray (3,)
+        White-noise and bias random-walk PSDs (see :func:`propagate`).
+    segments : tuple
+        ``(seg_i0, seg_i1, seg_qg, seg_qa)`` from :func:`gnssacc.quality.inflation_segments`.
+    phi_order : int
+        1 or 2.
+    cov_every : int
+        Covariance propagated every this many samples (1: every sample).
+    w_ie_sign : float
+        +1, or -1 for a time-reversed recording.
+    gm_tau_s, gm_sigma_m : ndarray (3,), optional
+        GNSS Gauss-Markov error model (correlation time [s], 1-sigma [m]), for an 18-state P.
+    """
+
+    def __init__(self, t, f_b, omega_ib_b, q_a, q_g, q_ba, q_bg, segments, phi_order: int = 1,
+                 cov_every: int = 1, w_ie_sign: float = 1.0, gm_tau_s=None, gm_sigma_m=None):
+        self.t = np.ascontiguousarray(t, float)
+        self.f = np.ascontiguousarray(f_b, float)
+        self.w = np.ascontiguousarray(omega_ib_b, float)
+        self.q = tuple(np.ascontiguousarray(q, float) for q in (q_a, q_g, q_ba, q_bg))
+        seg_i0, seg_i1, seg_qg, seg_qa = segments
+        self.segments = (np.asarray(seg_i0, np.int64), np.asarray(seg_i1, np.int64),
+                         np.ascontiguousarray(seg_qa, float).reshape(-1, 3),
+                         np.ascontiguousarray(seg_qg, float).reshape(-1, 3))
+        self.phi_order, self.cov_every, self.w_ie_sign = int(phi_order), max(int(cov_every), 1), float(w_ie_sign)
+        self.gm_tau = np.ascontiguousarray(np.broadcast_to(60.0 if gm_tau_s is None else gm_tau_s, (3,)), float)
+        self.gm_var = np.ascontiguousarray(np.broadcast_to(0.0 if gm_sigma_m is None else gm_sigma_m, (3,)), float) ** 2
+        #: Transition-matrix accumulator (used when ``with_phi``); reset it with :meth:`reset_phi`.
+        self.Phi = np.eye(15)
+        self.with_phi = False
+
+    def reset_phi(self) -> None:
+        self.Phi[:, :] = np.eye(15)
+
+    def advance(self, s, k: int, t_cur: float, t_to: float, with_cov: bool = True) -> tuple[int, float]:
+        """Propagate the state ``s`` (``pos, v_n, R_nb, b_a, b_g, P``, in place) to ``t_to``.
+
+        ``k`` is the first sample with ``t[k] > t_cur``; returns the updated ``k, t_cur``.
+        """
+        seg_i0, seg_i1, seg_qa, seg_qg = self.segments
+        return propagate(self.t, self.f, self.w, k, t_cur, t_to, s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, s.P,
+                         *self.q, seg_i0, seg_i1, seg_qa, seg_qg, self.phi_order, with_cov, self.cov_every,
+                         self.Phi, self.with_phi, self.w_ie_sign, self.gm_tau, self.gm_var)
 
 
 def warm_up() -> float:
     """Compile (or load from cache) the numba kernels; return the seconds it took."""
     import time
+    from types import SimpleNamespace
 
     t0 = time.perf_counter()
-    t = np.array([0.0, 0.01, 0.02])
-    fw = np.zeros((3, 3))
-    zeros3 = np.zeros(3)
+    z3 = np.zeros(3)
     seg_i = np.zeros(1, np.int64)
-    propagate(t, fw, fw, 1, 0.0, 0.015, np.array([0.5, 0.1, 0.0]), zeros3.copy(), np.eye(3), zeros3, zeros3,
-              np.eye(15), zeros3, zeros3, zeros3, zeros3, seg_i, seg_i + 1, np.zeros((1, 3)), np.zeros((1, 3)), 1,
-              True)
+    prop = Propagator(np.array([0.0, 0.01, 0.02]), np.zeros((3, 3)), np.zeros((3, 3)), z3, z3, z3, z3,
+                      (seg_i, seg_i + 1, np.zeros((1, 3)), np.zeros((1, 3))))
+    s = SimpleNamespace(pos=np.array([0.5, 0.1, 0.0]), v_n=z3.copy(), R_nb=np.eye(3), b_a=z3.copy(), b_g=z3.copy(),
+                        P=np.eye(15))
+    prop.advance(s, 1, 0.0, 0.015)
     return time.perf_counter() - t0

@@ -56,11 +56,21 @@ def _rms(e: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
 
 
-def score(run: RecordedRun, sol: NavSolution) -> Score:
-    """Score a solution against the run's truth (all ``None`` when there is no truth)."""
+def _in_window(t: np.ndarray, window) -> np.ndarray:
+    return np.ones(len(t), bool) if window is None else (t >= window[0]) & (t <= window[1])
+
+
+def score(run: RecordedRun, sol: NavSolution, window: tuple | None = None) -> Score:
+    """Score a solution against the run's truth (all ``None`` when there is no truth).
+
+    ``window = (t_a, t_b)`` [s] restricts the scored epochs, so that methods (and the raw fixes)
+    with different spans are compared over the same stretch.
+    """
     if run.truth is None or len(sol) == 0:
         return Score(None, None, None, len(sol))
     err, t = position_errors(run, sol)
+    keep = _in_window(t, window)
+    err, t = err[keep], t[keep]
     if len(err) == 0:
         return Score(None, None, None, 0)
     outages = run.meta.get("outages") or []
@@ -71,18 +81,23 @@ def score(run: RecordedRun, sol: NavSolution) -> Score:
     rpy = None
     if run.truth.rpy is not None:
         tr = run.truth
-        d = np.column_stack([wrap_angle(sol.rpy[:, i] - np.interp(sol.t, tr.t, np.unwrap(tr.rpy[:, i])))
+        m = _in_window(sol.t, window)
+        d = np.column_stack([wrap_angle(sol.rpy[m, i] - np.interp(sol.t[m], tr.t, np.unwrap(tr.rpy[:, i])))
                              for i in range(3)])
         rpy = np.degrees(np.sqrt(np.mean(d**2, axis=0))).tolist()
     return Score(_rms(err), _rms(err[:, :2]), prmse_out, len(err), rpy)
 
 
-def gnss_score(run: RecordedRun) -> Score:
-    """Score of the raw GNSS fixes themselves (the reference any filter must beat)."""
+def gnss_score(run: RecordedRun, window: tuple | None = None) -> Score:
+    """Score of the raw GNSS fixes themselves (the reference any filter must beat), at the fix
+    epochs inside ``window`` [s] when given."""
     if run.truth is None:
         return Score(None, None, None, len(run.gnss))
     p_true, valid = truth_at(run, run.gnss.t)
+    valid &= _in_window(run.gnss.t, window)
     err = (run.origin.to_ned(run.gnss.lat, run.gnss.lon, run.gnss.h) - p_true)[valid]
+    if len(err) == 0:
+        return Score(None, None, None, 0)
     return Score(_rms(err), _rms(err[:, :2]), None, len(err))
 
 

@@ -53,14 +53,14 @@ def parse_seeds(text: str) -> list[int]:
 
 
 def _one_seed(args) -> tuple[int, dict]:
-    source, preset, config, noise, outage, outage_every, methods, imu_frame, seed = args
+    source, preset, config, noise, outage, outage_every, methods, imu_frame, tune, seed = args
     from .config import load_config
     from .metrics import gnss_score, score
     from .pipeline import load_source, run_methods, with_outages
 
     cfg = load_config(preset, config)
     run = with_outages(load_source(source, cfg, noise=noise, seed=seed, imu_frame=imu_frame), outage, outage_every)
-    sols = run_methods(run, cfg, methods)
+    sols = run_methods(run, cfg, methods, tune=tune)
     out = {"gnss": (gnss_score(run).prmse_m, None)}
     for mid, sol in sols.items():
         sc = score(run, sol)
@@ -69,9 +69,9 @@ def _one_seed(args) -> tuple[int, dict]:
 
 
 def run_bench(source, preset, config, noise, outage, outage_every, methods, seeds, jobs: int = 1,
-              imu_frame: str = "frd", show_progress: bool = True) -> dict:
+              imu_frame: str = "frd", show_progress: bool = True, tune: str | None = None) -> dict:
     """Run all methods over the seeds; returns ``{seed: {method: (prmse, prmse_outage)}}``."""
-    tasks = [(source, preset, config, noise, outage, outage_every, methods, imu_frame, s) for s in seeds]
+    tasks = [(source, preset, config, noise, outage, outage_every, methods, imu_frame, tune, s) for s in seeds]
     results = {}
     if jobs <= 1:
         for t in progress(tasks, desc="seeds", enable=show_progress):

@@ -18,14 +18,11 @@ Classification, per IMU sample, in this order of precedence (thresholds in
 1. ``turning``: ``|yaw rate| > yaw_rate_dps``. The yaw rate is the gyro rate rotated into NED
    with the estimated attitude, down component (earth rate, < 0.005 deg/s, is left in). A pivot
    turn on the spot is turning.
-2. ``stationary``: the IMU is still -- gyro norm below ``still_gyro_dps`` and the standard
-   deviation of the specific-force norm over ``still_window_s`` below ``still_accel_std_mps2``
-   (a ZUPT-style detector) -- *and* the horizontal acceleration ``|R_nb f_b + g_n|_h`` is at
-   most ``accel_mps2`` (a smooth pull-away barely changes the specific-force norm) -- *and* the
-   estimated horizontal speed is below ``speed_mps``.
-   The speed test is needed because an IMU cannot tell standing from driving at constant
-   velocity without vibration (e.g. simulated data); the stillness test is needed because a
-   GNSS-aided velocity estimate carries errors of a few tenths of a m/s with metre-level fixes.
+2. ``stationary``: inside a stationary span of :func:`gnssacc.stationary.detect_stationary`
+   (windowed IMU statistics robust to vibration, confirmed by the GNSS fixes) -- *and* the
+   horizontal acceleration ``|R_nb f_b + g_n|_h`` is at most ``accel_mps2`` -- *and* the
+   estimated horizontal speed is below ``speed_mps``. The estimators' zero-velocity updates use
+   the same spans, so the analysis and the filter agree on when the vehicle stands.
 3. ``accelerating``: ``|along-track acceleration| > accel_mps2``. The acceleration is
    ``R_nb f_b + g_n`` (IMU specific force rotated with the estimated attitude, plus normal
    gravity), projected on the horizontal direction of travel, so a slope does not look like
@@ -33,9 +30,10 @@ Classification, per IMU sample, in this order of precedence (thresholds in
 4. ``straight``: everything else (moving at about constant speed without turning, hills
    included).
 
-The defaults suit ground vehicles with an industrial-grade or better IMU: a 3 deg/s yaw-rate
-threshold is 30x the turn-on gyro bias of a 0.1 deg/s (360 deg/h) sensor, and 0.25 m/s^2 is
-well above the gravity leak of a 0.5 deg tilt error (0.09 m/s^2) plus a 5 mg accelerometer bias.
+The defaults suit ground vehicles: a 3 deg/s yaw-rate threshold is 10x the turn-on gyro bias of
+a 0.3 deg/s consumer sensor, and 0.25 m/s^2 is well above the gravity leak of a 0.5 deg tilt
+error (0.09 m/s^2) plus a 5 mg accelerometer bias; the rates and accelerations are averaged over
+``smooth_s``, many periods of engine vibration.
 """
 from __future__ import annotations
 
@@ -47,6 +45,7 @@ from .earth import gravity_n
 from .rotations import euler_to_dcm
 from .run import RecordedRun
 from .solution import NavSolution
+from .stationary import StationaryReport, detect_stationary
 
 #: Label codes: ``LABELS[code]`` is the name.
 LABELS = ("stationary", "straight", "accelerating", "turning")
@@ -66,14 +65,6 @@ class MotionThresholds:
     ----------
     speed_mps : float
         Horizontal speed below which a still vehicle is stationary [m/s].
-    still_gyro_dps : float
-        Smoothed gyro norm below which the IMU is still [deg/s] (well above the turn-on bias of
-        an industrial or better IMU, 0.1 deg/s).
-    still_accel_std_mps2 : float
-        Standard deviation of the specific-force norm over ``still_window_s`` below which the
-        IMU is still [m/s^2].
-    still_window_s : float
-        Window of that standard deviation [s].
     yaw_rate_dps : float
         Absolute yaw rate above which it is turning [deg/s].
     accel_mps2 : float
@@ -83,9 +74,6 @@ class MotionThresholds:
     """
 
     speed_mps: float = 0.75
-    still_gyro_dps: float = 1.0
-    still_accel_std_mps2: float = 0.05
-    still_window_s: float = 1.0
     yaw_rate_dps: float = 3.0
     accel_mps2: float = 0.25
     smooth_s: float = 0.5
@@ -148,7 +136,7 @@ def _moving_average(x: np.ndarray, n: int) -> np.ndarray:
 
 
 def classify_motion(run: RecordedRun, sol: NavSolution, thresholds: MotionThresholds | None = None,
-                    t: np.ndarray | None = None) -> MotionContext:
+                    t: np.ndarray | None = None, stationary: StationaryReport | None = None) -> MotionContext:
     """Classify the motion of a run from its IMU and an estimated navigation solution.
 
     Parameters
@@ -160,6 +148,8 @@ def classify_motion(run: RecordedRun, sol: NavSolution, thresholds: MotionThresh
     thresholds : MotionThresholds, optional
     t : ndarray, optional
         Epochs [s] to report; default: the IMU sample times within the solution's span.
+    stationary : StationaryReport, optional
+        Stationary spans (:func:`gnssacc.stationary.detect_stationary` on the run when omitted).
 
     Returns
     -------
@@ -184,11 +174,9 @@ def classify_motion(run: RecordedRun, sol: NavSolution, thresholds: MotionThresh
     yaw_rate = _moving_average(yaw_rate, n)
     a_n = _moving_average(a_n, n)
     speed = np.hypot(v_n[:, 0], v_n[:, 1])
-    gyro = _moving_average(np.linalg.norm(w_b, axis=1), n)
-    nw = max(2, int(round(th.still_window_s / dt)))
-    fn = np.linalg.norm(f_b, axis=1)
-    f_std = np.sqrt(np.maximum(_moving_average(fn**2, nw) - _moving_average(fn, nw) ** 2, 0.0))
-    still = (np.degrees(gyro) < th.still_gyro_dps) & (f_std < th.still_accel_std_mps2)
+    if stationary is None:
+        stationary = detect_stationary(run.imu, run.gnss, run.origin)
+    still = stationary.mask(ti)
     # Direction of travel; while (nearly) stationary use the heading instead.
     course = np.where(speed > 0.2, np.arctan2(v_n[:, 1], v_n[:, 0]), rpy[:, 2])
     u = np.column_stack([np.cos(course), np.sin(course)])

@@ -56,9 +56,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import mechanization as mech
 from .config import RunConfig
-from .ekf import _position_innovation, _update, acceleration_model, prepare
+from .ekf import EkfObserver, run_ekf
+from .kalman import joseph_update
 from .metrics import truth_at
 from .quality import QualityReport
 from .rotations import dcm_to_euler, euler_error_jacobian, wrap_angle
@@ -298,11 +298,10 @@ class EkfReplay:
 
 
 def _cov_update(P: np.ndarray, H: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """Joseph-form covariance update with the optimal gain (as ``gnssacc.ekf._update``)."""
-    PHt = P @ H.T
-    K = PHt @ np.linalg.inv(H @ PHt + R)
-    IKH = np.eye(15) - K @ H
-    return IKH @ P @ IKH.T + K @ R @ K.T
+    """Joseph-form covariance update with the optimal gain (:func:`gnssacc.kalman.joseph_update`)."""
+    P = P.copy()
+    joseph_update(P, H, R, np.zeros(len(H)), 0.0)
+    return P
 
 
 def _euler_T(J: np.ndarray) -> np.ndarray:
@@ -319,96 +318,77 @@ def _euler_var(P: np.ndarray, J: np.ndarray) -> np.ndarray:
     return np.maximum(d, 0.0)
 
 
-def replay_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, with_phi: bool = False,
-               quality: QualityReport | None = None, t_end: float | None = None) -> EkfReplay:
-    """Re-run :func:`gnssacc.ekf.run_ekf` step by step and keep its matrices at every GNSS epoch.
+class _EpochCollector(EkfObserver):
+    """Keeps the filter's matrices at every GNSS epoch (the observer of one :func:`run_ekf` pass)."""
 
-    The loop mirrors ``run_ekf`` (same initialisation, propagation kernel, quality inflation,
-    gate, update functions and acceleration window) so the trajectory and covariances are the
-    filter's own; the tests check that the covariances match ``run_ekf(store_P=True)``.
+    def __init__(self, with_phi: bool):
+        self.with_phi = with_phi
+        self.epochs: list[GnssEpoch] = []
+        self._cur: dict = {}
+        self.P0 = self.init = None
+
+    def start(self, setup):
+        self.P0, self.init = setup.state.P.copy(), setup.init
+        setup.prop.with_phi = self.with_phi
+        setup.prop.reset_phi()
+
+    def before(self, t, kind, s, prop):
+        if kind == "gnss":
+            self._cur = {"t": float(t), "P_minus": s.P.copy(), "J": euler_error_jacobian(*_rpy(s.R_nb)),
+                         "Phi": prop.Phi.copy() if self.with_phi else None, "H_a": None, "R_a": None,
+                         "acc_used": False}
+
+    def update(self, t, m, nis, used, s):
+        if m.kind == "pos":
+            self._cur.update(H_p=m.H, R_p=m.R, pos_used=used)
+        elif m.kind == "acc":
+            self._cur.update(H_a=m.H, R_a=m.R, acc_used=used)
+
+    def after(self, t, kind, s, prop):
+        if kind == "gnss":
+            c = self._cur
+            self.epochs.append(GnssEpoch(c["t"], c["P_minus"], s.P.copy(), c["H_p"], c["R_p"], c["H_a"], c["R_a"],
+                                         c["J"], c["Phi"], c["pos_used"], c["acc_used"]))
+            prop.reset_phi()
+
+
+def replay_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, with_phi: bool = False,
+               quality: QualityReport | None = None, t_end: float | None = None, init=None,
+               stationary=None) -> EkfReplay:
+    """Run :func:`gnssacc.ekf.run_ekf` once and keep its matrices at every GNSS epoch.
+
+    This is the filter's own pass (an :class:`gnssacc.ekf.EkfObserver` watches it), so the
+    trajectory and covariances are the filter's; for ``ekf`` the acceleration update is also
+    evaluated, not applied, for the counterfactual.
 
     Parameters
     ----------
     run : RecordedRun
     cfg : RunConfig
     method : {"ekf", "ekf-acc"}
-        Which filter to replay (which updates are applied to the trajectory).
+        Which filter to run (which updates are applied to the trajectory).
     with_phi : bool
-        Also accumulate the error-state transition matrix between GNSS epochs. This propagates
-        one IMU sample per call (F evaluated at each sample, as the kernel does) and costs
-        about 30 us per sample.
+        Also accumulate the error-state transition matrix between GNSS epochs (in the
+        propagation kernel, one 15 x 15 product per IMU sample).
     quality : QualityReport, optional
     t_end : float, optional
         Stop after the last GNSS epoch at or before this time [s].
+    init : InitialState, optional
+        Start (default: the run's or self-initialisation, as ``run_ekf``).
+    stationary : gnssacc.stationary.StationaryReport, optional
+        Stationary spans (their updates are applied, and fold into ``P_minus``).
 
     Returns
     -------
     EkfReplay
-
-    Notes
-    -----
-    This duplicates the event loop of ``run_ekf`` (GNSS epochs only; output epochs are not
-    needed). A callback in ``run_ekf`` called at each GNSS epoch with ``P-``, ``H_p``, ``R_p``,
-    ``H_a``, ``R_a`` would remove the duplication; the transition matrices would still need the
-    per-sample stepping done here (or a ``Phi`` accumulator in ``mechanization.propagate``).
     """
     if method not in ("ekf", "ekf-acc"):
         raise ValueError(f"replay_ekf replays 'ekf' or 'ekf-acc', not {method!r}")
-    use_acc = method == "ekf-acc"
-    setup = prepare(run, cfg, quality=quality)
-    init, s, imu_t, f_imu, t0, k = setup.init, setup.state, setup.imu_t, setup.f_imu, setup.t0, setup.k
-    args, phi_order = setup.kernel_args, setup.kernel_args[8]
-    w_imu, lever, gate, window = setup.w_imu, setup.lever_b, setup.gate, setup.window
-    t_cur = t0
-    gnss, p_fix_n = run.gnss, setup.p_fix_n
-    P0 = s.P.copy()
-    J0 = euler_error_jacobian(*init.rpy)
-    epochs: list[GnssEpoch] = []
-    t_stop = imu_t[-1] if t_end is None else min(float(t_end), imu_t[-1])
-    I15 = np.eye(15)
-
-    for i in range(len(gnss)):
-        t_e = float(gnss.t[i])
-        if t_e > t_stop:
-            break
-        meas = window.push(t_e, p_fix_n[i], gnss.sigma_ned[i])
-        if t_e < t0:
-            continue
-        Phi = None
-        if t_e > t_cur:
-            if with_phi:
-                Phi = I15.copy()
-                while t_cur < t_e and k < len(imu_t):
-                    t_to = min(imu_t[k], t_e)
-                    dt = t_to - t_cur
-                    if dt > 0.0:
-                        F = mech.system_matrix(s.pos, s.v_n, s.R_nb, f_imu[k] - s.b_a) * dt
-                        step = I15 + F + (0.5 * F @ F if phi_order == 2 else 0.0)
-                        Phi = step @ Phi
-                    k, t_cur = mech.propagate(imu_t, f_imu, w_imu, k, t_cur, t_to, s.pos, s.v_n, s.R_nb, s.b_a,
-                                              s.b_g, s.P, *args)
-            else:
-                k, t_cur = mech.propagate(imu_t, f_imu, w_imu, k, t_cur, t_e, s.pos, s.v_n, s.R_nb, s.b_a, s.b_g,
-                                          s.P, *args)
-        elif with_phi:
-            Phi = I15.copy()
-        P_minus = s.P.copy()
-        J = euler_error_jacobian(*_rpy(s.R_nb))
-        dz, H_p = _position_innovation(s, gnss.lat[i], gnss.lon[i], gnss.h[i], lever)
-        R_p = np.diag(gnss.sigma_ned[i] ** 2)
-        pos_used = _update(s, dz, H_p, R_p, gate) >= 0
-        H_a = R_a = None
-        acc_used = False
-        if meas is not None:
-            # None on suspect IMU data: the filter would not use it, so no counterfactual either.
-            model = acceleration_model(run, setup, s, t_e, meas)
-            if model is not None:
-                dz_a, H_a, R_a = model
-                if use_acc:
-                    _update(s, dz_a, H_a, R_a)
-                    acc_used = True
-        epochs.append(GnssEpoch(t_e, P_minus, s.P.copy(), H_p, R_p, H_a, R_a, J, Phi, pos_used, acc_used))
-    return EkfReplay(method, epochs, P0, J0, t0, {"accel_window_resets": window.resets})
+    c = _EpochCollector(with_phi)
+    sol = run_ekf(run, cfg, method, output_times=np.zeros(0), quality=quality, init=init, stationary=stationary,
+                  observer=c, t_stop=t_end)
+    return EkfReplay(method, c.epochs, c.P0, euler_error_jacobian(*c.init.rpy), float(c.init.t),
+                     {"accel_window_resets": sol.stats["accel_window_resets"]})
 
 
 def _rpy(R: np.ndarray) -> np.ndarray:

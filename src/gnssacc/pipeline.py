@@ -8,32 +8,34 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
-import time
 from datetime import datetime
 from pathlib import Path
 
 
 from . import mechanization
 from .config import RunConfig
+from .consistency import assess
 from .ekf import run_ekf
-from .errors import InputError
+from .errors import InputError, warn_data
 from .gnss_noise import apply_outages, fixes_from_truth, parse_outages
+from .identify import Identified, identify
 from .metrics import gnss_score, score
-from .quality import QualityReport, check_imu
 from .report import format_table, metrics_dict, plot_errors, plot_trajectory, write_json, write_trajectory_csv
 from .run import RecordedRun
 from .solution import NavSolution
 
-def _ekf(run, cfg, method, **kw) -> dict[str, NavSolution]:
-    return {method: run_ekf(run, cfg, method, **kw)}
+def _ekf(ident: Identified, method: str, show_progress: bool) -> dict[str, NavSolution]:
+    return {method: run_ekf(ident.run, ident.cfg, method, quality=ident.quality, init=ident.init,
+                            stationary=ident.stationary, show_progress=show_progress)}
 
 
-def _smoother(run, cfg, method, **kw) -> dict[str, NavSolution]:
+def _smoother(ident: Identified, method: str, show_progress: bool) -> dict[str, NavSolution]:
     from .smoother import run_smoother  # gtsam import only when a smoother method is asked for
-    return run_smoother(run, cfg, method, **kw)
+    return run_smoother(ident.run, ident.cfg, method, quality=ident.quality, init=ident.init,
+                        stationary=ident.stationary, show_progress=show_progress)
 
 
-#: Estimators by method id: ``(run, cfg, method, quality=..., show_progress=...) -> {id: NavSolution}``.
+#: Estimators by method id: ``(identified, method, show_progress) -> {id: NavSolution}``.
 #: A smoother method also returns its online estimate as ``<id>-online``.
 METHODS = {"ekf": _ekf, "ekf-acc": _ekf, "smoother": _smoother, "smoother-acc": _smoother}
 DEFAULT_METHODS = ("ekf", "ekf-acc", "smoother", "smoother-acc")
@@ -107,34 +109,75 @@ def with_outages(run: RecordedRun, outage: str | None, outage_every: str | None)
     return apply_outages(run, parse_outages(outage, outage_every, run.duration_s))
 
 
-def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, quality: QualityReport | None = None,
-                show_progress: bool = False) -> dict[str, NavSolution]:
-    """Run each method on the same run and data-quality findings."""
-    quality = quality or check_imu(run.imu, cfg)
+def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
+                ident: Identified | None = None, show_progress: bool = False) -> dict[str, NavSolution]:
+    """Run each method on the same run, from the same identified start and noise.
+
+    Parameters
+    ----------
+    run : RecordedRun
+    cfg : RunConfig
+    methods : list of str
+        Method ids (:data:`METHODS`).
+    tune : {"auto", "none"}, optional
+        Noise identification (default: the configuration's ``[tune] mode``).
+    ident : Identified, optional
+        A result of :func:`gnssacc.identify.identify` to reuse (then ``run``/``cfg``/``tune`` are
+        not looked at again).
+    """
+    ident = ident or identify(run, cfg, tune)
     out: dict[str, NavSolution] = {}
     for m in methods:
-        out.update(METHODS[m](run, cfg, m, quality=quality, show_progress=show_progress))
+        out.update(METHODS[m](ident, m, show_progress))
     return out
 
 
-def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, show_progress: bool = False) -> tuple[dict, dict]:
-    """Run and score the methods.
+def common_window(run: RecordedRun, sols: dict[str, NavSolution]) -> tuple[float, float]:
+    """The stretch every solution covers [s] (the whole run when they all do)."""
+    starts = [float(s.t[0]) for s in sols.values() if len(s)] or [run.t_start]
+    ends = [float(s.t[-1]) for s in sols.values() if len(s)] or [run.t_end]
+    return max(starts), min(ends)
+
+
+def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
+            show_progress: bool = False) -> tuple[dict, dict, Identified]:
+    """Identify, run and score the methods over a common window, with consistency figures.
 
     Returns
     -------
     metrics : dict
         The content of ``metrics.json``.
     solutions : dict of NavSolution
+    ident : Identified
+        The shared start, stationary spans and (tuned) configuration.
     """
     jit_s = mechanization.warm_up()
-    t0 = time.perf_counter()
-    quality = check_imu(run.imu, cfg)
-    quality_s = time.perf_counter() - t0
-    sols = run_methods(run, cfg, methods, quality=quality, show_progress=show_progress)
-    scores = {m: score(run, s) for m, s in sols.items()}
-    extra = {"jit_compile_s": jit_s, "quality_check_s": quality_s, "quality": quality.to_dict(),
-             "config_sources": cfg.sources}
-    return metrics_dict(run, sols, scores, gnss_score(run), extra), sols
+    ident = identify(run, cfg, tune)
+    sols = run_methods(run, cfg, methods, ident=ident, show_progress=show_progress)
+    window = common_window(run, sols)
+    scores = {m: score(run, s, window) for m, s in sols.items()}
+    raw = gnss_score(run, window)
+    cons = {m: assess(ident.run, s, scores[m].prmse_m, raw.prmse_m, ident.model, ident.cfg.gnss_gm_sigma)
+            for m, s in sols.items()}
+    for m, c in cons.items():
+        for text in c.warnings:
+            warn_data(m, text)
+    extra = {"jit_compile_s": jit_s, "identify_s": ident.seconds, "quality": ident.quality.to_dict(),
+             "config_sources": ident.cfg.sources, "scored_window_s": [window[0], window[1]],
+             "coverage": {m: _coverage(run, s) for m, s in sols.items()},
+             "consistency": {m: c.to_dict() for m, c in cons.items()},
+             "init": ident.init.how, "stationary": ident.stationary.to_dict(),
+             "model_check": ident.model.to_dict() if ident.model is not None else None,
+             "tuning": ident.tuning.to_dict() if ident.tuning is not None else None}
+    return metrics_dict(run, sols, scores, raw, extra), sols, ident
+
+
+def _coverage(run: RecordedRun, sol: NavSolution) -> dict:
+    """How much of the recording (first to last IMU sample) a solution's epochs span."""
+    if not len(sol):
+        return {"first_s": None, "last_s": None, "fraction": 0.0}
+    a, b = float(sol.t[0]) - run.t_start, float(sol.t[-1]) - run.t_start
+    return {"first_s": a, "last_s": b, "fraction": (b - a) / run.duration_s if run.duration_s > 0 else 1.0}
 
 
 def default_out_dir(run: RecordedRun) -> Path:
@@ -142,14 +185,15 @@ def default_out_dir(run: RecordedRun) -> Path:
 
 
 def write_outputs(out_dir: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict, cfg: RunConfig,
-                  plots: bool = True, report: bool = False, export: tuple = ()) -> Path:
+                  plots: bool = True, report: bool = False, export: tuple = (), tuned_toml: str | None = None) -> Path:
     """Write all outputs into ``out_dir`` atomically.
 
     Files are first written to a temporary folder beside ``out_dir`` and moved in only when
     all of them exist, so an interrupted run never leaves a half-written result.
 
     ``report`` adds ``report.html`` (with ``sigmas.png``); ``export=("tum",)`` adds
-    ``trajectory_<id>.tum`` (and ``truth.tum``) for ``evo``.
+    ``trajectory_<id>.tum`` (and ``truth.tum``) for ``evo``; ``tuned_toml`` is written as
+    ``tuned.toml`` (the identified noise, reusable with ``--config``).
     """
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
@@ -158,6 +202,8 @@ def write_outputs(out_dir: Path, run: RecordedRun, sols: dict[str, NavSolution],
         for mid, sol in sols.items():
             write_trajectory_csv(sol, tmp / f"trajectory_{mid}.csv")
         (tmp / "config.toml").write_text(cfg.to_toml())
+        if tuned_toml is not None:
+            (tmp / "tuned.toml").write_text(tuned_toml)
         if plots:
             if run.truth is not None:  # errors need a reference
                 plot_errors(run, sols, tmp / "errors.png")

@@ -55,8 +55,9 @@ def metrics_dict(run: RecordedRun, sols: dict[str, NavSolution], scores: dict[st
             "realtime_factor": run.duration_s / sol.runtime_s if sol.runtime_s > 0 else None,
             "stats": sol.stats,
         }
-    return {"source": run.name, "where": run.where, "duration_s": run.duration_s,
-            "gnss_prmse_m": gnss.prmse_m, "gnss_hrmse_m": gnss.hrmse_m, "n_fixes": len(run.gnss),
+    return {"source": run.name, "where": run.where, "duration_s": run.duration_s, "t_start": run.t_start,
+            "gnss_prmse_m": gnss.prmse_m, "gnss_hrmse_m": gnss.hrmse_m, "gnss_n_epochs": gnss.n_epochs,
+            "n_fixes": len(run.gnss),
             "meta": run.meta, "methods": methods, **extra}
 
 
@@ -76,22 +77,52 @@ def _fmt(x, spec: str) -> str:
     return "-" if x is None else format(x, spec)
 
 
+def _nis_cell(metrics: dict, mid: str) -> str:
+    """Position NIS per dof (EKF) or normalised GNSS residual (smoother), '!' when warned about."""
+    c = metrics.get("consistency", {}).get(mid)
+    if not c:
+        return "-"
+    value = c["nis"].get("pos")
+    return _fmt(value, ".2f") + (" !" if c["warnings"] else "")
+
+
 def format_table(metrics: dict) -> str:
-    """The comparison table printed by ``gnssacc run``."""
+    """The comparison table printed by ``gnssacc run``, headed by the window it scores."""
     outage = any(m["prmse_outage_m"] is not None for m in metrics["methods"].values())
     head = ["method", "PRMSE [m]", "HRMSE [m]"] + (["outage PRMSE [m]"] if outage else []) + \
-        ["acc gain [%]", "wall [s]", "real-time x"]
+        ["NIS", "acc gain [%]", "wall [s]", "real-time x"]
     rows = []
     for mid, m in metrics["methods"].items():
         rows.append([mid, _fmt(m["prmse_m"], ".2f"), _fmt(m["hrmse_m"], ".2f")] +
                     ([_fmt(m["prmse_outage_m"], ".2f")] if outage else []) +
-                    [_fmt(m["improvement_pct"], "+.1f"), f"{m['runtime_s']:.3f}", _fmt(m["realtime_factor"], ".0f")])
+                    [_nis_cell(metrics, mid), _fmt(m["improvement_pct"], "+.1f"), f"{m['runtime_s']:.3f}",
+                     _fmt(m["realtime_factor"], ".0f")])
     if metrics.get("gnss_prmse_m") is not None:
         rows.append(["gnss (raw fixes)", _fmt(metrics["gnss_prmse_m"], ".2f"), _fmt(metrics["gnss_hrmse_m"], ".2f")] +
-                    (["-"] if outage else []) + ["-", "-", "-"])
+                    (["-"] if outage else []) + ["-", "-", "-", "-"])
     widths = [max(len(str(r[i])) for r in rows + [head]) for i in range(len(head))]
     line = lambda r: "  ".join(str(c).rjust(w) if i else str(c).ljust(w) for i, (c, w) in enumerate(zip(r, widths)))
-    return "\n".join([line(head), line(["-" * w for w in widths])] + [line(r) for r in rows])
+    return "\n".join(_window_lines(metrics) + [line(head), line(["-" * w for w in widths])] + [line(r) for r in rows]
+                     + _legend(metrics))
+
+
+def _window_lines(metrics: dict) -> list[str]:
+    w = metrics.get("scored_window_s")
+    if not w:
+        return []
+    t0 = metrics.get("t_start", 0.0)
+    frac = (w[1] - w[0]) / metrics["duration_s"] if metrics["duration_s"] > 0 else 1.0
+    n = {m["n_epochs"] for m in metrics["methods"].values()}
+    return [f"scored over t = {w[0] - t0:.1f} .. {w[1] - t0:.1f} s from the start ({100 * frac:.0f} % of the run), "
+            f"every row: {'/'.join(str(x) for x in sorted(n))} epochs per method, "
+            f"{metrics.get('gnss_n_epochs', '-')} raw fixes"]
+
+
+def _legend(metrics: dict) -> list[str]:
+    if not metrics.get("consistency"):
+        return []
+    return ["NIS: mean normalised innovation (EKF) or GNSS residual (smoother) squared per dof; "
+            "1 = consistent, '!' = see the warnings"]
 
 
 def _figure(figsize, nrows: int = 1, ncols: int = 1, **kw):

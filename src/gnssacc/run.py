@@ -120,6 +120,16 @@ class InitialState:
         1-sigma of the NED position, NED velocity and of the attitude error (n frame).
     how : str
         A short account of how the state was obtained (shown in reports).
+    b_a, b_g : ndarray, shape (3,)
+        Initial accelerometer [m/s^2] and gyro [rad/s] bias estimates, body axes (zero unless
+        measured, e.g. the gyro bias from a static start).
+    sigma_b_a, sigma_b_g : ndarray, shape (3,) or None
+        Their 1-sigma; ``None``: the configured turn-on bias sigmas.
+    fit_window : tuple of float or None
+        ``(t_first, t_last)`` of the fixes the initial position/velocity were fitted to [s].
+    levelled : bool
+        Roll and pitch come from accelerometer levelling: their error is then tied to the
+        accelerometer bias (the estimators start with that correlation).
     """
 
     t: float
@@ -132,6 +142,12 @@ class InitialState:
     sigma_vel_mps: np.ndarray
     sigma_att_rad: np.ndarray
     how: str = "given"
+    b_a: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    b_g: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    sigma_b_a: np.ndarray | None = None
+    sigma_b_g: np.ndarray | None = None
+    fit_window: tuple | None = None
+    levelled: bool = False
 
     @property
     def R_nb(self) -> np.ndarray:

@@ -10,11 +10,17 @@ Graph, in a local NED tangent frame at the run's origin:
   inflation over suspect IMU spans;
 * ``GPSFactor`` (``GPSFactorArm`` with a lever arm) with each fix's covariance;
 * for ``smoother-acc``, the GNSS-acceleration factor of :mod:`gnssacc.factors` on (X_k, B_k),
-  built from the same least-squares window as the EKF's update.
+  built from the same least-squares window as the EKF's update;
+* while the vehicle stands still (``[zupt]``), a zero-velocity prior on V_k and the zero-rate
+  reading (mean gyro minus the earth rate) as a prior on the gyro half of B_k, at the node
+  nearest each stationary epoch of :mod:`gnssacc.zupt` (nodes are added where no GNSS epoch is
+  near, e.g. a stop inside a GNSS outage).
 
 Two estimates per node are reported: the *online* one (the newest node right after its
 update, what a real-time user would have had) and the *fixed-lag* one (the node's value when
-it leaves the lag window, or at the end), each with 1-sigma from iSAM2's marginal covariances.
+it leaves the lag window, or at the end), each with 1-sigma from iSAM2's marginal covariances
+and its whitened GNSS residuals against their expectation (:func:`residual_chi2`) as a
+consistency figure.
 
 An ill-posed update (GTSAM's indeterminant-system error) never ends a run: the window is
 re-initialised from the last estimate with priors from its marginal covariances, and the event
@@ -26,18 +32,20 @@ import time
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, V, X
+from gtsam.symbol_shorthand import B, G, V, X
 
 from .config import RunConfig
 from .earth import earth_rate_n, normal_gravity
-from .factors import gnss_accel_factor
+from .ekf import initial_state
+from .factors import gauss_markov_factor, gnss_accel_factor, gnss_position_gm_factor, joint_prior_factor
 from .gnss_accel import AccelWindow, measured_specific_force
-from .initialise import initial_sigmas, initialise
 from .progress import progress
 from .quality import QualityReport, check_imu, inflation_segments, touches_segments
-from .rotations import dcm_to_euler, euler_error_jacobian
+from .rotations import dcm_to_euler, euler_error_jacobian, skew
 from .run import InitialState, RecordedRun
 from .solution import NavSolution
+from .yawbank import self_initialise
+from .zupt import StationaryEpochs, stationary_epochs
 
 METHODS = {"smoother": False, "smoother-acc": True}
 #: Nodes closer than this are merged (a duplicate time would make a zero-length IMU factor) [s].
@@ -50,7 +58,7 @@ def node_times(t0: float, t_end: float, gnss_t: np.ndarray, max_spacing: float) 
     Epochs closer than :data:`MIN_NODE_DT` to the previous one are dropped.
     """
     base = np.concatenate([[t0], gnss_t[(gnss_t > t0) & (gnss_t <= t_end)]])
-    if base[-1] < t_end - MIN_NODE_DT and t_end - base[-1] > max_spacing:
+    if base[-1] < t_end - MIN_NODE_DT:  # the last node is the end of the recording
         base = np.append(base, t_end)
     out = [base[0]]
     for t in base[1:]:
@@ -90,12 +98,30 @@ class _ImuModel:
         return self._cache[key]
 
 
-def _pose_covariance_body(R_nb: np.ndarray, sig_att_n: np.ndarray, sig_pos_n: np.ndarray) -> np.ndarray:
-    """Pose3 tangent covariance (body rotation, body translation) from NED sigmas."""
-    C = np.zeros((6, 6))
-    C[0:3, 0:3] = R_nb.T @ np.diag(sig_att_n**2) @ R_nb
-    C[3:6, 3:6] = R_nb.T @ np.diag(sig_pos_n**2) @ R_nb
-    return C
+def _initial_prior(init: InitialState, cfg: RunConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The EKF's initial covariance (:func:`gnssacc.ekf.initial_state`) in the smoother's variables.
+
+    EKF errors are estimate minus truth with ``R_est = (I + [phi x]) R``; the prior factor's error is
+    the truth's offset from the prior: rotation ``xi = -R^T phi``, translation ``tau = -R^T dp``,
+    biases ``+db`` (the residual bias adds to the estimate), GNSS error ``-dx_g``.
+
+    Returns
+    -------
+    cov : ndarray (12, 12) or (15, 15)
+        Of (rotation, translation, accelerometer bias, gyro bias[, GNSS error]).
+    c_vel : ndarray (3, 3)
+        Velocity covariance (uncorrelated with the rest at the start).
+    """
+    P = initial_state(init, cfg).P
+    n = P.shape[0]
+    R = init.R_nb
+    T = np.zeros((n - 3, n))            # smoother offsets <- EKF error state (velocity dropped)
+    T[0:3, 6:9] = -R.T
+    T[3:6, 0:3] = -R.T
+    T[6:12, 9:15] = np.eye(6)
+    if n > 15:
+        T[12:15, 15:18] = -np.eye(3)
+    return T @ P @ T.T, P[3:6, 3:6]
 
 
 class _Record:
@@ -110,17 +136,26 @@ class _Record:
         self.cov_vel = np.full((n, 3, 3), np.nan)
         self.cov_bias = np.full((n, 6, 6), np.nan)
         self.done = np.zeros(n, bool)
+        self.chi2 = np.full((n, 2), np.nan)   # whitened GNSS residual and its expectation, nodes with a fix
+        # GNSS Gauss-Markov error (zeros when not modelled): estimate, its covariance and its
+        # cross-covariance with the pose tangent.
+        self.g = np.zeros((n, 3))
+        self.cov_g = np.zeros((n, 3, 3))
+        self.cov_xg = np.zeros((n, 6, 3))
 
-    def put(self, i: int, pose: gtsam.Pose3, v_n, bias: gtsam.imuBias.ConstantBias, covs) -> None:
+    def put(self, i: int, est, covs) -> None:
+        pose, v_n, bias, g = est
         self.p_n[i] = pose.translation()
         self.R[i] = pose.rotation().matrix()
         self.v_n[i] = v_n
         self.bias[i] = bias.vector()
-        self.cov_pose[i], self.cov_vel[i], self.cov_bias[i] = covs
+        self.g[i] = g
+        self.cov_pose[i], self.cov_vel[i], self.cov_bias[i], self.cov_xg[i], self.cov_g[i] = covs
         self.done[i] = True
 
     def copy_from(self, other: "_Record", i: int) -> None:
-        for name in ("p_n", "R", "v_n", "bias", "cov_pose", "cov_vel", "cov_bias", "done"):
+        for name in ("p_n", "R", "v_n", "bias", "cov_pose", "cov_vel", "cov_bias", "done", "chi2", "g", "cov_g",
+                     "cov_xg"):
             getattr(self, name)[i] = getattr(other, name)[i]
 
     def sigmas(self) -> np.ndarray:
@@ -149,6 +184,7 @@ class _Smoother:
     def __init__(self, cfg: RunConfig):
         sm = cfg["smoother"]
         self.lag = float(sm["lag_s"])
+        self.gm = bool(np.any(cfg.gnss_gm_sigma > 0))
         self.params = gtsam.ISAM2Params()
         self.params.setFactorization(str(sm["factorization"]).upper())
         self.params.setRelinearizeThreshold(float(sm["relinearize_threshold"]))
@@ -172,21 +208,27 @@ class _Smoother:
         self.isam.update(graph, values, ts)
 
     def estimate(self, i: int):
+        """Pose, velocity, bias and GNSS error (zeros when not modelled) of node ``i``."""
         isam = self.isam
+        g = isam.calculateEstimateVector(G(i)) if self.gm else np.zeros(3)
         return (isam.calculateEstimatePose3(X(i)), isam.calculateEstimateVector(V(i)),
-                isam.calculateEstimateConstantBias(B(i)))
+                isam.calculateEstimateConstantBias(B(i)), g)
 
     def covariances(self, i: int, joint: bool = False):
-        """Marginal covariances of X_i (6x6, tangent), V_i (3x3) and B_i (6x6).
+        """Marginal covariances of X_i (6x6, tangent), V_i (3x3), B_i (6x6), and the pose-GNSS-error
+        cross-covariance (6x3) and GNSS-error covariance (3x3) (zeros when not modelled).
 
-        ``joint=True`` asks iSAM2 for the three at once, which is cheaper for old nodes deep in
-        the Bayes tree; single queries are cheaper for the newest node near the root.
+        ``joint=True`` asks iSAM2 for them at once, which is cheaper for old nodes deep in the
+        Bayes tree; single queries are cheaper for the newest node near the root.
         """
         isam = self.isam
-        if joint:
-            full = isam.getISAM2().jointMarginalCovariance([X(i), V(i), B(i)]).fullMatrix()
-            return full[0:6, 0:6], full[6:9, 6:9], full[9:15, 9:15]
-        return isam.marginalCovariance(X(i)), isam.marginalCovariance(V(i)), isam.marginalCovariance(B(i))
+        if joint or self.gm:
+            keys = [X(i), V(i), B(i)] + ([G(i)] if self.gm else [])
+            full = isam.getISAM2().jointMarginalCovariance(keys).fullMatrix()
+            gm = (full[0:6, 15:18], full[15:18, 15:18]) if self.gm else (np.zeros((6, 3)), np.zeros((3, 3)))
+            return full[0:6, 0:6], full[6:9, 6:9], full[9:15, 9:15], *gm
+        return (isam.marginalCovariance(X(i)), isam.marginalCovariance(V(i)), isam.marginalCovariance(B(i)),
+                np.zeros((6, 3)), np.zeros((3, 3)))
 
 
 def _is_ill_posed(exc: Exception) -> bool:
@@ -194,8 +236,143 @@ def _is_ill_posed(exc: Exception) -> bool:
     return "indeterminant" in text or "indeterminate" in text or "ill-posed" in text
 
 
+def residual_chi2(rec: "_Record", idx: np.ndarray, p_fix: np.ndarray, sigma_ned: np.ndarray,
+                  lever_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r"""Whitened squared residuals of GNSS factors at nodes ``idx`` of an estimate, and their
+    expectations.
+
+    ``r = p_fix - (t + R l + g)`` (``g`` the GNSS error, when modelled). For a consistent estimate
+    that includes the fix, ``E[r^T Sigma^-1 r] = tr(Sigma^-1 C_r)`` with ``C_r = Sigma - J C J^T``
+    (``C`` the joint marginal of the pose and ``g``, ``J = [-R [l x], R, I]`` on GTSAM's
+    (rotation, translation) tangent and ``g``). The consistency figure is the ratio of their sums
+    (:func:`run_smoother`): 1 when consistent, and never dominated by a node whose ``C_r`` is
+    close to zero (the pose and GNSS-error marginals nearly cancel there).
+
+    Parameters
+    ----------
+    rec : _Record
+    idx : ndarray (K,) of int
+        Nodes with a fix.
+    p_fix, sigma_ned : ndarray (K, 3)
+        Their fixes (tangent frame) and white 1-sigma [m].
+    lever_b : ndarray (3,)
+
+    Returns
+    -------
+    chi2, expected : ndarray (K,)
+    """
+    R = rec.R[idx]
+    r = p_fix - (rec.p_n[idx] + R @ lever_b + rec.g[idx])
+    J = np.concatenate([-R @ skew(lever_b), R], axis=2)
+    cross = J @ rec.cov_xg[idx]
+    JCJ = J @ rec.cov_pose[idx] @ J.transpose(0, 2, 1) + rec.cov_g[idx] + cross + cross.transpose(0, 2, 1)
+    w = 1.0 / sigma_ned**2
+    chi2 = np.sum(r**2 * w, axis=1)
+    expected = 3.0 - np.sum(np.diagonal(JCJ, axis1=1, axis2=2) * w, axis=1)
+    return chi2, np.maximum(expected, 0.0)
+
+
+class _Factors:
+    """Builds each kind of factor for a node: GNSS position, GNSS acceleration, stationary."""
+
+    def __init__(self, run: RecordedRun, cfg: RunConfig, stationary: StationaryEpochs, stats: dict):
+        self.run, self.stats, self.st = run, stats, stationary
+        gnss, origin = run.gnss, run.origin
+        self.p_fix = origin.to_ned(gnss.lat, gnss.lon, gnss.h)
+        self.fix_at = {float(t): i for i, t in enumerate(gnss.t)}
+        self.lever = cfg.lever_arm_b
+        self.g_n = np.array([0.0, 0.0, float(normal_gravity(origin.lat0, origin.h0))])
+        self.w_ie = earth_rate_n(origin.lat0)
+        self.f_avg = float(cfg["accel"]["specific_force_avg_s"])
+        self.window = AccelWindow(int(cfg["accel"]["window"]), float(cfg["accel"]["max_gap_s"]),
+                                  cfg.accel_sigma_override)
+        self.zupt_noise = gtsam.noiseModel.Isotropic.Sigma(3, float(cfg["zupt"]["velocity_sigma_mps"]))
+        self._noise: dict = {}
+        self.gm_sigma, self.gm_tau = cfg.gnss_gm_sigma, cfg.gnss_gm_tau
+        self.gm = bool(np.any(self.gm_sigma > 0))
+
+    def gps(self, graph, i: int, t: float) -> int | None:
+        """GPS factor on X_i if a fix is at ``t``; returns the fix index."""
+        k = self.fix_at.get(float(t))
+        if k is None:
+            return None
+        sig = self.run.gnss.sigma_ned[k]
+        self.stats["n_gps_factors"] += 1
+        if self.gm:
+            graph.add(gnss_position_gm_factor(X(i), G(i), self.p_fix[k], self.lever, sig))
+            return k
+        noise = self._noise.get(tuple(sig))
+        if noise is None:  # most runs have a handful of distinct fix sigmas
+            noise = self._noise[tuple(sig)] = gtsam.noiseModel.Diagonal.Sigmas(sig)
+        if np.any(self.lever != 0):
+            graph.add(gtsam.GPSFactorArm(X(i), self.p_fix[k], self.lever, noise))
+        else:
+            graph.add(gtsam.GPSFactor(X(i), self.p_fix[k], noise))
+        return k
+
+    def gm_chain(self, graph, values, i: int, dt: float, g_prev: np.ndarray) -> None:
+        """The GNSS error of node ``i`` and its Gauss-Markov link to node ``i - 1`` (when modelled)."""
+        if self.gm:
+            graph.add(gauss_markov_factor(G(i - 1), G(i), dt, self.gm_tau, self.gm_sigma))
+            values.insert(G(i), np.exp(-dt / self.gm_tau) * g_prev)
+
+    def accel(self, graph, i: int, t: float, k: int, seg_i0, seg_i1) -> None:
+        """GNSS-acceleration factor on (X_i, B_i) once the least-squares window is full."""
+        meas = self.window.push(t, self.p_fix[k], self.run.gnss.sigma_ned[k])
+        if meas is None:
+            return
+        f_meas = measured_specific_force(self.run.imu, t, self.f_avg, seg_i0, seg_i1)
+        if f_meas is None:
+            self.stats["n_acc_skipped_suspect_imu"] += 1
+            return
+        graph.add(gnss_accel_factor(X(i), B(i), f_meas, meas.a_n, self.g_n, meas.cov))
+        self.stats["n_acc_factors"] += 1
+
+    def stationary(self, graph, i: int, j: int, R_nb: np.ndarray, bias) -> None:
+        """Zero velocity on V_i and the zero-rate reading of stationary epoch ``j`` on B_i's gyro part."""
+        graph.add(gtsam.PriorFactorVector(V(i), np.zeros(3), self.zupt_noise))
+        # Only the gyro half is measured; the accelerometer half gets a vanishing weight.
+        b_g = self.st.omega_mean_b[j] - R_nb.T @ self.w_ie
+        sig = np.concatenate([np.full(3, 1e3), np.sqrt(self.st.omega_var_b[j])])
+        graph.add(gtsam.PriorFactorConstantBias(B(i), gtsam.imuBias.ConstantBias(bias.accelerometer(), b_g),
+                                                gtsam.noiseModel.Diagonal.Sigmas(sig)))
+        self.stats["n_zupt_factors"] += 1
+
+
+def _node_epochs(gnss_t: np.ndarray, stat_t: np.ndarray, interval: float) -> np.ndarray:
+    """GNSS epochs plus the stationary epochs no GNSS epoch is within half an interval of."""
+    if len(stat_t) == 0 or len(gnss_t) == 0:
+        return np.union1d(gnss_t, stat_t)
+    i = np.clip(np.searchsorted(gnss_t, stat_t), 1, len(gnss_t) - 1)
+    near = np.minimum(np.abs(gnss_t[i] - stat_t), np.abs(gnss_t[i - 1] - stat_t))
+    return np.union1d(gnss_t, stat_t[near > 0.5 * interval])
+
+
+def _attach_stationary(times: np.ndarray, st: StationaryEpochs, interval: float) -> dict:
+    """Node index for each stationary epoch (its nearest node within half an interval)."""
+    out = {}
+    for j, t in enumerate(st.t):
+        i = int(np.clip(np.searchsorted(times, t), 1, len(times) - 1))
+        i = i if abs(times[i] - t) <= abs(times[i - 1] - t) else i - 1
+        if abs(times[i] - t) <= 0.5 * interval + 1e-9:
+            out[i] = j
+    return out
+
+
+def _preintegrate(imu, model, bias, t_prev, t, j_start, k_end, inflation):
+    """PreintegratedCombinedMeasurements over ``(t_prev, t]``; samples held over (t[k-1], t[k]]."""
+    pim = gtsam.PreintegratedCombinedMeasurements(model.params(*inflation), bias)
+    edges = np.clip(imu.t[j_start:k_end], t_prev, t)
+    dts = np.diff(edges, prepend=t_prev)
+    integrate = pim.integrateMeasurement
+    for f_b, w_b, dt in zip(imu.f_b[j_start:k_end], imu.omega_ib_b[j_start:k_end], dts.tolist()):
+        if dt > 0.0:
+            integrate(f_b, w_b, dt)
+    return pim
+
+
 def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
-                 quality: QualityReport | None = None, init: InitialState | None = None,
+                 quality: QualityReport | None = None, init: InitialState | None = None, stationary=None,
                  show_progress: bool = False) -> dict[str, NavSolution]:
     """Run the fixed-lag smoother.
 
@@ -208,46 +385,65 @@ def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
     quality : QualityReport, optional
         Data-quality findings (computed when omitted).
     init : InitialState, optional
-        Overrides ``run.init`` and self-initialisation (same initialiser as the EKF).
+        Overrides ``run.init`` and self-initialisation (the same as the EKF's).
+    stationary : gnssacc.stationary.StationaryReport, optional
+        Where the vehicle stands still: zero-velocity and zero-rate factors there (``[zupt]``).
     show_progress : bool
 
     Returns
     -------
     dict
         ``{method: fixed-lag NavSolution, method + "-online": online NavSolution}``, one row per
-        node.
+        node; ``stats`` has the factor counts and ``nis_pos_mean``, the whitened GNSS residuals of
+        that estimate against their expectation (:func:`residual_chi2`; 1 when consistent).
     """
     if method not in METHODS:
         raise ValueError(f"unknown smoother method {method!r}; known: {', '.join(METHODS)}")
-    use_acc = METHODS[method]
     wall0 = time.perf_counter()
-    init = init or run.init or initialise(run, cfg)
     quality = quality or check_imu(run.imu, cfg)
-    seg_i0, seg_i1, seg_qg, seg_qa = inflation_segments(run.imu, quality, cfg)
-    imu, gnss, origin = run.imu, run.gnss, run.origin
+    if init is None and run.init is None:
+        init = self_initialise(run, cfg, stationary, quality)
+    init = init or run.init
+    z = cfg["zupt"]
+    st = (stationary_epochs(run.imu, stationary.spans, float(z["interval_s"]), cfg.gyro_psd)
+          if stationary is not None and z["enabled"] else StationaryEpochs.empty())
+    times = node_times(float(init.t), float(run.imu.t[-1]), _node_epochs(run.gnss.t, st.t, float(z["interval_s"])),
+                       float(cfg["smoother"]["max_node_spacing_s"]))
+    stats = {"n_nodes": len(times), "n_gps_factors": 0, "n_acc_factors": 0, "n_acc_skipped_suspect_imu": 0,
+             "n_zupt_factors": 0, "n_ill_posed_recovered": 0, "factorization_switched_to_qr": False,
+             "init": init.how, "t_init": float(init.t), "lag_s": float(cfg["smoother"]["lag_s"])}
+    loop = _Loop(run, cfg, METHODS[method], quality, init, times, _Factors(run, cfg, st, stats),
+                 _attach_stationary(times, st, float(z["interval_s"])), stats)
+    loop.feed(method, show_progress)
+    loop.score()
+    stats["final_window_variables"] = int(loop.smoother.isam.getLinearizationPoint().size())
+    stats["final_factor_slots"] = int(loop.smoother.isam.getFactors().size())
+    runtime = time.perf_counter() - wall0
+    out = {}
+    for mid, rec in ((method, loop.fixed), (method + "-online", loop.online)):
+        c = rec.chi2[np.isfinite(rec.chi2[:, 0])]
+        ratio = float(c[:, 0].sum() / c[:, 1].sum()) if len(c) and c[:, 1].sum() > 0 else None
+        out[mid] = rec.solution(run, mid, times, runtime, {**stats, "n_pos_updates": len(c), "nis_pos_mean": ratio})
+    return out
 
-    g = float(normal_gravity(origin.lat0, origin.h0))
-    g_n = np.array([0.0, 0.0, g])
-    model = _ImuModel(cfg, g, earth_rate_n(origin.lat0))
-    lever = cfg.lever_arm_b
-    f_avg = float(cfg["accel"]["specific_force_avg_s"])
-    p_fix = origin.to_ned(gnss.lat, gnss.lon, gnss.h)
-    fix_at = {float(t): i for i, t in enumerate(gnss.t)}
-    times = node_times(float(init.t), float(imu.t[-1]), gnss.t, float(cfg["smoother"]["max_node_spacing_s"]))
-    n = len(times)
-    online, fixed = _Record(n), _Record(n)
-    stats = {"n_nodes": n, "n_gps_factors": 0, "n_acc_factors": 0, "n_acc_skipped_suspect_imu": 0,
-             "n_ill_posed_recovered": 0, "factorization_switched_to_qr": False, "init": init.how, "t_init": float(init.t), "lag_s": float(cfg["smoother"]["lag_s"])}
 
-    sig_p, sig_v, sig_att = initial_sigmas(init, cfg)
-    R0 = init.R_nb
-    pose = gtsam.Pose3(gtsam.Rot3(R0), origin.to_ned(init.lat, init.lon, init.h))
-    vel = np.asarray(init.v_n, float)
-    bias = gtsam.imuBias.ConstantBias()
-    bias_sig0 = np.concatenate([cfg.accel_bias_sigma0, cfg.gyro_bias_sigma0])
-    smoother = _Smoother(cfg)
+class _Loop:
+    """Feeds iSAM2 node by node and records the online and fixed-lag estimates."""
 
-    def priors(i, pose, vel, bias, c_pose, c_vel, c_bias):
+    def __init__(self, run, cfg, use_acc, quality, init, times, factors, stationary_at, stats):
+        self.run, self.cfg, self.use_acc, self.times, self.f = run, cfg, use_acc, times, factors
+        self.stationary_at, self.stats = stationary_at, stats
+        self.segs = inflation_segments(run.imu, quality, cfg)
+        origin = run.origin
+        self.model = _ImuModel(cfg, float(factors.g_n[2]), earth_rate_n(origin.lat0))
+        n = len(times)
+        self.online, self.fixed = _Record(n), _Record(n)
+        self.smoother = _Smoother(cfg)
+        self.fix_of = np.full(n, -1)
+        self.window_start, self.oldest = 0, 0
+        self._start(init)
+
+    def priors(self, i, pose, vel, bias, c_pose, c_vel, c_bias, g=None, c_g=None):
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         graph.add(gtsam.PriorFactorPose3(X(i), pose, gtsam.noiseModel.Gaussian.Covariance(c_pose)))
         graph.add(gtsam.PriorFactorVector(V(i), vel, gtsam.noiseModel.Gaussian.Covariance(c_vel)))
@@ -255,106 +451,96 @@ def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
         values.insert(X(i), pose)
         values.insert(V(i), vel)
         values.insert(B(i), bias)
+        if self.f.gm:
+            graph.add(gtsam.PriorFactorVector(G(i), g, gtsam.noiseModel.Gaussian.Covariance(c_g)))
+            values.insert(G(i), g)
         return graph, values
 
-    has_lever = bool(np.any(lever != 0))
-    noise_cache: dict = {}
+    def keys(self, i) -> list:
+        return [X(i), V(i), B(i)] + ([G(i)] if self.f.gm else [])
 
-    def measurement_factors(graph, i, t):
-        k = fix_at.get(float(t))
-        if k is None:
-            return None
-        sig = tuple(gnss.sigma_ned[k])
-        noise = noise_cache.get(sig)
-        if noise is None:  # most runs have a handful of distinct fix sigmas
-            noise = noise_cache[sig] = gtsam.noiseModel.Diagonal.Sigmas(gnss.sigma_ned[k])
-        if has_lever:
-            graph.add(gtsam.GPSFactorArm(X(i), p_fix[k], lever, noise))
-        else:
-            graph.add(gtsam.GPSFactor(X(i), p_fix[k], noise))
-        stats["n_gps_factors"] += 1
-        return k
-
-    window = AccelWindow(int(cfg["accel"]["window"]), float(cfg["accel"]["max_gap_s"]), cfg.accel_sigma_override)
-    for k in np.flatnonzero(gnss.t <= times[0]):
-        window.push(gnss.t[k], p_fix[k], gnss.sigma_ned[k])
-
-    graph, values = priors(0, pose, vel, bias, _pose_covariance_body(R0, sig_att, sig_p), np.diag(sig_v**2),
-                           np.diag(bias_sig0**2))
-    measurement_factors(graph, 0, times[0])
-    smoother.update(graph, values, [(X(0), times[0]), (V(0), times[0]), (B(0), times[0])])
-    online.put(0, pose, vel, bias, smoother.covariances(0))
-    window_start = 0  # first node still in the current smoother (after a re-initialisation)
-    oldest = 0        # oldest node whose fixed-lag estimate is not recorded yet
-
-    imu_t, imu_f, imu_w = imu.t, imu.f_b, imu.omega_ib_b
-    # Samples of each node interval: (t_prev, t] is covered by samples [first[i], last[i]).
-    first = np.searchsorted(imu.t, times, side="right")
-    last = np.minimum(np.searchsorted(imu.t, times, side="left") + 1, len(imu.t))
-    suspect = (np.zeros(n, bool) if seg_i0.size == 0 else
-               np.array([touches_segments(first[i - 1], last[i], seg_i0, seg_i1) if i else False for i in range(n)]))
-    for i in progress(range(1, n), desc=method, enable=show_progress):
-        t_prev, t = times[i - 1], times[i]
-        # Preintegrate the IMU over (t_prev, t], samples held over (t[k-1], t[k]].
-        j_start, k_end = int(first[i - 1]), int(last[i])
-        if suspect[i]:
-            qa_x, qg_x = _inflation_over(imu.t, j_start, k_end, t_prev, t, seg_i0, seg_i1, seg_qa, seg_qg)
-        else:
-            qa_x = qg_x = None
-        pim = gtsam.PreintegratedCombinedMeasurements(model.params(qa_x, qg_x), bias)
-        # Interval pieces: each sample's (t[k-1], t[k]] clipped to (t_prev, t].
-        edges = np.clip(imu_t[j_start:k_end], t_prev, t)
-        dts = np.diff(edges, prepend=t_prev)
-        integrate = pim.integrateMeasurement
-        for f_b, w_b, dt in zip(imu_f[j_start:k_end], imu_w[j_start:k_end], dts.tolist()):
-            if dt > 0.0:
-                integrate(f_b, w_b, dt)
-
-        nav = pim.predict(gtsam.NavState(pose, vel), bias)
+    def _start(self, init):
+        """Node 0 with the EKF's own initial covariance (:func:`_initial_prior`)."""
+        R0 = init.R_nb
+        self.pose = gtsam.Pose3(gtsam.Rot3(R0), self.run.origin.to_ned(init.lat, init.lon, init.h))
+        self.vel = np.asarray(init.v_n, float)
+        self.bias = gtsam.imuBias.ConstantBias(np.asarray(init.b_a, float), np.asarray(init.b_g, float))
+        self.g = np.zeros(3)
+        for k in np.flatnonzero(self.run.gnss.t < self.times[0]):  # node 0 pushes its own fix
+            self.f.window.push(self.run.gnss.t[k], self.f.p_fix[k], self.run.gnss.sigma_ned[k])
+        cov, c_vel = _initial_prior(init, self.cfg)
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-        graph.add(gtsam.CombinedImuFactor(X(i - 1), V(i - 1), X(i), V(i), B(i - 1), B(i), pim))
-        values.insert(X(i), nav.pose())
-        values.insert(V(i), nav.velocity())
-        values.insert(B(i), bias)
-        k = measurement_factors(graph, i, t)
-        if use_acc and k is not None:
-            meas = window.push(t, p_fix[k], gnss.sigma_ned[k])
-            if meas is not None:
-                f_meas = measured_specific_force(imu, t, f_avg, seg_i0, seg_i1)
-                if f_meas is None:
-                    stats["n_acc_skipped_suspect_imu"] += 1
-                else:
-                    graph.add(gnss_accel_factor(X(i), B(i), f_meas, meas.a_n, g_n, meas.cov))
-                    stats["n_acc_factors"] += 1
+        graph.add(joint_prior_factor(X(0), B(0), G(0) if self.f.gm else None, self.pose, self.bias.vector(),
+                                     self.g if self.f.gm else None, cov))
+        graph.add(gtsam.PriorFactorVector(V(0), self.vel, gtsam.noiseModel.Gaussian.Covariance(c_vel)))
+        for key, value in ((X(0), self.pose), (V(0), self.vel), (B(0), self.bias)) + (((G(0), self.g),) if self.f.gm else ()):
+            values.insert(key, value)
+        self._node_factors(graph, 0, self.times[0], R0)
+        self.smoother.update(graph, values, [(key, self.times[0]) for key in self.keys(0)])
+        self._record_online(0)
 
-        # Nodes about to leave the window: their fixed-lag estimate is the value they have now.
-        oldest = max(oldest, window_start)
-        while oldest < i and times[oldest] < t - smoother.lag:
-            fixed.put(oldest, *smoother.estimate(oldest), smoother.covariances(oldest, joint=True))
-            oldest += 1
-        stamps = [(X(i), t), (V(i), t), (B(i), t)]
-        try:
-            smoother.update(graph, values, stamps)
-        except RuntimeError as exc:
-            if not _is_ill_posed(exc):
-                raise
-            stats["n_ill_posed_recovered"] += 1
-            window_start = _reinitialise(smoother, i, times, online, fixed, window_start, graph, values, priors, stats)
-        pose, vel, bias = smoother.estimate(i)
-        online.put(i, pose, vel, bias, smoother.covariances(i))
+    def _node_factors(self, graph, i, t, R_nb):
+        k = self.f.gps(graph, i, t)
+        if k is not None:
+            self.fix_of[i] = k
+            if self.use_acc:
+                self.f.accel(graph, i, t, k, self.segs[0], self.segs[1])
+        if i in self.stationary_at:
+            self.f.stationary(graph, i, self.stationary_at[i], R_nb, self.bias)
 
-    for m in range(window_start, n):
-        if not fixed.done[m]:
-            fixed.put(m, *smoother.estimate(m), smoother.covariances(m, joint=True))
-    # What the smoother holds at the end: bounded by the lag, whatever the run length.
-    stats["final_window_variables"] = int(smoother.isam.getLinearizationPoint().size())
-    stats["final_factor_slots"] = int(smoother.isam.getFactors().size())
-    runtime = time.perf_counter() - wall0
-    return {method: fixed.solution(run, method, times, runtime, stats),
-            method + "-online": online.solution(run, method + "-online", times, runtime, stats)}
+    def _record_online(self, i):
+        self.online.put(i, self.smoother.estimate(i), self.smoother.covariances(i))
+
+    def _record_fixed(self, i):
+        self.fixed.put(i, self.smoother.estimate(i), self.smoother.covariances(i, joint=True))
+
+    def score(self) -> None:
+        """Whitened GNSS residuals of both estimates at every node with a fix (vectorised)."""
+        for rec in (self.online, self.fixed):
+            idx = np.flatnonzero((self.fix_of >= 0) & rec.done)
+            k = self.fix_of[idx]
+            rec.chi2[idx] = np.column_stack(residual_chi2(rec, idx, self.f.p_fix[k], self.run.gnss.sigma_ned[k],
+                                                          self.f.lever))
+
+    def feed(self, method, show_progress):
+        imu, times, n = self.run.imu, self.times, len(self.times)
+        seg_i0, seg_i1, seg_qg, seg_qa = self.segs
+        first = np.searchsorted(imu.t, times, side="right")
+        last = np.minimum(np.searchsorted(imu.t, times, side="left") + 1, len(imu.t))
+        for i in progress(range(1, n), desc=method, enable=show_progress):
+            t_prev, t = times[i - 1], times[i]
+            j0, k1 = int(first[i - 1]), int(last[i])
+            inflation = (_inflation_over(imu.t, j0, k1, t_prev, t, seg_i0, seg_i1, seg_qa, seg_qg)
+                         if seg_i0.size and touches_segments(j0, k1, seg_i0, seg_i1) else (None, None))
+            pim = _preintegrate(imu, self.model, self.bias, t_prev, t, j0, k1, inflation)
+            nav = pim.predict(gtsam.NavState(self.pose, self.vel), self.bias)
+            graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+            graph.add(gtsam.CombinedImuFactor(X(i - 1), V(i - 1), X(i), V(i), B(i - 1), B(i), pim))
+            values.insert(X(i), nav.pose())
+            values.insert(V(i), nav.velocity())
+            values.insert(B(i), self.bias)
+            self.f.gm_chain(graph, values, i, t - t_prev, self.g)
+            self._node_factors(graph, i, t, nav.pose().rotation().matrix())
+            # Nodes about to leave the window: their fixed-lag estimate is the value they have now.
+            self.oldest = max(self.oldest, self.window_start)
+            while self.oldest < i and times[self.oldest] < t - self.smoother.lag:
+                self._record_fixed(self.oldest)
+                self.oldest += 1
+            try:
+                self.smoother.update(graph, values, [(key, t) for key in self.keys(i)])
+            except RuntimeError as exc:
+                if not _is_ill_posed(exc):
+                    raise
+                self.stats["n_ill_posed_recovered"] += 1
+                self.window_start = _reinitialise(self, i, graph, values)
+            self.pose, self.vel, self.bias, self.g = self.smoother.estimate(i)
+            self._record_online(i)
+        for m in range(self.window_start, n):
+            if not self.fixed.done[m]:
+                self._record_fixed(m)
 
 
-def _reinitialise(smoother, i, times, online, fixed, window_start, graph, values, priors, stats) -> int:
+def _reinitialise(loop: _Loop, i: int, graph, values) -> int:
     """Restart the window after an ill-posed update of node ``i``; return the new window start.
 
     The new window holds node ``i - 1`` with a prior from its online estimate and marginal
@@ -363,20 +549,21 @@ def _reinitialise(smoother, i, times, online, fixed, window_start, graph, values
     factorization it switches to QR, which tolerates the poor conditioning that stiff bias random
     walks cause. Nodes of the abandoned window keep their online estimate as their fixed-lag one.
     """
-    for m in range(window_start, i):
+    online, fixed, times = loop.online, loop.fixed, loop.times
+    for m in range(loop.window_start, i):
         if not fixed.done[m] and online.done[m]:
             fixed.copy_from(online, m)
-    if smoother.reset(robust=True):
-        stats["factorization_switched_to_qr"] = True
+    if loop.smoother.reset(robust=True):
+        loop.stats["factorization_switched_to_qr"] = True
     p = i - 1
     pose = gtsam.Pose3(gtsam.Rot3(online.R[p]), online.p_n[p])
     bias = gtsam.imuBias.ConstantBias(online.bias[p, 0:3], online.bias[p, 3:6])
-    p_graph, p_values = priors(p, pose, online.v_n[p], bias, online.cov_pose[p], online.cov_vel[p],
-                               online.cov_bias[p])
+    p_graph, p_values = loop.priors(p, pose, online.v_n[p], bias, online.cov_pose[p], online.cov_vel[p],
+                                    online.cov_bias[p], online.g[p], online.cov_g[p] + 1e-12 * np.eye(3))
     p_graph.push_back(graph)
     p_values.insert(values)
-    stamps = [(key(p), times[p]) for key in (X, V, B)] + [(key(i), times[i]) for key in (X, V, B)]
-    smoother.update(p_graph, p_values, stamps)
+    stamps = [(key, times[p]) for key in loop.keys(p)] + [(key, times[i]) for key in loop.keys(i)]
+    loop.smoother.update(p_graph, p_values, stamps)
     return p
 
 

@@ -1,0 +1,50 @@
+r"""Factors for time-correlated GNSS errors: a first-order Gauss-Markov error ``g`` (NED, metres)
+per fix, as in the EKF's three extra states (:mod:`gnssacc.measurements`).
+
+* :func:`gnss_position_gm_factor` on (X_k, G_k): the fix is the antenna plus its correlated
+  error, ``e = t + R l_b + g - p_fix`` with white noise ``Sigma``. Jacobians on GTSAM's Pose3
+  tangent (rotation ``xi``, translation ``tau``; ``R -> R Exp(xi)``, ``t -> t + R tau``):
+  ``de/dxi = -R [l_b x]``, ``de/dtau = R``, ``de/dg = I``.
+* :func:`gauss_markov_factor` on (G_{k-1}, G_k): ``e = g_k - a g_{k-1}``, ``a = exp(-dt/tau)``,
+  with 1-sigma ``sigma sqrt(1 - a^2)`` per axis (the exact discretisation of the process).
+"""
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+
+from gnssacc.rotations import skew
+
+
+def gnss_position_gm_factor(pose_key: int, gm_key: int, p_fix: np.ndarray, lever_b: np.ndarray,
+                            sigma_ned: np.ndarray) -> gtsam.CustomFactor:
+    """A fix ``p_fix`` [m, local NED] of the antenna at ``lever_b`` [m, body] with white 1-sigma
+    ``sigma_ned`` [m] and the Gauss-Markov error held by ``gm_key`` (a Vector3)."""
+    p_fix, lever_b = np.asarray(p_fix, float).copy(), np.asarray(lever_b, float).copy()
+    keys = (pose_key, gm_key)
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
+        pose = values.atPose3(keys[0])
+        R = pose.rotation().matrix()
+        if H is not None:
+            H[0] = np.hstack([-R @ skew(lever_b), R])
+            H[1] = np.eye(3)
+        return pose.translation() + R @ lever_b + values.atVector(keys[1]) - p_fix
+
+    return gtsam.CustomFactor(gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigma_ned, float)), list(keys), error)
+
+
+def gauss_markov_factor(prev_key: int, key: int, dt: float, tau_s: np.ndarray, sigma_m: np.ndarray) -> gtsam.CustomFactor:
+    """The Gauss-Markov transition over ``dt`` [s] (correlation time ``tau_s`` [s], stationary
+    1-sigma ``sigma_m`` [m], per N, E, D axis)."""
+    a = np.exp(-dt / np.asarray(tau_s, float))
+    keys = (prev_key, key)
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
+        if H is not None:
+            H[0] = -np.diag(a)
+            H[1] = np.eye(3)
+        return values.atVector(keys[1]) - a * values.atVector(keys[0])
+
+    sig = np.maximum(np.asarray(sigma_m, float) * np.sqrt(1.0 - a * a), 1e-9)
+    return gtsam.CustomFactor(gtsam.noiseModel.Diagonal.Sigmas(sig), list(keys), error)

@@ -1,0 +1,348 @@
+r"""Noise identification from the recording itself (``--tune auto``, the default).
+
+Every IMU noise key the user's configuration does not set (and ``gnss.sigma_scale``) is
+identified without truth, in two steps:
+
+1. **Stationary stretches** (:mod:`gnssacc.stationary`): the white-noise densities of the gyros
+   and accelerometers per axis, read from the Allan deviation in its white-noise region (robust
+   to engine vibration), become the starting values of ARW and VRW.
+2. **Maximum likelihood of the EKF's innovations.** With ``theta`` the log10 scale factors of
+   the seven parameters (gyro ARW, accelerometer VRW, gyro and accelerometer bias instability,
+   gyro and accelerometer turn-on sigma, GNSS sigma scale) relative to their starting values,
+   the objective is
+
+       J(theta) = -sum_k log N(nu_k; 0, S_k(theta)) + sum_i theta_i^2 / (2 d_i^2)
+
+   over every position and zero-rate update (acceleration updates too with ``[tune] likelihood =
+   "position+accel"``) of one EKF pass from the start. The zero-velocity updates are left out:
+   their noise is a chosen bound, not a sensor property, and their likelihood would pull the
+   accelerometer noise down. The second term is a
+   log-normal prior around the starting values, ``d_i = [tune] prior_decades`` (weak), or
+   ``[tune] stationary_prior_decades`` for a density measured at standstill in step 1: it keeps the
+   parameters the data barely inform from wandering (the one-step position innovations of 1 Hz
+   metre-level fixes say little about the white noise, and will trade it for unmodelled errors
+   such as scale factors) and costs a well-informed parameter nothing. ``J`` is minimised by Nelder-Mead (scipy) within
+   ``[tune] max_evaluations`` EKF passes (after a probe of each parameter at +-1 decade,
+   :func:`ml_search`), each bounded to +-2 decades; the passes propagate the covariance every
+   ``[tune] cov_every`` samples for speed.
+
+3. **Time-correlated GNSS errors.** A white-noise fix model misses the slowly varying part of
+   real fix errors (multipath, atmosphere); its one-step innovations then stay correlated in
+   time, and chasing NIS = 1 with a smaller sigma makes the stated position uncertainty far too
+   small. When the lag-1 autocorrelation of the whitened position innovations at the step-2
+   optimum exceeds :data:`ACF_CORRELATED` (and three standard errors of it), a first-order
+   Gauss-Markov error is added to every fix (three more EKF states, ``gnss.gm_sigma_m`` and
+   ``gnss.gm_tau_s``) and the search is run again over all parameters plus these two, from the
+   step-1 starting values (the white-noise search has distorted the IMU values while chasing the
+   correlated errors); the model is kept when it raises the log-likelihood by more than
+   :data:`GM_MIN_GAIN` (a likelihood-ratio test).
+
+The result is a :class:`TuneResult`: the tuned values in configuration units (a reusable
+``tuned.toml``), the NIS before and after, and the time it took.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .config import RunConfig, toml_value
+from .errors import InputError
+
+#: The identified parameters: (section, key), in the order of the search vector.
+PARAMETERS = (("imu", "gyro_arw_deg_rth"), ("imu", "accel_vrw_mps_rth"), ("imu", "gyro_bias_instability_deg_h"),
+              ("imu", "accel_bias_instability_mg"), ("imu", "gyro_bias_sigma0_deg_h"), ("imu", "accel_bias_sigma0_mg"),
+              ("gnss", "sigma_scale"))
+#: The Gauss-Markov GNSS error model, identified in a second stage (see the module docstring).
+GM_PARAMETERS = (("gnss", "sigma_scale"), ("gnss", "gm_sigma_m"), ("gnss", "gm_tau_s"))
+#: Lag-1 autocorrelation of the whitened position innovations above which the fix errors are
+#: taken as time-correlated (a correct model gives ~0; white fixes with a tuned IMU give < 0.1).
+ACF_CORRELATED = 0.3
+#: Log-likelihood gain the two extra Gauss-Markov parameters must bring: half the 1e-4 quantile of
+#: chi-square with 2 dof (a likelihood-ratio test).
+GM_MIN_GAIN = 9.2
+#: Passes of the white-noise search after which the whiteness of the innovations is checked (the
+#: coordinate probe of 7 parameters takes 15): a search that cannot fit correlated errors is
+#: abandoned then for the Gauss-Markov one.
+CHECK_AFTER = 20
+#: Each parameter stays within this many decades of its starting value.
+_BOUND_DECADES = 2.0
+_RAD_S_TO_DEG_RTH = 180.0 / np.pi * 60.0     # rad/sqrt(s) -> deg/sqrt(h)
+_MPS2_RTHZ_TO_MPS_RTH = 60.0                 # m/s^2/sqrt(Hz) -> m/s/sqrt(h)
+
+
+@dataclass
+class TuneResult:
+    """Outcome of :func:`tune`.
+
+    Attributes
+    ----------
+    values : dict
+        Section -> key -> tuned value (configuration units), the keys that were identified.
+    start : dict
+        The same keys' starting values (configuration or stationary analysis).
+    fixed : list of str
+        ``section.key`` of the parameters the user set, left alone.
+    from_stationary : dict
+        What the stationary stretches gave (densities, seconds used), or empty.
+    nis_before, nis_after : float or None
+        Mean position NIS per dof of the EKF at the start and at the tuned values.
+    loglik_before, loglik_after : float
+        Innovation log-likelihood at the start and at the tuned values.
+    n_evaluations : int
+    seconds : float
+    """
+
+    values: dict
+    start: dict
+    fixed: list
+    from_stationary: dict = field(default_factory=dict)
+    nis_before: float | None = None
+    nis_after: float | None = None
+    loglik_before: float = 0.0
+    loglik_after: float = 0.0
+    n_evaluations: int = 0
+    seconds: float = 0.0
+
+    def line(self) -> str:
+        """One line for the terminal."""
+        parts = [f"{key}={_short(v)}" for sec in self.values.values() for key, v in sec.items()]
+        nis = (f"; position NIS/dof {self.nis_before:.2f} -> {self.nis_after:.2f}"
+               if self.nis_before is not None and self.nis_after is not None else "")
+        return (f"tuned noise ({self.n_evaluations} EKF passes, {self.seconds:.1f} s): " + ", ".join(parts) + nis
+                + (f"; kept from config: {', '.join(self.fixed)}" if self.fixed else ""))
+
+    def to_toml(self, cfg: RunConfig) -> str:
+        """A reusable configuration file: every ``[imu]`` key and ``gnss.sigma_scale`` as tuned."""
+        lines = ["# Noise identified by gnssacc --tune auto from this recording (no truth used).",
+                 "# Reuse it with: gnssacc run ... --config tuned.toml --tune none", "", "[imu]"]
+        lines += [f"{k} = {toml_value(_plain(v))}" for k, v in cfg["imu"].items()]
+        lines += ["", "[gnss]"] + [f"{k} = {toml_value(_plain(cfg['gnss'][k]))}"
+                                    for k in ("sigma_scale", "gm_sigma_m", "gm_tau_s")]
+        return "\n".join(lines) + "\n"
+
+    def to_dict(self) -> dict:
+        return {"values": self.values, "start": self.start, "fixed": self.fixed, "from_stationary": self.from_stationary,
+                "nis_before": self.nis_before, "nis_after": self.nis_after, "loglik_before": self.loglik_before,
+                "loglik_after": self.loglik_after, "n_evaluations": self.n_evaluations, "seconds": self.seconds}
+
+
+def _plain(v):
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return [float(f"{float(x):.4g}") for x in v]
+    return float(f"{float(v):.4g}")
+
+
+def _short(v) -> str:
+    v = _plain(v)
+    if isinstance(v, list):
+        return "[" + ",".join(f"{x:g}" for x in v) + "]" if len(set(v)) > 1 else f"{v[0]:g}"
+    return f"{v:g}"
+
+
+def _prior_widths(cfg: RunConfig, params: list, info: dict) -> np.ndarray:
+    """Prior 1-sigma per parameter [decades]: tighter where the stationary stretches measured it."""
+    wide, tight = float(cfg["tune"]["prior_decades"]), float(cfg["tune"]["stationary_prior_decades"])
+    return np.array([tight if key in info else wide for _, key in params])
+
+
+def _start_values(cfg: RunConfig, free: list, noise) -> tuple[dict, dict]:
+    """Starting value per free parameter (numpy arrays), from the configuration or the stationary noise."""
+    start = {p: np.atleast_1d(np.asarray(cfg[p[0]][p[1]], float)).copy() for p in free}
+    info = {}
+    if noise is not None:
+        dens = {("imu", "gyro_arw_deg_rth"): (noise.gyro_density, _RAD_S_TO_DEG_RTH),
+                ("imu", "accel_vrw_mps_rth"): (noise.accel_density, _MPS2_RTHZ_TO_MPS_RTH)}
+        for p, (d, scale) in dens.items():
+            if p in start and d is not None and np.all(np.isfinite(d)) and np.all(np.asarray(d) > 0):
+                start[p] = np.asarray(d, float) * scale
+                info[p[1]] = _plain(start[p])
+        info["stationary_s"] = float(noise.seconds)
+    return start, info
+
+
+class _Objective:
+    """Negative innovation log-likelihood of one EKF pass at log10 scale factors ``theta``."""
+
+    def __init__(self, run, cfg, free, start, stationary, quality, init, method, kinds):
+        self.run, self.cfg, self.free, self.start = run, cfg, free, start
+        self.stationary, self.quality, self.init, self.method, self.kinds = stationary, quality, init, method, kinds
+        self.cov_every = int(cfg["tune"]["cov_every"])
+        self.stats: dict = {}
+
+    def config(self, theta) -> RunConfig:
+        upd: dict = {}
+        for p, th in zip(self.free, theta):
+            v = self.start[p] * 10.0**th
+            upd.setdefault(p[0], {})[p[1]] = v.tolist() if v.size > 1 else float(v[0])
+        return self.cfg.with_values(upd, "tuned")
+
+    def __call__(self, theta) -> float:
+        from .ekf import run_ekf   # tuning runs the EKF; the pipeline imports this module first
+
+        cfg = self.config(theta)
+        run = scaled_gnss(self.run, float(cfg["gnss"]["sigma_scale"]))
+        sol = run_ekf(run, cfg, self.method, init=self.init, stationary=self.stationary, quality=self.quality,
+                      output_times=np.zeros(0), cov_every=self.cov_every)
+        self.stats[tuple(np.round(theta, 12))] = sol.stats
+        return -_loglik(sol.stats, self.kinds)
+
+
+def ml_search(negloglik, n: int, budget: int, prior_decades: float, step_decades: float = 0.5,
+              theta0: np.ndarray | None = None, probe_decades: float | None = 1.0):
+    """Minimise ``negloglik(theta) + |theta|^2 / (2 d^2)`` over log10 scale factors ``theta``.
+
+    The generic part of the tuner: first each coordinate in turn is probed at ``+-probe_decades``
+    and moved there when that is better (the starting values can be decades off, e.g. industrial
+    defaults for a tactical IMU, and a local simplex does not travel that far within a small
+    budget); then Nelder-Mead (scipy) from there with an initial simplex of ``step_decades`` per
+    axis; at most ``budget`` evaluations in all, each ``theta`` clipped to +-:data:`_BOUND_DECADES`.
+
+    Parameters
+    ----------
+    negloglik : callable
+        ``theta (n,) -> float``, the negative log-likelihood (``inf`` where it cannot be evaluated).
+    n : int
+    budget : int
+    prior_decades : float or ndarray (n,)
+        ``d``, the 1-sigma of the log-normal prior around the starting values [decades].
+    step_decades : float
+    theta0 : ndarray (n,), optional
+        Where the search starts (default: the starting values, ``theta = 0``).
+    probe_decades : float or None
+        Coordinate probe step; ``None`` skips the probe (e.g. to continue an earlier search).
+
+    Returns
+    -------
+    theta : ndarray (n,)
+        The best point evaluated.
+    value : float
+        Its objective value.
+    n_evaluations : int
+    """
+    from scipy.optimize import minimize
+
+    best = [np.inf, np.zeros(n)]
+    count = [0]
+
+    def objective(theta):
+        theta = np.clip(theta, -_BOUND_DECADES, _BOUND_DECADES)
+        count[0] += 1
+        j = float(negloglik(theta)) + 0.5 * float(np.sum(np.square(theta / prior_decades)))
+        if not np.isfinite(j):
+            return 1e300
+        if j < best[0]:
+            best[:] = [j, np.array(theta)]
+        return j
+
+    x0 = np.zeros(n) if theta0 is None else np.asarray(theta0, float)
+    f0 = objective(x0)
+    for i in range(n if probe_decades else 0):
+        for d in (-probe_decades, probe_decades):
+            if count[0] >= budget:
+                break
+            x = x0.copy()
+            x[i] += d
+            f = objective(x)
+            if f < f0:
+                f0, x0 = f, x
+    left = budget - count[0]
+    if left > 1:
+        simplex = x0 + np.vstack([np.zeros(n), step_decades * np.eye(n)])
+        minimize(objective, x0, method="Nelder-Mead",
+                 options={"maxfev": left, "initial_simplex": simplex, "xatol": 0.02, "fatol": 0.5})
+    return best[1], best[0], count[0]
+
+
+def _gauss_markov_stage(run, cfg, free, start, stats, stationary, quality, init, method, kinds, info):
+    """Step 3 of the module docstring; returns the configuration, its EKF stats, the passes made and
+    whether the Gauss-Markov model was kept."""
+    acf, n = stats.get("acf1_pos"), stats.get("n_pos_updates", 0)
+    info["innovation_acf1"] = acf
+    gm_free = [p for p in GM_PARAMETERS[1:] if p not in cfg.explicit]
+    if acf is None or n < 10 or acf < max(ACF_CORRELATED, 3.0 / np.sqrt(3 * n)) or len(gm_free) < 2:
+        return None, stats, 0, False
+    # Start: the stated sigmas as the correlated part and a fifth of them as the white part.
+    scale = float(cfg["gnss"]["sigma_scale"])
+    start = dict(start)
+    if ("gnss", "sigma_scale") in start:
+        start[("gnss", "sigma_scale")] = np.atleast_1d(0.2 * scale)
+    start[("gnss", "gm_sigma_m")] = np.median(run.gnss.sigma_ned, axis=0) * scale
+    start[("gnss", "gm_tau_s")] = np.atleast_1d(cfg.gnss_gm_tau.mean())
+    params = list(free) + gm_free
+    obj = _Objective(run, cfg, params, start, stationary, quality, init, method, kinds)
+    theta, j_best, n_eval = ml_search(obj, len(params), int(cfg["tune"]["max_evaluations"]),
+                                      _prior_widths(cfg, params, info))
+    gm_stats = obj.stats[tuple(np.round(theta, 12))]
+    gain = _loglik(gm_stats, kinds) - _loglik(stats, kinds)
+    info["gauss_markov_loglik_gain"] = float(gain)
+    if gain <= GM_MIN_GAIN:
+        return None, stats, n_eval, False
+    return obj.config(theta), gm_stats, n_eval, True
+
+
+def _loglik(stats: dict, kinds) -> float:
+    return float(sum(stats[f"loglik_{k}"] for k in kinds))
+
+
+def scaled_gnss(run, scale: float):
+    """The run with every fix's sigma multiplied by ``scale``."""
+    if scale == 1.0:
+        return run
+    return run.with_gnss(replace(run.gnss, sigma_ned=run.gnss.sigma_ned * scale))
+
+
+def tune(run, cfg: RunConfig, stationary=None, quality=None, init=None, noise=None) -> tuple[RunConfig, TuneResult]:
+    """Identify the free noise parameters (see the module docstring).
+
+    Parameters
+    ----------
+    run : RecordedRun
+    cfg : RunConfig
+        Starting values; keys in ``cfg.explicit`` are never changed.
+    stationary : gnssacc.stationary.StationaryReport, optional
+    quality : gnssacc.quality.QualityReport, optional
+    init : InitialState
+        Where the EKF passes start (e.g. from :func:`gnssacc.yawbank.select_yaw`).
+    noise : gnssacc.stationary.StationaryNoise, optional
+        White-noise densities from stationary stretches (starting values of ARW / VRW).
+
+    Returns
+    -------
+    cfg : RunConfig
+        The configuration with the tuned values.
+    result : TuneResult
+    """
+    t0 = time.perf_counter()
+    free = [p for p in PARAMETERS if p not in cfg.explicit]
+    fixed = [f"{s}.{k}" for s, k in PARAMETERS if (s, k) in cfg.explicit]
+    start, info = _start_values(cfg, free, noise)
+    if not free:
+        return cfg, TuneResult({}, {}, fixed, info, seconds=time.perf_counter() - t0)
+    kinds = ("pos", "zaru") + (("acc",) if cfg["tune"]["likelihood"] == "position+accel" else ())
+    method = "ekf-acc" if "acc" in kinds else "ekf"
+    obj = _Objective(run, cfg, free, start, stationary, quality, init, method, kinds)
+    budget, prior = int(cfg["tune"]["max_evaluations"]), _prior_widths(cfg, free, info)
+    theta, j_best, n_eval = ml_search(obj, len(free), min(CHECK_AFTER, budget), prior)
+    if not np.isfinite(j_best):
+        raise InputError(run.where, "noise identification failed: the EKF diverged for every candidate; "
+                                    "set the IMU noise in a config file and use --tune none")
+    before, after = obj.stats[tuple(np.zeros(len(free)))], obj.stats[tuple(np.round(theta, 12))]
+    tuned, after_gm, n_gm, gm_kept = _gauss_markov_stage(run, cfg, free, start, after, stationary, quality, init,
+                                                         method, kinds, info)
+    if gm_kept:
+        tuned, after = tuned, after_gm
+    else:   # white fixes: finish the white-noise search where it stood
+        more = budget - n_eval
+        if more > 1:
+            theta, _, n_more = ml_search(obj, len(free), more, prior, theta0=theta, probe_decades=None)
+            n_eval += n_more
+        tuned, after = obj.config(theta), obj.stats[tuple(np.round(theta, 12))]
+    values: dict = {}
+    for sec, key in free + (list(GM_PARAMETERS[1:]) if gm_kept else []):
+        values.setdefault(sec, {})[key] = _plain(tuned[sec][key])
+    result = TuneResult(values, {f"{s}.{k}": _plain(v) for (s, k), v in start.items()}, fixed, info,
+                        before.get("nis_pos_mean"), after.get("nis_pos_mean"), _loglik(before, kinds),
+                        _loglik(after, kinds), n_eval + n_gm, time.perf_counter() - t0)
+    return tuned, result
