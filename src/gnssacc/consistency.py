@@ -24,7 +24,7 @@ Warnings (``gnssacc: warning: <method>: ...``) are raised when
   method thinks; too large below it: it discards information);
 * the innovations are correlated in time (lag-1 autocorrelation above :data:`ACF_MAX`);
 * the fix residual ratio exceeds :data:`FIX_RATIO_MAX`, or, with truth, the method's PRMSE
-  exceeds that of the raw fixes.
+  exceeds that of the raw fixes by more than :data:`WORSE_MARGIN`.
 
 Zero-velocity and zero-rate updates are pseudo-measurements whose noise is a chosen bound, so only
 a NIS above the band is reported for them (the vehicle moved, or the filter is overconfident).
@@ -47,6 +47,8 @@ from .solution import NavSolution
 NIS_BAND = (0.5, 2.0)
 #: Largest tolerated RMS of an estimate's residuals to its fixes, in units of their sigma.
 FIX_RATIO_MAX = math.sqrt(2.0)
+#: A method is reported as worse than the raw fixes (with truth) beyond this relative margin.
+WORSE_MARGIN = 0.05
 #: Largest tolerated lag-1 autocorrelation of the whitened innovations (and at least three
 #: standard errors of it, 3 / sqrt(3 N)). On simulated runs with realistic IMUs the identified noise
 #: gives at most 0.08 (60 runs); IMU noise set 10x too low gives up to 0.5 (attitude NEES 24-200
@@ -195,6 +197,6 @@ def assess(run, sol: NavSolution, prmse_m: float | None = None, gnss_prmse_m: fl
         c.warnings.append(f"its positions are as far from the GNSS fixes as an independent estimate no better "
                           f"than them would be (RMS normalised residual {c.fix_ratio:.2f} > {FIX_RATIO_MAX:.2f}): it "
                           f"does no better than the raw fixes it is fed")
-    if prmse_m is not None and gnss_prmse_m is not None and prmse_m > gnss_prmse_m:
+    if prmse_m is not None and gnss_prmse_m is not None and prmse_m > (1.0 + WORSE_MARGIN) * gnss_prmse_m:
         c.warnings.append(f"PRMSE {prmse_m:.2f} m is worse than the raw fixes' {gnss_prmse_m:.2f} m against the truth")
     return c

@@ -66,6 +66,9 @@ GM_MIN_GAIN = 9.2
 #: coordinate probe of 7 parameters takes 15): a search that cannot fit correlated errors is
 #: abandoned then for the Gauss-Markov one.
 CHECK_AFTER = 20
+#: Smallest white part of a fix's 1-sigma the tuner accepts [m]: no receiver's fix output is
+#: better than that (below it, the filter only becomes numerically stiff).
+MIN_WHITE_SIGMA_M = 0.01
 #: Each parameter stays within this many decades of its starting value.
 _BOUND_DECADES = 2.0
 _RAD_S_TO_DEG_RTH = 180.0 / np.pi * 60.0     # rad/sqrt(s) -> deg/sqrt(h)
@@ -169,12 +172,15 @@ class _Objective:
         self.run, self.cfg, self.free, self.start = run, cfg, free, start
         self.stationary, self.quality, self.init, self.method, self.kinds = stationary, quality, init, method, kinds
         self.cov_every = int(cfg["tune"]["cov_every"])
+        self.init_scale = float(cfg["gnss"]["sigma_scale"])   # the scale the start was made with
         self.stats: dict = {}
 
     def config(self, theta) -> RunConfig:
         upd: dict = {}
         for p, th in zip(self.free, theta):
             v = self.start[p] * 10.0**th
+            if p == ("gnss", "sigma_scale"):
+                v = np.maximum(v, MIN_WHITE_SIGMA_M / float(np.median(self.run.gnss.sigma_ned)))
             upd.setdefault(p[0], {})[p[1]] = v.tolist() if v.size > 1 else float(v[0])
         return self.cfg.with_values(upd, "tuned")
 
@@ -182,8 +188,11 @@ class _Objective:
         from .ekf import run_ekf   # tuning runs the EKF; the pipeline imports this module first
 
         cfg = self.config(theta)
-        run = scaled_gnss(self.run, float(cfg["gnss"]["sigma_scale"]))
-        sol = run_ekf(run, cfg, self.method, init=self.init, stationary=self.stationary, quality=self.quality,
+        scale = float(cfg["gnss"]["sigma_scale"])
+        run = scaled_gnss(self.run, scale)
+        # The start's position sigma is that of the fixes it came from: it scales with them.
+        init = replace(self.init, sigma_pos_m=self.init.sigma_pos_m * scale / self.init_scale)
+        sol = run_ekf(run, cfg, self.method, init=init, stationary=self.stationary, quality=self.quality,
                       output_times=np.zeros(0), cov_every=self.cov_every)
         self.stats[tuple(np.round(theta, 12))] = sol.stats
         return -_loglik(sol.stats, self.kinds)

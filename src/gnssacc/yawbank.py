@@ -19,7 +19,8 @@ and the most likely starts the estimators with a yaw sigma covering their poster
 horizon starts ``[init] yaw_horizon_s`` after the vehicle starts to move and doubles until the
 sector is found or the run ends. When the data never tell (a vehicle that never accelerates or
 turns), the best hypothesis is kept with a yaw sigma that covers the hypotheses still in play,
-and the account says so.
+and the account says so; so does a recording in which the vehicle never moves (its yaw would
+show only through the earth rate, gyrocompassing, which this bank does not attempt).
 """
 from __future__ import annotations
 
@@ -143,7 +144,9 @@ def select_yaw(run: RecordedRun, cfg: RunConfig, stationary=None, quality=None,
         if found or t_h >= run.t_end:
             break
         horizon *= 2.0
-    if not found:
+    if not found or t_move >= run.t_end - 1.0:
+        # A vehicle that never moves shows its yaw only through the earth rate (gyrocompassing),
+        # which takes a navigation-grade gyro and minutes of data: not attempted here.
         return _undetermined(start, hyps, yaws, best, mass, post, t_h)
     init, p_fine = _refine(run, ungated, start, stationary, quality, yaws[best], 2.0 * np.pi / n, t_h)
     t_dec = float(grid[min(first_ok, len(grid) - 1)])
