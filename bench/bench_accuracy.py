@@ -1,4 +1,5 @@
-"""Accuracy of the EKF methods on the KITTI default over noise seeds (the paper's PRMSE).
+"""Accuracy of the EKF methods on the KITTI default over noise seeds (the paper's PRMSE), with the
+default self-tuning (noise identified once per seed, shared by every method).
 
 For each GNSS noise profile (white, gm), with and without ``--outage-every 60:20``, runs all
 methods (``ekf``, ``ekf-acc``, ``smoother`` and ``smoother-acc`` with their online estimates)
@@ -26,15 +27,19 @@ BASELINE = {"ekf-acc": "ekf", "ekf-acc avg2": "ekf", "smoother-acc": "smoother",
 
 def _one(args):
     source, preset, noise, outage, seed = args
+    from dataclasses import replace
+
     from gnssacc.config import load_config
+    from gnssacc.identify import identify
     from gnssacc.metrics import gnss_score, score
     from gnssacc.pipeline import load_source, run_methods, with_outages
 
     cfg = load_config(preset)
     run = with_outages(load_source(source, cfg, noise=noise, seed=seed), None, outage)
-    sols = run_methods(run, cfg, ["ekf", "ekf-acc", "smoother", "smoother-acc"])
-    avg_cfg = load_config(preset, overrides={"accel": {"specific_force_avg_s": 2.0}})
-    sols["ekf-acc avg2"] = run_methods(run, avg_cfg, ["ekf-acc"])["ekf-acc"]
+    ident = identify(run, cfg)   # noise identified once; every method and variant shares it
+    sols = run_methods(run, cfg, ["ekf", "ekf-acc", "smoother", "smoother-acc"], ident=ident)
+    avg = replace(ident, cfg=ident.cfg.with_values({"accel": {"specific_force_avg_s": 2.0}}, "avg2"))
+    sols["ekf-acc avg2"] = run_methods(run, cfg, ["ekf-acc"], ident=avg)["ekf-acc"]
     out = {"gnss": gnss_score(run).prmse_m}
     for m, s in sols.items():
         sc = score(run, s)

@@ -172,3 +172,38 @@ def test_config_show_round_trips(tmp_path, capsys):
 def test_sim_command_writes_a_loadable_run(tmp_path, capsys):
     code, stdout, _ = _run_cli(["sim", tmp_path / "s", "--scenario", "ugv", "--duration", "60"], capsys)
     assert code == 0 and (tmp_path / "s" / "imu.csv").is_file() and (tmp_path / "s" / "truth.csv").is_file()
+
+
+def test_run_tunes_by_default_and_the_tuned_file_reproduces_it(run_dir, tmp_path, capsys):
+    out = tmp_path / "auto"
+    code, stdout, stderr = _run_cli(["run", run_dir, "--methods", "ekf", "--out", out, "--no-plots"], capsys)
+    assert code == 0, stderr
+    assert "tuned noise (" in stdout and "start: " in stdout and "scored over t = " in stdout
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["tuning"]["n_evaluations"] > 0 and m["tuning"]["seconds"] > 0
+    assert m["consistency"]["ekf"]["nis"]["pos"] == pytest.approx(m["methods"]["ekf"]["stats"]["nis_pos_mean"])
+    assert m["coverage"]["ekf"]["fraction"] == pytest.approx(1.0)
+    # The NIS column of the table shows the consistency figure.
+    line = next(ln for ln in stdout.splitlines() if ln.startswith("ekf "))
+    assert f"{m['consistency']['ekf']['nis']['pos']:.2f}" in line
+    again = tmp_path / "again"
+    code, stdout2, stderr = _run_cli(["run", run_dir, "--methods", "ekf", "--out", again, "--no-plots",
+                                      "--config", out / "tuned.toml", "--tune", "none"], capsys)
+    assert code == 0, stderr
+    assert "tuned noise" not in stdout2 and not (again / "tuned.toml").exists()
+    m2 = json.loads((again / "metrics.json").read_text())
+    assert m2["methods"]["ekf"]["prmse_m"] == pytest.approx(m["methods"]["ekf"]["prmse_m"], rel=0.01)
+
+
+def test_too_optimistic_noise_prints_a_warning_naming_the_method(tmp_path, capsys):
+    # A consumer IMU (vibration, scale-factor errors) configured 10x too optimistic.
+    write_csv_run(simulate("car-city", duration_s=200.0, imu_grade="consumer", noise="white", seed=1), tmp_path / "r")
+    cfg = tmp_path / "optimistic.toml"
+    cfg.write_text("[imu]\ngyro_arw_deg_rth = 0.06\naccel_vrw_mps_rth = 0.02\ngyro_bias_instability_deg_h = 3.0\n"
+                   "accel_bias_instability_mg = 0.05\ngyro_bias_sigma0_deg_h = 50.0\naccel_bias_sigma0_mg = 3.0\n")
+    code, stdout, stderr = _run_cli(["run", tmp_path / "r", "--methods", "ekf,smoother", "--config", cfg, "--tune",
+                                     "none", "--out", tmp_path / "o", "--no-plots"], capsys)
+    assert code == 0
+    for mid in ("ekf", "smoother"):
+        assert f"gnssacc: warning: {mid}: " in stderr, stderr
+    assert " !" in stdout   # the table marks the warned rows

@@ -48,9 +48,13 @@ class StationaryEpochs:
 
 
 def _block_means(imu: ImuData, edges: np.ndarray) -> np.ndarray:
-    """Mean gyro over the samples stamped in each ``(edges[j], edges[j+1]]``; NaN for an empty block."""
-    c = np.vstack([np.zeros((1, 3)), np.cumsum(imu.omega_ib_b, axis=0)])
-    idx = np.searchsorted(imu.t, edges, side="right")
+    """Mean gyro over the samples stamped in each ``(edges[j], edges[j+1]]``; NaN for an empty block.
+
+    Only the samples between the first and last edge are summed (memory in the span, not the run).
+    """
+    lo, hi = np.searchsorted(imu.t, [edges[0], edges[-1]], side="right")
+    c = np.vstack([np.zeros((1, 3)), np.cumsum(imu.omega_ib_b[lo:hi], axis=0)])
+    idx = np.searchsorted(imu.t[lo:hi], edges, side="right")
     n = np.diff(idx).astype(float)
     with np.errstate(invalid="ignore", divide="ignore"):
         return (c[idx[1:]] - c[idx[:-1]]) / np.where(n > 0, n, np.nan)[:, None]
