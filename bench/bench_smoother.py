@@ -123,22 +123,21 @@ def main():
         return
 
     from gnssacc.config import load_config
-    from gnssacc.initialise import initialise
+    from gnssacc.identify import identify
     from gnssacc.pipeline import load_source
-    from gnssacc.quality import check_imu
     from gnssacc.smoother import run_smoother
 
     cfg = load_config("kitti")
-    run = load_source("kitti", cfg, noise="white", seed=0)
-    q = check_imu(run.imu, cfg)
-    init = initialise(run, cfg)
-    run_smoother(run, cfg, "smoother", quality=q)  # warm-up (imports, caches)
+    ident = identify(load_source("kitti", cfg, noise="white", seed=0), cfg)  # the start and noise `run` uses
+    run, cfg, init = ident.run, ident.cfg, ident.init
+    kw = dict(quality=ident.quality, init=init, stationary=ident.stationary)
+    run_smoother(run, cfg, "smoother", **kw)  # warm-up (imports, caches)
     walls = {"plain gtsam script": [], "smoother": [], "smoother-acc": []}
     for _ in range(args.repeats):  # interleaved, so slow phases of the machine hit all alike
         walls["plain gtsam script"].append(plain_fixed_lag(run, cfg, init))
         for m in ("smoother", "smoother-acc"):
             t0 = time.perf_counter()
-            run_smoother(run, cfg, m, quality=q)
+            run_smoother(run, cfg, m, **kw)
             walls[m].append(time.perf_counter() - t0)
     plain = float(np.median(walls["plain gtsam script"]))
     print(f"KITTI {run.duration_s:.1f} s, {len(run.gnss)} nodes; median of {args.repeats} interleaved runs, one core")

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .config import RunConfig
-from .consistency import ModelCheck
+from .consistency import ModelCheck, rest_noise_findings
 from .ekf import run_ekf
 from .quality import QualityReport, check_imu
 from .run import InitialState, RecordedRun
@@ -100,9 +100,9 @@ def identify(run: RecordedRun, cfg: RunConfig, tune_mode: str | None = None) -> 
     init, bank = _start(est_run, cfg, stationary, quality)
     secs["initialisation_s"] = time.perf_counter() - t
     result = None
+    noise = noise_from_stationary(run.imu, stationary)
     if tune_mode == "auto":
         t = time.perf_counter()
-        noise = noise_from_stationary(run.imu, stationary)
         cfg_t, result = tune(run, cfg, stationary, quality, init, noise)
         est_run = scaled_gnss(run, float(cfg_t["gnss"]["sigma_scale"]))
         init2, bank2 = _start(est_run, cfg_t, stationary, quality)
@@ -116,4 +116,6 @@ def identify(run: RecordedRun, cfg: RunConfig, tune_mode: str | None = None) -> 
     check = run_ekf(est_run, cfg, "ekf", init=init, stationary=stationary, quality=quality, output_times=np.zeros(0),
                     cov_every=int(cfg["tune"]["cov_every"]))
     secs["model_check_s"] = time.perf_counter() - t
-    return Identified(est_run, cfg, quality, stationary, init, result, bank, ModelCheck.from_stats(check.stats), secs)
+    rest = rest_noise_findings(noise.white_density, np.sqrt(np.r_[cfg.accel_psd, cfg.gyro_psd]), noise.total_s)
+    model = ModelCheck.from_stats(check.stats, rest)
+    return Identified(est_run, cfg, quality, stationary, init, result, bank, model, secs)
