@@ -355,7 +355,8 @@ def test_comma_ekf_tracks_reference(method, comma, comma_ekf):
     run, sol = comma.run, comma_ekf[method]
     assert "moving start" in sol.stats["init"] and "yaw from a bank" in sol.stats["init"]
     assert sol.stats["t_init"] - run.t_start < 0.5               # the filter starts with the recording
-    assert len(sol) > 0.8 * len(comma.ref_t)
+    # Outputs at the fixes (and through gaps), to the end of the recording: not at the reference's epochs.
+    assert len(sol) > 0.95 * len(run.gnss) and sol.t[-1] == run.t_end
     if method == "ekf-acc":
         assert sol.stats["n_acc_updates"] > 0
     err = _ned(comma, sol.lat, sol.lon, sol.h) - _ref_ned_at(comma, sol.t)

@@ -1,6 +1,8 @@
 """The ``gnssacc`` command.
 
-Exit codes: 0 success, 2 bad input (one line on stderr naming the file and the problem).
+Exit codes: 0 success (for ``run``: at least one method succeeded), 1 every method failed, 2 bad
+input (one line on stderr naming the file and the problem; also a locked or foreign ``--out``),
+130 interrupted (Ctrl-C), 143 terminated (SIGTERM).
 """
 from __future__ import annotations
 
@@ -51,6 +53,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="bag whose only GNSS is an RTK reference: make the estimators' fixes by subsampling it at "
                         "RATE_HZ and adding --noise (default white); the reference stays the truth")
     r.add_argument("--out", default=None, help="output folder (default ./gnssacc-out/<source>-<timestamp>/)")
+    r.add_argument("--overwrite", action="store_true",
+                   help="let --out replace a file or a non-empty folder that is not a gnssacc result (and everything "
+                        "in it); a previous gnssacc result is always replaced as a whole")
     r.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     r.add_argument("--report", action="store_true",
                    help="also write report.html (table, figures, per-state sigmas, data-quality findings)")
@@ -114,19 +119,60 @@ def _cmd_inspect(args) -> int:
 
 
 def _cmd_run(args) -> int:
-    from .pipeline import compare, default_out_dir, load_source, parse_methods, with_outages, write_outputs
-    from .report import format_table
+    """``gnssacc run``. The output folder is locked from the start (:mod:`gnssacc.outdir`); Ctrl-C
+    or SIGTERM leave its old or its new complete result, say which, and exit 130 or 143."""
+    import contextlib
 
+    from .outdir import Terminated, sigterm_raises
+
+    held: list = []   # the locked output folder (a ResultDir), once there is one
+    with sigterm_raises():
+        try:
+            with contextlib.ExitStack() as stack:
+                return _run_locked(args, stack, held)
+        except (KeyboardInterrupt, Terminated) as exc:
+            print(f"gnssacc: interrupted: {held[0].kept() if held else 'nothing written'}", file=sys.stderr)
+            return 130 if isinstance(exc, KeyboardInterrupt) else 143
+
+
+def _lock_out(path, args, stack, held):
+    """Lock and check the output folder (refused at once: :class:`InputError`); hold it in ``stack``."""
+    from .outdir import ResultDir
+
+    keep = [args.source] if args.source not in (None, "kitti") else []   # never replace the input
+    held.append(stack.enter_context(ResultDir(path, overwrite=args.overwrite, keep_out=keep)))
+    return held[-1]
+
+
+def _run_locked(args, stack, held) -> int:
+    """Compute and write; exit code 0 when at least one method succeeded, 1 when none did."""
+    from .pipeline import compare, default_out_dir, load_source, parse_methods, with_outages, write_result_files
+    from .report import failed_methods
+
+    target = _lock_out(args.out, args, stack, held) if args.out else None
     methods = parse_methods(args.methods)
     cfg = load_config(_resolve_preset(args.preset, args.source), args.config)
     run = load_source(args.source, cfg, noise=args.noise, seed=args.seed, imu_frame=args.imu_frame,
                       imu_topic=args.imu_topic, gnss_topic=args.gnss_topic, truth_topic=args.truth_topic,
                       time_source=args.time_source, gnss_from_truth_hz=args.gnss_from_truth)
     run = with_outages(run, args.outage, args.outage_every)
+    target = target or _lock_out(default_out_dir(run), args, stack, held)
     metrics, sols, ident = compare(run, cfg, methods, tune=args.tune, show_progress=True)
+    if not sols:
+        reasons = "; ".join(f"{m}: {r}" for m, r in failed_methods(metrics).items())
+        print(f"gnssacc: error: every method failed ({reasons}); {target.kept()}", file=sys.stderr)
+        return 1
     tuned = ident.tuning.to_toml(ident.cfg) if ident.tuning is not None else None
-    out = write_outputs(Path(args.out) if args.out else default_out_dir(run), ident.run, sols, metrics, ident.cfg,
-                        plots=not args.no_plots, report=args.report, export=tuple(args.export), tuned_toml=tuned)
+    out = target.replace(lambda folder: write_result_files(
+        folder, ident.run, sols, metrics, ident.cfg, plots=not args.no_plots, report=args.report,
+        export=tuple(args.export), tuned_toml=tuned))
+    _print_summary(run, cfg, metrics, ident, out)
+    return 0
+
+
+def _print_summary(run, cfg, metrics: dict, ident, out) -> None:
+    from .report import format_table
+
     print(f"{run.name}: {run.duration_s:.1f} s, {len(run.imu)} IMU samples, {len(run.gnss)} GNSS fixes"
           + (f", noise {run.meta['noise']} seed {run.meta['seed']}" if "noise" in run.meta else "")
           + f"; config: {', '.join(cfg.sources)}")
@@ -140,7 +186,6 @@ def _cmd_run(args) -> int:
     print(format_table(metrics))
     print(f"\n(one-off JIT compilation {metrics['jit_compile_s']:.2f} s, not included in wall times)")
     print(f"results: {out}")
-    return 0
 
 
 def _quality_lines(metrics: dict) -> list[str]:
@@ -164,14 +209,12 @@ def _resolve_preset(preset: str | None, source: str | None) -> str | None:
 def _cmd_bench(args) -> int:
     import json
 
-    from .montecarlo import format_summary, parse_seeds, run_bench, summarise
+    from .argcheck import seeds as parse_seeds
+    from .montecarlo import format_summary, run_bench, summarise
     from .pipeline import parse_methods
 
     methods = parse_methods(args.methods)
-    try:
-        seeds = parse_seeds(args.seeds)
-    except ValueError:
-        raise InputError("--seeds", f"cannot read {args.seeds!r}: expected e.g. 0-19 or 1,4,7") from None
+    seeds = parse_seeds(args.seeds)
     preset = _resolve_preset(args.preset, args.source)
     load_config(preset, args.config)  # fail early, in this process, on a bad configuration
     results = run_bench(args.source, preset, args.config, args.noise, args.outage, args.outage_every, methods, seeds,
@@ -181,6 +224,7 @@ def _cmd_bench(args) -> int:
              + (f", outages {args.outage or ''}{args.outage_every or ''}" if args.outage or args.outage_every else ""))
     print(format_summary(table, title))
     if args.out:
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(json.dumps({"summary": table, "per_seed": {str(k): v for k, v in results.items()}},
                                              indent=2) + "\n")
     return 0
@@ -210,10 +254,18 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point; returns the exit code."""
+    """Entry point; returns the exit code.
+
+    Bad input (:class:`InputError`, or an operating-system error on a named file) is one line
+    ``gnssacc: error: <where>: <problem>`` and exit code 2; anything else unexpected is a bug:
+    one line ``gnssacc: internal error: ...`` naming a crash file with the traceback, exit code 1.
+    """
+    from .argcheck import check_args
+
     args = _parser().parse_args(argv)
     warnings.showwarning = _show_warning
     try:
+        check_args(args)  # every argument's syntax and range, before anything is loaded
         commands = {"run": _cmd_run, "inspect": _cmd_inspect, "config": _cmd_config, "sim": _cmd_sim,
                     "bench": _cmd_bench}
         return commands[args.command](args)
@@ -223,6 +275,38 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("gnssacc: interrupted; no results written", file=sys.stderr)
         return 130
+    except OSError as exc:
+        if exc.filename is None:
+            return _internal_error(exc, argv)
+        print(f"gnssacc: error: {exc.filename}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except Exception as exc:  # a bug: one line for the user, the traceback in a file for us
+        return _internal_error(exc, argv)
+
+
+def _internal_error(exc: Exception, argv: list[str] | None) -> int:
+    """Print one line for an unexpected exception, write its traceback to a crash file; return 1."""
+    import platform
+    import shlex
+    import tempfile
+    import traceback
+    from datetime import datetime
+
+    words = sys.argv[1:] if argv is None else [str(a) for a in argv]
+    text = (f"gnssacc {__version__}, Python {platform.python_version()}, {platform.platform()}\n"
+            f"command: gnssacc {shlex.join(words)}\n\n" + "".join(traceback.format_exception(exc)))
+    try:
+        stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
+        fd, path = tempfile.mkstemp(prefix=f"gnssacc-crash-{stamp}-", suffix=".txt")
+        with open(fd, "w") as fh:
+            fh.write(text)
+        details = f"details written to {path}"
+    except OSError as err:
+        details = f"could not write the details: {err}"
+    message = " ".join(str(exc).split())
+    message = message if len(message) <= 300 else message[:297] + "..."
+    print(f"gnssacc: internal error: {type(exc).__name__}: {message} (a bug; {details})", file=sys.stderr)
+    return 1
 
 
 if __name__ == "__main__":

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .config_check import check_value, show
 from .errors import InputError
 from .rotations import euler_to_dcm
 from .stationary import StationaryParams
@@ -45,11 +46,30 @@ DEFAULTS: dict[str, dict] = {
     },
     "mounting": {
         # Rotation from IMU axes to body (FRD) axes as roll, pitch, yaw [deg]:
-        # f_body = R(roll, pitch, yaw) @ f_imu. An upside-down IMU is [180, 0, 0].
+        # f_body = R(roll, pitch, yaw) @ f_imu. An upside-down IMU is [180, 0, 0]. "auto": measured
+        # from the recording (gravity gives roll/pitch, turns give yaw; gnssacc.mountcheck) and
+        # applied with a warning. With numbers, a recording that shows a clearly different
+        # mounting (upside down, sideways, turned by 90 deg or more than 30 deg) is an error that
+        # names the line to write.
         "imu_to_body_rpy_deg": [0.0, 0.0, 0.0],
         # Added to every IMU time stamp to put it on the GNSS clock [s]. A logger that stamps IMU
-        # samples 0.1 s late needs -0.1.
+        # samples 0.1 s late needs -0.1; IMU stamps on UTC beside fixes on GPS time need +18.
+        # "auto": measured from the recording (gnssacc.timeoffset, up to +-60 s) and applied with
+        # a warning. With a number, a measured offset many sigma and more than 50 ms away from it
+        # is an error that names the measured value.
         "imu_time_offset_s": 0.0,
+    },
+    "checks": {
+        # Plausibility checks of the input before estimation (gnssacc.plausibility): units, clocks,
+        # coordinates and mounting checked against the data themselves. What a check does when the
+        # data contradict their stated units or layout (accelerometer in g, gyro in deg/s, IMU
+        # stamps in ms/us/ns, latitude/longitude in radians): "never" stops with an error naming
+        # the likely cause and the fix; "auto" repairs the input where the evidence is unambiguous
+        # and says what it assumed in a warning.
+        "repair": "never",
+        # Checks to leave out, comma-separated, for a recording that really is unusual: time_units,
+        # fix_count, heights, accel_units, gyro_units, latlon, init_position, time_offset, mounting.
+        "skip": "",
     },
     "gnss": {
         # Antenna position relative to the IMU, body frame FRD [m].
@@ -200,7 +220,10 @@ PRESETS = ("consumer", "industrial", "tactical", "kitti")
 
 
 def _vec3(value, key: str, where: str) -> np.ndarray:
-    arr = np.atleast_1d(np.asarray(value, float))
+    try:
+        arr = np.atleast_1d(np.asarray(value, float))
+    except (TypeError, ValueError):
+        raise InputError(where, f"{key} must be a number or a list of three numbers, got {value!r}") from None
     if arr.size == 1:
         arr = np.repeat(arr, 3)
     if arr.shape != (3,) or not np.all(np.isfinite(arr)):
@@ -210,8 +233,11 @@ def _vec3(value, key: str, where: str) -> np.ndarray:
 
 def _merge(base: dict, update: dict, where: str) -> None:
     for section, values in update.items():
-        if section not in base or not isinstance(values, dict):
+        if section not in base:
             raise InputError(where, f"unknown config section [{section}] (known: {', '.join(base)})")
+        if not isinstance(values, dict):
+            raise InputError(where, f"{section} = {show(values)}: [{section}] must be a table (a [{section}] "
+                                    f"header followed by key = value lines), not a single value")
         for key, value in values.items():
             if key not in base[section]:
                 raise InputError(where, f"unknown config key [{section}] {key} "
@@ -224,10 +250,22 @@ def _keys(tree: dict) -> set:
 
 
 def _read_toml(path: Path, where: str) -> dict:
+    if path.is_dir():
+        raise InputError(where, "is a directory, expected a TOML configuration file")
     try:
-        return tomllib.loads(path.read_text())
+        data = path.read_bytes()
     except FileNotFoundError:
         raise InputError(where, "config file not found") from None
+    except OSError as exc:
+        raise InputError(where, f"cannot read the config file: {exc.strerror or exc}") from None
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        raise InputError(where, f"not a UTF-8 text file (byte 0x{data[exc.start]:02x} on line {line}); a TOML "
+                                f"file must be UTF-8: save it again with UTF-8 encoding") from None
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(where, f"not valid TOML: {exc}") from None
 
@@ -291,9 +329,18 @@ class RunConfig:
     # --- geometry ------------------------------------------------------------------------------
     @property
     def R_bi(self) -> np.ndarray:
-        """Rotation from IMU axes to body axes (``f_b = R_bi @ f_imu``)."""
-        rpy = _vec3(self["mounting"]["imu_to_body_rpy_deg"], "imu_to_body_rpy_deg", "config") * DEG
-        return euler_to_dcm(*rpy)
+        """Rotation from IMU axes to body axes (``f_b = R_bi @ f_imu``); the identity for
+        ``"auto"`` (the sources load the IMU axes as they are and the input checks apply the
+        measured mounting)."""
+        return euler_to_dcm(*(self.imu_to_body_rpy_deg * DEG))
+
+    @property
+    def imu_to_body_rpy_deg(self) -> np.ndarray:
+        """``[mounting] imu_to_body_rpy_deg`` as roll, pitch, yaw [deg]; zeros for ``"auto"``."""
+        value = self["mounting"]["imu_to_body_rpy_deg"]
+        if value == "auto":
+            return np.zeros(3)
+        return _vec3(value, "imu_to_body_rpy_deg", "config")
 
     @property
     def lever_arm_b(self) -> np.ndarray:
@@ -395,26 +442,41 @@ def load_config(preset: str | None = None, path: str | Path | None = None,
     """
     values = copy.deepcopy(DEFAULTS)
     sources = ["defaults"]
+    origin: dict = {}   # (section, key) -> the preset or file that set it, named in messages
     if preset:
-        ref = preset_path(preset)
-        _merge(values, tomllib.loads(ref.read_text()), f"preset {preset}")
+        layer = tomllib.loads(preset_path(preset).read_text())
+        _merge(values, layer, f"preset {preset}")
         sources.append(f"preset {preset}")
+        origin.update(dict.fromkeys(_keys(layer), f"preset {preset}"))
     explicit = set()
     if path:
         user = _read_toml(Path(path), str(path))
         _merge(values, user, str(path))
         sources.append(str(path))
         explicit |= _keys(user)
+        origin.update(dict.fromkeys(_keys(user), str(path)))
     if overrides:
         _merge(values, overrides, "overrides")
         sources.append("overrides")
         explicit |= _keys(overrides)
+        origin.update(dict.fromkeys(_keys(overrides), "overrides"))
     cfg = RunConfig(values, sources, frozenset(explicit))
-    _validate(cfg, sources[-1])
+    _validate(cfg, sources[-1], origin)
     return cfg
 
 
-def _validate(cfg: RunConfig, where: str) -> None:
+def _validate(cfg: RunConfig, where: str, origin: dict | None = None) -> None:
+    """Raise :class:`InputError` for the first key of the wrong type or out of range.
+
+    Types and ranges are those of :mod:`gnssacc.config_check`. ``origin`` maps ``(section, key)``
+    to the file (or preset) that set the key, named in the message; other keys are named ``where``.
+    """
+    origin = origin or {}
+    for section, values in cfg.values.items():
+        for key, value in values.items():
+            problem = check_value(section, key, value, DEFAULTS.get(section, {}).get(key))
+            if problem:
+                raise InputError(origin.get((section, key), where), problem)
     # Touch every derived quantity so malformed values fail now, naming the file.
     for name in ("gyro_psd", "accel_psd", "gyro_bias_rw_psd", "accel_bias_rw_psd", "gyro_bias_sigma0",
                  "accel_bias_sigma0", "R_bi", "lever_arm_b", "accel_sigma_override", "initial_sigma_overrides"):
@@ -424,38 +486,3 @@ def _validate(cfg: RunConfig, where: str) -> None:
                 value()
         except InputError as exc:
             raise InputError(where, exc.problem) from None
-    c = cfg["init"]
-    if int(c["yaw_hypotheses"]) < 4 or not float(c["yaw_horizon_s"]) > 0 or not 0.5 <= float(c["yaw_confidence"]) < 1:
-        raise InputError(where, "[init] yaw_hypotheses must be >= 4, yaw_horizon_s positive, yaw_confidence in [0.5, 1)")
-    if int(cfg["accel"]["window"]) < 3:
-        raise InputError(where, "[accel] window must be at least 3 fixes (a quadratic has three parameters)")
-    if float(cfg["imu"]["bias_correlation_time_s"]) <= 0:
-        raise InputError(where, "[imu] bias_correlation_time_s must be positive")
-    if int(cfg["ekf"]["phi_order"]) not in (1, 2):
-        raise InputError(where, "[ekf] phi_order must be 1 or 2")
-    if cfg["quality"]["suspect_sigma_mode"] not in ("local", "fixed"):
-        raise InputError(where, '[quality] suspect_sigma_mode must be "local" or "fixed"')
-    sm = cfg["smoother"]
-    if str(sm["factorization"]).upper() not in ("QR", "CHOLESKY"):
-        raise InputError(where, '[smoother] factorization must be "QR" or "CHOLESKY"')
-    if float(sm["lag_s"]) <= 0 or float(sm["max_node_spacing_s"]) <= 0:
-        raise InputError(where, "[smoother] lag_s and max_node_spacing_s must be positive")
-    if not 0.0 <= float(cfg["data"]["max_bad_fraction"]) <= 1.0:
-        raise InputError(where, "[data] max_bad_fraction must be between 0 and 1")
-    if not float(cfg["gnss"]["sigma_scale"]) > 0:
-        raise InputError(where, "[gnss] sigma_scale must be a positive number")
-    if np.any(cfg.gnss_gm_sigma < 0) or not np.all(cfg.gnss_gm_tau > 0):
-        raise InputError(where, "[gnss] gm_sigma_m must be >= 0 and gm_tau_s positive")
-    z = cfg["zupt"]
-    if not isinstance(z["enabled"], bool):
-        raise InputError(where, "[zupt] enabled must be true or false")
-    if not (float(z["interval_s"]) > 0 and float(z["velocity_sigma_mps"]) > 0 and float(z["gate_nis"]) >= 0):
-        raise InputError(where, "[zupt] interval_s and velocity_sigma_mps must be positive, gate_nis >= 0")
-    t = cfg["tune"]
-    if t["mode"] not in ("auto", "none"):
-        raise InputError(where, '[tune] mode must be "auto" or "none"')
-    if t["likelihood"] not in ("position", "position+accel"):
-        raise InputError(where, '[tune] likelihood must be "position" or "position+accel"')
-    if (int(t["max_evaluations"]) < 1 or int(t["cov_every"]) < 1 or not float(t["prior_decades"]) > 0
-            or not float(t["stationary_prior_decades"]) > 0):
-        raise InputError(where, "[tune] max_evaluations and cov_every must be >= 1, prior_decades positive")

@@ -20,6 +20,10 @@ class InputError(Exception):
         self.problem = problem
         super().__init__(f"{self.where}: {problem}")
 
+    def __reduce__(self):
+        # Picklable, so an error in a worker process (``gnssacc bench --jobs N``) reaches the CLI intact.
+        return type(self), (self.where, self.problem)
+
 
 class DataWarning(UserWarning):
     """Something in the input was repaired or dropped; the message says what and how much."""

@@ -14,7 +14,7 @@ stationary 1-sigma per axis.
 """
 from __future__ import annotations
 
-import re
+import math
 
 import numpy as np
 
@@ -86,48 +86,83 @@ def fixes_from_truth(run: RecordedRun, truth: Truth, profile: str, seed: int,
     return GnssFixes(truth.t.copy(), lat, lon, h, sig)
 
 
-_SPAN = re.compile(r"^\s*([0-9.]+)\s*:\s*([0-9.]+)\s*$")
+#: Shortest ``--outage-every`` period [s]: below a second (a fix interval or two) the cycle drops
+#: single fixes at random rather than making outages.
+MIN_OUTAGE_PERIOD_S = 1.0
+#: Most outage spans a run may get (``--outage`` list plus ``--outage-every`` cycles).
+MAX_OUTAGES = 10_000
 
 
-def parse_outages(spec: str | None, every: str | None, duration_s: float) -> list[tuple[float, float]]:
+def parse_outages(spec: str | None, every: str | None, duration_s: float | None) -> list[tuple[float, float]]:
     """Outage windows in seconds from the run start.
 
     Parameters
     ----------
     spec : str or None
-        ``"START:LEN[,START:LEN...]"``.
+        ``"START:LEN[,START:LEN...]"``: START >= 0, LEN > 0, finite, in seconds.
     every : str or None
         ``"PERIOD:LEN"``: a LEN-second outage at the end of every PERIOD-second block, i.e.
         ``[k*PERIOD - LEN, k*PERIOD)`` for k = 1, 2, ..., so the first block starts with GNSS.
-    duration_s : float
-        Run duration [s].
+        ``0 < LEN < PERIOD`` and ``PERIOD >= MIN_OUTAGE_PERIOD_S``.
+    duration_s : float or None
+        Run duration [s]. ``None``: only check the syntax and ranges (the CLI does so before
+        loading anything); the periodic outages are then left out.
 
     Returns
     -------
     list of (start, end)
+
+    Raises
+    ------
+    InputError
+        Naming ``--outage`` or ``--outage-every``: unreadable text, a value out of range, an
+        outage starting after the run's end, more than :data:`MAX_OUTAGES` outages.
     """
-    spans = []
-    for text, flag in ((spec, "--outage"), (every, "--outage-every")):
-        if not text:
-            continue
-        parts = text.split(",") if flag == "--outage" else [text]
-        for part in parts:
-            m = _SPAN.match(part)
-            if not m:
-                raise InputError(flag, f"cannot read {part!r}: expected START:LEN in seconds, e.g. 120:30")
-            a, b = float(m.group(1)), float(m.group(2))
-            if b <= 0:
-                raise InputError(flag, f"outage length must be positive in {part!r}")
-            if flag == "--outage":
-                spans.append((a, a + b))
-            else:
-                if b >= a:
-                    raise InputError(flag, f"outage length {b} s must be shorter than the period {a} s")
-                k = 1
-                while k * a - b < duration_s:
-                    spans.append((k * a - b, k * a))
-                    k += 1
+    spans = [_read_span(part, "--outage") for part in spec.split(",")] if spec else []
+    if len(spans) > MAX_OUTAGES:
+        raise InputError("--outage", f"{len(spans)} outages, more than {MAX_OUTAGES}")
+    for a, b in spans:
+        if b <= a:
+            raise InputError("--outage", f"outage length must be positive in '{a:g}:{b - a:g}'")
+        if duration_s is not None and a >= duration_s:
+            raise InputError("--outage", f"the outage at {a:g} s starts after the run's end ({duration_s:.1f} s)")
+    if every:
+        spans += _periodic(every, duration_s)
     return sorted(spans)
+
+
+def _read_span(text: str, flag: str) -> tuple[float, float]:
+    """``"A:B"`` -> (A, A + B) for --outage, (A, B) for --outage-every; finite, A >= 0."""
+    what = "START:LEN, e.g. 120:30" if flag == "--outage" else "PERIOD:LEN, e.g. 60:20"
+    parts = text.split(":")
+    try:
+        a, b = (float(p) for p in parts) if len(parts) == 2 else (None, None)
+    except ValueError:
+        a = b = None
+    if a is None:
+        raise InputError(flag, f"cannot read {text.strip()!r}: expected {what} (seconds)")
+    if not (math.isfinite(a) and math.isfinite(b)) or a < 0:
+        raise InputError(flag, f"{text.strip()!r}: the times must be finite and not negative ({what})")
+    return (a, a + b) if flag == "--outage" else (a, b)
+
+
+def _periodic(every: str, duration_s: float | None) -> list[tuple[float, float]]:
+    """The spans of ``--outage-every PERIOD:LEN`` over a run of ``duration_s`` (none if unknown)."""
+    period, length = _read_span(every, "--outage-every")
+    if not length > 0:
+        raise InputError("--outage-every", f"outage length must be positive in {every.strip()!r}")
+    if length >= period:
+        raise InputError("--outage-every", f"outage length {length:g} s must be shorter than the period {period:g} s")
+    if period < MIN_OUTAGE_PERIOD_S:
+        raise InputError("--outage-every", f"period {period:g} s is shorter than the minimum "
+                                           f"{MIN_OUTAGE_PERIOD_S:g} s")
+    if duration_s is None:
+        return []
+    n = int(math.floor((duration_s + length) / period)) + 1
+    if n > MAX_OUTAGES:
+        raise InputError("--outage-every", f"{every.strip()!r} makes about {n} outages over the {duration_s:.0f} s "
+                                           f"run, more than {MAX_OUTAGES}: choose a longer period")
+    return [(k * period - length, k * period) for k in range(1, n + 1) if k * period - length < duration_s]
 
 
 def in_spans(t_rel: np.ndarray, spans: list[tuple[float, float]]) -> np.ndarray:

@@ -3,6 +3,9 @@ its IMU and fixes are, and where and how it starts.
 
 :func:`identify` runs, in order,
 
+0. the input checks (:mod:`gnssacc.plausibility`): units, clocks, coordinates and mounting checked
+   against the data themselves; repairs and measured ``"auto"`` offsets and mountings are applied
+   here, so every later step and estimator sees the corrected run;
 1. the IMU data-quality check (:mod:`gnssacc.quality`);
 2. stationary detection from windowed IMU statistics and GNSS agreement (:mod:`gnssacc.stationary`);
 3. the start state and the yaw bank (:mod:`gnssacc.initialise`, :mod:`gnssacc.yawbank`), unless
@@ -25,6 +28,7 @@ import numpy as np
 from .config import RunConfig
 from .consistency import ModelCheck, rest_noise_findings
 from .ekf import run_ekf
+from .plausibility import check_run
 from .quality import QualityReport, check_imu
 from .run import InitialState, RecordedRun
 from .stationary import StationaryReport, detect_stationary, noise_from_stationary, params_from_config
@@ -52,6 +56,8 @@ class Identified:
         The final noise model against the recording (one EKF pass's innovations).
     seconds : dict
         Time spent per step [s].
+    checks : list of gnssacc.findings.Finding
+        What the input checks repaired or applied (they raise on anything else).
     """
 
     run: RecordedRun
@@ -63,6 +69,7 @@ class Identified:
     bank: BankResult | None = None
     model: ModelCheck | None = None
     seconds: dict = field(default_factory=dict)
+    checks: list = field(default_factory=list)
 
 
 def _start(run, cfg, stationary, quality) -> tuple[InitialState, BankResult | None]:
@@ -92,6 +99,9 @@ def identify(run: RecordedRun, cfg: RunConfig, tune_mode: str | None = None) -> 
     tune_mode = tune_mode or cfg["tune"]["mode"]
     secs = {}
     t = time.perf_counter()
+    run, cfg, checks = check_run(run, cfg)
+    secs["input_checks_s"] = time.perf_counter() - t
+    t = time.perf_counter()
     quality = check_imu(run.imu, cfg)
     stationary = detect_stationary(run.imu, run.gnss, run.origin, params_from_config(cfg))
     secs["quality_and_stationary_s"] = time.perf_counter() - t
@@ -118,4 +128,4 @@ def identify(run: RecordedRun, cfg: RunConfig, tune_mode: str | None = None) -> 
     secs["model_check_s"] = time.perf_counter() - t
     rest = rest_noise_findings(noise.white_density, np.sqrt(np.r_[cfg.accel_psd, cfg.gyro_psd]), noise.total_s)
     model = ModelCheck.from_stats(check.stats, rest)
-    return Identified(est_run, cfg, quality, stationary, init, result, bank, model, secs)
+    return Identified(est_run, cfg, quality, stationary, init, result, bank, model, secs, checks)

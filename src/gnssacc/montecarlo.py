@@ -13,10 +13,12 @@ normality, which PRMSE differences over a handful of seeds rarely justify.
 """
 from __future__ import annotations
 
+from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
+from .argcheck import MAX_SEED
 from .progress import progress
 from .report import BASELINES
 
@@ -37,18 +39,41 @@ def paired_permutation_pvalue(diff: np.ndarray, n_random: int = 200_000, seed: i
     return float(np.mean(means >= observed - 1e-12))
 
 
+#: Most seeds one bench runs.
+MAX_SEEDS = 1000
+
+
 def parse_seeds(text: str) -> list[int]:
-    """Seeds from ``"0-19"``, ``"3"`` or ``"1,4,7"``."""
+    """Seeds from ``"0-19"``, ``"3"`` or ``"1,4,7"``.
+
+    Raises
+    ------
+    ValueError
+        Saying what is wrong: unreadable part, empty range, a seed twice or out of
+        ``0..MAX_SEED``, no seed, more than :data:`MAX_SEEDS` seeds.
+    """
     out: list[int] = []
-    for part in text.split(","):
-        part = part.strip()
-        if "-" in part:
-            a, b = part.split("-", 1)
-            out.extend(range(int(a), int(b) + 1))
-        elif part:
-            out.append(int(part))
+    for part in (p.strip() for p in str(text).split(",")):
+        if not part:
+            continue
+        a, sep, b = part.partition("-")
+        try:
+            lo = int(a)
+            hi = int(b) if sep else lo
+        except ValueError:
+            raise ValueError(f"cannot read {part!r}") from None
+        if hi < lo:
+            raise ValueError(f"{part!r} is an empty range")
+        if hi > MAX_SEED:
+            raise ValueError(f"seed {hi} is larger than {MAX_SEED}")
+        if len(out) + hi - lo + 1 > MAX_SEEDS:
+            raise ValueError(f"more than {MAX_SEEDS} seeds")
+        out.extend(range(lo, hi + 1))
     if not out:
         raise ValueError("no seeds")
+    twice = sorted(s for s, n in Counter(out).items() if n > 1)
+    if twice:
+        raise ValueError(f"seed {twice[0]} is given twice")
     return out
 
 

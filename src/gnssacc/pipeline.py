@@ -5,9 +5,6 @@ compute the same numbers the same way.
 """
 from __future__ import annotations
 
-import os
-import shutil
-import tempfile
 from datetime import datetime
 from pathlib import Path
 
@@ -20,6 +17,7 @@ from .errors import InputError, warn_data
 from .gnss_noise import apply_outages, fixes_from_truth, parse_outages
 from .identify import Identified, identify
 from .metrics import gnss_score, score
+from .outdir import ResultDir
 from .report import format_table, metrics_dict, plot_errors, plot_trajectory, write_json, write_trajectory_csv
 from .run import RecordedRun
 from .solution import NavSolution
@@ -53,8 +51,19 @@ def parse_methods(text: str | None) -> list[str]:
 
 
 def is_bag(path: Path) -> bool:
-    """ROS 1 ``.bag``, bare ``.mcap``, or a ROS 2 bag directory (with ``metadata.yaml``)."""
-    return (path.is_file() and path.suffix in (".bag", ".mcap")) or (path.is_dir() and (path / "metadata.yaml").exists())
+    """Whether ``path`` is meant as a bag: a ``.bag``, ``.mcap`` or ``.db3`` file, or a directory with a
+    ``metadata.yaml`` or, without ``imu.csv``, ROS 2 storage files (a bag that lost its metadata).
+
+    Only the name and layout are looked at; whether the bag can be read is
+    :func:`gnssacc.sources.rosbag.check_bag_path`'s business (a clear error if not).
+    """
+    from .sources.rosbag import MAGIC, storage_files
+
+    if path.is_file():
+        return path.suffix in MAGIC
+    if not path.is_dir():
+        return False
+    return (path / "metadata.yaml").exists() or (not (path / "imu.csv").exists() and bool(storage_files(path)))
 
 
 def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None, seed: int = 0,
@@ -94,6 +103,11 @@ def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None,
                             noise=noise, seed=seed)
     if path.is_dir():
         from .sources.csvdir import load_csv_run
+        if not (path / "imu.csv").exists() and not (path / "gnss.csv").exists():
+            names = sorted(p.name for p in path.iterdir())
+            held = f"it holds {', '.join(names[:5])}{', ...' if len(names) > 5 else ''}" if names else "it is empty"
+            raise InputError(source, f"not a run directory: no imu.csv and gnss.csv (a CSV run) and no metadata.yaml "
+                                     f"(a ROS 2 bag); {held}")
         run = load_csv_run(path, cfg, imu_frame=imu_frame)
         if noise is not None:
             if run.truth is None:
@@ -110,7 +124,8 @@ def with_outages(run: RecordedRun, outage: str | None, outage_every: str | None)
 
 
 def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
-                ident: Identified | None = None, show_progress: bool = False) -> dict[str, NavSolution]:
+                ident: Identified | None = None, show_progress: bool = False,
+                failures: dict[str, str] | None = None) -> dict[str, NavSolution]:
     """Run each method on the same run, from the same identified start and noise.
 
     Parameters
@@ -124,12 +139,37 @@ def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: s
     ident : Identified, optional
         A result of :func:`gnssacc.identify.identify` to reuse (then ``run``/``cfg``/``tune`` are
         not looked at again).
+    failures : dict, optional
+        When given, a method whose estimator raises (any ``Exception`` but
+        :class:`gnssacc.errors.InputError`) is recorded here as ``{method: one-line reason}``
+        and the other methods still run; when omitted the exception propagates.
+
+    Returns
+    -------
+    dict of NavSolution
+        By solution id (a smoother method adds ``<id>-online``); failed methods are absent.
     """
     ident = ident or identify(run, cfg, tune)
     out: dict[str, NavSolution] = {}
     for m in methods:
-        out.update(METHODS[m](ident, m, show_progress))
+        try:
+            out.update(METHODS[m](ident, m, show_progress))
+        except InputError:
+            raise
+        except Exception as exc:  # an estimator failure costs that method only
+            if failures is None:
+                raise
+            failures[m] = failure_reason(exc)
     return out
+
+
+def failure_reason(exc: BaseException, limit: int = 200) -> str:
+    """One line for a method's failure: the exception type and its first sentence."""
+    text = " ".join(str(exc).split())
+    cut = text.find(". ")
+    text = text[:cut + 1] if cut > 0 else text
+    text = f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def common_window(run: RecordedRun, sols: dict[str, NavSolution]) -> tuple[float, float]:
@@ -143,33 +183,79 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
             show_progress: bool = False) -> tuple[dict, dict, Identified]:
     """Identify, run and score the methods over a common window, with consistency figures.
 
+    A method whose estimator fails is reported (a ``gnssacc: warning:`` naming it, and
+    ``status: "failed"`` with ``error`` in the metrics) without costing the others; it is up
+    to the caller what to do when every method failed.
+
     Returns
     -------
     metrics : dict
-        The content of ``metrics.json``.
+        The content of ``metrics.json``; each method has ``status`` ``"ok"`` or ``"failed"``.
     solutions : dict of NavSolution
+        Of the methods that succeeded.
     ident : Identified
         The shared start, stationary spans and (tuned) configuration.
     """
     jit_s = mechanization.warm_up()
     ident = identify(run, cfg, tune)
-    sols = run_methods(run, cfg, methods, ident=ident, show_progress=show_progress)
-    window = common_window(run, sols)
-    scores = {m: score(run, s, window) for m, s in sols.items()}
+    failed: dict[str, str] = {}
+    sols = run_methods(run, cfg, methods, ident=ident, show_progress=show_progress, failures=failed)
+    window = scored_window(run, sols)
     raw = gnss_score(run, window)
-    cons = {m: assess(ident.run, s, scores[m].prmse_m, raw.prmse_m, ident.model, ident.cfg.gnss_gm_sigma)
-            for m, s in sols.items()}
-    for m, c in cons.items():
-        for text in c.warnings:
+    scores, cons = {}, {}
+    for m, s in list(sols.items()):
+        try:  # scoring one solution must not cost the others either
+            scores[m] = score(run, s, window)
+            cons[m] = assess(ident.run, s, scores[m].prmse_m, raw.prmse_m, ident.model, ident.cfg.gnss_gm_sigma)
+        except Exception as exc:
+            failed[m] = failure_reason(exc)
+            del sols[m]
+            scores.pop(m, None)
+            continue
+        for text in cons[m].warnings:
             warn_data(m, text)
+    for m, reason in failed.items():
+        warn_data(m, f"failed: {reason}; the other methods' results are kept")
     extra = {"jit_compile_s": jit_s, "identify_s": ident.seconds, "quality": ident.quality.to_dict(),
              "config_sources": ident.cfg.sources, "scored_window_s": [window[0], window[1]],
+             "truth_coverage": truth_coverage(run),
              "coverage": {m: _coverage(run, s) for m, s in sols.items()},
              "consistency": {m: c.to_dict() for m, c in cons.items()},
              "init": ident.init.how, "stationary": ident.stationary.to_dict(),
              "model_check": ident.model.to_dict() if ident.model is not None else None,
              "tuning": ident.tuning.to_dict() if ident.tuning is not None else None}
-    return metrics_dict(run, sols, scores, raw, extra), sols, ident
+    return metrics_dict(run, sols, scores, raw, extra, failed), sols, ident
+
+
+#: Truth may miss this much of the recording before :func:`scored_window` warns [s].
+TRUTH_SHORT_TOLERANCE_S = 2.0
+
+
+def truth_coverage(run: RecordedRun) -> dict | None:
+    """The part of the recording (first to last IMU sample) the truth spans, from the start [s]."""
+    if run.truth is None:
+        return None
+    a = max(float(run.truth.t[0]), run.t_start) - run.t_start
+    b = min(float(run.truth.t[-1]), run.t_end) - run.t_start
+    span = max(b - a, 0.0)
+    return {"first_s": a, "last_s": b, "fraction": span / run.duration_s if run.duration_s > 0 else 1.0}
+
+
+def scored_window(run: RecordedRun, sols: dict[str, NavSolution]) -> tuple[float, float]:
+    """:func:`common_window` within the truth's span, warning when the truth misses part of the run.
+
+    The solutions still cover the whole run; only the scores are limited to where truth exists.
+    """
+    a, b = common_window(run, sols)
+    cov = truth_coverage(run)
+    if cov is None:
+        return a, b
+    span = max(cov["last_s"] - cov["first_s"], 0.0)
+    if run.duration_s - span > TRUTH_SHORT_TOLERANCE_S:
+        warn_data(f"{run.where} (truth)", f"the truth covers only {span:.1f} of {run.duration_s:.1f} s of the run "
+                                          f"(t = {cov['first_s']:.1f} .. {cov['last_s']:.1f} s from the start); "
+                                          f"the outputs cover the whole run, the scores only that part")
+    return max(a, run.t_start + cov["first_s"]), min(b, run.t_start + cov["last_s"])
 
 
 def _coverage(run: RecordedRun, sol: NavSolution) -> dict:
@@ -185,47 +271,49 @@ def default_out_dir(run: RecordedRun) -> Path:
 
 
 def write_outputs(out_dir: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict, cfg: RunConfig,
-                  plots: bool = True, report: bool = False, export: tuple = (), tuned_toml: str | None = None) -> Path:
-    """Write all outputs into ``out_dir`` atomically.
+                  plots: bool = True, report: bool = False, export: tuple = (), tuned_toml: str | None = None,
+                  overwrite: bool = False) -> Path:
+    """Replace ``out_dir`` as a whole by a complete result (:class:`gnssacc.outdir.ResultDir`).
 
-    Files are first written to a temporary folder beside ``out_dir`` and moved in only when
-    all of them exist, so an interrupted run never leaves a half-written result.
+    Takes the folder's lock for the time of writing; the CLI instead holds a
+    :class:`~gnssacc.outdir.ResultDir` over the whole run and calls :func:`write_result_files`
+    through it. ``overwrite`` also replaces a folder that is not a gnssacc result. The other
+    parameters are those of :func:`write_result_files`.
+    """
+    with ResultDir(out_dir, overwrite=overwrite) as target:
+        return target.replace(lambda folder: write_result_files(folder, run, sols, metrics, cfg, plots=plots,
+                                                                report=report, export=export, tuned_toml=tuned_toml))
 
+
+def write_result_files(folder: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict,
+                       cfg: RunConfig, plots: bool = True, report: bool = False, export: tuple = (),
+                       tuned_toml: str | None = None) -> None:
+    """Write every output file into ``folder`` (a fresh folder; see :func:`write_outputs`).
+
+    ``trajectory_<id>.csv`` per solution, ``config.toml``, ``table.txt``, ``metrics.json`` (with
+    the failed methods too); ``plots`` adds ``errors.png`` (with truth) and ``trajectory.png``;
     ``report`` adds ``report.html`` (with ``sigmas.png``); ``export=("tum",)`` adds
     ``trajectory_<id>.tum`` (and ``truth.tum``) for ``evo``; ``tuned_toml`` is written as
     ``tuned.toml`` (the identified noise, reusable with ``--config``).
     """
-    out_dir = Path(out_dir)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".gnssacc-partial-", dir=out_dir.parent))
-    try:
+    folder = Path(folder)
+    for mid, sol in sols.items():
+        write_trajectory_csv(sol, folder / f"trajectory_{mid}.csv")
+    (folder / "config.toml").write_text(cfg.to_toml())
+    if tuned_toml is not None:
+        (folder / "tuned.toml").write_text(tuned_toml)
+    if plots:
+        if run.truth is not None:  # errors need a reference
+            plot_errors(run, sols, folder / "errors.png")
+        plot_trajectory(run, sols, folder / "trajectory.png")
+    if "tum" in export:
+        from .export import write_truth_tum, write_tum
         for mid, sol in sols.items():
-            write_trajectory_csv(sol, tmp / f"trajectory_{mid}.csv")
-        (tmp / "config.toml").write_text(cfg.to_toml())
-        if tuned_toml is not None:
-            (tmp / "tuned.toml").write_text(tuned_toml)
-        if plots:
-            if run.truth is not None:  # errors need a reference
-                plot_errors(run, sols, tmp / "errors.png")
-            plot_trajectory(run, sols, tmp / "trajectory.png")
-        if "tum" in export:
-            from .export import write_truth_tum, write_tum
-            for mid, sol in sols.items():
-                write_tum(sol, run, tmp / f"trajectory_{mid}.tum")
-            if run.truth is not None:
-                write_truth_tum(run, tmp / "truth.tum")
-        if report:
-            from .htmlreport import write_html_report
-            write_html_report(tmp, run, sols, metrics, cfg)
-        (tmp / "table.txt").write_text(format_table(metrics) + "\n")
-        write_json(metrics, tmp / "metrics.json")  # last: its presence marks a complete result
-        if out_dir.exists():
-            for f in sorted(tmp.iterdir()):
-                os.replace(f, out_dir / f.name)
-            tmp.rmdir()
-        else:
-            os.replace(tmp, out_dir)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
-    return out_dir
+            write_tum(sol, run, folder / f"trajectory_{mid}.tum")
+        if run.truth is not None:
+            write_truth_tum(run, folder / "truth.tum")
+    if report:
+        from .htmlreport import write_html_report
+        write_html_report(folder, run, sols, metrics, cfg)
+    (folder / "table.txt").write_text(format_table(metrics) + "\n")
+    write_json(metrics, folder / "metrics.json")

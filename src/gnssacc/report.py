@@ -41,13 +41,19 @@ def write_trajectory_csv(sol: NavSolution, path: Path) -> None:
 
 
 def metrics_dict(run: RecordedRun, sols: dict[str, NavSolution], scores: dict[str, Score], gnss: Score,
-                 extra: dict) -> dict:
-    """The content of ``metrics.json``."""
+                 extra: dict, failed: dict[str, str] | None = None) -> dict:
+    """The content of ``metrics.json``.
+
+    Each entry of ``methods`` has ``status``: ``"ok"`` with the scores and statistics of a
+    solution, or ``"failed"`` with ``error``, the one-line reason, for each of ``failed``
+    (``{method: reason}``), listed after the solutions.
+    """
     methods = {}
     for mid, sol in sols.items():
         sc = scores[mid]
         base = BASELINES.get(mid)
         methods[mid] = {
+            "status": "ok",
             "prmse_m": sc.prmse_m, "hrmse_m": sc.hrmse_m, "prmse_outage_m": sc.prmse_outage_m,
             "rpy_rmse_deg": sc.rpy_rmse_deg, "n_epochs": sc.n_epochs,
             "improvement_pct": improvement_pct(scores[base].prmse_m, sc.prmse_m) if base in scores else None,
@@ -55,10 +61,22 @@ def metrics_dict(run: RecordedRun, sols: dict[str, NavSolution], scores: dict[st
             "realtime_factor": run.duration_s / sol.runtime_s if sol.runtime_s > 0 else None,
             "stats": sol.stats,
         }
+    for mid, reason in (failed or {}).items():
+        methods[mid] = {"status": "failed", "error": reason}
     return {"source": run.name, "where": run.where, "duration_s": run.duration_s, "t_start": run.t_start,
             "gnss_prmse_m": gnss.prmse_m, "gnss_hrmse_m": gnss.hrmse_m, "gnss_n_epochs": gnss.n_epochs,
             "n_fixes": len(run.gnss),
             "meta": run.meta, "methods": methods, **extra}
+
+
+def ok_methods(metrics: dict) -> dict:
+    """The entries of ``metrics["methods"]`` that hold a solution (``status`` not ``"failed"``)."""
+    return {mid: m for mid, m in metrics["methods"].items() if m.get("status", "ok") != "failed"}
+
+
+def failed_methods(metrics: dict) -> dict[str, str]:
+    """``{method: one-line reason}`` of the methods that failed."""
+    return {mid: m.get("error", "") for mid, m in metrics["methods"].items() if m.get("status") == "failed"}
 
 
 def write_json(data: dict, path: Path) -> None:
@@ -87,12 +105,14 @@ def _nis_cell(metrics: dict, mid: str) -> str:
 
 
 def format_table(metrics: dict) -> str:
-    """The comparison table printed by ``gnssacc run``, headed by the window it scores."""
-    outage = any(m["prmse_outage_m"] is not None for m in metrics["methods"].values())
+    """The comparison table printed by ``gnssacc run``, headed by the window it scores; a method
+    that failed has a ``failed: <reason>`` row."""
+    ok = ok_methods(metrics)
+    outage = any(m["prmse_outage_m"] is not None for m in ok.values())
     head = ["method", "PRMSE [m]", "HRMSE [m]"] + (["outage PRMSE [m]"] if outage else []) + \
         ["NIS", "acc gain [%]", "wall [s]", "real-time x"]
     rows = []
-    for mid, m in metrics["methods"].items():
+    for mid, m in ok.items():
         rows.append([mid, _fmt(m["prmse_m"], ".2f"), _fmt(m["hrmse_m"], ".2f")] +
                     ([_fmt(m["prmse_outage_m"], ".2f")] if outage else []) +
                     [_nis_cell(metrics, mid), _fmt(m["improvement_pct"], "+.1f"), f"{m['runtime_s']:.3f}",
@@ -100,10 +120,14 @@ def format_table(metrics: dict) -> str:
     if metrics.get("gnss_prmse_m") is not None:
         rows.append(["gnss (raw fixes)", _fmt(metrics["gnss_prmse_m"], ".2f"), _fmt(metrics["gnss_hrmse_m"], ".2f")] +
                     (["-"] if outage else []) + ["-", "-", "-", "-"])
+    failed = failed_methods(metrics)
     widths = [max(len(str(r[i])) for r in rows + [head]) for i in range(len(head))]
+    widths[0] = max([widths[0]] + [len(mid) for mid in failed])
     line = lambda r: "  ".join(str(c).rjust(w) if i else str(c).ljust(w) for i, (c, w) in enumerate(zip(r, widths)))
+    # A failed row is not cut into columns: its reason runs on after the method id.
+    failed_rows = [f"{mid.ljust(widths[0])}  failed: {reason}" for mid, reason in failed.items()]
     return "\n".join(_window_lines(metrics) + [line(head), line(["-" * w for w in widths])] + [line(r) for r in rows]
-                     + _legend(metrics))
+                     + failed_rows + _legend(metrics))
 
 
 def _window_lines(metrics: dict) -> list[str]:
@@ -112,7 +136,7 @@ def _window_lines(metrics: dict) -> list[str]:
         return []
     t0 = metrics.get("t_start", 0.0)
     frac = (w[1] - w[0]) / metrics["duration_s"] if metrics["duration_s"] > 0 else 1.0
-    n = {m["n_epochs"] for m in metrics["methods"].values()}
+    n = {m["n_epochs"] for m in ok_methods(metrics).values()}
     return [f"scored over t = {w[0] - t0:.1f} .. {w[1] - t0:.1f} s from the start ({100 * frac:.0f} % of the run), "
             f"every row: {'/'.join(str(x) for x in sorted(n))} epochs per method, "
             f"{metrics.get('gnss_n_epochs', '-')} raw fixes"]

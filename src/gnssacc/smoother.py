@@ -25,6 +25,13 @@ consistency figure.
 An ill-posed update (GTSAM's indeterminant-system error) never ends a run: the window is
 re-initialised from the last estimate with priors from its marginal covariances, and the event
 is counted in ``stats``.
+
+Bias random walks are floored at :data:`ACCEL_BIAS_RW_FLOOR` and :data:`GYRO_BIAS_RW_FLOOR` (per
+second) and the start's bias sigmas at the same values: a configured zero (``[imu]
+accel_bias_instability_mg`` or ``gyro_bias_instability_deg_h`` = 0, a constant bias; or a zero
+``*_bias_sigma0_*``, a calibrated one) would give the bias between-factor of
+``CombinedImuFactor`` or the start's prior a zero covariance, which GTSAM cannot factor. The floors are hundreds of times below any real IMU's random walk,
+so they change no estimate that a constant bias would not give.
 """
 from __future__ import annotations
 
@@ -50,6 +57,10 @@ from .zupt import StationaryEpochs, stationary_epochs
 METHODS = {"smoother": False, "smoother-acc": True}
 #: Nodes closer than this are merged (a duplicate time would make a zero-length IMU factor) [s].
 MIN_NODE_DT = 1e-3
+#: Smallest accelerometer bias random walk the smoother uses [m/s^2/sqrt(s)] (~0.1 ug/sqrt(s)).
+ACCEL_BIAS_RW_FLOOR = 1e-6
+#: Smallest gyro bias random walk the smoother uses [rad/s/sqrt(s)] (~0.002 deg/h/sqrt(s)).
+GYRO_BIAS_RW_FLOOR = 1e-8
 
 
 def node_times(t0: float, t_end: float, gnss_t: np.ndarray, max_spacing: float) -> np.ndarray:
@@ -90,8 +101,8 @@ class _ImuModel:
             p = gtsam.PreintegrationCombinedParams.MakeSharedD(self.g)
             p.setAccelerometerCovariance(np.diag(cfg.accel_psd + qa_extra))
             p.setGyroscopeCovariance(np.diag(cfg.gyro_psd + qg_extra))
-            p.setBiasAccCovariance(np.diag(cfg.accel_bias_rw_psd))
-            p.setBiasOmegaCovariance(np.diag(cfg.gyro_bias_rw_psd))
+            p.setBiasAccCovariance(np.diag(np.maximum(cfg.accel_bias_rw_psd, ACCEL_BIAS_RW_FLOOR**2)))
+            p.setBiasOmegaCovariance(np.diag(np.maximum(cfg.gyro_bias_rw_psd, GYRO_BIAS_RW_FLOOR**2)))
             p.setIntegrationCovariance(np.eye(3) * float(cfg["smoother"]["integration_sigma"]) ** 2)
             p.setOmegaCoriolis(self.omega)
             self._cache[key] = p
@@ -121,7 +132,9 @@ def _initial_prior(init: InitialState, cfg: RunConfig) -> tuple[np.ndarray, np.n
     T[6:12, 9:15] = np.eye(6)
     if n > 15:
         T[12:15, 15:18] = -np.eye(3)
-    return T @ P @ T.T, P[3:6, 3:6]
+    cov = T @ P @ T.T
+    cov[6:12, 6:12] += np.diag(np.r_[np.full(3, ACCEL_BIAS_RW_FLOOR), np.full(3, GYRO_BIAS_RW_FLOOR)] ** 2)
+    return cov, P[3:6, 3:6]
 
 
 class _Record:

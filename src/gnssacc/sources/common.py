@@ -25,7 +25,9 @@ def apply_mounting(imu: ImuData, cfg: RunConfig) -> ImuData:
         FRD first) with time stamps on the IMU clock.
     cfg : RunConfig
         ``mounting.imu_to_body_rpy_deg`` (via ``cfg.R_bi``, ``x_b = R_bi @ x_imu``) and
-        ``mounting.imu_time_offset_s`` [s], added to every time stamp.
+        ``mounting.imu_time_offset_s`` [s], added to every time stamp. ``"auto"`` stands for the
+        identity and zero here: the input checks (:mod:`gnssacc.plausibility`) measure and apply
+        them later.
 
     Returns
     -------
@@ -34,10 +36,11 @@ def apply_mounting(imu: ImuData, cfg: RunConfig) -> ImuData:
         the GNSS clock [s].
     """
     R_bi = cfg.R_bi
+    value = cfg["mounting"]["imu_time_offset_s"]
     try:
-        offset_s = float(cfg["mounting"]["imu_time_offset_s"])
+        offset_s = 0.0 if value == "auto" else float(value)
     except (TypeError, ValueError):
-        raise InputError("config", "[mounting] imu_time_offset_s must be a number of seconds") from None
+        raise InputError("config", '[mounting] imu_time_offset_s must be a number of seconds or "auto"') from None
     if not np.isfinite(offset_s):
         raise InputError("config", "[mounting] imu_time_offset_s must be finite")
     # Row vectors: x_b^T = x_imu^T R_bi^T.

@@ -12,12 +12,15 @@ A run directory holds
     down position uncertainty [m] (all three or none; without them ``gnss.default_sigma_m``).
 ``truth.csv`` (optional)
     Columns ``t, lat_deg, lon_deg, h_m``, optionally ``vn, ve, vd`` [m/s] and
-    ``roll_deg, pitch_deg, yaw_deg`` (each group all or none).
+    ``roll_deg, pitch_deg, yaw_deg`` (each group all or none). It may span less than the run:
+    the outputs still cover the whole run, the scores only the truth's span (with a warning).
 ``init.json`` (optional)
     ``{"t", "lat_deg", "lon_deg", "h_m", "vn", "ve", "vd", "roll_deg", "pitch_deg", "yaw_deg",
     "sigma": {"pos_m", "vel_mps", "roll_pitch_deg", "yaw_deg"}}``. ``sigma`` and each of its keys
     are optional (defaults: the first fix's GNSS sigma, 0.5 m/s, 2 deg, 5 deg); ``pos_m`` and
     ``vel_mps`` take a number or N, E, D values, ``roll_pitch_deg`` a number or [roll, pitch].
+    ``t`` must lie in the run: not after the last IMU sample, nor more than
+    :data:`INIT_BEFORE_START_TOLERANCE_S` before the first.
 
 In every CSV file header names are case-insensitive, column order is free, extra columns are
 ignored, and lines starting with ``#`` are comments. All times are seconds; GNSS, truth and
@@ -50,6 +53,8 @@ DEFAULT_SIGMA_VEL_MPS = 0.5
 DEFAULT_SIGMA_ROLL_PITCH_DEG = 2.0
 DEFAULT_SIGMA_YAW_DEG = 5.0
 IMU_FRAMES = ("frd", "flu")
+#: How far before the first IMU sample init.json's time may be (a state taken at the first fix) [s].
+INIT_BEFORE_START_TOLERANCE_S = 1.0
 
 
 # --- reading ------------------------------------------------------------------------------------------
@@ -89,6 +94,8 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd") -> RecordedRun:
     if not root.is_dir():
         raise InputError(where, "not a directory: a CSV run is a directory holding imu.csv and gnss.csv")
     for name in ("imu.csv", "gnss.csv"):
+        if (root / name).is_dir():
+            raise InputError(str(root / name), "is a directory, expected a CSV file")
         if not (root / name).is_file():
             raise InputError(str(root / name), f"file not found: a CSV run directory needs {name}")
     max_bad = float(cfg["data"]["max_bad_fraction"])
@@ -97,10 +104,23 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd") -> RecordedRun:
                       max_bad)
     truth = _read_truth(root / "truth.csv", max_bad) if (root / "truth.csv").exists() else None
     init = _read_init(root / "init.json", gnss.sigma_ned[0]) if (root / "init.json").exists() else None
+    if init is not None:
+        check_init_time(init.t, imu.t[0], imu.t[-1], str(root / "init.json"))
     run = RecordedRun(name=root.resolve().name, where=where, imu=imu, gnss=gnss,
                       origin=LocalTangentFrame(gnss.lat[0], gnss.lon[0], gnss.h[0]),
                       truth=truth, init=init, meta={"source": "csv", "imu_frame": frame})
     return run.validate()
+
+
+def check_init_time(t: float, t_start: float, t_end: float, where: str) -> None:
+    """Raise :class:`InputError` unless the initial time lies in the run: not after its last IMU
+    sample, nor more than :data:`INIT_BEFORE_START_TOLERANCE_S` before its first."""
+    span = f"the run's IMU data span t = {t_start:.3f} .. {t_end:.3f} s"
+    if t > t_end:
+        raise InputError(where, f"time t = {t:.3f} s is after the run's end: {span}")
+    if t < t_start - INIT_BEFORE_START_TOLERANCE_S:
+        raise InputError(where, f"time t = {t:.3f} s is {t_start - t:.3f} s before the run's start "
+                                f"(tolerance {INIT_BEFORE_START_TOLERANCE_S:g} s): {span}")
 
 
 def _columns(tab: dict, names) -> np.ndarray:

@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config import DEG, RunConfig, _vec3
+from ..config_check import FIX_MAPPING_FIELDS
 from ..earth import LocalTangentFrame
 from ..errors import InputError, warn_data
 from ..run import GnssFixes, ImuData, InitialState, RecordedRun, Truth, drop_nonfinite
@@ -66,8 +67,7 @@ FIX_MAPPINGS: dict[str, dict] = {
         "stamp": None, "status": None, "no_fix_values": [],
     },
 }
-_MAPPING_KEYS = {"lat", "lon", "height", "latlon_scale_deg", "height_scale_m", "sigma_n", "sigma_e", "sigma_d",
-                 "sigma_scale_m", "stamp", "status", "no_fix_values"}
+_MAPPING_KEYS = set(FIX_MAPPING_FIELDS)
 _MAPPING_DEFAULTS = {"latlon_scale_deg": 1.0, "height_scale_m": 1.0, "sigma_n": None, "sigma_e": None,
                      "sigma_d": None, "sigma_scale_m": 1.0, "stamp": None, "status": None, "no_fix_values": []}
 
@@ -256,15 +256,68 @@ def select_topics(stats: list[TopicStat], where: str, *, imu_topic=None, gnss_to
 
 # --- reading ----------------------------------------------------------------------------------------
 
-def _open_reader(path: Path):
-    from rosbags.highlevel import AnyReader
+#: First bytes of each bag file type (ROS 1 format 2.0, MCAP, and the sqlite3 storage of ROS 2).
+MAGIC = {".bag": b"#ROSBAG V2.0\n", ".mcap": b"\x89MCAP0\r\n", ".db3": b"SQLite format 3\x00"}
+#: Storage files of a ROS 2 bag directory (possibly compressed: ``x.db3.zstd``).
+STORAGE_SUFFIXES = (".db3", ".mcap", ".zstd")
+
+
+def storage_files(folder: Path) -> list[str]:
+    """Names of the ROS 2 storage files (``.db3``, ``.mcap``, compressed ``.zstd``) in a folder."""
+    return sorted(p.name for p in Path(folder).iterdir() if p.is_file() and p.name.endswith(STORAGE_SUFFIXES))
+
+
+def check_bag_path(path: Path) -> None:
+    """Raise :class:`InputError` unless ``path`` looks like a bag rosbags can open.
+
+    A ``.bag``, ``.mcap`` or ``.db3`` file must start with its format's magic bytes (so a text file or an
+    empty file named ``.bag`` is refused with what it starts with); a ROS 2 bag directory needs
+    ``metadata.yaml`` (without it, ``ros2 bag reindex`` rebuilds it) and a storage file.
+    """
     where = str(path)
     if not path.exists():
         raise InputError(where, "no such file or directory")
-    if path.is_dir() and not (path / "metadata.yaml").exists():
-        raise InputError(where, "not a ROS 2 bag directory (no metadata.yaml)")
-    if path.is_file() and path.suffix not in (".bag", ".mcap", ".db3"):
-        raise InputError(where, f"not a ROS bag: expected .bag, .mcap or a ROS 2 bag directory, got {path.name}")
+    if path.is_dir():
+        found = storage_files(path)
+        if not (path / "metadata.yaml").is_file():
+            if found:
+                raise InputError(where, f"looks like a ROS 2 bag without its metadata.yaml (holds {', '.join(found[:3])})"
+                                        f": rebuild it with 'ros2 bag reindex {path}', then try again")
+            raise InputError(where, "not a ROS 2 bag directory (no metadata.yaml)")
+        if not found:
+            raise InputError(where, "a ROS 2 bag directory with metadata.yaml but no storage file (.db3 or .mcap)")
+        return
+    if path.suffix not in MAGIC:
+        raise InputError(where, f"not a ROS bag: expected .bag, .mcap, .db3 or a ROS 2 bag directory, got {path.name}")
+    _check_magic(path, where)
+
+
+def _check_magic(path: Path, where: str) -> None:
+    """The file starts with the magic bytes its suffix promises (else InputError saying what it is)."""
+    with open(path, "rb") as fh:
+        head = fh.read(16)
+    if not head:
+        raise InputError(where, "empty file (0 bytes): not a ROS bag")
+    magic = MAGIC[path.suffix]
+    if head.startswith(magic):
+        return
+    kind = {".bag": "a ROS 1 bag (format 2.0)", ".mcap": "an MCAP file", ".db3": "an sqlite3 database"}[path.suffix]
+    other = next((s for s, m in MAGIC.items() if head.startswith(m)), None)
+    if other == ".mcap":
+        hint = "; it is an MCAP file: rename it to .mcap"
+    elif other == ".db3":
+        hint = "; it is an sqlite3 database: rename it to .db3"
+    elif head.startswith(b"#ROSBAG V"):
+        hint = f"; ROS 1 bag format {head[9:12].decode(errors='replace')} is not supported (only 2.0)"
+    else:
+        hint = ""
+    raise InputError(where, f"not {kind}: it starts with {head!r}, expected {magic!r}{hint}")
+
+
+def _open_reader(path: Path):
+    from rosbags.highlevel import AnyReader
+    where = str(path)
+    check_bag_path(path)
     try:
         reader = AnyReader([path])
         reader.open()
@@ -314,6 +367,7 @@ class _Ros1Salvage:
         self.good_bytes = 0
         self.start_time, self.end_time = 2**63 - 1, 0
         self.damaged = None
+        self.n_chunks = self.message_count = 0
         self._decomp = {"none": lambda b: b, "bz2": bz2.decompress}
         try:
             import lz4.frame
@@ -529,6 +583,17 @@ def _custom_fix_row(msg, t, col: _Collector, m: dict, default_sigma: np.ndarray)
             float(_get(msg, m["height"])) * float(m["height_scale_m"]), *sig)
 
 
+def _mapped_fix_row(msg, t, col: _Collector, m: dict, default_sigma: np.ndarray, where: str, topic: str, typ: str):
+    """:func:`_custom_fix_row`, with a mapping that does not fit the message an :class:`InputError`."""
+    try:
+        return _custom_fix_row(msg, t, col, m, default_sigma)
+    except (AttributeError, TypeError, ValueError) as err:
+        raise InputError(where, f"topic {topic}: the field mapping of {typ} does not fit its messages: "
+                                f"{_one_line(err)} (fields of the message: "
+                                f"{', '.join(k for k in getattr(msg, '__dataclass_fields__', {}) if not k.startswith('_'))})"
+                         ) from None
+
+
 enu_flu_to_ned_frd = ros_to_R_nb  # name kept for callers of this module
 
 
@@ -704,7 +769,7 @@ def load_bag_run(path, cfg: RunConfig, *, imu_topic: str | None = None, gnss_top
                 m = dict(mappings[typ])
                 if time_source == "receive":
                     m["stamp"] = None
-                row = _custom_fix_row(msg, t, col, m, default_sigma)
+                row = _mapped_fix_row(msg, t, col, m, default_sigma, where, topic, typ)
                 if row is not None:
                     col.add(row)
         if damaged is not None:
