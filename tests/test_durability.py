@@ -218,11 +218,16 @@ def test_two_runs_started_together(run_dir, tmp_path):
         p.stdout.close()
         p.stderr.close()
     codes = sorted(c for c, _ in res)
-    assert codes == [0, 2], res
-    loser = next(err for c, err in res if c == 2)
-    assert "another gnssacc run is writing" in loser
-    winner = "ekf" if res[0][0] == 0 else "ekf-acc"
-    _assert_complete(out, [winner])
+    # Overlapping runs: one wins, the other is refused at once. On a loaded machine the second may
+    # start only after the first has finished: then both succeed, one after the other. Either way
+    # the folder holds exactly one complete result, never a mix of the two (the lock itself is
+    # tested deterministically above).
+    assert codes in ([0, 2], [0, 0]), res
+    if codes == [0, 2]:
+        assert "another gnssacc run is writing" in next(err for c, err in res if c == 2)
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert set(metrics["methods"]) in ({"ekf"}, {"ekf-acc"})
+    _assert_complete(out, list(metrics["methods"]))
     assert _leftovers(tmp_path) == []
 
 
@@ -376,7 +381,8 @@ def test_sigterm_at_random_moments_leaves_old_or_new(run_dir, tmp_path, capsys):
         proc.send_signal(signal.SIGTERM)
         stdout, stderr = proc.communicate(timeout=60)
         said = [ln for ln in stderr.splitlines() if ln.startswith("gnssacc: interrupted:")]
-        assert "Traceback" not in stderr and _leftovers(tmp_path) == []
+        assert "Traceback" not in stderr, stderr
+        assert _leftovers(tmp_path) == [], (_leftovers(tmp_path), stderr)
         finished = "results: " in stdout   # then a SIGTERM during the interpreter's exit just ends it
         if finished or said == [f"gnssacc: interrupted: {out} holds the new complete result"]:
             assert proc.returncode in ((0, -signal.SIGTERM) if finished else (143,))

@@ -146,6 +146,7 @@ def _lock_out(path, args, stack, held):
 
 def _run_locked(args, stack, held) -> int:
     """Compute and write; exit code 0 when at least one method succeeded, 1 when none did."""
+    from .outdir import Terminated, terminate_requested
     from .pipeline import compare, default_out_dir, load_source, parse_methods, with_outages, write_result_files
     from .report import failed_methods
 
@@ -158,6 +159,8 @@ def _run_locked(args, stack, held) -> int:
     run = with_outages(run, args.outage, args.outage_every)
     target = target or _lock_out(default_out_dir(run), args, stack, held)
     metrics, sols, ident = compare(run, cfg, methods, tune=args.tune, show_progress=True)
+    if terminate_requested():   # SIGTERM inside compiled code may have surfaced as a method's failure
+        raise Terminated()
     if not sols:
         reasons = "; ".join(f"{m}: {r}" for m, r in failed_methods(metrics).items())
         print(f"gnssacc: error: every method failed ({reasons}); {target.kept()}", file=sys.stderr)
@@ -166,7 +169,7 @@ def _run_locked(args, stack, held) -> int:
     out = target.replace(lambda folder: write_result_files(
         folder, ident.run, sols, metrics, ident.cfg, plots=not args.no_plots, report=args.report,
         export=tuple(args.export), tuned_toml=tuned))
-    _print_summary(run, cfg, metrics, ident, out)
+    _print_summary(ident.run, cfg, metrics, ident, out)
     return 0
 
 

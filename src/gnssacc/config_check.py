@@ -113,6 +113,7 @@ CHOICES: dict[tuple[str, str], tuple] = {
     ("smoother", "factorization"): ("QR", "CHOLESKY"),
     ("tune", "mode"): ("auto", "none"),
     ("tune", "likelihood"): ("position", "position+accel"),
+    ("checks", "repair"): ("never", "auto"),
 }
 #: Choices compared in upper case (the code upper-cases the value).
 UPPER_CASE = {("smoother", "factorization")}

@@ -11,11 +11,16 @@ r"""The GNSS fixes checked against physics and against the IMU (part of the inpu
 * **Radians** (:func:`latlon_radians`): latitude and longitude in radians, read as degrees, put
   every fix within 1.57 deg of latitude and 3.14 deg of longitude of (0, 0): the open sea of the
   Gulf of Guinea, with no road. The IMU decides: the fixes' accelerations are then 57.3 times
-  smaller than those the IMU measures (:class:`gnssacc.motionmatch.HorizontalFit`).
+  smaller than those the IMU measures (:class:`gnssacc.motionmatch.HorizontalFit`), within the
+  :data:`SCALE_RANGE` a track in degrees must meet (a UGV that reverses for a sixth of its run
+  shows 0.6-0.75 of the true ratio: its velocity frame turns by 180 deg, the IMU's axes do not).
 * **Mirror image** (:func:`mirror_image`): swapped latitude and longitude, or a lost hemisphere
   sign, mirror the track: the fixes then turn left where the gyro turns right, and their
   acceleration fits the accelerometer's only as a mirror image. Both IMU sensors must disagree
-  with the fixes (when only one does, the IMU's own axes disagree in handedness).
+  with the fixes (when only one does, the IMU's own axes disagree in handedness). For the gyro
+  this is a question of sign alone (:data:`SIGN_SIGMAS`), not of the slope's size: swapping
+  latitude and longitude also stretches the track by cos(lat) / cos(lon) across its axes, which
+  with a slow vehicle's already low slope (0.8-0.9) takes it out of any band around -1.
 * **Scale** (:func:`gnss_scale`): otherwise the fixes' accelerations must match the IMU's within
   :data:`SCALE_RANGE` (the ratio's noise, attitude and slope effects stay within 20-30 %).
 * **Initial state** (:func:`init_position`): a given start (``init.json``) must lie near the
@@ -31,7 +36,6 @@ from .earth import LocalTangentFrame
 from .findings import Finding
 from .motionmatch import HorizontalFit, LateralFit, TurnFit
 from .run import RecordedRun
-from .unitcheck import SLOPE_TOLERANCE
 
 FIX_INTERVAL_S = (0.005, 60.0)
 MIN_FIXES = 3
@@ -43,6 +47,9 @@ MIN_RHO = 0.5
 MIRROR_MARGIN = 0.3
 #: Accepted ratio of the IMU's to the fixes' horizontal acceleration.
 SCALE_RANGE = (0.5, 2.0)
+#: The gyro turns with (or against) the fixes when the heading-rate slope is this many sigma above
+#: (below) zero: clean runs give 3-5 sigma on a slow UGV's two minutes, 7-9 on three, 16-25 on a car's.
+SIGN_SIGMAS = 3.0
 
 
 def gnss_time_units(t: np.ndarray, where: str) -> Finding | None:
@@ -109,7 +116,7 @@ def latlon_radians(run: RecordedRun, fit: HorizontalFit | None, where: str) -> F
     if decided and SCALE_RANGE[0] <= fit.scale <= SCALE_RANGE[1]:
         return None                        # the IMU agrees with the track as it is: a real place
     fix = "multiply the lat_deg and lon_deg columns by 180/pi"
-    if decided and abs(np.log(fit.scale * RAD_PER_DEG)) <= np.log(1.5):
+    if decided and SCALE_RANGE[0] <= fit.scale * RAD_PER_DEG <= SCALE_RANGE[1]:
         return Finding("latlon", where, f"{head} and the IMU measures {fit.scale:.3g} times the track's accelerations: "
                        f"the lat_deg and lon_deg columns are in radians", fix, _radians_to_degrees,
                        "multiplied latitude and longitude by 180/pi", details={"accel_ratio": fit.scale})
@@ -118,10 +125,12 @@ def latlon_radians(run: RecordedRun, fit: HorizontalFit | None, where: str) -> F
 
 
 def _slope_side(tf: TurnFit | None) -> int:
-    """+1 gyro agrees with the course rate, -1 mirrored, 0 undecided (slope in rad/s)."""
-    if tf is None or tf.sigma_k > 0.15:
+    """+1 gyro turns with the course rate, -1 against it (mirrored), 0 undecided: the sign of the
+    slope, when it stands :data:`SIGN_SIGMAS` clear of zero (its size is the gyro units' check)."""
+    if tf is None or not tf.sigma_k > 0:
         return 0
-    return 1 if abs(tf.k - 1.0) <= SLOPE_TOLERANCE else (-1 if abs(tf.k + 1.0) <= SLOPE_TOLERANCE else 0)
+    z = tf.k / tf.sigma_k
+    return 1 if z >= SIGN_SIGMAS else (-1 if z <= -SIGN_SIGMAS else 0)
 
 
 def _fit_side(fit: HorizontalFit | None) -> int:

@@ -17,8 +17,13 @@ GNSS side (:func:`gnss_kinematics`)
     velocity and an acceleration per window centre. A least-squares quadratic's acceleration is
     the true acceleration averaged with the biweight kernel ``(1 - s^2)^2`` over the window
     (integrate the fit's weights by parts twice), so the IMU's horizontal specific force averaged
-    with the same kernel (:func:`smooth`) is directly comparable, up to a rotation about the
-    vertical (the heading) and the tilt part.
+    with the same kernel is directly comparable, up to a rotation about the vertical (the heading)
+    and the tilt part. The fits average in a fixed (north-east) frame, so the IMU side is averaged
+    in a fixed frame too (:func:`smooth_horizontal`: turned by the heading the gyro integrates,
+    averaged, turned back): a slow vehicle's window of half a minute holds whole turns, and an
+    average over the IMU's own turning axes would mix the accelerations before and after them.
+    That frame needs a gyro in rad/s of the accelerometer's handedness, which the input checks
+    establish only later: they use whichever of the two frames matches the fixes better.
 Velocity frame (:func:`velocity_frame`)
     The GNSS acceleration resolved along and across the GNSS velocity, ``a_t + i a_n`` as a
     complex number (``a_n`` positive to the right of travel), is, for a vehicle that moves along
@@ -68,6 +73,10 @@ class LevelledImu:
         Angular rate about ``down`` [rad/s] (IMU units): the heading rate, positive turning right.
     f_mean_norm : float
         Norm of the run's mean specific force [m/s^2] (IMU units).
+    ground_frame : bool
+        Whether :func:`smooth_horizontal` averages in a frame fixed on the ground (turned by the
+        heading the gyro integrates), or in the IMU axes (for a gyro whose heading rate cannot
+        turn that frame: not in rad/s, or of the other handedness than the accelerometer).
     """
 
     t0: float
@@ -78,6 +87,7 @@ class LevelledImu:
     f_h: np.ndarray
     omega_v: np.ndarray
     f_mean_norm: float
+    ground_frame: bool = True
 
     @property
     def t(self) -> np.ndarray:
@@ -164,6 +174,33 @@ def smooth(x: np.ndarray, step: float, window_s: float, kernel: str = "biweight"
     num = np.column_stack([fftconvolve(x2[:, i], k, "same") for i in range(x2.shape[1])])
     den = fftconvolve(np.ones(len(x)), k, "same")[:, None]
     return (num / np.maximum(den, 1e-12)).reshape(x.shape)
+
+
+def smooth_horizontal(lev: LevelledImu, window_s: float) -> np.ndarray:
+    """The levelled horizontal specific force averaged like the GNSS fits average the acceleration:
+    in a frame fixed on the ground, then resolved in the IMU axes of each grid point (module notes).
+
+    The frame is the IMU's turned back by the heading the gyro integrates about ``down`` (a gyro
+    bias turns it by a few degrees over a window, which the average does not notice); with
+    ``lev.ground_frame`` false, the IMU axes themselves.
+
+    Parameters
+    ----------
+    lev : LevelledImu
+    window_s : float
+        Kernel width [s] (biweight, :func:`smooth`).
+
+    Returns
+    -------
+    ndarray, shape (n, 2)
+        Along ``e1``, ``e2`` [m/s^2] (IMU units).
+    """
+    if not lev.ground_frame:
+        return smooth(lev.f_h, lev.step, window_s)
+    psi = np.cumsum(lev.omega_v) * lev.step
+    turn = np.exp(1j * psi)
+    f = smooth((lev.f_h[:, 0] + 1j * lev.f_h[:, 1]) * turn, lev.step, window_s) / turn
+    return np.column_stack([f.real, f.imag])
 
 
 def at_times(t0: float, step: float, x: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -410,7 +447,7 @@ def horizontal_fit(lev: LevelledImu, kin: GnssKinematics, offset_s: float) -> Ho
     m = _aligned(lev, kin, offset_s, moving)
     if m.sum() < MIN_FIXES:
         return None
-    x = at_times(lev.t0, lev.step, smooth(lev.f_h, lev.step, kin.window_s), kin.t[m] - offset_s)
+    x = at_times(lev.t0, lev.step, smooth_horizontal(lev, kin.window_s), kin.t[m] - offset_s)
     return complex_fit(x[:, 0] + 1j * x[:, 1], z_g[m], kin.sigma_a[m] ** 2, _n_eff(kin, int(m.sum())))
 
 

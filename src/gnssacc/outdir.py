@@ -52,14 +52,26 @@ class Terminated(BaseException):
     """SIGTERM, raised in the main thread; like ``KeyboardInterrupt``, not an ``Exception``."""
 
 
+_TERMINATE_REQUESTED = [False]
+
+
 def _raise_terminated(signum, frame):
+    _TERMINATE_REQUESTED[0] = True
     raise Terminated()
+
+
+def terminate_requested() -> bool:
+    """Whether SIGTERM arrived inside :func:`sigterm_raises`: a signal that lands inside compiled
+    code (numba) can surface as another exception, which a caller that isolates failures would
+    otherwise record as an ordinary error."""
+    return _TERMINATE_REQUESTED[0]
 
 
 @contextlib.contextmanager
 def sigterm_raises():
     """Within the block, SIGTERM raises :class:`Terminated` (the previous handler is restored).
     Outside the main thread (where handlers cannot be set) this does nothing."""
+    _TERMINATE_REQUESTED[0] = False
     try:
         old = (signal.signal(signal.SIGTERM, _raise_terminated),)
     except ValueError:

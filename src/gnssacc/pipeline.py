@@ -198,6 +198,7 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
     """
     jit_s = mechanization.warm_up()
     ident = identify(run, cfg, tune)
+    run = ident.run   # as the input checks left it: repaired units, the measured clock offset applied
     failed: dict[str, str] = {}
     sols = run_methods(run, cfg, methods, ident=ident, show_progress=show_progress, failures=failed)
     window = scored_window(run, sols)

@@ -178,12 +178,20 @@ class Motion:
 
 
 def measure_motion(run: RecordedRun) -> Motion:
-    """The comparisons of :class:`Motion` for a run (IMU and fixes as they are)."""
+    """The comparisons of :class:`Motion` for a run (IMU and fixes as they are).
+
+    The IMU's horizontal specific force is averaged in a frame fixed on the ground, which needs
+    the gyro's heading rate in rad/s, or in the IMU axes (:func:`gnssacc.motionmatch.smooth_horizontal`):
+    the gyro is not checked yet, so whichever gives the higher clock-offset correlation peak is used."""
     lev = level_imu(run.imu)
     kin = choose_window(run.gnss, run.origin, run.duration_s)
     if kin is None:
         return Motion(lev, None, OffsetEstimate(0.0, float("inf"), False))
     off = coarse_offset(lev, kin)
+    imu_axes = replace(lev, ground_frame=False)
+    off_imu = coarse_offset(imu_axes, kin)
+    if np.nan_to_num(off_imu.rho, nan=-1.0) > np.nan_to_num(off.rho, nan=-1.0):
+        lev, off = imu_axes, off_imu
     tau = off.offset_s
     return Motion(lev, kin, off, horizontal_fit(lev, kin, tau), turn_rate_fit(lev, kin, tau), lateral_fit(lev, kin, tau))
 
@@ -265,16 +273,28 @@ def offset_step(run: RecordedRun, cfg: RunConfig, policy: Policy, m: Motion, fin
         if est is not None:
             settle(run, _offset_error(est, float(cfg["mounting"]["imu_time_offset_s"]), where), policy, findings)
         return run, cfg, left
-    if not off.determined:
-        est, text = off, "the recording has too little motion to measure it; 0 s assumed"
-    else:
-        est = refine_offset(shifted(run, off.offset_s), cfg, off) or off
-        text = f"measured {est.text()}, added to the IMU time stamps"
+    est, apply, text = _auto_offset(run, cfg, off)
+    applied = est.offset_s if apply else 0.0
     findings.append(Finding("time_offset", where, f"IMU-to-GNSS clock offset: {text}", action="applied",
-                            details={"offset_s": est.offset_s, "sigma_s": est.sigma_s}))
+                            details={"offset_s": applied, "measured_s": est.offset_s if est else None,
+                                     "sigma_s": est.sigma_s if est else float("inf")}))
     warn_data(where, f'[mounting] imu_time_offset_s = "auto": {text}')
-    cfg = cfg.with_values({"mounting": {"imu_time_offset_s": round(float(est.offset_s), 4)}}, "input checks")
-    return shifted(run, est.offset_s), cfg, float(est.offset_s)
+    cfg = cfg.with_values({"mounting": {"imu_time_offset_s": round(float(applied), 4)}}, "input checks")
+    return (shifted(run, applied), cfg, float(applied)) if apply else (run, cfg, left)
+
+
+def _auto_offset(run: RecordedRun, cfg: RunConfig, off: OffsetEstimate) -> tuple[OffsetEstimate | None, bool, str]:
+    """The measured offset (``None`` without enough motion), whether ``"auto"`` applies it, and
+    what to say: applied when the data tell it from zero (:data:`ERROR_SIGMAS` sigma, the evidence
+    an error needs), else 0 s kept, so that a synchronised recording with noisy fixes is not
+    shifted by the estimate's own noise."""
+    if not off.determined:
+        return None, False, "the recording has too little motion to measure it; 0 s assumed"
+    est = refine_offset(shifted(run, off.offset_s), cfg, off) or off
+    if abs(est.offset_s) > ERROR_SIGMAS * est.sigma_s:
+        return est, True, f"measured {est.text()}, added to the IMU time stamps"
+    return est, False, (f"measured {est.text()}, not distinguishable from 0 s (that needs {ERROR_SIGMAS:g} sigma); "
+                        f"0 s kept")
 
 
 def _axis_name(v: np.ndarray) -> str:

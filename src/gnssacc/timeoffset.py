@@ -8,8 +8,9 @@ Two stages:
 1. **Cross-correlation** (:func:`coarse_offset`), searching +-``max_offset_s`` (60 s). The signals
    are those of :mod:`gnssacc.motionmatch`, which need no attitude, mounting or trusted units:
    first the magnitude of the GNSS-derived horizontal acceleration against the magnitude of the
-   IMU's horizontal specific force, smoothed with the same kernel, on a 0.05 s lag grid (invariant
-   to the heading, the mounting, mirror images and unit scale factors); then, within +-1 s of
+   IMU's horizontal specific force, smoothed with the same kernel in a frame fixed on the ground
+   (:func:`gnssacc.motionmatch.smooth_horizontal`), on a 0.05 s lag grid (invariant to the
+   heading, the mounting, mirror images and unit scale factors); then, within +-1 s of
    that peak at 10 ms, the complex correlation of the two in the GNSS velocity frame (the signs of
    the along- and across-track parts too; direct or mirrored, whichever fits). Its uncertainty is
    a block jackknife: the run is cut into :data:`JACKKNIFE_BLOCKS` pieces and the peak found
@@ -18,7 +19,8 @@ Two stages:
 2. **Innovation likelihood** (:func:`refine_offset`): the EKF (position updates, the configured
    noise) is run with the IMU shifted by ``delta`` and the log-likelihood of its position
    innovations is maximised over ``delta`` within a bracket around stage 1 (scipy's bounded
-   ``minimize_scalar``); the uncertainty comes from the curvature of the log-likelihood. This uses
+   ``minimize_scalar``); the uncertainty comes from the curvature of the log-likelihood over a
+   step of about two sigma (:data:`CURVATURE_DROP`: it is jagged on a smaller scale). This uses
    all the information the fixes hold and is run only when the offset is to be applied
    (``"auto"``) or stage 1 contradicts the configured offset.
 
@@ -33,7 +35,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .config import RunConfig
-from .motionmatch import GnssKinematics, LevelledImu, at_times, smooth, velocity_frame
+from .motionmatch import GnssKinematics, LevelledImu, at_times, smooth_horizontal, velocity_frame
 from .quality import check_imu
 from .run import ImuData, RecordedRun
 from .stationary import detect_stationary, params_from_config
@@ -76,6 +78,11 @@ STAGE1_MODEL_SIGMA_S = 0.1
 #: Position innovations of the first seconds after the EKF start are not scored by stage 2: the
 #: start's own errors (the same for every shift) settle there [s].
 BURN_IN_S = 10.0
+#: Stage 2's uncertainty is the curvature of the log-likelihood over a step that lowers it by this
+#: much on average (a 2-sigma step), from a parabola through five points. On a smaller scale the
+#: log-likelihood is jagged: by ~1.5 within 20 ms on a 3-minute slow-UGV run with a consumer IMU and
+#: 3 m fixes, where the step a drop of 1 chose gave a sigma of 12 ms for an error of 0.2 s.
+CURVATURE_DROP = 2.0
 #: Stage 2 searches stage 1's estimate +- this many of its sigmas, within the bounds below [s].
 BRACKET_SIGMAS = 4.0
 BRACKET_MIN_S, BRACKET_MAX_S = 0.5, 2.0
@@ -197,7 +204,7 @@ def coarse_offset(lev: LevelledImu, kin: GnssKinematics, max_offset_s: float = M
     if kin is None or len(kin) < MIN_CENTRES or not kin.snr >= MIN_SNR:
         return none
     W = kin.window_s
-    fh_s = smooth(lev.f_h, lev.step, W)
+    fh_s = smooth_horizontal(lev, W)
     lags = np.arange(-max_offset_s, max_offset_s + 1e-9, max(COARSE_STEP_S, COARSE_STEP_FRACTION * W))
     rho = _magnitude_rho(lev, np.hypot(fh_s[:, 0], fh_s[:, 1]), kin, lags, 0.5 * W)
     if np.all(np.isnan(rho)):
@@ -225,14 +232,24 @@ def shifted(run: RecordedRun, delta_s: float) -> RecordedRun:
 class _ShiftLikelihood:
     """Negative log-likelihood of the EKF's position innovations with the IMU shifted by ``delta``,
     over a fixed set of fixes (those at least :data:`BURN_IN_S` after the start and inside the IMU
-    span for every shift of the bracket), from one start state."""
+    span for every shift of the bracket), from one start state.
+
+    The start lies where the IMU has data for every shift of the bracket (a given ``run.init``
+    when it does, else the yaw bank's start on the IMU from ``half_width_s`` after its first
+    sample): a filter started before the shifted IMU's first sample pays for the shift with its
+    whole start, which pins the likelihood's maximum to the unshifted IMU, i.e. to stage 1."""
 
     def __init__(self, run: RecordedRun, cfg: RunConfig, half_width_s: float):
         from .yawbank import select_yaw  # the bank runs the EKF, which the checks precede
 
         quality = check_imu(run.imu, cfg)
-        stationary = detect_stationary(run.imu, run.gnss, run.origin, params_from_config(cfg))
-        self.init = run.init or select_yaw(run, cfg, stationary, quality).init
+        t_first = run.t_start + half_width_s
+        if run.init is not None and float(run.init.t) >= t_first:
+            self.init = run.init
+        else:
+            late = replace(run, imu=run.imu.select(run.imu.t >= t_first), init=None)
+            stationary = detect_stationary(late.imu, late.gnss, late.origin, params_from_config(cfg))
+            self.init = select_yaw(late, cfg, stationary, check_imu(late.imu, cfg)).init
         self.run, self.cfg, self.quality = run, cfg, quality
         self.t_lo = max(float(self.init.t), run.t_start + half_width_s) + BURN_IN_S
         self.t_hi = run.t_end - half_width_s
@@ -278,14 +295,19 @@ def refine_offset(run: RecordedRun, cfg: RunConfig, start: OffsetEstimate) -> Of
     d, f0 = float(res.x), float(res.fun)
     if not np.isfinite(f0) or abs(d) > 0.9 * hw:
         return None
-    # Curvature of the log-likelihood: a step that changes it by at least ~1 (its noise is far below).
+    # Curvature of the log-likelihood over a step that lowers it by CURVATURE_DROP on average, from a
+    # parabola fitted to five points (module notes: it is jagged on a smaller scale).
     h = 0.01
     while True:
         fp, fm = cost(d + h), cost(d - h)
-        if min(fp, fm) - f0 >= 1.0 or h >= 0.25 * hw:
+        if 0.5 * (fp + fm) - f0 >= CURVATURE_DROP or h >= 0.25 * hw:
             break
         h *= 2.0
-    curv = (fp + fm - 2.0 * f0) / h**2
+    x = np.array([-h, -0.5 * h, 0.0, 0.5 * h, h])
+    y = np.array([fm, cost(d - 0.5 * h), f0, cost(d + 0.5 * h), fp])
+    if not np.all(np.isfinite(y)):
+        return None
+    curv = 2.0 * float(np.polyfit(x, y, 2)[0])
     if not (curv > 0 and np.isfinite(curv)):
         return None
     return replace(start, offset_s=start.offset_s + d, sigma_s=max(float(1.0 / np.sqrt(curv)), 0.001),

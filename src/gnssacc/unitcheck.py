@@ -15,7 +15,13 @@ r"""Units of the IMU data, checked against physics and the GNSS fixes (part of t
   (:func:`gnssacc.motionmatch.turn_rate_fit`): the slope is 1 for rad/s and pi/180 = 0.0175 for
   deg/s. Course and heading rates differ by side slip and the smoothing, and a gyro's scale
   factor by < 1 %: +-30 % is accepted. A slope of -1 is a mirrored pair (GNSS or IMU axes, see
-  :mod:`gnssacc.gnsscheck`). With too little turning, a parked vehicle's gyro reading above
+  :mod:`gnssacc.gnsscheck`). A slope that fits neither unit is reported only when it is precise
+  (:data:`SLOPE_MAX_REL_SIGMA`) and positive: a negative one is a mirror image, which also
+  changes its size (swapped latitude and longitude stretch the track by cos(lat) / cos(lon)),
+  and is left to :func:`gnssacc.gnsscheck.mirror_image`. deg/s needs less, since rad/s lies 57
+  times away: a slope in the deg/s band that stands :data:`DEG_SLOPE_MIN_SIGMAS` sigma clear of
+  zero (the gyro follows the turns) cannot come from a rad/s gyro (a slow UGV's 3-minute run
+  gives a 12-16 % sigma). With too little turning, a parked vehicle's gyro reading above
   :data:`REST_RATE_MAX_RPS` (no MEMS turn-on bias comes near) points to deg/s.
 """
 from __future__ import annotations
@@ -37,8 +43,11 @@ TIME_UNITS = ((1e-3, "milliseconds", "1000"), (1e-6, "microseconds", "1e6"), (1e
 GRAVITY_TOLERANCE = 0.10
 #: Accepted deviation of the gyro/course slope from 1 (or from pi/180 for deg/s).
 SLOPE_TOLERANCE = 0.30
-#: Largest relative 1-sigma of the slope for a verdict.
+#: Largest relative 1-sigma of the slope for a verdict other than deg/s.
 SLOPE_MAX_REL_SIGMA = 0.15
+#: A slope in the deg/s band is that verdict when it is this many sigma from zero (module notes):
+#: a rad/s gyro's slope (0.7-1.3) would then lie more than a hundred sigma away.
+DEG_SLOPE_MIN_SIGMAS = 4.0
 #: Largest plausible mean angular rate of a parked vehicle [rad/s] (5.7 deg/s): MEMS turn-on
 #: biases stay below ~2 deg/s, the earth turns at 0.004 deg/s.
 REST_RATE_MAX_RPS = 0.1
@@ -127,21 +136,23 @@ def gyro_units(tf: TurnFit | None, rest_rate: float | None, where: str) -> Findi
         Median norm of the angular rate while the GNSS shows the vehicle at rest [IMU units].
     """
     deg = np.pi / 180.0
-    if tf is not None and abs(tf.k) > 0 and tf.sigma_k <= SLOPE_MAX_REL_SIGMA * abs(tf.k):
+    if tf is not None and abs(tf.k) > 0:
         k = tf.k
+        precise = tf.sigma_k <= SLOPE_MAX_REL_SIGMA * abs(k)
         details = {"slope": k, "slope_sigma": tf.sigma_k}
-        if abs(abs(k) - 1.0) <= SLOPE_TOLERANCE:
-            return None
         head = (f"the gyro's heading rate is {1 / k:.4g} times the GNSS course rate over "
                 f"{tf.turned_deg:.0f} (IMU) degrees of turns")
-        if abs(abs(k) / deg - 1.0) <= SLOPE_TOLERANCE:
+        if precise and abs(abs(k) - 1.0) <= SLOPE_TOLERANCE:
+            return None
+        if abs(abs(k) / deg - 1.0) <= SLOPE_TOLERANCE and abs(k) >= DEG_SLOPE_MIN_SIGMAS * tf.sigma_k:
             def repair(run: RecordedRun) -> RecordedRun:
                 return _with_imu(run, ImuData(run.imu.t, run.imu.f_b, run.imu.omega_ib_b * deg))
 
             return Finding("gyro_units", where, f"{head}: the gx, gy, gz columns are in deg/s",
                            "multiply them by pi/180", repair, "multiplied the angular rate by pi/180", details=details)
-        return Finding("gyro_units", where, f"{head}: the gyro columns are not angular rate in rad/s",
-                       "convert them to rad/s", details=details)
+        if precise and k > 0:
+            return Finding("gyro_units", where, f"{head}: the gyro columns are not angular rate in rad/s",
+                           "convert them to rad/s", details=details)
     if rest_rate is not None and rest_rate > REST_RATE_MAX_RPS:
         return Finding("gyro_units", where,
                        f"the gyro reads {rest_rate:.3g} (median norm) while the GNSS shows the vehicle at rest; no gyro "
