@@ -8,6 +8,7 @@ The same parsers serve the Python API (:func:`gnssacc.gnss_noise.parse_outages`,
 from __future__ import annotations
 
 import os
+import re
 import tempfile
 from pathlib import Path
 
@@ -100,7 +101,7 @@ def check_args(args) -> None:
         check_input_file(args.config, "--config")
     if getattr(args, "seed", None) is not None:
         check_option(args.seed, "--seed", SEED, integer=True)
-    checks = {"run": _run, "bench": _bench, "sim": _sim, "inspect": lambda a: check_source(a.bag)}
+    checks = {"run": _run, "bench": _bench, "batch": _batch, "sim": _sim, "inspect": lambda a: check_source(a.bag)}
     checks.get(args.command, lambda a: None)(args)
 
 
@@ -128,6 +129,44 @@ def _bench(args) -> None:
     check_option(args.jobs, "--jobs", JOBS, integer=True)
     if args.out:
         check_output(args.out, "--out", folder=False)
+
+
+def _batch(args) -> None:
+    """``gnssacc batch``: every source, pattern and option, before a campaign folder is touched."""
+    from .gnss_noise import parse_outages
+    from .pipeline import parse_methods
+
+    if not args.sources and args.resume is None:
+        raise InputError("SOURCE", "give the recordings to process ('kitti', bags, CSV run directories), or "
+                                   "--resume CAMPAIGN to finish a campaign")
+    for flag, bad in (("--out", args.out is not None and args.resume is not None),
+                      ("--retry-failed", args.retry_failed and args.resume is None),
+                      ("--jobs", args.jobs is not None and args.scheduler is not None)):
+        if bad:
+            other = {"--out": "with --resume (the campaign's folder is given there)", "--retry-failed":
+                     "only with --resume CAMPAIGN", "--jobs": "not with --scheduler (the cluster has its workers)"}
+            raise InputError(flag, other[flag])
+    for source in args.sources:
+        check_source(source)
+    if args.methods:
+        parse_methods(args.methods)
+    for spec in args.outage or []:
+        if spec != "none":
+            parse_outages(spec, None, None)
+    for spec in args.outage_every or []:
+        parse_outages(None, spec, None)
+    if args.seeds:
+        seeds(args.seeds)
+    if args.jobs is not None:
+        check_option(args.jobs, "--jobs", JOBS, integer=True)
+    if args.gnss_from_truth is not None:
+        check_option(args.gnss_from_truth, "--gnss-from-truth", RATE_FROM_TRUTH_HZ)
+    if args.scheduler is not None and not re.fullmatch(r"([a-z0-9]+://)?[^\s/]+:\d+/?", args.scheduler):
+        raise InputError("--scheduler", f"{args.scheduler!r} is not a scheduler address such as tcp://host:8786")
+    if args.resume is not None and not os.path.isdir(args.resume):
+        raise InputError("--resume", f"{args.resume}: no such folder")
+    if args.out is not None:
+        check_output(args.out, "--out", folder=True)
 
 
 def _sim(args) -> None:

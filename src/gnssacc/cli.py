@@ -13,7 +13,7 @@ from pathlib import Path
 
 from . import __version__
 from .config import PRESETS, load_config
-from .errors import DataWarning, InputError
+from .errors import DataWarning, InputError, raise_if_interrupted
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -75,8 +75,11 @@ def _parser() -> argparse.ArgumentParser:
     bch.add_argument("--preset", default=None, choices=PRESETS + ("none",))
     bch.add_argument("--tune", choices=["auto", "none"], default=None, help="noise identification per seed (default auto)")
     bch.add_argument("--imu-frame", choices=["frd", "flu"], default="frd")
-    bch.add_argument("--jobs", type=int, default=1, help="parallel processes (default 1)")
+    bch.add_argument("--jobs", type=int, default=1,
+                     help="worker processes of a local Dask cluster (default 1: in this process, without Dask)")
     bch.add_argument("--out", default=None, help="also write the per-seed results and the summary as JSON")
+
+    _batch_parser(sub)
 
     ins = sub.add_parser("inspect", help="list a bag's topics and which ones gnssacc would use, and why")
     ins.add_argument("bag", help="ROS 1 .bag, .mcap, or ROS 2 bag directory")
@@ -98,6 +101,44 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--noise", choices=["white", "gm", "none"], default="white")
     s.add_argument("--seed", type=int, default=0)
     return p
+
+
+def _batch_parser(sub) -> None:
+    b = sub.add_parser("batch", help="a campaign: every method on many recordings, seeds and outage patterns",
+                       description="Run a campaign: every (recording, seed, outage pattern) is a task that writes "
+                                   "the folder 'gnssacc run' writes, under OUT/<recording>/<seed>/; OUT/summary.csv "
+                                   "and OUT/summary.md are rewritten as results arrive. Runs on a local Dask "
+                                   "cluster (all cores), --jobs N processes, or an existing cluster (--scheduler). "
+                                   "Resumable: 'gnssacc batch --resume OUT' runs what is missing.")
+    b.add_argument("sources", nargs="*", metavar="SOURCE", help="'kitti', bags, CSV run directories")
+    b.add_argument("--methods", default=None, help="comma-separated method ids (default: all four)")
+    b.add_argument("--seeds", default=None, help="GNSS noise seeds, e.g. 0-9 or 1,4,7 (default 0)")
+    b.add_argument("--noise", choices=["white", "gm", "none"], default=None,
+                   help="GNSS noise made from the truth (as for 'run'); a seed changes nothing without it, "
+                        "except for KITTI (white by default)")
+    b.add_argument("--outage", action="append", default=None, metavar="START:LEN[,START:LEN...]|none",
+                   help="an outage pattern (repeatable; 'none': no outage); each pattern is a task per seed")
+    b.add_argument("--outage-every", action="append", default=None, metavar="PERIOD:LEN",
+                   help="a periodic outage pattern (repeatable)")
+    b.add_argument("--config", default=None)
+    b.add_argument("--preset", default=None, choices=PRESETS + ("none",))
+    b.add_argument("--tune", choices=["auto", "none"], default=None)
+    b.add_argument("--imu-frame", choices=["frd", "flu"], default=None)
+    _bag_arguments(b)
+    b.add_argument("--time-source", choices=["header", "receive"], default=None)
+    b.add_argument("--gnss-from-truth", type=float, default=None, metavar="RATE_HZ")
+    b.add_argument("--no-plots", action="store_true", default=None, help="skip the PNG figures")
+    b.add_argument("--report", action="store_true", default=None, help="also write report.html per task")
+    b.add_argument("--export", choices=["tum"], action="append", default=None)
+    b.add_argument("--out", default=None, help="campaign folder (default ./gnssacc-out/campaign-<timestamp>/)")
+    b.add_argument("--resume", default=None, metavar="CAMPAIGN",
+                   help="finish a campaign: run the tasks without a result (its settings are stored in it; "
+                        "options given must agree with them)")
+    b.add_argument("--retry-failed", action="store_true", help="with --resume: also run the failed tasks again")
+    b.add_argument("--jobs", type=int, default=None,
+                   help="local worker processes (default: every core; 1: in this process, without Dask)")
+    b.add_argument("--scheduler", default=None, metavar="tcp://HOST:8786",
+                   help="run on this Dask cluster (it must see the recordings and the campaign folder)")
 
 
 def _bag_arguments(p: argparse.ArgumentParser) -> None:
@@ -129,7 +170,11 @@ def _cmd_run(args) -> int:
     with sigterm_raises():
         try:
             with contextlib.ExitStack() as stack:
-                return _run_locked(args, stack, held)
+                try:
+                    return _run_locked(args, stack, held)
+                except Exception as exc:   # Ctrl-C inside a numba kernel comes as a SystemError
+                    raise_if_interrupted(exc)
+                    raise
         except (KeyboardInterrupt, Terminated) as exc:
             print(f"gnssacc: interrupted: {held[0].kept() if held else 'nothing written'}", file=sys.stderr)
             return 130 if isinstance(exc, KeyboardInterrupt) else 143
@@ -147,28 +192,25 @@ def _lock_out(path, args, stack, held):
 def _run_locked(args, stack, held) -> int:
     """Compute and write; exit code 0 when at least one method succeeded, 1 when none did."""
     from .outdir import Terminated, terminate_requested
-    from .pipeline import compare, default_out_dir, load_source, parse_methods, with_outages, write_result_files
+    from .pipeline import compare_and_write, default_out_dir, load_source, parse_methods, resolve_preset, with_outages
     from .report import failed_methods
 
     target = _lock_out(args.out, args, stack, held) if args.out else None
     methods = parse_methods(args.methods)
-    cfg = load_config(_resolve_preset(args.preset, args.source), args.config)
+    cfg = load_config(resolve_preset(args.preset, args.source), args.config)
     run = load_source(args.source, cfg, noise=args.noise, seed=args.seed, imu_frame=args.imu_frame,
                       imu_topic=args.imu_topic, gnss_topic=args.gnss_topic, truth_topic=args.truth_topic,
                       time_source=args.time_source, gnss_from_truth_hz=args.gnss_from_truth)
     run = with_outages(run, args.outage, args.outage_every)
     target = target or _lock_out(default_out_dir(run), args, stack, held)
-    metrics, sols, ident = compare(run, cfg, methods, tune=args.tune, show_progress=True)
+    metrics, _, ident, out = compare_and_write(run, cfg, methods, target, tune=args.tune, plots=not args.no_plots,
+                                               report=args.report, export=tuple(args.export), show_progress=True)
     if terminate_requested():   # SIGTERM inside compiled code may have surfaced as a method's failure
         raise Terminated()
-    if not sols:
+    if out is None:
         reasons = "; ".join(f"{m}: {r}" for m, r in failed_methods(metrics).items())
         print(f"gnssacc: error: every method failed ({reasons}); {target.kept()}", file=sys.stderr)
         return 1
-    tuned = ident.tuning.to_toml(ident.cfg) if ident.tuning is not None else None
-    out = target.replace(lambda folder: write_result_files(
-        folder, ident.run, sols, metrics, ident.cfg, plots=not args.no_plots, report=args.report,
-        export=tuple(args.export), tuned_toml=tuned))
     _print_summary(ident.run, cfg, metrics, ident, out)
     return 0
 
@@ -202,28 +244,23 @@ def _quality_lines(metrics: dict) -> list[str]:
     return ["IMU data quality: " + ", ".join(parts) + " - process noise inflated over these spans"]
 
 
-def _resolve_preset(preset: str | None, source: str | None) -> str | None:
-    """The KITTI source uses its preset unless another (or 'none') is asked for."""
-    if preset is None and source in (None, "kitti"):
-        preset = "kitti"
-    return None if preset == "none" else preset
-
-
 def _cmd_bench(args) -> int:
+    """``gnssacc bench``: a one-source campaign (:func:`gnssacc.batch.bench`) and its table."""
     import json
 
     from .argcheck import seeds as parse_seeds
-    from .montecarlo import format_summary, run_bench, summarise
-    from .pipeline import parse_methods
+    from .batch import bench
+    from .montecarlo import format_summary, summarise
+    from .pipeline import parse_methods, resolve_preset
 
     methods = parse_methods(args.methods)
     seeds = parse_seeds(args.seeds)
-    preset = _resolve_preset(args.preset, args.source)
-    load_config(preset, args.config)  # fail early, in this process, on a bad configuration
-    results = run_bench(args.source, preset, args.config, args.noise, args.outage, args.outage_every, methods, seeds,
-                        jobs=max(args.jobs, 1), imu_frame=args.imu_frame, tune=args.tune)
+    load_config(resolve_preset(args.preset, args.source), args.config)  # fail early on a bad configuration
+    results = bench(args.source, methods, seeds, noise=args.noise, outage=args.outage, outage_every=args.outage_every,
+                    preset=args.preset, config=args.config, tune=args.tune, imu_frame=args.imu_frame,
+                    jobs=max(args.jobs, 1))
     table = summarise(results)
-    title = (f"{args.source or 'kitti'}: {len(seeds)} seeds, noise {args.noise}"
+    title = (f"{args.source or 'kitti'}: {len(results)} seeds, noise {args.noise}"
              + (f", outages {args.outage or ''}{args.outage_every or ''}" if args.outage or args.outage_every else ""))
     print(format_summary(table, title))
     if args.out:
@@ -231,6 +268,30 @@ def _cmd_bench(args) -> int:
         Path(args.out).write_text(json.dumps({"summary": table, "per_seed": {str(k): v for k, v in results.items()}},
                                              indent=2) + "\n")
     return 0
+
+
+def _cmd_batch(args) -> int:
+    """``gnssacc batch``: exit 0 when every task succeeded, 1 when some failed (all recorded),
+    130/143 when interrupted (the finished tasks stay; ``--resume`` runs the rest)."""
+    from .batch import open_executor, run_campaign
+    from .campaign_args import campaign_from_args
+    from .outdir import Terminated, sigterm_raises
+
+    camp = campaign_from_args(args)
+    executor = open_executor(args.jobs, args.scheduler)
+    with sigterm_raises():
+        try:
+            with camp:
+                print(f"campaign: {camp.root} ({len(camp.tasks())} tasks, settings hash {camp.hash})", flush=True)
+                ledger = run_campaign(camp, executor, retry_failed=args.retry_failed)
+        except (KeyboardInterrupt, Terminated) as exc:
+            print(f"gnssacc: interrupted: the finished tasks are kept in {camp.root}; "
+                  f"finish with: gnssacc batch --resume {camp.root}", file=sys.stderr)
+            return 130 if isinstance(exc, KeyboardInterrupt) else 143
+    print(ledger.markdown().replace("```\n", "").replace("```", ""))
+    failed = ledger.count("failed")
+    print(f"results: {camp.root}/summary.csv, summary.md ({ledger.count('ok')} ok, {failed} failed)")
+    return 1 if failed else 0
 
 
 def _cmd_config(args) -> int:
@@ -270,7 +331,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         check_args(args)  # every argument's syntax and range, before anything is loaded
         commands = {"run": _cmd_run, "inspect": _cmd_inspect, "config": _cmd_config, "sim": _cmd_sim,
-                    "bench": _cmd_bench}
+                    "bench": _cmd_bench, "batch": _cmd_batch}
         return commands[args.command](args)
     except InputError as exc:
         print(f"gnssacc: error: {exc.where}: {exc.problem}", file=sys.stderr)

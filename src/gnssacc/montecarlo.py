@@ -1,4 +1,5 @@
-"""Monte-Carlo comparison over GNSS noise seeds (``gnssacc bench``) and its statistics.
+"""Statistics of a Monte-Carlo comparison over GNSS noise seeds (``gnssacc bench``, and the
+tables of ``gnssacc batch``'s ``summary.md``); the runs themselves are :mod:`gnssacc.batch` tasks.
 
 Each seed draws a new GNSS noise realisation on the same recorded run; every method runs on it.
 The table reports mean, standard deviation, min and max PRMSE per method, and for each ``-acc``
@@ -14,29 +15,43 @@ normality, which PRMSE differences over a handful of seeds rarely justify.
 from __future__ import annotations
 
 from collections import Counter
-from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
 from .argcheck import MAX_SEED
-from .progress import progress
 from .report import BASELINES
 
 
+#: Most sign patterns evaluated at once by :func:`paired_permutation_pvalue` (bounds its memory:
+#: a block holds this many patterns times the number of pairs, as 8-byte integers).
+SIGN_BLOCK_ENTRIES = 1 << 22
+
+
 def paired_permutation_pvalue(diff: np.ndarray, n_random: int = 200_000, seed: int = 0) -> float:
-    """Two-sided p-value of the mean of paired differences ``diff`` being zero (sign-flip test)."""
+    """Two-sided p-value of the mean of paired differences ``diff`` being zero (sign-flip test).
+
+    The sign patterns are evaluated in blocks of at most :data:`SIGN_BLOCK_ENTRIES` entries, so
+    a campaign's pooled test over thousands of pairs needs tens of MB, not GB; the random
+    patterns are drawn block after block from one generator, the same stream as in one draw.
+    """
     d = np.asarray(diff, float)
     d = d[np.isfinite(d)]
     n = d.size
     if n == 0 or np.all(d == 0):
         return 1.0
     observed = abs(d.mean())
-    if n <= 20:
-        signs = ((np.arange(2**n)[:, None] >> np.arange(n)) & 1) * 2 - 1
-    else:
-        signs = np.random.default_rng(seed).choice([-1, 1], size=(n_random, n))
-    means = np.abs(signs @ d) / n
-    return float(np.mean(means >= observed - 1e-12))
+    total = 2**n if n <= 20 else n_random
+    rng = None if n <= 20 else np.random.default_rng(seed)
+    step = max(SIGN_BLOCK_ENTRIES // n, 1)
+    hits = 0
+    for start in range(0, total, step):
+        if rng is None:
+            index = np.arange(start, min(start + step, total))
+            signs = ((index[:, None] >> np.arange(n)) & 1) * 2 - 1
+        else:
+            signs = rng.choice([-1, 1], size=(min(step, total - start), n))
+        hits += int(np.sum(np.abs(signs @ d) / n >= observed - 1e-12))
+    return hits / total
 
 
 #: Most seeds one bench runs.
@@ -75,38 +90,6 @@ def parse_seeds(text: str) -> list[int]:
     if twice:
         raise ValueError(f"seed {twice[0]} is given twice")
     return out
-
-
-def _one_seed(args) -> tuple[int, dict]:
-    source, preset, config, noise, outage, outage_every, methods, imu_frame, tune, seed = args
-    from .config import load_config
-    from .metrics import gnss_score, score
-    from .pipeline import load_source, run_methods, with_outages
-
-    cfg = load_config(preset, config)
-    run = with_outages(load_source(source, cfg, noise=noise, seed=seed, imu_frame=imu_frame), outage, outage_every)
-    sols = run_methods(run, cfg, methods, tune=tune)
-    out = {"gnss": (gnss_score(run).prmse_m, None)}
-    for mid, sol in sols.items():
-        sc = score(run, sol)
-        out[mid] = (sc.prmse_m, sc.prmse_outage_m)
-    return seed, out
-
-
-def run_bench(source, preset, config, noise, outage, outage_every, methods, seeds, jobs: int = 1,
-              imu_frame: str = "frd", show_progress: bool = True, tune: str | None = None) -> dict:
-    """Run all methods over the seeds; returns ``{seed: {method: (prmse, prmse_outage)}}``."""
-    tasks = [(source, preset, config, noise, outage, outage_every, methods, imu_frame, tune, s) for s in seeds]
-    results = {}
-    if jobs <= 1:
-        for t in progress(tasks, desc="seeds", enable=show_progress):
-            seed, out = _one_seed(t)
-            results[seed] = out
-    else:
-        with ProcessPoolExecutor(jobs) as ex:
-            for seed, out in progress(ex.map(_one_seed, tasks), desc="seeds", enable=show_progress, total=len(tasks)):
-                results[seed] = out
-    return results
 
 
 def summarise(results: dict) -> dict:

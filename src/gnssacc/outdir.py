@@ -100,9 +100,18 @@ class FolderLock:
     """The exclusive lock ``<parent>/.<name>.lock`` of output folder ``<parent>/<name>``."""
 
     def __init__(self, folder: Path):
-        folder = Path(folder)
-        self.path = folder.parent / f".{folder.name}.lock"
+        self.folder = Path(folder)
+        self.path = self.folder.parent / f".{self.folder.name}.lock"
         self.fd: int | None = None
+
+    def take(self, where: str, busy: str) -> None:
+        """Create the folder's parent and take the lock, or raise :class:`InputError`
+        (``where``: ``busy`` when another process holds it; also when the folder is the root)."""
+        if not self.folder.name:
+            raise InputError(where, f"{self.folder} cannot be an output folder (it is the root)")
+        self.folder.parent.mkdir(parents=True, exist_ok=True)
+        if not self.acquire():
+            raise InputError(where, busy)
 
     def acquire(self) -> bool:
         """Take the lock without waiting; ``False`` when another process holds it."""
@@ -198,11 +207,7 @@ class ResultDir:
         self.replaced = False
 
     def __enter__(self) -> "ResultDir":
-        if not self.path.name:
-            raise InputError("--out", f"{self.path} cannot be an output folder (it is the root)")
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        if not self.lock.acquire():
-            raise InputError("--out", f"another gnssacc run is writing {self.path}")
+        self.lock.take("--out", f"another gnssacc run is writing {self.path}")
         try:
             clean_stale(self.path.parent, self.path.name)
             self.check()

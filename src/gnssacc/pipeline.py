@@ -7,13 +7,13 @@ from __future__ import annotations
 
 from datetime import datetime
 from pathlib import Path
-
+from typing import Callable
 
 from . import mechanization
 from .config import RunConfig
 from .consistency import assess
 from .ekf import run_ekf
-from .errors import InputError, warn_data
+from .errors import InputError, raise_if_interrupted, warn_data
 from .gnss_noise import apply_outages, fixes_from_truth, parse_outages
 from .identify import Identified, identify
 from .metrics import gnss_score, score
@@ -48,6 +48,13 @@ def parse_methods(text: str | None) -> list[str]:
     if bad or not ids:
         raise InputError("--methods", f"unknown method(s) {', '.join(bad) or '(none)'}; known: {', '.join(METHODS)}")
     return ids
+
+
+def resolve_preset(preset: str | None, source: str | None) -> str | None:
+    """The preset a source runs with: KITTI uses ``kitti`` unless another (or ``"none"``) is asked for."""
+    if preset is None and source in (None, "kitti"):
+        preset = "kitti"
+    return None if preset == "none" else preset
 
 
 def is_bag(path: Path) -> bool:
@@ -157,6 +164,7 @@ def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: s
         except InputError:
             raise
         except Exception as exc:  # an estimator failure costs that method only
+            raise_if_interrupted(exc)
             if failures is None:
                 raise
             failures[m] = failure_reason(exc)
@@ -209,6 +217,7 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
             scores[m] = score(run, s, window)
             cons[m] = assess(ident.run, s, scores[m].prmse_m, raw.prmse_m, ident.model, ident.cfg.gnss_gm_sigma)
         except Exception as exc:
+            raise_if_interrupted(exc)
             failed[m] = failure_reason(exc)
             del sols[m]
             scores.pop(m, None)
@@ -265,6 +274,48 @@ def _coverage(run: RecordedRun, sol: NavSolution) -> dict:
         return {"first_s": None, "last_s": None, "fraction": 0.0}
     a, b = float(sol.t[0]) - run.t_start, float(sol.t[-1]) - run.t_start
     return {"first_s": a, "last_s": b, "fraction": (b - a) / run.duration_s if run.duration_s > 0 else 1.0}
+
+
+def compare_and_write(run: RecordedRun, cfg: RunConfig, methods: list[str], target: ResultDir, *,
+                      tune: str | None = None, plots: bool = True, report: bool = False, export: tuple = (),
+                      extra_files: Callable[[dict], dict[str, str]] | None = None,
+                      show_progress: bool = False) -> tuple[dict, dict, Identified, Path | None]:
+    """:func:`compare`, then write the complete result through ``target`` (all or nothing).
+
+    What ``gnssacc run`` does after loading, and what each ``gnssacc batch`` task does.
+
+    Parameters
+    ----------
+    run, cfg, methods, tune, show_progress
+        As for :func:`compare`.
+    target : ResultDir
+        The locked output folder (inside its ``with`` block).
+    plots, report, export
+        As for :func:`write_result_files`.
+    extra_files : callable, optional
+        ``extra_files(metrics) -> {file name: text}``: more files written into the folder beside
+        the result (called once the metrics are known).
+
+    Returns
+    -------
+    metrics, solutions, ident
+        As from :func:`compare`.
+    out : Path or None
+        The folder written; ``None`` when every method failed (then nothing is written and the
+        folder keeps what it held).
+    """
+    metrics, sols, ident = compare(run, cfg, methods, tune=tune, show_progress=show_progress)
+    if not sols:
+        return metrics, sols, ident, None
+    tuned = ident.tuning.to_toml(ident.cfg) if ident.tuning is not None else None
+
+    def fill(folder: Path) -> None:
+        write_result_files(folder, ident.run, sols, metrics, ident.cfg, plots=plots, report=report, export=export,
+                           tuned_toml=tuned)
+        for name, text in (extra_files(metrics) if extra_files else {}).items():
+            (folder / name).write_text(text)
+
+    return metrics, sols, ident, target.replace(fill)
 
 
 def default_out_dir(run: RecordedRun) -> Path:
