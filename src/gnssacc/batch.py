@@ -25,12 +25,12 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
+from .api import configure, load
 from .campaign import TASK_FILE, Campaign, TaskSpec, config_identity, write_atomic, write_record
 from .campaign_summary import SummaryMarkdown, csv_text, task_rows
-from .config import load_config
 from .errors import DataWarning, InputError, raise_if_interrupted
 from .outdir import ResultDir
-from .pipeline import compare, compare_and_write, failure_reason, load_source, resolve_preset, with_outages
+from .pipeline import compare, compare_and_write, failure_reason
 from .progress import CampaignProgress
 
 #: The error line when Dask is needed and missing.
@@ -141,9 +141,10 @@ def _load(spec: TaskSpec):
     if o["config"] and config_identity(o["config"]["path"])["sha256"] != o["config"]["sha256"]:
         raise InputError(o["config"]["path"], "changed since the campaign started (its settings hash would change)")
     source = None if spec.source == "kitti" else spec.source
-    cfg = load_config(resolve_preset(o["preset"], source), o["config"]["path"] if o["config"] else None)
-    run = load_source(source, cfg, noise=o["noise"], seed=spec.seed, imu_frame=o["imu_frame"], **o["bag"])
-    return with_outages(run, spec.pattern.outage, spec.pattern.outage_every), cfg
+    cfg = configure(source, preset=o["preset"], config=o["config"]["path"] if o["config"] else None)
+    run = load(source, config=cfg, noise=o["noise"], seed=spec.seed, outage=spec.pattern.outage,
+               outage_every=spec.pattern.outage_every, imu_frame=o["imu_frame"], **o["bag"])
+    return run, cfg
 
 
 def failed_record(spec: TaskSpec, error: str, kind: str = "worker") -> dict:

@@ -191,27 +191,28 @@ def _lock_out(path, args, stack, held):
 
 def _run_locked(args, stack, held) -> int:
     """Compute and write; exit code 0 when at least one method succeeded, 1 when none did."""
+    from .api import configure, evaluate, load
     from .outdir import Terminated, terminate_requested
-    from .pipeline import compare_and_write, default_out_dir, load_source, parse_methods, resolve_preset, with_outages
+    from .pipeline import default_out_dir, parse_methods
     from .report import failed_methods
 
     target = _lock_out(args.out, args, stack, held) if args.out else None
     methods = parse_methods(args.methods)
-    cfg = load_config(resolve_preset(args.preset, args.source), args.config)
-    run = load_source(args.source, cfg, noise=args.noise, seed=args.seed, imu_frame=args.imu_frame,
-                      imu_topic=args.imu_topic, gnss_topic=args.gnss_topic, truth_topic=args.truth_topic,
-                      time_source=args.time_source, gnss_from_truth_hz=args.gnss_from_truth)
-    run = with_outages(run, args.outage, args.outage_every)
+    cfg = configure(args.source, preset=args.preset, config=args.config)
+    run = load(args.source, config=cfg, noise=args.noise, seed=args.seed, outage=args.outage,
+               outage_every=args.outage_every, imu_frame=args.imu_frame, imu_topic=args.imu_topic,
+               gnss_topic=args.gnss_topic, truth_topic=args.truth_topic, time_source=args.time_source,
+               gnss_from_truth_hz=args.gnss_from_truth)
     target = target or _lock_out(default_out_dir(run), args, stack, held)
-    metrics, _, ident, out = compare_and_write(run, cfg, methods, target, tune=args.tune, plots=not args.no_plots,
-                                               report=args.report, export=tuple(args.export), show_progress=True)
+    res = evaluate(run, cfg, methods, tune=args.tune, show_progress=True)
+    out = res.write(target, plots=not args.no_plots, report=args.report, export=args.export)
     if terminate_requested():   # SIGTERM inside compiled code may have surfaced as a method's failure
         raise Terminated()
     if out is None:
-        reasons = "; ".join(f"{m}: {r}" for m, r in failed_methods(metrics).items())
+        reasons = "; ".join(f"{m}: {r}" for m, r in failed_methods(res.metrics).items())
         print(f"gnssacc: error: every method failed ({reasons}); {target.kept()}", file=sys.stderr)
         return 1
-    _print_summary(ident.run, cfg, metrics, ident, out)
+    _print_summary(res.run, cfg, res.metrics, res.ident, out)
     return 0
 
 

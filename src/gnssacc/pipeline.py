@@ -280,42 +280,54 @@ def compare_and_write(run: RecordedRun, cfg: RunConfig, methods: list[str], targ
                       tune: str | None = None, plots: bool = True, report: bool = False, export: tuple = (),
                       extra_files: Callable[[dict], dict[str, str]] | None = None,
                       show_progress: bool = False) -> tuple[dict, dict, Identified, Path | None]:
-    """:func:`compare`, then write the complete result through ``target`` (all or nothing).
-
-    What ``gnssacc run`` does after loading, and what each ``gnssacc batch`` task does.
-
-    Parameters
-    ----------
-    run, cfg, methods, tune, show_progress
-        As for :func:`compare`.
-    target : ResultDir
-        The locked output folder (inside its ``with`` block).
-    plots, report, export
-        As for :func:`write_result_files`.
-    extra_files : callable, optional
-        ``extra_files(metrics) -> {file name: text}``: more files written into the folder beside
-        the result (called once the metrics are known).
+    """:func:`compare`, then :func:`write_result` (what each ``gnssacc batch`` task does).
 
     Returns
     -------
     metrics, solutions, ident
         As from :func:`compare`.
     out : Path or None
+        As from :func:`write_result`.
+    """
+    metrics, sols, ident = compare(run, cfg, methods, tune=tune, show_progress=show_progress)
+    return metrics, sols, ident, write_result(target, ident.run, sols, metrics, ident, plots=plots, report=report,
+                                              export=export, extra_files=extra_files)
+
+
+def write_result(target: ResultDir, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict,
+                 ident: Identified, *, plots: bool = True, report: bool = False, export: tuple = (),
+                 extra_files: Callable[[dict], dict[str, str]] | None = None) -> Path | None:
+    """Write a complete result through ``target`` (all or nothing).
+
+    Parameters
+    ----------
+    target : ResultDir
+        The locked output folder (inside its ``with`` block).
+    run, sols, metrics, ident
+        As :func:`compare` returned them (``run``: ``ident.run``).
+    plots, report, export
+        As for :func:`write_result_files`.
+    extra_files : callable, optional
+        ``extra_files(metrics) -> {file name: text}``: more files written into the folder beside
+        the result.
+
+    Returns
+    -------
+    Path or None
         The folder written; ``None`` when every method failed (then nothing is written and the
         folder keeps what it held).
     """
-    metrics, sols, ident = compare(run, cfg, methods, tune=tune, show_progress=show_progress)
     if not sols:
-        return metrics, sols, ident, None
+        return None
     tuned = ident.tuning.to_toml(ident.cfg) if ident.tuning is not None else None
 
     def fill(folder: Path) -> None:
-        write_result_files(folder, ident.run, sols, metrics, ident.cfg, plots=plots, report=report, export=export,
+        write_result_files(folder, run, sols, metrics, ident.cfg, plots=plots, report=report, export=export,
                            tuned_toml=tuned)
         for name, text in (extra_files(metrics) if extra_files else {}).items():
             (folder / name).write_text(text)
 
-    return metrics, sols, ident, target.replace(fill)
+    return target.replace(fill)
 
 
 def default_out_dir(run: RecordedRun) -> Path:

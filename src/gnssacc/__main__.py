@@ -1,0 +1,6 @@
+"""``python -m gnssacc``: the ``gnssacc`` command."""
+import sys
+
+from .cli import main
+
+sys.exit(main())

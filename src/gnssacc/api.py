@@ -1,0 +1,190 @@
+"""The Python API: what ``gnssacc run`` does, from a notebook or a script.
+
+::
+
+    import gnssacc
+    res = gnssacc.process("run.bag", methods=["ekf", "ekf-acc"])   # or "kitti", a CSV run directory
+    print(res.table())                   # the table gnssacc run prints
+    df = res.to_dataframe("ekf")         # the trajectory as a pandas DataFrame (pandas installed)
+    res.save("out/")                     # the folder gnssacc run writes
+
+Settings are resolved exactly as ``gnssacc run`` resolves them (the command line is a layer over
+this module): KITTI runs with the ``kitti`` preset unless another (or ``"none"``) is asked for;
+``noise`` makes fixes from the truth; the input checks, self-tuning and scoring are those of
+:func:`gnssacc.pipeline.compare`. A run made in Python (:func:`simulate`, or a
+:class:`gnssacc.run.RecordedRun` of your own) can be given instead of a source.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from .config import RunConfig, load_config
+from .identify import Identified
+from .pipeline import compare, load_source, parse_methods, resolve_preset, with_outages, write_result
+from .report import TRAJECTORY_COLUMNS, format_table, ok_methods, trajectory_table
+from .run import RecordedRun
+from .solution import NavSolution
+
+
+def configure(source=None, *, preset: str | None = None, config=None) -> RunConfig:
+    """The configuration a source runs with.
+
+    Parameters
+    ----------
+    source : str, Path, RecordedRun or None
+        ``None`` or ``"kitti"`` selects the ``kitti`` preset unless ``preset`` says otherwise.
+    preset : str, optional
+        A packaged preset, or ``"none"`` for the defaults alone.
+    config : str, Path, dict or RunConfig, optional
+        A TOML file, or ``{section: {key: value}}`` overrides, applied over the preset; a
+        :class:`RunConfig` is used as it is.
+    """
+    if isinstance(config, RunConfig):
+        return config
+    name = source if source is None or isinstance(source, str) else "run"
+    path, overrides = (None, config) if isinstance(config, dict) else (config, None)
+    return load_config(resolve_preset(preset, name), path, overrides=overrides)
+
+
+def load(source=None, *, config=None, preset: str | None = None, noise: str | None = None, seed: int = 0,
+         outage: str | None = None, outage_every: str | None = None, imu_frame: str = "frd",
+         **bag_options) -> RecordedRun:
+    """A recorded run, as ``gnssacc run`` loads it (see :func:`process` for the parameters)."""
+    return _load(source, configure(source, preset=preset, config=config), noise, seed, outage, outage_every,
+                 imu_frame, bag_options)
+
+
+def _load(source, cfg, noise, seed, outage, outage_every, imu_frame, bag_options) -> RecordedRun:
+    if isinstance(source, RecordedRun):
+        run = source
+    else:
+        run = load_source(None if source is None else str(source), cfg, noise=noise, seed=seed,
+                          imu_frame=imu_frame, **bag_options)
+    return with_outages(run, outage, outage_every)
+
+
+def simulate(scenario: str = "car", duration_s: float = 300.0, **options) -> RecordedRun:
+    """A simulated run with known truth (:func:`gnssacc.sources.sim.simulate`; ``imu_grade``,
+    ``noise``, ``seed``, rates ...), ready for :func:`process`."""
+    from .sources.sim import simulate as _simulate
+
+    return _simulate(scenario, duration_s, **options)
+
+
+def process(source=None, *, methods=None, config=None, preset: str | None = None, tune: str | None = None,
+            noise: str | None = None, seed: int = 0, outage: str | None = None, outage_every: str | None = None,
+            imu_frame: str = "frd", show_progress: bool = False, **bag_options) -> "Result":
+    """Run the estimators on a source and score them: ``gnssacc run`` without the files.
+
+    Parameters
+    ----------
+    source : str, Path, RecordedRun or None
+        ``"kitti"`` (or ``None``), a ROS 1 ``.bag``, an ``.mcap``, a ROS 2 bag directory, a CSV run
+        directory, or a run made in Python.
+    methods : list of str or str, optional
+        Method ids (default: ``ekf, ekf-acc, smoother, smoother-acc``).
+    config, preset
+        See :func:`configure`.
+    tune : {"auto", "none"}, optional
+        Noise identification from the recording (default: as ``[tuning] mode`` says, ``auto``).
+    noise : {"white", "gm", "none"}, optional
+        GNSS noise made from the truth (KITTI: ``white`` by default).
+    seed : int
+        Noise seed.
+    outage, outage_every : str, optional
+        GNSS outages, ``"START:LEN[,...]"`` and ``"PERIOD:LEN"`` [s].
+    imu_frame : {"frd", "flu"}
+        Axes of a CSV run's ``imu.csv``.
+    show_progress : bool
+        Progress bars on a terminal.
+    **bag_options
+        ``imu_topic``, ``gnss_topic``, ``truth_topic``, ``time_source``, ``gnss_from_truth_hz``.
+
+    Returns
+    -------
+    Result
+
+    Raises
+    ------
+    gnssacc.errors.InputError
+        Bad input, naming the file or option and the problem.
+    """
+    ids = parse_methods(methods if methods is None or isinstance(methods, str) else ",".join(methods))
+    cfg = configure(source, preset=preset, config=config)
+    run = _load(source, cfg, noise, seed, outage, outage_every, imu_frame, bag_options)
+    return evaluate(run, cfg, ids, tune=tune, show_progress=show_progress)
+
+
+def evaluate(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
+             show_progress: bool = False) -> "Result":
+    """Check, identify, run and score ``methods`` on a loaded run (:func:`gnssacc.pipeline.compare`)."""
+    metrics, sols, ident = compare(run, cfg, methods, tune=tune, show_progress=show_progress)
+    return Result(ident.run, cfg, metrics, sols, ident)
+
+
+@dataclass
+class Result:
+    """What :func:`process` found.
+
+    Attributes
+    ----------
+    run : RecordedRun
+        The run as the input checks left it (repaired units, a measured clock offset applied).
+    config : RunConfig
+        The configuration given (the tuned one is ``ident.cfg``).
+    metrics : dict
+        The content of ``metrics.json`` (scores, consistency, tuning, failures).
+    solutions : dict of NavSolution
+        Per method that succeeded (``<id>-online`` too for the smoothers).
+    ident : Identified
+        The shared start, stationary spans, input findings and tuned configuration.
+    """
+
+    run: RecordedRun
+    config: RunConfig
+    metrics: dict
+    solutions: dict[str, NavSolution]
+    ident: Identified
+
+    def table(self) -> str:
+        """The comparison table ``gnssacc run`` prints."""
+        return format_table(self.metrics)
+
+    def prmse(self) -> dict[str, float | None]:
+        """PRMSE [m] per method that succeeded (``None`` without truth), and ``"gnss"`` for the fixes."""
+        out = {m: v["prmse_m"] for m, v in ok_methods(self.metrics).items()}
+        return {**out, "gnss": self.metrics["gnss_prmse_m"]}
+
+    def to_dataframe(self, method: str):
+        """One method's trajectory as a pandas DataFrame, with the columns (and units, degrees at
+        this edge) of ``trajectory_<id>.csv``."""
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ImportError("Result.to_dataframe needs pandas (pip install pandas); Result.solutions holds "
+                              "the same numbers as numpy arrays") from None
+        if method not in self.solutions:
+            raise KeyError(f"{method!r}: no solution (have: {', '.join(self.solutions) or 'none'})")
+        return pd.DataFrame(trajectory_table(self.solutions[method]), columns=TRAJECTORY_COLUMNS)
+
+    def save(self, folder, *, plots: bool = True, report: bool = False, export: tuple = (),
+             overwrite: bool = False) -> Path:
+        """Write the folder ``gnssacc run --out folder`` writes (all or nothing); return its path.
+
+        Raises
+        ------
+        gnssacc.errors.InputError
+            The folder holds something else (without ``overwrite``), or another writer holds it.
+        """
+        from .outdir import ResultDir
+
+        with ResultDir(Path(folder), overwrite=overwrite) as target:
+            return self.write(target, plots=plots, report=report, export=export)
+
+    def write(self, target, *, plots: bool = True, report: bool = False, export: tuple = (),
+              extra_files=None) -> Path | None:
+        """Write into a locked :class:`gnssacc.outdir.ResultDir` (``None`` when every method failed:
+        nothing is written)."""
+        return write_result(target, self.run, self.solutions, self.metrics, self.ident, plots=plots, report=report,
+                            export=tuple(export), extra_files=extra_files)
