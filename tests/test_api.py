@@ -10,7 +10,7 @@ import pytest
 import gnssacc
 from gnssacc.cli import main
 from gnssacc.errors import InputError
-from gnssacc.report import TRAJECTORY_COLUMNS
+from gnssacc.report import RUN_FIELDS, TRAJECTORY_COLUMNS
 from gnssacc.sources.bagwrite import write_bag
 from gnssacc.sources.csvdir import write_csv_run
 
@@ -55,6 +55,10 @@ def test_a_run_made_in_python_and_save_writes_the_cli_folder(tmp_path):
     assert (out / "table.txt").read_text().strip() == res.table().strip()
     saved = json.loads((out / "metrics.json").read_text())
     assert saved["methods"]["ekf"]["prmse_m"] == pytest.approx(res.prmse()["ekf"], abs=1e-12)
+    # metrics.json keeps the documented facts about the run, not the simulator's per-sample arrays.
+    assert (out / "metrics.json").stat().st_size < 100_000
+    assert saved["run"]["scenario"] == "ugv-slow" and saved["run"]["seed"] == 2
+    assert set(saved["run"]) <= set(RUN_FIELDS) and "meta" not in saved
     # The DataFrame holds the numbers of the CSV file, column for column, to the digits written
     # there (1e-9 deg, 1e-4 m and m/s, 1e-5 deg, 6 significant digits).
     df = res.to_dataframe("ekf")

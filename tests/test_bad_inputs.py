@@ -495,7 +495,7 @@ def test_awkward_but_valid_bags(env, capsys):
     the middle (read up to the damage, with a warning); a bare .db3 file; inspect with a topic missing."""
     m = _metrics(env, capsys, env.bags["mcapdir"], "bag-out", "--outage", "40:8,20:5,42:3")
     assert m["methods"]["ekf"]["prmse_m"] < m["gnss_prmse_m"]
-    assert m["meta"]["outages"] == [[20.0, 25.0], [40.0, 48.0], [42.0, 45.0]]
+    assert m["run"]["outages"] == [[20.0, 25.0], [40.0, 48.0], [42.0, 45.0]]
     err: list = []
     m = _metrics(env, capsys, _bag_copy(env, "ros1", "mid.bag", _smash_middle), "mid-out", "--gnss-topic",
                  "/UBX/hpposllh", warnings=err)

@@ -68,7 +68,7 @@ def test_noise_and_outages_on_a_run_with_truth(run_dir, tmp_path, capsys):
                                      "--outage", "40:15", "--out", out, "--no-plots"], capsys)
     assert code == 0, stderr
     m = json.loads((out / "metrics.json").read_text())
-    assert m["meta"]["noise"] == "gm" and m["meta"]["outages"] == [[40.0, 55.0]]
+    assert m["run"]["noise"] == "gm" and m["run"]["outages"] == [[40.0, 55.0]]
     assert m["methods"]["ekf"]["prmse_outage_m"] is not None
     assert "outage PRMSE" in stdout
 

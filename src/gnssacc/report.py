@@ -40,6 +40,36 @@ def write_trajectory_csv(sol: NavSolution, path: Path) -> None:
                fmt=fmt)
 
 
+#: The facts about a run that ``metrics.json`` keeps (under ``"run"``), from ``run.meta``: only
+#: these, each small (per-sample arrays such as a simulation's true biases stay out).
+RUN_FIELDS = {
+    "source": "kind of source: kitti, csv, bag, simulator",
+    "noise": "GNSS noise profile drawn from the truth (white, gm, none), if any",
+    "seed": "its seed",
+    "outages": "GNSS outage spans [s from the start]",
+    "gnss_from_truth_hz": "rate of the fixes made from a bag's truth [Hz]",
+    "imu_frame": "axes of a CSV run's imu.csv (frd, flu)",
+    "bag_format": "ros1 or ros2",
+    "topics": "the bag topics read: imu, gnss, truth",
+    "imu_mounting": "where a bag's IMU mounting came from, and its roll/pitch/yaw [deg]",
+    "truth_origin": "how a bag's truth pose frame was placed",
+    "damaged": "what a damaged bag lost",
+    "time_fixes": "repairs of a bag's time stamps",
+    "gaps": "IMU and GNSS gaps of a bag",
+    "scenario": "simulator scenario",
+    "imu_grade": "simulated IMU grade",
+    "imu_rate_hz": "simulated IMU rate [Hz]",
+    "gnss_rate_hz": "simulated GNSS rate [Hz]",
+    "gnss_seed": "simulator seed of the fixes' noise",
+    "origin_llh_deg": "tangent-plane origin [deg, deg, m]",
+}
+
+
+def run_facts(run: RecordedRun) -> dict:
+    """The :data:`RUN_FIELDS` of ``run.meta`` that the run has."""
+    return {k: run.meta[k] for k in RUN_FIELDS if k in run.meta}
+
+
 def metrics_dict(run: RecordedRun, sols: dict[str, NavSolution], scores: dict[str, Score], gnss: Score,
                  extra: dict, failed: dict[str, str] | None = None) -> dict:
     """The content of ``metrics.json``.
@@ -66,7 +96,7 @@ def metrics_dict(run: RecordedRun, sols: dict[str, NavSolution], scores: dict[st
     return {"source": run.name, "where": run.where, "duration_s": run.duration_s, "t_start": run.t_start,
             "gnss_prmse_m": gnss.prmse_m, "gnss_hrmse_m": gnss.hrmse_m, "gnss_n_epochs": gnss.n_epochs,
             "n_fixes": len(run.gnss),
-            "meta": run.meta, "methods": methods, **extra}
+            "run": run_facts(run), "methods": methods, **extra}
 
 
 def ok_methods(metrics: dict) -> dict:
