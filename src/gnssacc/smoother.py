@@ -288,8 +288,10 @@ def residual_chi2(rec: "_Record", idx: np.ndarray, p_fix: np.ndarray, sigma_ned:
 class _Factors:
     """Builds each kind of factor for a node: GNSS position, GNSS acceleration, stationary."""
 
-    def __init__(self, run: RecordedRun, cfg: RunConfig, stationary: StationaryEpochs, stats: dict):
+    def __init__(self, run: RecordedRun, cfg: RunConfig, stationary: StationaryEpochs, stats: dict,
+                 gnss_checked: np.ndarray):
         self.run, self.stats, self.st = run, stats, stationary
+        self.gnss_checked = gnss_checked   # per stationary epoch: its span was checked by the fixes
         gnss, origin = run.gnss, run.origin
         self.p_fix = origin.to_ned(gnss.lat, gnss.lon, gnss.h)
         self.fix_at = {float(t): i for i, t in enumerate(gnss.t)}
@@ -300,6 +302,8 @@ class _Factors:
         self.window = AccelWindow(int(cfg["accel"]["window"]), float(cfg["accel"]["max_gap_s"]),
                                   cfg.accel_sigma_override)
         self.zupt_noise = gtsam.noiseModel.Isotropic.Sigma(3, float(cfg["zupt"]["velocity_sigma_mps"]))
+        self.zupt_var = float(cfg["zupt"]["velocity_sigma_mps"]) ** 2
+        self.zupt_gate = float(cfg["zupt"]["gate_nis"])
         self._noise: dict = {}
         self.gm_sigma, self.gm_tau = cfg.gnss_gm_sigma, cfg.gnss_gm_tau
         self.gm = bool(np.any(self.gm_sigma > 0))
@@ -341,8 +345,20 @@ class _Factors:
         graph.add(gnss_accel_factor(X(i), B(i), f_meas, meas.a_n, self.g_n, meas.cov))
         self.stats["n_acc_factors"] += 1
 
-    def stationary(self, graph, i: int, j: int, R_nb: np.ndarray, bias) -> None:
-        """Zero velocity on V_i and the zero-rate reading of stationary epoch ``j`` on B_i's gyro part."""
+    def stationary(self, graph, i: int, j: int, R_nb: np.ndarray, bias, v_pred: np.ndarray,
+                   c_vel: np.ndarray) -> None:
+        """Zero velocity on V_i and the zero-rate reading of stationary epoch ``j`` on B_i's gyro
+        part, unless the velocity predicted for the node (``v_pred`` NED [m/s], covariance
+        ``c_vel``) rejects standing still: its NIS against zero above ``[zupt] gate_nis``, the
+        EKF's gate. Only spans found on IMU evidence alone (a GNSS outage) are gated: they may be
+        a constant-speed cruise, and a zero-velocity factor there drags the whole window to a
+        stop; the fixes have vetted the others, whose first epochs the gate would wrongly refuse
+        while the estimate still carries the braking's last few cm/s."""
+        if self.zupt_gate > 0 and not self.gnss_checked[j]:
+            nis = float(v_pred @ np.linalg.solve(c_vel + self.zupt_var * np.eye(3), v_pred))
+            if not nis <= self.zupt_gate:
+                self.stats["n_zupt_gated"] += 1
+                return
         graph.add(gtsam.PriorFactorVector(V(i), np.zeros(3), self.zupt_noise))
         # Only the gyro half is measured; the accelerometer half gets a vanishing weight.
         b_g = self.st.omega_mean_b[j] - R_nb.T @ self.w_ie
@@ -423,9 +439,10 @@ def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
     times = node_times(float(init.t), float(run.imu.t[-1]), _node_epochs(run.gnss.t, st.t, float(z["interval_s"])),
                        float(cfg["smoother"]["max_node_spacing_s"]))
     stats = {"n_nodes": len(times), "n_gps_factors": 0, "n_acc_factors": 0, "n_acc_skipped_suspect_imu": 0,
-             "n_zupt_factors": 0, "n_ill_posed_recovered": 0, "factorization_switched_to_qr": False,
+             "n_zupt_factors": 0, "n_zupt_gated": 0, "n_ill_posed_recovered": 0, "factorization_switched_to_qr": False,
              "init": init.how, "t_init": float(init.t), "lag_s": float(cfg["smoother"]["lag_s"])}
-    loop = _Loop(run, cfg, METHODS[method], quality, init, times, _Factors(run, cfg, st, stats),
+    checked = np.array([stationary.spans[j].gnss_checked for j in st.span], bool)
+    loop = _Loop(run, cfg, METHODS[method], quality, init, times, _Factors(run, cfg, st, stats, checked),
                  _attach_stationary(times, st, float(z["interval_s"])), stats)
     loop.feed(method, show_progress)
     loop.score()
@@ -488,18 +505,28 @@ class _Loop:
         graph.add(gtsam.PriorFactorVector(V(0), self.vel, gtsam.noiseModel.Gaussian.Covariance(c_vel)))
         for key, value in ((X(0), self.pose), (V(0), self.vel), (B(0), self.bias)) + (((G(0), self.g),) if self.f.gm else ()):
             values.insert(key, value)
-        self._node_factors(graph, 0, self.times[0], R0)
+        self._node_factors(graph, 0, self.times[0], R0, self.vel, c_vel)
         self.smoother.update(graph, values, [(key, self.times[0]) for key in self.keys(0)])
         self._record_online(0)
 
-    def _node_factors(self, graph, i, t, R_nb):
+    def _node_factors(self, graph, i, t, R_nb, v_pred, c_vel):
+        """GNSS, acceleration and stationary factors of node ``i``; ``v_pred`` [m/s] (NED) and
+        ``c_vel`` its 3x3 covariance: the velocity predicted for the node, which gates the
+        stationary factors (:meth:`_Factors.stationary`)."""
         k = self.f.gps(graph, i, t)
         if k is not None:
             self.fix_of[i] = k
             if self.use_acc:
                 self.f.accel(graph, i, t, k, self.segs[0], self.segs[1])
         if i in self.stationary_at:
-            self.f.stationary(graph, i, self.stationary_at[i], R_nb, self.bias)
+            self.f.stationary(graph, i, self.stationary_at[i], R_nb, self.bias, v_pred, c_vel)
+
+    def _predicted_velocity_cov(self, i, pim) -> np.ndarray:
+        """Covariance of node ``i``'s predicted NED velocity [m^2/s^2]: node ``i - 1``'s online
+        marginal plus the preintegrated velocity noise (rotated from body ``i - 1`` into NED)."""
+        R = self.online.R[i - 1]
+        c_pim = np.asarray(pim.preintMeasCov())[6:9, 6:9]
+        return self.online.cov_vel[i - 1] + R @ c_pim @ R.T
 
     def _record_online(self, i):
         self.online.put(i, self.smoother.estimate(i), self.smoother.covariances(i))
@@ -533,7 +560,8 @@ class _Loop:
             values.insert(V(i), nav.velocity())
             values.insert(B(i), self.bias)
             self.f.gm_chain(graph, values, i, t - t_prev, self.g)
-            self._node_factors(graph, i, t, nav.pose().rotation().matrix())
+            self._node_factors(graph, i, t, nav.pose().rotation().matrix(), nav.velocity(),
+                               self._predicted_velocity_cov(i, pim))
             # Nodes about to leave the window: their fixed-lag estimate is the value they have now.
             self.oldest = max(self.oldest, self.window_start)
             while self.oldest < i and times[self.oldest] < t - self.smoother.lag:
