@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .metrics import Score, improvement_pct, position_errors
+from .metrics import Score, improvement_pct, truth_at
 from .run import RecordedRun
 from .solution import NavSolution
 
@@ -187,29 +187,57 @@ def _figure(figsize, nrows: int = 1, ncols: int = 1, **kw):
     return plt.subplots(nrows, ncols, figsize=figsize, **kw)
 
 
-def _finish(fig, ax, path: Path, xlabel: str, ylabel: str, title: str) -> None:
+def _finish(fig, ax, path: Path, xlabel: str, ylabel: str, title: str, legend: bool = True,
+            title_ax=None) -> None:
     import matplotlib.pyplot as plt
 
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
-    ax.set_title(title)
+    (title_ax or ax).set_title(title)
     ax.grid(alpha=0.3)
-    ax.legend()
+    if legend:
+        ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
+#: Line styles cycled over the methods, so that two methods whose errors coincide stay distinct
+#: (the later one dashed or dotted on top of the earlier, thinner).
+_STYLES = (("-", 1.6), ("--", 1.2), (":", 1.4), ("-.", 1.0))
+
+
 def plot_errors(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> None:
-    """Position error norm vs time for all methods, outages shaded."""
-    fig, ax = _figure((10, 4.5))
-    for mid, sol in sols.items():
-        err, t = position_errors(run, sol)
-        ax.plot(t - run.t_start, np.linalg.norm(err, axis=1), lw=1, label=mid)
-    for a, b in run.meta.get("outages") or []:
-        ax.axvspan(a, b, color="0.85", zorder=0)
-    _finish(fig, ax, path, "time since start [s]", "3-D position error [m]",
-            f"{run.name}: position error (grey: GNSS outages)")
+    """North, east and down position error per method against time, each with its +-3 sigma
+    band (the method's own 1-sigma, drawn as thin edges in its colour and line style); GNSS
+    outages shaded grey when there are any. Each axis spans the 98th percentile of the errors and
+    bands (the widest 2 % of a band, deep in an outage, is cut off)."""
+    fig, axes = _figure((10, 7.5), nrows=3, sharex=True)
+    outages = run.meta.get("outages") or []
+    extent = np.zeros(3)   # per axis: the 98th percentile of |error| and 3 sigma over the methods
+    for k, (mid, sol) in enumerate(sols.items()):
+        p_true, valid = truth_at(run, sol.t)
+        err = run.origin.to_ned(sol.lat, sol.lon, sol.h)[valid] - p_true[valid]
+        t, sig = sol.t[valid] - run.t_start, sol.sigma[valid, 0:3]
+        style, lw = _STYLES[k % len(_STYLES)]
+        for i, ax in enumerate(axes):
+            line, = ax.plot(t, err[:, i], style, lw=lw, label=mid, zorder=3)
+            for sign in (-1, 1):   # the band as thin edges in the method's colour and style
+                ax.plot(t, sign * 3 * sig[:, i], style, lw=0.7, color=line.get_color(), alpha=0.6, zorder=2)
+        if len(t):
+            extent = np.maximum(extent, np.percentile(np.maximum(np.abs(err), 3 * sig), 98, axis=0))
+    for ax, axis, lim in zip(axes, ("north", "east", "down"), extent):
+        if lim > 0:   # a band that opens in a long outage must not flatten every error line
+            ax.set_ylim(-1.15 * lim, 1.15 * lim)
+        for a, b in outages:
+            ax.axvspan(a, b, color="0.85", zorder=0)
+        ax.set_ylabel(f"{axis} error [m]")
+        ax.grid(alpha=0.3)
+    axes[0].legend(ncol=min(len(sols), 4), fontsize="small", loc="upper right")
+    note = "; grey: GNSS outages" if outages else ""
+    _finish(fig, axes[-1], path, "time since start [s]", "down error [m]",
+            f"{run.name}: position error, estimate minus truth, with +-3 sigma bands{note}", legend=False,
+            title_ax=axes[0])
 
 
 def plot_trajectory(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> None:
