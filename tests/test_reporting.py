@@ -97,3 +97,71 @@ def test_bench_command(run_dir, tmp_path, capsys):
 def test_bench_bad_seeds(capsys):
     assert main(["bench", "--seeds", "a-b"]) == 2
     assert "--seeds" in capsys.readouterr().err
+
+
+def _read_odometry(path):
+    """Every message of an exported bag, read back with rosbags: {topic: [(t, msg)]}."""
+    from rosbags.highlevel import AnyReader
+
+    out = {}
+    with AnyReader([path]) as reader:
+        for conn, _, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            out.setdefault(conn.topic, []).append((msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec, msg))
+    return out
+
+
+@pytest.mark.parametrize("kind, name", [("bag", "trajectories"), ("ros1bag", "trajectories.bag")])
+def test_odometry_bag_export_reads_back_as_the_csv_trajectory(kind, name, run_dir, tmp_path, capsys):
+    from gnssacc.earth import LocalTangentFrame
+    from gnssacc.odombag import ORIGIN_TOPIC, topic_of
+
+    out = tmp_path / "o"
+    assert main(["run", str(run_dir), "--methods", "ekf,smoother", "--tune", "none", "--no-plots", "--export", kind,
+                 "--out", str(out)]) == 0
+    capsys.readouterr()
+    msgs = _read_odometry(out / name)
+    assert set(msgs) == {ORIGIN_TOPIC, topic_of("truth")} | {topic_of(m) for m in
+                                                              ("ekf", "smoother", "smoother-online")}
+    fix = msgs[ORIGIN_TOPIC][0][1]
+    origin = LocalTangentFrame(*np.radians([fix.latitude, fix.longitude]), fix.altitude)
+    for method in ("ekf", "smoother-online"):
+        csv = np.genfromtxt(out / f"trajectory_{method}.csv", delimiter=",", names=True)
+        got = msgs[topic_of(method)]
+        assert len(got) == len(csv)
+        t = np.array([s for s, _ in got])
+        np.testing.assert_allclose(t, csv["t"], atol=1e-6)
+        # Positions: ENU in the bag, lat/lon/h in the CSV, compared in NED through the stated origin.
+        enu = np.array([[m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z] for _, m in got])
+        ned = origin.to_ned(np.radians(csv["lat_deg"]), np.radians(csv["lon_deg"]), csv["h_m"])
+        np.testing.assert_allclose(enu, ned[:, [1, 0, 2]] * [1, 1, -1], atol=2e-3)
+        # Attitude: the FLU->ENU quaternion is the CSV's roll/pitch/yaw (FRD->NED) in ROS axes.
+        flu_frd, enu_ned = np.diag([1.0, -1.0, -1.0]), np.array([[0.0, 1, 0], [1, 0, 0], [0, 0, -1]])
+        for k in (0, len(csv) // 2, len(csv) - 1):
+            q = got[k][1].pose.pose.orientation
+            R_nb = euler_to_dcm(*np.radians([csv["roll_deg"][k], csv["pitch_deg"][k], csv["yaw_deg"][k]]))
+            np.testing.assert_allclose(_quat_to_dcm([q.x, q.y, q.z, q.w]), enu_ned @ R_nb @ flu_frd, atol=1e-5)
+            # Covariance diagonal: east, north, up sigmas of the CSV squared.
+            cov = np.asarray(got[k][1].pose.covariance).reshape(6, 6)
+            np.testing.assert_allclose(np.sqrt(np.diag(cov)[:3]), [csv["se_m"][k], csv["sn_m"][k], csv["sd_m"][k]],
+                                       rtol=1e-4)
+            # Twist: the NED velocity expressed in body FLU axes.
+            v = got[k][1].twist.twist.linear
+            v_ned = np.array([csv["vn"][k], csv["ve"][k], csv["vd"][k]])
+            np.testing.assert_allclose(enu_ned @ R_nb @ flu_frd @ [v.x, v.y, v.z], enu_ned @ v_ned, atol=2e-4)
+
+
+def test_truth_without_attitude_is_exported_as_positions_only_and_says_so(tmp_path):
+    from dataclasses import replace
+
+    from gnssacc.errors import DataWarning
+    from gnssacc.export import write_truth_tum
+
+    run = simulate("car", 30.0, noise="white", seed=1)
+    run = replace(run, truth=replace(run.truth, rpy=None))
+    with pytest.warns(DataWarning, match="trans_part"):
+        path = write_truth_tum(run, tmp_path)
+    assert path.name == "truth_positions.tum" and not (tmp_path / "truth.tum").exists()
+    assert "POSITIONS ONLY" in path.read_text().splitlines()[0]
+    data = np.loadtxt(path)
+    np.testing.assert_allclose(data[:, 1:4], run.origin.to_ned(run.truth.lat, run.truth.lon, run.truth.h), atol=1e-5)

@@ -59,8 +59,10 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     r.add_argument("--report", action="store_true",
                    help="also write report.html (table, figures, per-state sigmas, data-quality findings)")
-    r.add_argument("--export", choices=["tum"], action="append", default=[],
-                   help="also export trajectories: 'tum' writes trajectory_<id>.tum and truth.tum for evo")
+    r.add_argument("--export", choices=["tum", "bag", "ros1bag"], action="append", default=[],
+                   help="also export trajectories (repeatable): 'tum' writes trajectory_<id>.tum and truth.tum for "
+                        "evo; 'bag' a ROS 2 bag (trajectories/) and 'ros1bag' a ROS 1 bag (trajectories.bag) of "
+                        "nav_msgs/Odometry with covariance, one topic per method")
 
     bch = sub.add_parser("bench", help="Monte-Carlo comparison over GNSS noise seeds",
                          description="Run every method over noise seeds on one run and print the paper-style "
@@ -129,7 +131,7 @@ def _batch_parser(sub) -> None:
     b.add_argument("--gnss-from-truth", type=float, default=None, metavar="RATE_HZ")
     b.add_argument("--no-plots", action="store_true", default=None, help="skip the PNG figures")
     b.add_argument("--report", action="store_true", default=None, help="also write report.html per task")
-    b.add_argument("--export", choices=["tum"], action="append", default=None)
+    b.add_argument("--export", choices=["tum", "bag", "ros1bag"], action="append", default=None)
     b.add_argument("--out", default=None, help="campaign folder (default ./gnssacc-out/campaign-<timestamp>/)")
     b.add_argument("--resume", default=None, metavar="CAMPAIGN",
                    help="finish a campaign: run the tasks without a result (its settings are stored in it; "

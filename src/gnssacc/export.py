@@ -3,8 +3,8 @@
 A TUM file has one line per pose: ``timestamp tx ty tz qx qy qz qw``. gnssacc writes positions
 in the run's local NED tangent frame [m] (origin in the file header) and the body-FRD-to-NED
 attitude as a unit quaternion, so ``evo_ape tum truth.tum trajectory_ekf.tum`` compares like with
-like. ``truth.tum`` (positions only, identity attitude when the truth has none) is written beside
-the estimates when the run has truth.
+like. ``truth.tum`` is written beside the estimates when the run has truth with attitude, and
+``truth_positions.tum`` (with a warning) when its truth has positions only.
 """
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import warn_data
 from .rotations import dcm_to_quaternion, euler_to_dcm
 from .run import RecordedRun
 from .solution import NavSolution
@@ -34,9 +35,23 @@ def write_tum(sol: NavSolution, run: RecordedRun, path: Path) -> None:
     _write(Path(path), sol.t, run.origin.to_ned(sol.lat, sol.lon, sol.h), sol.rpy, _origin_note(run))
 
 
-def write_truth_tum(run: RecordedRun, path: Path) -> None:
-    """Write the run's truth in TUM format (identity attitude where the truth has none)."""
+def write_truth_tum(run: RecordedRun, folder: Path) -> Path:
+    """Write the run's truth in TUM format into ``folder``; return the file.
+
+    With attitude: ``truth.tum``. Without (positions only, e.g. fixes of an RTK receiver):
+    ``truth_positions.tum``, whose quaternions are the identity and say nothing, with a warning:
+    ``evo_ape`` with ``--pose_relation trans_part`` compares positions correctly, while
+    ``evo_rpe`` (which expresses relative motion in the reference's body axes) does not.
+    """
     tr = run.truth
-    rpy = tr.rpy if tr.rpy is not None else np.zeros((len(tr.t), 3))
-    _write(Path(path), tr.t, run.origin.to_ned(tr.lat, tr.lon, tr.h), rpy,
-           _origin_note(run) + ("" if tr.rpy is not None else "; truth has no attitude: identity written"))
+    if tr.rpy is not None:
+        path = Path(folder) / "truth.tum"
+        _write(path, tr.t, run.origin.to_ned(tr.lat, tr.lon, tr.h), tr.rpy, _origin_note(run))
+        return path
+    path = Path(folder) / "truth_positions.tum"
+    _write(path, tr.t, run.origin.to_ned(tr.lat, tr.lon, tr.h), np.zeros((len(tr.t), 3)),
+           _origin_note(run) + "; POSITIONS ONLY: the truth has no attitude, the quaternions are placeholders")
+    warn_data(f"{run.where} (truth)", "has no attitude: truth_positions.tum carries placeholder quaternions; compare "
+                                      "positions only (evo_ape ... --pose_relation trans_part); evo_rpe's figures "
+                                      "would be meaningless")
+    return path

@@ -356,8 +356,9 @@ def write_result_files(folder: Path, run: RecordedRun, sols: dict[str, NavSoluti
 
     ``trajectory_<id>.csv`` per solution, ``config.toml``, ``table.txt``, ``metrics.json`` (with
     the failed methods too); ``plots`` adds ``errors.png`` (with truth) and ``trajectory.png``;
-    ``report`` adds ``report.html`` (with ``sigmas.png``); ``export=("tum",)`` adds
-    ``trajectory_<id>.tum`` (and ``truth.tum``) for ``evo``; ``tuned_toml`` is written as
+    ``report`` adds ``report.html`` (with ``sigmas.png``); ``export`` may hold ``"tum"``
+    (``trajectory_<id>.tum`` and the truth's, for ``evo``), ``"bag"`` (``trajectories/``, a ROS 2
+    bag of ``nav_msgs/Odometry``) and ``"ros1bag"`` (``trajectories.bag``); ``tuned_toml`` is written as
     ``tuned.toml`` (the identified noise, reusable with ``--config``).
     """
     folder = Path(folder)
@@ -375,7 +376,10 @@ def write_result_files(folder: Path, run: RecordedRun, sols: dict[str, NavSoluti
         for mid, sol in sols.items():
             write_tum(sol, run, folder / f"trajectory_{mid}.tum")
         if run.truth is not None:
-            write_truth_tum(run, folder / "truth.tum")
+            write_truth_tum(run, folder)
+    for kind in set(export) & {"bag", "ros1bag"}:
+        from .odombag import BAG_EXPORTS, write_odometry_bag
+        write_odometry_bag(sols, run, folder / BAG_EXPORTS[kind])
     if report:
         from .htmlreport import write_html_report
         write_html_report(folder, run, sols, metrics, cfg)
