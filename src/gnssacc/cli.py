@@ -89,7 +89,10 @@ def _parser() -> argparse.ArgumentParser:
     ins.add_argument("--config", default=None, help="configuration TOML (for [bag] fix_mappings of custom types)")
 
     c = sub.add_parser("config", help="show the resolved run configuration")
-    c.add_argument("--show", action="store_true", help="print the configuration as TOML (default)")
+    c.add_argument("--show", action="store_true",
+                   help="print the resolved configuration as TOML, each key with its documentation (default)")
+    c.add_argument("--template", action="store_true",
+                   help="print a commented starting file: every key documented and commented out")
     c.add_argument("--config", default=None)
     c.add_argument("--preset", default=None, choices=PRESETS)
 
@@ -298,7 +301,13 @@ def _cmd_batch(args) -> int:
 
 
 def _cmd_config(args) -> int:
-    print(load_config(args.preset, args.config).to_toml(), end="")
+    cfg = load_config(args.preset, args.config)
+    if args.template:
+        from .config_docs import template_toml
+
+        print(template_toml(cfg), end="")
+    else:
+        print(cfg.to_toml(), end="")
     return 0
 
 

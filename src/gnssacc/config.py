@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import copy
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from dataclasses import fields as dataclass_fields
 from importlib import resources
 from pathlib import Path
@@ -289,6 +289,8 @@ class RunConfig:
     #: ``(section, key)`` pairs set by the user's file or overrides (never by a preset): the noise
     #: tuner leaves these alone.
     explicit: frozenset = frozenset()
+    #: ``(section, key)`` -> the preset, file or ``"overrides"`` that set it (defaults: absent).
+    origin: dict = field(default_factory=dict)
 
     def __getitem__(self, section: str) -> dict:
         return self.values[section]
@@ -386,16 +388,15 @@ class RunConfig:
         """
         values = copy.deepcopy(self.values)
         _merge(values, updates, source)
-        return RunConfig(values, self.sources + [source], self.explicit)
+        origin = {**self.origin, **dict.fromkeys(_keys(updates), source)}
+        return RunConfig(values, self.sources + [source], self.explicit, origin)
 
     def to_toml(self) -> str:
-        """The resolved configuration as TOML text (for ``gnssacc config --show`` and outputs)."""
-        lines = [f"# resolved from: {', '.join(self.sources)}"]
-        for section, values in self.values.items():
-            lines.append(f"\n[{section}]")
-            for key, value in values.items():
-                lines.append(f"{key} = {toml_value(value)}")
-        return "\n".join(lines) + "\n"
+        """The resolved configuration as TOML text (for ``gnssacc config --show`` and outputs):
+        each key with its documentation and, when not at its default, what set it."""
+        from .config_docs import commented_toml
+
+        return commented_toml(self.values, [f"resolved from: {', '.join(self.sources)}"], self.origin)
 
 
 def toml_value(value) -> str:
@@ -460,7 +461,7 @@ def load_config(preset: str | None = None, path: str | Path | None = None,
         sources.append("overrides")
         explicit |= _keys(overrides)
         origin.update(dict.fromkeys(_keys(overrides), "overrides"))
-    cfg = RunConfig(values, sources, frozenset(explicit))
+    cfg = RunConfig(values, sources, frozenset(explicit), origin)
     _validate(cfg, sources[-1], origin)
     return cfg
 
