@@ -1,4 +1,5 @@
-"""Execute the notebooks in notebooks/ so they cannot rot (needs the `test` extra: nbclient, nbformat, ipykernel)."""
+"""Execute the notebooks in notebooks/ so they cannot rot (needs the `test` extra: nbclient, nbformat, ipykernel);
+they are stored executed (notebooks/execute.py) and must stay so."""
 from __future__ import annotations
 
 import os
@@ -17,8 +18,13 @@ NOTEBOOKS = ["filter_vs_smoother.ipynb", "observability.ipynb"]
 
 def _run(name: str):
     nb = nbformat.read(NB_DIR / name, as_version=4)
-    # The notebooks are stored without outputs; executing them must not need any.
-    assert all(not c.get("outputs") for c in nb.cells if c.cell_type == "code"), f"{name} is stored with outputs"
+    # Stored executed (notebooks/execute.py), so they read on any code host: every code cell ran,
+    # none raised. Executed here again from a copy without outputs, which must not need them.
+    code = [c for c in nb.cells if c.cell_type == "code"]
+    assert all(c.get("execution_count") for c in code), f"{name}: stored unexecuted (python notebooks/execute.py)"
+    assert not any(o.get("output_type") == "error" for c in code for o in c.get("outputs", [])), name
+    for c in code:
+        c.outputs, c.execution_count = [], None
     env_seeds = os.environ.pop("GNSSACC_NB_SEEDS", None)
     try:
         t0 = time.perf_counter()
