@@ -63,6 +63,35 @@ def test_run_with_report_and_tum_export(run_dir, tmp_path, capsys):
     import re
     shares = [float(x) for x in re.findall(r"<tr><td>(?:stationary|straight|accelerating|turning)</td><td>([0-9.]+)", page)]
     assert len(shares) == 4 and sum(shares) == pytest.approx(100.0, abs=0.2)
+    # The comparison is a real table whose PRMSE cells are metrics.json's, method by method.
+    from html.parser import HTMLParser
+
+    class Rows(HTMLParser):
+        rows, cell = [], None
+
+        def handle_starttag(self, tag, attrs):
+            if tag == "tr":
+                self.rows.append([])
+            elif tag in ("td", "th"):
+                self.cell = ""
+
+        def handle_data(self, data):
+            if self.cell is not None:
+                self.cell += data
+
+        def handle_endtag(self, tag):
+            if tag in ("td", "th"):
+                self.rows[-1].append(self.cell)
+                self.cell = None
+
+    parser = Rows()
+    parser.feed(page.split("<h2>Comparison</h2>")[1].split("</table>")[0])
+    head, *body = parser.rows
+    metrics = json.loads((out / "metrics.json").read_text())
+    col = head.index("PRMSE [m]")
+    for row in body[:-1]:
+        assert float(row[col]) == pytest.approx(metrics["methods"][row[0]]["prmse_m"], abs=0.006)
+    assert body[-1][0] == "gnss (raw fixes)" and float(body[-1][col]) == pytest.approx(metrics["gnss_prmse_m"], abs=0.006)
     tum = np.loadtxt(out / "trajectory_ekf.tum")
     csv = np.genfromtxt(out / "trajectory_ekf.csv", delimiter=",", names=True)
     assert tum.shape == (len(csv), 8)

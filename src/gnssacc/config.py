@@ -219,7 +219,9 @@ DEFAULTS: dict[str, dict] = {
 PRESETS = ("consumer", "industrial", "tactical", "kitti")
 
 
-def _vec3(value, key: str, where: str) -> np.ndarray:
+def vec3(value, key: str, where: str) -> np.ndarray:
+    """A configuration value as a 3-vector: a scalar (the same for every axis) or three numbers;
+    :class:`InputError` naming ``key`` and ``where`` otherwise."""
     try:
         arr = np.atleast_1d(np.asarray(value, float))
     except (TypeError, ValueError):
@@ -299,34 +301,34 @@ class RunConfig:
     @property
     def gyro_psd(self) -> np.ndarray:
         """White gyro noise PSD per axis [rad^2/s]."""
-        return (_vec3(self["imu"]["gyro_arw_deg_rth"], "gyro_arw_deg_rth", "config") * DEG / 60.0) ** 2
+        return (vec3(self["imu"]["gyro_arw_deg_rth"], "gyro_arw_deg_rth", "config") * DEG / 60.0) ** 2
 
     @property
     def accel_psd(self) -> np.ndarray:
         """White accelerometer noise PSD per axis [(m/s^2)^2/s]."""
-        return (_vec3(self["imu"]["accel_vrw_mps_rth"], "accel_vrw_mps_rth", "config") / 60.0) ** 2
+        return (vec3(self["imu"]["accel_vrw_mps_rth"], "accel_vrw_mps_rth", "config") / 60.0) ** 2
 
     @property
     def gyro_bias_rw_psd(self) -> np.ndarray:
         """Gyro bias random-walk PSD per axis [(rad/s)^2/s]."""
-        s = _vec3(self["imu"]["gyro_bias_instability_deg_h"], "gyro_bias_instability_deg_h", "config")
+        s = vec3(self["imu"]["gyro_bias_instability_deg_h"], "gyro_bias_instability_deg_h", "config")
         return 2.0 * (s * DEG / 3600.0) ** 2 / float(self["imu"]["bias_correlation_time_s"])
 
     @property
     def accel_bias_rw_psd(self) -> np.ndarray:
         """Accelerometer bias random-walk PSD per axis [(m/s^2)^2/s]."""
-        s = _vec3(self["imu"]["accel_bias_instability_mg"], "accel_bias_instability_mg", "config")
+        s = vec3(self["imu"]["accel_bias_instability_mg"], "accel_bias_instability_mg", "config")
         return 2.0 * (s * 1e-3 * G0) ** 2 / float(self["imu"]["bias_correlation_time_s"])
 
     @property
     def gyro_bias_sigma0(self) -> np.ndarray:
         """Initial gyro bias 1-sigma per axis [rad/s]."""
-        return _vec3(self["imu"]["gyro_bias_sigma0_deg_h"], "gyro_bias_sigma0_deg_h", "config") * DEG / 3600.0
+        return vec3(self["imu"]["gyro_bias_sigma0_deg_h"], "gyro_bias_sigma0_deg_h", "config") * DEG / 3600.0
 
     @property
     def accel_bias_sigma0(self) -> np.ndarray:
         """Initial accelerometer bias 1-sigma per axis [m/s^2]."""
-        return _vec3(self["imu"]["accel_bias_sigma0_mg"], "accel_bias_sigma0_mg", "config") * 1e-3 * G0
+        return vec3(self["imu"]["accel_bias_sigma0_mg"], "accel_bias_sigma0_mg", "config") * 1e-3 * G0
 
     # --- geometry ------------------------------------------------------------------------------
     @property
@@ -342,22 +344,22 @@ class RunConfig:
         value = self["mounting"]["imu_to_body_rpy_deg"]
         if value == "auto":
             return np.zeros(3)
-        return _vec3(value, "imu_to_body_rpy_deg", "config")
+        return vec3(value, "imu_to_body_rpy_deg", "config")
 
     @property
     def lever_arm_b(self) -> np.ndarray:
         """GNSS antenna position relative to the IMU in the body frame [m]."""
-        return _vec3(self["gnss"]["lever_arm_b_m"], "lever_arm_b_m", "config")
+        return vec3(self["gnss"]["lever_arm_b_m"], "lever_arm_b_m", "config")
 
     @property
     def gnss_gm_sigma(self) -> np.ndarray:
         """1-sigma of the GNSS Gauss-Markov error per N, E, D axis [m] (zeros: not modelled)."""
-        return _vec3(self["gnss"]["gm_sigma_m"], "gm_sigma_m", "config")
+        return vec3(self["gnss"]["gm_sigma_m"], "gm_sigma_m", "config")
 
     @property
     def gnss_gm_tau(self) -> np.ndarray:
         """Correlation time of the GNSS Gauss-Markov error per axis [s]."""
-        return _vec3(self["gnss"]["gm_tau_s"], "gm_tau_s", "config")
+        return vec3(self["gnss"]["gm_tau_s"], "gm_tau_s", "config")
 
     @property
     def accel_sigma_override(self) -> np.ndarray | None:
@@ -365,14 +367,14 @@ class RunConfig:
         v = self["accel"]["sigma_mps2"]
         if v is None or (isinstance(v, list) and len(v) == 0):
             return None
-        return _vec3(v, "accel.sigma_mps2", "config")
+        return vec3(v, "accel.sigma_mps2", "config")
 
     def initial_sigma_overrides(self) -> dict:
         """Configured initial sigmas in SI units: keys ``pos``, ``vel`` (3,), ``roll_pitch``, ``yaw`` [rad]."""
         c, out = self["init"], {}
         for key, name, scale in (("pos_sigma_m", "pos", 1.0), ("vel_sigma_mps", "vel", 1.0)):
             if c[key] not in ([], None):
-                out[name] = _vec3(c[key], f"[init] {key}", "config") * scale
+                out[name] = vec3(c[key], f"[init] {key}", "config") * scale
         for key, name in (("roll_pitch_sigma_deg", "roll_pitch"), ("yaw_sigma_deg", "yaw")):
             if c[key] not in ([], None):
                 v = float(c[key])

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .report import _figure, format_table
+from .report import failed_methods, figure, table_notes, table_rows
 from .run import RecordedRun
 from .solution import NavSolution
 
@@ -26,7 +26,7 @@ def plot_sigmas(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> N
     """1-sigma of every error state vs time, one panel per state, one line per method."""
     import matplotlib.pyplot as plt
 
-    fig, axes = _figure((14, 14), 5, 3, sharex=True)
+    fig, axes = figure((14, 14), 5, 3, sharex=True)
     for row, (name, cols, scale, unit, labels) in enumerate(SIGMA_GROUPS):
         for c, label in enumerate(labels):
             ax = axes[row, c]
@@ -61,6 +61,21 @@ def observability_html(run: RecordedRun, sols: dict[str, NavSolution], cfg) -> s
             "<p>Mean share of each state's predicted variance removed at a GNSS epoch, by the position update alone "
             "and by position + GNSS-derived acceleration (the EKF's own matrices, epochs with an acceleration):</p>"
             f"<table><tr><th>state</th><th>position [%]</th><th>position + acceleration [%]</th></tr>{rows}</table>")
+
+
+def comparison_html(metrics: dict) -> str:
+    """The comparison table as an HTML table (numbers right-aligned, '!' cells flagged), with
+    the scored window above it, a row per failed method with its reason, and the NIS legend."""
+    head, rows = table_rows(metrics)
+    above, below = table_notes(metrics)
+    cell = lambda c, i: (f'<td class="num{" warn" if c.endswith("!") else ""}">{html.escape(c)}</td>' if i
+                         else f"<td>{html.escape(c)}</td>")
+    body = "".join("<tr>" + "".join(cell(c, i) for i, c in enumerate(r)) + "</tr>" for r in rows)
+    body += "".join(f'<tr><td>{html.escape(m)}</td><td class="warn" colspan="{len(head) - 1}">failed: '
+                    f"{html.escape(r)}</td></tr>" for m, r in failed_methods(metrics).items())
+    return ("".join(f"<p>{html.escape(t)}</p>" for t in above) + "<table><tr>"
+            + "".join(f"<th>{html.escape(h)}</th>" for h in head) + f"</tr>{body}</table>"
+            + "".join(f'<p class="note">{html.escape(t)}</p>' for t in below))
 
 
 def _fmt(x, spec: str = ".2f") -> str:
@@ -117,11 +132,12 @@ def write_html_report(folder: Path, run: RecordedRun, sols: dict[str, NavSolutio
 <html><head><meta charset="utf-8"><title>gnssacc report: {html.escape(run.name)}</title>
 <style>body{{font-family:sans-serif;max-width:1100px;margin:2em auto}} img{{max-width:100%}}
 table{{border-collapse:collapse}} td,th{{border:1px solid #ccc;padding:2px 6px;font-size:90%}}
-pre{{background:#f6f6f6;padding:1em}}</style></head><body>
+pre{{background:#f6f6f6;padding:1em}} th{{background:#f0f0f0}}
+td:first-child{{white-space:nowrap}} td.num{{text-align:right;font-variant-numeric:tabular-nums}} td.warn{{background:#fff3cd}} p.note{{font-size:85%;color:#555}}</style></head><body>
 <h1>gnssacc report: {html.escape(run.name)}</h1>
 <p>Source: {html.escape(run.where)}<br>Duration {run.duration_s:.1f} s, {len(run.imu)} IMU samples,
 {len(run.gnss)} GNSS fixes. Configuration: {html.escape(', '.join(metrics.get('config_sources', [])))}.</p>
-<h2>Comparison</h2><pre>{html.escape(format_table(metrics))}</pre>
+<h2>Comparison</h2>{comparison_html(metrics)}
 <h2>Consistency</h2>{consistency_html(metrics)}
 <h2>Noise identification</h2>{tuning_html(metrics)}
 <h2>Initialisation</h2><p>All methods start from the same state: {inits}</p>

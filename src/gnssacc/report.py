@@ -134,9 +134,9 @@ def _nis_cell(metrics: dict, mid: str) -> str:
     return _fmt(value, ".2f") + (" !" if c["warnings"] else "")
 
 
-def format_table(metrics: dict) -> str:
-    """The comparison table printed by ``gnssacc run``, headed by the window it scores; a method
-    that failed has a ``failed: <reason>`` row."""
+def table_rows(metrics: dict) -> tuple[list[str], list[list[str]]]:
+    """The comparison table's header and rows (text cells), the raw fixes last; the failed
+    methods are :func:`failed_methods`."""
     ok = ok_methods(metrics)
     outage = any(m["prmse_outage_m"] is not None for m in ok.values())
     head = ["method", "PRMSE [m]", "HRMSE [m]"] + (["outage PRMSE [m]"] if outage else []) + \
@@ -150,6 +150,18 @@ def format_table(metrics: dict) -> str:
     if metrics.get("gnss_prmse_m") is not None:
         rows.append(["gnss (raw fixes)", _fmt(metrics["gnss_prmse_m"], ".2f"), _fmt(metrics["gnss_hrmse_m"], ".2f")] +
                     (["-"] if outage else []) + ["-", "-", "-", "-"])
+    return head, rows
+
+
+def table_notes(metrics: dict) -> tuple[list[str], list[str]]:
+    """The lines above the comparison table (the scored window) and below it (the NIS legend)."""
+    return _window_lines(metrics), _legend(metrics)
+
+
+def format_table(metrics: dict) -> str:
+    """The comparison table printed by ``gnssacc run``, headed by the window it scores; a method
+    that failed has a ``failed: <reason>`` row."""
+    head, rows = table_rows(metrics)
     failed = failed_methods(metrics)
     widths = [max(len(str(r[i])) for r in rows + [head]) for i in range(len(head))]
     widths[0] = max([widths[0]] + [len(mid) for mid in failed])
@@ -179,7 +191,8 @@ def _legend(metrics: dict) -> list[str]:
             "1 = consistent, '!' = see the warnings"]
 
 
-def _figure(figsize, nrows: int = 1, ncols: int = 1, **kw):
+def figure(figsize, nrows: int = 1, ncols: int = 1, **kw):
+    """A matplotlib figure and axes for a file (the Agg backend: never needs a display)."""
     import matplotlib
     matplotlib.use("Agg")  # files only; never needs a display
     import matplotlib.pyplot as plt
@@ -212,7 +225,7 @@ def plot_errors(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> N
     band (the method's own 1-sigma, drawn as thin edges in its colour and line style); GNSS
     outages shaded grey when there are any. Each axis spans the 98th percentile of the errors and
     bands (the widest 2 % of a band, deep in an outage, is cut off)."""
-    fig, axes = _figure((10, 7.5), nrows=3, sharex=True)
+    fig, axes = figure((10, 7.5), nrows=3, sharex=True)
     outages = run.meta.get("outages") or []
     extent = np.zeros(3)   # per axis: the 98th percentile of |error| and 3 sigma over the methods
     for k, (mid, sol) in enumerate(sols.items()):
@@ -242,7 +255,7 @@ def plot_errors(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> N
 
 def plot_trajectory(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> None:
     """North/east track of each method with the truth and the GNSS fixes."""
-    fig, ax = _figure((7.5, 7.5))
+    fig, ax = figure((7.5, 7.5))
     fx = run.origin.to_ned(run.gnss.lat, run.gnss.lon, run.gnss.h)
     ax.plot(fx[:, 1], fx[:, 0], ".", ms=2.5, color="0.6", label="GNSS fixes")
     if run.truth is not None:

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import DEG, RunConfig, _vec3
+from ..config import DEG, RunConfig, vec3
 from ..config_check import FIX_MAPPING_FIELDS
 from ..earth import LocalTangentFrame
 from ..errors import InputError, warn_data
@@ -713,7 +713,7 @@ def load_bag_run(path, cfg: RunConfig, *, imu_topic: str | None = None, gnss_top
     if gnss_from_truth_hz is not None and not float(gnss_from_truth_hz) > 0:
         raise InputError(where, f"--gnss-from-truth must be a positive rate in Hz, got {gnss_from_truth_hz}")
     mappings = _mappings(cfg["bag"]["fix_mappings"] if fix_mappings is None else fix_mappings)
-    default_sigma = _vec3(cfg["gnss"]["default_sigma_m"], "gnss.default_sigma_m", "config")
+    default_sigma = vec3(cfg["gnss"]["default_sigma_m"], "gnss.default_sigma_m", "config")
     max_bad = float(cfg["data"]["max_bad_fraction"])
     meta: dict = {"source": "bag", "time_source": time_source}
 
@@ -779,7 +779,7 @@ def load_bag_run(path, cfg: RunConfig, *, imu_topic: str | None = None, gnss_top
                              f"messages read before the damage")
             meta["damaged"] = damaged
         tf = None
-        if not np.any(_vec3(cfg["mounting"]["imu_to_body_rpy_deg"], "imu_to_body_rpy_deg", "config")):
+        if not np.any(vec3(cfg["mounting"]["imu_to_body_rpy_deg"], "imu_to_body_rpy_deg", "config")):
             try:
                 tf = _tf_mounting(reader, imu_frame_id, where)
             except Exception as err:
@@ -812,7 +812,7 @@ def load_bag_run(path, cfg: RunConfig, *, imu_topic: str | None = None, gnss_top
     else:
         meta["imu_mounting"] = {"from": "config [mounting] imu_to_body_rpy_deg",
                                 "imu_to_body_rpy_deg": [float(v) for v in
-                                                        _vec3(cfg["mounting"]["imu_to_body_rpy_deg"], "m", "config")]}
+                                                        vec3(cfg["mounting"]["imu_to_body_rpy_deg"], "m", "config")]}
         R_bi_total = cfg.R_bi
     imu = apply_mounting(ImuData(itab[:, 0].copy(), f_imu, w_imu), cfg)
     meta["gaps"] = {"imu": _gaps(imu.t, 5.0)}

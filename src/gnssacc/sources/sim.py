@@ -45,9 +45,9 @@ from ..gnss_noise import PROFILES, fixes_from_truth
 from ..rotations import wrap_angle
 from ..run import GnssFixes, ImuData, InitialState, RecordedRun, Truth
 from .sim_imu_errors import (GRADE_KEYS, IMU_EXTRA_ERRORS, IMU_GRADES, MODEL_KEYS,  # noqa: F401 (re-exported)
-                             UNMODELLED_KEYS, VIBRATION_ENVIRONMENT, _axes, bias_drift, gauss_markov,
+                             UNMODELLED_KEYS, VIBRATION_ENVIRONMENT, per_axis, bias_drift, gauss_markov,
                              grade_config, imu_error_model, imu_errors, imu_sigmas_si, sensor_matrices)
-from .sim_scenarios import (SCENARIOS, Kinematics, Pulse, Scenario, _R_nb_batch,  # noqa: F401 (re-exported)
+from .sim_scenarios import (SCENARIOS, Kinematics, Pulse, Scenario, R_nb_batch,  # noqa: F401 (re-exported)
                             make_scenario, reversing_spans)
 from .sim_vibration import engine_vibration, road_vibration
 

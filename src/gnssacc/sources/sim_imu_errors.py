@@ -222,7 +222,7 @@ def imu_error_model(grade: str, overrides: dict | None = None) -> dict:
     return model
 
 
-def _axes(value) -> np.ndarray:
+def per_axis(value) -> np.ndarray:
     """A scalar or three per-axis values as a float array of shape (3,)."""
     return np.broadcast_to(np.asarray(value, float), (3,)).copy()
 
@@ -243,12 +243,12 @@ def imu_sigmas_si(params: dict) -> dict:
         ``tau`` [s].
     """
     return {
-        "gyro_density": _axes(params["gyro_arw_deg_rth"]) * DEG / 60.0,
-        "accel_density": _axes(params["accel_vrw_mps_rth"]) / 60.0,
-        "gyro_bi": _axes(params["gyro_bias_instability_deg_h"]) * DEG / 3600.0,
-        "accel_bi": _axes(params["accel_bias_instability_mg"]) * MG,
-        "gyro_sigma0": _axes(params["gyro_bias_sigma0_deg_h"]) * DEG / 3600.0,
-        "accel_sigma0": _axes(params["accel_bias_sigma0_mg"]) * MG,
+        "gyro_density": per_axis(params["gyro_arw_deg_rth"]) * DEG / 60.0,
+        "accel_density": per_axis(params["accel_vrw_mps_rth"]) / 60.0,
+        "gyro_bi": per_axis(params["gyro_bias_instability_deg_h"]) * DEG / 3600.0,
+        "accel_bi": per_axis(params["accel_bias_instability_mg"]) * MG,
+        "gyro_sigma0": per_axis(params["gyro_bias_sigma0_deg_h"]) * DEG / 3600.0,
+        "accel_sigma0": per_axis(params["accel_bias_sigma0_mg"]) * MG,
         "tau": float(params["bias_correlation_time_s"]),
     }
 
@@ -275,7 +275,7 @@ def gauss_markov(n: int, dt: float, tau: float, sigma, rng: np.random.Generator)
     -------
     ndarray, shape (n, 3) or (n, c)
     """
-    sigma = _axes(sigma) if np.ndim(sigma) == 0 else np.asarray(sigma, float).copy()
+    sigma = per_axis(sigma) if np.ndim(sigma) == 0 else np.asarray(sigma, float).copy()
     c = len(sigma)
     a = np.exp(-dt / tau)
     x = np.empty((n, c))
@@ -343,8 +343,8 @@ def sensor_matrices(model: dict, rng: np.random.Generator) -> dict:
     """
     out = {}
     for sensor in ("accel", "gyro"):
-        s = rng.standard_normal(3) * _axes(model[f"{sensor}_scale_factor_ppm"]) * 1e-6
-        m = rng.standard_normal((3, 3)) * _axes(model[f"{sensor}_cross_axis_ppm"])[:, None] * 1e-6
+        s = rng.standard_normal(3) * per_axis(model[f"{sensor}_scale_factor_ppm"]) * 1e-6
+        m = rng.standard_normal((3, 3)) * per_axis(model[f"{sensor}_cross_axis_ppm"])[:, None] * 1e-6
         np.fill_diagonal(m, 0.0)
         out[f"{sensor}_scale_factor"], out[f"{sensor}_cross_axis"] = s, m
         out[f"K_{sensor[0]}"] = np.eye(3) + np.diag(s) + m
@@ -371,11 +371,11 @@ def bias_drift(t_rel: np.ndarray, model: dict, rng: np.random.Generator, rw_step
         ``drift_a`` [m/s^2], ``drift_g`` [rad/s] (shape (n, 3)) and the draws
         ``accel_warmup`` [m/s^2], ``gyro_warmup`` [rad/s] (warm-up amplitudes, shape (3,)).
     """
-    warm_a = rng.standard_normal(3) * _axes(model["accel_warmup_mg"]) * MG
-    warm_g = rng.standard_normal(3) * _axes(model["gyro_warmup_deg_h"]) * DEG / 3600.0
+    warm_a = rng.standard_normal(3) * per_axis(model["accel_warmup_mg"]) * MG
+    warm_g = rng.standard_normal(3) * per_axis(model["gyro_warmup_deg_h"]) * DEG / 3600.0
     # Random-walk densities in SI: [mg/sqrt(h)] -> [m/s^2/sqrt(s)], [deg/h/sqrt(h)] -> [rad/s/sqrt(s)].
-    k = np.concatenate([_axes(model["accel_bias_rw_mg_rth"]) * MG / 60.0,
-                        _axes(model["gyro_bias_rw_deg_h_rth"]) * DEG / 3600.0 / 60.0])
+    k = np.concatenate([per_axis(model["accel_bias_rw_mg_rth"]) * MG / 60.0,
+                        per_axis(model["gyro_bias_rw_deg_h_rth"]) * DEG / 3600.0 / 60.0])
     m = int(np.ceil(t_rel[-1] / rw_step_s)) + 1
     steps = rng.standard_normal((m - 1, 6)) * (k * np.sqrt(rw_step_s))
     walk = np.vstack([np.zeros((1, 6)), np.cumsum(steps, axis=0)])

@@ -115,7 +115,7 @@ class Kinematics:
     @property
     def R_nb(self) -> np.ndarray:
         """Body-to-NED rotations, shape (K, 3, 3) (roll zero)."""
-        return _R_nb_batch(self.pitch, self.yaw)
+        return R_nb_batch(self.pitch, self.yaw)
 
     @property
     def v_n(self) -> np.ndarray:
@@ -416,7 +416,7 @@ def reversing_spans(segments: list[dict]) -> list[tuple[float, float]]:
     return spans
 
 
-def _R_nb_batch(pitch, yaw) -> np.ndarray:
+def R_nb_batch(pitch, yaw) -> np.ndarray:
     """``Rz(yaw) @ Ry(pitch)`` for arrays, shape (K, 3, 3)."""
     cp, sp, cy, sy = np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
     R = np.empty((len(cp), 3, 3))

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .sim_imu_errors import DEG, _axes, gauss_markov
+from .sim_imu_errors import DEG, per_axis, gauss_markov
 
 
 def harmonic_interval_mean(phase_edges: np.ndarray, order: int, offset=0.0) -> np.ndarray:
@@ -96,7 +96,7 @@ def engine_vibration(speed_mid: np.ndarray, dt: float, model: dict, rng: np.rand
     phase0 = rng.uniform(0.0, 2.0 * np.pi)
     theta = rng.uniform(0.0, 2.0 * np.pi, size=(2, len(rel), 3))
     edges = phase0 + 2.0 * np.pi * dt * np.concatenate([[0.0], np.cumsum(f)])
-    amp = np.concatenate([_axes(model["vib_engine_accel_mps2"]), _axes(model["vib_engine_gyro_dps"]) * DEG])
+    amp = np.concatenate([per_axis(model["vib_engine_accel_mps2"]), per_axis(model["vib_engine_gyro_dps"]) * DEG])
     vib = np.zeros((len(f), 6))
     for h, r in enumerate(rel, start=1):
         if r != 0.0:
@@ -176,6 +176,6 @@ def road_vibration(speed_mid: np.ndarray, dt: float, model: dict, rng: np.random
     """
     z = band_limited_interval_means(len(speed_mid), dt, model["vib_road_band_hz"], rng, channels=6)
     gain = (np.abs(speed_mid) / float(model["vib_road_ref_speed_mps"])) ** float(model["vib_road_speed_exponent"])
-    rms = np.concatenate([_axes(model["vib_road_accel_mps2"]), _axes(model["vib_road_gyro_dps"]) * DEG])
+    rms = np.concatenate([per_axis(model["vib_road_accel_mps2"]), per_axis(model["vib_road_gyro_dps"]) * DEG])
     z *= gain[:, None] * rms
     return {"vib_a": z[:, :3], "vib_g": z[:, 3:]}
