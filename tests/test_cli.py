@@ -55,7 +55,7 @@ def test_run_on_csv_dir_writes_all_outputs(run_dir, tmp_path, capsys):
         rows = list(csv.reader(fh))
     header = rows[0]
     assert header[:10] == REQUIRED_COLUMNS
-    for col in ("sn_m", "se_m", "sd_m", "sroll_deg", "syaw_deg", "sbax_mps2", "sbgz_dph"):
+    for col in ("sn_m", "se_m", "sd_m", "sroll_deg", "syaw_deg", "sbax_mg", "sbgz_dph"):
         assert col in header
     data = np.array(rows[1:], float)
     assert len(data) == m["methods"]["ekf"]["n_epochs"]

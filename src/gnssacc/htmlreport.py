@@ -6,32 +6,23 @@ from __future__ import annotations
 import html
 from pathlib import Path
 
-import numpy as np
 
+from .display import DISPLAY_SCALE, STATE_GROUPS
 from .report import failed_methods, figure, table_notes, table_rows
 from .run import RecordedRun
 from .solution import NavSolution
-
-#: (title, columns of NavSolution.sigma, scale to display units, unit)
-SIGMA_GROUPS = (
-    ("position", slice(0, 3), 1.0, "m", ("N", "E", "D")),
-    ("velocity", slice(3, 6), 1.0, "m/s", ("N", "E", "D")),
-    ("attitude", slice(6, 9), 180.0 / np.pi, "deg", ("roll", "pitch", "yaw")),
-    ("accelerometer bias", slice(9, 12), 1e3 / 9.80665, "mg", ("x", "y", "z")),
-    ("gyro bias", slice(12, 15), 180.0 / np.pi * 3600.0, "deg/h", ("x", "y", "z")),
-)
-
 
 def plot_sigmas(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> None:
     """1-sigma of every error state vs time, one panel per state, one line per method."""
     import matplotlib.pyplot as plt
 
     fig, axes = figure((14, 14), 5, 3, sharex=True)
-    for row, (name, cols, scale, unit, labels) in enumerate(SIGMA_GROUPS):
+    for row, (name, cols, unit, labels) in enumerate(STATE_GROUPS):
         for c, label in enumerate(labels):
             ax = axes[row, c]
+            k = cols.start + c
             for mid, sol in sols.items():
-                ax.semilogy(sol.t - run.t_start, sol.sigma[:, cols][:, c] * scale, lw=1, label=mid)
+                ax.semilogy(sol.t - run.t_start, sol.sigma[:, k] * DISPLAY_SCALE[k], lw=1, label=mid)
             ax.set_title(f"{name} {label} [{unit}]", fontsize=9)
             ax.grid(alpha=0.3, which="both")
     for ax in axes[-1]:

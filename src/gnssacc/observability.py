@@ -57,6 +57,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .config import RunConfig
+from .display import DISPLAY_SCALE, DISPLAY_UNITS, STATE_NAMES  # noqa: F401 (part of this module's API)
 from .ekf import EkfObserver, run_ekf
 from .kalman import joseph_update
 from .metrics import truth_at
@@ -65,14 +66,8 @@ from .rotations import dcm_to_euler, euler_error_jacobian, wrap_angle
 from .run import RecordedRun
 from .solution import NavSolution
 
-#: Error-state names in :class:`NavSolution.sigma` order.
-STATE_NAMES = ("pos_n", "pos_e", "pos_d", "vel_n", "vel_e", "vel_d", "roll", "pitch", "yaw",
-               "ba_x", "ba_y", "ba_z", "bg_x", "bg_y", "bg_z")
-#: SI units per state.
+#: SI units per state (the display names and units are :mod:`gnssacc.display`'s).
 STATE_UNITS = ("m",) * 3 + ("m/s",) * 3 + ("rad",) * 3 + ("m/s^2",) * 3 + ("rad/s",) * 3
-#: Factors to display units (m, m/s, deg, mg, deg/h) and their names.
-DISPLAY_SCALE = np.array([1.0] * 6 + [np.degrees(1.0)] * 3 + [1000.0 / 9.80665] * 3 + [np.degrees(1.0) * 3600.0] * 3)
-DISPLAY_UNITS = ("m",) * 3 + ("m/s",) * 3 + ("deg",) * 3 + ("mg",) * 3 + ("deg/h",) * 3
 ATT = slice(6, 9)
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .display import DISPLAY_SCALE, TRAJECTORY_COLUMNS
 from .metrics import Score, improvement_pct, truth_at
 from .run import RecordedRun
 from .solution import NavSolution
@@ -14,21 +15,14 @@ from .solution import NavSolution
 #: Baseline of each aided method, for the improvement column.
 BASELINES = {"ekf-acc": "ekf", "smoother-acc": "smoother", "smoother-acc-online": "smoother-online"}
 
-TRAJECTORY_COLUMNS = (
-    ["t", "lat_deg", "lon_deg", "h_m", "vn", "ve", "vd", "roll_deg", "pitch_deg", "yaw_deg",
-     "bax_mps2", "bay_mps2", "baz_mps2", "bgx_dph", "bgy_dph", "bgz_dph"] + list(NavSolution.SIGMA_NAMES))
-
-_RAD2DEG = 180.0 / np.pi
-_RPS2DPH = _RAD2DEG * 3600.0
+#: Columns of ``trajectory_<id>.csv`` (display units, :mod:`gnssacc.display`).
+TRAJECTORY_COLUMNS = list(TRAJECTORY_COLUMNS)
 
 
 def trajectory_table(sol: NavSolution) -> np.ndarray:
-    """The rows of ``trajectory_<id>.csv`` (see :data:`TRAJECTORY_COLUMNS`); degrees at this edge."""
-    sig = sol.sigma.copy()
-    sig[:, 6:9] *= _RAD2DEG
-    sig[:, 12:15] *= _RPS2DPH
+    """The rows of ``trajectory_<id>.csv`` (see :data:`TRAJECTORY_COLUMNS`), in display units."""
     return np.column_stack([sol.t, np.degrees(sol.lat), np.degrees(sol.lon), sol.h, sol.v_n, np.degrees(sol.rpy),
-                            sol.b_a, sol.b_g * _RPS2DPH, sig])
+                            sol.b_a * DISPLAY_SCALE[9:12], sol.b_g * DISPLAY_SCALE[12:15], sol.sigma * DISPLAY_SCALE])
 
 
 def write_trajectory_csv(sol: NavSolution, path: Path) -> None:

@@ -5,6 +5,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .display import SIGMA_COLUMNS
+
 
 @dataclass
 class NavSolution:
@@ -54,5 +56,4 @@ class NavSolution:
         return len(self.t)
 
     #: Column names of :attr:`sigma`.
-    SIGMA_NAMES = ("sn_m", "se_m", "sd_m", "svn_mps", "sve_mps", "svd_mps", "sroll_deg", "spitch_deg", "syaw_deg",
-                   "sbax_mps2", "sbay_mps2", "sbaz_mps2", "sbgx_dph", "sbgy_dph", "sbgz_dph")
+    SIGMA_NAMES = SIGMA_COLUMNS
