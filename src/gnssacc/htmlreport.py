@@ -6,7 +6,6 @@ from __future__ import annotations
 import html
 from pathlib import Path
 
-
 from .display import DISPLAY_SCALE, STATE_GROUPS
 from .report import failed_methods, figure, table_notes, table_rows
 from .run import RecordedRun
