@@ -21,6 +21,14 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"gnssacc {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
+    _run_parser(sub)
+    _bench_parser(sub)
+    _batch_parser(sub)
+    _tool_parsers(sub)
+    return p
+
+
+def _run_parser(sub) -> None:
     r = sub.add_parser("run", help="run and compare estimators on a recorded run",
                        description="Run the estimators on a run and print a comparison table. SOURCE: omitted or "
                                    "'kitti' for the KITTI sequence inside the gtsam wheel, a ROS 1 .bag, a .mcap, a "
@@ -64,6 +72,8 @@ def _parser() -> argparse.ArgumentParser:
                         "evo; 'bag' a ROS 2 bag (trajectories/) and 'ros1bag' a ROS 1 bag (trajectories.bag) of "
                         "nav_msgs/Odometry with covariance, one topic per method")
 
+
+def _bench_parser(sub) -> None:
     bch = sub.add_parser("bench", help="Monte-Carlo comparison over GNSS noise seeds",
                          description="Run every method over noise seeds on one run and print the paper-style "
                                      "table with mean, spread and a paired significance test of each -acc gain.")
@@ -81,8 +91,9 @@ def _parser() -> argparse.ArgumentParser:
                      help="worker processes of a local Dask cluster (default 1: in this process, without Dask)")
     bch.add_argument("--out", default=None, help="also write the per-seed results and the summary as JSON")
 
-    _batch_parser(sub)
 
+def _tool_parsers(sub) -> None:
+    """``inspect``, ``config`` and ``sim``."""
     ins = sub.add_parser("inspect", help="list a bag's topics and which ones gnssacc would use, and why")
     ins.add_argument("bag", help="ROS 1 .bag, .mcap, or ROS 2 bag directory")
     _bag_arguments(ins)
@@ -105,7 +116,6 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--gnss-rate", type=float, default=1.0, help="Hz (default 1)")
     s.add_argument("--noise", choices=["white", "gm", "none"], default="white")
     s.add_argument("--seed", type=int, default=0)
-    return p
 
 
 def _batch_parser(sub) -> None:
