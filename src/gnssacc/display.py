@@ -1,5 +1,6 @@
-"""Names and display units of the error states and the trajectory outputs: the one table the CSV
-files, the report, the observability analysis and the text tables read.
+"""Names and display units of the error states and the trajectory outputs (the one table the CSV
+files, the report, the observability analysis and the text tables read), and the text-table
+layout every printed table uses.
 
 Inside, everything is SI and radians (:class:`gnssacc.solution.NavSolution`); at these edges the
 attitude is in degrees, the accelerometer bias in milli-g and the gyro bias in deg/h, as in the
@@ -44,3 +45,12 @@ STATE_GROUPS = (
     ("accelerometer bias", slice(9, 12), "mg", ("x", "y", "z")),
     ("gyro bias", slice(12, 15), "deg/h", ("x", "y", "z")),
 )
+
+
+def text_table(head: list[str], rows: list[list[str]], min_first: int = 0) -> list[str]:
+    """Lines of a plain-text table: the first column left-aligned, the others right-aligned, each
+    as wide as its widest cell (the first at least ``min_first``), a dashed rule under the head."""
+    widths = [max(len(str(r[i])) for r in rows + [head]) for i in range(len(head))]
+    widths[0] = max(widths[0], min_first)
+    line = lambda r: "  ".join(str(c).rjust(w) if i else str(c).ljust(w) for i, (c, w) in enumerate(zip(r, widths)))
+    return [line(head), line(["-" * w for w in widths])] + [line(r) for r in rows]

@@ -19,6 +19,7 @@ from collections import Counter
 import numpy as np
 
 from .argcheck import MAX_SEED
+from .display import text_table
 from .report import BASELINES
 
 
@@ -123,6 +124,4 @@ def format_summary(table: dict, title: str) -> str:
                      "-" if r["outage_mean"] is None else f"{r['outage_mean']:.2f}",
                      f"{r['improvement_pct_mean']:+.2f}" if acc else "-",
                      f"{r['helped']}/{r['n']}" if acc else "-", f"{r['p_value']:.3f}" if acc else "-"])
-    widths = [max(len(str(x[i])) for x in rows + [head]) for i in range(len(head))]
-    fmt = lambda r: "  ".join(str(c).rjust(w) if i else str(c).ljust(w) for i, (c, w) in enumerate(zip(r, widths)))
-    return "\n".join([title, fmt(head), fmt(["-" * w for w in widths])] + [fmt(r) for r in rows])
+    return "\n".join([title] + text_table(head, rows))

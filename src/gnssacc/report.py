@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .display import DISPLAY_SCALE, TRAJECTORY_COLUMNS
+from .display import DISPLAY_SCALE, TRAJECTORY_COLUMNS, text_table
 from .metrics import Score, improvement_pct, truth_at
 from .run import RecordedRun
 from .solution import NavSolution
@@ -157,13 +157,11 @@ def format_table(metrics: dict) -> str:
     that failed has a ``failed: <reason>`` row."""
     head, rows = table_rows(metrics)
     failed = failed_methods(metrics)
-    widths = [max(len(str(r[i])) for r in rows + [head]) for i in range(len(head))]
-    widths[0] = max([widths[0]] + [len(mid) for mid in failed])
-    line = lambda r: "  ".join(str(c).rjust(w) if i else str(c).ljust(w) for i, (c, w) in enumerate(zip(r, widths)))
+    lines = text_table(head, rows, max([0] + [len(mid) for mid in failed]))
+    first = len(lines[1].split("  ")[0])
     # A failed row is not cut into columns: its reason runs on after the method id.
-    failed_rows = [f"{mid.ljust(widths[0])}  failed: {reason}" for mid, reason in failed.items()]
-    return "\n".join(_window_lines(metrics) + [line(head), line(["-" * w for w in widths])] + [line(r) for r in rows]
-                     + failed_rows + _legend(metrics))
+    failed_rows = [f"{mid.ljust(first)}  failed: {reason}" for mid, reason in failed.items()]
+    return "\n".join(_window_lines(metrics) + lines + failed_rows + _legend(metrics))
 
 
 def _window_lines(metrics: dict) -> list[str]:
