@@ -194,3 +194,25 @@ def test_truth_without_attitude_is_exported_as_positions_only_and_says_so(tmp_pa
     assert "POSITIONS ONLY" in path.read_text().splitlines()[0]
     data = np.loadtxt(path)
     np.testing.assert_allclose(data[:, 1:4], run.origin.to_ned(run.truth.lat, run.truth.lon, run.truth.h), atol=1e-5)
+
+
+def test_report_reads_the_filters_own_pass(run_dir, tmp_path, monkeypatch):
+    """One pass: the observability section comes from the ekf-acc run itself (no second EKF
+    run), and equals a separate replay of that filter from the same start."""
+    import gnssacc
+    from gnssacc import observability as ob
+
+    res = gnssacc.process(str(run_dir), methods=["ekf", "ekf-acc"], tune="none")
+    ident = res.ident
+    again = ob.replay_ekf(res.run, ident.cfg, "ekf-acc", quality=ident.quality, init=ident.init,
+                          stationary=ident.stationary)
+    a, b = ob.aiding_information(res.replay).summary(), ob.aiding_information(again).summary()
+    for name in ob.STATE_NAMES:
+        assert a[name]["pos_acc"] == pytest.approx(b[name]["pos_acc"], rel=1e-9, abs=1e-12)
+
+    def no_second_pass(*args, **kwargs):
+        raise AssertionError("the report ran the filter again")
+
+    monkeypatch.setattr(ob, "replay_ekf", no_second_pass)
+    out = res.save(tmp_path / "r", report=True, plots=False)
+    assert "position + acceleration" in (out / "report.html").read_text()

@@ -21,7 +21,8 @@ from pathlib import Path
 
 from .config import RunConfig, load_config
 from .identify import Identified
-from .pipeline import compare, load_source, parse_methods, resolve_preset, with_outages, write_result
+from .pipeline import (compare, load_source, parse_methods, report_collector, resolve_preset, with_outages,
+                       write_result)
 from .report import TRAJECTORY_COLUMNS, format_table, ok_methods, trajectory_table
 from .run import RecordedRun
 from .solution import NavSolution
@@ -117,10 +118,17 @@ def process(source=None, *, methods=None, config=None, preset: str | None = None
 
 
 def evaluate(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
-             show_progress: bool = False) -> "Result":
-    """Check, identify, run and score ``methods`` on a loaded run (:func:`gnssacc.pipeline.compare`)."""
-    metrics, sols, ident = compare(run, cfg, methods, tune=tune, show_progress=show_progress)
-    return Result(ident.run, cfg, metrics, sols, ident)
+             show_progress: bool = False, observe: bool = True) -> "Result":
+    """Check, identify, run and score ``methods`` on a loaded run (:func:`gnssacc.pipeline.compare`).
+
+    ``observe``: keep the ``ekf-acc`` pass's matrices for the report's observability section
+    (:attr:`Result.replay`), so that ``save(report=True)`` does not run the filter again.
+    """
+    collector = report_collector(methods) if observe else None
+    metrics, sols, ident = compare(run, cfg, methods, tune=tune, show_progress=show_progress,
+                                   observers={"ekf-acc": collector} if collector else None)
+    replay = collector.replay("ekf-acc", sols["ekf-acc"]) if collector and "ekf-acc" in sols else None
+    return Result(ident.run, cfg, metrics, sols, ident, replay)
 
 
 @dataclass
@@ -139,6 +147,9 @@ class Result:
         Per method that succeeded (``<id>-online`` too for the smoothers).
     ident : Identified
         The shared start, stationary spans, input findings and tuned configuration.
+    replay : gnssacc.observability.EkfReplay or None
+        The ``ekf-acc`` pass's matrices at every GNSS epoch (for the report's observability
+        section and :func:`gnssacc.observability.aiding_information`).
     """
 
     run: RecordedRun
@@ -146,6 +157,7 @@ class Result:
     metrics: dict
     solutions: dict[str, NavSolution]
     ident: Identified
+    replay: object = None
 
     def table(self) -> str:
         """The comparison table ``gnssacc run`` prints."""
@@ -187,4 +199,4 @@ class Result:
         """Write into a locked :class:`gnssacc.outdir.ResultDir` (``None`` when every method failed:
         nothing is written)."""
         return write_result(target, self.run, self.solutions, self.metrics, self.ident, plots=plots, report=report,
-                            export=tuple(export), extra_files=extra_files)
+                            export=tuple(export), extra_files=extra_files, replay=self.replay)

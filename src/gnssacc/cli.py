@@ -219,7 +219,7 @@ def _run_locked(args, stack, held) -> int:
                gnss_topic=args.gnss_topic, truth_topic=args.truth_topic, time_source=args.time_source,
                gnss_from_truth_hz=args.gnss_from_truth)
     target = target or _lock_out(default_out_dir(run), args, stack, held)
-    res = evaluate(run, cfg, methods, tune=args.tune, show_progress=True)
+    res = evaluate(run, cfg, methods, tune=args.tune, show_progress=True, observe=args.report)
     out = res.write(target, plots=not args.no_plots, report=args.report, export=args.export)
     if terminate_requested():   # SIGTERM inside compiled code may have surfaced as a method's failure
         raise Terminated()

@@ -33,8 +33,10 @@ def plot_sigmas(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> N
     plt.close(fig)
 
 
-def observability_html(run: RecordedRun, sols: dict[str, NavSolution], cfg) -> str:
-    """Motion context and, per state, the share of predicted variance each aiding removes (EKF)."""
+def observability_html(run: RecordedRun, sols: dict[str, NavSolution], cfg, replay=None) -> str:
+    """Motion context and, per state, the share of predicted variance each aiding removes (EKF),
+    from ``replay`` (the ``ekf-acc`` pass's own matrices), or from one more ``ekf-acc`` pass when
+    the run did not have one."""
     from .motion import classify_motion
     from .observability import STATE_NAMES, aiding_information, replay_ekf
 
@@ -43,7 +45,7 @@ def observability_html(run: RecordedRun, sols: dict[str, NavSolution], cfg) -> s
         return ""
     fractions = classify_motion(run, ref).fractions()
     motion = "".join(f"<tr><td>{html.escape(k)}</td><td>{100 * v:.1f}</td></tr>" for k, v in fractions.items())
-    summary = aiding_information(replay_ekf(run, cfg, "ekf-acc")).summary()
+    summary = aiding_information(replay or replay_ekf(run, cfg, "ekf-acc")).summary()
     rows = "".join(f"<tr><td>{n}</td><td>{100 * summary[n]['pos']:.2f}</td><td>{100 * summary[n]['pos_acc']:.2f}</td>"
                    f"</tr>" for n in STATE_NAMES)
     return (f"<h2>Observability</h2><p>Motion context (from the IMU and the {html.escape(ref.method)} velocity):</p>"
@@ -101,7 +103,8 @@ def tuning_html(metrics: dict) -> str:
             f"<table><tr><th>key</th><th>start</th><th>identified</th></tr>{rows}</table>")
 
 
-def write_html_report(folder: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict, cfg=None) -> Path:
+def write_html_report(folder: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict, cfg=None,
+                      replay=None) -> Path:
     """Write ``report.html`` (and ``sigmas.png``) into ``folder``; returns the page's path.
 
     With ``cfg`` the page also gets the observability section (:func:`observability_html`).
@@ -132,7 +135,7 @@ td:first-child{{white-space:nowrap}} td.num{{text-align:right;font-variant-numer
 <h2>Noise identification</h2>{tuning_html(metrics)}
 <h2>Initialisation</h2><p>All methods start from the same state: {inits}</p>
 <h2>IMU data quality</h2>{quality}
-{observability_html(run, sols, cfg) if cfg is not None else ""}
+{observability_html(run, sols, cfg, replay) if cfg is not None else ""}
 {figures}
 </body></html>
 """

@@ -313,8 +313,10 @@ def _euler_var(P: np.ndarray, J: np.ndarray) -> np.ndarray:
     return np.maximum(d, 0.0)
 
 
-class _EpochCollector(EkfObserver):
-    """Keeps the filter's matrices at every GNSS epoch (the observer of one :func:`run_ekf` pass)."""
+class EpochCollector(EkfObserver):
+    """Keeps the filter's matrices at every GNSS epoch (the observer of one :func:`run_ekf` pass:
+    give it to ``run_ekf(..., observer=...)``, or to :func:`gnssacc.pipeline.compare` by method,
+    then :meth:`replay` makes the :class:`EkfReplay`)."""
 
     def __init__(self, with_phi: bool):
         self.with_phi = with_phi
@@ -338,6 +340,11 @@ class _EpochCollector(EkfObserver):
             self._cur.update(H_p=m.H, R_p=m.R, pos_used=used)
         elif m.kind == "acc":
             self._cur.update(H_a=m.H, R_a=m.R, acc_used=used)
+
+    def replay(self, method: str, sol) -> EkfReplay:
+        """The :class:`EkfReplay` of the pass this collector watched (``sol``: its solution)."""
+        return EkfReplay(method, self.epochs, self.P0, euler_error_jacobian(*self.init.rpy), float(self.init.t),
+                         {"accel_window_resets": sol.stats["accel_window_resets"]})
 
     def after(self, t, kind, s, prop):
         if kind == "gnss":
@@ -379,11 +386,10 @@ def replay_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, with_ph
     """
     if method not in ("ekf", "ekf-acc"):
         raise ValueError(f"replay_ekf replays 'ekf' or 'ekf-acc', not {method!r}")
-    c = _EpochCollector(with_phi)
+    c = EpochCollector(with_phi)
     sol = run_ekf(run, cfg, method, output_times=np.zeros(0), quality=quality, init=init, stationary=stationary,
                   observer=c, t_stop=t_end)
-    return EkfReplay(method, c.epochs, c.P0, euler_error_jacobian(*c.init.rpy), float(c.init.t),
-                     {"accel_window_resets": sol.stats["accel_window_resets"]})
+    return c.replay(method, sol)
 
 
 def _rpy(R: np.ndarray) -> np.ndarray:

@@ -22,9 +22,9 @@ from .report import format_table, metrics_dict, plot_errors, plot_trajectory, wr
 from .run import RecordedRun
 from .solution import NavSolution
 
-def _ekf(ident: Identified, method: str, show_progress: bool) -> dict[str, NavSolution]:
+def _ekf(ident: Identified, method: str, show_progress: bool, observer=None) -> dict[str, NavSolution]:
     return {method: run_ekf(ident.run, ident.cfg, method, quality=ident.quality, init=ident.init,
-                            stationary=ident.stationary, show_progress=show_progress)}
+                            stationary=ident.stationary, show_progress=show_progress, observer=observer)}
 
 
 def _smoother(ident: Identified, method: str, show_progress: bool) -> dict[str, NavSolution]:
@@ -132,7 +132,7 @@ def with_outages(run: RecordedRun, outage: str | None, outage_every: str | None)
 
 def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
                 ident: Identified | None = None, show_progress: bool = False,
-                failures: dict[str, str] | None = None) -> dict[str, NavSolution]:
+                failures: dict[str, str] | None = None, observers: dict | None = None) -> dict[str, NavSolution]:
     """Run each method on the same run, from the same identified start and noise.
 
     Parameters
@@ -150,6 +150,9 @@ def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: s
         When given, a method whose estimator raises (any ``Exception`` but
         :class:`gnssacc.errors.InputError`) is recorded here as ``{method: one-line reason}``
         and the other methods still run; when omitted the exception propagates.
+    observers : dict, optional
+        ``{method: gnssacc.ekf.EkfObserver}`` watching an EKF method's own pass (e.g. the
+        :class:`gnssacc.observability.EpochCollector` of the report's observability section).
 
     Returns
     -------
@@ -160,7 +163,8 @@ def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: s
     out: dict[str, NavSolution] = {}
     for m in methods:
         try:
-            out.update(METHODS[m](ident, m, show_progress))
+            extra = {"observer": observers[m]} if observers and m in observers else {}
+            out.update(METHODS[m](ident, m, show_progress, **extra))
         except InputError:
             raise
         except Exception as exc:  # an estimator failure costs that method only
@@ -188,12 +192,13 @@ def common_window(run: RecordedRun, sols: dict[str, NavSolution]) -> tuple[float
 
 
 def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
-            show_progress: bool = False) -> tuple[dict, dict, Identified]:
+            show_progress: bool = False, observers: dict | None = None) -> tuple[dict, dict, Identified]:
     """Identify, run and score the methods over a common window, with consistency figures.
 
     A method whose estimator fails is reported (a ``gnssacc: warning:`` naming it, and
     ``status: "failed"`` with ``error`` in the metrics) without costing the others; it is up
-    to the caller what to do when every method failed.
+    to the caller what to do when every method failed. ``observers`` (``{method: observer}``)
+    watch EKF methods' own passes (:func:`run_methods`).
 
     Returns
     -------
@@ -208,7 +213,8 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
     ident = identify(run, cfg, tune)
     run = ident.run   # as the input checks left it: repaired units, the measured clock offset applied
     failed: dict[str, str] = {}
-    sols = run_methods(run, cfg, methods, ident=ident, show_progress=show_progress, failures=failed)
+    sols = run_methods(run, cfg, methods, ident=ident, show_progress=show_progress, failures=failed,
+                       observers=observers)
     window = scored_window(run, sols)
     raw = gnss_score(run, window)
     scores, cons = {}, {}
@@ -289,14 +295,25 @@ def compare_and_write(run: RecordedRun, cfg: RunConfig, methods: list[str], targ
     out : Path or None
         As from :func:`write_result`.
     """
-    metrics, sols, ident = compare(run, cfg, methods, tune=tune, show_progress=show_progress)
+    collector = report_collector(methods) if report else None
+    metrics, sols, ident = compare(run, cfg, methods, tune=tune, show_progress=show_progress,
+                                   observers={"ekf-acc": collector} if collector else None)
+    replay = collector.replay("ekf-acc", sols["ekf-acc"]) if collector and "ekf-acc" in sols else None
     return metrics, sols, ident, write_result(target, ident.run, sols, metrics, ident, plots=plots, report=report,
-                                              export=export, extra_files=extra_files)
+                                              export=export, extra_files=extra_files, replay=replay)
+
+
+def report_collector(methods: list[str]):
+    """The observer that lets the report's observability section read the ``ekf-acc`` pass
+    itself (``None`` when ``ekf-acc`` is not among ``methods``)."""
+    from .observability import EpochCollector
+
+    return EpochCollector(False) if "ekf-acc" in methods else None
 
 
 def write_result(target: ResultDir, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict,
                  ident: Identified, *, plots: bool = True, report: bool = False, export: tuple = (),
-                 extra_files: Callable[[dict], dict[str, str]] | None = None) -> Path | None:
+                 extra_files: Callable[[dict], dict[str, str]] | None = None, replay=None) -> Path | None:
     """Write a complete result through ``target`` (all or nothing).
 
     Parameters
@@ -310,6 +327,8 @@ def write_result(target: ResultDir, run: RecordedRun, sols: dict[str, NavSolutio
     extra_files : callable, optional
         ``extra_files(metrics) -> {file name: text}``: more files written into the folder beside
         the result.
+    replay : EkfReplay, optional
+        For the report (:func:`write_result_files`).
 
     Returns
     -------
@@ -323,7 +342,7 @@ def write_result(target: ResultDir, run: RecordedRun, sols: dict[str, NavSolutio
 
     def fill(folder: Path) -> None:
         write_result_files(folder, run, sols, metrics, ident.cfg, plots=plots, report=report, export=export,
-                           tuned_toml=tuned)
+                           tuned_toml=tuned, replay=replay)
         for name, text in (extra_files(metrics) if extra_files else {}).items():
             (folder / name).write_text(text)
 
@@ -351,7 +370,7 @@ def write_outputs(out_dir: Path, run: RecordedRun, sols: dict[str, NavSolution],
 
 def write_result_files(folder: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict,
                        cfg: RunConfig, plots: bool = True, report: bool = False, export: tuple = (),
-                       tuned_toml: str | None = None) -> None:
+                       tuned_toml: str | None = None, replay=None) -> None:
     """Write every output file into ``folder`` (a fresh folder; see :func:`write_outputs`).
 
     ``trajectory_<id>.csv`` per solution, ``config.toml``, ``table.txt``, ``metrics.json`` (with
@@ -359,7 +378,9 @@ def write_result_files(folder: Path, run: RecordedRun, sols: dict[str, NavSoluti
     ``report`` adds ``report.html`` (with ``sigmas.png``); ``export`` may hold ``"tum"``
     (``trajectory_<id>.tum`` and the truth's, for ``evo``), ``"bag"`` (``trajectories/``, a ROS 2
     bag of ``nav_msgs/Odometry``) and ``"ros1bag"`` (``trajectories.bag``); ``tuned_toml`` is written as
-    ``tuned.toml`` (the identified noise, reusable with ``--config``).
+    ``tuned.toml`` (the identified noise, reusable with ``--config``); ``replay`` is the
+    ``ekf-acc`` pass's :class:`gnssacc.observability.EkfReplay` for the report (``None``: the
+    report runs that filter once more).
     """
     folder = Path(folder)
     for mid, sol in sols.items():
@@ -382,6 +403,6 @@ def write_result_files(folder: Path, run: RecordedRun, sols: dict[str, NavSoluti
         write_odometry_bag(sols, run, folder / BAG_EXPORTS[kind])
     if report:
         from .htmlreport import write_html_report
-        write_html_report(folder, run, sols, metrics, cfg)
+        write_html_report(folder, run, sols, metrics, cfg, replay=replay)
     (folder / "table.txt").write_text(format_table(metrics) + "\n")
     write_json(metrics, folder / "metrics.json")
