@@ -101,7 +101,7 @@ def test_ekf_estimates_the_heading_and_biases_of_a_simulated_ugv():
     yaw_sigma_deg = np.degrees(sol.sigma[-1, 8])
     assert sc.rpy_rmse_deg[2] < 10.0 and yaw_sigma_deg < 10.0
     # The final z-gyro bias estimate is within 3 sigma of the truth.
-    b_true = run.meta["true_bias_g"][-1, 2]
+    b_true = run.sim.true_bias_g[-1, 2]
     assert abs(sol.b_g[-1, 2] - b_true) < 3 * sol.sigma[-1, 14] + 1e-6
 
 

@@ -157,9 +157,9 @@ def test_motion_classifier_matches_the_simulated_segments():
     run = simulate("ugv", 240.0, GRADE, seed=0)
     sol = run_ekf(run, _cfg(), "ekf")
     mc = motion.classify_motion(run, sol)
-    ref = motion.labels_from_segments(run.meta["segments"], mc.t)
+    ref = motion.labels_from_segments(run.sim.segments, mc.t)
     # Away from the 1-s ramps at segment ends and the first seconds of the filter.
-    m = motion.segment_interior(run.meta["segments"], mc.t, 1.5) & (mc.t > sol.t[0] + 5.0)
+    m = motion.segment_interior(run.sim.segments, mc.t, 1.5) & (mc.t > sol.t[0] + 5.0)
     agree = np.mean(ref[m] == mc.label[m])
     assert agree > 0.97, agree
     for code in range(4):

@@ -128,7 +128,7 @@ def test_reversing_strapdown_roundtrip(name, t0, t1):
     rate = 50.0
     run = sim.simulate(name, t1, imu_grade="perfect", imu_rate_hz=rate, noise="none")
     truth = sim.dense_truth(name, t1, rate)
-    assert any(t0 < a and b < t1 for a, b in sim.reversing_spans(run.meta["segments"]))
+    assert any(t0 < a and b < t1 for a, b in sim.reversing_spans(run.sim.segments))
     k0 = int(round(t0 * rate))
     tr = sim.TruthSamples(*(getattr(truth, f)[k0:] for f in sim.TruthSamples.__dataclass_fields__))
     assert tr.speed.min() < -0.9
@@ -259,8 +259,8 @@ def test_imu_noise_statistics_match_grade(grade, overrides):
     run = sim.simulate("static", 300.0, imu_grade=grade, seed=3, imu_overrides=overrides)
     perfect = sim.simulate("static", 300.0, imu_grade="perfect", seed=3)
     p = sim.grade_config(grade)
-    white_a = run.imu.f_b - perfect.imu.f_b - run.meta["true_bias_a"]
-    white_g = run.imu.omega_ib_b - perfect.imu.omega_ib_b - run.meta["true_bias_g"]
+    white_a = run.imu.f_b - perfect.imu.f_b - run.sim.true_bias_a
+    white_g = run.imu.omega_ib_b - perfect.imu.omega_ib_b - run.sim.true_bias_g
     sig_a = p["accel_vrw_mps_rth"] / 60.0 / np.sqrt(dt)
     sig_g = p["gyro_arw_deg_rth"] * DEG / 60.0 / np.sqrt(dt)
     np.testing.assert_allclose(white_a.std(axis=0), sig_a, rtol=0.1)
@@ -269,7 +269,7 @@ def test_imu_noise_statistics_match_grade(grade, overrides):
     a = np.exp(-dt / p["bias_correlation_time_s"])
     bi_g = p["gyro_bias_instability_deg_h"] * DEG / 3600.0
     bi_a = p["accel_bias_instability_mg"] * 1e-3 * G0
-    for bias, bi in ((run.meta["true_bias_g"], bi_g), (run.meta["true_bias_a"], bi_a)):
+    for bias, bi in ((run.sim.true_bias_g, bi_g), (run.sim.true_bias_a, bi_a)):
         innov = bias[1:] - a * bias[:-1]
         np.testing.assert_allclose(innov.std(axis=0), np.sqrt(1 - a * a) * bi, rtol=0.1)
 
@@ -280,10 +280,10 @@ def test_turn_on_bias_is_drawn_with_grade_sigma(grade):
     p = sim.grade_config(grade)
     runs = [sim.simulate("static", 1.0, imu_grade=grade, seed=s, imu_rate_hz=20.0, gnss_rate_hz=1.0)
             for s in range(200)]
-    b0 = np.array([r.meta["true_bias_g"][0] for r in runs])
+    b0 = np.array([r.sim.true_bias_g[0] for r in runs])
     expected = np.hypot(p["gyro_bias_sigma0_deg_h"], p["gyro_bias_instability_deg_h"]) * DEG / 3600.0
     np.testing.assert_allclose(b0.std(), expected, rtol=0.1)
-    on = np.array([r.meta["imu_error_draws"]["gyro_turn_on_bias"] for r in runs])
+    on = np.array([r.sim.imu_error_draws["gyro_turn_on_bias"] for r in runs])
     np.testing.assert_allclose(on.std(), p["gyro_bias_sigma0_deg_h"] * DEG / 3600.0, rtol=0.1)
 
 
@@ -299,11 +299,11 @@ def test_gauss_markov_is_stationary_with_short_tau():
 
 def test_perfect_grade_has_zero_bias_and_overrides_apply():
     run = sim.simulate("static", 10.0, imu_grade="perfect")
-    assert not np.any(run.meta["true_bias_a"]) and not np.any(run.meta["true_bias_g"])
+    assert not np.any(run.sim.true_bias_a) and not np.any(run.sim.true_bias_g)
     over = sim.simulate("static", 10.0, imu_grade="perfect", imu_overrides={"gyro_arw_deg_rth": 1.0})
     assert np.any(over.imu.omega_ib_b != run.imu.omega_ib_b)
     np.testing.assert_array_equal(over.imu.f_b, run.imu.f_b)
-    assert over.meta["imu_params"]["gyro_arw_deg_rth"] == 1.0
+    assert over.sim.imu_params["gyro_arw_deg_rth"] == 1.0
 
 
 def test_grade_config_builds_filter_config():
@@ -332,7 +332,7 @@ def test_seed_reproducibility():
     np.testing.assert_array_equal(a.imu.f_b, b.imu.f_b)
     np.testing.assert_array_equal(a.imu.omega_ib_b, b.imu.omega_ib_b)
     np.testing.assert_array_equal(a.gnss.lat, b.gnss.lat)
-    np.testing.assert_array_equal(a.meta["true_bias_g"], b.meta["true_bias_g"])
+    np.testing.assert_array_equal(a.sim.true_bias_g, b.sim.true_bias_g)
     assert np.all(a.imu.f_b != c.imu.f_b)
     assert np.all(a.gnss.lat != c.gnss.lat)
     np.testing.assert_array_equal(a.truth.lat, c.truth.lat)  # truth does not depend on the seed
@@ -381,8 +381,8 @@ def test_run_validates_and_records_arguments(name):
     for key in ("scenario", "duration_s", "imu_grade", "imu_rate_hz", "gnss_rate_hz", "noise", "seed",
                 "origin_llh_deg", "initial_yaw_deg", "lever_arm_b", "give_init", "imu_overrides"):
         assert key in run.meta
-    assert run.meta["true_bias_a"].shape == (len(run.imu), 3)
-    assert run.meta["segments"][0]["t0"] == 0.0
+    assert run.sim.true_bias_a.shape == (len(run.imu), 3)
+    assert run.sim.segments[0]["t0"] == 0.0
     assert run.duration_s == pytest.approx(40.0)
 
 

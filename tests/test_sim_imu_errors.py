@@ -79,8 +79,8 @@ def test_basic_grades_reproduce_original_outputs(grade):
     f_b, w_b, bias_g = ORIGINAL_VALUES[grade]
     np.testing.assert_allclose(run.imu.f_b[[0, 777, -1]], f_b, rtol=1e-12, atol=0)
     np.testing.assert_allclose(run.imu.omega_ib_b[[0, 777, -1]], w_b, rtol=1e-12, atol=1e-20)
-    np.testing.assert_allclose(run.meta["true_bias_g"][-1], bias_g, rtol=1e-12, atol=0)
-    assert run.meta["imu_params"] == ORIGINAL_GRADES[grade]
+    np.testing.assert_allclose(run.sim.true_bias_g[-1], bias_g, rtol=1e-12, atol=0)
+    assert run.sim.imu_params == ORIGINAL_GRADES[grade]
 
 
 @pytest.mark.parametrize("grade", list(ORIGINAL_GRADES))
@@ -93,7 +93,7 @@ def test_basic_grades_follow_the_original_code_path(grade):
     err = sim.imu_errors(len(run.imu), 0.01, ORIGINAL_GRADES[grade], np.random.default_rng([seed, 1]))
     np.testing.assert_array_equal(run.imu.f_b, perfect.imu.f_b + err["bias_a"] + err["noise_a"])
     np.testing.assert_array_equal(run.imu.omega_ib_b, perfect.imu.omega_ib_b + err["bias_g"] + err["noise_g"])
-    np.testing.assert_array_equal(run.meta["true_bias_a"], err["bias_a"])
+    np.testing.assert_array_equal(run.sim.true_bias_a, err["bias_a"])
     np.testing.assert_array_equal(run.gnss.lat, perfect.gnss.lat)          # GNSS noise: its own stream
 
 
@@ -109,9 +109,9 @@ def test_rng_order_contract():
     a = sim.simulate("ugv", 30.0, imu_grade="consumer", seed=4)
     b = sim.simulate("ugv", 30.0, imu_grade="consumer", seed=4, imu_overrides={"vib_road_gyro_dps": 9.0,
                                                                                "vib_engine_accel_mps2": 0.0})
-    np.testing.assert_array_equal(a.meta["true_bias_g"], b.meta["true_bias_g"])
-    for key, value in a.meta["imu_error_draws"].items():
-        np.testing.assert_array_equal(value, b.meta["imu_error_draws"][key])
+    np.testing.assert_array_equal(a.sim.true_bias_g, b.sim.true_bias_g)
+    for key, value in a.sim.imu_error_draws.items():
+        np.testing.assert_array_equal(value, b.sim.imu_error_draws[key])
 
 
 # ----------------------------------------------------------------------------------------------
@@ -135,17 +135,17 @@ def test_parked_consumer_matches_a_real_car(seed):
     assert np.all((da.std(axis=0) >= 0.5) & (da.std(axis=0) <= 1.0))
     # The mean over a 30 s window is the drawn bias (plus (K - I) times the true signal), within
     # the standard error of the mean estimated from 1-s batch means.
-    draws = run.meta["imu_error_draws"]
+    draws = run.sim.imu_error_draws
     w = slice(300, 3300)
-    for meas, true, bias, K in ((run.imu.f_b, perfect.imu.f_b, run.meta["true_bias_a"], _sensor_matrix(draws, "accel")),
-                                (run.imu.omega_ib_b, perfect.imu.omega_ib_b, run.meta["true_bias_g"],
+    for meas, true, bias, K in ((run.imu.f_b, perfect.imu.f_b, run.sim.true_bias_a, _sensor_matrix(draws, "accel")),
+                                (run.imu.omega_ib_b, perfect.imu.omega_ib_b, run.sim.true_bias_g,
                                  _sensor_matrix(draws, "gyro"))):
         r = meas[w] - true[w] @ K.T - bias[w]
         se = r.reshape(30, 100, 3).mean(axis=1).std(axis=0, ddof=1) / np.sqrt(30)
         assert np.all(np.abs(r.mean(axis=0)) < 4.0 * se)
     # That bias is the drawn turn-on bias plus a Gauss-Markov part of a few bias instabilities.
     p = sim.grade_config("consumer")
-    gm = run.meta["true_bias_g"][w].mean(axis=0) - draws["gyro_turn_on_bias"]
+    gm = run.sim.true_bias_g[w].mean(axis=0) - draws["gyro_turn_on_bias"]
     assert np.all(np.abs(gm) < 4.0 * p["gyro_bias_instability_deg_h"] * DEG / 3600.0)
 
 
@@ -170,7 +170,7 @@ def test_scale_factor_and_cross_axis_recovered_by_least_squares():
     over = {k: v for k, v in ALL_OFF.items() if "scale_factor" not in k and "cross_axis" not in k}
     run = sim.simulate("car", 120.0, imu_grade="consumer", imu_overrides=over, imu_rate_hz=20.0, seed=6)
     perfect = _perfect("car", 120.0, imu_rate_hz=20.0)
-    draws = run.meta["imu_error_draws"]
+    draws = run.sim.imu_error_draws
     for meas, true, sensor in ((run.imu.f_b, perfect.imu.f_b, "accel"), (run.imu.omega_ib_b, perfect.imu.omega_ib_b, "gyro")):
         K = np.linalg.lstsq(true, meas, rcond=None)[0].T        # meas = K true
         np.testing.assert_allclose(K, _sensor_matrix(draws, sensor), rtol=0, atol=1e-9)
@@ -193,9 +193,9 @@ def test_bias_drift_warmup_and_random_walk():
     run = sim.simulate("static", 6.0 * tau, imu_grade="consumer", imu_overrides=over, imu_rate_hz=10.0,
                        gnss_rate_hz=1.0, seed=9)
     perfect = _perfect("static", 6.0 * tau, imu_rate_hz=10.0)
-    bias = run.meta["true_bias_g"]
+    bias = run.sim.true_bias_g
     np.testing.assert_allclose(run.imu.omega_ib_b - perfect.imu.omega_ib_b, bias, rtol=0, atol=1e-15)
-    amp = run.meta["imu_error_draws"]["gyro_warmup"]
+    amp = run.sim.imu_error_draws["gyro_warmup"]
     assert np.all(bias[0] == 0.0) and np.all(np.abs(amp) > 0.0)
     np.testing.assert_allclose(bias[-1], amp, rtol=0.01)
     k_tau = int(round(tau * 10.0))
@@ -233,17 +233,17 @@ def test_grade_parameters_and_model():
         sim.grade_config("consumer", {"vib_road_gyro_dps": 1.0})   # not a filter key
 
 
-def test_meta_records_model_and_small_draws():
+def test_sim_truth_records_model_and_small_draws():
     run = sim.simulate("car-city", 20.0, imu_grade="consumer", seed=2)
-    meta = run.meta
-    assert meta["imu_error_model"] == sim.imu_error_model("consumer")
-    assert meta["imu_params"] == sim.grade_config("consumer")
-    assert meta["true_bias_a"].shape == (len(run.imu), 3)
-    draws = meta["imu_error_draws"]
+    truths = run.sim
+    assert truths.imu_error_model == sim.imu_error_model("consumer")
+    assert truths.imu_params == sim.grade_config("consumer")
+    assert truths.true_bias_a.shape == (len(run.imu), 3)
+    draws = truths.imu_error_draws
     assert {"accel_turn_on_bias", "gyro_turn_on_bias", "accel_scale_factor", "gyro_cross_axis", "gyro_warmup",
             "engine_phase0", "engine_harmonic_phase"} <= set(draws)
     assert all(np.size(v) <= 18 for v in draws.values())
-    json.dumps(meta, default=_json_default)
+    json.dumps(run.meta, default=_json_default)   # the small facts stay JSON-ready
 
 
 def test_realistic_runs_are_deterministic():
@@ -252,7 +252,7 @@ def test_realistic_runs_are_deterministic():
     c = sim.simulate("ugv-slow", 40.0, imu_grade="consumer", seed=8)
     np.testing.assert_array_equal(a.imu.f_b, b.imu.f_b)
     np.testing.assert_array_equal(a.imu.omega_ib_b, b.imu.omega_ib_b)
-    np.testing.assert_array_equal(a.meta["true_bias_a"], b.meta["true_bias_a"])
+    np.testing.assert_array_equal(a.sim.true_bias_a, b.sim.true_bias_a)
     assert np.all(a.imu.omega_ib_b != c.imu.omega_ib_b)
     np.testing.assert_array_equal(a.truth.lat, c.truth.lat)
 

@@ -85,7 +85,7 @@ def test_cycles_repeat_up_to_30_min(name):
 @pytest.mark.parametrize("name, radius", [("ugv-slow", 5.0), ("car-city", 6.0)])
 def test_reversing_geometry(name, radius):
     run = sim.simulate(name, 280.0, imu_grade="perfect", imu_rate_hz=20.0, gnss_rate_hz=20.0, noise="none")
-    spans = sim.reversing_spans(run.meta["segments"])
+    spans = sim.reversing_spans(run.sim.segments)
     assert len(spans) == 1
     a, b = spans[0]
     tr = sim.build_trajectory(name, 280.0, 20.0).at(run.truth.t)
@@ -97,7 +97,7 @@ def test_reversing_geometry(name, radius):
     assert np.all(v_b[:, 0] < 0.0)
     np.testing.assert_allclose(v_b[:, 1:], 0.0, atol=1e-12)
     # The turn made while reversing is an arc of the requested radius (fitted to positions).
-    turn = [s for s in run.meta["segments"] if s["reverse"] and s["kind"] == "turn"][0]
+    turn = [s for s in run.sim.segments if s["reverse"] and s["kind"] == "turn"][0]
     plateau = (run.truth.t > turn["t0"] + 1.05) & (run.truth.t < turn["t1"] - 1.05)
     p = run.origin.to_ned(run.truth.lat[plateau], run.truth.lon[plateau], run.truth.h[plateau])
     assert _circle_radius(p[:, :2]) == pytest.approx(radius, rel=1e-3)

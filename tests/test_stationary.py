@@ -126,12 +126,12 @@ def test_parked_with_idling_engine_is_stationary():
 def test_stops_detected_and_motion_rejected(scenario):
     run, truth = _sim(scenario, 300.0, seed=3, texture=True)
     report = detect_stationary(run.imu, run.gnss, run.origin)
-    score = _score(report, truth, run.meta["segments"])
+    score = _score(report, truth, run.sim.segments)
     print(scenario, score, report.summary())
     assert score["detected"] >= 0.90
     assert score["fp_speed_s"] == 0.0 and score["fp_yaw_s"] == 0.0
     # Pivots on the spot (ugv: 90 deg at 30 deg/s) are never stationary.
-    for s in run.meta["segments"]:
+    for s in run.sim.segments:
         if s["kind"] == "turn":
             inside = (truth.t > s["t0"]) & (truth.t < s["t1"])
             assert not np.any(report.mask(truth.t[inside])), s
@@ -143,7 +143,7 @@ def test_imu_still_motion_is_never_accepted(scenario):
     # looks IMU-still; only the GNSS fixes and the IMU velocity chain can reject them.
     run, truth = _sim(scenario, 300.0, seed=4, texture=False)
     report = detect_stationary(run.imu, run.gnss, run.origin)
-    score = _score(report, truth, run.meta["segments"])
+    score = _score(report, truth, run.sim.segments)
     print(scenario, score, report.summary())
     moving_still = [(a, b) for a, b in imu_still_stretches(run.imu) if np.max(truth.speed[a:b]) > 1.0]
     assert len(moving_still) >= 3                   # the case is real
@@ -170,7 +170,7 @@ def test_slow_creep_rejected_by_gnss_stops_kept():
         still[a:b] = True
     assert (still & creep).sum() > 0.8 * creep.sum()       # the creep looks IMU-still
     report = detect_stationary(run.imu, run.gnss, run.origin)
-    score = _score(report, truth, run.meta["segments"])
+    score = _score(report, truth, run.sim.segments)
     assert score["fp_speed_s"] == 0.0
     assert score["detected"] >= 0.85, score
     t_creep = truth.t[creep]
@@ -180,7 +180,7 @@ def test_slow_creep_rejected_by_gnss_stops_kept():
 
 def test_stop_in_gnss_outage_accepted_on_imu_evidence():
     run, truth = _sim("car", 300.0, seed=5, texture=True)
-    hold = [s for s in run.meta["segments"] if s["kind"] == "hold" and s["t0"] > 50.0][0]
+    hold = [s for s in run.sim.segments if s["kind"] == "hold" and s["t0"] > 50.0][0]
     g = run.gnss
     run = replace(run, gnss=g.select((g.t < hold["t0"] - 5.0) | (g.t > hold["t1"] + 5.0)))
     report = detect_stationary(run.imu, run.gnss, run.origin)
@@ -188,14 +188,14 @@ def test_stop_in_gnss_outage_accepted_on_imu_evidence():
     assert len(inside) == 1 and not inside[0].gnss_checked and inside[0].gnss_speed_mps is None
     assert inside[0].duration_s >= 0.85 * (hold["t1"] - hold["t0"])
     assert all(s.gnss_checked for s in report.spans if s is not inside[0])
-    assert _score(report, truth, run.meta["segments"])["fp_speed_s"] == 0.0
+    assert _score(report, truth, run.sim.segments)["fp_speed_s"] == 0.0
 
 
 def test_noise_free_imu_and_data_gap():
     run = sim.simulate("ugv", 120.0, imu_grade="perfect", noise="white", seed=0)
     truth = sim.dense_truth("ugv", 120.0)
     report = detect_stationary(run.imu, run.gnss, run.origin)
-    score = _score(report, truth, run.meta["segments"])
+    score = _score(report, truth, run.sim.segments)
     assert score["detected"] >= 0.9 and score["fp_speed_s"] == 0.0 and score["fp_yaw_s"] == 0.0
     # A 0.5 s hole in the IMU record inside a stop splits it: nothing is known inside the hole.
     static = sim.simulate("static", 30.0, imu_grade="perfect", noise="white", seed=0)

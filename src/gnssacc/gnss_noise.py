@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import math
 
+from dataclasses import replace
+
 import numpy as np
 
 from .errors import InputError
@@ -174,10 +176,10 @@ def in_spans(t_rel: np.ndarray, spans: list[tuple[float, float]]) -> np.ndarray:
 
 
 def apply_outages(run: RecordedRun, spans: list[tuple[float, float]]) -> RecordedRun:
-    """Drop the fixes inside the outage spans; record the spans in ``run.meta['outages']``."""
+    """Drop the fixes inside the outage spans; record the spans in ``run.outages``."""
     if not spans:
         return run
     keep = ~in_spans(run.gnss.t - run.t_start, spans)
     if not np.any(keep):
         raise InputError(run.where, "the outages remove every GNSS fix")
-    return run.with_gnss(run.gnss.select(keep), outages=[list(s) for s in spans])
+    return replace(run, gnss=run.gnss.select(keep), outages=tuple((float(a), float(b)) for a, b in spans))

@@ -73,7 +73,7 @@ def score(run: RecordedRun, sol: NavSolution, window: tuple | None = None) -> Sc
     err, t = err[keep], t[keep]
     if len(err) == 0:
         return Score(None, None, None, 0)
-    outages = run.meta.get("outages") or []
+    outages = run.outages
     prmse_out = None
     if outages:
         m = in_spans(t - run.t_start, outages)

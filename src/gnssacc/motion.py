@@ -8,7 +8,7 @@ Inputs are the data an estimator has: the IMU samples and an estimated navigatio
 (speed and attitude). The fixed-lag smoother's solution gives the most reliable speed: after a
 1-2 deg initial tilt error the EKF's velocity error can reach ~1 m/s while standing (3 m GNSS
 noise), which the speed test below would read as moving. Truth is never read; for simulated runs
-:func:`labels_from_segments` turns the simulator's scenario log (``run.meta["segments"]``) into
+:func:`labels_from_segments` turns the simulator's scenario log (``run.sim.segments``) into
 reference labels to check the classifier against.
 
 Classification, per IMU sample, in this order of precedence (thresholds in
@@ -204,7 +204,7 @@ def sol_bias_at(sol: NavSolution, t: np.ndarray) -> np.ndarray:
 
 
 def labels_from_segments(segments: list[dict], t: np.ndarray) -> np.ndarray:
-    """Reference labels at times ``t`` from a simulator scenario log (``run.meta["segments"]``).
+    """Reference labels at times ``t`` from a simulator scenario log (``run.sim.segments``).
 
     ``hold`` -> stationary, ``cruise`` and ``hill`` -> straight, ``speed`` -> accelerating,
     ``turn`` -> turning. Times outside every segment get -1.

@@ -60,8 +60,11 @@ RUN_FIELDS = {
 
 
 def run_facts(run: RecordedRun) -> dict:
-    """The :data:`RUN_FIELDS` of ``run.meta`` that the run has."""
-    return {k: run.meta[k] for k in RUN_FIELDS if k in run.meta}
+    """The :data:`RUN_FIELDS` the run has (``outages`` from :attr:`RecordedRun.outages`)."""
+    facts = {k: run.meta[k] for k in RUN_FIELDS if k in run.meta}
+    if run.outages:
+        facts["outages"] = [list(s) for s in run.outages]
+    return facts
 
 
 def metrics_dict(run: RecordedRun, sols: dict[str, NavSolution], scores: dict[str, Score], gnss: Score,
@@ -218,7 +221,7 @@ def plot_errors(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> N
     outages shaded grey when there are any. Each axis spans the 98th percentile of the errors and
     bands (the widest 2 % of a band, deep in an outage, is cut off)."""
     fig, axes = figure((10, 7.5), nrows=3, sharex=True)
-    outages = run.meta.get("outages") or []
+    outages = run.outages
     extent = np.zeros(3)   # per axis: the 98th percentile of |error| and 3 sigma over the methods
     for k, (mid, sol) in enumerate(sols.items()):
         p_true, valid = truth_at(run, sol.t)

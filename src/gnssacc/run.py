@@ -155,6 +155,33 @@ class InitialState:
 
 
 @dataclass
+class SimTruth:
+    """What only a simulation knows about its IMU (:func:`gnssacc.sources.sim.simulate`).
+
+    Attributes
+    ----------
+    true_bias_a, true_bias_g : ndarray, shape (N, 3)
+        The accelerometer [m/s^2] and gyro [rad/s] bias in effect at each IMU sample (turn-on +
+        Gauss-Markov + drift), body axes.
+    segments : list of dict
+        The scenario log: one dict per motion segment (``kind``, ``t0``, ``t1`` [s], ``reverse``, ...).
+    imu_error_draws : dict
+        Per-run constants of the IMU error model (turn-on biases, scale factors, misalignments ...).
+    imu_params : dict
+        The filter-visible noise parameters of the simulated grade (configuration keys and units).
+    imu_error_model : dict
+        The full error description it was drawn from.
+    """
+
+    true_bias_a: np.ndarray
+    true_bias_g: np.ndarray
+    segments: list
+    imu_error_draws: dict
+    imu_params: dict
+    imu_error_model: dict
+
+
+@dataclass
 class RecordedRun:
     """One recorded (or simulated) run, ready for the estimators.
 
@@ -172,8 +199,13 @@ class RecordedRun:
     truth : Truth or None
     init : InitialState or None
         Given initial state; ``None`` lets the estimators initialise themselves.
+    outages : tuple of (float, float)
+        GNSS outage spans applied to the fixes, seconds from the start (:func:`gnssacc.gnss_noise.apply_outages`).
+    sim : SimTruth or None
+        A simulated run's IMU truths (true biases, scenario segments).
     meta : dict
-        Free-form facts about the run (noise profile, seed, outages, ...).
+        Small facts about the source (noise profile, seed, bag topics, ...): those of
+        :data:`gnssacc.report.RUN_FIELDS` are written to ``metrics.json``.
     """
 
     name: str
@@ -183,6 +215,8 @@ class RecordedRun:
     origin: LocalTangentFrame
     truth: Truth | None = None
     init: InitialState | None = None
+    outages: tuple = ()
+    sim: SimTruth | None = None
     meta: dict = field(default_factory=dict)
 
     @property

@@ -43,7 +43,7 @@ from ..earth import LocalTangentFrame, OMEGA_IE, normal_gravity, radii
 from ..errors import InputError
 from ..gnss_noise import PROFILES, fixes_from_truth
 from ..rotations import wrap_angle
-from ..run import GnssFixes, ImuData, InitialState, RecordedRun, Truth
+from ..run import GnssFixes, ImuData, InitialState, RecordedRun, SimTruth, Truth
 from .sim_imu_errors import (GRADE_KEYS, IMU_EXTRA_ERRORS, IMU_GRADES, MODEL_KEYS,  # noqa: F401 (re-exported)
                              UNMODELLED_KEYS, VIBRATION_ENVIRONMENT, per_axis, bias_drift, gauss_markov,
                              grade_config, imu_error_model, imu_errors, imu_sigmas_si, sensor_matrices)
@@ -512,11 +512,12 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
     -------
     RecordedRun
         ``name = "sim-<scenario>"``, ``where = "simulator(<scenario>, seed=<seed>)"``. ``meta``
-        records every argument, the filter-visible IMU parameters (``imu_params``, as
-        :func:`grade_config`), the full error description (``imu_error_model``), the per-run
-        error draws (``imu_error_draws``, small arrays), the true biases per IMU sample
-        ``true_bias_a`` [m/s^2] and ``true_bias_g`` [rad/s] (arrays (N, 3)), the scenario
-        ``segments`` (times absolute; ``reverse`` marks reversing) and the GNSS seed.
+        records every argument and the GNSS seed; ``sim`` (:class:`gnssacc.run.SimTruth`) the
+        filter-visible IMU parameters (``imu_params``, as :func:`grade_config`), the full error
+        description (``imu_error_model``), the per-run error draws (``imu_error_draws``, small
+        arrays), the true biases per IMU sample ``true_bias_a`` [m/s^2] and ``true_bias_g``
+        [rad/s] (arrays (N, 3)) and the scenario ``segments`` (times absolute; ``reverse`` marks
+        reversing).
     """
     args = dict(scenario=scenario, duration_s=duration_s, imu_grade=imu_grade, imu_rate_hz=imu_rate_hz,
                 gnss_rate_hz=gnss_rate_hz, noise=noise, seed=seed, origin_llh_deg=list(origin_llh_deg),
@@ -540,14 +541,14 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
     truth = truth_gnss if truth_rate_hz is None else traj.at(_imu_time(t_start_s, duration_s, truth_rate_hz))
     origin = LocalTangentFrame(*(np.array(origin_llh_deg[:2], float) * DEG), float(origin_llh_deg[2]))
     gnss_seed = int(np.random.SeedSequence([seed, 2]).generate_state(1)[0])
-    meta = {**args, "source": "simulator", "imu_params": {k: model[k] for k in GRADE_KEYS},
-            "imu_error_model": model, "imu_sample_convention": "sample k = average over (t[k-1], t[k]]",
-            **imu_info, "gnss_seed": gnss_seed,
-            "segments": [{**s, "t0": s["t0"] + t_start_s, "t1": s["t1"] + t_start_s}
-                         for s in traj.scenario.segments_until(duration_s)]}
+    meta = {**args, "source": "simulator", "imu_sample_convention": "sample k = average over (t[k-1], t[k]]",
+            "gnss_seed": gnss_seed}
+    segments = [{**s, "t0": s["t0"] + t_start_s, "t1": s["t1"] + t_start_s} for s in traj.scenario.segments_until(duration_s)]
+    truths = SimTruth(imu_info["true_bias_a"], imu_info["true_bias_g"], segments, imu_info["imu_error_draws"],
+                      {k: model[k] for k in GRADE_KEYS}, model)
     empty = GnssFixes(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, 3)))
     run = RecordedRun(name=f"sim-{name}", where=where, imu=imu, gnss=empty, origin=origin,
-                      truth=truth.to_truth(), init=_initial_state(truth) if give_init else None, meta=meta)
+                      truth=truth.to_truth(), init=_initial_state(truth) if give_init else None, sim=truths, meta=meta)
     p_antenna_n = truth_gnss.R_nb @ lever_b
     fixes = fixes_from_truth(run, truth_gnss.to_truth(), noise, gnss_seed, p_antenna_n)
     return replace(run, gnss=fixes)

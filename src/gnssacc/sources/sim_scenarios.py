@@ -404,7 +404,7 @@ def make_scenario(name: str, duration_s: float) -> Scenario:
 
 
 def reversing_spans(segments: list[dict]) -> list[tuple[float, float]]:
-    """Time spans ``(t0, t1)`` [s] of consecutive segments marked ``reverse`` (e.g. ``run.meta["segments"]``)."""
+    """Time spans ``(t0, t1)`` [s] of consecutive segments marked ``reverse`` (e.g. ``run.sim.segments``)."""
     spans: list[tuple[float, float]] = []
     for s in segments:
         if not s.get("reverse"):
