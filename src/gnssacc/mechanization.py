@@ -266,14 +266,21 @@ def _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order):
 
     For the first-order case ``Phi P Phi^T = P + dt (F P + P F^T) + dt^2 F P F^T`` is evaluated
     with F's sparsity (only rows 0..8 are non-zero), about 4x fewer operations than dense.
-    ``A`` is a (9, 15) work array.
+    ``A`` is a (9, 15) work array. Only ``P[:15, :15]`` is touched, so ``P`` may carry more
+    states (passing the whole array, not a view, keeps one compiled version of this kernel).
     """
     if phi_order == 2:
-        Phi = F * dt
-        Phi = Phi + 0.5 * _mm(Phi, Phi)
+        Phi = _transition(F, dt, phi_order)
+        Pn = np.empty((15, 15))
+        PhiT = np.empty((15, 15))
         for i in range(15):
-            Phi[i, i] += 1.0
-        P[:, :] = _mm(_mm(Phi, P), Phi.T.copy())
+            for j in range(15):
+                Pn[i, j] = P[i, j]
+                PhiT[i, j] = Phi[j, i]
+        Pn = _mm(_mm(Phi, Pn), PhiT)
+        for i in range(15):
+            for j in range(15):
+                P[i, j] = Pn[i, j]
     else:
         # A = F P over the non-zero columns of each row of F.
         for i in range(9):
@@ -349,9 +356,7 @@ def _propagate_all(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order, gm_tau, g
     """The 15 navigation states, then the GNSS error states when P has them."""
     if P.shape[0] > 15:
         _propagate_gm(P, F, dt, gm_tau, gm_var)  # needs only P_xg and F: order-independent
-        _propagate_cov(P[:15, :15], F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order)
-    else:
-        _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order)
+    _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order)
 
 
 @njit(cache=True)
@@ -370,14 +375,30 @@ def _segment_index(k, seg_i0, seg_i1):
 
 
 @njit(cache=True)
-def _step_phi(Phi, F, dt, phi_order):
-    """Phi <- (I + F dt (+ (F dt)^2 / 2)) Phi: the error-state transition over one step."""
-    S = F * dt
+def _transition(F, dt, phi_order):
+    """``I + F dt (+ (F dt)^2 / 2)``, the error-state transition over one step. Explicit loops:
+    numba's array expressions (``F * dt``) cost seconds of compilation each."""
+    S = np.empty((15, 15))
+    for i in range(15):
+        for j in range(15):
+            S[i, j] = F[i, j] * dt
     if phi_order == 2:
-        S = S + 0.5 * _mm(S, S)
+        S2 = _mm(S, S)
+        for i in range(15):
+            for j in range(15):
+                S[i, j] = S[i, j] + 0.5 * S2[i, j]
     for i in range(15):
         S[i, i] += 1.0
-    Phi[:, :] = _mm(S, Phi)
+    return S
+
+
+@njit(cache=True)
+def _step_phi(Phi, F, dt, phi_order):
+    """Phi <- (I + F dt (+ (F dt)^2 / 2)) Phi: the error-state transition over one step."""
+    C = _mm(_transition(F, dt, phi_order), Phi)
+    for i in range(15):
+        for j in range(15):
+            Phi[i, j] = C[i, j]
 
 
 @njit(cache=True)
@@ -480,6 +501,14 @@ def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
     return k, t_cur
 
 
+def kernel_array(x, dtype) -> np.ndarray:
+    """``x`` as the kernels take it: C-contiguous and writable. numba compiles a separate version
+    of a kernel for read-only arrays (a broadcast, a memory map), which would cost a second full
+    compilation; the IMU arrays are copied only when they are read-only or not contiguous."""
+    a = np.ascontiguousarray(x, dtype)
+    return a if a.flags.writeable else a.copy()
+
+
 class Propagator:
     """The IMU samples and the noise model, bound once; :meth:`advance` moves a state in time.
 
@@ -503,17 +532,14 @@ class Propagator:
 
     def __init__(self, t, f_b, omega_ib_b, q_a, q_g, q_ba, q_bg, segments, phi_order: int = 1,
                  cov_every: int = 1, w_ie_sign: float = 1.0, gm_tau_s=None, gm_sigma_m=None):
-        self.t = np.ascontiguousarray(t, float)
-        self.f = np.ascontiguousarray(f_b, float)
-        self.w = np.ascontiguousarray(omega_ib_b, float)
-        self.q = tuple(np.ascontiguousarray(q, float) for q in (q_a, q_g, q_ba, q_bg))
+        self.t, self.f, self.w = (kernel_array(x, float) for x in (t, f_b, omega_ib_b))
+        self.q = tuple(np.array(q, float) for q in (q_a, q_g, q_ba, q_bg))
         seg_i0, seg_i1, seg_qg, seg_qa = segments
-        self.segments = (np.asarray(seg_i0, np.int64), np.asarray(seg_i1, np.int64),
-                         np.ascontiguousarray(seg_qa, float).reshape(-1, 3),
-                         np.ascontiguousarray(seg_qg, float).reshape(-1, 3))
+        self.segments = (np.array(seg_i0, np.int64), np.array(seg_i1, np.int64),
+                         np.array(seg_qa, float).reshape(-1, 3), np.array(seg_qg, float).reshape(-1, 3))
         self.phi_order, self.cov_every, self.w_ie_sign = int(phi_order), max(int(cov_every), 1), float(w_ie_sign)
-        self.gm_tau = np.ascontiguousarray(np.broadcast_to(60.0 if gm_tau_s is None else gm_tau_s, (3,)), float)
-        self.gm_var = np.ascontiguousarray(np.broadcast_to(0.0 if gm_sigma_m is None else gm_sigma_m, (3,)), float) ** 2
+        self.gm_tau = np.array(np.broadcast_to(60.0 if gm_tau_s is None else gm_tau_s, (3,)), float)
+        self.gm_var = np.array(np.broadcast_to(0.0 if gm_sigma_m is None else gm_sigma_m, (3,)), float) ** 2
         #: Transition-matrix accumulator (used when ``with_phi``); reset it with :meth:`reset_phi`.
         self.Phi = np.eye(15)
         self.with_phi = False
@@ -533,9 +559,12 @@ class Propagator:
 
 
 def warm_up() -> float:
-    """Compile (or load from cache) the numba kernels; return the seconds it took."""
+    """Compile (or load from cache) the numba kernels of an EKF run (propagation, update,
+    correction); return the seconds it took. See :mod:`gnssacc.jit` for the background version."""
     import time
     from types import SimpleNamespace
+
+    from .kalman import joseph_update
 
     t0 = time.perf_counter()
     z3 = np.zeros(3)
@@ -545,4 +574,8 @@ def warm_up() -> float:
     s = SimpleNamespace(pos=np.array([0.5, 0.1, 0.0]), v_n=z3.copy(), R_nb=np.eye(3), b_a=z3.copy(), b_g=z3.copy(),
                         P=np.eye(15))
     prop.advance(s, 1, 0.0, 0.015)
+    H = np.zeros((3, 15))
+    H[:, :3] = np.eye(3)
+    dx = joseph_update(s.P, H, np.eye(3), np.ones(3), 0.0)[0]
+    apply_correction(s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, z3.copy(), dx)
     return time.perf_counter() - t0
