@@ -35,7 +35,7 @@ Conventions
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -286,8 +286,9 @@ IMU_BLOCK = 50_000
 def _perfect_imu_block(traj: Trajectory, g0: int, g1: int) -> tuple[np.ndarray, np.ndarray]:
     """:func:`perfect_imu` of the intervals within grid nodes ``[g0, g1)`` (``g0`` even)."""
     dt = 2.0 * traj.step
-    kin = traj.grid_kinematics
-    v_n, R_nb = kin.v_n[g0:g1], kin.R_nb[g0:g1]
+    full = traj.grid_kinematics   # its v_n and R_nb are computed on access: take the block first
+    kin = Kinematics(*(getattr(full, f.name)[g0:g1] for f in fields(Kinematics)))
+    v_n, R_nb = kin.v_n, kin.R_nb
     lat, lon, h = traj.lat[g0:g1], traj.lon[g0:g1], traj.h[g0:g1]
     # Interval k spans grid nodes 2k .. 2k+2 with its midpoint at 2k+1.
     a, m, b = slice(0, -2, 2), slice(1, -1, 2), slice(2, None, 2)
