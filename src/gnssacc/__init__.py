@@ -31,6 +31,10 @@ Conventions (every module follows them; they are stated here once):
 """
 __version__ = "0.1.0"
 
+from .jit import configure_cache as _configure_cache
+
+_configure_cache()   # before anything imports numba: a read-only install caches in the user's folder
+
 #: The API, imported when first used (so ``gnssacc --help`` stays instant).
 _API = ("process", "load", "simulate", "configure", "evaluate", "Result")
 

@@ -350,6 +350,11 @@ def main(argv: list[str] | None = None) -> int:
 
     args = _parser().parse_args(argv)
     warnings.showwarning = _show_warning
+    if args.command == "run" or (args.command == "bench" and args.jobs <= 1):
+        from .jit import start_background
+        # At once: the kernels compile (first run, with a one-line notice) or load in the
+        # background while the arguments are checked, the modules imported and the data loaded.
+        start_background()
     try:
         check_args(args)  # every argument's syntax and range, before anything is loaded
         commands = {"run": _cmd_run, "inspect": _cmd_inspect, "config": _cmd_config, "sim": _cmd_sim,

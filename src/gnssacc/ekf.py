@@ -132,36 +132,40 @@ class EkfObserver:
 
 
 class _Recorder:
-    """Collects the output rows; memory grows with the outputs only."""
+    """Collects the output rows; memory grows with the outputs only. Each row keeps the attitude
+    matrix and the covariance pieces it needs; Euler angles and their sigmas are computed for all
+    rows at once in :meth:`solution` (per-row numpy calls cost more than the filter step)."""
 
     def __init__(self, n: int, store_P: bool):
         self.t = np.empty(n)
         self.pos = np.empty((n, 3))
         self.v_n = np.empty((n, 3))
-        self.rpy = np.empty((n, 3))
+        self.R_nb = np.empty((n, 3, 3))
         self.b_a = np.empty((n, 3))
         self.b_g = np.empty((n, 3))
-        self.sigma = np.empty((n, 15))
+        self.var = np.empty((n, 15))
+        self.P_att = np.empty((n, 3, 3))
         self.P = np.empty((n, 15, 15)) if store_P else None
         self.n = 0
 
     def add(self, t: float, s: FilterState) -> None:
         i = self.n
-        self.t[i], self.pos[i], self.v_n[i] = t, s.pos, s.v_n
-        rpy = np.array(dcm_to_euler(s.R_nb))
-        self.rpy[i], self.b_a[i], self.b_g[i] = rpy, s.b_a, s.b_g
-        d = np.sqrt(np.maximum(np.diag(s.P)[:15], 0.0))
-        J = euler_error_jacobian(*rpy)
-        d[6:9] = np.sqrt(np.maximum(np.diag(J @ s.P[6:9, 6:9] @ J.T), 0.0))
-        self.sigma[i] = d
+        self.t[i], self.pos[i], self.v_n[i], self.R_nb[i] = t, s.pos, s.v_n, s.R_nb
+        self.b_a[i], self.b_g[i] = s.b_a, s.b_g
+        self.var[i] = s.P.diagonal()[:15]
+        self.P_att[i] = s.P[6:9, 6:9]
         if self.P is not None:
             self.P[i] = s.P[:15, :15]
         self.n += 1
 
     def solution(self, method: str, runtime_s: float, stats: dict) -> NavSolution:
         n = self.n
+        rpy = np.column_stack(dcm_to_euler(self.R_nb[:n]))
+        sigma = np.sqrt(np.maximum(self.var[:n], 0.0))
+        J = euler_error_jacobian(rpy[:, 0], rpy[:, 1], rpy[:, 2])
+        sigma[:, 6:9] = np.sqrt(np.maximum(np.einsum("nij,njk,nik->ni", J, self.P_att[:n], J), 0.0))
         return NavSolution(method, self.t[:n], self.pos[:n, 0], self.pos[:n, 1], self.pos[:n, 2], self.v_n[:n],
-                           self.rpy[:n], self.b_a[:n], self.b_g[:n], self.sigma[:n], runtime_s, stats,
+                           rpy, self.b_a[:n], self.b_g[:n], sigma, runtime_s, stats,
                            None if self.P is None else self.P[:n])
 
 

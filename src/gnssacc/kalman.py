@@ -83,7 +83,10 @@ def joseph_update(P, H, R, dz, gate):
             for k in range(n):
                 v += H[i, k] * PHt[k, j]
             S[i, j] += v
-    S_inv, logdet, Linv, ok = _cholesky_inverse(0.5 * (S + S.T))
+    for i in range(m):   # symmetrise (loops: array expressions cost seconds of compilation)
+        for j in range(i + 1, m):
+            S[i, j] = S[j, i] = 0.5 * (S[i, j] + S[j, i])
+    S_inv, logdet, Linv, ok = _cholesky_inverse(S)
     dx = np.zeros(n)
     wz = np.zeros(m)
     if not ok:

@@ -66,53 +66,6 @@ def _mm(A, B):
 
 
 @njit(cache=True)
-def _mv(A, x):
-    y = np.zeros(A.shape[0])
-    for i in range(A.shape[0]):
-        for k in range(A.shape[1]):
-            y[i] += A[i, k] * x[k]
-    return y
-
-
-@njit(cache=True)
-def _skew(v, out):
-    out[0, 0] = 0.0
-    out[0, 1] = -v[2]
-    out[0, 2] = v[1]
-    out[1, 0] = v[2]
-    out[1, 1] = 0.0
-    out[1, 2] = -v[0]
-    out[2, 0] = -v[1]
-    out[2, 1] = v[0]
-    out[2, 2] = 0.0
-
-
-@njit(cache=True)
-def _exp_so3(phi):
-    """Rodrigues' formula."""
-    angle = np.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
-    K = np.empty((3, 3))
-    _skew(phi, K)
-    if angle < 1e-8:
-        a, b = 1.0, 0.5
-    else:
-        a = np.sin(angle) / angle
-        b = (1.0 - np.cos(angle)) / (angle * angle)
-    return np.eye(3) + a * K + b * _mm(K, K)
-
-
-@njit(cache=True)
-def _rates(pos, v_n, w_ie_sign):
-    """Earth rate (times ``w_ie_sign``) and transport rate in NED [rad/s], radii [m]."""
-    lat, h = pos[0], pos[2]
-    R_M, R_N = _radii(lat)
-    W = _W * w_ie_sign
-    w_ie = np.array([W * np.cos(lat), 0.0, -W * np.sin(lat)])
-    w_en = np.array([v_n[1] / (R_N + h), -v_n[0] / (R_M + h), -v_n[1] * np.tan(lat) / (R_N + h)])
-    return w_ie, w_en, R_M, R_N
-
-
-@njit(cache=True)
 def _exp_so3_into(p0, p1, p2, out):
     """``out = Exp([p x])`` by Rodrigues' formula, ``I + a K + b (p p^T - |p|^2 I)``, no allocation."""
     th2 = p0 * p0 + p1 * p1 + p2 * p2
@@ -228,16 +181,31 @@ def system_matrix(pos, v_n, R_nb, f_b, w_ie_sign=1.0):
     w_ie_sign : float
         +1, or -1 for a time-reversed recording.
     """
+    F = np.zeros((15, 15))
+    _system_matrix_into(F, pos, v_n, R_nb, f_b, w_ie_sign)
+    return F
+
+
+@njit(cache=True)
+def _cross(a0, a1, a2, b0, b1, b2):
+    """``a x b`` as three scalars (``[a x] b``)."""
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@njit(cache=True)
+def _system_matrix_into(F, pos, v_n, R_nb, f_b, w_ie_sign):
+    """:func:`system_matrix` written into ``F``, scalar arithmetic only: the per-sample path
+    allocates nothing. Every call writes the same entries, so the rest of ``F`` (zero from the
+    caller) stays zero."""
     lat, h = pos[0], pos[2]
     vN, vE, vD = v_n[0], v_n[1], v_n[2]
-    w_ie, w_en, R_M, R_N = _rates(pos, v_n, w_ie_sign)
+    R_M, R_N = _radii(lat)
     W = _W * w_ie_sign
     g, dg_dh = _gravity(lat, h)
     rm, rn = R_M + h, R_N + h
     tl, cl, sl = np.tan(lat), np.cos(lat), np.sin(lat)
-
-    F = np.zeros((15, 15))
-    S = np.empty((3, 3))
+    wie0, wie2 = W * cl, -W * sl                       # earth rate, NED (east component 0)
+    wen0, wen1, wen2 = vE / rn, -vN / rm, -vE * tl / rn   # transport rate
     # Position rows (metres): d(dp)/dt = F_pp dp + dv.
     F[0, 0] = -vD / rm
     F[0, 2] = vN / rm
@@ -246,44 +214,45 @@ def system_matrix(pos, v_n, R_nb, f_b, w_ie_sign=1.0):
     F[1, 2] = vE / rn
     for i in range(3):
         F[i, 3 + i] = 1.0
-
-    # Sensitivities of omega_ie + omega_en (d/dlat, d/dh) and of omega_en (d/dv).
-    dW_dlat = np.array([-W * sl, 0.0, -W * cl - vE / (rn * cl * cl)])
-    dWie_dlat = np.array([-W * sl, 0.0, -W * cl])
-    drho_dlat = np.array([0.0, 0.0, -vE / (rn * cl * cl)])
-    drho_dh = np.array([-vE / rn**2, vN / rm**2, vE * tl / rn**2])
-    drho_dv = np.zeros((3, 3))
-    drho_dv[0, 1] = 1.0 / rn
-    drho_dv[1, 0] = -1.0 / rm
-    drho_dv[2, 1] = -tl / rn
-
+    # Sensitivities of omega_ie + omega_en (d/dlat, d/dh) and of omega_en (d/dv):
+    # drho_dv has [0, 1] = 1/rn, [1, 0] = -1/rm, [2, 1] = -tl/rn.
+    rho_lat2 = -vE / (rn * cl * cl)                    # d(w_en_D)/dlat
+    dh0, dh1, dh2 = -vE / rn**2, vN / rm**2, vE * tl / rn**2
     # Velocity rows: dv_dot = -[(2 w_ie + w_en) x] dv + [v x] d(2 w_ie + w_en) + dg - [(R f) x] phi + R b_a.
-    Vx = np.empty((3, 3))
-    _skew(v_n, Vx)
-    _skew(2.0 * w_ie + w_en, S)
-    Fvv = -S + _mm(Vx, drho_dv)
-    col_N = _mv(Vx, 2.0 * dWie_dlat + drho_dlat) / rm
-    col_D = -_mv(Vx, drho_dh)
-    _skew(_mv(R_nb, f_b), S)
-    for i in range(3):
-        for j in range(3):
-            F[3 + i, 3 + j] = Fvv[i, j]
-            F[3 + i, 6 + j] = -S[i, j]
-            F[3 + i, 9 + j] = R_nb[i, j]
-        F[3 + i, 0] = col_N[i]
-        F[3 + i, 2] = col_D[i]
-    F[5, 2] += -dg_dh  # dp_D = -dh and g_D = g(h)
-
+    c0, c1, c2 = 2.0 * wie0 + wen0, wen1, 2.0 * wie2 + wen2
+    # -[c x] + [v x] drho_dv, column by column ([v x] e_k = v x e_k).
+    x0, x1, x2 = _cross(vN, vE, vD, 0.0, -1.0 / rm, 0.0)
+    F[3, 3], F[4, 3], F[5, 3] = x0, -c2 + x1, c1 + x2
+    y0, y1, y2 = _cross(vN, vE, vD, 1.0 / rn, 0.0, -tl / rn)
+    F[3, 4], F[4, 4], F[5, 4] = c2 + y0, y1, -c0 + y2
+    F[3, 5], F[4, 5], F[5, 5] = -c1, c0, 0.0
+    n0, n1, n2 = _cross(vN, vE, vD, 2.0 * (-W * sl), 0.0, 2.0 * (-W * cl) + rho_lat2)
+    d0, d1, d2 = _cross(vN, vE, vD, dh0, dh1, dh2)
+    F[3, 0], F[4, 0], F[5, 0] = n0 / rm, n1 / rm, n2 / rm
+    F[3, 2], F[4, 2], F[5, 2] = -d0, -d1, -d2 - dg_dh   # dp_D = -dh and g_D = g(h)
+    a0 = R_nb[0, 0] * f_b[0] + R_nb[0, 1] * f_b[1] + R_nb[0, 2] * f_b[2]
+    a1 = R_nb[1, 0] * f_b[0] + R_nb[1, 1] * f_b[1] + R_nb[1, 2] * f_b[2]
+    a2 = R_nb[2, 0] * f_b[0] + R_nb[2, 1] * f_b[1] + R_nb[2, 2] * f_b[2]
+    _neg_skew_into(F, 3, 6, a0, a1, a2)
     # Attitude rows: phi_dot = -[w_in x] phi - d(w_in) + R b_g.
-    _skew(w_ie + w_en, S)
+    F[6, 0], F[7, 0], F[8, 0] = W * sl / rm, 0.0, (W * cl - rho_lat2) / rm
+    F[6, 2], F[7, 2], F[8, 2] = dh0, dh1, dh2
+    F[6, 3], F[6, 4], F[6, 5] = 0.0, -1.0 / rn, 0.0
+    F[7, 3], F[7, 4], F[7, 5] = 1.0 / rm, 0.0, 0.0
+    F[8, 3], F[8, 4], F[8, 5] = 0.0, tl / rn, 0.0
+    _neg_skew_into(F, 6, 6, wie0 + wen0, wen1, wie2 + wen2)
     for i in range(3):
-        F[6 + i, 0] = -dW_dlat[i] / rm
-        F[6 + i, 2] = drho_dh[i]
         for j in range(3):
-            F[6 + i, 3 + j] = -drho_dv[i, j]
-            F[6 + i, 6 + j] = -S[i, j]
+            F[3 + i, 9 + j] = R_nb[i, j]
             F[6 + i, 12 + j] = R_nb[i, j]
-    return F
+
+
+@njit(cache=True)
+def _neg_skew_into(F, r, c, a0, a1, a2):
+    """``F[r:r+3, c:c+3] = -[a x]``."""
+    F[r, c], F[r, c + 1], F[r, c + 2] = 0.0, a2, -a1
+    F[r + 1, c], F[r + 1, c + 1], F[r + 1, c + 2] = -a2, 0.0, a0
+    F[r + 2, c], F[r + 2, c + 1], F[r + 2, c + 2] = a1, -a0, 0.0
 
 
 # Column ranges of the non-zero entries of F, per block row (rows 9..14 of F are zero).
@@ -297,14 +266,21 @@ def _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order):
 
     For the first-order case ``Phi P Phi^T = P + dt (F P + P F^T) + dt^2 F P F^T`` is evaluated
     with F's sparsity (only rows 0..8 are non-zero), about 4x fewer operations than dense.
-    ``A`` is a (9, 15) work array.
+    ``A`` is a (9, 15) work array. Only ``P[:15, :15]`` is touched, so ``P`` may carry more
+    states (passing the whole array, not a view, keeps one compiled version of this kernel).
     """
     if phi_order == 2:
-        Phi = F * dt
-        Phi = Phi + 0.5 * _mm(Phi, Phi)
+        Phi = _transition(F, dt, phi_order)
+        Pn = np.empty((15, 15))
+        PhiT = np.empty((15, 15))
         for i in range(15):
-            Phi[i, i] += 1.0
-        P[:, :] = _mm(_mm(Phi, P), Phi.T.copy())
+            for j in range(15):
+                Pn[i, j] = P[i, j]
+                PhiT[i, j] = Phi[j, i]
+        Pn = _mm(_mm(Phi, Pn), PhiT)
+        for i in range(15):
+            for j in range(15):
+                P[i, j] = Pn[i, j]
     else:
         # A = F P over the non-zero columns of each row of F.
         for i in range(9):
@@ -380,9 +356,7 @@ def _propagate_all(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order, gm_tau, g
     """The 15 navigation states, then the GNSS error states when P has them."""
     if P.shape[0] > 15:
         _propagate_gm(P, F, dt, gm_tau, gm_var)  # needs only P_xg and F: order-independent
-        _propagate_cov(P[:15, :15], F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order)
-    else:
-        _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order)
+    _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order)
 
 
 @njit(cache=True)
@@ -401,14 +375,30 @@ def _segment_index(k, seg_i0, seg_i1):
 
 
 @njit(cache=True)
-def _step_phi(Phi, F, dt, phi_order):
-    """Phi <- (I + F dt (+ (F dt)^2 / 2)) Phi: the error-state transition over one step."""
-    S = F * dt
+def _transition(F, dt, phi_order):
+    """``I + F dt (+ (F dt)^2 / 2)``, the error-state transition over one step. Explicit loops:
+    numba's array expressions (``F * dt``) cost seconds of compilation each."""
+    S = np.empty((15, 15))
+    for i in range(15):
+        for j in range(15):
+            S[i, j] = F[i, j] * dt
     if phi_order == 2:
-        S = S + 0.5 * _mm(S, S)
+        S2 = _mm(S, S)
+        for i in range(15):
+            for j in range(15):
+                S[i, j] = S[i, j] + 0.5 * S2[i, j]
     for i in range(15):
         S[i, i] += 1.0
-    Phi[:, :] = _mm(S, Phi)
+    return S
+
+
+@njit(cache=True)
+def _step_phi(Phi, F, dt, phi_order):
+    """Phi <- (I + F dt (+ (F dt)^2 / 2)) Phi: the error-state transition over one step."""
+    C = _mm(_transition(F, dt, phi_order), Phi)
+    for i in range(15):
+        for j in range(15):
+            Phi[i, j] = C[i, j]
 
 
 @njit(cache=True)
@@ -462,6 +452,7 @@ def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
     f = np.empty(3)
     w = np.empty(3)
     A = np.empty((9, 15))
+    F = np.zeros((15, 15))
     work = np.empty((3, 3, 3))
     qa_k = np.empty(3)
     qg_k = np.empty(3)
@@ -484,7 +475,7 @@ def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
                 dt_acc += dt
                 count += 1
                 if count >= cov_every or t_end >= t_to:
-                    F = system_matrix(pos, v_n, R_nb, f, w_ie_sign)
+                    _system_matrix_into(F, pos, v_n, R_nb, f, w_ie_sign)
                     for i in range(3):
                         qa_k[i] = qa_int[i] / dt_acc
                         qg_k[i] = qg_int[i] / dt_acc
@@ -500,7 +491,7 @@ def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
         if t_cur >= t_imu[k]:
             k += 1
     if with_cov and count > 0:  # the IMU data ended before t_to: flush what was accumulated
-        F = system_matrix(pos, v_n, R_nb, f, w_ie_sign)
+        _system_matrix_into(F, pos, v_n, R_nb, f, w_ie_sign)
         for i in range(3):
             qa_k[i] = qa_int[i] / dt_acc
             qg_k[i] = qg_int[i] / dt_acc
@@ -508,6 +499,14 @@ def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
         if with_phi:
             _step_phi(Phi, F, dt_acc, phi_order)
     return k, t_cur
+
+
+def kernel_array(x, dtype) -> np.ndarray:
+    """``x`` as the kernels take it: C-contiguous and writable. numba compiles a separate version
+    of a kernel for read-only arrays (a broadcast, a memory map), which would cost a second full
+    compilation; the IMU arrays are copied only when they are read-only or not contiguous."""
+    a = np.ascontiguousarray(x, dtype)
+    return a if a.flags.writeable else a.copy()
 
 
 class Propagator:
@@ -533,17 +532,14 @@ class Propagator:
 
     def __init__(self, t, f_b, omega_ib_b, q_a, q_g, q_ba, q_bg, segments, phi_order: int = 1,
                  cov_every: int = 1, w_ie_sign: float = 1.0, gm_tau_s=None, gm_sigma_m=None):
-        self.t = np.ascontiguousarray(t, float)
-        self.f = np.ascontiguousarray(f_b, float)
-        self.w = np.ascontiguousarray(omega_ib_b, float)
-        self.q = tuple(np.ascontiguousarray(q, float) for q in (q_a, q_g, q_ba, q_bg))
+        self.t, self.f, self.w = (kernel_array(x, float) for x in (t, f_b, omega_ib_b))
+        self.q = tuple(np.array(q, float) for q in (q_a, q_g, q_ba, q_bg))
         seg_i0, seg_i1, seg_qg, seg_qa = segments
-        self.segments = (np.asarray(seg_i0, np.int64), np.asarray(seg_i1, np.int64),
-                         np.ascontiguousarray(seg_qa, float).reshape(-1, 3),
-                         np.ascontiguousarray(seg_qg, float).reshape(-1, 3))
+        self.segments = (np.array(seg_i0, np.int64), np.array(seg_i1, np.int64),
+                         np.array(seg_qa, float).reshape(-1, 3), np.array(seg_qg, float).reshape(-1, 3))
         self.phi_order, self.cov_every, self.w_ie_sign = int(phi_order), max(int(cov_every), 1), float(w_ie_sign)
-        self.gm_tau = np.ascontiguousarray(np.broadcast_to(60.0 if gm_tau_s is None else gm_tau_s, (3,)), float)
-        self.gm_var = np.ascontiguousarray(np.broadcast_to(0.0 if gm_sigma_m is None else gm_sigma_m, (3,)), float) ** 2
+        self.gm_tau = np.array(np.broadcast_to(60.0 if gm_tau_s is None else gm_tau_s, (3,)), float)
+        self.gm_var = np.array(np.broadcast_to(0.0 if gm_sigma_m is None else gm_sigma_m, (3,)), float) ** 2
         #: Transition-matrix accumulator (used when ``with_phi``); reset it with :meth:`reset_phi`.
         self.Phi = np.eye(15)
         self.with_phi = False
@@ -563,9 +559,12 @@ class Propagator:
 
 
 def warm_up() -> float:
-    """Compile (or load from cache) the numba kernels; return the seconds it took."""
+    """Compile (or load from cache) the numba kernels of an EKF run (propagation, update,
+    correction); return the seconds it took. See :mod:`gnssacc.jit` for the background version."""
     import time
     from types import SimpleNamespace
+
+    from .kalman import joseph_update
 
     t0 = time.perf_counter()
     z3 = np.zeros(3)
@@ -575,4 +574,8 @@ def warm_up() -> float:
     s = SimpleNamespace(pos=np.array([0.5, 0.1, 0.0]), v_n=z3.copy(), R_nb=np.eye(3), b_a=z3.copy(), b_g=z3.copy(),
                         P=np.eye(15))
     prop.advance(s, 1, 0.0, 0.015)
+    H = np.zeros((3, 15))
+    H[:, :3] = np.eye(3)
+    dx = joseph_update(s.P, H, np.eye(3), np.ones(3), 0.0)[0]
+    apply_correction(s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, z3.copy(), dx)
     return time.perf_counter() - t0

@@ -9,7 +9,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Callable
 
-from . import mechanization
+from . import jit
 from .config import RunConfig
 from .consistency import assess
 from .ekf import run_ekf
@@ -209,7 +209,7 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
     ident : Identified
         The shared start, stationary spans and (tuned) configuration.
     """
-    jit_s = mechanization.warm_up()
+    jit_s = jit.warm_up()   # waits for a background compilation when one was started
     ident = identify(run, cfg, tune)
     run = ident.run   # as the input checks left it: repaired units, the measured clock offset applied
     failed: dict[str, str] = {}

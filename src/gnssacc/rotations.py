@@ -71,14 +71,18 @@ def euler_error_jacobian(roll, pitch, yaw):
     are ``d_euler = J @ phi``, ``J = E^-1`` with ``E = [Rz Ry e_x, Rz e_y, e_z]`` (the matrix
     that maps Z-Y-X Euler-angle rates to an angular rate resolved in n).
 
+    Angles may be scalars or arrays of one shape ``(...)``.
+
     Returns
     -------
-    ndarray, shape (3, 3)
+    ndarray, shape (..., 3, 3)
         Rows: roll, pitch, yaw errors [rad] per component of ``phi`` [rad].
     """
     cy, sy = np.cos(yaw), np.sin(yaw)
     cp, sp = np.cos(pitch), np.sin(pitch)
-    E = np.array([[cy * cp, -sy, 0.0], [sy * cp, cy, 0.0], [-sp, 0.0, 1.0]])
+    zero, one = np.zeros_like(cy), np.ones_like(cy)
+    E = np.stack([np.stack([cy * cp, -sy, zero], -1), np.stack([sy * cp, cy, zero], -1),
+                  np.stack([-sp, zero, one], -1)], -2)
     return np.linalg.inv(E)
 
 

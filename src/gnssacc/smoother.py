@@ -178,7 +178,7 @@ class _Record:
         c_pos = R @ self.cov_pose[:, 3:6, 3:6] @ R.transpose(0, 2, 1)
         c_att = R @ self.cov_pose[:, 0:3, 0:3] @ R.transpose(0, 2, 1)
         roll, pitch, yaw = dcm_to_euler(R)
-        J = np.array([euler_error_jacobian(r, p, y) for r, p, y in zip(roll, pitch, yaw)]).reshape(-1, 3, 3)
+        J = euler_error_jacobian(roll, pitch, yaw).reshape(-1, 3, 3)
         c_eul = J @ c_att @ J.transpose(0, 2, 1)
         diag = lambda C: np.sqrt(np.maximum(np.diagonal(C, axis1=1, axis2=2), 0.0))
         return np.concatenate([diag(c_pos), diag(self.cov_vel), diag(c_eul), diag(self.cov_bias)], axis=1)

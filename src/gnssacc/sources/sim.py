@@ -35,7 +35,7 @@ Conventions
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -269,10 +269,27 @@ def perfect_imu(traj: Trajectory, t: np.ndarray) -> tuple[np.ndarray, np.ndarray
     omega_ib_b : ndarray, shape (N, 3)
         Inertial attitude increment over the interval as a rotation vector / dt [rad/s].
     """
+    n = len(t)
+    f_b, omega_ib_b = np.empty((n, 3)), np.empty((n, 3))
+    # In blocks of samples: the per-interval temporaries (rotation stacks) stay small whatever
+    # the run length; every sample's arithmetic is the same as in one pass.
+    for k0 in range(0, n, IMU_BLOCK):
+        k1 = min(k0 + IMU_BLOCK, n)
+        f_b[k0:k1], omega_ib_b[k0:k1] = _perfect_imu_block(traj, 2 * k0, 2 * k1 + 1)
+    return f_b, omega_ib_b
+
+
+#: IMU samples per block of :func:`perfect_imu` (memory ~1 kB per sample in a block).
+IMU_BLOCK = 50_000
+
+
+def _perfect_imu_block(traj: Trajectory, g0: int, g1: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`perfect_imu` of the intervals within grid nodes ``[g0, g1)`` (``g0`` even)."""
     dt = 2.0 * traj.step
-    kin = traj.grid_kinematics
+    full = traj.grid_kinematics   # its v_n and R_nb are computed on access: take the block first
+    kin = Kinematics(*(getattr(full, f.name)[g0:g1] for f in fields(Kinematics)))
     v_n, R_nb = kin.v_n, kin.R_nb
-    lat, lon, h = traj.lat, traj.lon, traj.h
+    lat, lon, h = traj.lat[g0:g1], traj.lon[g0:g1], traj.h[g0:g1]
     # Interval k spans grid nodes 2k .. 2k+2 with its midpoint at 2k+1.
     a, m, b = slice(0, -2, 2), slice(1, -1, 2), slice(2, None, 2)
     # Attitude: C_{b(k-1)}^{b(k)} = R_nb(k-1)^T C_{n(k-1)}^{n(k)} R_nb(k), with the navigation-
@@ -291,8 +308,7 @@ def perfect_imu(traj: Trajectory, t: np.ndarray) -> tuple[np.ndarray, np.ndarray
     q_n = g_n - np.cross(2.0 * _earth_rate_batch(lat) + _transport_rate_batch(lat, h, v_n), v_n)
     dv_specific_n = v_n[b] - v_n[a] - dt / 6.0 * (q_n[a] + 4.0 * q_n[m] + q_n[b])
     f_b = np.einsum("kji,kj->ki", R_nb[m], dv_specific_n) / dt
-    n = len(t)
-    return f_b[:n], omega_ib_b[:n]
+    return f_b, omega_ib_b
 
 
 def build_trajectory(scenario: str | Scenario = "car", duration_s: float = 300.0, rate_hz: float = 100.0,

@@ -1,0 +1,164 @@
+"""Where numba caches gnssacc's compiled kernels, and compiling them in the background.
+
+The first run after an install compiles the kernels (several seconds); later runs load them
+from numba's on-disk cache in a fraction of a second. numba caches next to the sources
+(``gnssacc/__pycache__``) when it can write there. A system or container install usually
+cannot, so :func:`configure_cache` (called by ``gnssacc/__init__`` before numba is imported)
+then points ``NUMBA_CACHE_DIR`` at a user cache folder; a ``NUMBA_CACHE_DIR`` set by the user
+is always kept. :func:`cache_folder` says where the kernels go.
+
+:func:`start_background` compiles (or loads) the kernels in a thread while the caller loads
+data, and prints one notice line at once when they are not in the cache yet (a stamp file
+written after a compilation says they are; see :func:`kernels_stamp`).
+A task that needs a kernel meanwhile waits for it (numba's compile lock), never compiles it
+twice; :func:`warm_up` waits for the background compilation or, without one, compiles.
+"""
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+ENV = "NUMBA_CACHE_DIR"
+PACKAGE_DIR = Path(__file__).resolve().parent
+
+
+def _writable(folder: Path) -> bool:
+    """Whether files can be created in ``folder`` (made if missing), as numba itself checks."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder):
+            return True
+    except OSError:
+        return False
+
+
+def user_cache_dir() -> Path:
+    """``$XDG_CACHE_HOME/gnssacc/numba`` (default ``~/.cache``), or a per-user temporary folder
+    when the home folder is not writable either."""
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    folder = Path(base) / "gnssacc" / "numba"
+    if _writable(folder):
+        return folder
+    uid = os.getuid() if hasattr(os, "getuid") else "user"
+    return Path(tempfile.gettempdir()) / f"gnssacc-numba-{uid}"
+
+
+def configure_cache() -> None:
+    """Set ``NUMBA_CACHE_DIR`` to :func:`user_cache_dir` when the package folder is read-only.
+
+    Must run before numba is imported (numba reads the variable once); does nothing when the
+    variable is already set or numba already imported (numba then falls back to its own
+    user-wide cache folder).
+    """
+    if os.environ.get(ENV) or "numba" in sys.modules or _writable(PACKAGE_DIR / "__pycache__"):
+        return
+    os.environ[ENV] = str(user_cache_dir())
+
+
+def cache_folder() -> Path:
+    """The folder numba caches gnssacc's kernels under: ``NUMBA_CACHE_DIR`` (numba adds a
+    sub-folder per source tree) or the package's ``__pycache__``."""
+    return Path(os.environ[ENV]) if os.environ.get(ENV) else PACKAGE_DIR / "__pycache__"
+
+
+#: The modules whose kernels :func:`gnssacc.mechanization.warm_up` compiles.
+KERNEL_SOURCES = ("mechanization.py", "kalman.py")
+
+
+def kernels_stamp() -> Path:
+    """The file that marks the kernels as compiled into the cache, named by a hash of what
+    numba's cache depends on (the kernels' sources, numba, Python, the machine); found without
+    importing numba, so the notice can come at once."""
+    import hashlib
+    import platform
+    from importlib.metadata import version
+
+    h = hashlib.sha256(f"{version('numba')} {sys.version} {platform.machine()}".encode())
+    for name in KERNEL_SOURCES:
+        h.update((PACKAGE_DIR / name).read_bytes())
+    return cache_folder() / f"gnssacc-kernels-{h.hexdigest()[:16]}.stamp"
+
+
+def kernels_cached() -> bool:
+    """Whether a previous process compiled the kernels into the cache (see :func:`kernels_stamp`)."""
+    try:
+        return kernels_stamp().exists()
+    except OSError:
+        return False
+
+
+class BackgroundWarmUp:
+    """Compiles (or loads) the kernels in a daemon thread; :meth:`wait` returns the seconds it took.
+
+    Parameters
+    ----------
+    notice : file-like, optional
+        Where the one-line notice goes, at once, when the kernels are not in the cache yet
+        (``None``: no notice).
+    """
+
+    def __init__(self, notice=None):
+        self.seconds: float | None = None
+        self.error: BaseException | None = None
+        self.compiling = not kernels_cached()
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="gnssacc-jit", daemon=True)
+        if notice is not None and self.compiling:
+            print(f"gnssacc: first run: compiling the numba kernels (once, about 10 s; cache: {cache_folder()}) "
+                  "while the data loads", file=notice, flush=True)
+
+    def start(self) -> "BackgroundWarmUp":
+        self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        t0 = time.perf_counter()
+        try:
+            from .mechanization import warm_up
+
+            warm_up()
+            if self.compiling:
+                _write_stamp()
+        except BaseException as exc:   # re-raised in the waiting thread
+            self.error = exc
+        self.seconds = time.perf_counter() - t0
+        self._done.set()
+
+    def wait(self) -> float:
+        """Block until the kernels are ready; their compile (or load) time [s], imports included."""
+        self._done.wait()
+        if self.error is not None:
+            raise self.error
+        return float(self.seconds)
+
+
+def _write_stamp() -> None:
+    try:
+        stamp = kernels_stamp()
+        stamp.parent.mkdir(parents=True, exist_ok=True)
+        stamp.touch()
+    except OSError:   # no cache folder to write to: numba did not cache either, the notice repeats
+        pass
+
+
+_background: BackgroundWarmUp | None = None
+
+
+def start_background(notice=sys.stderr) -> BackgroundWarmUp:
+    """Start compiling the kernels in the background (once per process; later calls return the
+    same one)."""
+    global _background
+    if _background is None:
+        _background = BackgroundWarmUp(notice).start()
+    return _background
+
+
+def warm_up() -> float:
+    """The kernels' compile (or load) time [s]: the background one's when started, else now."""
+    if _background is not None:
+        return _background.wait()
+    return BackgroundWarmUp().start().wait()
