@@ -59,6 +59,9 @@ JACKKNIFE_BLOCKS = 8
 #: (measured on simulated car and slow-UGV runs) stands clear while chance peaks do not.
 MIN_PEAK = 0.5
 MIN_MARGIN = 0.2
+#: Most (lag, centre) pairs the correlations evaluate at once: bounds their temporaries to a few
+#: MB whatever the run length (a 6000 s run has ~6000 centres and thousands of lags).
+CHUNK_ENTRIES = 250_000
 #: Fewest comparison epochs for any verdict.
 MIN_CENTRES = 12
 #: Least GNSS acceleration signal-to-noise power ratio (:attr:`GnssKinematics.snr`) for a verdict:
@@ -128,7 +131,7 @@ def _magnitude_rho(lev: LevelledImu, mag_s: np.ndarray, kin: GnssKinematics, lag
     out = np.full(len(lags), np.nan)
     count = np.zeros(len(lags))
     need = max(MIN_CENTRES, len(kin) // 3)
-    chunk = max(int(4e6 // max(len(kin), 1)), 1)
+    chunk = max(int(CHUNK_ENTRIES // max(len(kin), 1)), 1)
     for j0 in range(0, len(lags), chunk):
         tq = kin.t[None, :] - lags[j0:j0 + chunk, None]
         m = (tq >= lev.t0 + edge) & (tq <= lev.t_end - edge)
@@ -160,11 +163,19 @@ def _significance(rho: np.ndarray, count: np.ndarray, kin: GnssKinematics) -> np
 
 def _complex_rho(lev: LevelledImu, fh_s: np.ndarray, kin: GnssKinematics, lags: np.ndarray,
                  sel: np.ndarray) -> np.ndarray:
-    """Best of the direct and mirrored complex correlations per lag, over centres ``sel``."""
+    """Best of the direct and mirrored complex correlations per lag, over centres ``sel`` (lags
+    in chunks of :data:`CHUNK_ENTRIES` lag-centre pairs)."""
     z_g, _, moving = velocity_frame(kin)
     use = sel & moving
     t, zg = kin.t[use], z_g[use]
-    edge = 0.5 * kin.window_s
+    chunk = max(int(CHUNK_ENTRIES // max(len(t), 1)), 1)
+    return np.concatenate([_complex_rho_lags(lev, fh_s, t, zg, lags[j:j + chunk], 0.5 * kin.window_s)
+                           for j in range(0, len(lags), chunk)]) if len(lags) else np.zeros(0)
+
+
+def _complex_rho_lags(lev: LevelledImu, fh_s: np.ndarray, t: np.ndarray, zg: np.ndarray, lags: np.ndarray,
+                      edge: float) -> np.ndarray:
+    """:func:`_complex_rho` for some lags, vectorised over lags and centres."""
     tq = t[None, :] - lags[:, None]
     m = (tq >= lev.t0 + edge) & (tq <= lev.t_end - edge)
     x = at_times(lev.t0, lev.step, fh_s, tq.ravel()).reshape(tq.shape + (2,))

@@ -5,6 +5,8 @@ Every source must pass its IMU samples through :func:`apply_mounting` exactly on
 """
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 from pathlib import Path
 from typing import Sequence
 
@@ -63,16 +65,41 @@ def check_degrees(lat_deg: np.ndarray, lon_deg: np.ndarray, t: np.ndarray, where
                                     f"(|{name}| must be <= {limit:g} deg); {bad.size} such row(s)")
 
 
-def _read_text(path: Path) -> str:
+#: Data lines parsed at once by :func:`read_table`: the text of one block is held at a time, so
+#: reading a long recording needs its numbers' memory, not several times its file size.
+BLOCK_LINES = 65536
+
+
+@contextmanager
+def _text_lines(path: Path):
+    """The file's lines (``\\n`` stripped), read lazily; :class:`InputError` for a missing file,
+    a directory or text that is not UTF-8 (also when met half-way through)."""
     try:
         # utf-8-sig: spreadsheets often start CSV files with a byte-order mark.
-        return path.read_text(encoding="utf-8-sig")
+        with open(path, encoding="utf-8-sig", newline=None) as fh:
+            yield (line.rstrip("\n") for line in fh)
     except FileNotFoundError:
         raise InputError(str(path), "file not found") from None
     except IsADirectoryError:
         raise InputError(str(path), "is a directory, expected a CSV file") from None
     except UnicodeDecodeError:
         raise InputError(str(path), "not a UTF-8 text file (expected comma-separated values)") from None
+
+
+def _data_blocks(lines, first_line_no: int):
+    """``(lines, 1-based line numbers, is_last)`` of the data rows in blocks of :data:`BLOCK_LINES`
+    (blank and ``#`` comment lines left out); ``is_last`` marks the block holding the file's last
+    data row (or an empty block when there is none)."""
+    block, numbers, n = [], [], first_line_no
+    for line in lines:
+        n += 1
+        if line.strip() and not line.lstrip().startswith("#"):
+            if len(block) == BLOCK_LINES:   # a full block is not the last: another row follows
+                yield block, np.asarray(numbers, int), False
+                block, numbers = [], []
+            block.append(line)
+            numbers.append(n)
+    yield block, np.asarray(numbers, int), True
 
 
 def _header_names(line: str) -> list[str]:
@@ -141,11 +168,37 @@ def read_table(path, required: Sequence[str], optional: Sequence[str] = (),
     """
     path = Path(path)
     where = str(path)
-    lines = _read_text(path).splitlines()
-    kept = [i for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")]
-    if not kept:
-        raise InputError(where, f"empty file: no header line (expected columns {', '.join(required)})")
-    names = _header_names(lines[kept[0]])
+    with _text_lines(path) as lines:
+        header, n_header = _header_line(lines)
+        if header is None:
+            raise InputError(where, f"empty file: no header line (expected columns {', '.join(required)})")
+        names = _header_names(header)
+        wanted, usecols = _columns(names, required, optional, where)
+        parts = []
+        for data, line_no, last in _data_blocks(lines, n_header):
+            data, line_no = _check_cell_counts(data, line_no, len(names), where, last)
+            if data:
+                parts.append(_parse(data, line_no, usecols, names, where))
+    if not parts:
+        return {c: np.empty(0) for c in wanted}
+    # Column-major, so that every column is a contiguous view of the one table (no second copy).
+    table = np.empty((sum(len(p) for p in parts), len(wanted)), order="F")
+    np.concatenate(parts, axis=0, out=table)
+    del parts
+    table = np.asfortranarray(drop_nonfinite(table, where, path.stem, float(max_bad_fraction)))
+    return {c: table[:, k] for k, c in enumerate(wanted)}
+
+
+def _header_line(lines) -> tuple[str | None, int]:
+    """The first line that is neither blank nor a ``#`` comment, and its 1-based number."""
+    for n, line in enumerate(lines, start=1):
+        if line.strip() and not line.lstrip().startswith("#"):
+            return line, n
+    return None, 0
+
+
+def _columns(names: list[str], required, optional, where: str) -> tuple[list[str], list[int]]:
+    """The column names to read (required, then the optional ones present) and their indices."""
     wanted = list(required) + [c for c in optional if c in names]
     missing = [c for c in required if c not in names]
     if missing:
@@ -154,26 +207,23 @@ def read_table(path, required: Sequence[str], optional: Sequence[str] = (),
     repeated = sorted({c for c in wanted if names.count(c) > 1})
     if repeated:
         raise InputError(where, f"column(s) {', '.join(repeated)} appear more than once in the header")
-    usecols = [names.index(c) for c in wanted]
+    return wanted, [names.index(c) for c in wanted]
 
-    line_no = np.asarray(kept[1:], int) + 1              # 1-based file line numbers of data rows
-    data = [lines[i] for i in kept[1:]]
-    data, line_no = _check_cell_counts(data, line_no, len(names), where)
-    if not data:
-        return {c: np.empty(0) for c in wanted}
+
+def _parse(data: list[str], line_no: np.ndarray, usecols: list[int], names: list[str], where: str) -> np.ndarray:
+    """One block of rows: numpy's parser, or cell by cell when it refuses (empty or bad cells)."""
     try:
-        table = np.loadtxt(data, delimiter=",", usecols=usecols, ndmin=2, dtype=float, comments=None)
+        return np.loadtxt(data, delimiter=",", usecols=usecols, ndmin=2, dtype=float, comments=None)
     except ValueError:
-        table = _parse_slowly(data, line_no, usecols, names, where)
-    table = drop_nonfinite(table, where, path.stem, float(max_bad_fraction))
-    return {c: np.ascontiguousarray(table[:, k]) for k, c in enumerate(wanted)}
+        return _parse_slowly(data, line_no, usecols, names, where)
 
 
-def _check_cell_counts(data: list[str], line_no: np.ndarray, n_cols: int, where: str):
-    """Every data row must have as many cells as the header (a truncated last row is dropped)."""
+def _check_cell_counts(data: list[str], line_no: np.ndarray, n_cols: int, where: str, last: bool = True):
+    """Every data row must have as many cells as the header (a truncated last row of the file,
+    the last of its ``last`` block, is dropped)."""
     n_commas = np.fromiter((line.count(",") for line in data), int, len(data))
     bad = np.flatnonzero(n_commas != n_cols - 1)
-    if bad.size == 1 and bad[0] == len(data) - 1 and n_commas[-1] < n_cols - 1:
+    if last and bad.size == 1 and bad[0] == len(data) - 1 and n_commas[-1] < n_cols - 1:
         warn_data(where, f"dropped the truncated last line {line_no[-1]} ({n_commas[-1] + 1} of {n_cols} cells)")
         return data[:-1], line_no[:-1]
     if bad.size:
