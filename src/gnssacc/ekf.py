@@ -380,8 +380,8 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
     out_t = out_t[(out_t >= t0) & (out_t <= t_end)]
     ev_t, ev_kind, ev_idx = _events(run.gnss.t, setup.stationary.t, out_t)
     rec = _Recorder(len(out_t), store_P)
-    stats = {"n_acc_skipped_suspect_imu": 0, "init": setup.init.how, "t_init": t0}
-    tally = _Tally(record_innovations)
+    updates = _Updates(run, setup, use_acc, observer, _Tally(record_innovations),
+                       {"n_acc_skipped_suspect_imu": 0, "init": setup.init.how, "t_init": t0})
     if observer is not None:
         observer.start(setup)
     t_cur = t0
@@ -399,25 +399,48 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
             s.gm *= np.exp(-(t_cur - t_prev) / prop.gm_tau)   # the estimated GNSS error decays
         if kind == OUTPUT:
             rec.add(t_e, s)
-            continue
+        else:
+            updates.at(t_e, kind, i, acc)
+    return rec.solution(method, time.perf_counter() - wall0, updates.final_stats())
+
+
+@dataclass
+class _Updates:
+    """The measurement updates of one EKF pass, their tally and statistics."""
+
+    run: RecordedRun
+    setup: EkfSetup
+    use_acc: bool
+    observer: EkfObserver | None
+    tally: _Tally
+    stats: dict
+
+    def at(self, t_e: float, kind: int, i: int, acc) -> None:
+        """The updates of GNSS epoch or stationary epoch ``i`` at ``t_e`` (``acc``: the window's
+        GNSS acceleration, if any), each shown to the observer."""
+        setup, s, obs = self.setup, self.setup.state, self.observer
         name = "gnss" if kind == GNSS else "stationary"
-        if observer is not None:
-            observer.before(t_e, name, s, prop)
-        models = (_gnss_measurements(run, setup, s, t_e, i, acc, use_acc, observer is not None, stats)
+        if obs is not None:
+            obs.before(t_e, name, s, setup.prop)
+        models = (_gnss_measurements(self.run, setup, s, t_e, i, acc, self.use_acc, obs is not None, self.stats)
                   if kind == GNSS else _stationary_measurements(setup, s, i))
         for m, apply in models:
             if apply:
                 nis, loglik, used, wz = kalman_update(s, m)
-                tally.add(t_e, m, nis, loglik, used, wz)
+                self.tally.add(t_e, m, nis, loglik, used, wz)
             else:
                 nis, used = float("nan"), False
-            if observer is not None:
-                observer.update(t_e, m, nis, used, s)
-        if observer is not None:
-            observer.after(t_e, name, s, prop)
-    stats.update(tally.stats())
-    stats["n_pos_updates"], stats["n_acc_updates"] = tally.n["pos"], tally.n["acc"]
-    stats["n_pos_rejected"] = tally.rejected["pos"]
-    stats["accel_window_resets"] = setup.window.resets
-    stats["loglik"] = float(sum(tally.loglik.values()))
-    return rec.solution(method, time.perf_counter() - wall0, stats)
+            if obs is not None:
+                obs.update(t_e, m, nis, used, s)
+        if obs is not None:
+            obs.after(t_e, name, s, setup.prop)
+
+    def final_stats(self) -> dict:
+        """The pass's ``stats`` (see :func:`run_ekf`)."""
+        tally, stats = self.tally, self.stats
+        stats.update(tally.stats())
+        stats["n_pos_updates"], stats["n_acc_updates"] = tally.n["pos"], tally.n["acc"]
+        stats["n_pos_rejected"] = tally.rejected["pos"]
+        stats["accel_window_resets"] = self.setup.window.resets
+        stats["loglik"] = float(sum(tally.loglik.values()))
+        return stats
