@@ -52,22 +52,8 @@ def _cholesky_inverse(S):
 
 
 @njit(cache=True)
-def joseph_update(P, H, R, dz, gate):
-    """Kalman update of ``P`` (n x n, in place) with ``H`` (m x n), ``R`` (m x m), innovation ``dz``.
-
-    Returns
-    -------
-    dx : ndarray (n,)
-        The estimated error (zero when rejected).
-    nis : float
-        Normalised innovation squared ``dz^T S^-1 dz``.
-    logdet : float
-        ``log det S``.
-    used : bool
-        False when ``gate > 0`` and ``nis > gate``, or when ``S`` is not positive definite.
-    wz : ndarray (m,)
-        The whitened innovation ``L^-1 dz`` (``S = L L^T``), for whiteness tests.
-    """
+def _innovation_cov(P, H, R):
+    """``P H^T`` (n x m) and the symmetrised innovation covariance ``S = H P H^T + R``."""
     n, m = P.shape[0], H.shape[0]
     PHt = np.zeros((n, m))
     for i in range(n):
@@ -86,22 +72,16 @@ def joseph_update(P, H, R, dz, gate):
     for i in range(m):   # symmetrise (loops: array expressions cost seconds of compilation)
         for j in range(i + 1, m):
             S[i, j] = S[j, i] = 0.5 * (S[i, j] + S[j, i])
-    S_inv, logdet, Linv, ok = _cholesky_inverse(S)
-    dx = np.zeros(n)
-    wz = np.zeros(m)
-    if not ok:
-        return dx, np.inf, 0.0, False, wz
-    for i in range(m):
-        for k in range(i + 1):
-            wz[i] += Linv[i, k] * dz[k]
-    nis = 0.0
-    for i in range(m):
-        for j in range(m):
-            nis += dz[i] * S_inv[i, j] * dz[j]
-    if gate > 0.0 and nis > gate:
-        return dx, nis, logdet, False, wz
-    # K = P H^T S^-1; dx = K dz; explicit loops (numba's @ goes through BLAS, slower at this size).
+    return PHt, S
+
+
+@njit(cache=True)
+def _gain(PHt, S_inv, dz):
+    """``K = P H^T S^-1`` and ``dx = K dz`` (explicit loops: numba's @ goes through BLAS, slower
+    at this size)."""
+    n, m = PHt.shape
     K = np.zeros((n, m))
+    dx = np.zeros(n)
     for i in range(n):
         for j in range(m):
             v = 0.0
@@ -110,7 +90,13 @@ def joseph_update(P, H, R, dz, gate):
             K[i, j] = v
         for j in range(m):
             dx[i] += K[i, j] * dz[j]
-    # Joseph form: A = I - K H; P <- A P A^T + K R K^T.
+    return K, dx
+
+
+@njit(cache=True)
+def _joseph(P, K, H, R):
+    """``P <- A P A^T + K R K^T`` with ``A = I - K H``, in place, kept exactly symmetric."""
+    n, m = P.shape[0], H.shape[0]
     A = np.zeros((n, n))
     for i in range(n):
         A[i, i] = 1.0
@@ -138,4 +124,40 @@ def joseph_update(P, H, R, dz, gate):
                 v += KR[i, k] * K[j, k]
             P[i, j] = v
             P[j, i] = v
+
+
+@njit(cache=True)
+def joseph_update(P, H, R, dz, gate):
+    """Kalman update of ``P`` (n x n, in place) with ``H`` (m x n), ``R`` (m x m), innovation ``dz``.
+
+    Returns
+    -------
+    dx : ndarray (n,)
+        The estimated error (zero when rejected).
+    nis : float
+        Normalised innovation squared ``dz^T S^-1 dz``.
+    logdet : float
+        ``log det S``.
+    used : bool
+        False when ``gate > 0`` and ``nis > gate``, or when ``S`` is not positive definite.
+    wz : ndarray (m,)
+        The whitened innovation ``L^-1 dz`` (``S = L L^T``), for whiteness tests.
+    """
+    n, m = P.shape[0], H.shape[0]
+    PHt, S = _innovation_cov(P, H, R)
+    S_inv, logdet, Linv, ok = _cholesky_inverse(S)
+    wz = np.zeros(m)
+    if not ok:
+        return np.zeros(n), np.inf, 0.0, False, wz
+    for i in range(m):
+        for k in range(i + 1):
+            wz[i] += Linv[i, k] * dz[k]
+    nis = 0.0
+    for i in range(m):
+        for j in range(m):
+            nis += dz[i] * S_inv[i, j] * dz[j]
+    if gate > 0.0 and nis > gate:
+        return np.zeros(n), nis, logdet, False, wz
+    K, dx = _gain(PHt, S_inv, dz)
+    _joseph(P, K, H, R)
     return dx, nis, logdet, True, wz
