@@ -475,15 +475,8 @@ def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
                 dt_acc += dt
                 count += 1
                 if count >= cov_every or t_end >= t_to:
-                    _system_matrix_into(F, pos, v_n, R_nb, f, w_ie_sign)
-                    for i in range(3):
-                        qa_k[i] = qa_int[i] / dt_acc
-                        qg_k[i] = qg_int[i] / dt_acc
-                        qa_int[i] = 0.0
-                        qg_int[i] = 0.0
-                    _propagate_all(P, F, A, R_nb, dt_acc, qa_k, qg_k, q_ba, q_bg, phi_order, gm_tau, gm_var)
-                    if with_phi:
-                        _step_phi(Phi, F, dt_acc, phi_order)
+                    _cov_step(P, F, A, Phi, with_phi, pos, v_n, R_nb, f, w_ie_sign, qa_int, qg_int, qa_k, qg_k, dt_acc,
+                              q_ba, q_bg, phi_order, gm_tau, gm_var)
                     dt_acc = 0.0
                     count = 0
             _strapdown(pos, v_n, R_nb, f, w, dt, w_ie_sign, work)
@@ -491,14 +484,25 @@ def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
         if t_cur >= t_imu[k]:
             k += 1
     if with_cov and count > 0:  # the IMU data ended before t_to: flush what was accumulated
-        _system_matrix_into(F, pos, v_n, R_nb, f, w_ie_sign)
-        for i in range(3):
-            qa_k[i] = qa_int[i] / dt_acc
-            qg_k[i] = qg_int[i] / dt_acc
-        _propagate_all(P, F, A, R_nb, dt_acc, qa_k, qg_k, q_ba, q_bg, phi_order, gm_tau, gm_var)
-        if with_phi:
-            _step_phi(Phi, F, dt_acc, phi_order)
+        _cov_step(P, F, A, Phi, with_phi, pos, v_n, R_nb, f, w_ie_sign, qa_int, qg_int, qa_k, qg_k, dt_acc,
+                  q_ba, q_bg, phi_order, gm_tau, gm_var)
     return k, t_cur
+
+
+@njit(cache=True)
+def _cov_step(P, F, A, Phi, with_phi, pos, v_n, R_nb, f, w_ie_sign, qa_int, qg_int, qa_k, qg_k, dt_acc, q_ba, q_bg,
+              phi_order, gm_tau, gm_var):
+    """One covariance (and transition-matrix) step over ``dt_acc`` [s] with the noise integrated
+    over it (``qa_int``, ``qg_int``: PSD x time, reset to zero here; ``qa_k``, ``qg_k``: scratch)."""
+    _system_matrix_into(F, pos, v_n, R_nb, f, w_ie_sign)
+    for i in range(3):
+        qa_k[i] = qa_int[i] / dt_acc
+        qg_k[i] = qg_int[i] / dt_acc
+        qa_int[i] = 0.0
+        qg_int[i] = 0.0
+    _propagate_all(P, F, A, R_nb, dt_acc, qa_k, qg_k, q_ba, q_bg, phi_order, gm_tau, gm_var)
+    if with_phi:
+        _step_phi(Phi, F, dt_acc, phi_order)
 
 
 def kernel_array(x, dtype) -> np.ndarray:
