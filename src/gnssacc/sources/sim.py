@@ -559,12 +559,18 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
     gnss_seed = int(np.random.SeedSequence([seed, 2]).generate_state(1)[0])
     meta = {**args, "source": "simulator", "imu_sample_convention": "sample k = average over (t[k-1], t[k]]",
             "gnss_seed": gnss_seed}
-    segments = [{**s, "t0": s["t0"] + t_start_s, "t1": s["t1"] + t_start_s} for s in traj.scenario.segments_until(duration_s)]
-    truths = SimTruth(imu_info["true_bias_a"], imu_info["true_bias_g"], segments, imu_info["imu_error_draws"],
-                      {k: model[k] for k in GRADE_KEYS}, model)
+    truths = _sim_truth(traj, imu_info, model, duration_s, t_start_s)
     empty = GnssFixes(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, 3)))
     run = RecordedRun(name=f"sim-{name}", where=where, imu=imu, gnss=empty, origin=origin,
                       truth=truth.to_truth(), init=_initial_state(truth) if give_init else None, sim=truths, meta=meta)
     p_antenna_n = truth_gnss.R_nb @ lever_b
     fixes = fixes_from_truth(run, truth_gnss.to_truth(), noise, gnss_seed, p_antenna_n)
     return replace(run, gnss=fixes)
+
+
+def _sim_truth(traj: Trajectory, imu_info: dict, model: dict, duration_s: float, t_start_s: float) -> SimTruth:
+    """The run's :class:`SimTruth`: true biases and draws (:func:`simulate_imu`), the scenario log
+    with absolute times, the grade's filter-visible parameters and the full error model."""
+    segments = [{**s, "t0": s["t0"] + t_start_s, "t1": s["t1"] + t_start_s} for s in traj.scenario.segments_until(duration_s)]
+    return SimTruth(imu_info["true_bias_a"], imu_info["true_bias_g"], segments, imu_info["imu_error_draws"],
+                    {k: model[k] for k in GRADE_KEYS}, model)
