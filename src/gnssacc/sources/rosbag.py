@@ -26,6 +26,13 @@ Times
 
 Only the chosen connections are read (``reader.messages(connections=...)``): image and other
 topics are skipped without being decoded, and memory is bounded by the IMU/GNSS data.
+
+Modules
+    This module composes the others into a :class:`~gnssacc.run.RecordedRun` (frames, units,
+    origin, initial state) and re-exports their public names: :mod:`.bag_files` (bag paths and
+    opening), :mod:`.bag_salvage` (damaged ROS 1 bags), :mod:`.bag_topics` (survey and topic
+    selection), :mod:`.bag_decode` (messages to rows, fix mappings, ``/tf_static``) and
+    :mod:`.bag_times` (time-stamp repair and gaps).
 """
 from __future__ import annotations
 
@@ -105,8 +112,8 @@ def load_bag_run(path, cfg: RunConfig, *, imu_topic: str | None = None, gnss_top
     itab, imu, R_bi_total = _imu(dec.cols[sel.imu.topic], tf, cfg, where, max_bad, meta)
     truth = None
     if sel.truth is not None and sel.truth_kind == "fix":
-        t = _fix_table(dec.cols[sel.truth.topic], where, "truth", max_bad, meta, "truth")
-        truth = Truth(t[:, 0], t[:, 1] * DEG, t[:, 2] * DEG, t[:, 3])
+        rows = _fix_table(dec.cols[sel.truth.topic], where, "truth", max_bad, meta, "truth")
+        truth = Truth(rows[:, 0], rows[:, 1] * DEG, rows[:, 2] * DEG, rows[:, 3])
     if sel.gnss is not None:
         g = _fix_table(dec.cols[sel.gnss.topic], where, "GNSS", max_bad, meta, "gnss")
         gnss = GnssFixes(g[:, 0], g[:, 1] * DEG, g[:, 2] * DEG, g[:, 3], g[:, 4:7])
@@ -124,6 +131,7 @@ def load_bag_run(path, cfg: RunConfig, *, imu_topic: str | None = None, gnss_top
 
 
 def _check_options(where: str, time_source: str, noise: str | None, gnss_from_truth_hz) -> None:
+    """:class:`InputError` for a time source, noise or ``--gnss-from-truth`` rate [Hz] that cannot be used."""
     if time_source not in TIME_SOURCES:
         raise InputError(where, f"time_source must be one of {', '.join(TIME_SOURCES)}, got {time_source!r}")
     if noise is not None and gnss_from_truth_hz is None:
@@ -171,21 +179,28 @@ def _check_damage(dec: Decoded, where: str, meta: dict) -> None:
     meta["damaged"] = dec.damaged
 
 
+def _clean_rows(col: Collector, n_needed: int, where: str, what: str, max_bad: float, meta: dict,
+                key: str) -> np.ndarray:
+    """The rows of ``col`` whose first ``n_needed`` columns are finite (the others dropped with a
+    warning, or an error above ``max_bad``), sorted by time without repeated stamps."""
+    tab = col.table()
+    if len(tab) == 0:
+        raise InputError(where, f"{what}: no messages")
+    keep = np.all(np.isfinite(tab[:, :n_needed]), axis=1)
+    if not keep.all():
+        drop_nonfinite(tab[:, :n_needed], where, what, max_bad)      # warns with the count, or raises
+        tab = tab[keep]
+    return sorted_unique(tab, where, what, meta, key)
+
+
 def _imu(col: Collector, tf, cfg: RunConfig, where: str, max_bad: float, meta: dict):
     """IMU rows -> (sorted rows, ImuData in body FRD, R_bi of the IMU axes incl. /tf_static).
 
     The FLU samples are turned FRD, rotated by the ``/tf_static`` mounting if there is one, then
     by ``[mounting]`` (:func:`~gnssacc.sources.common.apply_mounting`).
     """
-    itab = col.table()
     what = f"IMU topic {col.topic}"
-    if len(itab) == 0:
-        raise InputError(where, f"{what}: no messages")
-    finite = np.all(np.isfinite(itab[:, :7]), axis=1)
-    if not finite.all():
-        drop_nonfinite(itab[:, :7], where, what, max_bad)      # warns with the count, or raises
-        itab = itab[finite]
-    itab = sorted_unique(itab, where, what, meta, "imu")
+    itab = _clean_rows(col, 7, where, what, max_bad, meta, "imu")
     if len(itab) < 2:
         raise InputError(where, f"{what}: {len(itab)} usable message(s), need at least two")
     f_imu = itab[:, 1:4] @ FLU_FRD          # FLU -> FRD (diagonal: same as T @ x per row)
@@ -242,14 +257,7 @@ def _gnss_from_truth(truth: Truth, imu: ImuData, where: str, rate_hz: float, noi
 def _pose_truth(col: Collector, origin: LocalTangentFrame, truth_origin_llh_deg, where: str, max_bad: float,
                 meta: dict) -> Truth:
     """Truth from pose rows (NED about the pose frame's origin: ``truth_origin_llh_deg`` or ``origin``)."""
-    ptab = col.table()
-    what = f"truth topic {col.topic}"
-    if len(ptab) == 0:
-        raise InputError(where, f"{what}: no messages")
-    keep = np.all(np.isfinite(ptab[:, :4]), axis=1)
-    if not keep.all():
-        drop_nonfinite(ptab[:, :4], where, what, max_bad)
-    ptab = sorted_unique(ptab[keep], where, what, meta, "truth")
+    ptab = _clean_rows(col, 4, where, f"truth topic {col.topic}", max_bad, meta, "truth")
     if truth_origin_llh_deg is not None:
         lat0, lon0, h0 = (float(v) for v in truth_origin_llh_deg)
         porigin = LocalTangentFrame(lat0 * DEG, lon0 * DEG, h0)
