@@ -79,8 +79,8 @@ def imu_messages(ty: MessageTypes, run: RecordedRun, opts, key: str = "imu"):
     """``sensor_msgs/Imu`` of every IMU sample, in the IMU axes (``opts.imu_frame``: FLU or FRD).
 
     ``opts`` (:class:`~gnssacc.sources.bagwrite.BagOptions`) gives the mounting, frame id, time
-    offset and receive delay [s], whether to fill the orientation from the truth (nearest later
-    truth epoch; else marked absent) and whether to swap a few neighbouring stamps.
+    offset and receive delay [s], whether to fill the orientation from the truth (the truth epoch
+    at or after each sample; else marked absent) and whether to swap a few neighbouring stamps.
     """
     imu = run.imu
     R_ib = imu_axes(opts.imu_mount_rpy_deg)

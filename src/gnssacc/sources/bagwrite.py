@@ -55,7 +55,7 @@ class BagOptions:
     imu_frame_id : str
         ``header.frame_id`` of the IMU messages (and the child of the ``/tf_static`` transform).
     with_orientation : bool
-        Fill the Imu orientation from ``run.truth.rpy`` (nearest truth epoch), else mark it
+        Fill the Imu orientation from ``run.truth.rpy`` (the truth epoch at or after each sample), else mark it
         absent (``orientation_covariance[0] = -1``).
     imu_mount_rpy_deg : (roll, pitch, yaw), optional
         IMU mounting [deg]; IMU data written in the IMU axes and a ``/tf_static`` transform added.
