@@ -14,7 +14,7 @@ from .config import RunConfig
 from .consistency import assess
 from .ekf import run_ekf
 from .errors import InputError, raise_if_interrupted, warn_data
-from .gnss_noise import apply_outages, fixes_from_truth, parse_outages
+from .gnss_noise import apply_outages, parse_outages
 from .identify import Identified, identify
 from .metrics import gnss_score, score
 from .outdir import ResultDir
@@ -109,6 +109,7 @@ def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None,
                             time_source=time_source, gnss_from_truth_hz=gnss_from_truth_hz,
                             noise=noise, seed=seed)
     if path.is_dir():
+        from .sources.common import with_noisy_fixes
         from .sources.csvdir import load_csv_run
         if not (path / "imu.csv").exists() and not (path / "gnss.csv").exists():
             names = sorted(p.name for p in path.iterdir())
@@ -119,7 +120,7 @@ def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None,
         if noise is not None:
             if run.truth is None:
                 raise InputError(str(path), "--noise makes fixes from the truth, but the run has no truth.csv")
-            run = run.with_gnss(fixes_from_truth(run, run.truth, noise, seed), noise=noise, seed=seed)
+            run = with_noisy_fixes(run, run.truth, noise, seed)
         return run
     raise InputError(source, "not a run: expected a CSV run directory (imu.csv, gnss.csv), a ROS 1 .bag, "
                              "a .mcap file or a ROS 2 bag directory")

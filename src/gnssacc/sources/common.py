@@ -14,7 +14,8 @@ import numpy as np
 
 from ..config import RunConfig
 from ..errors import InputError, warn_data
-from ..run import ImuData, drop_nonfinite
+from ..gnss_noise import fixes_from_truth
+from ..run import ImuData, RecordedRun, Truth, drop_nonfinite
 
 
 def apply_mounting(imu: ImuData, cfg: RunConfig) -> ImuData:
@@ -49,6 +50,34 @@ def apply_mounting(imu: ImuData, cfg: RunConfig) -> ImuData:
     return ImuData(np.asarray(imu.t, float) + offset_s,
                    np.asarray(imu.f_b, float) @ R_bi.T,
                    np.asarray(imu.omega_ib_b, float) @ R_bi.T)
+
+
+def with_noisy_fixes(run: RecordedRun, truth: Truth, noise: str, seed: int) -> RecordedRun:
+    """``run`` with its GNSS replaced by fixes made from ``truth`` plus simulated noise.
+
+    Parameters
+    ----------
+    run : RecordedRun
+        Supplies the tangent-plane origin (``run.origin``) in which the noise [m, NED] is added.
+    truth : Truth
+        Positions (geodetic, radians and metres) at the epochs [s] the fixes get.
+    noise : str
+        GNSS noise profile (:data:`gnssacc.gnss_noise.PROFILES`).
+    seed : int
+        Noise seed.
+
+    Returns
+    -------
+    RecordedRun
+        A copy with the new fixes and ``noise`` and ``seed`` in ``meta``.
+    """
+    return run.with_gnss(fixes_from_truth(run, truth, noise, seed), noise=noise, seed=seed)
+
+
+def one_line(err: Exception) -> str:
+    """An exception's text on one line, at most 300 characters (for error and warning messages)."""
+    text = " ".join(str(a) for a in err.args) or type(err).__name__
+    return " ".join(text.split())[:300]
 
 
 def check_degrees(lat_deg: np.ndarray, lon_deg: np.ndarray, t: np.ndarray, where: str, what: str) -> None:

@@ -25,10 +25,9 @@ import numpy as np
 from ..config import RunConfig
 from ..earth import LocalTangentFrame
 from ..errors import InputError
-from ..gnss_noise import fixes_from_truth
 from ..rotations import flu_to_frd
 from ..run import GnssFixes, ImuData, RecordedRun, Truth
-from .common import apply_mounting
+from .common import apply_mounting, with_noisy_fixes
 
 #: Geodetic origin assigned to the KITTI local frame: latitude, longitude [deg], height [m].
 ORIGIN_LLH_DEG = (49.0, 8.4, 110.0)
@@ -79,5 +78,4 @@ def load_kitti(cfg: RunConfig, noise: str = "white", seed: int = 0) -> RecordedR
     placeholder = GnssFixes(truth.t, lat, lon, h, np.full((len(lat), 3), 0.01))
     run = RecordedRun(name="kitti", where=str(folder / GPS_FILE), imu=imu, gnss=placeholder, origin=origin,
                       truth=truth, meta={"source": "kitti", "origin_llh_deg": list(ORIGIN_LLH_DEG)})
-    fixes = fixes_from_truth(run, truth, noise, seed)
-    return run.with_gnss(fixes, noise=noise, seed=seed).validate()
+    return with_noisy_fixes(run, truth, noise, seed).validate()
