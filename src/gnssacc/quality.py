@@ -188,14 +188,32 @@ def _interpolated(t: np.ndarray, x: np.ndarray, tol: float, min_s: float) -> lis
     return spans
 
 
-def _gaps(t: np.ndarray, factor: float) -> tuple[list[Span], float, float]:
+def gap_indices(t: np.ndarray, factor: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """The one gap rule (IMU checks, bag summaries): intervals ``t[k+1] - t[k]`` longer than
+    ``factor`` (``[quality] gap_factor``) times the median interval.
+
+    Returns
+    -------
+    idx : ndarray of int
+        The ``k`` of each gap.
+    dt : ndarray
+        Every interval [s].
+    dt_med : float
+        The median interval [s] (NaN with fewer than two samples).
+    """
     if len(t) < 2:
-        return [], float("nan"), float("nan")
+        return np.zeros(0, int), np.zeros(0), float("nan")
     dt = np.diff(t)
     dt_med = float(np.median(dt))
+    return np.flatnonzero(dt > factor * dt_med), dt, dt_med
+
+
+def _gaps(t: np.ndarray, factor: float) -> tuple[list[Span], float, float]:
+    idx, dt, dt_med = gap_indices(t, factor)
+    if not len(dt):
+        return [], float("nan"), float("nan")
     spans = [_span("gap", t, k + 1, k + 2, "all",
-                   f"interval {dt[k]:.4f} s = {dt[k] / dt_med:.1f} x median {dt_med:.4f} s")
-             for k in np.flatnonzero(dt > factor * dt_med)]
+                   f"interval {dt[k]:.4f} s = {dt[k] / dt_med:.1f} x median {dt_med:.4f} s") for k in idx]
     return spans, dt_med, float(dt.max())
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import warn_data
+from ..quality import gap_indices
 
 
 def sorted_unique(tab: np.ndarray, where: str, what: str, meta: dict, key: str) -> np.ndarray:
@@ -60,7 +61,8 @@ def sorted_unique(tab: np.ndarray, where: str, what: str, meta: dict, key: str) 
 
 
 def find_gaps(t: np.ndarray, factor: float) -> dict:
-    """Pauses longer than ``factor`` times the median sample interval.
+    """Pauses longer than ``factor`` times the median sample interval (the rule of
+    :func:`gnssacc.quality.gap_indices`, with ``[quality] gap_factor`` as the IMU checks use it).
 
     Parameters
     ----------
@@ -77,9 +79,7 @@ def find_gaps(t: np.ndarray, factor: float) -> dict:
     """
     if len(t) < 3:
         return {"count": 0, "spans": []}
-    d = np.diff(t)
-    med = float(np.median(d))
-    idx = np.flatnonzero(d > factor * med)
+    idx, d, med = gap_indices(t, factor)
     return {"nominal_dt_s": med, "count": int(idx.size),
             "spans": [[float(t[k]), float(d[k])] for k in idx[:20]]}
 

@@ -120,7 +120,7 @@ def load_bag_run(path, cfg: RunConfig, *, imu_topic: str | None = None, gnss_top
         origin = LocalTangentFrame(gnss.lat[0], gnss.lon[0], gnss.h[0])
     else:
         gnss, origin = _gnss_from_truth(truth, imu, where, float(gnss_from_truth_hz), noise or "white", seed, meta)
-    meta["gaps"]["gnss"] = find_gaps(gnss.t, 3.0)
+    meta["gaps"]["gnss"] = find_gaps(gnss.t, float(cfg["quality"]["gap_factor"]))
     if sel.truth is not None and sel.truth_kind == "pose":
         truth = _pose_truth(dec.cols[sel.truth.topic], origin, truth_origin_llh_deg, where, max_bad, meta)
     good_q = np.isfinite(itab[:, 7:11]).all(axis=1)
@@ -216,7 +216,7 @@ def _imu(col: Collector, tf, cfg: RunConfig, where: str, max_bad: float, meta: d
                                 "imu_to_body_rpy_deg": [float(v) for v in cfg.imu_to_body_rpy_deg]}
         R_bi_total = cfg.R_bi
     imu = apply_mounting(ImuData(itab[:, 0].copy(), f_imu, w_imu), cfg)
-    meta["gaps"] = {"imu": find_gaps(imu.t, 5.0)}
+    meta["gaps"] = {"imu": find_gaps(imu.t, float(cfg["quality"]["gap_factor"]))}
     return itab, imu, R_bi_total
 
 
