@@ -40,7 +40,7 @@ import numpy as np
 from gnssacc import cli
 from gnssacc.config import load_config
 from gnssacc.plausibility import check_run
-from gnssacc.run import GnssFixes, ImuData
+from gnssacc.recording import GnssFixes, ImuData
 from gnssacc.sources.csvdir import write_csv_run
 from gnssacc.sources.sim import simulate
 

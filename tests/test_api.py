@@ -92,6 +92,13 @@ def test_bad_input_raises_input_error_naming_it(tmp_path):
     assert "kalman" in str(exc.value)
 
 
+def test_run_is_process_and_the_data_model_is_gnssacc_recording():
+    """``gnssacc.run`` is the verb (it used to be the data-model module, not callable)."""
+    import gnssacc.recording
+
+    assert gnssacc.run is gnssacc.process and isinstance(gnssacc.simulate("car", 10.0), gnssacc.recording.RecordedRun)
+
+
 def test_python_dash_m_is_the_command():
     out = subprocess.run([sys.executable, "-m", "gnssacc", "--version"], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0 and gnssacc.__version__ in out.stdout

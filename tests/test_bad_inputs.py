@@ -25,7 +25,7 @@ pytest.importorskip("rosbags")
 from gnssacc import cli  # noqa: E402
 from gnssacc.gnss_noise import MAX_OUTAGES, parse_outages  # noqa: E402
 from gnssacc.errors import InputError  # noqa: E402
-from gnssacc.run import ImuData  # noqa: E402
+from gnssacc.recording import ImuData  # noqa: E402
 from gnssacc.sources.bagwrite import write_bag  # noqa: E402
 from gnssacc.sources.csvdir import write_csv_run  # noqa: E402
 from gnssacc.sources.sim import simulate  # noqa: E402

@@ -10,7 +10,7 @@ import pytest
 from gnssacc.config import DEG, load_config
 from gnssacc.earth import LocalTangentFrame
 from gnssacc.errors import DataWarning, InputError
-from gnssacc.run import GnssFixes, ImuData, InitialState, RecordedRun, Truth
+from gnssacc.recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth
 from gnssacc.sources.common import apply_mounting, read_table
 from gnssacc.sources.csvdir import load_csv_run, write_csv_run
 

@@ -5,7 +5,7 @@ from gnssacc.config import load_config
 from gnssacc.ekf import run_ekf
 from gnssacc.metrics import score
 from gnssacc.rotations import euler_to_dcm
-from gnssacc.run import ImuData
+from gnssacc.recording import ImuData
 from gnssacc.sources.csvdir import load_csv_run, write_csv_run
 from gnssacc.sources.sim import grade_config, simulate
 

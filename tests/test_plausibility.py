@@ -24,7 +24,7 @@ from gnssacc.earth import LocalTangentFrame
 from gnssacc.errors import DataWarning, InputError
 from gnssacc.plausibility import CHECKS, check_run, fix_imu_time_units
 from gnssacc.rotations import euler_to_dcm
-from gnssacc.run import ImuData, InitialState
+from gnssacc.recording import ImuData, InitialState
 from gnssacc.sources.common import apply_mounting
 from gnssacc.sources.csvdir import load_csv_run, write_csv_run
 from gnssacc.sources.sim import simulate

@@ -9,7 +9,7 @@ import pytest
 
 from gnssacc.config import DEG, load_config
 from gnssacc.quality import KINDS, check_imu, inflation_psd
-from gnssacc.run import ImuData
+from gnssacc.recording import ImuData
 
 RATE_HZ = 100.0
 

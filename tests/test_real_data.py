@@ -32,7 +32,7 @@ from gnssacc.yawbank import select_yaw
 from gnssacc.metrics import gnss_score, score
 from gnssacc.quality import check_imu
 from gnssacc.rotations import wrap_angle
-from gnssacc.run import GnssFixes, ImuData, InitialState, RecordedRun, Truth
+from gnssacc.recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 METHODS = ("ekf", "ekf-acc")

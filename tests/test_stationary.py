@@ -24,7 +24,7 @@ import pytest
 
 from gnssacc.earth import LocalTangentFrame
 from gnssacc.errors import InputError
-from gnssacc.run import GnssFixes, ImuData, RecordedRun
+from gnssacc.recording import GnssFixes, ImuData, RecordedRun
 from gnssacc.sources import sim
 from gnssacc.stationary import (StationaryParams, StationaryReport, detect_stationary, imu_still_stretches,
                                 noise_from_stationary, params_from_config)

@@ -8,7 +8,7 @@ gtsam wheel), input checks, self-tuning, metrics and reports.
 Python API (the command line's twin, :mod:`gnssacc.api`)::
 
     import gnssacc
-    res = gnssacc.process("kitti", methods=["ekf", "ekf-acc"])
+    res = gnssacc.process("kitti", methods=["ekf", "ekf-acc"])   # gnssacc.run(...) is the same
     print(res.table())
     run = gnssacc.load("run.bag")            # a RecordedRun
     sim = gnssacc.simulate("car", 300.0)     # a RecordedRun with truth
@@ -36,7 +36,7 @@ from .jit import configure_cache as _configure_cache
 _configure_cache()   # before anything imports numba: a read-only install caches in the user's folder
 
 #: The API, imported when first used (so ``gnssacc --help`` stays instant).
-_API = ("process", "load", "simulate", "configure", "evaluate", "Result")
+_API = ("process", "run", "load", "simulate", "configure", "evaluate", "Result")
 
 
 def __getattr__(name):

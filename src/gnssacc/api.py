@@ -12,7 +12,7 @@ Settings are resolved exactly as ``gnssacc run`` resolves them (the command line
 this module): KITTI runs with the ``kitti`` preset unless another (or ``"none"``) is asked for;
 ``noise`` makes fixes from the truth; the input checks, self-tuning and scoring are those of
 :func:`gnssacc.pipeline.compare`. A run made in Python (:func:`simulate`, or a
-:class:`gnssacc.run.RecordedRun` of your own) can be given instead of a source.
+:class:`gnssacc.recording.RecordedRun` of your own) can be given instead of a source.
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ from .identify import Identified
 from .pipeline import (compare, load_source, parse_methods, report_collector, resolve_preset, with_outages,
                        write_result)
 from .report import TRAJECTORY_COLUMNS, format_table, ok_methods, trajectory_table
-from .run import RecordedRun
+from .recording import RecordedRun
 from .solution import NavSolution
 
 
@@ -129,6 +129,10 @@ def evaluate(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str 
                                    observers={"ekf-acc": collector} if collector else None)
     replay = collector.replay("ekf-acc", sols["ekf-acc"]) if collector and "ekf-acc" in sols else None
     return Result(ident.run, cfg, metrics, sols, ident, replay)
+
+
+#: ``gnssacc.run(...)``, named like the command: the same as :func:`process`.
+run = process
 
 
 @dataclass

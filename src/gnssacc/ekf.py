@@ -31,7 +31,7 @@ from .mechanization import Propagator, apply_correction
 from .progress import progress
 from .quality import QualityReport, check_imu, inflation_segments
 from .rotations import dcm_to_euler, euler_error_jacobian
-from .run import InitialState, RecordedRun
+from .recording import InitialState, RecordedRun
 from .solution import NavSolution
 from .zupt import StationaryEpochs, stationary_epochs
 

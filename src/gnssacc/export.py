@@ -14,7 +14,7 @@ import numpy as np
 
 from .errors import warn_data
 from .rotations import dcm_to_quaternion, euler_to_dcm
-from .run import RecordedRun
+from .recording import RecordedRun
 from .solution import NavSolution
 
 

@@ -21,7 +21,7 @@ from dataclasses import replace
 import numpy as np
 
 from .errors import InputError
-from .run import GnssFixes, RecordedRun, Truth
+from .recording import GnssFixes, RecordedRun, Truth
 
 PROFILES = {
     "white": {"gm_sigma": np.zeros(3), "tau_s": 60.0, "white_sigma": np.array([3.0, 3.0, 5.0])},

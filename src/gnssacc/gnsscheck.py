@@ -35,7 +35,7 @@ import numpy as np
 from .earth import LocalTangentFrame
 from .findings import Finding
 from .motionmatch import HorizontalFit, LateralFit, TurnFit
-from .run import RecordedRun
+from .recording import RecordedRun
 
 FIX_INTERVAL_S = (0.005, 60.0)
 MIN_FIXES = 3

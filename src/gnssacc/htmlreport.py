@@ -8,7 +8,7 @@ from pathlib import Path
 
 from .display import DISPLAY_SCALE, STATE_GROUPS
 from .report import failed_methods, figure, table_notes, table_rows
-from .run import RecordedRun
+from .recording import RecordedRun
 from .solution import NavSolution
 
 def plot_sigmas(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> None:

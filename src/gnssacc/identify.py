@@ -30,7 +30,7 @@ from .consistency import ModelCheck, rest_noise_findings
 from .ekf import run_ekf
 from .plausibility import check_run
 from .quality import QualityReport, check_imu
-from .run import InitialState, RecordedRun
+from .recording import InitialState, RecordedRun
 from .stationary import StationaryReport, detect_stationary, noise_from_stationary, params_from_config
 from .tuning import TuneResult, scaled_gnss, tune
 from .yawbank import BankResult, select_yaw

@@ -26,7 +26,7 @@ from .earth import earth_rate_n, gravity_n
 from .errors import InputError
 from .gnss_accel import acceleration_row
 from .rotations import euler_to_dcm
-from .run import InitialState, RecordedRun
+from .recording import InitialState, RecordedRun
 
 #: Prior 1-sigma of a ground vehicle's mean acceleration over a fit window [m/s^2], used to
 #: shrink the (noisy) GNSS-fitted acceleration towards zero and to budget a line fit's model error.

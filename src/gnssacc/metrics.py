@@ -7,7 +7,7 @@ import numpy as np
 
 from .gnss_noise import in_spans
 from .rotations import wrap_angle
-from .run import RecordedRun
+from .recording import RecordedRun
 from .solution import NavSolution
 
 

@@ -43,7 +43,7 @@ import numpy as np
 
 from .earth import gravity_n
 from .rotations import euler_to_dcm
-from .run import RecordedRun
+from .recording import RecordedRun
 from .solution import NavSolution
 from .stationary import StationaryReport, detect_stationary
 

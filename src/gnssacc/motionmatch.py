@@ -146,7 +146,7 @@ def level_imu(imu, step: float | None = None) -> LevelledImu:
 
     Parameters
     ----------
-    imu : gnssacc.run.ImuData
+    imu : gnssacc.recording.ImuData
         Samples in any axes (time [s]; units as recorded).
     step : float, optional
         Grid step [s]; default the median sample interval, at least :data:`MIN_STEP_S`.

@@ -63,7 +63,7 @@ from .kalman import joseph_update
 from .metrics import truth_at
 from .quality import QualityReport
 from .rotations import dcm_to_euler, euler_error_jacobian, wrap_angle
-from .run import RecordedRun
+from .recording import RecordedRun
 from .solution import NavSolution
 
 #: SI units per state (the display names and units are :mod:`gnssacc.display`'s).

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from .rotations import ENU_NED, R_nb_to_ros, dcm_to_quaternion, euler_to_dcm
-from .run import RecordedRun
+from .recording import RecordedRun
 from .solution import NavSolution
 
 #: ``--export`` kinds and the file each writes in the result folder.

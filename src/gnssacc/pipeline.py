@@ -19,7 +19,7 @@ from .identify import Identified, identify
 from .metrics import gnss_score, score
 from .outdir import ResultDir
 from .report import format_table, metrics_dict, plot_errors, plot_trajectory, write_json, write_trajectory_csv
-from .run import RecordedRun
+from .recording import RecordedRun
 from .solution import NavSolution
 
 def _ekf(ident: Identified, method: str, show_progress: bool, observer=None) -> dict[str, NavSolution]:

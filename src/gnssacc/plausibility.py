@@ -60,7 +60,7 @@ from .motionmatch import (LevelledImu, at_times, box_average, choose_window, hor
                           level_imu, turn_rate_fit, velocity_frame)
 from .mountcheck import estimate_mounting, rotation_angle_deg as rotation_angle
 from .rotations import dcm_to_euler
-from .run import ImuData, RecordedRun
+from .recording import ImuData, RecordedRun
 from .timeoffset import OffsetEstimate, coarse_offset, refine_offset, shifted
 
 CHECKS = ("time_units", "fix_count", "heights", "accel_units", "gyro_units", "latlon", "init_position",

@@ -19,7 +19,7 @@ Four kinds of defect are flagged, each as a :class:`Span` of suspect IMU samples
     typical level (more than :data:`SATURATION_ROBUST_SIGMAS` robust standard deviations from its
     median), so clipping is caught while a quiet static channel is not.
 
-Sample ``k`` holds over the interval ``(t[k-1], t[k]]`` (see :class:`gnssacc.run.ImuData`), so a
+Sample ``k`` holds over the interval ``(t[k-1], t[k]]`` (see :class:`gnssacc.recording.ImuData`), so a
 span of samples ``i_start .. i_end-1`` covers the time ``t[i_start-1] .. t[i_end-1]``; that is
 what ``Span.t_start`` / ``Span.t_end`` hold and what :func:`inflation_psd` uses as the span
 duration.
@@ -33,7 +33,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .config import DEG, RunConfig
-from .run import ImuData
+from .recording import ImuData
 
 #: Channel names, in the column order of the stacked ``[f_b, omega_ib_b]`` array (as in imu.csv).
 CHANNELS = ("ax", "ay", "az", "gx", "gy", "gz")

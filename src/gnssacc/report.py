@@ -9,7 +9,7 @@ import numpy as np
 
 from .display import DISPLAY_SCALE, TRAJECTORY_COLUMNS, text_table
 from .metrics import Score, improvement_pct, truth_at
-from .run import RecordedRun
+from .recording import RecordedRun
 from .solution import NavSolution
 
 #: Baseline of each aided method, for the improvement column.

@@ -49,7 +49,7 @@ from .gnss_accel import AccelWindow, measured_specific_force
 from .progress import progress
 from .quality import QualityReport, check_imu, inflation_segments, touches_segments
 from .rotations import dcm_to_euler, euler_error_jacobian, skew
-from .run import InitialState, RecordedRun
+from .recording import InitialState, RecordedRun
 from .solution import NavSolution
 from .yawbank import self_initialise
 from .zupt import StationaryEpochs, stationary_epochs

@@ -68,7 +68,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from .allan import allan_deviation_pooled, fit_noise_terms, floor_bias_instability, remove_spectral_lines
 from .earth import LocalTangentFrame
 from .errors import InputError
-from .run import GnssFixes, ImuData
+from .recording import GnssFixes, ImuData
 
 DEG = np.pi / 180.0
 CHANNELS = ("ax", "ay", "az", "gx", "gy", "gz")

@@ -39,7 +39,7 @@ import numpy as np
 from .config import RunConfig
 from .motionmatch import GnssKinematics, LevelledImu, at_times, smooth_horizontal, velocity_frame
 from .quality import check_imu
-from .run import ImuData, RecordedRun
+from .recording import ImuData, RecordedRun
 from .stationary import detect_stationary, params_from_config
 
 #: Largest offset searched [s]: clock mix-ups of whole seconds (GPS-UTC is 18 s since 2017) and

@@ -33,7 +33,7 @@ import numpy as np
 from .config import G0
 from .findings import Finding
 from .motionmatch import TurnFit, box_average
-from .run import ImuData, RecordedRun
+from .recording import ImuData, RecordedRun
 from .timeoffset import MAX_OFFSET_S
 
 IMU_RATE_HZ = (5.0, 20000.0)

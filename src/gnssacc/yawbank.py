@@ -31,7 +31,7 @@ import numpy as np
 from .config import RunConfig
 from .initialise import StartState, hypothesis, start_state
 from .rotations import wrap_angle
-from .run import InitialState, RecordedRun
+from .recording import InitialState, RecordedRun
 
 #: Update kinds whose likelihood scores a hypothesis.
 _SCORED = ("pos", "zupt", "zaru")

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .run import ImuData
+from .recording import ImuData
 
 
 @dataclass

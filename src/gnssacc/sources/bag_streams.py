@@ -12,7 +12,7 @@ import numpy as np
 
 from ..earth import LocalTangentFrame
 from ..rotations import ENU_NED, FLU_FRD, R_nb_to_ros, dcm_to_quaternion, euler_to_dcm
-from ..run import RecordedRun
+from ..recording import RecordedRun
 
 LLH_MSG = "float64 lat\nfloat64 lon\nfloat64 height\n"
 HPPOSLLH_MSG = "ubxtranslator/llh llh\nubxtranslator/llh err\n"

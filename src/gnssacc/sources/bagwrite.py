@@ -1,4 +1,4 @@
-"""Write a :class:`~gnssacc.run.RecordedRun` as a ROS bag, so every bag path can be tested end to
+"""Write a :class:`~gnssacc.recording.RecordedRun` as a ROS bag, so every bag path can be tested end to
 end with known truth (and benchmarked).
 
 Kinds
@@ -26,7 +26,7 @@ import numpy as np
 from ..earth import LocalTangentFrame
 from ..errors import InputError
 from ..rotations import R_nb_to_ros
-from ..run import RecordedRun
+from ..recording import RecordedRun
 from .bag_streams import (HPPOSLLH_TYPE, IMAGE_TYPE, IMU_TYPE, NAVSATFIX_TYPE, ODOMETRY_TYPE, TF_TYPE, MessageTypes,
                           fix_messages, image_messages, imu_messages, odometry_messages, tf_static_messages)
 

@@ -15,7 +15,7 @@ import numpy as np
 from ..config import RunConfig
 from ..errors import InputError, warn_data
 from ..gnss_noise import fixes_from_truth
-from ..run import ImuData, RecordedRun, Truth, drop_nonfinite
+from ..recording import ImuData, RecordedRun, Truth, drop_nonfinite
 
 
 def apply_mounting(imu: ImuData, cfg: RunConfig) -> ImuData:
@@ -166,7 +166,7 @@ def read_table(path, required: Sequence[str], optional: Sequence[str] = (),
     is free and extra columns are ignored (they may hold anything). Blank lines and lines whose
     first non-blank character is ``#`` are skipped anywhere in the file. Empty cells count as
     missing (NaN). Rows with NaN/inf in a column that is read are dropped with a
-    :class:`~gnssacc.errors.DataWarning` giving the count (see :func:`gnssacc.run.drop_nonfinite`).
+    :class:`~gnssacc.errors.DataWarning` giving the count (see :func:`gnssacc.recording.drop_nonfinite`).
     A truncated last line (fewer cells than the header, as left by a logger that stopped
     mid-write) is dropped with a warning.
 

@@ -38,7 +38,7 @@ from ..config import DEG, RunConfig, vec3
 from ..earth import LocalTangentFrame
 from ..errors import InputError
 from ..rotations import flu_to_frd
-from ..run import GnssFixes, ImuData, InitialState, RecordedRun, Truth, check_increasing
+from ..recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth, check_increasing
 from .common import apply_mounting, check_degrees, read_table
 
 IMU_COLUMNS = ("t", "ax", "ay", "az", "gx", "gy", "gz")

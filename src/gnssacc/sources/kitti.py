@@ -26,7 +26,7 @@ from ..config import RunConfig
 from ..earth import LocalTangentFrame
 from ..errors import InputError
 from ..rotations import flu_to_frd
-from ..run import GnssFixes, ImuData, RecordedRun, Truth
+from ..recording import GnssFixes, ImuData, RecordedRun, Truth
 from .common import apply_mounting, with_noisy_fixes
 
 #: Geodetic origin assigned to the KITTI local frame: latitude, longitude [deg], height [m].

@@ -28,7 +28,7 @@ Only the chosen connections are read (``reader.messages(connections=...)``): ima
 topics are skipped without being decoded, and memory is bounded by the IMU/GNSS data.
 
 Modules
-    This module composes the others into a :class:`~gnssacc.run.RecordedRun` (frames, units,
+    This module composes the others into a :class:`~gnssacc.recording.RecordedRun` (frames, units,
     origin, initial state) and re-exports their public names: :mod:`.bag_files` (bag paths and
     opening), :mod:`.bag_salvage` (damaged ROS 1 bags), :mod:`.bag_topics` (survey and topic
     selection), :mod:`.bag_decode` (messages to rows, fix mappings, ``/tf_static``) and
@@ -44,7 +44,7 @@ from ..config import DEG, RunConfig, vec3
 from ..earth import LocalTangentFrame
 from ..errors import InputError, warn_data
 from ..rotations import FLU_FRD, dcm_to_euler, quaternion_to_dcm, ros_to_R_nb
-from ..run import GnssFixes, ImuData, InitialState, RecordedRun, Truth, drop_nonfinite
+from ..recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth, drop_nonfinite
 from .bag_decode import FIX_MAPPINGS, TIME_SOURCES, Collector, Decoded, RowDecoder, decode_topics, \
     merge_fix_mappings, normalize_type, tf_mounting
 from .bag_files import MAGIC, STORAGE_SUFFIXES, check_bag_path, open_reader, storage_files

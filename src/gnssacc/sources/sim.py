@@ -1,6 +1,6 @@
 """Ground-vehicle simulator: scenarios with known truth, WGS-84-consistent IMU, GNSS fixes.
 
-The simulator produces :class:`gnssacc.run.RecordedRun` objects for tests of the estimators.
+The simulator produces :class:`gnssacc.recording.RecordedRun` objects for tests of the estimators.
 Its parts: :mod:`.sim_scenarios` (speed / yaw / pitch profiles), this module (the path on the
 ellipsoid, the error-free IMU, the run), :mod:`.sim_imu_errors` (grades and IMU errors) and
 :mod:`.sim_vibration` (engine and road vibration). Their public names are re-exported here.
@@ -43,7 +43,7 @@ from ..earth import LocalTangentFrame, OMEGA_IE, normal_gravity, radii
 from ..errors import InputError
 from ..gnss_noise import PROFILES, fixes_from_truth
 from ..rotations import wrap_angle
-from ..run import GnssFixes, ImuData, InitialState, RecordedRun, SimTruth, Truth
+from ..recording import GnssFixes, ImuData, InitialState, RecordedRun, SimTruth, Truth
 from .sim_imu_errors import (GRADE_KEYS, IMU_EXTRA_ERRORS, IMU_GRADES, MODEL_KEYS,  # noqa: F401 (re-exported)
                              UNMODELLED_KEYS, VIBRATION_ENVIRONMENT, per_axis, bias_drift, gauss_markov,
                              grade_config, imu_error_model, imu_errors, imu_sigmas_si, sensor_matrices)
@@ -149,7 +149,7 @@ class TruthSamples:
     speed: np.ndarray
 
     def to_truth(self) -> Truth:
-        """As a :class:`gnssacc.run.Truth`."""
+        """As a :class:`gnssacc.recording.Truth`."""
         return Truth(self.t.copy(), self.lat.copy(), self.lon.copy(), self.h.copy(),
                      self.v_n.copy(), self.rpy.copy())
 
@@ -528,7 +528,7 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
     -------
     RecordedRun
         ``name = "sim-<scenario>"``, ``where = "simulator(<scenario>, seed=<seed>)"``. ``meta``
-        records every argument and the GNSS seed; ``sim`` (:class:`gnssacc.run.SimTruth`) the
+        records every argument and the GNSS seed; ``sim`` (:class:`gnssacc.recording.SimTruth`) the
         filter-visible IMU parameters (``imu_params``, as :func:`grade_config`), the full error
         description (``imu_error_model``), the per-run error draws (``imu_error_draws``, small
         arrays), the true biases per IMU sample ``true_bias_a`` [m/s^2] and ``true_bias_g``
