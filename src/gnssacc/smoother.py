@@ -51,6 +51,7 @@ from .quality import QualityReport, check_imu, inflation_segments, touches_segme
 from .rotations import dcm_to_euler, euler_error_jacobian, skew
 from .run import InitialState, RecordedRun
 from .solution import NavSolution
+from .window_marginals import NotAChain, WindowMarginals
 from .yawbank import self_initialise
 from .zupt import StationaryEpochs, stationary_epochs
 
@@ -205,6 +206,7 @@ class _Smoother:
         # Reuse the slots of marginalised factors so the factor list stays bounded on long runs.
         self.params.findUnusedFactorSlots = True
         self.isam = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
+        self.marginals = WindowMarginals(self.gm)
 
     def reset(self, robust: bool = False) -> None:
         """A new, empty smoother; ``robust`` switches to QR factorization (returns whether it did)."""
@@ -212,6 +214,7 @@ class _Smoother:
         if switched:
             self.params.setFactorization("QR")
         self.isam = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
+        self.marginals.clear()
         return switched
 
     def update(self, graph, values, stamps) -> None:
@@ -219,6 +222,10 @@ class _Smoother:
         for key, t in stamps:
             ts.insert((key, t))
         self.isam.update(graph, values, ts)
+        try:
+            self.marginals.sync(self.isam, graph)
+        except NotAChain:
+            self.marginals.clear()
 
     def estimate(self, i: int):
         """Pose, velocity, bias and GNSS error (zeros when not modelled) of node ``i``."""
@@ -227,21 +234,32 @@ class _Smoother:
         return (isam.calculateEstimatePose3(X(i)), isam.calculateEstimateVector(V(i)),
                 isam.calculateEstimateConstantBias(B(i)), g)
 
-    def covariances(self, i: int, joint: bool = False):
+    def keys(self, i: int) -> list:
+        """Keys of node ``i``: pose, velocity, bias[, GNSS error]."""
+        return [X(i), V(i), B(i)] + ([G(i)] if self.gm else [])
+
+    def covariances(self, i: int):
         """Marginal covariances of X_i (6x6, tangent), V_i (3x3), B_i (6x6), and the pose-GNSS-error
         cross-covariance (6x3) and GNSS-error covariance (3x3) (zeros when not modelled).
 
-        ``joint=True`` asks iSAM2 for them at once, which is cheaper for old nodes deep in the
-        Bayes tree; single queries are cheaper for the newest node near the root.
+        From :class:`gnssacc.window_marginals.WindowMarginals` (the window's linear system, kept
+        in step with iSAM2); iSAM2's own joint query, by QR, if that system is not at hand.
         """
-        isam = self.isam
-        if joint or self.gm:
-            keys = [X(i), V(i), B(i)] + ([G(i)] if self.gm else [])
-            full = isam.getISAM2().jointMarginalCovariance(keys).fullMatrix()
-            gm = (full[0:6, 15:18], full[15:18, 15:18]) if self.gm else (np.zeros((6, 3)), np.zeros((3, 3)))
-            return full[0:6, 0:6], full[6:9, 6:9], full[9:15, 9:15], *gm
-        return (isam.marginalCovariance(X(i)), isam.marginalCovariance(V(i)), isam.marginalCovariance(B(i)),
-                np.zeros((6, 3)), np.zeros((3, 3)))
+        full = None
+        if self.marginals.first is not None:
+            try:
+                full = self.marginals.covariance(i)
+            except np.linalg.LinAlgError:
+                self.marginals.clear()   # rebuilt at the next update
+        if full is None:
+            keys = self.keys(i)
+            info, _ = self.isam.getISAM2().joint(keys, gtsam.EliminateQR).hessian(gtsam.Ordering(keys))
+            full = np.linalg.inv(info)
+        gm = (full[0:6, 15:18], full[15:18, 15:18]) if self.gm else (_ZERO_XG, _ZERO_G)
+        return full[0:6, 0:6], full[6:9, 6:9], full[9:15, 9:15], *gm
+
+
+_ZERO_XG, _ZERO_G = np.zeros((6, 3)), np.zeros((3, 3))
 
 
 def _is_ill_posed(exc: Exception) -> bool:
@@ -469,9 +487,6 @@ class _Loop:
             values.insert(G(i), g)
         return graph, values
 
-    def keys(self, i) -> list:
-        return [X(i), V(i), B(i)] + ([G(i)] if self.f.gm else [])
-
     def _start(self, init):
         """Node 0 with the EKF's own initial covariance (:func:`_initial_prior`)."""
         R0 = init.R_nb
@@ -489,7 +504,7 @@ class _Loop:
         for key, value in ((X(0), self.pose), (V(0), self.vel), (B(0), self.bias)) + (((G(0), self.g),) if self.f.gm else ()):
             values.insert(key, value)
         self._node_factors(graph, 0, self.times[0], R0)
-        self.smoother.update(graph, values, [(key, self.times[0]) for key in self.keys(0)])
+        self.smoother.update(graph, values, [(key, self.times[0]) for key in self.smoother.keys(0)])
         self._record_online(0)
 
     def _node_factors(self, graph, i, t, R_nb):
@@ -502,10 +517,13 @@ class _Loop:
             self.f.stationary(graph, i, self.stationary_at[i], R_nb, self.bias)
 
     def _record_online(self, i):
-        self.online.put(i, self.smoother.estimate(i), self.smoother.covariances(i))
+        """Record the newest node's estimate and marginal covariances; return the estimate."""
+        est = self.smoother.estimate(i)
+        self.online.put(i, est, self.smoother.covariances(i))
+        return est
 
     def _record_fixed(self, i):
-        self.fixed.put(i, self.smoother.estimate(i), self.smoother.covariances(i, joint=True))
+        self.fixed.put(i, self.smoother.estimate(i), self.smoother.covariances(i))
 
     def score(self) -> None:
         """Whitened GNSS residuals of both estimates at every node with a fix (vectorised)."""
@@ -540,14 +558,13 @@ class _Loop:
                 self._record_fixed(self.oldest)
                 self.oldest += 1
             try:
-                self.smoother.update(graph, values, [(key, t) for key in self.keys(i)])
+                self.smoother.update(graph, values, [(key, t) for key in self.smoother.keys(i)])
             except RuntimeError as exc:
                 if not _is_ill_posed(exc):
                     raise
                 self.stats["n_ill_posed_recovered"] += 1
                 self.window_start = _reinitialise(self, i, graph, values)
-            self.pose, self.vel, self.bias, self.g = self.smoother.estimate(i)
-            self._record_online(i)
+            self.pose, self.vel, self.bias, self.g = self._record_online(i)
         for m in range(self.window_start, n):
             if not self.fixed.done[m]:
                 self._record_fixed(m)
@@ -575,7 +592,7 @@ def _reinitialise(loop: _Loop, i: int, graph, values) -> int:
                                     online.cov_bias[p], online.g[p], online.cov_g[p] + 1e-12 * np.eye(3))
     p_graph.push_back(graph)
     p_values.insert(values)
-    stamps = [(key, times[p]) for key in loop.keys(p)] + [(key, times[i]) for key in loop.keys(i)]
+    stamps = [(key, times[p]) for key in loop.smoother.keys(p)] + [(key, times[i]) for key in loop.smoother.keys(i)]
     loop.smoother.update(p_graph, p_values, stamps)
     return p
 
