@@ -179,7 +179,7 @@ class _Record:
         c_pos = R @ self.cov_pose[:, 3:6, 3:6] @ R.transpose(0, 2, 1)
         c_att = R @ self.cov_pose[:, 0:3, 0:3] @ R.transpose(0, 2, 1)
         roll, pitch, yaw = dcm_to_euler(R)
-        J = np.array([euler_error_jacobian(r, p, y) for r, p, y in zip(roll, pitch, yaw)]).reshape(-1, 3, 3)
+        J = euler_error_jacobian(roll, pitch, yaw)
         c_eul = J @ c_att @ J.transpose(0, 2, 1)
         diag = lambda C: np.sqrt(np.maximum(np.diagonal(C, axis1=1, axis2=2), 0.0))
         return np.concatenate([diag(c_pos), diag(self.cov_vel), diag(c_eul), diag(self.cov_bias)], axis=1)
@@ -390,16 +390,36 @@ def _attach_stationary(times: np.ndarray, st: StationaryEpochs, interval: float)
     return out
 
 
-def _preintegrate(imu, model, bias, t_prev, t, j_start, k_end, inflation):
-    """PreintegratedCombinedMeasurements over ``(t_prev, t]``; samples held over (t[k-1], t[k]]."""
+def _preintegrate(imu, model, bias, t_prev, t, j_start, k_end, inflation, dt_all):
+    """PreintegratedCombinedMeasurements over ``(t_prev, t]``; samples held over (t[k-1], t[k]].
+
+    ``dt_all[k] = t[k] - t[k-1]``: only the first and last samples' spans are cut at the node times.
+    """
     pim = gtsam.PreintegratedCombinedMeasurements(model.params(*inflation), bias)
-    edges = np.clip(imu.t[j_start:k_end], t_prev, t)
-    dts = np.diff(edges, prepend=t_prev)
+    if k_end <= j_start:
+        return pim
+    imu_t = imu.t
+    dts = dt_all[j_start:k_end].tolist()
+    dts[0] = min(imu_t[j_start], t) - t_prev
+    if k_end - j_start > 1 and imu_t[k_end - 1] > t:
+        dts[-1] = t - imu_t[k_end - 2]
     integrate = pim.integrateMeasurement
-    for f_b, w_b, dt in zip(imu.f_b[j_start:k_end], imu.omega_ib_b[j_start:k_end], dts.tolist()):
+    for f_b, w_b, dt in zip(imu.f_b[j_start:k_end], imu.omega_ib_b[j_start:k_end], dts):
         if dt > 0.0:
             integrate(f_b, w_b, dt)
     return pim
+
+
+def _touches(first: np.ndarray, last: np.ndarray, seg_i0: np.ndarray, seg_i1: np.ndarray) -> np.ndarray:
+    """Per node interval, whether samples ``[first[i-1], last[i])`` overlap a suspect segment
+    (segments sorted and disjoint, :func:`gnssacc.quality.inflation_segments`)."""
+    out = np.zeros(len(first), bool)
+    if seg_i0.size:
+        j0, k1 = first[:-1], last[1:]
+        s = np.searchsorted(seg_i1, j0, side="right")        # first segment ending after j0
+        ok = s < len(seg_i0)
+        out[1:][ok] = seg_i0[s[ok]] < k1[ok]
+    return out
 
 
 def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
@@ -538,12 +558,14 @@ class _Loop:
         seg_i0, seg_i1, seg_qg, seg_qa = self.segs
         first = np.searchsorted(imu.t, times, side="right")
         last = np.minimum(np.searchsorted(imu.t, times, side="left") + 1, len(imu.t))
+        touches = _touches(first, last, seg_i0, seg_i1)
+        dt_all = np.diff(imu.t, prepend=imu.t[0])
         for i in progress(range(1, n), desc=method, enable=show_progress):
             t_prev, t = times[i - 1], times[i]
             j0, k1 = int(first[i - 1]), int(last[i])
             inflation = (_inflation_over(imu.t, j0, k1, t_prev, t, seg_i0, seg_i1, seg_qa, seg_qg)
-                         if seg_i0.size and touches_segments(j0, k1, seg_i0, seg_i1) else (None, None))
-            pim = _preintegrate(imu, self.model, self.bias, t_prev, t, j0, k1, inflation)
+                         if touches[i] else (None, None))
+            pim = _preintegrate(imu, self.model, self.bias, t_prev, t, j0, k1, inflation, dt_all)
             nav = pim.predict(gtsam.NavState(self.pose, self.vel), self.bias)
             graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
             graph.add(gtsam.CombinedImuFactor(X(i - 1), V(i - 1), X(i), V(i), B(i - 1), B(i), pim))
