@@ -34,8 +34,6 @@ import numpy as np
 from gtsam.symbol_shorthand import X
 from numba import njit
 
-#: Offset and dimension of each variable in a node's block, by GTSAM symbol character.
-_LAYOUT = {"x": (0, 6), "v": (6, 3), "b": (9, 6), "g": (15, 3)}
 _INDEX_MASK = (1 << 56) - 1
 
 
@@ -113,12 +111,44 @@ def _inverse(A):
 
 
 @njit(cache=True)
-def _scatter(D, O, info, rows, offs, dims):
-    """Add a factor's information ``info`` to the blocks; keys at storage rows ``rows``."""
+def _layout(key):
+    """Offset and dimension of a variable in its node's block, from the GTSAM symbol character."""
+    c = key >> 56
+    if c == 120:                         # 'x': Pose3
+        return 0, 6
+    if c == 118:                         # 'v': velocity
+        return 6, 3
+    if c == 98:                          # 'b': IMU bias
+        return 9, 6
+    if c == 103:                         # 'g': GNSS error
+        return 15, 3
+    return -1, 0
+
+
+@njit(cache=True)
+def _scatter(D, O, info, keys, first, start):
+    """Add a factor's information ``info`` (over ``keys``, in order) to the blocks.
+
+    Returns the lowest storage row touched, -1 for an unknown variable, -2 for a factor on nodes
+    that are not neighbours or older than the window.
+    """
+    nk = len(keys)
+    rows = np.empty(nk, np.int64)
+    offs = np.empty(nk, np.int64)
+    dims = np.empty(nk, np.int64)
+    low = 1 << 62
+    for p in range(nk):
+        offs[p], dims[p] = _layout(keys[p])
+        if dims[p] == 0:
+            return -1
+        rows[p] = start + (keys[p] & _INDEX_MASK) - first
+        if rows[p] < start:
+            return -2
+        low = min(low, rows[p])
     p0 = 0
-    for p in range(len(rows)):
+    for p in range(nk):
         q0 = 0
-        for q in range(len(rows)):
+        for q in range(nk):
             a, c = rows[p], rows[q]
             if a == c or c == a + 1:
                 T = D[a] if a == c else O[a]
@@ -126,28 +156,31 @@ def _scatter(D, O, info, rows, offs, dims):
                     for t in range(dims[q]):
                         T[offs[p] + r, offs[q] + t] += info[p0 + r, q0 + t]
             elif a != c + 1:
-                return False
+                return -2
             q0 += dims[q]
         p0 += dims[p]
-    return True
+    return low
 
 
 @njit(cache=True)
-def _forward(D, O, F, k0, k1):
-    """Forward sweep from storage row ``k0`` (whose ``F`` is valid) to ``k1``."""
-    for k in range(k0, k1):
+def _node_covariance(D, O, F, start, f_valid, j, last):
+    """Covariance of storage row ``j``; extends the forward sweep ``F`` (valid up to ``f_valid``).
+
+    Returns the covariance (NaN if not positive definite) and the new ``f_valid``.
+    """
+    if f_valid < start:
+        F[start] = D[start]
+        f_valid = start
+    for k in range(f_valid, j):          # F_{k+1} = D_{k+1} - O_k^T F_k^-1 O_k
         F[k + 1] = D[k + 1] - _schur(F[k], O[k], False)
-
-
-@njit(cache=True)
-def _marginal_info(D, O, F, start, j, last):
-    """Marginal information of storage row ``j``: ``F_j`` (valid) less the newer nodes' Schur complement."""
-    if j == last:
-        return F[j].copy()
-    G = D[last].copy()
-    for k in range(last - 1, j, -1):
-        G = D[k] - _schur(G, O[k], True)
-    return F[j] - _schur(G, O[j], True)
+    f_valid = max(f_valid, j)
+    info = F[j].copy()
+    if j < last:                         # less the newer nodes' Schur complement (backward sweep)
+        G = D[last].copy()
+        for k in range(last - 1, j, -1):
+            G = D[k] - _schur(G, O[k], True)
+        info -= _schur(G, O[j], True)
+    return _inverse(info), f_valid
 
 
 class WindowMarginals:
@@ -187,7 +220,7 @@ class WindowMarginals:
 
     def rebuild(self, factors: gtsam.NonlinearFactorGraph, theta: gtsam.Values) -> None:
         """The blocks of all ``factors`` linearised at ``theta``."""
-        nodes = [k & _INDEX_MASK for k in theta.keys() if chr(k >> 56) == "x"]
+        nodes = [k & _INDEX_MASK for k in theta.keys() if k >> 56 == ord("x")]
         self.clear()
         self.first = min(nodes)
         self._grow(max(nodes))
@@ -199,18 +232,15 @@ class WindowMarginals:
             f = gfg.at(j)
             if f is None:
                 continue
-            keys = f.keys()
-            nodes = [k & _INDEX_MASK for k in keys]
-            if max(nodes) >= self.first + self.n:
-                self._grow(max(nodes))
-            layout = [_LAYOUT[chr(k >> 56)] for k in keys]
-            rows = np.array([self.start + m - self.first for m in nodes])
-            if rows.min() < self.start:
-                raise NotAChain("a factor on a node older than the window")
-            if not _scatter(self.D, self.O, f.information(), rows, np.array([o for o, _ in layout]),
-                            np.array([d for _, d in layout])):
-                raise NotAChain(f"a factor on non-neighbouring nodes {sorted(set(nodes))}")
-            self.f_valid = min(self.f_valid, rows.min() - 1)
+            keys = np.array(f.keys(), np.int64)
+            last = int((keys & _INDEX_MASK).max())
+            if last >= self.first + self.n:
+                self._grow(last)
+            low = _scatter(self.D, self.O, f.information(), keys, self.first, self.start)
+            if low < 0:
+                raise NotAChain(f"a factor on {[gtsam.DefaultKeyFormatter(int(k)) for k in keys]} does not fit "
+                                "the window's chain of nodes")
+            self.f_valid = min(self.f_valid, low - 1)
 
     def marginalize_first(self) -> None:
         """Schur complement of the oldest node onto the next one; drop it."""
@@ -231,13 +261,7 @@ class WindowMarginals:
         j, last = self.start + node - self.first, self.start + self.n - 1
         if not self.start <= j <= last:
             raise KeyError(f"node {node} is not in the window")
-        if self.f_valid < self.start:
-            self.F[self.start] = self.D[self.start]
-            self.f_valid = self.start
-        if self.f_valid < j:
-            _forward(self.D, self.O, self.F, self.f_valid, j)
-            self.f_valid = j
-        cov = _inverse(_marginal_info(self.D, self.O, self.F, self.start, j, last))
+        cov, self.f_valid = _node_covariance(self.D, self.O, self.F, self.start, self.f_valid, j, last)
         if not np.isfinite(cov[0, 0]):
             raise np.linalg.LinAlgError(f"the marginal information of node {node} is not positive definite")
         return cov
