@@ -45,7 +45,7 @@ from .config import RunConfig
 from .earth import earth_rate_n, normal_gravity
 from .ekf import initial_state
 from .factors import gauss_markov_factor, gnss_accel_factor, gnss_position_gm_factor, joint_prior_factor
-from .gnss_accel import AccelWindow, measured_specific_force
+from .gnss_accel import measured_specific_force, window_accelerations
 from .progress import progress
 from .quality import QualityReport, check_imu, inflation_segments, touches_segments
 from .rotations import dcm_to_euler, euler_error_jacobian, skew
@@ -315,8 +315,8 @@ class _Factors:
         self.g_n = np.array([0.0, 0.0, float(normal_gravity(origin.lat0, origin.h0))])
         self.w_ie = earth_rate_n(origin.lat0)
         self.f_avg = float(cfg["accel"]["specific_force_avg_s"])
-        self.window = AccelWindow(int(cfg["accel"]["window"]), float(cfg["accel"]["max_gap_s"]),
-                                  cfg.accel_sigma_override)
+        self.acc_window = (int(cfg["accel"]["window"]), float(cfg["accel"]["max_gap_s"]), cfg.accel_sigma_override)
+        self.acc = None
         self.zupt_noise = gtsam.noiseModel.Isotropic.Sigma(3, float(cfg["zupt"]["velocity_sigma_mps"]))
         self._noise: dict = {}
         self.gm_sigma, self.gm_tau = cfg.gnss_gm_sigma, cfg.gnss_gm_tau
@@ -347,16 +347,26 @@ class _Factors:
             graph.add(gauss_markov_factor(G(i - 1), G(i), dt, self.gm_tau, self.gm_sigma))
             values.insert(G(i), np.exp(-dt / self.gm_tau) * g_prev)
 
+    def prepare_accel(self, times: np.ndarray) -> None:
+        """GNSS accelerations of every fix, all at once: the fixes before the first node and those
+        at node times, in order, as :class:`gnssacc.gnss_accel.AccelWindow` would see them."""
+        t_fix = self.run.gnss.t
+        nodes = set(times.tolist())
+        pushed = np.flatnonzero((t_fix < times[0]) | np.array([t in nodes for t in t_fix.tolist()], bool))
+        full, a_n, var = window_accelerations(t_fix[pushed], self.p_fix[pushed], self.run.gnss.sigma_ned[pushed],
+                                              *self.acc_window)
+        self.acc = {int(k): (a_n[j], var[j]) for j, k in enumerate(pushed) if full[j]}
+
     def accel(self, graph, i: int, t: float, k: int, seg_i0, seg_i1) -> None:
         """GNSS-acceleration factor on (X_i, B_i) once the least-squares window is full."""
-        meas = self.window.push(t, self.p_fix[k], self.run.gnss.sigma_ned[k])
+        meas = self.acc.get(k)
         if meas is None:
             return
         f_meas = measured_specific_force(self.run.imu, t, self.f_avg, seg_i0, seg_i1)
         if f_meas is None:
             self.stats["n_acc_skipped_suspect_imu"] += 1
             return
-        graph.add(gnss_accel_factor(X(i), B(i), f_meas, meas.a_n, self.g_n, meas.cov))
+        graph.add(gnss_accel_factor(X(i), B(i), f_meas, meas[0], self.g_n, np.diag(meas[1])))
         self.stats["n_acc_factors"] += 1
 
     def stationary(self, graph, i: int, j: int, R_nb: np.ndarray, bias) -> None:
@@ -514,8 +524,8 @@ class _Loop:
         self.vel = np.asarray(init.v_n, float)
         self.bias = gtsam.imuBias.ConstantBias(np.asarray(init.b_a, float), np.asarray(init.b_g, float))
         self.g = np.zeros(3)
-        for k in np.flatnonzero(self.run.gnss.t < self.times[0]):  # node 0 pushes its own fix
-            self.f.window.push(self.run.gnss.t[k], self.f.p_fix[k], self.run.gnss.sigma_ned[k])
+        if self.use_acc:
+            self.f.prepare_accel(self.times)
         cov, c_vel = _initial_prior(init, self.cfg)
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         graph.add(joint_prior_factor(X(0), B(0), G(0) if self.f.gm else None, self.pose, self.bias.vector(),

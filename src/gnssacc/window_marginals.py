@@ -45,13 +45,16 @@ class NotAChain(RuntimeError):
 def _gram(W, scale):
     """``W^T W`` scaled by ``scale_i scale_j`` (explicit loops: numba's ``@`` would call BLAS)."""
     b = W.shape[0]
-    out = np.empty((b, b))
+    out = np.zeros((b, b))
+    for k in range(b):                   # row by row, contiguous inner loops
+        for i in range(b):
+            w = W[k, i]
+            for j in range(i, b):
+                out[i, j] += w * W[k, j]
     for i in range(b):
         for j in range(i, b):
-            v = 0.0
-            for k in range(b):
-                v += W[k, i] * W[k, j]
-            out[i, j] = out[j, i] = v * scale[i] * scale[j]
+            out[i, j] *= scale[i] * scale[j]
+            out[j, i] = out[i, j]
     return out
 
 
@@ -85,12 +88,16 @@ def _schur(A, C, transpose):
     b = A.shape[0]
     L, s = _chol(A)
     W = np.empty((b, b))
-    for j in range(b):                   # W = L^-1 S C, column by column
-        for i in range(b):
-            v = (C[j, i] if transpose else C[i, j]) * s[i]
-            for k in range(i):
-                v -= L[i, k] * W[k, j]
-            W[i, j] = v / L[i, i]
+    for i in range(b):                   # W = L^-1 S C, row by row
+        for j in range(b):
+            W[i, j] = (C[j, i] if transpose else C[i, j]) * s[i]
+        for k in range(i):
+            l = L[i, k]
+            for j in range(b):
+                W[i, j] -= l * W[k, j]
+        d = 1.0 / L[i, i]
+        for j in range(b):
+            W[i, j] *= d
     return _gram(W, np.ones(b))
 
 
