@@ -18,9 +18,10 @@ Graph, in a local NED tangent frame at the run's origin:
 
 Two estimates per node are reported: the *online* one (the newest node right after its
 update, what a real-time user would have had) and the *fixed-lag* one (the node's value when
-it leaves the lag window, or at the end), each with 1-sigma from iSAM2's marginal covariances
-and its whitened GNSS residuals against their expectation (:func:`residual_chi2`) as a
-consistency figure.
+it leaves the lag window, or at the end), each with 1-sigma from the marginal covariances of
+iSAM2's linear system (:class:`gnssacc.window_marginals.WindowMarginals`, which keeps a copy of
+that system cheaper to query than iSAM2's Bayes tree) and its whitened GNSS residuals against
+their expectation (:func:`residual_chi2`) as a consistency figure.
 
 An ill-posed update (GTSAM's indeterminant-system error) never ends a run: the window is
 re-initialised from the last estimate with priors from its marginal covariances, and the event

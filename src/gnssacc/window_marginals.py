@@ -221,7 +221,12 @@ class WindowMarginals:
         if self.first is None or isam.getISAM2Result().getVariablesRelinearized() > 0:
             self.rebuild(isam.getFactors(), theta)
             return
-        self.add(new_factors.linearize(theta))
+        try:
+            gfg = new_factors.linearize(theta)
+        except RuntimeError:             # a new factor on a node already marginalised (a lag
+            self.rebuild(isam.getFactors(), theta)   # shorter than the node spacing)
+            return
+        self.add(gfg)
         while self.n > 1 and not theta.exists(X(self.first)):
             self.marginalize_first()
 
