@@ -72,15 +72,18 @@ def gnss_accel_factor(pose_key: int, bias_key: int, f_b: np.ndarray, a_n: np.nda
         Covariance of ``a_n`` [m^2/s^4].
     """
     f_b, a_n, g_n = (np.asarray(x, float).copy() for x in (f_b, a_n, g_n))
-
-    keys = (pose_key, bias_key)
+    pose_key, bias_key = int(pose_key), int(bias_key)
+    zero = np.zeros((3, 3))
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
-        R_nb = values.atPose3(keys[0]).rotation().matrix()
-        f_corr = f_b - values.atConstantBias(keys[1]).accelerometer()
+        R_nb = values.atPose3(pose_key).rotation().matrix()
+        f_corr = f_b - values.atConstantBias(bias_key).accelerometer()
         if H is not None:
-            H[0], H[1] = smoother_jacobians_from_H_a(R_nb, f_corr)
-        return predicted_acceleration(R_nb, f_corr, g_n) - a_n
+            # smoother_jacobians_from_H_a without the zero-padded copies (same numbers).
+            H_phi, H_ba = H_a_blocks(R_nb, f_corr)
+            H[0] = np.hstack((H_phi @ R_nb, zero))
+            H[1] = np.hstack((-H_ba, zero))
+        return R_nb @ f_corr + g_n - a_n   # predicted_acceleration(R_nb, f_corr, g_n) - a_n
 
     noise = gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, float))
     return gtsam.CustomFactor(noise, [pose_key, bias_key], error)

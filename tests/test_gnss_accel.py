@@ -134,3 +134,25 @@ def test_H_p_with_lever_arm_by_finite_differences():
         np.testing.assert_allclose(H[:, j], num, atol=2e-6)
     np.testing.assert_allclose(H[:, 0:3], np.eye(3))
     np.testing.assert_allclose(dz(np.zeros(15))[0], 0.0, atol=1e-6)
+
+
+@pytest.mark.parametrize("override", [None, np.array([0.1, 0.2, 0.3])])
+def test_window_accelerations_equal_the_sliding_window(override):
+    """The vectorised accelerations (the smoother's) equal AccelWindow's, gaps and resets included."""
+    from gnssacc.gnss_accel import AccelWindow, window_accelerations
+
+    rng = np.random.default_rng(5)
+    t = np.cumsum(rng.choice([0.2, 1.0, 1.0, 3.0], size=80))          # 3 s steps exceed the gap
+    p = rng.normal(size=(80, 3)) * 5 + t[:, None] ** 2
+    sig = rng.uniform(0.5, 3.0, size=(80, 3))
+    full, a_n, var = window_accelerations(t, p, sig, 4, 2.5, override)
+    w = AccelWindow(4, 2.5, override)
+    n_full = 0
+    for j in range(80):
+        meas = w.push(t[j], p[j], sig[j])
+        assert full[j] == (meas is not None)
+        if meas is not None:
+            n_full += 1
+            np.testing.assert_allclose(a_n[j], meas.a_n, rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(np.diag(var[j]), meas.cov, rtol=1e-12, atol=1e-15)
+    assert 10 < n_full < 70 and w.resets > 3

@@ -106,6 +106,66 @@ def ls_acceleration(t: np.ndarray, p_n: np.ndarray, sigma_ned: np.ndarray) -> tu
     return a_n, cov
 
 
+def window_accelerations(t: np.ndarray, p_n: np.ndarray, sigma_ned: np.ndarray, m: int, max_gap_s: float,
+                         sigma_override: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What :class:`AccelWindow` returns for each of a sequence of fixes pushed in order, at once.
+
+    The window of fix ``j`` is fixes ``j - m + 1 .. j``; it is full when none of its intervals
+    exceeds ``max_gap_s`` (the buffer is cleared at such a gap). Same formula as
+    :func:`acceleration_row` and :func:`ls_acceleration`, vectorised over the windows.
+
+    Parameters
+    ----------
+    t : ndarray (M,)
+        Fix times [s], increasing.
+    p_n, sigma_ned : ndarray (M, 3)
+        Positions in a local NED frame and their 1-sigma [m].
+    m : int
+        Window length (>= 3).
+    max_gap_s : float
+    sigma_override : ndarray (3,), optional
+        Fixed 1-sigma [m/s^2] replacing the propagated covariance.
+
+    Returns
+    -------
+    full : ndarray (M,) of bool
+        Whether fix ``j`` completes a window (a measurement).
+    a_n : ndarray (M, 3)
+        Accelerations [m/s^2, NED] (NaN where not full).
+    var : ndarray (M, 3)
+        Their variances (diagonal covariance) [m^2/s^4].
+    """
+    t = np.asarray(t, float)
+    M = len(t)
+    full = np.zeros(M, bool)
+    a_n, var = np.full((M, 3), np.nan), np.full((M, 3), np.nan)
+    if M < m:
+        return full, a_n, var
+    gap = np.diff(t) > max_gap_s                       # gap[j]: between fixes j and j + 1
+    bad = np.concatenate([[0], np.cumsum(gap)])        # gaps before fix j
+    j = np.arange(m - 1, M)
+    ok = bad[j] == bad[j - m + 1]
+    j = j[ok]
+    full[j] = True
+    idx = j[:, None] + np.arange(1 - m, 1)             # (K, m) fix indices per window
+    T = t[idx]
+    scale = np.maximum(T[:, -1] - T[:, 0], 1e-9)
+    u = (T - T[:, :1]) / scale[:, None]
+    q = 0.5 * u * u
+    s0, s1, s2 = float(m), u.sum(1), q.sum(1)
+    s11, s12, s22 = (u * u).sum(1), (u * q).sum(1), (q * q).sum(1)
+    c20, c21, c22 = s1 * s12 - s11 * s2, -(s0 * s12 - s1 * s2), s0 * s11 - s1 * s1
+    det = s0 * (s11 * s22 - s12 * s12) - s1 * (s1 * s22 - s12 * s2) + s2 * c20
+    if np.any(np.abs(det) < 1e-12 * max(1.0, s0) ** 3):
+        raise ValueError("acceleration window needs at least three distinct fix times")
+    Bw = (c20[:, None] + c21[:, None] * u + c22[:, None] * q) / det[:, None] / scale[:, None] ** 2
+    a_n[j] = np.einsum("km,kmc->kc", Bw, np.asarray(p_n, float)[idx])
+    var[j] = (Bw[:, :, None] ** 2 * np.asarray(sigma_ned, float)[idx] ** 2).sum(1)
+    if sigma_override is not None:
+        var[j] = np.asarray(sigma_override, float) ** 2
+    return full, a_n, var
+
+
 @dataclass
 class AccelMeasurement:
     """One GNSS-derived acceleration, valid at the newest fix of its window.

@@ -71,7 +71,7 @@ def euler_error_jacobian(roll, pitch, yaw):
     are ``d_euler = J @ phi``, ``J = E^-1`` with ``E = [Rz Ry e_x, Rz e_y, e_z]`` (the matrix
     that maps Z-Y-X Euler-angle rates to an angular rate resolved in n).
 
-    Angles may be scalars or arrays of one shape ``(...)``.
+    Works on scalars or arrays of angles (one matrix per element).
 
     Returns
     -------
@@ -80,9 +80,12 @@ def euler_error_jacobian(roll, pitch, yaw):
     """
     cy, sy = np.cos(yaw), np.sin(yaw)
     cp, sp = np.cos(pitch), np.sin(pitch)
-    zero, one = np.zeros_like(cy), np.ones_like(cy)
-    E = np.stack([np.stack([cy * cp, -sy, zero], -1), np.stack([sy * cp, cy, zero], -1),
-                  np.stack([-sp, zero, one], -1)], -2)
+    if np.ndim(cy) == 0:
+        return np.linalg.inv(np.array([[cy * cp, -sy, 0.0], [sy * cp, cy, 0.0], [-sp, 0.0, 1.0]]))
+    E = np.zeros(np.shape(cy) + (3, 3))
+    E[..., 0, 0], E[..., 0, 1] = cy * cp, -sy
+    E[..., 1, 0], E[..., 1, 1] = sy * cp, cy
+    E[..., 2, 0], E[..., 2, 2] = -sp, 1.0
     return np.linalg.inv(E)
 
 

@@ -18,9 +18,10 @@ Graph, in a local NED tangent frame at the run's origin:
 
 Two estimates per node are reported: the *online* one (the newest node right after its
 update, what a real-time user would have had) and the *fixed-lag* one (the node's value when
-it leaves the lag window, or at the end), each with 1-sigma from iSAM2's marginal covariances
-and its whitened GNSS residuals against their expectation (:func:`residual_chi2`) as a
-consistency figure.
+it leaves the lag window, or at the end), each with 1-sigma from the marginal covariances of
+iSAM2's linear system (:class:`gnssacc.window_marginals.WindowMarginals`, which keeps a copy of
+that system cheaper to query than iSAM2's Bayes tree) and its whitened GNSS residuals against
+their expectation (:func:`residual_chi2`) as a consistency figure.
 
 An ill-posed update (GTSAM's indeterminant-system error) never ends a run: the window is
 re-initialised from the last estimate with priors from its marginal covariances, and the event
@@ -45,12 +46,13 @@ from .config import RunConfig
 from .earth import earth_rate_n, normal_gravity
 from .ekf import initial_state
 from .factors import gauss_markov_factor, gnss_accel_factor, gnss_position_gm_factor, joint_prior_factor
-from .gnss_accel import AccelWindow, measured_specific_force
+from .gnss_accel import measured_specific_force, window_accelerations
 from .progress import progress
 from .quality import QualityReport, check_imu, inflation_segments, touches_segments
 from .rotations import dcm_to_euler, euler_error_jacobian, skew
 from .recording import InitialState, RecordedRun
 from .solution import NavSolution
+from .window_marginals import NotAChain, WindowMarginals
 from .yawbank import self_initialise
 from .zupt import StationaryEpochs, stationary_epochs
 
@@ -178,7 +180,7 @@ class _Record:
         c_pos = R @ self.cov_pose[:, 3:6, 3:6] @ R.transpose(0, 2, 1)
         c_att = R @ self.cov_pose[:, 0:3, 0:3] @ R.transpose(0, 2, 1)
         roll, pitch, yaw = dcm_to_euler(R)
-        J = euler_error_jacobian(roll, pitch, yaw).reshape(-1, 3, 3)
+        J = euler_error_jacobian(roll, pitch, yaw)
         c_eul = J @ c_att @ J.transpose(0, 2, 1)
         diag = lambda C: np.sqrt(np.maximum(np.diagonal(C, axis1=1, axis2=2), 0.0))
         return np.concatenate([diag(c_pos), diag(self.cov_vel), diag(c_eul), diag(self.cov_bias)], axis=1)
@@ -205,6 +207,7 @@ class _Smoother:
         # Reuse the slots of marginalised factors so the factor list stays bounded on long runs.
         self.params.findUnusedFactorSlots = True
         self.isam = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
+        self.marginals = WindowMarginals(self.gm)
 
     def reset(self, robust: bool = False) -> None:
         """A new, empty smoother; ``robust`` switches to QR factorization (returns whether it did)."""
@@ -212,6 +215,7 @@ class _Smoother:
         if switched:
             self.params.setFactorization("QR")
         self.isam = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
+        self.marginals.clear()
         return switched
 
     def update(self, graph, values, stamps) -> None:
@@ -219,6 +223,10 @@ class _Smoother:
         for key, t in stamps:
             ts.insert((key, t))
         self.isam.update(graph, values, ts)
+        try:
+            self.marginals.sync(self.isam, graph)
+        except NotAChain:
+            self.marginals.clear()
 
     def estimate(self, i: int):
         """Pose, velocity, bias and GNSS error (zeros when not modelled) of node ``i``."""
@@ -227,21 +235,32 @@ class _Smoother:
         return (isam.calculateEstimatePose3(X(i)), isam.calculateEstimateVector(V(i)),
                 isam.calculateEstimateConstantBias(B(i)), g)
 
-    def covariances(self, i: int, joint: bool = False):
+    def keys(self, i: int) -> list:
+        """Keys of node ``i``: pose, velocity, bias[, GNSS error]."""
+        return [X(i), V(i), B(i)] + ([G(i)] if self.gm else [])
+
+    def covariances(self, i: int):
         """Marginal covariances of X_i (6x6, tangent), V_i (3x3), B_i (6x6), and the pose-GNSS-error
         cross-covariance (6x3) and GNSS-error covariance (3x3) (zeros when not modelled).
 
-        ``joint=True`` asks iSAM2 for them at once, which is cheaper for old nodes deep in the
-        Bayes tree; single queries are cheaper for the newest node near the root.
+        From :class:`gnssacc.window_marginals.WindowMarginals` (the window's linear system, kept
+        in step with iSAM2); iSAM2's own joint query, by QR, if that system is not at hand.
         """
-        isam = self.isam
-        if joint or self.gm:
-            keys = [X(i), V(i), B(i)] + ([G(i)] if self.gm else [])
-            full = isam.getISAM2().jointMarginalCovariance(keys).fullMatrix()
-            gm = (full[0:6, 15:18], full[15:18, 15:18]) if self.gm else (np.zeros((6, 3)), np.zeros((3, 3)))
-            return full[0:6, 0:6], full[6:9, 6:9], full[9:15, 9:15], *gm
-        return (isam.marginalCovariance(X(i)), isam.marginalCovariance(V(i)), isam.marginalCovariance(B(i)),
-                np.zeros((6, 3)), np.zeros((3, 3)))
+        full = None
+        if self.marginals.first is not None:
+            try:
+                full = self.marginals.covariance(i)
+            except np.linalg.LinAlgError:
+                self.marginals.clear()   # rebuilt at the next update
+        if full is None:
+            keys = self.keys(i)
+            info, _ = self.isam.getISAM2().joint(keys, gtsam.EliminateQR).hessian(gtsam.Ordering(keys))
+            full = np.linalg.inv(info)
+        gm = (full[0:6, 15:18], full[15:18, 15:18]) if self.gm else (_ZERO_XG, _ZERO_G)
+        return full[0:6, 0:6], full[6:9, 6:9], full[9:15, 9:15], *gm
+
+
+_ZERO_XG, _ZERO_G = np.zeros((6, 3)), np.zeros((3, 3))
 
 
 def _is_ill_posed(exc: Exception) -> bool:
@@ -299,8 +318,8 @@ class _Factors:
         self.g_n = np.array([0.0, 0.0, float(normal_gravity(origin.lat0, origin.h0))])
         self.w_ie = earth_rate_n(origin.lat0)
         self.f_avg = float(cfg["accel"]["specific_force_avg_s"])
-        self.window = AccelWindow(int(cfg["accel"]["window"]), float(cfg["accel"]["max_gap_s"]),
-                                  cfg.accel_sigma_override)
+        self.acc_window = (int(cfg["accel"]["window"]), float(cfg["accel"]["max_gap_s"]), cfg.accel_sigma_override)
+        self.acc = None
         self.zupt_noise = gtsam.noiseModel.Isotropic.Sigma(3, float(cfg["zupt"]["velocity_sigma_mps"]))
         self.zupt_var = float(cfg["zupt"]["velocity_sigma_mps"]) ** 2
         self.zupt_gate = float(cfg["zupt"]["gate_nis"])
@@ -333,16 +352,26 @@ class _Factors:
             graph.add(gauss_markov_factor(G(i - 1), G(i), dt, self.gm_tau, self.gm_sigma))
             values.insert(G(i), np.exp(-dt / self.gm_tau) * g_prev)
 
+    def prepare_accel(self, times: np.ndarray) -> None:
+        """GNSS accelerations of every fix, all at once: the fixes before the first node and those
+        at node times, in order, as :class:`gnssacc.gnss_accel.AccelWindow` would see them."""
+        t_fix = self.run.gnss.t
+        nodes = set(times.tolist())
+        pushed = np.flatnonzero((t_fix < times[0]) | np.array([t in nodes for t in t_fix.tolist()], bool))
+        full, a_n, var = window_accelerations(t_fix[pushed], self.p_fix[pushed], self.run.gnss.sigma_ned[pushed],
+                                              *self.acc_window)
+        self.acc = {int(k): (a_n[j], var[j]) for j, k in enumerate(pushed) if full[j]}
+
     def accel(self, graph, i: int, t: float, k: int, seg_i0, seg_i1) -> None:
         """GNSS-acceleration factor on (X_i, B_i) once the least-squares window is full."""
-        meas = self.window.push(t, self.p_fix[k], self.run.gnss.sigma_ned[k])
+        meas = self.acc.get(k)
         if meas is None:
             return
         f_meas = measured_specific_force(self.run.imu, t, self.f_avg, seg_i0, seg_i1)
         if f_meas is None:
             self.stats["n_acc_skipped_suspect_imu"] += 1
             return
-        graph.add(gnss_accel_factor(X(i), B(i), f_meas, meas.a_n, self.g_n, meas.cov))
+        graph.add(gnss_accel_factor(X(i), B(i), f_meas, meas[0], self.g_n, np.diag(meas[1])))
         self.stats["n_acc_factors"] += 1
 
     def stationary(self, graph, i: int, j: int, R_nb: np.ndarray, bias, v_pred: np.ndarray,
@@ -388,16 +417,36 @@ def _attach_stationary(times: np.ndarray, st: StationaryEpochs, interval: float)
     return out
 
 
-def _preintegrate(imu, model, bias, t_prev, t, j_start, k_end, inflation):
-    """PreintegratedCombinedMeasurements over ``(t_prev, t]``; samples held over (t[k-1], t[k]]."""
+def _preintegrate(imu, model, bias, t_prev, t, j_start, k_end, inflation, dt_all):
+    """PreintegratedCombinedMeasurements over ``(t_prev, t]``; samples held over (t[k-1], t[k]].
+
+    ``dt_all[k] = t[k] - t[k-1]``: only the first and last samples' spans are cut at the node times.
+    """
     pim = gtsam.PreintegratedCombinedMeasurements(model.params(*inflation), bias)
-    edges = np.clip(imu.t[j_start:k_end], t_prev, t)
-    dts = np.diff(edges, prepend=t_prev)
+    if k_end <= j_start:
+        return pim
+    imu_t = imu.t
+    dts = dt_all[j_start:k_end].tolist()
+    dts[0] = min(imu_t[j_start], t) - t_prev
+    if k_end - j_start > 1 and imu_t[k_end - 1] > t:
+        dts[-1] = t - imu_t[k_end - 2]
     integrate = pim.integrateMeasurement
-    for f_b, w_b, dt in zip(imu.f_b[j_start:k_end], imu.omega_ib_b[j_start:k_end], dts.tolist()):
+    for f_b, w_b, dt in zip(imu.f_b[j_start:k_end], imu.omega_ib_b[j_start:k_end], dts):
         if dt > 0.0:
             integrate(f_b, w_b, dt)
     return pim
+
+
+def _touches(first: np.ndarray, last: np.ndarray, seg_i0: np.ndarray, seg_i1: np.ndarray) -> np.ndarray:
+    """Per node interval, whether samples ``[first[i-1], last[i])`` overlap a suspect segment
+    (segments sorted and disjoint, :func:`gnssacc.quality.inflation_segments`)."""
+    out = np.zeros(len(first), bool)
+    if seg_i0.size:
+        j0, k1 = first[:-1], last[1:]
+        s = np.searchsorted(seg_i1, j0, side="right")        # first segment ending after j0
+        ok = s < len(seg_i0)
+        out[1:][ok] = seg_i0[s[ok]] < k1[ok]
+    return out
 
 
 def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
@@ -486,9 +535,6 @@ class _Loop:
             values.insert(G(i), g)
         return graph, values
 
-    def keys(self, i) -> list:
-        return [X(i), V(i), B(i)] + ([G(i)] if self.f.gm else [])
-
     def _start(self, init):
         """Node 0 with the EKF's own initial covariance (:func:`_initial_prior`)."""
         R0 = init.R_nb
@@ -496,8 +542,8 @@ class _Loop:
         self.vel = np.asarray(init.v_n, float)
         self.bias = gtsam.imuBias.ConstantBias(np.asarray(init.b_a, float), np.asarray(init.b_g, float))
         self.g = np.zeros(3)
-        for k in np.flatnonzero(self.run.gnss.t < self.times[0]):  # node 0 pushes its own fix
-            self.f.window.push(self.run.gnss.t[k], self.f.p_fix[k], self.run.gnss.sigma_ned[k])
+        if self.use_acc:
+            self.f.prepare_accel(self.times)
         cov, c_vel = _initial_prior(init, self.cfg)
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         graph.add(joint_prior_factor(X(0), B(0), G(0) if self.f.gm else None, self.pose, self.bias.vector(),
@@ -506,7 +552,7 @@ class _Loop:
         for key, value in ((X(0), self.pose), (V(0), self.vel), (B(0), self.bias)) + (((G(0), self.g),) if self.f.gm else ()):
             values.insert(key, value)
         self._node_factors(graph, 0, self.times[0], R0, self.vel, c_vel)
-        self.smoother.update(graph, values, [(key, self.times[0]) for key in self.keys(0)])
+        self.smoother.update(graph, values, [(key, self.times[0]) for key in self.smoother.keys(0)])
         self._record_online(0)
 
     def _node_factors(self, graph, i, t, R_nb, v_pred, c_vel):
@@ -529,10 +575,13 @@ class _Loop:
         return self.online.cov_vel[i - 1] + R @ c_pim @ R.T
 
     def _record_online(self, i):
-        self.online.put(i, self.smoother.estimate(i), self.smoother.covariances(i))
+        """Record the newest node's estimate and marginal covariances; return the estimate."""
+        est = self.smoother.estimate(i)
+        self.online.put(i, est, self.smoother.covariances(i))
+        return est
 
     def _record_fixed(self, i):
-        self.fixed.put(i, self.smoother.estimate(i), self.smoother.covariances(i, joint=True))
+        self.fixed.put(i, self.smoother.estimate(i), self.smoother.covariances(i))
 
     def score(self) -> None:
         """Whitened GNSS residuals of both estimates at every node with a fix (vectorised)."""
@@ -547,12 +596,14 @@ class _Loop:
         seg_i0, seg_i1, seg_qg, seg_qa = self.segs
         first = np.searchsorted(imu.t, times, side="right")
         last = np.minimum(np.searchsorted(imu.t, times, side="left") + 1, len(imu.t))
+        touches = _touches(first, last, seg_i0, seg_i1)
+        dt_all = np.diff(imu.t, prepend=imu.t[0])
         for i in progress(range(1, n), desc=method, enable=show_progress):
             t_prev, t = times[i - 1], times[i]
             j0, k1 = int(first[i - 1]), int(last[i])
             inflation = (_inflation_over(imu.t, j0, k1, t_prev, t, seg_i0, seg_i1, seg_qa, seg_qg)
-                         if seg_i0.size and touches_segments(j0, k1, seg_i0, seg_i1) else (None, None))
-            pim = _preintegrate(imu, self.model, self.bias, t_prev, t, j0, k1, inflation)
+                         if touches[i] else (None, None))
+            pim = _preintegrate(imu, self.model, self.bias, t_prev, t, j0, k1, inflation, dt_all)
             nav = pim.predict(gtsam.NavState(self.pose, self.vel), self.bias)
             graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
             graph.add(gtsam.CombinedImuFactor(X(i - 1), V(i - 1), X(i), V(i), B(i - 1), B(i), pim))
@@ -560,22 +611,21 @@ class _Loop:
             values.insert(V(i), nav.velocity())
             values.insert(B(i), self.bias)
             self.f.gm_chain(graph, values, i, t - t_prev, self.g)
-            self._node_factors(graph, i, t, nav.pose().rotation().matrix(), nav.velocity(),
-                               self._predicted_velocity_cov(i, pim))
+            c_vel = self._predicted_velocity_cov(i, pim) if i in self.stationary_at else None   # for the ZUPT gate
+            self._node_factors(graph, i, t, nav.pose().rotation().matrix(), nav.velocity(), c_vel)
             # Nodes about to leave the window: their fixed-lag estimate is the value they have now.
             self.oldest = max(self.oldest, self.window_start)
             while self.oldest < i and times[self.oldest] < t - self.smoother.lag:
                 self._record_fixed(self.oldest)
                 self.oldest += 1
             try:
-                self.smoother.update(graph, values, [(key, t) for key in self.keys(i)])
+                self.smoother.update(graph, values, [(key, t) for key in self.smoother.keys(i)])
             except RuntimeError as exc:
                 if not _is_ill_posed(exc):
                     raise
                 self.stats["n_ill_posed_recovered"] += 1
                 self.window_start = _reinitialise(self, i, graph, values)
-            self.pose, self.vel, self.bias, self.g = self.smoother.estimate(i)
-            self._record_online(i)
+            self.pose, self.vel, self.bias, self.g = self._record_online(i)
         for m in range(self.window_start, n):
             if not self.fixed.done[m]:
                 self._record_fixed(m)
@@ -603,7 +653,7 @@ def _reinitialise(loop: _Loop, i: int, graph, values) -> int:
                                     online.cov_bias[p], online.g[p], online.cov_g[p] + 1e-12 * np.eye(3))
     p_graph.push_back(graph)
     p_values.insert(values)
-    stamps = [(key, times[p]) for key in loop.keys(p)] + [(key, times[i]) for key in loop.keys(i)]
+    stamps = [(key, times[p]) for key in loop.smoother.keys(p)] + [(key, times[i]) for key in loop.smoother.keys(i)]
     loop.smoother.update(p_graph, p_values, stamps)
     return p
 
