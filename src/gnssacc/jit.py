@@ -66,7 +66,7 @@ def cache_folder() -> Path:
 
 
 #: The modules whose kernels :func:`gnssacc.mechanization.warm_up` compiles.
-KERNEL_SOURCES = ("mechanization.py", "kalman.py")
+KERNEL_SOURCES = ("mechanization.py", "kalman.py", "window_marginals.py")
 
 
 def kernels_stamp() -> Path:
@@ -106,6 +106,7 @@ class BackgroundWarmUp:
         self.error: BaseException | None = None
         self.compiling = not kernels_cached()
         self._done = threading.Event()
+        self._smoother_done = threading.Event()
         self._thread = threading.Thread(target=self._run, name="gnssacc-jit", daemon=True)
         if notice is not None and self.compiling:
             print(f"gnssacc: first run: compiling the numba kernels (once, about 10 s; cache: {cache_folder()}) "
@@ -121,12 +122,19 @@ class BackgroundWarmUp:
             from .mechanization import warm_up
 
             warm_up()
-            if self.compiling:
-                _write_stamp()
         except BaseException as exc:   # re-raised in the waiting thread
             self.error = exc
         self.seconds = time.perf_counter() - t0
-        self._done.set()
+        self._done.set()   # the EKF's kernels: the estimators may start
+        try:               # then, on a first run, the smoother's while the EKF and the tuner run
+            if self.compiling and self.error is None:
+                from .smoother import warm_up as smoother_warm_up
+
+                smoother_warm_up()
+                _write_stamp()
+        except Exception:  # the smoother compiles them itself when it first runs
+            pass
+        self._smoother_done.set()
 
     def wait(self) -> float:
         """Block until the kernels are ready; their compile (or load) time [s], imports included."""
