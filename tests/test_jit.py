@@ -18,7 +18,7 @@ PROBE = """
 import os, sys
 from gnssacc import jit, mechanization
 b = jit.start_background()
-b.wait()
+b.wait_all()
 s = mechanization.propagate.stats
 print(os.environ.get("NUMBA_CACHE_DIR"))
 print(len(s.cache_hits), len(s.cache_misses))

@@ -136,6 +136,11 @@ class BackgroundWarmUp:
             pass
         self._smoother_done.set()
 
+    def wait_all(self) -> float:
+        """Block until the smoother's kernels are ready too (:meth:`wait` is the EKF's)."""
+        self._smoother_done.wait()
+        return self.wait()
+
     def wait(self) -> float:
         """Block until the kernels are ready; their compile (or load) time [s], imports included."""
         self._done.wait()
