@@ -171,7 +171,18 @@ def start_background(notice=sys.stderr) -> BackgroundWarmUp:
 
 
 def warm_up() -> float:
-    """The kernels' compile (or load) time [s]: the background one's when started, else now."""
-    if _background is not None:
-        return _background.wait()
-    return BackgroundWarmUp().start().wait()
+    """The EKF kernels' compile (or load) time [s]: the background one's when started, else now
+    (the smoother's then follow in the background on a first run)."""
+    global _background
+    if _background is None:
+        _background = BackgroundWarmUp().start()
+    return _background.wait()
+
+
+def smoother_ready() -> float:
+    """Wait for the smoother's kernels compiled in the background (first run); the seconds waited."""
+    if _background is None:
+        return 0.0
+    t0 = time.perf_counter()
+    _background.wait_all()
+    return time.perf_counter() - t0
