@@ -347,6 +347,11 @@ class RunConfig:
         return vec3(value, "imu_to_body_rpy_deg", "config")
 
     @property
+    def default_sigma_ned(self) -> np.ndarray:
+        """1-sigma N, E, D [m] of fixes that carry no uncertainty of their own."""
+        return vec3(self["gnss"]["default_sigma_m"], "gnss.default_sigma_m", "config")
+
+    @property
     def lever_arm_b(self) -> np.ndarray:
         """GNSS antenna position relative to the IMU in the body frame [m]."""
         return vec3(self["gnss"]["lever_arm_b_m"], "lever_arm_b_m", "config")

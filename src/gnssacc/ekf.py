@@ -29,11 +29,11 @@ from .initialise import initial_sigmas
 from .kalman import joseph_update
 from .mechanization import Propagator, apply_correction
 from .progress import progress
-from .quality import QualityReport, check_imu, inflation_segments
+from .quality import QualityReport, inflation_segments
 from .rotations import dcm_to_euler, euler_error_jacobian
 from .recording import InitialState, RecordedRun
 from .solution import NavSolution
-from .zupt import StationaryEpochs, stationary_epochs
+from .zupt import StationaryEpochs, epochs_for
 
 METHODS = {"ekf": False, "ekf-acc": True}
 #: Event kinds of the loop, in the order they are handled at equal times.
@@ -246,19 +246,15 @@ def prepare(run: RecordedRun, cfg: RunConfig, init: InitialState | None = None,
             quality: QualityReport | None = None, stationary=None, cov_every: int = 1) -> EkfSetup:
     """Initial state and covariance, IMU propagator with noise and inflation, acceleration window,
     stationary epochs (``stationary``: a :class:`gnssacc.stationary.StationaryReport` or ``None``)."""
-    if quality is None:
-        quality = check_imu(run.imu, cfg)
-    if init is None and run.init is None:
-        from .yawbank import self_initialise  # the bank runs this filter: imported here to avoid a cycle
-        init = self_initialise(run, cfg, stationary, quality)
-    init = init or run.init
+    from .yawbank import start_and_quality  # the bank runs this filter: imported here to avoid a cycle
+
+    init, quality = start_and_quality(run, cfg, init, quality, stationary)
     segments = inflation_segments(run.imu, quality, cfg)
     prop = Propagator(run.imu.t, run.imu.f_b, run.imu.omega_ib_b, cfg.accel_psd, cfg.gyro_psd, cfg.accel_bias_rw_psd,
                       cfg.gyro_bias_rw_psd, segments, int(cfg["ekf"]["phi_order"]), cov_every,
                       gm_tau_s=cfg.gnss_gm_tau, gm_sigma_m=cfg.gnss_gm_sigma)
     z = cfg["zupt"]
-    epochs = (stationary_epochs(run.imu, stationary.spans, float(z["interval_s"]), cfg.gyro_psd)
-              if stationary is not None and z["enabled"] else StationaryEpochs.empty())
+    epochs = epochs_for(run, cfg, stationary)
     gnss = run.gnss
     return EkfSetup(init, initial_state(init, cfg), prop, segments[0], segments[1],
                     float(cfg["ekf"]["position_gate_nis"]), cfg.lever_arm_b, float(cfg["accel"]["specific_force_avg_s"]),

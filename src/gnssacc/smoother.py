@@ -48,13 +48,13 @@ from .ekf import initial_state
 from .factors import gauss_markov_factor, gnss_accel_factor, gnss_position_gm_factor, joint_prior_factor
 from .gnss_accel import measured_specific_force, window_accelerations
 from .progress import progress
-from .quality import QualityReport, check_imu, inflation_segments, touches_segments
+from .quality import QualityReport, inflation_segments, touches_segments
 from .rotations import dcm_to_euler, euler_error_jacobian, skew
 from .recording import InitialState, RecordedRun
 from .solution import NavSolution
 from .window_marginals import NotAChain, WindowMarginals
-from .yawbank import self_initialise
-from .zupt import StationaryEpochs, stationary_epochs
+from .yawbank import start_and_quality
+from .zupt import StationaryEpochs, epochs_for
 
 METHODS = {"smoother": False, "smoother-acc": True}
 #: Nodes closer than this are merged (a duplicate time would make a zero-length IMU factor) [s].
@@ -478,13 +478,9 @@ def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
     if method not in METHODS:
         raise ValueError(f"unknown smoother method {method!r}; known: {', '.join(METHODS)}")
     wall0 = time.perf_counter()
-    quality = quality or check_imu(run.imu, cfg)
-    if init is None and run.init is None:
-        init = self_initialise(run, cfg, stationary, quality)
-    init = init or run.init
+    init, quality = start_and_quality(run, cfg, init, quality, stationary)
     z = cfg["zupt"]
-    st = (stationary_epochs(run.imu, stationary.spans, float(z["interval_s"]), cfg.gyro_psd)
-          if stationary is not None and z["enabled"] else StationaryEpochs.empty())
+    st = epochs_for(run, cfg, stationary)
     times = node_times(float(init.t), float(run.imu.t[-1]), _node_epochs(run.gnss.t, st.t, float(z["interval_s"])),
                        float(cfg["smoother"]["max_node_spacing_s"]))
     stats = {"n_nodes": len(times), "n_gps_factors": 0, "n_acc_factors": 0, "n_acc_skipped_suspect_imu": 0,

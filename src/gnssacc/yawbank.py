@@ -30,6 +30,7 @@ import numpy as np
 
 from .config import RunConfig
 from .initialise import StartState, hypothesis, start_state
+from .quality import check_imu
 from .rotations import wrap_angle
 from .recording import InitialState, RecordedRun
 
@@ -174,3 +175,18 @@ def _undetermined(start, hyps, yaws, best, mass, post, t_h) -> BankResult:
 def self_initialise(run: RecordedRun, cfg: RunConfig, stationary=None, quality=None) -> InitialState:
     """The start of the recording with its yaw from the bank (see the module docstring)."""
     return select_yaw(run, cfg, stationary, quality).init
+
+
+def start_and_quality(run: RecordedRun, cfg: RunConfig, init=None, quality=None, stationary=None):
+    """What every estimator starts from: the IMU data-quality findings (checked here when not
+    given) and the initial state (``init``, else the run's, else :func:`self_initialise`).
+
+    Returns
+    -------
+    init : InitialState
+    quality : gnssacc.quality.QualityReport
+    """
+    quality = quality if quality is not None else check_imu(run.imu, cfg)
+    if init is None and run.init is None:
+        init = self_initialise(run, cfg, stationary, quality)
+    return init or run.init, quality

@@ -100,3 +100,12 @@ def stationary_epochs(imu: ImuData, spans, interval_s: float, gyro_psd: np.ndarr
     if not ts:
         return StationaryEpochs.empty()
     return StationaryEpochs(np.concatenate(ts), np.vstack(means), np.vstack(var), np.concatenate(which))
+
+
+def epochs_for(run, cfg, stationary) -> StationaryEpochs:
+    """The stationary epochs of an estimator run: of ``stationary``'s spans (a
+    :class:`gnssacc.stationary.StationaryReport`) when given and ``[zupt] enabled``, else none."""
+    z = cfg["zupt"]
+    if stationary is None or not z["enabled"]:
+        return StationaryEpochs.empty()
+    return stationary_epochs(run.imu, stationary.spans, float(z["interval_s"]), cfg.gyro_psd)

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import DEG, RunConfig, vec3
+from ..config import DEG, RunConfig
 from ..earth import LocalTangentFrame
 from ..errors import InputError
 from ..rotations import flu_to_frd
@@ -100,7 +100,7 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd") -> RecordedRun:
             raise InputError(str(root / name), f"file not found: a CSV run directory needs {name}")
     max_bad = float(cfg["data"]["max_bad_fraction"])
     imu = apply_mounting(_read_imu(root / "imu.csv", frame, max_bad), cfg)
-    gnss = _read_gnss(root / "gnss.csv", vec3(cfg["gnss"]["default_sigma_m"], "gnss.default_sigma_m", "config"),
+    gnss = _read_gnss(root / "gnss.csv", cfg.default_sigma_ned,
                       max_bad)
     truth = _read_truth(root / "truth.csv", max_bad) if (root / "truth.csv").exists() else None
     init = _read_init(root / "init.json", gnss.sigma_ned[0]) if (root / "init.json").exists() else None

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import DEG, RunConfig, vec3
+from ..config import DEG, RunConfig
 from ..earth import LocalTangentFrame
 from ..errors import InputError, warn_data
 from ..rotations import FLU_FRD, dcm_to_euler, quaternion_to_dcm, ros_to_R_nb
@@ -102,7 +102,7 @@ def load_bag_run(path, cfg: RunConfig, *, imu_topic: str | None = None, gnss_top
     where = str(path)
     _check_options(where, time_source, noise, gnss_from_truth_hz)
     mappings = merge_fix_mappings(cfg["bag"]["fix_mappings"] if fix_mappings is None else fix_mappings)
-    decoder = RowDecoder(mappings, time_source, vec3(cfg["gnss"]["default_sigma_m"], "gnss.default_sigma_m", "config"),
+    decoder = RowDecoder(mappings, time_source, cfg.default_sigma_ned,
                          where)
     max_bad = float(cfg["data"]["max_bad_fraction"])
     meta: dict = {"source": "bag", "time_source": time_source}
