@@ -6,6 +6,7 @@ from types import SimpleNamespace
 
 import gtsam
 import numpy as np
+import pytest
 from gtsam.symbol_shorthand import G, X
 
 from gnssacc import measurements as mm
@@ -99,13 +100,18 @@ def test_gauss_markov_transition_factor_is_the_exact_discretisation():
     tau, sigma, dt = np.array([60.0, 60.0, 30.0]), np.array([2.5, 2.5, 4.0]), 0.7
     f = gauss_markov_factor(G(0), G(1), dt, tau, sigma)
     a = np.exp(-dt / tau)
-    np.testing.assert_allclose(np.sqrt(np.diag(f.noiseModel().covariance())), sigma * np.sqrt(1 - a**2))
+    sig = sigma * np.sqrt(1 - a**2)
+    g0, g1 = np.array([1.0, 2.0, 3.0]), np.array([0.5, 1.0, 1.0])
     values = gtsam.Values()
-    values.insert(G(0), np.array([1.0, 2.0, 3.0]))
-    values.insert(G(1), np.array([0.5, 1.0, 1.0]))
-    A, cols = _linearised(f, values, (3, 3))
-    np.testing.assert_allclose(A[:, cols[0]], -np.diag(a), atol=1e-12)
-    np.testing.assert_allclose(A[:, cols[1]], np.eye(3), atol=1e-12)
+    values.insert(G(0), g0)
+    values.insert(G(1), g1)
+    # Error at any values: half the squared whitened residual g1 - a g0 (the factor is exact, not
+    # a linearisation around its own point).
+    assert f.error(values) == pytest.approx(0.5 * np.sum(((g1 - a * g0) / sig) ** 2), rel=1e-12)
+    A, b = f.linearize(values).jacobian()    # whitened
+    np.testing.assert_allclose(A[:, :3] * sig[:, None], -np.diag(a), atol=1e-12)
+    np.testing.assert_allclose(A[:, 3:] * sig[:, None], np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(-b * sig, g1 - a * g0, atol=1e-12)
 
 
 def test_gauss_markov_covariance_propagation_matches_its_closed_form():
