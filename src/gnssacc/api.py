@@ -21,8 +21,7 @@ from pathlib import Path
 
 from .config import RunConfig, load_config
 from .identify import Identified
-from .pipeline import (compare, load_source, parse_methods, report_collector, resolve_preset, with_outages,
-                       write_result)
+from .pipeline import compare_observed, load_source, parse_methods, resolve_preset, with_outages, write_result
 from .report import TRAJECTORY_COLUMNS, format_table, ok_methods, trajectory_table
 from .recording import RecordedRun
 from .solution import NavSolution
@@ -124,10 +123,8 @@ def evaluate(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str 
     ``observe``: keep the ``ekf-acc`` pass's matrices for the report's observability section
     (:attr:`Result.replay`), so that ``save(report=True)`` does not run the filter again.
     """
-    collector = report_collector(methods) if observe else None
-    metrics, sols, ident = compare(run, cfg, methods, tune=tune, show_progress=show_progress,
-                                   observers={"ekf-acc": collector} if collector else None)
-    replay = collector.replay("ekf-acc", sols["ekf-acc"]) if collector and "ekf-acc" in sols else None
+    metrics, sols, ident, replay = compare_observed(run, cfg, methods, tune=tune, show_progress=show_progress,
+                                                   observe=observe)
     return Result(ident.run, cfg, metrics, sols, ident, replay)
 
 

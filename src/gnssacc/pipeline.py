@@ -298,20 +298,32 @@ def compare_and_write(run: RecordedRun, cfg: RunConfig, methods: list[str], targ
     out : Path or None
         As from :func:`write_result`.
     """
-    collector = report_collector(methods) if report else None
-    metrics, sols, ident = compare(run, cfg, methods, tune=tune, show_progress=show_progress,
-                                   observers={"ekf-acc": collector} if collector else None)
-    replay = collector.replay("ekf-acc", sols["ekf-acc"]) if collector and "ekf-acc" in sols else None
+    metrics, sols, ident, replay = compare_observed(run, cfg, methods, tune=tune, show_progress=show_progress,
+                                                   observe=report)
     return metrics, sols, ident, write_result(target, ident.run, sols, metrics, ident, plots=plots, report=report,
                                               export=export, extra_files=extra_files, replay=replay)
 
 
-def report_collector(methods: list[str]):
-    """The observer that lets the report's observability section read the ``ekf-acc`` pass
-    itself (``None`` when ``ekf-acc`` is not among ``methods``)."""
-    from .observability import EpochCollector
+def compare_observed(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
+                     show_progress: bool = False, observe: bool = True):
+    """:func:`compare`, keeping (with ``observe``, when ``ekf-acc`` runs) that pass's matrices at
+    every GNSS epoch for the report's observability section.
 
-    return EpochCollector(False) if "ekf-acc" in methods else None
+    Returns
+    -------
+    metrics, solutions, ident
+        As from :func:`compare`.
+    replay : gnssacc.observability.EkfReplay or None
+    """
+    collector = None
+    if observe and "ekf-acc" in methods:
+        from .observability import EpochCollector
+
+        collector = EpochCollector(False)
+    metrics, sols, ident = compare(run, cfg, methods, tune=tune, show_progress=show_progress,
+                                   observers={"ekf-acc": collector} if collector else None)
+    replay = collector.replay("ekf-acc", sols["ekf-acc"]) if collector and "ekf-acc" in sols else None
+    return metrics, sols, ident, replay
 
 
 def write_result(target: ResultDir, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict,
