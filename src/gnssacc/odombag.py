@@ -20,9 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .rotations import ENU_NED, R_nb_to_ros, dcm_to_quaternion, euler_to_dcm
 from .recording import RecordedRun
+from .rotations import ENU_NED, R_nb_to_ros, euler_to_dcm
 from .solution import NavSolution
+from .sources.bag_streams import ODOMETRY_TYPE, MessageTypes, ns
 
 #: ``--export`` kinds and the file each writes in the result folder.
 BAG_EXPORTS = {"bag": "trajectories", "ros1bag": "trajectories.bag"}
@@ -32,41 +33,6 @@ ORIGIN_TOPIC = "/gnssacc/origin"
 def topic_of(method: str) -> str:
     """The odometry topic of a method (``truth`` for the truth)."""
     return f"/gnssacc/{method.replace('-', '_')}/odom"
-
-
-class _Msgs:
-    """Message constructors for one typestore."""
-
-    def __init__(self, ros1: bool):
-        from rosbags.typesys import Stores, get_typestore
-
-        self.ros1 = ros1
-        self.ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
-        self.T = self.ts.types
-
-    def serialize(self, msg, typ: str) -> bytes:
-        return self.ts.serialize_ros1(msg, typ) if self.ros1 else self.ts.serialize_cdr(msg, typ)
-
-    def header(self, t: float, frame: str):
-        ns = int(round(t * 1e9))
-        stamp = self.T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
-        extra = {"seq": 0} if self.ros1 else {}
-        return self.T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame, **extra)
-
-    def vec3(self, v):
-        return self.T["geometry_msgs/msg/Vector3"](x=float(v[0]), y=float(v[1]), z=float(v[2]))
-
-    def odometry(self, t, p_enu, R_enu_flu, v_flu, pose_cov, twist_cov):
-        T = self.T
-        q = dcm_to_quaternion(R_enu_flu)
-        pose = T["geometry_msgs/msg/Pose"](
-            position=T["geometry_msgs/msg/Point"](x=float(p_enu[0]), y=float(p_enu[1]), z=float(p_enu[2])),
-            orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]))
-        twist = T["geometry_msgs/msg/Twist"](linear=self.vec3(v_flu), angular=self.vec3(np.zeros(3)))
-        return T["nav_msgs/msg/Odometry"](
-            header=self.header(t, "map"), child_frame_id="base_link",
-            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=pose_cov.ravel()),
-            twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=twist_cov.ravel()))
 
 
 def _covariances(R_enu_flu: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -80,7 +46,7 @@ def _covariances(R_enu_flu: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, 
     return pose, twist
 
 
-def _stream(m: _Msgs, key: str, t, p_ned, rpy, v_ned, sigma):
+def _stream(m: MessageTypes, key: str, t, p_ned, rpy, v_ned, sigma):
     """(time ns, key, bytes) of one trajectory's messages."""
     for k in range(len(t)):
         R = R_nb_to_ros(euler_to_dcm(*rpy[k])) if rpy is not None else np.eye(3)
@@ -89,16 +55,16 @@ def _stream(m: _Msgs, key: str, t, p_ned, rpy, v_ned, sigma):
         if rpy is None:   # a truth without attitude: identity orientation, marked unknown
             pose_cov[[3, 4, 5], [3, 4, 5]] = -1.0
         msg = m.odometry(float(t[k]), ENU_NED @ p_ned[k], R, v_flu, pose_cov, twist_cov)
-        yield int(round(float(t[k]) * 1e9)), key, m.serialize(msg, "nav_msgs/msg/Odometry")
+        yield ns(t[k]), key, m.serialize(msg, ODOMETRY_TYPE)
 
 
-def _origin_msg(m: _Msgs, run: RecordedRun):
+def _origin_msg(m: MessageTypes, run: RecordedRun):
     o = run.origin
     fix = m.T["sensor_msgs/msg/NavSatFix"](
         header=m.header(run.t_start, "map"), status=m.T["sensor_msgs/msg/NavSatStatus"](status=0, service=1),
         latitude=float(np.degrees(o.lat0)), longitude=float(np.degrees(o.lon0)), altitude=float(o.h0),
         position_covariance=np.zeros(9), position_covariance_type=0)
-    return int(round(run.t_start * 1e9)), "origin", m.serialize(fix, "sensor_msgs/msg/NavSatFix")
+    return ns(run.t_start), "origin", m.serialize(fix, "sensor_msgs/msg/NavSatFix")
 
 
 def write_odometry_bag(sols: dict[str, NavSolution], run: RecordedRun, path: Path) -> Path:
@@ -108,7 +74,7 @@ def write_odometry_bag(sols: dict[str, NavSolution], run: RecordedRun, path: Pat
     """
     path = Path(path)
     ros1 = path.suffix == ".bag"
-    m = _Msgs(ros1)
+    m = MessageTypes(ros1)
     if ros1:
         from rosbags.rosbag1 import Writer
         writer = Writer(path)
@@ -117,12 +83,12 @@ def write_odometry_bag(sols: dict[str, NavSolution], run: RecordedRun, path: Pat
         writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
     streams, topics = [iter([_origin_msg(m, run)])], {"origin": (ORIGIN_TOPIC, "sensor_msgs/msg/NavSatFix")}
     for mid, sol in sols.items():
-        topics[mid] = (topic_of(mid), "nav_msgs/msg/Odometry")
+        topics[mid] = (topic_of(mid), ODOMETRY_TYPE)
         streams.append(_stream(m, mid, sol.t, run.origin.to_ned(sol.lat, sol.lon, sol.h), sol.rpy, sol.v_n,
                                sol.sigma))
     if run.truth is not None:
         tr = run.truth
-        topics["truth"] = (topic_of("truth"), "nav_msgs/msg/Odometry")
+        topics["truth"] = (topic_of("truth"), ODOMETRY_TYPE)
         streams.append(_stream(m, "truth", tr.t, run.origin.to_ned(tr.lat, tr.lon, tr.h), tr.rpy, tr.v_n, None))
     with writer:
         conns = {key: writer.add_connection(topic, typ, typestore=m.ts) for key, (topic, typ) in topics.items()}

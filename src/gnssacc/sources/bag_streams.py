@@ -67,6 +67,20 @@ class MessageTypes:
         """A ``geometry_msgs/Quaternion`` from ``(x, y, z, w)``."""
         return self.T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])
 
+    def odometry(self, t: float, p_enu, R_enu_flu, v_flu, pose_cov, twist_cov):
+        """A ``nav_msgs/Odometry`` stamped ``t`` [s] in ``map`` (ENU) of ``base_link`` (FLU):
+        position [m], orientation ENU <- FLU, body-axes velocity [m/s] (no angular rate), and the
+        6x6 pose and twist covariances."""
+        T = self.T
+        pose = T["geometry_msgs/msg/Pose"](
+            position=T["geometry_msgs/msg/Point"](x=float(p_enu[0]), y=float(p_enu[1]), z=float(p_enu[2])),
+            orientation=self.quat(dcm_to_quaternion(R_enu_flu)))
+        twist = T["geometry_msgs/msg/Twist"](linear=self.vec3(v_flu), angular=self.vec3(np.zeros(3)))
+        return T[ODOMETRY_TYPE](
+            header=self.header(t, "map"), child_frame_id="base_link",
+            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.ravel(pose_cov)),
+            twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=np.ravel(twist_cov)))
+
 
 def imu_axes(imu_mount_rpy_deg) -> np.ndarray:
     """``R_ib`` (body FRD to IMU FRD axes, ``x_imu = R_ib @ x_b``) of a mounting [deg]; identity for None."""
@@ -146,21 +160,13 @@ def fix_messages(ty: MessageTypes, key: str, typ: str, tt, lat, lon, h, sig, opt
 def odometry_messages(ty: MessageTypes, run: RecordedRun, origin: LocalTangentFrame, opts, key: str = "truth"):
     """The truth as ``nav_msgs/Odometry``: position ENU [m] about ``origin``, orientation
     ENU <- FLU (identity without ``truth.rpy``), twist in body FLU [m/s] (zero without ``truth.v_n``)."""
-    T = ty.T
     tr = run.truth
     p_n = origin.to_ned(tr.lat, tr.lon, tr.h)
+    zero = np.zeros(36)
     for k in range(len(tr.t)):
         R = R_nb_to_ros(euler_to_dcm(*tr.rpy[k])) if tr.rpy is not None else np.eye(3)
         v_flu = R.T @ (ENU_NED @ tr.v_n[k]) if tr.v_n is not None else np.zeros(3)
-        pose = T["geometry_msgs/msg/PoseWithCovariance"](
-            pose=T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](
-                x=float(p_n[k, 1]), y=float(p_n[k, 0]), z=float(-p_n[k, 2])), orientation=ty.quat(dcm_to_quaternion(R))),
-            covariance=np.zeros(36))
-        twist = T["geometry_msgs/msg/TwistWithCovariance"](
-            twist=T["geometry_msgs/msg/Twist"](linear=ty.vec3(v_flu), angular=ty.vec3(np.zeros(3))),
-            covariance=np.zeros(36))
-        msg = T[ODOMETRY_TYPE](header=ty.header(tr.t[k] + opts.time_offset_s, "map"), child_frame_id="base_link",
-                               pose=pose, twist=twist)
+        msg = ty.odometry(tr.t[k] + opts.time_offset_s, ENU_NED @ p_n[k], R, v_flu, zero, zero)
         yield ns(tr.t[k] + opts.time_offset_s + opts.receive_delay_s), key, ty.serialize(msg, ODOMETRY_TYPE)
 
 
