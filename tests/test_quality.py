@@ -81,6 +81,18 @@ def test_each_kind_found_at_the_right_place(cfg):
     assert mask[1000] and mask[1050] and not mask[999] and not mask[1051]
 
 
+@pytest.mark.parametrize("block", [7, 50, 1000])
+def test_interpolation_check_in_blocks_finds_the_same_spans(cfg, monkeypatch, block):
+    # Blocks of rows (bounded memory on long runs) with the defect straddling block edges:
+    # the same spans, anchors and notes (the largest second difference) as in one piece.
+    import gnssacc.quality as quality
+    imu, _ = _with_defects()
+    whole = check_imu(imu, cfg).spans
+    monkeypatch.setattr(quality, "CHECK_BLOCK_ROWS", block)
+    assert check_imu(imu, cfg).spans == whole
+    assert any(s.kind == "interpolated" for s in whole)
+
+
 def test_time_linear_interpolation_with_jittered_stamps(cfg):
     imu = _clean(jitter_s=3e-3)          # stamps jitter by up to 30 % of the interval
     t = imu.t

@@ -28,6 +28,7 @@ import numpy as np
 from .config import RunConfig
 from .consistency import ModelCheck, rest_noise_findings
 from .ekf import run_ekf
+from .memory import release_free_memory
 from .plausibility import check_run
 from .quality import QualityReport, check_imu
 from .recording import InitialState, RecordedRun
@@ -100,9 +101,11 @@ def identify(run: RecordedRun, cfg: RunConfig, tune_mode: str | None = None) -> 
     secs = {}
     t = time.perf_counter()
     run, cfg, checks = check_run(run, cfg)
+    release_free_memory()   # the checks' temporaries, before the next stage's
     secs["input_checks_s"] = time.perf_counter() - t
     t = time.perf_counter()
     quality = check_imu(run.imu, cfg)
+    release_free_memory()
     stationary = detect_stationary(run.imu, run.gnss, run.origin, params_from_config(cfg))
     secs["quality_and_stationary_s"] = time.perf_counter() - t
     t = time.perf_counter()

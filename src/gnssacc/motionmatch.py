@@ -125,13 +125,16 @@ def box_average(t: np.ndarray, x: np.ndarray, t0: float, step: float, n: int) ->
     ndarray, shape (n, k)
     """
     dt = np.diff(t, prepend=t[0] - (t[1] - t[0]))
-    cum = np.vstack([np.zeros((1, x.shape[1])), np.cumsum(x * dt[:, None], axis=0)])
     edges = np.concatenate([[t[0] - dt[0]], t])
     g = t0 + step * (np.arange(n + 1) - 0.5)
     g = np.clip(g, edges[0], edges[-1])
-    integral = np.column_stack([np.interp(g, edges, cum[:, i]) for i in range(x.shape[1])])
     width = np.maximum(np.diff(g), 1e-12)
-    return np.diff(integral, axis=0) / width[:, None]
+    out = np.empty((n, x.shape[1]))
+    cum = np.zeros(len(t) + 1)
+    for i in range(x.shape[1]):   # one channel at a time: a long run's temporaries stay one column
+        np.cumsum(x[:, i] * dt, out=cum[1:])
+        out[:, i] = np.diff(np.interp(g, edges, cum)) / width
+    return out
 
 
 def _horizontal_basis(down: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -158,7 +161,7 @@ def level_imu(imu, step: float | None = None) -> LevelledImu:
     t = np.asarray(imu.t, float)
     step = float(step or max(float(np.median(np.diff(t))), MIN_STEP_S))
     dt = np.diff(t, prepend=t[0] - (t[1] - t[0]))
-    f_mean = (imu.f_b * dt[:, None]).sum(axis=0) / dt.sum()
+    f_mean = dt @ imu.f_b / dt.sum()
     norm = float(np.linalg.norm(f_mean))
     down = -f_mean / norm if norm > 0 else np.array([0.0, 0.0, 1.0])
     e1, e2 = _horizontal_basis(down)

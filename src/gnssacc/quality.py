@@ -162,9 +162,15 @@ def _stack(imu: ImuData) -> np.ndarray:
 
 # --- the four checks -------------------------------------------------------------------------------
 
-def _interpolated(t: np.ndarray, x: np.ndarray, tol: float, min_s: float) -> list[Span]:
-    if len(t) < 3:
-        return []
+#: Rows of the IMU table the interpolation check differences at once: its temporaries (first and
+#: second differences, chord distances: about ten copies of a block) stay a few MiB whatever the
+#: run length.
+CHECK_BLOCK_ROWS = 65_536
+
+
+def _straight(t: np.ndarray, x: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per centre sample ``j + 1`` (``j = 0 .. N-3``): whether it lies on the line through its
+    neighbours, and its largest absolute second difference over the channels."""
     d1 = np.diff(x, axis=0)
     d2 = np.diff(d1, axis=0)                 # index j: centre sample j+1
     # Loggers interpolate either per sample index or in time; with jittered time stamps only
@@ -174,17 +180,28 @@ def _interpolated(t: np.ndarray, x: np.ndarray, tol: float, min_s: float) -> lis
     h0 = (t[1:-1] - t[:-2])[:, None]
     h1 = (t[2:] - t[1:-1])[:, None]
     e2_scaled = np.abs(h1 * d1[:-1] - h0 * d1[1:])          # = |e2| (h0 + h1) / 2
-    straight = (np.abs(d2).max(axis=1) < tol) | (e2_scaled.max(axis=1) < 0.5 * tol * (h0 + h1)[:, 0])
+    worst = np.abs(d2).max(axis=1)
+    straight = (worst < tol) | (e2_scaled.max(axis=1) < 0.5 * tol * (h0 + h1)[:, 0])
     # A constant stretch is also straight: leave it to the frozen check.
     still = np.all(d1 == 0.0, axis=1)
-    straight &= ~(still[:-1] & still[1:])
+    return straight & ~(still[:-1] & still[1:]), worst
+
+
+def _interpolated(t: np.ndarray, x: np.ndarray, tol: float, min_s: float) -> list[Span]:
+    if len(t) < 3:
+        return []
+    n = len(t) - 2
+    straight, worst = np.empty(n, bool), np.empty(n)
+    for a in range(0, n, CHECK_BLOCK_ROWS):   # centres a+1 .. b need samples a .. b+1
+        b = min(a + CHECK_BLOCK_ROWS, n)
+        straight[a:b], worst[a:b] = _straight(t[a:b + 2], x[a:b + 2], tol)
     spans = []
     for s, f in zip(*_runs(straight)):
         i0, i1 = s + 1, f + 1               # the centres; the two end samples are the real anchors
         if t[i1 - 1] - t[i0 - 1] >= min_s:
-            worst = float(np.abs(d2[s:f]).max())
             spans.append(_span("interpolated", t, i0, i1, "all",
-                               f"{i1 - i0} samples on straight lines (max |second difference| {worst:.1e})"))
+                               f"{i1 - i0} samples on straight lines (max |second difference| "
+                               f"{float(worst[s:f].max()):.1e})"))
     return spans
 
 

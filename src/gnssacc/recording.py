@@ -294,4 +294,5 @@ def drop_nonfinite(table: np.ndarray, where: str, what: str, max_fraction: float
             raise InputError(where, f"{n_bad} of {len(table)} {what} rows ({100 * frac:.1f}%) contain NaN/inf, "
                                     f"more than the allowed {100 * max_fraction:.1f}% (data.max_bad_fraction)")
         warn_data(where, f"dropped {n_bad} of {len(table)} {what} rows with NaN/inf values")
-    return table[good]
+        return table[good]
+    return table   # no copy when every row is good: the common case, and a long run's largest array

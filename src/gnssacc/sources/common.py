@@ -215,7 +215,7 @@ def read_table(path, required: Sequence[str], optional: Sequence[str] = (),
     np.concatenate(parts, axis=0, out=table)
     del parts
     table = np.asfortranarray(drop_nonfinite(table, where, path.stem, float(max_bad_fraction)))
-    return {c: table[:, k] for k, c in enumerate(wanted)}
+    return {c: table[:, k] for k, c in enumerate(wanted)}   # views: callers copy what they keep
 
 
 def _header_line(lines) -> tuple[str | None, int]:

@@ -38,6 +38,7 @@ from ..config import DEG, RunConfig
 from ..earth import LocalTangentFrame
 from ..errors import InputError
 from ..rotations import flu_to_frd
+from ..memory import release_free_memory
 from ..recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth, check_increasing
 from .common import apply_mounting, check_degrees, read_table
 
@@ -109,6 +110,7 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd") -> RecordedRun:
     run = RecordedRun(name=root.resolve().name, where=where, imu=imu, gnss=gnss,
                       origin=LocalTangentFrame(gnss.lat[0], gnss.lon[0], gnss.h[0]),
                       truth=truth, init=init, meta={"source": "csv", "imu_frame": frame})
+    release_free_memory()   # the parser's blocks
     return run.validate()
 
 
@@ -148,7 +150,8 @@ def _read_imu(path: Path, frame: str, max_bad: float) -> ImuData:
     omega_imu = _columns(tab, IMU_COLUMNS[4:7])
     if frame == "flu":
         f_imu, omega_imu = flu_to_frd(f_imu), flu_to_frd(omega_imu)
-    return ImuData(tab["t"], f_imu, omega_imu)
+    # A copy of the time column: a view would keep the whole parsed table alive with the run.
+    return ImuData(tab["t"].copy(), f_imu, omega_imu)
 
 
 def _read_positions(path: Path, what: str, optional, max_bad: float) -> dict:

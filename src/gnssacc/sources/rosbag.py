@@ -44,6 +44,7 @@ from ..config import DEG, RunConfig
 from ..earth import LocalTangentFrame
 from ..errors import InputError, warn_data
 from ..rotations import FLU_FRD, dcm_to_euler, quaternion_to_dcm, ros_to_R_nb
+from ..memory import release_free_memory
 from ..recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth, drop_nonfinite
 from .bag_decode import FIX_MAPPINGS, TIME_SOURCES, Collector, Decoded, RowDecoder, decode_topics, \
     merge_fix_mappings, normalize_type, tf_mounting
@@ -127,6 +128,7 @@ def load_bag_run(path, cfg: RunConfig, *, imu_topic: str | None = None, gnss_top
     init = _initial_state(itab, good_q, imu, gnss, R_bi_total, sel.imu.topic) if good_q.any() else None
     run = RecordedRun(name=path.stem if path.is_file() else path.name, where=where, imu=imu, gnss=gnss,
                       origin=origin, truth=truth, init=init, meta=meta)
+    release_free_memory()   # the decoded message columns
     return run.validate()
 
 
