@@ -134,3 +134,42 @@ def test_truth_figures_of_a_solution_with_known_errors():
     assert f["nees_att"] == pytest.approx((1.0 + 4.0 + 1.0) / 3.0, rel=1e-6)
     late = truth_figures(run, replace(sol, sigma=2.0 * sigma), window=(t[5], t[-1]))
     assert late["nees_pos"] == pytest.approx(0.5, rel=1e-6)
+
+
+def _synthetic_rows(effect_pct, n_seeds=12, noise_pct=2.0, seed=0):
+    """Rows of one cell: ekf PRMSE around 2 m, ekf-acc ``effect_pct`` % off it per seed, plus scatter."""
+    from gnssacc.study import CELL_KEYS
+
+    rng = np.random.default_rng(seed)
+    cell = dict(zip(CELL_KEYS, ("gm", "consumer", "car", "1", "none")))
+    rows = []
+    for s in range(n_seeds):
+        base = 2.0 + 0.3 * rng.standard_normal()
+        var = base * (1.0 + (effect_pct + noise_pct * rng.standard_normal()) / 100.0)
+        rows += [{**cell, "method": "ekf", "seed": str(s), "status": "ok", "prmse_m": repr(base)},
+                 {**cell, "method": "ekf-acc", "seed": str(s), "status": "ok", "prmse_m": repr(var)}]
+    return rows
+
+
+def test_study_statistics_find_a_known_effect_and_no_effect():
+    from gnssacc import study
+
+    (e,) = study.effects(_synthetic_rows(-10.0), figures=("prmse_m",))
+    assert e.variant == "ekf-acc" and e.baseline == "ekf" and e.n == 12
+    assert e.ci_low < -10.0 < e.ci_high and e.ci_high < -7.0      # 2 % scatter over 12 seeds: SE 0.6 %
+    assert e.p < 0.001 and "helps in 1" in study.verdict([e])
+    (z,) = study.effects(_synthetic_rows(0.0, seed=1), figures=("prmse_m",))
+    assert z.ci_low < 0.0 < z.ci_high and z.p > 0.05 and "helps in 0, hurts in 0" in study.verdict([z])
+    # exact closed form: every pair differs by +5 % -> mean +5, zero-width interval, p = 2 / 2^n
+    rows = [{**r, "prmse_m": repr(2.0 * (1.05 if r["method"] == "ekf-acc" else 1.0))} for r in _synthetic_rows(0.0)]
+    (c,) = study.effects(rows, figures=("prmse_m",))
+    assert c.mean_pct == pytest.approx(5.0) and c.ci_low == pytest.approx(5.0) and c.ci_high == pytest.approx(5.0)
+    assert c.p == pytest.approx(2.0 / 2**12)
+
+
+def test_study_baselines():
+    from gnssacc.study import baseline_of
+
+    assert [baseline_of(m) for m in ("ekf-gm", "ekf-accw", "smoother-gm", "smoother-gm-online", "ekf", "smoother",
+                                     "smoother-online")] == ["ekf", "ekf", "smoother", "smoother-online", None, None,
+                                                             None]
