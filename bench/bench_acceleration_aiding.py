@@ -119,9 +119,16 @@ def print_timing(rows: list[dict]) -> None:
         tasks.setdefault(key, {}).setdefault((r["noise"], r["outages"], r["seed"]), float(r["task_s"] or "nan"))
     print(f"\ntime per task (all methods, median over tasks), load average now {os.getloadavg()[0]:.2f} "
           f"on {os.cpu_count()} cores:")
+    runtimes: dict = {}
+    for r in rows:
+        if r["runtime_s"]:
+            runtimes.setdefault((r["scenario"], r["imu"], r["gnss_hz"]), {}).setdefault(r["method"], []).append(
+                float(r["runtime_s"]))
     for key, times in sorted(tasks.items()):
+        per = ", ".join(f"{m} {statistics.median(v):.1f}" for m, v in runtimes.get(key, {}).items()
+                        if not m.endswith("-online"))
         print(f"  {key[0]:9s} {key[1]:11s} {key[2]:>3s} Hz: {statistics.median(times.values()):6.1f} s "
-              f"({len(times)} tasks)")
+              f"({len(times)} tasks; method wall times [s]: {per})")
 
 
 def main(argv=None) -> None:

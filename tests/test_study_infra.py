@@ -173,3 +173,14 @@ def test_study_baselines():
     assert [baseline_of(m) for m in ("ekf-gm", "ekf-accw", "smoother-gm", "smoother-gm-online", "ekf", "smoother",
                                      "smoother-online")] == ["ekf", "ekf", "smoother", "smoother-online", None, None,
                                                              None]
+
+
+def test_gm_method_with_tuning_fits_its_own_model_on_white_fixes():
+    res = gnssacc.process("sim:car,duration=120", methods=["ekf", "ekf-gm"], tune="auto", noise="white", seed=1)
+    how = res.solutions["ekf-gm"].stats["gauss_markov"]
+    assert res.ident.cfg["gnss"]["gm_sigma_m"] == 0.0          # the tuner kept white fixes for ekf
+    assert how["source"] == "tuner" and min(how["gm_sigma_m"]) > 0
+    # on white fixes the fitted correlated part is small and the likelihood barely moves
+    assert how["loglik_gain"] < 9.2
+    a, b = (res.metrics["methods"][m]["prmse_m"] for m in ("ekf", "ekf-gm"))
+    assert abs(b - a) < 0.1 * a

@@ -17,7 +17,6 @@ from .errors import DataWarning, InputError, raise_if_interrupted
 from .gnss_noise import PROFILES
 
 
-
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="gnssacc", description="INS/GNSS estimation with GNSS-derived acceleration aiding.")
     p.add_argument("--version", action="version", version=f"gnssacc {__version__}")
@@ -82,7 +81,8 @@ def _bench_parser(sub) -> None:
     bch.add_argument("source", nargs="?", default=None, help="'kitti' (default) or a CSV run directory with truth")
     bch.add_argument("--seeds", default="0-9", help="e.g. 0-19 or 1,4,7 (default 0-9)")
     bch.add_argument("--methods", default=None, help="comma-separated method ids (default: all four)")
-    bch.add_argument("--noise", choices=[p for p in PROFILES if p != "none"], default="white")
+    bch.add_argument("--noise", choices=[p for p in PROFILES if p != "none"], default="white",
+                     help="GNSS noise profile made from the truth (default white)")
     bch.add_argument("--outage", default=None, metavar="START:LEN[,START:LEN...]")
     bch.add_argument("--outage-every", default=None, metavar="PERIOD:LEN")
     bch.add_argument("--config", default=None)

@@ -42,14 +42,16 @@ def gm_setup(ident: Identified) -> tuple[Identified, dict]:
     ident : Identified
         A copy with ``cfg`` holding ``gm_sigma_m > 0`` and ``run``'s fix sigmas the white part.
     how : dict
-        ``source`` (``config``, ``tuner``, ``noise profile``), ``gm_sigma_m`` [m], ``gm_tau_s`` [s],
+        ``source`` (``config``, ``tuner (its Gauss-Markov stage)``, ``tuner``, ``noise profile``),
+        ``gm_sigma_m`` [m], ``gm_tau_s`` [s],
         ``sigma_scale`` and, for the tuner, ``loglik_gain``.
     """
     if _last[0] is ident:
         return _last[1]
     cfg, how = ident.cfg, {}
     if np.any(cfg.gnss_gm_sigma > 0):
-        out, how["source"] = ident, "config"
+        out = ident
+        how["source"] = "config" if ("gnss", "gm_sigma_m") in cfg.explicit else "tuner (its Gauss-Markov stage)"
     elif ident.tuning is not None:
         cfg, info = tune_gauss_markov(ident.run, cfg, ident.stationary, ident.quality, ident.init)
         out = replace(ident, cfg=cfg, run=scaled_gnss(ident.run, info["run_scale"]))

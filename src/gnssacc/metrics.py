@@ -117,12 +117,14 @@ def truth_figures(run: RecordedRun, sol: NavSolution, window: tuple | None = Non
     """
     from .observability import state_errors   # it scores with this module's truth_at
 
-    err = state_errors(run, sol)[_in_window(sol.t, window)] if run.truth is not None else np.full((0, 15), np.nan)
-    sig = np.asarray(sol.sigma, float)[_in_window(sol.t, window)] if len(err) else np.zeros((0, 15))
-    out = {"tilt_rms_deg": _rms_rows(err[:, 6:8], np.degrees(1.0)), "yaw_rms_deg": _rms_rows(err[:, 8:9], np.degrees(1.0)),
-           "bias_a_rms_mg": _rms_rows(err[:, 9:12], 1.0 / _MG), "bias_g_rms_deg_h": _rms_rows(err[:, 12:15], 1.0 / _DEG_H),
-           "nees_pos": _nees(err[:, 0:3], sig[:, 0:3]), "nees_att": _nees(err[:, 6:9], sig[:, 6:9])}
-    return out
+    keep = _in_window(sol.t, window)
+    err = state_errors(run, sol)[keep] if run.truth is not None else np.full((0, 15), np.nan)
+    sig = np.asarray(sol.sigma, float)[keep] if len(err) else np.zeros((0, 15))
+    deg = np.degrees(1.0)
+    return {"tilt_rms_deg": _rms_rows(err[:, 6:8], deg), "yaw_rms_deg": _rms_rows(err[:, 8:9], deg),
+            "bias_a_rms_mg": _rms_rows(err[:, 9:12], 1.0 / _MG),
+            "bias_g_rms_deg_h": _rms_rows(err[:, 12:15], 1.0 / _DEG_H),
+            "nees_pos": _nees(err[:, 0:3], sig[:, 0:3]), "nees_att": _nees(err[:, 6:9], sig[:, 6:9])}
 
 
 def _rms_rows(e: np.ndarray, unit: float) -> float | None:

@@ -131,8 +131,8 @@ def folder_name(spec: str) -> str:
 
 def known_noise_config(cfg: RunConfig, run, tune: str | None) -> RunConfig:
     """``cfg`` with the simulator's filter-visible IMU parameters under the keys the user did not
-    set, when ``run`` came from a ``sim:`` spec (:func:`load_sim`) and the noise is not tuned (``tune`` or ``[tune] mode`` is
-    ``none``); otherwise ``cfg`` itself.
+    set, when ``run`` came from a ``sim:`` spec (:func:`load_sim`) and the noise is not tuned
+    (``tune`` or ``[tune] mode`` is ``none``); otherwise ``cfg`` itself.
 
     The user's own keys stay as they are (and explicit); the simulator's are recorded as set by
     ``simulator`` in the configuration's sources.
