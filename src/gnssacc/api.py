@@ -24,6 +24,7 @@ from .identify import Identified
 from .pipeline import compare_observed, load_source, parse_methods, resolve_preset, with_outages, write_result
 from .report import TRAJECTORY_COLUMNS, format_table, ok_methods, trajectory_table
 from .recording import RecordedRun
+from .simspec import known_noise_config
 from .solution import NavSolution
 
 
@@ -81,15 +82,17 @@ def process(source=None, *, methods=None, config=None, preset: str | None = None
     ----------
     source : str, Path, RecordedRun or None
         ``"kitti"`` (or ``None``), a ROS 1 ``.bag``, an ``.mcap``, a ROS 2 bag directory, a CSV run
-        directory, or a run made in Python.
+        directory, a simulated run ``"sim:SCENARIO[,key=value...]"`` (:mod:`gnssacc.simspec`; with
+        ``tune="none"`` it runs with the simulator's IMU noise), or a run made in Python.
     methods : list of str or str, optional
         Method ids (default: ``ekf, ekf-acc, smoother, smoother-acc``).
     config, preset
         See :func:`configure`.
     tune : {"auto", "none"}, optional
         Noise identification from the recording (default: as ``[tuning] mode`` says, ``auto``).
-    noise : {"white", "gm", "none"}, optional
-        GNSS noise made from the truth (KITTI: ``white`` by default).
+    noise : str, optional
+        GNSS noise made from the truth, a profile of :data:`gnssacc.gnss_noise.PROFILES` (``white``,
+        ``gm``, ``precise``, ``rtk``, ``none``; KITTI and ``sim:`` sources: ``white`` by default).
     seed : int
         Noise seed.
     outage, outage_every : str, optional
@@ -123,6 +126,7 @@ def evaluate(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str 
     ``observe``: keep the ``ekf-acc`` pass's matrices for the report's observability section
     (:attr:`Result.replay`), so that ``save(report=True)`` does not run the filter again.
     """
+    cfg = known_noise_config(cfg, run, tune)   # a sim: source with --tune none: the simulator's IMU noise
     metrics, sols, ident, replay = compare_observed(run, cfg, methods, tune=tune, show_progress=show_progress,
                                                    observe=observe)
     return Result(ident.run, cfg, metrics, sols, ident, replay)

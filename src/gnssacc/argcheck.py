@@ -45,8 +45,13 @@ def check_input_file(path: str, flag: str) -> None:
 
 
 def check_source(source: str | None) -> None:
-    """Raise :class:`InputError` unless ``source`` is omitted, ``"kitti"`` or an existing path."""
-    if source not in (None, "kitti") and not os.path.lexists(source):
+    """Raise :class:`InputError` unless ``source`` is omitted, ``"kitti"``, a valid ``sim:`` spec
+    (:func:`gnssacc.simspec.parse_sim_spec`) or an existing path."""
+    from .simspec import is_sim_spec, parse_sim_spec
+
+    if is_sim_spec(source):
+        parse_sim_spec(source)
+    elif source not in (None, "kitti") and not os.path.lexists(source):
         raise InputError(source, "no such file or directory")
 
 

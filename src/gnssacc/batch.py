@@ -32,6 +32,7 @@ from .errors import DataWarning, InputError, raise_if_interrupted
 from .outdir import ResultDir
 from .pipeline import compare, compare_and_write, failure_reason
 from .progress import CampaignProgress
+from .simspec import is_sim_spec, known_noise_config
 
 #: The error line when Dask is needed and missing.
 NEEDS_DASK = 'needs dask.distributed: pip install "gnssacc[cluster]" (or --jobs 1 to run in this process)'
@@ -61,7 +62,8 @@ def run_task(spec: TaskSpec) -> dict:
         if spec.folder is None:
             return _guarded(spec, note, None)
         try:
-            with ResultDir(spec.folder, keep_out=[] if spec.source == "kitti" else [spec.source]) as target:
+            keep = [] if spec.source == "kitti" or is_sim_spec(spec.source) else [spec.source]
+            with ResultDir(spec.folder, keep_out=keep) as target:
                 record = _guarded(spec, note, target)
                 if record["status"] != "ok":
                     target.replace(lambda folder: write_record(folder, record))
@@ -144,7 +146,7 @@ def _load(spec: TaskSpec):
     cfg = configure(source, preset=o["preset"], config=o["config"]["path"] if o["config"] else None)
     run = load(source, config=cfg, noise=o["noise"], seed=spec.seed, outage=spec.pattern.outage,
                outage_every=spec.pattern.outage_every, imu_frame=o["imu_frame"], **o["bag"])
-    return run, cfg
+    return run, known_noise_config(cfg, run, o["tune"])
 
 
 def failed_record(spec: TaskSpec, error: str, kind: str = "worker") -> dict:

@@ -124,7 +124,8 @@ def make_settings(sources: list[str], methods: list[str], seeds: list[int], patt
     Parameters
     ----------
     sources : list of str
-        ``"kitti"`` or paths (made absolute here); each must exist.
+        ``"kitti"``, ``sim:`` specs (:mod:`gnssacc.simspec`, checked here, kept as they are) or paths
+        (made absolute here); each must exist.
     methods, seeds, patterns
         What every task runs.
     noise, preset, tune, imu_frame, bag
@@ -139,7 +140,12 @@ def make_settings(sources: list[str], methods: list[str], seeds: list[int], patt
     InputError
         A source given twice.
     """
-    paths = [s if s == "kitti" else os.path.abspath(s) for s in sources]
+    from .simspec import is_sim_spec, parse_sim_spec
+
+    for s in sources:
+        if is_sim_spec(s):
+            parse_sim_spec(s)   # a bad spec: one line before the campaign starts
+    paths = [s if s == "kitti" or is_sim_spec(s) else os.path.abspath(s) for s in sources]
     twice = sorted({p for p in paths if paths.count(p) > 1})
     if twice:
         raise InputError(twice[0], "given twice as a source")
@@ -166,12 +172,15 @@ def settings_hash(settings: dict) -> str:
 
 
 def recording_names(sources: list[str]) -> list[str]:
-    """A distinct folder name per source: its last path component (``kitti`` for KITTI; ``_``
+    """A distinct folder name per source: its last path component (``kitti`` for KITTI, the spec with
+    ``:,=`` replaced for a ``sim:`` spec, :func:`gnssacc.simspec.folder_name`; ``_``
     before a leading dot), with ``-2``, ``-3``... after a name already taken (or one of the
     campaign's own files), in the order given."""
+    from .simspec import folder_name, is_sim_spec
+
     names: list[str] = []
     for s in sources:
-        base = "kitti" if s == "kitti" else (Path(s).name or "recording")
+        base = "kitti" if s == "kitti" else folder_name(s) if is_sim_spec(s) else (Path(s).name or "recording")
         base = "_" + base if base.startswith(".") else base
         name, k = base, 2
         while name in names or name in RESERVED:

@@ -6,6 +6,9 @@ task order, with the columns of :data:`COLUMNS`:
 * ``source`` (the recording's name in the campaign), ``seed``, ``outages`` (``none``,
   ``120:30,300:10``, ``every 60:20``), ``method`` (a method id, ``<id>-online`` for a smoother's
   online estimate, ``gnss`` for the raw fixes);
+* the truth figures of :func:`gnssacc.metrics.truth_figures` (``tilt_rms_deg``, ``yaw_rms_deg``,
+  ``bias_a_rms_mg``, ``bias_g_rms_deg_h``, ``nees_pos``, ``nees_att``; empty where the truth
+  lacks what they need);
 * ``status`` ``ok`` or ``failed``, ``error`` the one-line reason of a failure;
 * ``prmse_m``, ``hrmse_m``, ``prmse_outage_m`` [m], ``nis`` (position NIS per dof, or the
   smoother's normalised GNSS residual), ``improvement_pct`` of an ``-acc`` method over its baseline;
@@ -26,11 +29,12 @@ import csv
 import io
 from datetime import datetime
 
+from .metrics import TRUTH_FIGURES
 from .montecarlo import format_summary, summarise
 from .report import failed_methods, ok_methods
 
 COLUMNS = ["source", "seed", "outages", "method", "status", "error", "prmse_m", "hrmse_m", "prmse_outage_m", "nis",
-           "improvement_pct", "runtime_s", "realtime_factor", "task_s", "warnings", "folder"]
+           "improvement_pct", *TRUTH_FIGURES, "runtime_s", "realtime_factor", "task_s", "warnings", "folder"]
 #: The measured columns (wall times): they differ between two runs of the same campaign.
 TIMING_COLUMNS = ("runtime_s", "realtime_factor", "task_s")
 #: The raw GNSS fixes' row.
@@ -63,7 +67,7 @@ def task_rows(task: dict, metrics: dict | None, error: str | None = None, method
         rows.append({**base, "method": mid, "status": "ok", "prmse_m": _num(m["prmse_m"]),
                      "hrmse_m": _num(m["hrmse_m"]), "prmse_outage_m": _num(m["prmse_outage_m"]), "nis": _num(nis),
                      "improvement_pct": _num(m["improvement_pct"]), "runtime_s": _num(m["runtime_s"]),
-                     "realtime_factor": _num(m["realtime_factor"])})
+                     "realtime_factor": _num(m["realtime_factor"]), **{k: _num(m.get(k)) for k in TRUTH_FIGURES}})
     rows += [{**base, "method": mid, "status": "failed", "error": reason}
              for mid, reason in failed_methods(metrics).items()]
     rows.append({**base, "method": GNSS_ROW, "status": "ok", "prmse_m": _num(metrics.get("gnss_prmse_m")),

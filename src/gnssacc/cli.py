@@ -14,6 +14,7 @@ from pathlib import Path
 from . import __version__
 from .config import PRESETS, load_config
 from .errors import DataWarning, InputError, raise_if_interrupted
+from .gnss_noise import PROFILES
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -38,7 +39,7 @@ def _run_parser(sub) -> None:
                    help="comma-separated method ids (default: ekf,ekf-acc,smoother,smoother-acc); each smoother "
                         "method also reports its online estimate as <id>-online")
     r.add_argument("--seed", type=int, default=0, help="GNSS noise seed (default 0)")
-    r.add_argument("--noise", choices=["white", "gm", "none"], default=None,
+    r.add_argument("--noise", choices=list(PROFILES), default=None,
                    help="GNSS noise profile for sources with truth (KITTI default: white); for a CSV run it "
                         "replaces gnss.csv by truth + noise")
     r.add_argument("--outage", default=None, metavar="START:LEN[,START:LEN...]",
@@ -80,7 +81,8 @@ def _bench_parser(sub) -> None:
     bch.add_argument("source", nargs="?", default=None, help="'kitti' (default) or a CSV run directory with truth")
     bch.add_argument("--seeds", default="0-9", help="e.g. 0-19 or 1,4,7 (default 0-9)")
     bch.add_argument("--methods", default=None, help="comma-separated method ids (default: all four)")
-    bch.add_argument("--noise", choices=["white", "gm"], default="white")
+    bch.add_argument("--noise", choices=[p for p in PROFILES if p != "none"], default="white",
+                     help="GNSS noise profile made from the truth (default white)")
     bch.add_argument("--outage", default=None, metavar="START:LEN[,START:LEN...]")
     bch.add_argument("--outage-every", default=None, metavar="PERIOD:LEN")
     bch.add_argument("--config", default=None)
@@ -114,7 +116,7 @@ def _tool_parsers(sub) -> None:
     s.add_argument("--grade", default="industrial", help="IMU grade: perfect, consumer, industrial, tactical")
     s.add_argument("--imu-rate", type=float, default=100.0, help="Hz (default 100)")
     s.add_argument("--gnss-rate", type=float, default=1.0, help="Hz (default 1)")
-    s.add_argument("--noise", choices=["white", "gm", "none"], default="white")
+    s.add_argument("--noise", choices=list(PROFILES), default="white")
     s.add_argument("--seed", type=int, default=0)
 
 
@@ -128,7 +130,7 @@ def _batch_parser(sub) -> None:
     b.add_argument("sources", nargs="*", metavar="SOURCE", help="'kitti', bags, CSV run directories")
     b.add_argument("--methods", default=None, help="comma-separated method ids (default: all four)")
     b.add_argument("--seeds", default=None, help="GNSS noise seeds, e.g. 0-9 or 1,4,7 (default 0)")
-    b.add_argument("--noise", choices=["white", "gm", "none"], default=None,
+    b.add_argument("--noise", choices=list(PROFILES), default=None,
                    help="GNSS noise made from the truth (as for 'run'); a seed changes nothing without it, "
                         "except for KITTI (white by default)")
     b.add_argument("--outage", action="append", default=None, metavar="START:LEN[,START:LEN...]|none",

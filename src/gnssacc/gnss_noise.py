@@ -6,6 +6,10 @@ Profiles (1-sigma, metres, N/E/D):
     iid Gaussian, 3 / 3 / 5.
 ``gm``
     first-order Gauss-Markov, tau = 60 s, 2.5 / 2.5 / 4, plus white 0.5 / 0.5 / 0.8.
+``precise``
+    iid Gaussian, 0.5 / 0.5 / 0.8 (a dual-frequency or SBAS-corrected receiver).
+``rtk``
+    iid Gaussian, 0.02 / 0.02 / 0.04 (fixed-ambiguity RTK).
 ``none``
     the truth itself (for tests).
 
@@ -26,6 +30,8 @@ from .recording import GnssFixes, RecordedRun, Truth
 PROFILES = {
     "white": {"gm_sigma": np.zeros(3), "tau_s": 60.0, "white_sigma": np.array([3.0, 3.0, 5.0])},
     "gm": {"gm_sigma": np.array([2.5, 2.5, 4.0]), "tau_s": 60.0, "white_sigma": np.array([0.5, 0.5, 0.8])},
+    "precise": {"gm_sigma": np.zeros(3), "tau_s": 60.0, "white_sigma": np.array([0.5, 0.5, 0.8])},
+    "rtk": {"gm_sigma": np.zeros(3), "tau_s": 60.0, "white_sigma": np.array([0.02, 0.02, 0.04])},
     "none": {"gm_sigma": np.zeros(3), "tau_s": 60.0, "white_sigma": np.zeros(3)},
 }
 
@@ -37,7 +43,8 @@ def noise_ned(t: np.ndarray, profile: str, seed: int) -> tuple[np.ndarray, np.nd
     ----------
     t : ndarray, shape (M,)
         Fix times [s], increasing.
-    profile : {"white", "gm", "none"}
+    profile : str
+        A key of :data:`PROFILES`.
     seed : int
 
     Returns

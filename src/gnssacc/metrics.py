@@ -1,7 +1,8 @@
-"""Scoring against truth: PRMSE (paper eq. rmse), horizontal RMSE, outage-only PRMSE."""
+"""Scoring against truth: PRMSE (paper eq. rmse), horizontal RMSE, outage-only PRMSE, and the
+truth figures of attitude, biases and consistency (:func:`truth_figures`)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -27,6 +28,8 @@ class Score:
         Epochs scored.
     rpy_rmse_deg : list of float or None
         Roll, pitch, yaw RMSE [deg] when the truth has attitude.
+    truth : dict
+        :func:`truth_figures` (``None`` values where the truth lacks what a figure needs).
     """
 
     prmse_m: float | None
@@ -34,6 +37,7 @@ class Score:
     prmse_outage_m: float | None
     n_epochs: int
     rpy_rmse_deg: list | None = None
+    truth: dict = field(default_factory=dict)
 
 
 def truth_at(run: RecordedRun, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -85,7 +89,54 @@ def score(run: RecordedRun, sol: NavSolution, window: tuple | None = None) -> Sc
         d = np.column_stack([wrap_angle(sol.rpy[m, i] - np.interp(sol.t[m], tr.t, np.unwrap(tr.rpy[:, i])))
                              for i in range(3)])
         rpy = np.degrees(np.sqrt(np.mean(d**2, axis=0))).tolist()
-    return Score(_rms(err), _rms(err[:, :2]), prmse_out, len(err), rpy)
+    return Score(_rms(err), _rms(err[:, :2]), prmse_out, len(err), rpy, truth_figures(run, sol, window))
+
+
+#: The figures of :func:`truth_figures`, in the order of ``summary.csv``.
+TRUTH_FIGURES = ("tilt_rms_deg", "yaw_rms_deg", "bias_a_rms_mg", "bias_g_rms_deg_h", "nees_pos", "nees_att")
+_MG = 9.80665e-3                     # m/s^2 per milli-g
+_DEG_H = np.pi / 180.0 / 3600.0      # rad/s per deg/h
+
+
+def truth_figures(run: RecordedRun, sol: NavSolution, window: tuple | None = None) -> dict:
+    """Attitude, bias and consistency figures against the truth, over the epochs in ``window`` [s].
+
+    Errors are estimate minus truth (:func:`gnssacc.observability.state_errors`; the filter's
+    biases are the sensor's own, ``measured = true + bias``, as the simulator draws them).
+
+    Returns
+    -------
+    dict
+        ``tilt_rms_deg``: RMS over epochs of ``sqrt(droll^2 + dpitch^2)`` [deg]; ``yaw_rms_deg``
+        [deg]; ``bias_a_rms_mg`` [mg] and ``bias_g_rms_deg_h`` [deg/h]: RMS over epochs of the
+        3-axis error norm (simulated runs only); ``nees_pos`` and ``nees_att``: the mean over
+        epochs and the three axes of ``(e_i / sigma_i)^2`` (1 if consistent). The solutions keep
+        per-state sigmas, not the full covariance, so this is the per-axis NEES per dof: it
+        equals the full NEES per dof when the covariance is diagonal in those axes and leaves out
+        the cross-correlations otherwise. Each ``None`` when the truth lacks what it needs.
+    """
+    from .observability import state_errors   # it scores with this module's truth_at
+
+    keep = _in_window(sol.t, window)
+    err = state_errors(run, sol)[keep] if run.truth is not None else np.full((0, 15), np.nan)
+    sig = np.asarray(sol.sigma, float)[keep] if len(err) else np.zeros((0, 15))
+    deg = np.degrees(1.0)
+    return {"tilt_rms_deg": _rms_rows(err[:, 6:8], deg), "yaw_rms_deg": _rms_rows(err[:, 8:9], deg),
+            "bias_a_rms_mg": _rms_rows(err[:, 9:12], 1.0 / _MG),
+            "bias_g_rms_deg_h": _rms_rows(err[:, 12:15], 1.0 / _DEG_H),
+            "nees_pos": _nees(err[:, 0:3], sig[:, 0:3]), "nees_att": _nees(err[:, 6:9], sig[:, 6:9])}
+
+
+def _rms_rows(e: np.ndarray, unit: float) -> float | None:
+    """RMS over rows of the row norm, times ``unit``; rows with a NaN are left out (``None`` if all)."""
+    ok = np.all(np.isfinite(e), axis=1)
+    return float(unit * np.sqrt(np.mean(np.sum(e[ok] ** 2, axis=1)))) if np.any(ok) else None
+
+
+def _nees(e: np.ndarray, s: np.ndarray) -> float | None:
+    """Mean of ``(e / s)^2`` over the rows with finite errors and positive sigmas, and the axes."""
+    ok = np.all(np.isfinite(e), axis=1) & np.all(s > 0, axis=1)
+    return float(np.mean((e[ok] / s[ok]) ** 2)) if np.any(ok) else None
 
 
 def gnss_score(run: RecordedRun, window: tuple | None = None) -> Score:

@@ -20,6 +20,7 @@ from .metrics import gnss_score, score
 from .outdir import ResultDir
 from .report import format_table, metrics_dict, plot_errors, plot_trajectory, write_json, write_trajectory_csv
 from .recording import RecordedRun
+from .simspec import is_sim_spec, load_sim
 from .solution import NavSolution
 
 def _ekf(ident: Identified, method: str, show_progress: bool, observer=None) -> dict[str, NavSolution]:
@@ -33,9 +34,15 @@ def _smoother(ident: Identified, method: str, show_progress: bool) -> dict[str, 
                         stationary=ident.stationary, show_progress=show_progress)
 
 
+def _gm(ident: Identified, method: str, show_progress: bool) -> dict[str, NavSolution]:
+    from .gm_variant import BASE_OF, run_gm
+    return run_gm(ident, method, show_progress, METHODS[BASE_OF[method]])
+
+
 #: Estimators by method id: ``(identified, method, show_progress) -> {id: NavSolution}``.
 #: A smoother method also returns its online estimate as ``<id>-online``.
-METHODS = {"ekf": _ekf, "ekf-acc": _ekf, "smoother": _smoother, "smoother-acc": _smoother}
+METHODS = {"ekf": _ekf, "ekf-acc": _ekf, "smoother": _smoother, "smoother-acc": _smoother,
+           "ekf-gm": _gm, "smoother-gm": _gm}
 DEFAULT_METHODS = ("ekf", "ekf-acc", "smoother", "smoother-acc")
 
 
@@ -82,7 +89,9 @@ def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None,
     Parameters
     ----------
     source : str or None
-        ``None`` or ``"kitti"``: the KITTI sequence in the gtsam wheel. A ROS 1 ``.bag``, a bare
+        ``None`` or ``"kitti"``: the KITTI sequence in the gtsam wheel. ``sim:SCENARIO[,key=value...]``:
+        a simulated run (:mod:`gnssacc.simspec`; ``noise`` default ``white``, ``seed`` draws the IMU
+        errors and the GNSS noise). A ROS 1 ``.bag``, a bare
         ``.mcap`` or a ROS 2 bag directory: read through rosbags. Another directory: a CSV run
         directory (``imu.csv``, ``gnss.csv``, optional ``truth.csv``, ``init.json``).
     cfg : RunConfig
@@ -100,6 +109,8 @@ def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None,
     if source in (None, "kitti"):
         from .sources.kitti import load_kitti
         return load_kitti(cfg, noise or "white", seed)
+    if is_sim_spec(source):
+        return load_sim(source, noise, seed)
     path = Path(source)
     if not path.exists():
         raise InputError(source, "no such file or directory")

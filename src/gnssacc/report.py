@@ -13,7 +13,8 @@ from .recording import RecordedRun
 from .solution import NavSolution
 
 #: Baseline of each aided method, for the improvement column.
-BASELINES = {"ekf-acc": "ekf", "smoother-acc": "smoother", "smoother-acc-online": "smoother-online"}
+BASELINES = {"ekf-acc": "ekf", "smoother-acc": "smoother", "smoother-acc-online": "smoother-online",
+             "ekf-gm": "ekf", "smoother-gm": "smoother", "smoother-gm-online": "smoother-online"}
 
 #: Columns of ``trajectory_<id>.csv`` (display units, :mod:`gnssacc.display`).
 TRAJECTORY_COLUMNS = list(TRAJECTORY_COLUMNS)
@@ -82,7 +83,7 @@ def metrics_dict(run: RecordedRun, sols: dict[str, NavSolution], scores: dict[st
         methods[mid] = {
             "status": "ok",
             "prmse_m": sc.prmse_m, "hrmse_m": sc.hrmse_m, "prmse_outage_m": sc.prmse_outage_m,
-            "rpy_rmse_deg": sc.rpy_rmse_deg, "n_epochs": sc.n_epochs,
+            "rpy_rmse_deg": sc.rpy_rmse_deg, "n_epochs": sc.n_epochs, **sc.truth,
             "improvement_pct": improvement_pct(scores[base].prmse_m, sc.prmse_m) if base in scores else None,
             "runtime_s": sol.runtime_s,
             "realtime_factor": run.duration_s / sol.runtime_s if sol.runtime_s > 0 else None,

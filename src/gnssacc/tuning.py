@@ -372,3 +372,65 @@ def tune(run, cfg: RunConfig, stationary=None, quality=None, init=None, noise=No
                         before.get("nis_pos_mean"), after.get("nis_pos_mean"), _loglik(before, kinds),
                         _loglik(after, kinds), n_eval + n_gm, time.perf_counter() - t0)
     return tuned, result
+
+
+def tune_gauss_markov(run, cfg: RunConfig, stationary=None, quality=None, init=None) -> tuple[RunConfig, dict]:
+    """Fit the Gauss-Markov fix-error model alone, the IMU noise of ``cfg`` held (the ``-gm`` methods
+    on a run where :func:`tune` kept white fixes).
+
+    The free keys of :data:`GM_PARAMETERS` (not in ``cfg.explicit``) are searched by maximum
+    likelihood of one EKF pass's position and zero-rate innovations, from the start of step 3 of
+    the module docstring: the stated sigmas as the correlated part, a fifth of them as the white part.
+
+    Parameters
+    ----------
+    run : RecordedRun
+        As the estimators see it (fix sigmas already times ``cfg``'s ``gnss.sigma_scale``).
+    cfg : RunConfig
+    stationary, quality, init
+        As for :func:`tune`.
+
+    Returns
+    -------
+    cfg : RunConfig
+        With ``gnss.gm_sigma_m``, ``gnss.gm_tau_s`` and ``gnss.sigma_scale`` (relative to the raw
+        fixes, as :func:`tune` gives it) as fitted.
+    info : dict
+        ``loglik_gain`` over the white model, ``n_evaluations``, ``seconds``, ``run_scale`` (the
+        factor to apply to ``run``'s fix sigmas: the white part of the fitted model).
+
+    Raises
+    ------
+    InputError
+        ``gnss.gm_sigma_m`` is set explicitly (to zero: the user asked for white fixes).
+    """
+    t0 = time.perf_counter()
+    if ("gnss", "gm_sigma_m") in cfg.explicit:
+        raise InputError("gnss.gm_sigma_m", "is set to 0 (white fixes); a -gm method needs it > 0 or unset")
+    free_scale = ("gnss", "sigma_scale") not in cfg.explicit
+    base = cfg.with_values({"gnss": {"sigma_scale": 1.0}}, "sigma scale of the run") if free_scale else cfg
+    params = [p for p in GM_PARAMETERS if p not in cfg.explicit]
+    start = {("gnss", "sigma_scale"): np.atleast_1d(0.2),
+             ("gnss", "gm_sigma_m"): np.median(run.gnss.sigma_ned, axis=0),
+             ("gnss", "gm_tau_s"): np.atleast_1d(cfg.gnss_gm_tau.mean())}
+    start = {p: start[p] for p in params}
+    kinds = ("pos", "zaru")
+    obj = _Objective(run, base, params, start, stationary, quality, init, "ekf", kinds)
+    theta, _, n_eval = ml_search(obj, len(params), int(cfg["tune"]["max_evaluations"]),
+                                 _prior_widths(cfg, params, {}), lower=_lower_bounds(params, {}))
+    white_stats = run_white_stats(run, cfg, stationary, quality, init)
+    gain = _loglik(obj.stats[tuple(np.round(theta, 12))], kinds) - _loglik(white_stats, kinds)
+    fitted = obj.config(theta)
+    rel = float(fitted["gnss"]["sigma_scale"]) if free_scale else 1.0
+    out = fitted.with_values({"gnss": {"sigma_scale": rel * float(cfg["gnss"]["sigma_scale"])}}, "tuned") \
+        if free_scale else fitted
+    return out, {"loglik_gain": float(gain), "n_evaluations": n_eval + 1, "run_scale": rel,
+                 "seconds": time.perf_counter() - t0}
+
+
+def run_white_stats(run, cfg: RunConfig, stationary=None, quality=None, init=None) -> dict:
+    """The innovation statistics of one EKF pass with ``cfg`` as it is on ``run`` (already scaled)."""
+    from .ekf import run_ekf
+
+    return run_ekf(run, cfg, "ekf", init=init, stationary=stationary, quality=quality, output_times=np.zeros(0),
+                   cov_every=int(cfg["tune"]["cov_every"])).stats
