@@ -170,6 +170,21 @@ def test_study_statistics_find_a_known_effect_and_no_effect():
     assert c.p == pytest.approx(2.0 / 2**12)
 
 
+def test_verdict_controls_false_discoveries_over_many_null_cells():
+    # 60 cells without any effect: at p < 0.05 about three would "help or hurt" by chance; at a
+    # false-discovery rate of 0.05 none does, while one real -10 % cell among them is still found.
+    from gnssacc import study
+
+    from dataclasses import replace
+
+    null = [replace(e, cell=(str(k),) * 5) for k in range(60)
+            for e in study.effects(_synthetic_rows(0.0, seed=100 + k), figures=("prmse_m",))]
+    assert sum(e.p < 0.05 for e in null) >= 1     # chance "effects" uncorrected (these draws: see below)
+    assert "helps in 0, hurts in 0" in study.verdict(null)
+    (real,) = study.effects(_synthetic_rows(-10.0), figures=("prmse_m",))
+    assert "helps in 1, hurts in 0" in study.verdict(null + [real])
+
+
 def test_study_baselines():
     from gnssacc.study import baseline_of
 
