@@ -21,6 +21,7 @@ Works on plain rows (``csv.DictReader``), no pandas needed::
 from __future__ import annotations
 
 import csv
+import gzip
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,10 +53,21 @@ def baseline_of(method: str) -> str | None:
     return None
 
 
-def read_rows(path) -> list[dict]:
-    """The rows of a ``study.csv`` (strings; empty cells are ``""``)."""
-    with open(Path(path), newline="") as fh:
-        return list(csv.DictReader(fh))
+def read_rows(*paths) -> list[dict]:
+    """The rows of one or more ``study.csv`` files (``.csv.gz`` too), strings (empty cells ``""``).
+
+    Studies run in parts (e.g. another method set on the same cells and seeds) are read together;
+    a row repeated by several parts (a baseline run in each: the same simulated data, the same
+    figures) is kept once, by its cell, method and seed.
+    """
+    out: dict = {}
+    for path in paths:
+        path = Path(path)
+        opener = gzip.open if path.suffix == ".gz" else open
+        with opener(path, "rt", newline="") as fh:
+            for r in csv.DictReader(fh):
+                out.setdefault((*(r[k] for k in CELL_KEYS), r["method"], r["seed"]), r)
+    return list(out.values())
 
 
 def bootstrap_ci(d: np.ndarray, n_boot: int = 10_000, level: float = 0.95, seed: int = 0) -> tuple[float, float]:
