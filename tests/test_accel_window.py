@@ -6,10 +6,8 @@ import pytest
 from scipy.integrate import quad
 
 from gnssacc.config import load_config
-from gnssacc.earth import gravity_n
 from gnssacc.ekf import FilterState, run_ekf
-from gnssacc.gnss_accel import (acceleration_row, measured_specific_force, peano_kernel, peano_weights,
-                                predicted_acceleration, window_accelerations, window_samples)
+from gnssacc.gnss_accel import acceleration_row, model_errors, peano_kernel, peano_weights, window_samples
 from gnssacc.measurements import window_acceleration
 from gnssacc.mechanization import kernel_force_integrals
 from gnssacc.rotations import euler_to_dcm, rotvec_to_dcm
@@ -121,30 +119,12 @@ def test_H_w_by_finite_differences():
     assert 1.0 < np.abs(m0.H[:, 12:15]).max() < 30.0
 
 
-def _model_errors(run):
-    """Per full window: |a~ - a_pred(truth)| for the paper's one-epoch model and the window model."""
-    g = run.gnss
-    p = run.origin.to_ned(g.lat, g.lon, g.h)
-    full, a_meas, _ = window_accelerations(g.t, p, g.sigma_ned, 3, 2.5)
-    tr = run.truth
-    assert np.allclose(tr.t, g.t)
-    err_paper, err_win = [], []
-    z3, no = np.zeros(3), np.zeros(0, np.int64)
-    for j in np.flatnonzero(full):
-        R = euler_to_dcm(*tr.rpy[j])
-        g_n = gravity_n(tr.lat[j], tr.h[j])
-        f = measured_specific_force(run.imu, g.t[j], 0.0, no, no)
-        err_paper.append(predicted_acceleration(R, f, g_n) - a_meas[j])
-        k0, k1, h, w = window_samples(run.imu.t, g.t[j - 2:j + 1])
-        F, _, _ = kernel_force_integrals(run.imu.f_b[k0:k1], run.imu.omega_ib_b[k0:k1], h, w, z3, z3)
-        err_win.append(predicted_acceleration(R, F, g_n) - a_meas[j])
-    rms = lambda e: float(np.sqrt(np.mean(np.sum(np.square(e), axis=1))))
-    return rms(err_paper), rms(err_win)
-
-
 def test_window_model_error_is_far_below_the_paper_model_on_noise_free_data():
     run = simulate("car", 300.0, imu_grade="perfect", noise="none")
-    paper, window = _model_errors(run)
+    _, e_paper, e_window = model_errors(run)
+    rms = lambda e: float(np.sqrt(np.mean(np.sum(e * e, axis=1))))
+    paper, window = rms(e_paper), rms(e_window)
+    assert len(e_paper) > 290
     print(f"model error RMS on noise-free fixes, perfect IMU: paper {paper:.4f} m/s^2, window {window:.4f} m/s^2")
     assert window < 0.2 * paper
     assert window < 0.01
@@ -167,3 +147,21 @@ def test_ekf_accw_runs_end_to_end_with_finite_nis(sigma):
     assert 0.3 < st["nis_acc_mean"] < 3.0 and 0.3 < st["nis_pos_mean"] < 3.0
     from gnssacc.metrics import gnss_score, score
     assert score(run, sol).prmse_m < gnss_score(run).prmse_m
+
+
+def test_windows_touching_a_suspect_imu_span_are_skipped():
+    """A window whose IMU samples touch a flagged span gives no update; the others still do."""
+    from gnssacc.quality import QualityReport, Span, touches_segments
+
+    cfg = load_config(overrides={"imu": grade_config("industrial")})
+    run = simulate("car", duration_s=120.0, imu_grade="industrial", noise="white", seed=1)
+    i0, i1 = 5000, 5150
+    flagged = QualityReport([Span("interpolated", run.imu.t[i0], run.imu.t[i1 - 1], i0, i1, "all", "test")],
+                            len(run.imu), 0.01, 0.01)
+    sol = run_ekf(run, cfg, "ekf-accw", quality=flagged)
+    t = run.gnss.t
+    seg0, seg1 = np.array([i0]), np.array([i1])
+    expected = sum(touches_segments(*window_samples(run.imu.t, t[j - 2:j + 1])[:2], seg0, seg1)
+                   for j in range(2, len(t)) if t[j] >= sol.stats["t_init"])
+    assert expected >= 2
+    assert sol.stats["n_acc_skipped_suspect_imu"] == expected

@@ -82,8 +82,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .earth import gravity_n
+from .mechanization import kernel_force_integrals
 from .quality import touches_segments
-from .rotations import skew
+from .rotations import euler_to_dcm, skew
 
 
 def design_matrix(t: np.ndarray) -> np.ndarray:
@@ -403,3 +405,41 @@ def paper_H_a_blocks(R_nb: np.ndarray, f_b: np.ndarray) -> tuple[np.ndarray, np.
     ``phi_b = R_nb^T phi``: ``paper_dphi @ R_nb^T == -d_phi`` and ``paper_dba == -d_ba``.
     """
     return R_nb @ skew(f_b), -R_nb
+
+
+def model_errors(run, m: int = 3, max_gap_s: float = 2.5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``a~ - a_pred`` at the true state for every full window of a run with truth at its fixes.
+
+    Parameters
+    ----------
+    run : gnssacc.recording.RecordedRun
+        With ``run.truth`` (attitude) at the GNSS epochs, e.g. a simulated run; on noise-free
+        fixes and a perfect IMU the result is the model error alone.
+    m, max_gap_s : int, float
+        Window length and largest fix interval [s], as :class:`AccelWindow`.
+
+    Returns
+    -------
+    t : ndarray (K,)
+        The windows' update epochs [s].
+    paper, window : ndarray (K, 3)
+        Errors [m/s^2, NED] of the paper's one-epoch prediction ``R_nb f(t_k) + g`` and of the
+        window-consistent one ``R_nb F_b + g`` (true attitude, zero biases).
+    """
+    g, tr = run.gnss, run.truth
+    if tr is None or tr.rpy is None or len(tr.t) != len(g.t) or not np.allclose(tr.t, g.t):
+        raise ValueError("model_errors needs the truth's attitude at the GNSS epochs")
+    full, a_meas, _ = window_accelerations(g.t, run.origin.to_ned(g.lat, g.lon, g.h), g.sigma_ned, m, max_gap_s)
+    z3, no = np.zeros(3), np.zeros(0, np.int64)
+    rows = []
+    for j in np.flatnonzero(full):
+        win = window_samples(run.imu.t, g.t[j - m + 1:j + 1])
+        if win is None:
+            continue
+        k0, k1, h, w = win
+        R, g_n = euler_to_dcm(*tr.rpy[j]), gravity_n(tr.lat[j], tr.h[j])
+        F, _, _ = kernel_force_integrals(run.imu.f_b[k0:k1], run.imu.omega_ib_b[k0:k1], h, w, z3, z3)
+        f = measured_specific_force(run.imu, g.t[j], 0.0, no, no)
+        rows.append((g.t[j], predicted_acceleration(R, f, g_n) - a_meas[j], predicted_acceleration(R, F, g_n) - a_meas[j]))
+    return (np.array([r[0] for r in rows]), np.array([r[1] for r in rows]).reshape(-1, 3),
+            np.array([r[2] for r in rows]).reshape(-1, 3))
