@@ -165,3 +165,21 @@ def test_windows_touching_a_suspect_imu_span_are_skipped():
                    for j in range(2, len(t)) if t[j] >= sol.stats["t_init"])
     assert expected >= 2
     assert sol.stats["n_acc_skipped_suspect_imu"] == expected
+
+
+def test_H_w_reduces_to_the_paper_H_a_without_rotation():
+    """No rotation over the window and a constant specific force: F_b = f, M = I, and H_w's
+    attitude and accelerometer-bias blocks are the paper's H_a (same sign convention)."""
+    from gnssacc.gnss_accel import H_a_blocks, H_w_blocks
+
+    t_imu = np.arange(-0.1, 2.2, 0.01)
+    k0, k1, h, w = window_samples(t_imu, np.array([0.0, 1.0, 2.0]))
+    n = k1 - k0
+    f = np.array([0.7, -0.2, -9.8])
+    b_a = np.array([0.01, 0.02, -0.03])
+    F, M, G = kernel_force_integrals(np.tile(f, (n, 1)), np.zeros((n, 3)), h, w, b_a, np.zeros(3))
+    np.testing.assert_allclose(F, f - b_a, atol=1e-12)
+    np.testing.assert_allclose(M, np.eye(3), atol=1e-12)
+    R = euler_to_dcm(0.2, 0.1, -1.0)
+    for blk_w, blk_a in zip(H_w_blocks(R, F, M, G)[:2], H_a_blocks(R, f - b_a)):
+        np.testing.assert_allclose(blk_w, blk_a, atol=1e-12)
