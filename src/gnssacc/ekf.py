@@ -9,7 +9,9 @@ Innovations are predicted minus measured and the error state is estimate minus t
 closed-loop feedback subtracts the estimated errors (paper: ``dx+ = K dz``, closed loop).
 
 At a GNSS epoch the position update comes first; ``ekf-acc`` then applies the acceleration update
-with ``H_a`` from :mod:`gnssacc.gnss_accel`, evaluated at the state after the position update.
+with ``H_a`` from :mod:`gnssacc.gnss_accel`, evaluated at the state after the position update;
+``ekf-accw`` the window-consistent one (the kernel-weighted INS acceleration over the fixes'
+window, ``H_w``).
 An *observer* (see :class:`EkfObserver`) sees every epoch and update; the observability analysis
 uses it instead of a copy of this loop.
 """
@@ -24,18 +26,19 @@ import numpy as np
 from . import measurements as meas_models
 from .config import RunConfig
 from .earth import earth_rate_n, gravity_n
-from .gnss_accel import AccelWindow, measured_specific_force
+from .gnss_accel import AccelWindow, measured_specific_force, window_samples
 from .initialise import initial_sigmas
 from .kalman import joseph_update
-from .mechanization import Propagator, apply_correction
+from .mechanization import Propagator, apply_correction, kernel_force_integrals
 from .progress import progress
-from .quality import QualityReport, inflation_segments
+from .quality import QualityReport, inflation_segments, touches_segments
 from .rotations import dcm_to_euler, euler_error_jacobian
 from .recording import InitialState, RecordedRun
 from .solution import NavSolution
 from .zupt import StationaryEpochs, epochs_for
 
-METHODS = {"ekf": False, "ekf-acc": True}
+#: The acceleration update each method applies (``None``: none; see :func:`acceleration_model`).
+METHODS = {"ekf": None, "ekf-acc": "acc", "ekf-accw": "accw"}
 #: Event kinds of the loop, in the order they are handled at equal times.
 GNSS, STATIONARY, OUTPUT = 0, 1, 2
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -264,13 +267,25 @@ def prepare(run: RecordedRun, cfg: RunConfig, init: InitialState | None = None,
                     float(z["velocity_sigma_mps"]), float(z["gate_nis"]))
 
 
-def acceleration_model(run: RecordedRun, setup: EkfSetup, s: FilterState, t: float, acc):
+def acceleration_model(run: RecordedRun, setup: EkfSetup, s: FilterState, t: float, acc, model: str = "acc"):
     """The acceleration update at ``t`` for the window measurement ``acc``, or ``None`` when the
-    specific force it needs comes from a suspect IMU span (fabricated or damaged data)."""
+    specific force it needs comes from a suspect IMU span (fabricated or damaged data) or, for
+    ``model="accw"``, the IMU does not cover the window.
+
+    ``model``: ``"acc"`` the paper's (specific force at ``t``), ``"accw"`` the window-consistent
+    prediction (:mod:`gnssacc.gnss_accel`)."""
+    g_n = gravity_n(s.pos[0], s.pos[2])
+    if model == "accw":
+        win = window_samples(run.imu.t, acc.t_window)
+        if win is None or touches_segments(win[0], win[1], setup.seg_i0, setup.seg_i1):
+            return None
+        k0, k1, h, w = win
+        F_b, M, G = kernel_force_integrals(run.imu.f_b[k0:k1], run.imu.omega_ib_b[k0:k1], h, w, s.b_a, s.b_g)
+        return meas_models.window_acceleration(s, acc.a_n, acc.cov, F_b, M, G, g_n)
     f_meas = measured_specific_force(run.imu, t, setup.f_avg_s, setup.seg_i0, setup.seg_i1)
     if f_meas is None:
         return None
-    return meas_models.acceleration(s, acc.a_n, acc.cov, f_meas, gravity_n(s.pos[0], s.pos[2]))
+    return meas_models.acceleration(s, acc.a_n, acc.cov, f_meas, g_n)
 
 
 def default_output_times(run: RecordedRun) -> np.ndarray:
@@ -302,15 +317,17 @@ def _events(gnss_t: np.ndarray, stat_t: np.ndarray, out_t: np.ndarray):
 
 
 def _gnss_measurements(run, setup, s, t, i, acc, use_acc, evaluate_acc, stats):
-    """The updates of a GNSS epoch, each built at the state left by the previous one."""
+    """The updates of a GNSS epoch, each built at the state left by the previous one (``use_acc``:
+    the acceleration model applied, a value of :data:`METHODS`; the paper's is evaluated when
+    only ``evaluate_acc``)."""
     gnss = run.gnss
     yield meas_models.position(s, gnss.lat[i], gnss.lon[i], gnss.h[i], gnss.sigma_ned[i], setup.lever_b, setup.gate), True
     if acc is not None and (use_acc or evaluate_acc):
-        m = acceleration_model(run, setup, s, t, acc)
+        m = acceleration_model(run, setup, s, t, acc, use_acc or "acc")
         if m is None:
             stats["n_acc_skipped_suspect_imu"] += 1 if use_acc else 0
         else:
-            yield m, use_acc
+            yield m, bool(use_acc)
 
 
 def _stationary_measurements(setup, s, j):
@@ -330,9 +347,10 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
     ----------
     run : RecordedRun
     cfg : RunConfig
-    method : {"ekf", "ekf-acc"}
+    method : {"ekf", "ekf-acc", "ekf-accw"}
         ``ekf``: position updates (the paper's baseline); ``ekf-acc``: position and GNSS-derived
-        acceleration updates (the paper's method). Both add stationary updates when
+        acceleration updates (the paper's method); ``ekf-accw``: the same with the
+        window-consistent acceleration prediction. Both add stationary updates when
         ``stationary`` is given and ``[zupt] enabled``.
     output_times : ndarray, optional
         Epochs [s] at which to report the state (after any update at the same time). Default:
@@ -406,7 +424,7 @@ class _Updates:
 
     run: RecordedRun
     setup: EkfSetup
-    use_acc: bool
+    use_acc: str | None
     observer: EkfObserver | None
     tally: _Tally
     stats: dict

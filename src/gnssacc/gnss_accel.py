@@ -32,6 +32,48 @@ The paper prints ``H_a = [0, 0, R_nb [f x], -R_nb, 0]``. That is exactly ``-1`` 
 Jacobian of the measured-minus-predicted residual w.r.t. a body-frame estimate-minus-truth
 attitude error. Both give the same Kalman correction; :func:`paper_H_a_blocks` returns the
 printed form and the tests check the mapping.
+
+Window-consistent prediction (``ekf-accw``)
+-------------------------------------------
+``a~ = B p`` is not the acceleration at one epoch: ``B`` annihilates constants and linear
+functions, so Taylor's formula with integral remainder gives the Peano-kernel identity
+
+    B p = int_{t_0}^{t_{m-1}} K(s) p''(s) ds,    K(s) = sum_j B_j (t_j - s)_+,
+
+with ``int K = 1`` (``B`` is exact on ``t^2 / 2``) and ``K = 0`` outside the window. For three
+uniform fixes ``K`` is the triangle ``(s - t_0) / dt^2`` rising to ``1 / dt`` at the middle fix and
+falling to zero at ``t_2``. The paper compares ``a~`` with ``R_nb f + g`` at ``t_{m-1}`` alone; on
+noise-free data that model error is of the order of the acceleration's change over the window.
+The window-consistent prediction applies the same operator to what the INS says:
+
+    a_pred = int K(s) (R_nb(s) (f(s) - b_a) + g) ds = R_nb(t_k) F_b + g^n,
+    F_b = int K(s) R_{b_k b_s} (f(s) - b_a) ds,      M = int K(s) R_{b_k b_s} ds,
+
+``t_k = t_{m-1}`` the GNSS epoch of the update and ``R_{b_k b_s}`` the body rotation from ``s`` to
+``t_k`` integrated from the bias-corrected gyros. IMU sample ``i`` holds over
+``(t_{i-1}, t_i]``, so it enters with weight ``w_i = int K`` over that interval (clipped to the
+window), exact because ``K`` is piecewise linear (:func:`peano_weights`), and with the rotation at
+the interval's midpoint (:func:`gnssacc.mechanization.kernel_force_integrals`). Neglected, as in
+the paper's model: the earth rate in the relative rotation (7.3e-5 rad/s, < 2e-4 rad over a
+2 s window), the transport rate and Coriolis acceleration (``2 omega_ie x v`` < 5e-3 m/s^2 at
+30 m/s), the change of ``g^n`` over the window, and the IMU noise over the window. The attitude
+and accelerometer-bias errors are taken constant over the window (seconds); the gyro-bias error
+turns the relative rotation, ``R^est_{b_k b_s} = (I - [(Gamma(s) b_g) x]) R_{b_k b_s}`` with
+``Gamma(s) = int_s^{t_k} R_{b_k b_tau} d tau``. With ``u(s) = R_{b_k b_s} (f(s) - b_a)``:
+
+    a_pred - a_true = -[(R_nb F_b) x] phi + R_nb M b_a + R_nb (int K [u x] Gamma ds) b_g,
+
+so ``H_w = [0, 0, -[(R_nb F_b) x], R_nb M, R_nb G]``, ``G = int K [u x] Gamma ds``: the paper's
+``H_a`` with ``f`` replaced by the kernel average (``M = I``, ``G = 0`` for a window of zero
+length). The noise is the paper's ``Sigma_a`` (or the configured fixed sigma).
+
+Correlations (all variants)
+---------------------------
+``a~`` is a deterministic linear function of fixes the filter also uses as position updates.
+Both ``ekf-acc`` and ``ekf-accw`` treat it as an independent measurement, so the same fix noise
+is counted twice. An exact treatment (stochastic cloning with the fix noises carried as states,
+:mod:`gnssacc.aiding_theory`) reproduces the position-only filter in the linear-Gaussian case:
+the acceleration then carries no information of its own.
 """
 from __future__ import annotations
 
@@ -40,8 +82,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .earth import gravity_n
+from .mechanization import kernel_force_integrals
 from .quality import touches_segments
-from .rotations import skew
+from .rotations import euler_to_dcm, skew
 
 
 def design_matrix(t: np.ndarray) -> np.ndarray:
@@ -244,6 +288,62 @@ def measured_specific_force(imu, t: float, avg_s: float, seg_i0: np.ndarray, seg
     return imu.f_b[k0:k1].mean(axis=0)
 
 
+def peano_kernel(t_fix: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """The Peano kernel ``K(s) = sum_j B_j (t_j - s)_+`` [1/s] of the window ``t_fix`` [s] at times
+    ``s`` [s] (see the module docstring): ``B p = int K p'' ds``; zero outside the window."""
+    t_fix = np.asarray(t_fix, float)
+    B = acceleration_row(t_fix)
+    s = np.asarray(s, float)
+    K = np.maximum(t_fix - s[..., None], 0.0) @ B
+    return np.where((s >= t_fix[0]) & (s <= t_fix[-1]), K, 0.0)
+
+
+def peano_weights(t_fix: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """``int_lo^hi K(s) ds`` for intervals ``[lo_i, hi_i]`` inside the window ``t_fix`` [s].
+
+    ``K`` is piecewise linear with the antiderivative ``-sum_j B_j (t_j - s)_+^2 / 2``, so this is
+    exact; times are referred to ``t_fix[0]`` to keep the squares small. Dimensionless; they sum
+    to 1 over intervals that tile the window.
+    """
+    t_fix = np.asarray(t_fix, float)
+    B = acceleration_row(t_fix)
+    tj = t_fix - t_fix[0]
+    lo = np.asarray(lo, float)[:, None] - t_fix[0]
+    hi = np.asarray(hi, float)[:, None] - t_fix[0]
+    return 0.5 * ((np.maximum(tj - lo, 0.0) ** 2 - np.maximum(tj - hi, 0.0) ** 2) @ B)
+
+
+def window_samples(t_imu: np.ndarray, t_fix: np.ndarray) -> tuple[int, int, np.ndarray, np.ndarray] | None:
+    """The IMU samples covering the window ``[t_fix[0], t_fix[-1]]`` and their kernel weights.
+
+    Parameters
+    ----------
+    t_imu : ndarray (N,)
+        IMU sample times [s]; sample ``i`` holds over ``(t_imu[i-1], t_imu[i]]``.
+    t_fix : ndarray (m,)
+        The window's fix times [s].
+
+    Returns
+    -------
+    k0, k1 : int
+        Samples ``k0 .. k1 - 1`` overlap the window.
+    h : ndarray (k1 - k0,)
+        Length of each sample's overlap with the window [s].
+    w : ndarray (k1 - k0,)
+        ``int K`` over each overlap (:func:`peano_weights`).
+
+    ``None`` when the IMU does not cover the window.
+    """
+    t0, t1 = float(t_fix[0]), float(t_fix[-1])
+    k0 = int(np.searchsorted(t_imu, t0, side="right"))
+    k1 = int(np.searchsorted(t_imu, t1, side="left")) + 1
+    if k0 < 1 or k1 > len(t_imu):
+        return None
+    lo = np.maximum(t_imu[k0 - 1:k1 - 1], t0)
+    hi = np.minimum(t_imu[k0:k1], t1)
+    return k0, k1, hi - lo, peano_weights(t_fix, lo, hi)
+
+
 def predicted_acceleration(R_nb: np.ndarray, f_b: np.ndarray, g_n: np.ndarray) -> np.ndarray:
     """Acceleration in n predicted by the INS, ``a^n = R_nb f_b + g^n`` [m/s^2]."""
     return R_nb @ f_b + g_n
@@ -278,6 +378,26 @@ def H_a(R_nb: np.ndarray, f_b: np.ndarray) -> np.ndarray:
     return H
 
 
+def H_w_blocks(R_nb: np.ndarray, F_b: np.ndarray, M: np.ndarray, G: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Non-zero blocks of the window-consistent Jacobian ``H_w`` (see module docstring).
+
+    Parameters
+    ----------
+    R_nb : ndarray (3, 3)
+        Estimated body-to-NED rotation at the update epoch ``t_k``.
+    F_b, M, G : ndarray (3,), (3, 3), (3, 3)
+        Kernel integrals ``int K u``, ``int K R_{b_k b_s}``, ``int K [u x] Gamma`` (body frame at
+        ``t_k``; [m/s^2], [-], [m/s]) from :func:`gnssacc.mechanization.kernel_force_integrals`.
+
+    Returns
+    -------
+    d_phi, d_ba, d_bg : ndarray (3, 3)
+        ``-[(R_nb F_b) x]`` [m/s^2/rad], ``R_nb M`` [-], ``R_nb G`` [m/s].
+    """
+    return -skew(R_nb @ F_b), R_nb @ M, R_nb @ G
+
+
 def paper_H_a_blocks(R_nb: np.ndarray, f_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The blocks as printed in the paper, ``(R_nb [f x], -R_nb)``.
 
@@ -285,3 +405,41 @@ def paper_H_a_blocks(R_nb: np.ndarray, f_b: np.ndarray) -> tuple[np.ndarray, np.
     ``phi_b = R_nb^T phi``: ``paper_dphi @ R_nb^T == -d_phi`` and ``paper_dba == -d_ba``.
     """
     return R_nb @ skew(f_b), -R_nb
+
+
+def model_errors(run, m: int = 3, max_gap_s: float = 2.5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``a~ - a_pred`` at the true state for every full window of a run with truth at its fixes.
+
+    Parameters
+    ----------
+    run : gnssacc.recording.RecordedRun
+        With ``run.truth`` (attitude) at the GNSS epochs, e.g. a simulated run; on noise-free
+        fixes and a perfect IMU the result is the model error alone.
+    m, max_gap_s : int, float
+        Window length and largest fix interval [s], as :class:`AccelWindow`.
+
+    Returns
+    -------
+    t : ndarray (K,)
+        The windows' update epochs [s].
+    paper, window : ndarray (K, 3)
+        Errors [m/s^2, NED] of the paper's one-epoch prediction ``R_nb f(t_k) + g`` and of the
+        window-consistent one ``R_nb F_b + g`` (true attitude, zero biases).
+    """
+    g, tr = run.gnss, run.truth
+    if tr is None or tr.rpy is None or len(tr.t) != len(g.t) or not np.allclose(tr.t, g.t):
+        raise ValueError("model_errors needs the truth's attitude at the GNSS epochs")
+    full, a_meas, _ = window_accelerations(g.t, run.origin.to_ned(g.lat, g.lon, g.h), g.sigma_ned, m, max_gap_s)
+    z3, no = np.zeros(3), np.zeros(0, np.int64)
+    rows = []
+    for j in np.flatnonzero(full):
+        win = window_samples(run.imu.t, g.t[j - m + 1:j + 1])
+        if win is None:
+            continue
+        k0, k1, h, w = win
+        R, g_n = euler_to_dcm(*tr.rpy[j]), gravity_n(tr.lat[j], tr.h[j])
+        F, _, _ = kernel_force_integrals(run.imu.f_b[k0:k1], run.imu.omega_ib_b[k0:k1], h, w, z3, z3)
+        f = measured_specific_force(run.imu, g.t[j], 0.0, no, no)
+        rows.append((g.t[j], predicted_acceleration(R, f, g_n) - a_meas[j], predicted_acceleration(R, F, g_n) - a_meas[j]))
+    return (np.array([r[0] for r in rows]), np.array([r[1] for r in rows]).reshape(-1, 3),
+            np.array([r[2] for r in rows]).reshape(-1, 3))

@@ -17,7 +17,9 @@ Models
     fix is the antenna plus its Gauss-Markov error ``x_g`` plus white noise).
 ``acc``
     GNSS-derived acceleration (the paper's): ``H_a = [0, 0, -[(R f) x], R, 0]`` from
-    :func:`gnssacc.gnss_accel.H_a_blocks`.
+    :func:`gnssacc.gnss_accel.H_a_blocks`; or its window-consistent form (``ekf-accw``), the
+    kernel-weighted INS acceleration over the fixes' window, ``H_w = [0, 0, -[(R F) x], R M, R G]``
+    from :func:`gnssacc.gnss_accel.H_w_blocks`.
 ``zupt``
     Zero velocity while the vehicle stands still: ``dz = v_est``, ``H = [0, I, 0, 0, 0]``.
 ``zaru``
@@ -32,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .earth import radii
-from .gnss_accel import H_a_blocks, predicted_acceleration
+from .gnss_accel import H_a_blocks, H_w_blocks, predicted_acceleration
 from .rotations import skew
 
 #: Update kinds, in the order they are reported.
@@ -95,6 +97,20 @@ def acceleration(s, a_n: np.ndarray, cov: np.ndarray, f_meas_b: np.ndarray, g_n:
     H[:, 6:9] = d_phi
     H[:, 9:12] = d_ba
     return Measurement("acc", a_pred - a_n, H, cov)
+
+
+def window_acceleration(s, a_n: np.ndarray, cov: np.ndarray, F_b: np.ndarray, M: np.ndarray, G: np.ndarray,
+                        g_n: np.ndarray) -> Measurement:
+    """GNSS-derived acceleration ``a_n`` [m/s^2] (covariance ``cov``) against the window-consistent
+    INS prediction ``R_nb F_b + g_n``, ``F_b, M, G`` the kernel integrals of
+    :func:`gnssacc.mechanization.kernel_force_integrals` at the state's biases (body frame at the
+    update epoch)."""
+    d_phi, d_ba, d_bg = H_w_blocks(s.R_nb, F_b, M, G)
+    H = _H(s, 3)
+    H[:, 6:9] = d_phi
+    H[:, 9:12] = d_ba
+    H[:, 12:15] = d_bg
+    return Measurement("acc", predicted_acceleration(s.R_nb, F_b, g_n) - a_n, H, cov)
 
 
 def zero_velocity(s, sigma_mps: float, gate: float = 0.0) -> Measurement:

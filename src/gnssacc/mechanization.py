@@ -127,6 +127,70 @@ def _strapdown(pos, v_n, R_nb, f_b, omega_ib_b, dt, w_ie_sign, work):
 
 
 @njit(cache=True)
+def kernel_force_integrals(f_b, omega_b, h, w, b_a, b_g):
+    """Kernel-weighted specific force over an acceleration window, in the body frame at its end.
+
+    Walks the samples backward from the window's end ``t_k``, integrating the body rotation
+    ``R_{b_k b_s}`` from the bias-corrected gyro (earth rate neglected: see
+    :mod:`gnssacc.gnss_accel`), each sample taken at the midpoint of its overlap.
+
+    Parameters
+    ----------
+    f_b, omega_b : ndarray (n, 3)
+        The window's raw IMU samples in time order, body [m/s^2], [rad/s].
+    h : ndarray (n,)
+        Each sample's overlap with the window [s].
+    w : ndarray (n,)
+        Its kernel weight ``int K`` [-] (:func:`gnssacc.gnss_accel.window_samples`).
+    b_a, b_g : ndarray (3,)
+        Bias estimates [m/s^2], [rad/s].
+
+    Returns
+    -------
+    F : ndarray (3,)
+        ``int K R_{b_k b_s} (f - b_a) ds`` [m/s^2].
+    M : ndarray (3, 3)
+        ``int K R_{b_k b_s} ds`` [-].
+    G : ndarray (3, 3)
+        ``int K [u x] Gamma ds`` [m/s], ``u = R_{b_k b_s} (f - b_a)``, ``Gamma(s) = int_s^{t_k}
+        R_{b_k b_tau} d tau``: the sensitivity of ``F`` to the gyro-bias error.
+    """
+    F = np.zeros(3)
+    M = np.zeros((3, 3))
+    G = np.zeros((3, 3))
+    R = np.eye(3)                 # R_{b_k b(s)} at the start of the current step (walking back)
+    Gam = np.zeros((3, 3))        # Gamma at that time
+    E = np.empty((3, 3))
+    Rm = np.empty((3, 3))
+    Gm = np.empty((3, 3))
+    u = np.empty(3)
+    for i in range(h.shape[0] - 1, -1, -1):
+        hi = h[i]
+        p0, p1, p2 = omega_b[i, 0] - b_g[0], omega_b[i, 1] - b_g[1], omega_b[i, 2] - b_g[2]
+        _exp_so3_into(-0.5 * hi * p0, -0.5 * hi * p1, -0.5 * hi * p2, E)
+        _mm3_into(R, E, Rm)
+        for r in range(3):
+            for c in range(3):
+                Gm[r, c] = Gam[r, c] + 0.5 * hi * Rm[r, c]
+        for r in range(3):
+            u[r] = (Rm[r, 0] * (f_b[i, 0] - b_a[0]) + Rm[r, 1] * (f_b[i, 1] - b_a[1])
+                    + Rm[r, 2] * (f_b[i, 2] - b_a[2]))
+        wi = w[i]
+        for r in range(3):
+            F[r] += wi * u[r]
+            for c in range(3):
+                M[r, c] += wi * Rm[r, c]
+                # [u x] Gm, row r
+                G[r, c] += wi * (u[(r + 1) % 3] * Gm[(r + 2) % 3, c] - u[(r + 2) % 3] * Gm[(r + 1) % 3, c])
+        for r in range(3):
+            for c in range(3):
+                Gam[r, c] += hi * Rm[r, c]
+        _exp_so3_into(-0.5 * hi * p0, -0.5 * hi * p1, -0.5 * hi * p2, E)
+        _mm3_into(Rm, E, R)
+    return F, M, G
+
+
+@njit(cache=True)
 def apply_correction(pos, v_n, R_nb, b_a, b_g, gm, dx):
     """Closed-loop feedback of an estimated error ``dx`` (estimate minus truth, order
     ``[dp, dv, phi, b_a, b_g (, x_g)]``) into the nominal state, in place.

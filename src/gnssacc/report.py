@@ -13,7 +13,7 @@ from .recording import RecordedRun
 from .solution import NavSolution
 
 #: Baseline of each aided method, for the improvement column.
-BASELINES = {"ekf-acc": "ekf", "smoother-acc": "smoother", "smoother-acc-online": "smoother-online",
+BASELINES = {"ekf-acc": "ekf", "ekf-accw": "ekf", "smoother-acc": "smoother", "smoother-acc-online": "smoother-online",
              "ekf-gm": "ekf", "smoother-gm": "smoother", "smoother-gm-online": "smoother-online"}
 
 #: Columns of ``trajectory_<id>.csv`` (display units, :mod:`gnssacc.display`).
