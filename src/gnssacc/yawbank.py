@@ -133,8 +133,13 @@ def select_yaw(run: RecordedRun, cfg: RunConfig, stationary=None, quality=None,
     n = int(c["yaw_hypotheses"])
     yaws = 2.0 * np.pi * np.arange(n) / n
     hyps = [hypothesis(run, cfg, start, y, np.pi / n) for y in yaws]
-    # Gates would let a wrong hypothesis skip the updates that expose it.
+    # Gates would let a wrong hypothesis skip the updates that expose it; so only the stationary
+    # spans the fixes confirmed are scored: an IMU-still stretch inside an outage may be a smooth
+    # cruise, whose zero-velocity updates, ungated, would condemn the right yaw (the one that knows
+    # its velocity best) and crown a wrong one.
     ungated = cfg.with_values({"zupt": {"gate_nis": 0.0}, "ekf": {"position_gate_nis": 0.0}}, "yaw bank")
+    if stationary is not None:
+        stationary = replace(stationary, spans=[s for s in stationary.spans if s.gnss_checked])
     t_move = start.t if start.static is None else float(run.imu.t[start.static.stop - 1])
     horizon, level = float(c["yaw_horizon_s"]), float(c["yaw_confidence"])
     while True:
