@@ -35,7 +35,8 @@ def _smoother(ident: Identified, method: str, show_progress: bool) -> dict[str, 
 
 #: Estimators by method id: ``(identified, method, show_progress) -> {id: NavSolution}``.
 #: A smoother method also returns its online estimate as ``<id>-online``.
-METHODS = {"ekf": _ekf, "ekf-acc": _ekf, "smoother": _smoother, "smoother-acc": _smoother}
+METHODS = {"ekf": _ekf, "ekf-acc": _ekf, "smoother": _smoother, "smoother-acc": _smoother,
+           "smoother-accw": _smoother}
 DEFAULT_METHODS = ("ekf", "ekf-acc", "smoother", "smoother-acc")
 
 

@@ -13,7 +13,8 @@ from .recording import RecordedRun
 from .solution import NavSolution
 
 #: Baseline of each aided method, for the improvement column.
-BASELINES = {"ekf-acc": "ekf", "smoother-acc": "smoother", "smoother-acc-online": "smoother-online"}
+BASELINES = {"ekf-acc": "ekf", "smoother-acc": "smoother", "smoother-acc-online": "smoother-online",
+             "smoother-accw": "smoother", "smoother-accw-online": "smoother-online"}
 
 #: Columns of ``trajectory_<id>.csv`` (display units, :mod:`gnssacc.display`).
 TRAJECTORY_COLUMNS = list(TRAJECTORY_COLUMNS)
