@@ -688,6 +688,8 @@ def _reinitialise(loop: _Loop, i: int, graph, values) -> int:
     for j in range(graph.size()):
         if all(p_values.exists(key) for key in graph.at(j).keys()):
             p_graph.push_back(graph.at(j))
+        else:
+            loop.stats["n_factors_dropped_at_restart"] = loop.stats.get("n_factors_dropped_at_restart", 0) + 1
     stamps = [(key, times[p]) for key in loop.smoother.keys(p)] + [(key, times[i]) for key in loop.smoother.keys(i)]
     loop.smoother.update(p_graph, p_values, stamps)
     return p
