@@ -20,7 +20,9 @@ The error is linear in the positions but not in the Pose3 tangent (``tau`` is bo
 linear GTSAM factor is not exact here: it is a CustomFactor (its cost is in ``bench/bench_smoother.py``).
 Noise: the propagated ``sum_j B_j^2 Sigma_j`` (fixes independent) or a fixed sigma, as for the
 paper's factor. It is not correlated with the position factors of the same fixes: like the
-paper's factor it counts their information twice (:mod:`gnssacc.aiding_theory`).
+paper's factor it counts their information twice (:mod:`gnssacc.aiding_theory`). With the
+Gauss-Markov GNSS-error states the factor still compares with the antenna positions alone (the
+second difference of a slow error is small, but it is not modelled here).
 """
 from __future__ import annotations
 
