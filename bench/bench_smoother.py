@@ -1,9 +1,9 @@
 """Smoother speed and memory.
 
 Speed (KITTI default, one core, median of --repeats runs): wall time and real-time factor of
-``smoother`` and ``smoother-acc`` (acceleration factor and per-node marginal covariances
-included), next to a *plain* gtsam baseline timed in the same process: IncrementalFixedLagSmoother
-with CombinedImuFactor + GPSFactor, 10 s lag, 1 Hz nodes, no marginals. The ratio to the plain
+``smoother``, ``smoother-acc`` and ``smoother-accw`` (acceleration factors and per-node marginal
+covariances included), next to a *plain* gtsam baseline timed in the same process:
+IncrementalFixedLagSmoother with CombinedImuFactor + GPSFactor, 10 s lag, 1 Hz nodes, no marginals. The ratio to the plain
 script is the machine-independent figure; the real-time factor is what a user sees.
 
 Memory: peak resident memory of fresh processes running ``smoother-acc`` on simulated car runs
@@ -132,10 +132,11 @@ def main():
     run, cfg, init = ident.run, ident.cfg, ident.init
     kw = dict(quality=ident.quality, init=init, stationary=ident.stationary)
     run_smoother(run, cfg, "smoother", **kw)  # warm-up (imports, caches)
-    walls = {"plain gtsam script": [], "smoother": [], "smoother-acc": []}
+    smoothers = ("smoother", "smoother-acc", "smoother-accw")
+    walls = {"plain gtsam script": [], **{m: [] for m in smoothers}}
     for _ in range(args.repeats):  # interleaved, so slow phases of the machine hit all alike
         walls["plain gtsam script"].append(plain_fixed_lag(run, cfg, init))
-        for m in ("smoother", "smoother-acc"):
+        for m in smoothers:
             t0 = time.perf_counter()
             run_smoother(run, cfg, m, **kw)
             walls[m].append(time.perf_counter() - t0)
@@ -145,6 +146,9 @@ def main():
     for m, w in walls.items():
         med = float(np.median(w))
         print(f"{m:20s} {med:9.3f} {min(w):8.3f} {run.duration_s / med:17.0f} {med / plain:15.2f}")
+    base = float(np.median(walls["smoother"]))
+    for m in smoothers[1:]:
+        print(f"{m} / smoother: {float(np.median(walls[m])) / base:.2f} (median wall over median wall)")
 
     print("\nMemory (fresh process per run, peak RSS above the RSS before the smoother starts):")
     print(f"{'run length [s]':>15s} {'nodes':>7s} {'peak growth [MiB]':>18s} {'variables held':>15s} "

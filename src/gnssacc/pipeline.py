@@ -42,7 +42,7 @@ def _gm(ident: Identified, method: str, show_progress: bool) -> dict[str, NavSol
 #: Estimators by method id: ``(identified, method, show_progress) -> {id: NavSolution}``.
 #: A smoother method also returns its online estimate as ``<id>-online``.
 METHODS = {"ekf": _ekf, "ekf-acc": _ekf, "ekf-accw": _ekf, "smoother": _smoother, "smoother-acc": _smoother,
-           "ekf-gm": _gm, "smoother-gm": _gm}
+           "smoother-accw": _smoother, "ekf-gm": _gm, "smoother-gm": _gm}
 DEFAULT_METHODS = ("ekf", "ekf-acc", "smoother", "smoother-acc")
 
 

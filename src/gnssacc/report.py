@@ -14,6 +14,7 @@ from .solution import NavSolution
 
 #: Baseline of each aided method, for the improvement column.
 BASELINES = {"ekf-acc": "ekf", "ekf-accw": "ekf", "smoother-acc": "smoother", "smoother-acc-online": "smoother-online",
+             "smoother-accw": "smoother", "smoother-accw-online": "smoother-online",
              "ekf-gm": "ekf", "smoother-gm": "smoother", "smoother-gm-online": "smoother-online"}
 
 #: Columns of ``trajectory_<id>.csv`` (display units, :mod:`gnssacc.display`).

@@ -10,7 +10,8 @@ Graph, in a local NED tangent frame at the run's origin:
   inflation over suspect IMU spans;
 * ``GPSFactor`` (``GPSFactorArm`` with a lever arm) with each fix's covariance;
 * for ``smoother-acc``, the GNSS-acceleration factor of :mod:`gnssacc.factors` on (X_k, B_k),
-  built from the same least-squares window as the EKF's update;
+  built from the same least-squares window as the EKF's update; for ``smoother-accw`` the
+  window-consistent one on the poses of the window's fixes (``sum_j B_j p_ant(X_j) - a~``);
 * while the vehicle stands still (``[zupt]``), a zero-velocity prior on V_k and the zero-rate
   reading (mean gyro minus the earth rate) as a prior on the gyro half of B_k, at the node
   nearest each stationary epoch of :mod:`gnssacc.zupt` (nodes are added where no GNSS epoch is
@@ -45,8 +46,9 @@ from gtsam.symbol_shorthand import B, G, V, X
 from .config import RunConfig
 from .earth import earth_rate_n, normal_gravity
 from .ekf import initial_state
-from .factors import gauss_markov_factor, gnss_accel_factor, gnss_position_gm_factor, joint_prior_factor
-from .gnss_accel import measured_specific_force, window_accelerations
+from .factors import (gauss_markov_factor, gnss_accel_factor, gnss_position_gm_factor, joint_prior_factor,
+                      window_accel_factor)
+from .gnss_accel import acceleration_row, measured_specific_force, window_accelerations
 from .progress import progress
 from .quality import QualityReport, inflation_segments, touches_segments
 from .rotations import dcm_to_euler, euler_error_jacobian, skew
@@ -56,7 +58,8 @@ from .window_marginals import NotAChain, WindowMarginals
 from .yawbank import start_and_quality
 from .zupt import StationaryEpochs, epochs_for
 
-METHODS = {"smoother": False, "smoother-acc": True}
+#: Method id -> GNSS-acceleration factor: none, the paper's on (X_k, B_k), or the window-consistent one.
+METHODS = {"smoother": None, "smoother-acc": "paper", "smoother-accw": "window"}
 #: Nodes closer than this are merged (a duplicate time would make a zero-length IMU factor) [s].
 MIN_NODE_DT = 1e-3
 #: Smallest accelerometer bias random walk the smoother uses [m/s^2/sqrt(s)] (~0.1 ug/sqrt(s)).
@@ -196,7 +199,10 @@ class _Record:
 class _Smoother:
     """The incremental fixed-lag smoother with bookkeeping and recovery."""
 
-    def __init__(self, cfg: RunConfig):
+    def __init__(self, cfg: RunConfig, chain: bool = True):
+        """``chain``: factors link consecutive nodes only, so the window's marginals can be kept
+        by :class:`WindowMarginals`; otherwise (window-consistent acceleration factors on three
+        nodes) they come from iSAM2's joint queries."""
         sm = cfg["smoother"]
         self.lag = float(sm["lag_s"])
         self.gm = bool(np.any(cfg.gnss_gm_sigma > 0))
@@ -207,7 +213,7 @@ class _Smoother:
         # Reuse the slots of marginalised factors so the factor list stays bounded on long runs.
         self.params.findUnusedFactorSlots = True
         self.isam = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
-        self.marginals = WindowMarginals(self.gm)
+        self.marginals = WindowMarginals(self.gm) if chain else None
 
     def reset(self, robust: bool = False) -> None:
         """A new, empty smoother; ``robust`` switches to QR factorization (returns whether it did)."""
@@ -215,7 +221,8 @@ class _Smoother:
         if switched:
             self.params.setFactorization("QR")
         self.isam = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
-        self.marginals.clear()
+        if self.marginals is not None:
+            self.marginals.clear()
         return switched
 
     def update(self, graph, values, stamps) -> None:
@@ -223,6 +230,8 @@ class _Smoother:
         for key, t in stamps:
             ts.insert((key, t))
         self.isam.update(graph, values, ts)
+        if self.marginals is None:
+            return
         try:
             self.marginals.sync(self.isam, graph)
         except NotAChain:
@@ -235,6 +244,10 @@ class _Smoother:
         return (isam.calculateEstimatePose3(X(i)), isam.calculateEstimateVector(V(i)),
                 isam.calculateEstimateConstantBias(B(i)), g)
 
+    def has_node(self, i: int) -> bool:
+        """Whether node ``i`` is in the window (not marginalised, not dropped by a restart)."""
+        return self.isam.getISAM2().valueExists(X(i))
+
     def keys(self, i: int) -> list:
         """Keys of node ``i``: pose, velocity, bias[, GNSS error]."""
         return [X(i), V(i), B(i)] + ([G(i)] if self.gm else [])
@@ -244,14 +257,21 @@ class _Smoother:
         cross-covariance (6x3) and GNSS-error covariance (3x3) (zeros when not modelled).
 
         From :class:`gnssacc.window_marginals.WindowMarginals` (the window's linear system, kept
-        in step with iSAM2); iSAM2's own joint query, by QR, if that system is not at hand.
+        in step with iSAM2); iSAM2's own joint query, by QR, if that system is not at hand (its
+        per-key marginals when the window holds no chain and no GNSS-error states).
         """
         full = None
-        if self.marginals.first is not None:
+        if self.marginals is not None and self.marginals.first is not None:
             try:
                 full = self.marginals.covariance(i)
             except np.linalg.LinAlgError:
                 self.marginals.clear()   # rebuilt at the next update
+        if full is None and self.marginals is None and not self.gm:
+            # Only the diagonal blocks are used without GNSS-error states: iSAM2's per-key
+            # marginals cost a third of its joint query (measured, smoother-accw).
+            isam = self.isam.getISAM2()
+            return (isam.marginalCovariance(X(i)), isam.marginalCovariance(V(i)), isam.marginalCovariance(B(i)),
+                    _ZERO_XG, _ZERO_G)
         if full is None:
             keys = self.keys(i)
             info, _ = self.isam.getISAM2().joint(keys, gtsam.EliminateQR).hessian(gtsam.Ordering(keys))
@@ -320,6 +340,8 @@ class _Factors:
         self.f_avg = float(cfg["accel"]["specific_force_avg_s"])
         self.acc_window = (int(cfg["accel"]["window"]), float(cfg["accel"]["max_gap_s"]), cfg.accel_sigma_override)
         self.acc = None
+        self.acc_fixes: dict = {}   # fix index -> the window's fix indices, oldest first
+        self.node_of: dict = {}     # fix index -> its node
         self.zupt_noise = gtsam.noiseModel.Isotropic.Sigma(3, float(cfg["zupt"]["velocity_sigma_mps"]))
         self.zupt_var = float(cfg["zupt"]["velocity_sigma_mps"]) ** 2
         self.zupt_gate = float(cfg["zupt"]["gate_nis"])
@@ -334,6 +356,7 @@ class _Factors:
             return None
         sig = self.run.gnss.sigma_ned[k]
         self.stats["n_gps_factors"] += 1
+        self.node_of[k] = i
         if self.gm:
             graph.add(gnss_position_gm_factor(X(i), G(i), self.p_fix[k], self.lever, sig))
             return k
@@ -361,6 +384,8 @@ class _Factors:
         full, a_n, var = window_accelerations(t_fix[pushed], self.p_fix[pushed], self.run.gnss.sigma_ned[pushed],
                                               *self.acc_window)
         self.acc = {int(k): (a_n[j], var[j]) for j, k in enumerate(pushed) if full[j]}
+        m = self.acc_window[0]
+        self.acc_fixes = {int(k): pushed[j - m + 1:j + 1] for j, k in enumerate(pushed) if full[j]}
 
     def accel(self, graph, i: int, t: float, k: int, seg_i0, seg_i1) -> None:
         """GNSS-acceleration factor on (X_i, B_i) once the least-squares window is full."""
@@ -372,6 +397,21 @@ class _Factors:
             self.stats["n_acc_skipped_suspect_imu"] += 1
             return
         graph.add(gnss_accel_factor(X(i), B(i), f_meas, meas[0], self.g_n, np.diag(meas[1])))
+        self.stats["n_acc_factors"] += 1
+
+    def accel_window(self, graph, k: int, in_window) -> None:
+        """Window-consistent GNSS-acceleration factor on the poses of fix ``k``'s window, when its
+        window is full and all of its fixes' nodes are in the smoother (``in_window(node)``)."""
+        meas = self.acc.get(k)
+        if meas is None:
+            return
+        fixes = self.acc_fixes[k]
+        nodes = [self.node_of.get(int(f)) for f in fixes]
+        if any(n is None or not in_window(n) for n in nodes):   # fixes before the start, or marginalised
+            self.stats["n_acc_skipped_window"] = self.stats.get("n_acc_skipped_window", 0) + 1
+            return
+        B_row = acceleration_row(self.run.gnss.t[fixes])
+        graph.add(window_accel_factor([X(n) for n in nodes], B_row, meas[0], self.lever, np.diag(meas[1])))
         self.stats["n_acc_factors"] += 1
 
     def stationary(self, graph, i: int, j: int, R_nb: np.ndarray, bias, v_pred: np.ndarray,
@@ -458,8 +498,9 @@ def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
     ----------
     run : RecordedRun
     cfg : RunConfig
-    method : {"smoother", "smoother-acc"}
-        Without / with the GNSS-acceleration factor.
+    method : {"smoother", "smoother-acc", "smoother-accw"}
+        Without the GNSS-acceleration factor, with the paper's, or with the window-consistent one
+        (:data:`METHODS`).
     quality : QualityReport, optional
         Data-quality findings (computed when omitted).
     init : InitialState, optional
@@ -513,7 +554,7 @@ class _Loop:
         self.model = _ImuModel(cfg, float(factors.g_n[2]), earth_rate_n(origin.lat0))
         n = len(times)
         self.online, self.fixed = _Record(n), _Record(n)
-        self.smoother = _Smoother(cfg)
+        self.smoother = _Smoother(cfg, chain=use_acc != "window")
         self.fix_of = np.full(n, -1)
         self.window_start, self.oldest = 0, 0
         self._start(init)
@@ -558,7 +599,9 @@ class _Loop:
         k = self.f.gps(graph, i, t)
         if k is not None:
             self.fix_of[i] = k
-            if self.use_acc:
+            if self.use_acc == "window":
+                self.f.accel_window(graph, k, lambda n: n == i or self.smoother.has_node(n))
+            elif self.use_acc:
                 self.f.accel(graph, i, t, k, self.segs[0], self.segs[1])
         if i in self.stationary_at:
             self.f.stationary(graph, i, self.stationary_at[i], R_nb, self.bias, v_pred, c_vel)
@@ -632,7 +675,8 @@ def _reinitialise(loop: _Loop, i: int, graph, values) -> int:
 
     The new window holds node ``i - 1`` with a prior from its online estimate and marginal
     covariance (what the failed window knew about it), node ``i`` with all of its new factors
-    (IMU, GNSS, acceleration), so no measurement is lost. If the smoother used Cholesky
+    (IMU, GNSS, acceleration), so no measurement is lost, except a window-consistent acceleration
+    factor on nodes older than ``i - 1`` (they are gone). If the smoother used Cholesky
     factorization it switches to QR, which tolerates the poor conditioning that stiff bias random
     walks cause. Nodes of the abandoned window keep their online estimate as their fixed-lag one.
     """
@@ -647,8 +691,12 @@ def _reinitialise(loop: _Loop, i: int, graph, values) -> int:
     bias = gtsam.imuBias.ConstantBias(online.bias[p, 0:3], online.bias[p, 3:6])
     p_graph, p_values = loop.priors(p, pose, online.v_n[p], bias, online.cov_pose[p], online.cov_vel[p],
                                     online.cov_bias[p], online.g[p], online.cov_g[p] + 1e-12 * np.eye(3))
-    p_graph.push_back(graph)
     p_values.insert(values)
+    for j in range(graph.size()):
+        if all(p_values.exists(key) for key in graph.at(j).keys()):
+            p_graph.push_back(graph.at(j))
+        else:
+            loop.stats["n_factors_dropped_at_restart"] = loop.stats.get("n_factors_dropped_at_restart", 0) + 1
     stamps = [(key, times[p]) for key in loop.smoother.keys(p)] + [(key, times[i]) for key in loop.smoother.keys(i)]
     loop.smoother.update(p_graph, p_values, stamps)
     return p
