@@ -1,5 +1,6 @@
 """A user with an upside-down, rotated IMU and a 0.1 s logging delay fixes it in the config."""
 import numpy as np
+import pytest
 
 from gnssacc.config import load_config
 from gnssacc.ekf import run_ekf
@@ -35,3 +36,19 @@ def test_mounting_and_time_offset_from_config(tmp_path):
     from gnssacc.metrics import gnss_score
     assert score(raw, sol).prmse_m < gnss_score(raw).prmse_m
     assert np.all(np.abs(np.degrees(sol.rpy[:, 0])) > 170.0)
+
+
+@pytest.mark.parametrize("kernel", ["biweight", "box"])
+def test_smoothing_in_blocks_equals_one_convolution(monkeypatch, kernel):
+    # A long run's grid is smoothed block by block (bounded memory): the same values as one FFT
+    # convolution, for complex and real signals, at the ends and across block edges.
+    import gnssacc.motionmatch as mm
+
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal(1000) + 1j * rng.standard_normal(1000)
+    y = rng.standard_normal((1000, 2))
+    whole = mm.smooth(x, 0.01, 0.6, kernel), mm.smooth(y, 0.01, 0.6, kernel)
+    monkeypatch.setattr(mm, "SMOOTH_BLOCK", 37)
+    blocks = mm.smooth(x, 0.01, 0.6, kernel), mm.smooth(y, 0.01, 0.6, kernel)
+    for a, b in zip(whole, blocks):
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-12)

@@ -182,9 +182,30 @@ def smooth(x: np.ndarray, step: float, window_s: float, kernel: str = "biweight"
     s = np.arange(-half, half + 1) / (half + 1.0)
     k = {"biweight": (1 - s * s) ** 2, "epanechnikov": 1 - s * s, "box": np.ones_like(s)}[kernel]
     x2 = x.reshape(len(x), -1)
-    num = np.column_stack([fftconvolve(x2[:, i], k, "same") for i in range(x2.shape[1])])
-    den = fftconvolve(np.ones(len(x)), k, "same")[:, None]
-    return (num / np.maximum(den, 1e-12)).reshape(x.shape)
+    den = np.maximum(_convolve_same(np.ones(len(x)), k), 1e-12)
+    out = np.empty(x2.shape, np.result_type(x2, float))
+    for i in range(x2.shape[1]):
+        out[:, i] = _convolve_same(x2[:, i], k) / den
+    return out.reshape(x.shape)
+
+
+#: Samples convolved per FFT in :func:`smooth`: a long run's grid is smoothed in blocks (each with
+#: the kernel's half width of neighbours), so the FFT's work arrays stay a few MiB.
+SMOOTH_BLOCK = 1 << 16
+
+
+def _convolve_same(x: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """``scipy.signal.fftconvolve(x, k, "same")`` for an odd-length kernel, block by block."""
+    half, n = len(k) // 2, len(x)
+    if n <= SMOOTH_BLOCK:
+        return fftconvolve(x, k, "same")
+    out = np.empty(n, np.result_type(x, k))
+    for a in range(0, n, SMOOTH_BLOCK):
+        b = min(a + SMOOTH_BLOCK, n)
+        lo, hi = max(a - half, 0), min(b + half, n)   # every sample that reaches outputs a .. b-1
+        full = fftconvolve(x[lo:hi], k, "full")       # full[j] is output lo + j - half
+        out[a:b] = full[a - lo + half:b - lo + half]
+    return out
 
 
 def smooth_horizontal(lev: LevelledImu, window_s: float) -> np.ndarray:
@@ -208,9 +229,14 @@ def smooth_horizontal(lev: LevelledImu, window_s: float) -> np.ndarray:
     """
     if not lev.ground_frame:
         return smooth(lev.f_h, lev.step, window_s)
-    psi = np.cumsum(lev.omega_v) * lev.step
-    turn = np.exp(1j * psi)
-    f = smooth((lev.f_h[:, 0] + 1j * lev.f_h[:, 1]) * turn, lev.step, window_s) / turn
+    turn = np.cumsum(lev.omega_v) * (1j * lev.step)   # in place from here: a long run's grid is large
+    np.exp(turn, out=turn)
+    z = lev.f_h[:, 1] * 1j
+    z += lev.f_h[:, 0]
+    z *= turn
+    f = smooth(z, lev.step, window_s)
+    del z
+    f /= turn
     return np.column_stack([f.real, f.imag])
 
 

@@ -237,7 +237,7 @@ def _gaps(t: np.ndarray, factor: float) -> tuple[list[Span], float, float]:
 def _frozen(t: np.ndarray, x: np.ndarray, min_samples: int) -> list[Span]:
     if len(t) < 2:
         return []
-    still = np.all(np.diff(x, axis=0) == 0.0, axis=1)   # index k: sample k+1 repeats sample k
+    still = np.all(x[1:] == x[:-1], axis=1)   # index k: sample k+1 repeats sample k (no float temporary)
     spans = []
     for s, f in zip(*_runs(still)):
         if f - s >= min_samples:
@@ -249,23 +249,23 @@ def _frozen(t: np.ndarray, x: np.ndarray, min_samples: int) -> list[Span]:
 
 def _saturated(t: np.ndarray, x: np.ndarray, min_samples: int) -> list[Span]:
     spans = []
-    med = np.median(x, axis=0)
-    sigma = 1.4826 * np.median(np.abs(x - med), axis=0)
-    # A coarsely quantised channel can have MAD = 0; fall back to the plain std then.
-    sigma = np.where(sigma > 0, sigma, np.std(x, axis=0))
-    for c, name in enumerate(CHANNELS):
-        if sigma[c] == 0:
+    for c, name in enumerate(CHANNELS):   # channel by channel: a long run's temporaries stay one column
+        col = x[:, c]
+        med = float(np.median(col))
+        # A coarsely quantised channel can have MAD = 0; fall back to the plain std then.
+        sigma = 1.4826 * float(np.median(np.abs(col - med))) or float(np.std(col))
+        if sigma == 0:
             continue                         # constant channel: nothing to tell apart
-        for which, ext in (("max", x[:, c].max()), ("min", x[:, c].min())):
-            far = abs(ext - med[c]) / sigma[c]
+        for which, ext in (("max", col.max()), ("min", col.min())):
+            far = abs(ext - med) / sigma
             if far <= SATURATION_ROBUST_SIGMAS:
                 continue
-            at_ext = np.abs(x[:, c] - ext) <= 1e-9 * max(abs(ext), 1.0)
+            at_ext = np.abs(col - ext) <= 1e-9 * max(abs(ext), 1.0)
             for s, f in zip(*_runs(at_ext)):
                 if f - s >= min_samples:
                     spans.append(_span("saturated", t, s, f, name,
                                        f"{name} held at its {which} {ext:.6g} for {f - s} samples "
-                                       f"({far:.0f} robust sigma from its median {med[c]:.4g})"))
+                                       f"({far:.0f} robust sigma from its median {med:.4g})"))
     return spans
 
 
