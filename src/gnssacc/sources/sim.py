@@ -42,6 +42,7 @@ import numpy as np
 from ..earth import LocalTangentFrame, OMEGA_IE, normal_gravity, radii
 from ..errors import InputError
 from ..gnss_noise import PROFILES, fixes_from_truth
+from ..memory import release_free_memory
 from ..rotations import wrap_angle
 from ..recording import GnssFixes, ImuData, InitialState, RecordedRun, SimTruth, Truth
 from .sim_imu_errors import (GRADE_KEYS, IMU_EXTRA_ERRORS, IMU_GRADES, MODEL_KEYS,  # noqa: F401 (re-exported)
@@ -550,7 +551,9 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
     lever_b = np.asarray(lever_arm_b, float).reshape(3)
 
     traj = build_trajectory(scenario, duration_s, imu_rate_hz, origin_llh_deg, initial_yaw_deg, t_start_s)
+    release_free_memory()   # the integration's temporaries, before the IMU's
     imu, imu_info = simulate_imu(traj, _imu_time(t_start_s, duration_s, imu_rate_hz), model, seed)
+    release_free_memory()
 
     t_gnss = _imu_time(t_start_s, duration_s, gnss_rate_hz)
     truth_gnss = traj.at(t_gnss)
