@@ -613,3 +613,16 @@ def test_cli_imu_on_utc_with_automatic_offset_is_scored_over_the_whole_run(car_c
     assert got["scored_window_s"][1] == pytest.approx(120.0)
     assert got["coverage"]["ekf"]["fraction"] == pytest.approx(1.0)
     assert got["methods"]["ekf"]["prmse_m"] == pytest.approx(clean["methods"]["ekf"]["prmse_m"], rel=0.05)
+
+
+@pytest.mark.parametrize("seed", [0, 7])
+def test_no_clock_or_gyro_false_alarm_across_outages_on_a_slow_ugv(seed):
+    # A slow UGV, 3 m fixes at 5 Hz, 20 s outages every 60 s: the quadratic fits bridged the
+    # outages and invented accelerations, so the checks refused correct data ("IMU time stamps
+    # run 16.7 s behind the GNSS clock" for seed 7, "the gyro's heading rate is 1.67 times the
+    # GNSS course rate" for seed 0). Windows with a long stretch without fixes are not used.
+    import gnssacc
+
+    res = gnssacc.process("sim:ugv-slow,imu=industrial,gnss_hz=5,duration=180", methods=["ekf"], noise="white",
+                          seed=seed, tune="none", outage_every="60:20")
+    assert res.metrics["methods"]["ekf"]["prmse_m"] < 5.0

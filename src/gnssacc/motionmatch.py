@@ -321,6 +321,7 @@ def local_fits(t: np.ndarray, p: np.ndarray, w: np.ndarray, centres: np.ndarray,
     A = np.stack([np.ones_like(s), s, 0.5 * s * s], -1)
     N = np.einsum("nmi,nm,nmj->nij", A, ww, A)
     ok = ((hi - lo) >= MIN_FIXES) & ((valid & (s < 0)).sum(1) >= 2) & ((valid & (s > 0)).sum(1) >= 2)
+    ok &= _largest_gap(t, idx, valid, lo, hi, centres, half) <= _gap_limit(t, window_s)
     N[~ok] = np.eye(3)
     Ninv = np.linalg.inv(N)
     x = Ninv @ np.einsum("nmi,nm,nmk->nik", A, ww, p[idx])
@@ -328,6 +329,28 @@ def local_fits(t: np.ndarray, p: np.ndarray, w: np.ndarray, centres: np.ndarray,
     scale = np.array([1.0, 1.0 / half, 1.0 / half**2])
     var = np.diagonal(Ninv, axis1=1, axis2=2) * scale**2
     return x * scale[None, :, None], var, ok, resid, (hi - lo) - 3
+
+
+#: A window's fit is used only when no stretch of it without fixes (inside, or at either end) is
+#: longer than this fraction of the window (or twice the median fix interval, if longer): a
+#: quadratic bridged over an outage invents the motion inside it, and a slow vehicle's turns
+#: there read as accelerations no IMU saw (a clock offset of 16 s, a gyro "1.7 times" the course
+#: rate, on a slow UGV with 20 s outages).
+MAX_GAP_FRACTION = 0.25
+
+
+def _gap_limit(t: np.ndarray, window_s: float) -> float:
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else window_s
+    return max(MAX_GAP_FRACTION * window_s, 2.0 * dt)
+
+
+def _largest_gap(t, idx, valid, lo, hi, centres, half) -> np.ndarray:
+    """Per window: its longest stretch without fixes [s], the ends of the window included."""
+    last = t[np.maximum(hi - 1, 0)]
+    tv = np.where(valid, t[idx], last[:, None])                  # padding repeats the last fix
+    inner = np.diff(tv, axis=1).max(axis=1) if tv.shape[1] > 1 else np.zeros(len(tv))
+    first = t[np.minimum(lo, len(t) - 1)]
+    return np.maximum(inner, np.maximum(first - (centres - half), (centres + half) - last))
 
 
 def fix_scatter(t: np.ndarray, p: np.ndarray, w: np.ndarray) -> float:
