@@ -128,12 +128,15 @@ def test_ill_posed_updates_are_recovered_and_counted():
     assert np.all(np.isfinite(sol.sigma))
 
 
-def test_injected_failure_mid_run_is_recovered(monkeypatch):
+@pytest.mark.parametrize("method, dropped", [("smoother", 0), ("smoother-accw", 2)])
+def test_injected_failure_mid_run_is_recovered(monkeypatch, method, dropped):
+    """Two ill-posed updates are recovered by a restart; a restart keeps nodes i-1 and i only, so
+    ``smoother-accw`` drops (and counts) its window factor on node i-2 each time."""
     import gnssacc.smoother as S
 
     cfg = load_config(overrides={"imu": grade_config("industrial")})
     run = simulate("car", duration_s=90.0, imu_grade="industrial", noise="white", seed=2)
-    ref = run_smoother(run, cfg, "smoother")["smoother"]
+    ref = run_smoother(run, cfg, method)[method]
     calls = {"n": 0}
     real_update = S._Smoother.update
 
@@ -144,9 +147,10 @@ def test_injected_failure_mid_run_is_recovered(monkeypatch):
         return real_update(self, graph, values, stamps)
 
     monkeypatch.setattr(S._Smoother, "update", flaky)
-    sol = run_smoother(run, cfg, "smoother")["smoother"]
+    sol = run_smoother(run, cfg, method)[method]
     assert sol.stats["n_ill_posed_recovered"] == 2
-    assert len(sol) == len(ref)
+    assert sol.stats.get("n_factors_dropped_at_restart", 0) == dropped
+    assert len(sol) == len(ref) and np.all(np.isfinite(sol.sigma))
     assert score(run, sol).prmse_m < 1.5 * score(run, ref).prmse_m
 
 
