@@ -175,11 +175,12 @@ def _cell(e: Effect) -> str:
     return f"{e.mean_pct:+.1f} [{e.ci_low:+.1f},{e.ci_high:+.1f}] p={e.p:.3f}"
 
 
-def verdict(eff: list[Effect], figure: str = "prmse_m", alpha: float = 0.05) -> str:
-    """Which cells each variant helps or hurts on ``figure``: significant at false-discovery rate
-    ``alpha`` over that variant's cells (Benjamini-Hochberg q-value below ``alpha``: a grid of a
-    hundred cells would otherwise show about five "effects" at p < 0.05 by chance alone), with
-    its bootstrap interval on one side of zero."""
+def classify(eff: list[Effect], figure: str = "prmse_m", alpha: float = 0.05) -> dict[str, dict[str, list]]:
+    """Per variant, its cells on ``figure`` as ``{"helps", "hurts", "same"}``: lists of ``(Effect,
+    q)``. Significant means at false-discovery rate ``alpha`` over that variant's cells
+    (Benjamini-Hochberg q-value below ``alpha``: a grid of a hundred cells would otherwise show
+    about five "effects" at p < 0.05 by chance alone), with the bootstrap interval on one side of
+    zero."""
     by: dict = {}
     for variant in sorted({e.variant for e in eff if e.figure == figure}):
         mine = [e for e in eff if e.figure == figure and e.variant == variant]
@@ -189,8 +190,13 @@ def verdict(eff: list[Effect], figure: str = "prmse_m", alpha: float = 0.05) -> 
             sig = qe < alpha
             kinds["helps" if sig and e.ci_high < 0 else "hurts" if sig and e.ci_low > 0 else "same"].append((e, qe))
         by[variant] = kinds
+    return by
+
+
+def verdict(eff: list[Effect], figure: str = "prmse_m", alpha: float = 0.05) -> str:
+    """Which cells each variant helps or hurts on ``figure`` (:func:`classify`), as text."""
     lines = []
-    for variant, kinds in by.items():
+    for variant, kinds in classify(eff, figure, alpha).items():
         total = sum(len(v) for v in kinds.values())
         base = next(e.baseline for v in kinds.values() for e, _ in v)
         lines.append(f"{variant} vs {base} on {figure}: helps in {len(kinds['helps'])}, hurts in "
