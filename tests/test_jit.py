@@ -1,4 +1,4 @@
-"""Where the numba kernels are cached, and the first-run notice.
+"""Where the numba kernels are cached, the first-run notice, and who compiles them.
 
 The package is copied to a temporary folder whose ``gnssacc/__pycache__`` cannot be created (a
 read-only install: the folder is made read-only, or, as root, who may write anywhere, a file
@@ -15,8 +15,10 @@ from pathlib import Path
 import gnssacc
 
 PROBE = """
-import os, sys
+import os, subprocess, sys
 from gnssacc import jit, mechanization
+if os.environ.get("CHILDREN_FAIL"):   # the compiling processes die at once: this process compiles
+    jit._spawn = lambda part: subprocess.Popen([sys.executable, "-c", "raise SystemExit(3)"])
 b = jit.start_background()
 b.wait_all()
 s = mechanization.propagate.stats
@@ -53,8 +55,11 @@ def test_read_only_install_caches_in_the_user_folder_and_says_so_once(tmp_path):
     assert first.stdout.splitlines()[0] == str(folder)
     notice = [line for line in first.stderr.splitlines() if line.startswith("gnssacc: ")]
     assert len(notice) == 1 and "compiling" in notice[0] and str(folder) in notice[0]
-    assert first.stdout.splitlines()[1].split()[1] != "0"            # compiled: cache misses
+    hits, misses = first.stdout.splitlines()[1].split()
+    assert hits != "0" and misses == "0"      # compiled by the child processes, loaded from the cache
     assert list(folder.rglob("mechanization.propagate-*.nbi"))      # ... written to the user folder
+    assert list(folder.rglob("window_marginals.*.nbi"))             # the smoother's too
+    assert list(folder.rglob("mechanization.kernel_force_integrals-*.nbi"))
     assert not (root / "gnssacc" / "__pycache__").is_dir()
 
     second = _probe(root, cache_home)
@@ -68,3 +73,15 @@ def test_numba_cache_dir_set_by_the_user_is_kept(tmp_path):
     out = subprocess.run([sys.executable, "-c", "import os, gnssacc; print(os.environ['NUMBA_CACHE_DIR'])"],
                          env=env, capture_output=True, text=True, check=True)
     assert out.stdout.strip() == str(tmp_path / "mine")
+
+
+def test_failed_compiling_processes_fall_back_to_compiling_in_process(tmp_path):
+    root = _read_only_copy(tmp_path)
+    cache_home = tmp_path / "cache"
+    first = _probe(root, cache_home, CHILDREN_FAIL="1")
+    hits, misses = first.stdout.splitlines()[1].split()
+    assert misses != "0"                      # compiled here
+    folder = cache_home / "gnssacc" / "numba"
+    assert list(folder.rglob("window_marginals.*.nbi")) and list(folder.rglob("gnssacc-kernels-*.stamp"))
+    second = _probe(root, cache_home)
+    assert "gnssacc: " not in second.stderr

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import measurements as meas_models
+from . import jit, measurements as meas_models
 from .config import RunConfig
 from .earth import earth_rate_n, gravity_n
 from .gnss_accel import AccelWindow, measured_specific_force, window_samples
@@ -386,6 +386,9 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
     if method not in METHODS:
         raise ValueError(f"unknown EKF method {method!r}; known: {', '.join(METHODS)}")
     use_acc = METHODS[method]
+    jit.warm_up()   # the kernels, compiled or loaded in the background: a first run waits here
+    if use_acc == "accw":
+        jit.smoother_ready()   # its kernel is compiled with the smoother's
     wall0 = time.perf_counter()
     setup = prepare(run, cfg, init, quality, stationary, cov_every)
     s, prop, t0, k = setup.state, setup.prop, setup.t0, setup.k

@@ -7,11 +7,13 @@ cannot, so :func:`configure_cache` (called by ``gnssacc/__init__`` before numba 
 then points ``NUMBA_CACHE_DIR`` at a user cache folder; a ``NUMBA_CACHE_DIR`` set by the user
 is always kept. :func:`cache_folder` says where the kernels go.
 
-:func:`start_background` compiles (or loads) the kernels in a thread while the caller loads
+:func:`start_background` compiles (or loads) the kernels in the background while the caller loads
 data, and prints one notice line at once when they are not in the cache yet (a stamp file
-written after a compilation says they are; see :func:`kernels_stamp`).
-A task that needs a kernel meanwhile waits for it (numba's compile lock), never compiles it
-twice; :func:`warm_up` waits for the background compilation or, without one, compiles.
+written after a compilation says they are; see :func:`kernels_stamp`). A first run compiles in
+child processes (numba's compiler holds the GIL, so a thread would mostly take turns with the
+loading); a thread then loads what they cached. The estimators wait for the kernels where they
+first need them (:func:`warm_up`, :func:`smoother_ready`), never compile them twice in one
+process (numba's compile lock); without a background start, :func:`warm_up` compiles.
 """
 from __future__ import annotations
 
@@ -91,20 +93,70 @@ def kernels_cached() -> bool:
         return False
 
 
+#: What each compiling process compiles (``python -c`` code; see :func:`compile_part`).
+PARTS = ("ekf", "smoother")
+
+
+def compile_part(part: str) -> None:
+    """Compile (or load) one part of the kernels into the cache: ``"ekf"`` the EKF's (propagation,
+    update, correction), ``"smoother"`` the smoother's and the window-consistent update's."""
+    if part == "ekf":
+        from .mechanization import warm_up
+
+        warm_up()
+    elif part == "smoother":
+        from .mechanization import warm_up_window
+        from .smoother import warm_up as smoother_warm_up
+
+        smoother_warm_up()
+        warm_up_window()
+    else:
+        raise ValueError(f"unknown kernel part {part!r}; expected one of {PARTS}")
+
+
+def _spawn(part: str):
+    """A process compiling ``part`` into the cache (numba's compilation holds the GIL: a thread
+    would take turns with the loading it is meant to overlap); ``None`` when it cannot start."""
+    import subprocess
+
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(PACKAGE_DIR.parent),
+                                                                       os.environ.get("PYTHONPATH")]))}
+    code = f"from gnssacc.jit import compile_part; compile_part({part!r})"
+    try:
+        return subprocess.Popen([sys.executable, "-c", code], env=env, stdin=subprocess.DEVNULL,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    except OSError:
+        return None
+
+
+def _compiled_by(proc) -> bool:
+    """Wait for a compiling process; whether it filled the cache (exit code 0)."""
+    return proc is not None and proc.wait() == 0
+
+
 class BackgroundWarmUp:
-    """Compiles (or loads) the kernels in a daemon thread; :meth:`wait` returns the seconds it took.
+    """Compiles (or loads) the kernels in the background; :meth:`wait` returns the seconds it took.
+
+    A daemon thread loads the EKF's kernels, then (first run) makes sure the smoother's are in
+    the cache. With ``processes=True`` a first run compiles in two child processes, one per
+    :data:`PARTS`, which use the machine's other cores while this process loads and checks the
+    data; the thread then loads what they cached (a failed child: it compiles here instead).
 
     Parameters
     ----------
     notice : file-like, optional
         Where the one-line notice goes, at once, when the kernels are not in the cache yet
         (``None``: no notice).
+    processes : bool
+        Compile a first run's kernels in child processes (else in the thread).
     """
 
-    def __init__(self, notice=None):
+    def __init__(self, notice=None, processes: bool = False):
         self.seconds: float | None = None
         self.error: BaseException | None = None
         self.compiling = not kernels_cached()
+        self._processes = processes and self.compiling
+        self._children: dict = {}
         self._done = threading.Event()
         self._smoother_done = threading.Event()
         self._thread = threading.Thread(target=self._run, name="gnssacc-jit", daemon=True)
@@ -113,24 +165,33 @@ class BackgroundWarmUp:
                   "while the data loads", file=notice, flush=True)
 
     def start(self) -> "BackgroundWarmUp":
+        if self._processes:
+            import atexit
+
+            self._children = {part: _spawn(part) for part in PARTS}
+            atexit.register(self.stop)
         self._thread.start()
         return self
+
+    def stop(self) -> None:
+        """End compiling children still running (the process is exiting without their kernels)."""
+        for proc in self._children.values():
+            if proc is not None and proc.poll() is None:
+                proc.terminate()
 
     def _run(self) -> None:
         t0 = time.perf_counter()
         try:
-            from .mechanization import warm_up
-
-            warm_up()
+            _compiled_by(self._children.get("ekf"))
+            compile_part("ekf")   # loads what the child cached, or compiles
         except BaseException as exc:   # re-raised in the waiting thread
             self.error = exc
         self.seconds = time.perf_counter() - t0
         self._done.set()   # the EKF's kernels: the estimators may start
         try:               # then, on a first run, the smoother's while the EKF and the tuner run
             if self.compiling and self.error is None:
-                from .smoother import warm_up as smoother_warm_up
-
-                smoother_warm_up()
+                if not _compiled_by(self._children.get("smoother")):
+                    compile_part("smoother")
                 _write_stamp()
         except Exception:  # the smoother compiles them itself when it first runs
             pass
@@ -159,28 +220,28 @@ def _write_stamp() -> None:
 
 
 _background: BackgroundWarmUp | None = None
+_start_lock = threading.Lock()
 
 
-def start_background(notice=sys.stderr) -> BackgroundWarmUp:
+def start_background(notice=sys.stderr, processes: bool = True) -> BackgroundWarmUp:
     """Start compiling the kernels in the background (once per process; later calls return the
-    same one)."""
+    same one); a first run compiles in child processes unless ``processes=False``."""
     global _background
-    if _background is None:
-        _background = BackgroundWarmUp(notice).start()
+    with _start_lock:   # estimators in several threads may ask at once
+        if _background is None:
+            _background = BackgroundWarmUp(notice, processes).start()
     return _background
 
 
 def warm_up() -> float:
     """The EKF kernels' compile (or load) time [s]: the background one's when started, else now
     (the smoother's then follow in the background on a first run)."""
-    global _background
-    if _background is None:
-        _background = BackgroundWarmUp().start()
-    return _background.wait()
+    return start_background(notice=None, processes=False).wait()
 
 
 def smoother_ready() -> float:
-    """Wait for the smoother's kernels compiled in the background (first run); the seconds waited."""
+    """Wait for the smoother's (and the window-consistent update's) kernels compiled in the
+    background on a first run; the seconds waited."""
     if _background is None:
         return 0.0
     t0 = time.perf_counter()

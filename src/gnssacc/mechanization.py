@@ -647,3 +647,15 @@ def warm_up() -> float:
     dx = joseph_update(s.P, H, np.eye(3), np.ones(3), 0.0)[0]
     apply_correction(s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, z3.copy(), dx)
     return time.perf_counter() - t0
+
+
+def warm_up_window() -> float:
+    """Compile (or load) the window-consistent acceleration update's kernel
+    (:func:`kernel_force_integrals`); return the seconds it took."""
+    import time
+
+    t0 = time.perf_counter()
+    n = 4
+    kernel_force_integrals(np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, 0.01), np.full(n, 0.25),
+                           np.zeros(3), np.zeros(3))
+    return time.perf_counter() - t0
