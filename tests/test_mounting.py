@@ -52,3 +52,16 @@ def test_smoothing_in_blocks_equals_one_convolution(monkeypatch, kernel):
     blocks = mm.smooth(x, 0.01, 0.6, kernel), mm.smooth(y, 0.01, 0.6, kernel)
     for a, b in zip(whole, blocks):
         np.testing.assert_allclose(b, a, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("block", [37, 1 << 16])
+def test_fft_convolution_equals_the_direct_sum(monkeypatch, block):
+    # The FFT convolution behind the smoothing against numpy's direct sum, real and complex,
+    # whole and in blocks.
+    import gnssacc.motionmatch as mm
+
+    monkeypatch.setattr(mm, "SMOOTH_BLOCK", block)
+    rng = np.random.default_rng(5)
+    k = rng.random(61)
+    for x in (rng.standard_normal(997), rng.standard_normal(997) + 1j * rng.standard_normal(997)):
+        np.testing.assert_allclose(mm._convolve_same(x, k), np.convolve(x, k, "same"), rtol=0, atol=1e-12)
