@@ -76,6 +76,7 @@ def _warm_up() -> None:
     from . import mechanization, pipeline, smoother  # noqa: F401
 
     mechanization.warm_up()
+    mechanization.warm_up_window()   # ekf-accw's kernel
 
 
 @contextlib.contextmanager
