@@ -7,9 +7,15 @@ one), the first result (the table's header line) and the end of the process, plu
 compilation the run reports. ``--ref-src`` runs the same cases with another source tree (e.g.
 ``git archive <commit> src | tar -x -C /tmp/ref``) on ``PYTHONPATH``, for a before/after ratio.
 
+``--fresh-venv`` measures what a new user meets instead: a new virtual environment, ``pip install``
+of this repository (timed; packages come from pip's cache or the registry), then ``gnssacc run``
+from that environment, the kernels cached where a user's are (the installed package's
+``__pycache__``); before each *cold* repeat the cached kernels are deleted.
+
 Usage::
 
     python bench/bench_cold_start.py [--repeats 3] [--ref-src /tmp/ref/src]
+    python bench/bench_cold_start.py --fresh-venv [--repeats 3]
 """
 from __future__ import annotations
 
@@ -20,16 +26,19 @@ import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
 
 RUN = ["-m", "gnssacc.cli", "run", "--no-plots", "--overwrite"]
 
 
-def timed(args: list[str], env: dict) -> dict:
+def timed(args: list[str], env: dict, python: str = sys.executable) -> dict:
     """Seconds from the start to the first line, the table header and the exit of one process."""
     t0 = time.perf_counter()
-    p = subprocess.Popen([sys.executable, *args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    p = subprocess.Popen([python, *args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
     out = {"first_line": None, "first_result": None, "jit": None}
     for line in p.stdout:
         now = time.perf_counter() - t0
@@ -51,11 +60,56 @@ def env_for(src: str | None, cache: str) -> dict:
     return env
 
 
+def fresh_venv(tmp: str) -> tuple[str, float]:
+    """A new virtual environment with this repository installed; its python and the seconds taken."""
+    t0 = time.perf_counter()
+    venv = os.path.join(tmp, "venv")
+    subprocess.run([sys.executable, "-m", "venv", venv], check=True)
+    python = os.path.join(venv, "bin", "python")
+    subprocess.run([python, "-m", "pip", "install", "-q", str(REPO)], check=True)
+    return python, time.perf_counter() - t0
+
+
+def clear_kernels(python: str, env: dict) -> None:
+    """Delete the installed package's cached kernels (numba's index and data files, the stamp)."""
+    out = subprocess.run([python, "-c", "from gnssacc import jit; print(jit.cache_folder())"], env=env,
+                         capture_output=True, text=True, check=True)
+    folder = Path(out.stdout.strip())
+    for pattern in ("**/*.nbi", "**/*.nbc", "gnssacc-kernels-*.stamp"):
+        for f in folder.glob(pattern):
+            f.unlink()
+
+
+def main_fresh_venv(repeats: int) -> None:
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "PYTHONPATH")}
+    env["OMP_NUM_THREADS"] = "1"
+    rows: dict[str, list] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        python, install_s = fresh_venv(tmp)
+        out_dir = os.path.join(tmp, "out")
+        for r in range(repeats):
+            clear_kernels(python, env)
+            for case in ("cold", "warm"):
+                rows.setdefault(case, []).append(timed(RUN + ["--out", out_dir], env, python))
+            print(f"round {r + 1}/{repeats} done", file=sys.stderr)
+    load = os.getloadavg()
+    print(f"fresh virtual environment: pip install {REPO} took {install_s:.1f} s; then gnssacc run (KITTI default), "
+          f"median of {repeats}; load average {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} on {os.cpu_count()} cores")
+    print(f"{'case':7s} {'first line [s]':>15s} {'first result [s]':>17s} {'exit [s]':>9s} {'JIT [s]':>8s}")
+    for case, vals in rows.items():
+        m = {k: float(np.median([v[k] if v[k] is not None else np.nan for v in vals]))
+             for k in ("first_line", "first_result", "end", "jit")}
+        print(f"{case:7s} {m['first_line']:15.2f} {m['first_result']:17.2f} {m['end']:9.2f} {m['jit']:8.2f}")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--ref-src", default=None, help="another source tree to compare with (put on PYTHONPATH)")
+    ap.add_argument("--fresh-venv", action="store_true", help="install into a new virtual environment first")
     args = ap.parse_args()
+    if args.fresh_venv:
+        return main_fresh_venv(args.repeats)
     trees = {"this": None} | ({"ref": args.ref_src} if args.ref_src else {})
     rows: dict[tuple, list] = {}
     with tempfile.TemporaryDirectory() as tmp:
