@@ -93,21 +93,21 @@ def kernels_cached() -> bool:
         return False
 
 
-#: What each compiling process compiles (``python -c`` code; see :func:`compile_part`).
-PARTS = ("ekf", "smoother")
+#: The compiling processes of a first run: the EKF's propagation (the biggest kernel, needed
+#: first), and the rest (the EKF's update, the smoother's, the window-consistent update's).
+PARTS = ("propagation", "rest")
 
 
 def compile_part(part: str) -> None:
-    """Compile (or load) one part of the kernels into the cache: ``"ekf"`` the EKF's (propagation,
-    update, correction), ``"smoother"`` the smoother's and the window-consistent update's."""
-    if part == "ekf":
-        from .mechanization import warm_up
+    """Compile (or load) one of :data:`PARTS` into the cache."""
+    from .mechanization import warm_up, warm_up_window
 
-        warm_up()
-    elif part == "smoother":
-        from .mechanization import warm_up_window
+    if part == "propagation":
+        warm_up(update=False)
+    elif part == "rest":
         from .smoother import warm_up as smoother_warm_up
 
+        warm_up(propagation=False)
         smoother_warm_up()
         warm_up_window()
     else:
@@ -182,16 +182,18 @@ class BackgroundWarmUp:
     def _run(self) -> None:
         t0 = time.perf_counter()
         try:
-            _compiled_by(self._children.get("ekf"))
-            compile_part("ekf")   # loads what the child cached, or compiles
+            from .mechanization import warm_up
+
+            _compiled_by(self._children.get("propagation"))
+            warm_up()   # loads what the children cached, or compiles
         except BaseException as exc:   # re-raised in the waiting thread
             self.error = exc
         self.seconds = time.perf_counter() - t0
         self._done.set()   # the EKF's kernels: the estimators may start
         try:               # then, on a first run, the smoother's while the EKF and the tuner run
             if self.compiling and self.error is None:
-                if not _compiled_by(self._children.get("smoother")):
-                    compile_part("smoother")
+                if not _compiled_by(self._children.get("rest")):
+                    compile_part("rest")
                 _write_stamp()
         except Exception:  # the smoother compiles them itself when it first runs
             pass

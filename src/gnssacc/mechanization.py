@@ -626,9 +626,10 @@ class Propagator:
                          self.Phi, self.with_phi, self.w_ie_sign, self.gm_tau, self.gm_var)
 
 
-def warm_up() -> float:
-    """Compile (or load from cache) the numba kernels of an EKF run (propagation, update,
-    correction); return the seconds it took. See :mod:`gnssacc.jit` for the background version."""
+def warm_up(propagation: bool = True, update: bool = True) -> float:
+    """Compile (or load from cache) the numba kernels of an EKF run: ``propagation``, and
+    ``update`` (the update and the correction); return the seconds it took. See
+    :mod:`gnssacc.jit` for the background version."""
     import time
     from types import SimpleNamespace
 
@@ -636,16 +637,18 @@ def warm_up() -> float:
 
     t0 = time.perf_counter()
     z3 = np.zeros(3)
-    seg_i = np.zeros(1, np.int64)
-    prop = Propagator(np.array([0.0, 0.01, 0.02]), np.zeros((3, 3)), np.zeros((3, 3)), z3, z3, z3, z3,
-                      (seg_i, seg_i + 1, np.zeros((1, 3)), np.zeros((1, 3))))
     s = SimpleNamespace(pos=np.array([0.5, 0.1, 0.0]), v_n=z3.copy(), R_nb=np.eye(3), b_a=z3.copy(), b_g=z3.copy(),
                         P=np.eye(15))
-    prop.advance(s, 1, 0.0, 0.015)
-    H = np.zeros((3, 15))
-    H[:, :3] = np.eye(3)
-    dx = joseph_update(s.P, H, np.eye(3), np.ones(3), 0.0)[0]
-    apply_correction(s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, z3.copy(), dx)
+    if propagation:
+        seg_i = np.zeros(1, np.int64)
+        prop = Propagator(np.array([0.0, 0.01, 0.02]), np.zeros((3, 3)), np.zeros((3, 3)), z3, z3, z3, z3,
+                          (seg_i, seg_i + 1, np.zeros((1, 3)), np.zeros((1, 3))))
+        prop.advance(s, 1, 0.0, 0.015)
+    if update:
+        H = np.zeros((3, 15))
+        H[:, :3] = np.eye(3)
+        dx = joseph_update(s.P, H, np.eye(3), np.ones(3), 0.0)[0]
+        apply_correction(s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, z3.copy(), dx)
     return time.perf_counter() - t0
 
 
