@@ -269,3 +269,21 @@ def test_outage_patterns_and_summary_tables(recordings, tmp_path, capsys):
     table = summarise(results)
     md = (out / "summary.md").read_text().split("## outages: every 20:5")[1]
     assert f"{table['ekf-acc']['p_value']:.3f}" in md and f"{table['ekf']['mean']:.3f}" in md
+
+
+def test_a_campaign_made_through_the_api_resumes_from_the_command_line(recordings, tmp_path, capsys):
+    # The API leaves the bag options out; the command line gives every one (None = not given).
+    from gnssacc.batch import SerialExecutor, run_campaign
+    from gnssacc.campaign import Campaign, Pattern, make_settings
+
+    out = tmp_path / "api"
+    settings = make_settings([recordings[0]], ["ekf"], [0, 1], [Pattern(None, None)], noise="white", tune="none",
+                             plots=False)
+    with Campaign.create(out, settings) as camp, SerialExecutor() as ex:
+        run_campaign(camp, ex, lines=False)
+    first = _records(out)
+    assert len(first) == 2 and all(r["status"] == "ok" for r in first.values())
+    shutil.rmtree(out / next(iter(first)))   # one task lost
+    code, _, err = _cli(["batch", "--resume", out, "--jobs", "1"], capsys)
+    assert code == 0, err
+    assert _records(out).keys() == first.keys()

@@ -115,6 +115,17 @@ class TaskSpec:
         return f"{self.name}/{self.pattern.label}/{self.seed}"
 
 
+#: The bag options of a campaign and their defaults (``gnssacc run``'s), all stored, so that a
+#: campaign made through the API (which may give none) resumes from the command line.
+BAG_DEFAULTS = {"imu_topic": None, "gnss_topic": None, "truth_topic": None, "time_source": "header",
+                "gnss_from_truth_hz": None}
+
+
+def full_bag(bag: dict | None) -> dict:
+    """``bag`` with every option of :data:`BAG_DEFAULTS` (the defaults where it has none)."""
+    return {**BAG_DEFAULTS, **(bag or {})}
+
+
 def make_settings(sources: list[str], methods: list[str], seeds: list[int], patterns: list[Pattern], *,
                   noise: str | None = None, preset: str | None = None, tune: str | None = None,
                   config: str | None = None, imu_frame: str = "frd", bag: dict | None = None,
@@ -153,7 +164,7 @@ def make_settings(sources: list[str], methods: list[str], seeds: list[int], patt
             "methods": list(methods), "seeds": [int(s) for s in seeds],
             "outages": [[p.outage, p.outage_every] for p in patterns], "noise": noise, "preset": preset,
             "tune": tune, "config": config_identity(config) if config else None, "imu_frame": imu_frame,
-            "bag": dict(bag or {}), "outputs": {"plots": bool(plots), "report": bool(report),
+            "bag": full_bag(bag), "outputs": {"plots": bool(plots), "report": bool(report),
                                                 "export": sorted(export)}}
 
 
@@ -347,6 +358,9 @@ def read_record(folder: Path) -> dict | None:
 def differing_setting(stored: dict, given: dict) -> str | None:
     """The first setting (by its option's name) in which ``given`` differs from ``stored``."""
     for key in OPTION_OF:
-        if stored.get(key) != given.get(key):
+        a, b = stored.get(key), given.get(key)
+        if key == "bag":   # campaigns stored before every bag option was kept
+            a, b = full_bag(a), full_bag(b)
+        if a != b:
             return key
     return None

@@ -11,14 +11,13 @@ from datetime import datetime
 
 from .argcheck import check_source
 from .argcheck import seeds as parse_seeds
-from .campaign import OPTION_OF, Campaign, Pattern, differing_setting, make_settings
+from .campaign import OPTION_OF, Campaign, Pattern, differing_setting, full_bag, make_settings
 from .errors import InputError, warn_data
 from .pipeline import parse_methods
 
-#: ``gnssacc batch``'s bag options: (setting, argument, default).
-BAG_OPTIONS = (("imu_topic", "imu_topic", None), ("gnss_topic", "gnss_topic", None),
-               ("truth_topic", "truth_topic", None), ("time_source", "time_source", "header"),
-               ("gnss_from_truth_hz", "gnss_from_truth", None))
+#: ``gnssacc batch``'s bag options: setting -> argument (defaults: :data:`gnssacc.campaign.BAG_DEFAULTS`).
+BAG_ARGUMENTS = {"imu_topic": "imu_topic", "gnss_topic": "gnss_topic", "truth_topic": "truth_topic",
+                 "time_source": "time_source", "gnss_from_truth_hz": "gnss_from_truth"}
 #: The outputs of a task folder when no option says otherwise.
 DEFAULT_OUTPUTS = {"plots": True, "report": False, "export": []}
 
@@ -56,8 +55,8 @@ def settings_from_args(args, stored: dict) -> dict:
         value = getattr(args, name)
         return value if value is not None else stored.get(name, default)
 
-    bag = {k: getattr(args, a) if getattr(args, a) is not None else stored.get("bag", {}).get(k, d)
-           for k, a, d in BAG_OPTIONS}
+    before = full_bag(stored.get("bag"))
+    bag = {k: getattr(args, a) if getattr(args, a) is not None else before[k] for k, a in BAG_ARGUMENTS.items()}
     out = stored.get("outputs", DEFAULT_OUTPUTS)
     patterns = _patterns(args) if args.outage or args.outage_every else \
         [Pattern(*p) for p in stored.get("outages", [[None, None]])]
