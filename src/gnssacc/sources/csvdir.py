@@ -39,6 +39,7 @@ from ..earth import LocalTangentFrame
 from ..errors import InputError
 from ..rotations import flu_to_frd
 from ..memory import release_free_memory
+from ..plausibility import fix_imu_time_units
 from ..recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth, check_increasing
 from .common import apply_mounting, check_degrees, read_table
 
@@ -100,9 +101,11 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd") -> RecordedRun:
         if not (root / name).is_file():
             raise InputError(str(root / name), f"file not found: a CSV run directory needs {name}")
     max_bad = float(cfg["data"]["max_bad_fraction"])
-    imu = apply_mounting(_read_imu(root / "imu.csv", frame, max_bad), cfg)
-    gnss = _read_gnss(root / "gnss.csv", cfg.default_sigma_ned,
-                      max_bad)
+    gnss = _read_gnss(root / "gnss.csv", cfg.default_sigma_ned, max_bad)
+    imu = _read_imu(root / "imu.csv", frame, max_bad)
+    # Stamps in ms/us/ns would never meet the fixes: found (and rescaled, or named) before the
+    # overlap check, which could only say "different clocks?".
+    imu = apply_mounting(fix_imu_time_units(imu, gnss.t, str(root / "imu.csv"), cfg), cfg)
     truth = _read_truth(root / "truth.csv", max_bad) if (root / "truth.csv").exists() else None
     init = _read_init(root / "init.json", gnss.sigma_ned[0]) if (root / "init.json").exists() else None
     if init is not None:
