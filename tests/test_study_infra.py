@@ -227,3 +227,21 @@ def test_study_rows_read_from_parts_and_gzip(tmp_path):
     assert len(got) == 3 * 12 and sorted({r["method"] for r in got}) == ["ekf", "ekf-acc", "ekf-accw"]
     eff = {e.variant: e for e in study.effects(got, figures=("prmse_m",))}
     assert eff["ekf-acc"].mean_pct == pytest.approx(eff["ekf-accw"].mean_pct)
+
+
+def test_gm_setup_is_made_once_per_identification(monkeypatch):
+    # ekf-gm and smoother-gm share one Gauss-Markov search of the tuned run; another
+    # identification (here a copy with another configuration) gets its own.
+    import gnssacc.gm_variant as gv
+    from gnssacc.config import load_config
+    from gnssacc.identify import identify
+
+    calls = []
+    real = gv.tune_gauss_markov
+    monkeypatch.setattr(gv, "tune_gauss_markov", lambda *a, **k: calls.append(1) or real(*a, **k))
+    run = gnssacc.load("sim:car,duration=60", noise="gm", seed=1)
+    ident = identify(run, load_config(), "auto")
+    first = gv.gm_setup(ident)
+    assert gv.gm_setup(ident) is first and len(calls) == 1
+    other = replace(ident, cfg=ident.cfg.with_values({"gnss": {"sigma_scale": 1.5}}, "test"))
+    assert gv.gm_setup(other) is not first and len(calls) == 2

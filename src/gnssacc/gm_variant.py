@@ -30,8 +30,6 @@ from .tuning import scaled_gnss, tune_gauss_markov
 
 #: The ``-gm`` methods and the baseline each one runs as.
 BASE_OF = {"ekf-gm": "ekf", "smoother-gm": "smoother"}
-#: The last run's setup (``(ident, setup)``): ``ekf-gm`` and ``smoother-gm`` share one search.
-_last: list = [None, None]
 
 
 def gm_setup(ident: Identified) -> tuple[Identified, dict]:
@@ -45,9 +43,11 @@ def gm_setup(ident: Identified) -> tuple[Identified, dict]:
         ``source`` (``config``, ``tuner (its Gauss-Markov stage)``, ``tuner``, ``noise profile``),
         ``gm_sigma_m`` [m], ``gm_tau_s`` [s],
         ``sigma_scale`` and, for the tuner, ``loglik_gain``.
+    Made once per identification (kept in ``ident.derived``): ``ekf-gm`` and ``smoother-gm``
+    share one search.
     """
-    if _last[0] is ident:
-        return _last[1]
+    if "gm" in ident.derived:
+        return ident.derived["gm"]
     cfg, how = ident.cfg, {}
     if np.any(cfg.gnss_gm_sigma > 0):
         out = ident
@@ -61,8 +61,8 @@ def gm_setup(ident: Identified) -> tuple[Identified, dict]:
         how["source"] = "noise profile"
     how.update(gm_sigma_m=out.cfg.gnss_gm_sigma.tolist(), gm_tau_s=out.cfg.gnss_gm_tau.tolist(),
                sigma_scale=float(out.cfg["gnss"]["sigma_scale"]))
-    _last[:] = [ident, (out, how)]
-    return out, how
+    ident.derived["gm"] = (out, how)
+    return ident.derived["gm"]
 
 
 def _from_profile(ident: Identified) -> Identified:

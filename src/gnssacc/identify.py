@@ -59,6 +59,10 @@ class Identified:
         Time spent per step [s].
     checks : list of gnssacc.findings.Finding
         What the input checks repaired or applied (they raise on anything else).
+    derived : dict
+        Setups that several methods derive from this identification and share, made on first
+        use (e.g. the ``-gm`` methods' Gauss-Markov search, :func:`gnssacc.gm_variant.gm_setup`).
+        Not copied by ``dataclasses.replace``: a changed identification starts empty.
     """
 
     run: RecordedRun
@@ -71,6 +75,7 @@ class Identified:
     model: ModelCheck | None = None
     seconds: dict = field(default_factory=dict)
     checks: list = field(default_factory=list)
+    derived: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
 
 def _start(run, cfg, stationary, quality) -> tuple[InitialState, BankResult | None]:
