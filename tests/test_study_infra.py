@@ -239,8 +239,9 @@ def test_gm_setup_is_made_once_per_identification(monkeypatch):
     calls = []
     real = gv.tune_gauss_markov
     monkeypatch.setattr(gv, "tune_gauss_markov", lambda *a, **k: calls.append(1) or real(*a, **k))
-    run = gnssacc.load("sim:car,duration=60", noise="gm", seed=1)
+    run = gnssacc.load("sim:car,duration=60", noise="white", seed=1)
     ident = identify(run, load_config(), "auto")
+    assert not np.any(ident.cfg.gnss_gm_sigma > 0)   # the tuner kept white fixes: gm_setup searches
     first = gv.gm_setup(ident)
     assert gv.gm_setup(ident) is first and len(calls) == 1
     other = replace(ident, cfg=ident.cfg.with_values({"gnss": {"sigma_scale": 1.5}}, "test"))
