@@ -246,3 +246,14 @@ def test_gm_setup_is_made_once_per_identification(monkeypatch):
     assert gv.gm_setup(ident) is first and len(calls) == 1
     other = replace(ident, cfg=ident.cfg.with_values({"gnss": {"sigma_scale": 1.5}}, "test"))
     assert gv.gm_setup(other) is not first and len(calls) == 2
+
+
+def test_gm_methods_are_judged_by_their_own_noise_model():
+    # Gauss-Markov fixes, known noise: the white model's check fails (NIS 0.26-0.30, innovations
+    # correlated), the -gm model's passes. A smoother's own figures cannot show the model, so it
+    # carries its model's check: smoother (white) warns, smoother-gm must not.
+    res = gnssacc.process("sim:car,imu=industrial,duration=240", methods=["smoother", "smoother-gm"], tune="none",
+                          noise="gm", seed=0)
+    warned = {m: " ".join(c["warnings"]) for m, c in res.metrics["consistency"].items()}
+    assert "the noise model does not fit" in warned["smoother"]
+    assert "noise model" not in warned["smoother-gm"] and "noise model" not in warned["smoother-gm-online"]

@@ -23,6 +23,8 @@ from dataclasses import replace
 
 import numpy as np
 
+from .consistency import ModelCheck
+from .ekf import run_ekf
 from .errors import InputError
 from .gnss_noise import PROFILES
 from .identify import Identified
@@ -77,6 +79,20 @@ def _from_profile(ident: Identified) -> Identified:
     cfg = ident.cfg.with_values({"gnss": {"gm_sigma_m": profile["gm_sigma"].tolist(), "gm_tau_s": profile["tau_s"],
                                           "sigma_scale": scale}}, f"noise profile {ident.run.meta['noise']}")
     return replace(ident, cfg=cfg, run=scaled_gnss(ident.run, white_ratio))
+
+
+def gm_model(ident: Identified) -> tuple[Identified, ModelCheck]:
+    """The ``-gm`` setup and its noise-model check (one EKF pass with the Gauss-Markov states, as
+    :func:`gnssacc.identify.identify` checks the baselines' model), made once per identification:
+    what the ``-gm`` methods' consistency is judged with (a smoother's own figures cannot show
+    the model; the baselines' check is of the white model)."""
+    if "gm_model" not in ident.derived:
+        gm_ident, _ = gm_setup(ident)
+        check = run_ekf(gm_ident.run, gm_ident.cfg, "ekf", init=gm_ident.init, stationary=gm_ident.stationary,
+                        quality=gm_ident.quality, output_times=np.zeros(0))
+        rest = ident.model.rest if ident.model is not None else []
+        ident.derived["gm_model"] = (gm_ident, ModelCheck.from_stats(check.stats, rest))
+    return ident.derived["gm_model"]
 
 
 def run_gm(ident: Identified, method: str, show_progress: bool, runner) -> dict:

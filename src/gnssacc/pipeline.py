@@ -235,7 +235,8 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
     for m, s in list(sols.items()):
         try:  # scoring one solution must not cost the others either
             scores[m] = score(run, s, window)
-            cons[m] = assess(ident.run, s, scores[m].prmse_m, raw.prmse_m, ident.model, ident.cfg.gnss_gm_sigma)
+            judged, model = _noise_model_of(ident, m)
+            cons[m] = assess(judged.run, s, scores[m].prmse_m, raw.prmse_m, model, judged.cfg.gnss_gm_sigma)
         except Exception as exc:
             raise_if_interrupted(exc)
             failed[m] = failure_reason(exc)
@@ -255,6 +256,15 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
              "model_check": ident.model.to_dict() if ident.model is not None else None,
              "tuning": ident.tuning.to_dict() if ident.tuning is not None else None}
     return metrics_dict(run, sols, scores, raw, extra, failed), sols, ident
+
+
+def _noise_model_of(ident: Identified, sid: str):
+    """The identification whose run (fix sigmas) and configuration (Gauss-Markov sigmas) a solution
+    used, and the check of its noise model: the ``-gm`` methods' own, else the run's."""
+    if METHODS.get(sid.removesuffix("-online")) is _gm:
+        from .gm_variant import gm_model
+        return gm_model(ident)
+    return ident, ident.model
 
 
 #: Truth may miss this much of the recording before :func:`scored_window` warns [s].
