@@ -105,16 +105,19 @@ def test_truth_functions_do_not_depend_on_the_block_size(monkeypatch):
 
 
 def test_scenario_sweep_is_the_one_pass_kinematics():
-    # Short pulses, several ending between two samples, one ending exactly on a sample.
+    # Samples every 1/8 s, blocks of 4 samples overlapping by one (first samples at 0, 3/8, 6/8 s, ...).
+    # Pulses ending exactly on a block's first sample (1.5, 2.625, 3.0 s), and short pulses, two
+    # of them ending between the same two samples.
     s = sim.Scenario("edges", 0.0)
-    s.hold(0.37).speed_to(2.0, 0.013, ramp_s=0.005).turn(0.01, rate_dps=30.0, ramp_s=0.001)
-    s.turn(-0.01, rate_dps=30.0, ramp_s=0.001).speed_to(3.0, 0.25).cruise(1.0).hill(0.05, 3.0)
+    s.hold(1.0).speed_to(2.0, 0.5, ramp_s=0.125).turn(45.0, rate_dps=45.0, ramp_s=0.125)
+    s.speed_to(3.0, 0.375, ramp_s=0.125).turn(0.01, rate_dps=30.0, ramp_s=0.001)
+    s.turn(-0.01, rate_dps=30.0, ramp_s=0.001).cruise(1.0).hill(0.05, 3.0)
     s.speed_to(-1.0, 0.5).turn(5.0, radius_m=2.0).speed_to(0.0, 0.3)
-    t = np.arange(0, int(s.t_end / 0.005) + 2) * 0.005
+    t = np.arange(0, int(s.t_end * 8) + 3) * 0.125
     one = s.kinematics(t, 0.3)
     parts, ended = [], None
-    for g0 in range(0, len(t) - 1, 5):                     # blocks of 6 samples, overlapping by one
-        kin, ended = s.kinematics_block(t[g0:g0 + 6], 0.3, ended)
+    for g0 in range(0, len(t) - 1, 3):
+        kin, ended = s.kinematics_block(t[g0:g0 + 4], 0.3, ended)
         parts.append(kin if g0 == 0 else sim.Kinematics(*(v[1:] for v in vars(kin).values())))
     for key, value in vars(one).items():
         np.testing.assert_array_equal(np.concatenate([getattr(p, key) for p in parts])[:len(t)], value, err_msg=key)
