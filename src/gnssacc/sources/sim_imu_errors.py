@@ -36,6 +36,8 @@ For comparison, the datasheet white noise alone gives 0.10 deg/s and 0.033 m/s^2
 """
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from ..config import DEFAULTS, G0
@@ -275,22 +277,88 @@ def gauss_markov(n: int, dt: float, tau: float, sigma, rng: np.random.Generator)
     -------
     ndarray, shape (n, 3) or (n, c)
     """
-    sigma = per_axis(sigma) if np.ndim(sigma) == 0 else np.asarray(sigma, float).copy()
-    c = len(sigma)
-    a = np.exp(-dt / tau)
-    x = np.empty((n, c))
-    x[0] = rng.standard_normal(c) * sigma
-    drive = rng.standard_normal((max(n - 1, 0), c)) * (np.sqrt(1.0 - a * a) * sigma)
-    # Closed form per block, x[s+i] = a^i (x[s] + sum_j a^-j e_j), vectorised; the block length
-    # keeps a^-i below 1e6 so the scaled cumulative sum stays accurate.
-    block = max(1, int(np.log(1e6) * tau / dt))
-    s = 0
-    while s < n - 1:
-        m = min(block, n - 1 - s)
-        p = a ** np.arange(1, m + 1)
-        x[s + 1:s + m + 1] = p[:, None] * (x[s] + np.cumsum(drive[s:s + m] / p[:, None], axis=0))
-        s += m
-    return x
+    return GaussMarkovStream(n, dt, tau, sigma, rng).take(n)
+
+
+class GaussMarkovStream:
+    """:func:`gauss_markov` in consecutive chunks (:meth:`take`): the same numbers, bit for bit.
+
+    The initial value is drawn at construction, the driving noise as the chunks are taken, so
+    memory does not grow with ``n``. Parameters are those of :func:`gauss_markov`.
+    """
+
+    def __init__(self, n: int, dt: float, tau: float, sigma, rng: np.random.Generator):
+        sigma = per_axis(sigma) if np.ndim(sigma) == 0 else np.asarray(sigma, float).copy()
+        self.n, self.rng, self.k = int(n), rng, 0
+        self.a = np.exp(-dt / tau)
+        self.scale = np.sqrt(1.0 - self.a * self.a) * sigma
+        # Closed form per block, x[s+i] = a^i (x[s] + sum_j a^-j e_j), vectorised; the block length
+        # keeps a^-i below 1e6 so the scaled cumulative sum stays accurate.
+        self.block = max(1, int(np.log(1e6) * tau / dt))
+        self.x0 = rng.standard_normal(len(sigma)) * sigma
+        self._xs, self._p, self._off, self._cum = self.x0, np.zeros(0), 0, None
+
+    def take(self, m: int) -> np.ndarray:
+        """The next ``m`` samples, shape (m, c)."""
+        out = np.empty((m, len(self.x0)))
+        j = 0
+        if m and self.k == 0:
+            out[0], j, self.k = self.x0, 1, 1
+        while j < m:
+            if self._off == len(self._p):   # a new block starts at sample k - 1
+                self._p = self.a ** np.arange(1, min(self.block, self.n - self.k) + 1)
+                self._off, self._cum = 0, None
+            q = min(m - j, len(self._p) - self._off)
+            p = self._p[self._off:self._off + q, None]
+            steps = self.rng.standard_normal((q, len(self.x0))) * self.scale / p
+            cum = (np.cumsum(steps, axis=0) if self._cum is None
+                   else np.cumsum(np.concatenate([self._cum[None], steps]), axis=0)[1:])
+            out[j:j + q] = p * (self._xs + cum)
+            self._cum, self._off, j, self.k = cum[-1], self._off + q, j + q, self.k + q
+            if self._off == len(self._p):
+                self._xs = out[j - 1].copy()
+        return out
+
+
+def skip_normals(rng: np.random.Generator, count: int, chunk: int = 1 << 16) -> None:
+    """Advance ``rng`` past ``count`` standard normal draws (in chunks: small memory)."""
+    for k in range(0, count, chunk):
+        rng.standard_normal(min(chunk, count - k))
+
+
+class ImuErrorStream:
+    """:func:`imu_errors` in consecutive chunks (:meth:`take`): the same numbers, bit for bit.
+
+    The stream's four long sections (Gauss-Markov biases, then white noise, accelerometer before
+    gyro, ``3 n`` normal draws each) are read side by side by four copies of ``rng`` set to
+    their starts (found by drawing through them once), so memory does not grow with ``n``.
+    ``rng`` is left where :func:`imu_errors` leaves it. Parameters are those of :func:`imu_errors`.
+
+    Attributes
+    ----------
+    turn_on_a : ndarray, shape (3,)
+        Accelerometer turn-on bias [m/s^2].
+    turn_on_g : ndarray, shape (3,)
+        Gyro turn-on bias [rad/s].
+    """
+
+    def __init__(self, n: int, dt: float, params: dict, rng: np.random.Generator):
+        si = imu_sigmas_si(params)
+        self.turn_on_a = rng.standard_normal(3) * si["accel_sigma0"]
+        self.turn_on_g = rng.standard_normal(3) * si["gyro_sigma0"]
+        starts = []
+        for _ in range(4):
+            starts.append(copy.deepcopy(rng))
+            skip_normals(rng, 3 * n)
+        self._gm_a = GaussMarkovStream(n, dt, si["tau"], si["accel_bi"], starts[0])
+        self._gm_g = GaussMarkovStream(n, dt, si["tau"], si["gyro_bi"], starts[1])
+        self._noise = ((starts[2], si["accel_density"] / np.sqrt(dt)), (starts[3], si["gyro_density"] / np.sqrt(dt)))
+
+    def take(self, m: int) -> dict:
+        """The next ``m`` samples: ``bias_a``, ``bias_g``, ``noise_a``, ``noise_g`` of :func:`imu_errors`."""
+        (rng_a, scale_a), (rng_g, scale_g) = self._noise
+        return {"bias_a": self.turn_on_a + self._gm_a.take(m), "bias_g": self.turn_on_g + self._gm_g.take(m),
+                "noise_a": rng_a.standard_normal((m, 3)) * scale_a, "noise_g": rng_g.standard_normal((m, 3)) * scale_g}
 
 
 def imu_errors(n: int, dt: float, params: dict, rng: np.random.Generator) -> dict:
@@ -316,15 +384,8 @@ def imu_errors(n: int, dt: float, params: dict, rng: np.random.Generator) -> dic
         ``noise_a`` [m/s^2], ``noise_g`` [rad/s] (white, shape (n, 3), 1-sigma density/sqrt(dt)),
         ``turn_on_a`` [m/s^2], ``turn_on_g`` [rad/s] (the turn-on biases, shape (3,)).
     """
-    si = imu_sigmas_si(params)
-    on_a = rng.standard_normal(3) * si["accel_sigma0"]
-    on_g = rng.standard_normal(3) * si["gyro_sigma0"]
-    gm_a = gauss_markov(n, dt, si["tau"], si["accel_bi"], rng)
-    gm_g = gauss_markov(n, dt, si["tau"], si["gyro_bi"], rng)
-    noise_a = rng.standard_normal((n, 3)) * (si["accel_density"] / np.sqrt(dt))
-    noise_g = rng.standard_normal((n, 3)) * (si["gyro_density"] / np.sqrt(dt))
-    return {"bias_a": on_a + gm_a, "bias_g": on_g + gm_g, "noise_a": noise_a, "noise_g": noise_g,
-            "turn_on_a": on_a, "turn_on_g": on_g}
+    stream = ImuErrorStream(n, dt, params, rng)
+    return {**stream.take(n), "turn_on_a": stream.turn_on_a, "turn_on_g": stream.turn_on_g}
 
 
 def sensor_matrices(model: dict, rng: np.random.Generator) -> dict:
@@ -371,16 +432,36 @@ def bias_drift(t_rel: np.ndarray, model: dict, rng: np.random.Generator, rw_step
         ``drift_a`` [m/s^2], ``drift_g`` [rad/s] (shape (n, 3)) and the draws
         ``accel_warmup`` [m/s^2], ``gyro_warmup`` [rad/s] (warm-up amplitudes, shape (3,)).
     """
-    warm_a = rng.standard_normal(3) * per_axis(model["accel_warmup_mg"]) * MG
-    warm_g = rng.standard_normal(3) * per_axis(model["gyro_warmup_deg_h"]) * DEG / 3600.0
-    # Random-walk densities in SI: [mg/sqrt(h)] -> [m/s^2/sqrt(s)], [deg/h/sqrt(h)] -> [rad/s/sqrt(s)].
-    k = np.concatenate([per_axis(model["accel_bias_rw_mg_rth"]) * MG / 60.0,
-                        per_axis(model["gyro_bias_rw_deg_h_rth"]) * DEG / 3600.0 / 60.0])
-    m = int(np.ceil(t_rel[-1] / rw_step_s)) + 1
-    steps = rng.standard_normal((m - 1, 6)) * (k * np.sqrt(rw_step_s))
-    walk = np.vstack([np.zeros((1, 6)), np.cumsum(steps, axis=0)])
-    grid = rw_step_s * np.arange(m)
-    rw = np.column_stack([np.interp(t_rel, grid, walk[:, i]) for i in range(6)])
-    shape = -np.expm1(-t_rel / float(model["warmup_time_s"]))[:, None]
-    return {"drift_a": shape * warm_a + rw[:, :3], "drift_g": shape * warm_g + rw[:, 3:],
-            "accel_warmup": warm_a, "gyro_warmup": warm_g}
+    drift = BiasDrift(float(t_rel[-1]), model, rng, rw_step_s)
+    drift_a, drift_g = drift.at(t_rel)
+    return {"drift_a": drift_a, "drift_g": drift_g, "accel_warmup": drift.warm_a, "gyro_warmup": drift.warm_g}
+
+
+class BiasDrift:
+    """The drift of :func:`bias_drift`, drawn once for a run lasting ``t_end`` [s], evaluated at any times.
+
+    Attributes
+    ----------
+    warm_a : ndarray, shape (3,)
+        Accelerometer warm-up amplitude [m/s^2].
+    warm_g : ndarray, shape (3,)
+        Gyro warm-up amplitude [rad/s].
+    """
+
+    def __init__(self, t_end: float, model: dict, rng: np.random.Generator, rw_step_s: float = 1.0):
+        self.warm_a = rng.standard_normal(3) * per_axis(model["accel_warmup_mg"]) * MG
+        self.warm_g = rng.standard_normal(3) * per_axis(model["gyro_warmup_deg_h"]) * DEG / 3600.0
+        # Random-walk densities in SI: [mg/sqrt(h)] -> [m/s^2/sqrt(s)], [deg/h/sqrt(h)] -> [rad/s/sqrt(s)].
+        k = np.concatenate([per_axis(model["accel_bias_rw_mg_rth"]) * MG / 60.0,
+                            per_axis(model["gyro_bias_rw_deg_h_rth"]) * DEG / 3600.0 / 60.0])
+        m = int(np.ceil(t_end / rw_step_s)) + 1
+        steps = rng.standard_normal((m - 1, 6)) * (k * np.sqrt(rw_step_s))
+        self._walk = np.vstack([np.zeros((1, 6)), np.cumsum(steps, axis=0)])
+        self._grid = rw_step_s * np.arange(m)
+        self._tau = float(model["warmup_time_s"])
+
+    def at(self, t_rel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Drift at times ``t_rel`` from the first sample [s]: accelerometers [m/s^2], gyros [rad/s], (k, 3) each."""
+        rw = np.column_stack([np.interp(t_rel, self._grid, self._walk[:, i]) for i in range(6)])
+        shape = -np.expm1(-t_rel / self._tau)[:, None]
+        return shape * self.warm_a + rw[:, :3], shape * self.warm_g + rw[:, 3:]

@@ -59,33 +59,61 @@ class Pulse:
         return self.amplitude * (self.duration - self.ramp)
 
 
-def _channel(pulses: list[Pulse], t: np.ndarray, kind: str) -> np.ndarray:
-    """Sum of pulses at sorted times ``t``: ``kind`` = "value", "rate" (d/dt) or "integral".
+def _support(p: Pulse, t: np.ndarray):
+    """Index range ``[i0, i1)`` of the samples ``t0 < t <= t0 + duration`` of pulse ``p`` (found by
+    bisection, so the cost stays linear in the number of samples) and its two step arguments there."""
+    te = p.t0 + p.duration
+    i0, i1 = np.searchsorted(t, [p.t0, te], side="right")
+    tt = t[i0:i1]
+    # Rising step at t0, falling step at te - ramp; the pulse is their difference.
+    x1 = np.clip((tt - p.t0) / p.ramp, 0.0, 1.0)
+    x2 = np.clip((tt - (te - p.ramp)) / p.ramp, 0.0, 1.0)
+    return i0, i1, tt, x1, x2
 
-    Each pulse is evaluated only on its support (found by bisection), so the cost stays linear in
-    the number of samples for long runs with many segments.
+
+def _channel(pulses: list[Pulse], t: np.ndarray, kind: str) -> np.ndarray:
+    """Sum of pulses at sorted times ``t``: ``kind`` = "value", "rate" (d/dt) or "integral"."""
+    if kind == "integral":
+        return _integral(pulses, t)[0]
+    out = np.zeros(len(t))
+    for p in pulses:
+        i0, i1, _, x1, x2 = _support(p, t)
+        if kind == "value":
+            out[i0:i1] += p.amplitude * (_step(x1) - _step(x2))
+        else:
+            out[i0:i1] += p.amplitude / p.ramp * (_step_d(x1) - _step_d(x2))
+    return out
+
+
+def _integral(pulses: list[Pulse], t: np.ndarray, ended: float | None = None) -> tuple[np.ndarray, float]:
+    """Integral of the pulses from -inf to the sorted times ``t``, evaluable block by block.
+
+    ``ended`` is the summed area of the pulses that ended before ``t[0]`` as the previous block
+    returned it (``None``: the first block, summed here). The areas are summed in the same order
+    whatever the blocks, so a sweep in blocks that overlap by one sample gives the one-pass
+    numbers bit for bit.
+
+    Returns
+    -------
+    ndarray, shape (len(t),)
+        The integral (unit of the channel x s).
+    float
+        The summed area of the pulses that ended before ``t[-1]``: ``ended`` of the next block.
     """
     out = np.zeros(len(t))
     tail = np.zeros(len(t) + 1)
     for p in pulses:
+        i0, i1, tt, x1, x2 = _support(p, t)
         te = p.t0 + p.duration
-        i0, i1 = np.searchsorted(t, [p.t0, te], side="right")
-        tt = t[i0:i1]
-        # Rising step at t0, falling step at te - ramp; the pulse is their difference.
-        x1 = np.clip((tt - p.t0) / p.ramp, 0.0, 1.0)
-        x2 = np.clip((tt - (te - p.ramp)) / p.ramp, 0.0, 1.0)
-        if kind == "value":
-            out[i0:i1] += p.amplitude * (_step(x1) - _step(x2))
-        elif kind == "rate":
-            out[i0:i1] += p.amplitude / p.ramp * (_step_d(x1) - _step_d(x2))
-        else:
-            int1 = p.ramp * _step_int(x1) + np.maximum(tt - p.t0 - p.ramp, 0.0)
-            int2 = p.ramp * _step_int(x2) + np.maximum(tt - te, 0.0)
-            out[i0:i1] += p.amplitude * (int1 - int2)
-            tail[i1] += p.area
-    if kind == "integral":
-        out += np.cumsum(tail[:-1])
-    return out
+        int1 = p.ramp * _step_int(x1) + np.maximum(tt - p.t0 - p.ramp, 0.0)
+        int2 = p.ramp * _step_int(x2) + np.maximum(tt - te, 0.0)
+        out[i0:i1] += p.amplitude * (int1 - int2)
+        tail[i1] += p.area
+    if ended is not None:
+        tail[0] = ended
+    done = np.cumsum(tail[:-1])
+    out += done
+    return out, float(done[-1]) if len(t) else (ended or 0.0)
 
 
 # Scenarios
@@ -175,6 +203,7 @@ class Scenario:
         self._accel: list[Pulse] = []
         self._yaw_rate: list[Pulse] = []
         self._pitch: list[Pulse] = []
+        self._spans: dict[int, tuple] = {}   # start and end times of each pulse list, for sweeps
 
     def _log(self, kind: str, duration: float, reverse: bool | None = None, **info) -> "Scenario":
         info = {k: float(v) for k, v in info.items()}
@@ -260,18 +289,41 @@ class Scenario:
 
     def kinematics(self, t_rel: np.ndarray, yaw0: float) -> Kinematics:
         """Evaluate the path at sorted times ``t_rel`` [s] relative to the start; ``yaw0`` [rad]."""
+        return self.kinematics_block(t_rel, yaw0)[0]
+
+    def kinematics_block(self, t_rel: np.ndarray, yaw0: float, ended=None) -> tuple[Kinematics, tuple]:
+        """:meth:`kinematics` of one block of a sweep over sorted times, bit for bit the one-pass values.
+
+        ``ended`` is what the previous block returned (``None`` for the first); consecutive blocks
+        overlap by one sample. Returns the kinematics and the ``ended`` of the next block.
+        """
         t_rel = np.atleast_1d(np.asarray(t_rel, float))
-        speed = self.speed0 + _channel(self._accel, t_rel, "integral")
+        # Within a sweep only the pulses overlapping the block count (the areas of those that
+        # ended before it arrive in ``ended``): the cost per block does not grow with the run.
+        accel, yaw_rate, pitch = (self._overlapping(p, t_rel) if ended is not None and len(t_rel) else p
+                                  for p in (self._accel, self._yaw_rate, self._pitch))
+        speed_int, speed_end = _integral(accel, t_rel, None if ended is None else ended[0])
+        yaw_int, yaw_end = _integral(yaw_rate, t_rel, None if ended is None else ended[1])
+        speed = self.speed0 + speed_int
         # Stops end with floating-point dust of ~1e-15 m/s: make them exactly stationary.
         speed = np.where(np.abs(speed) < 1e-12, 0.0, speed)
-        return Kinematics(
+        kin = Kinematics(
             speed=speed,
-            accel=_channel(self._accel, t_rel, "value"),
-            yaw=yaw0 + _channel(self._yaw_rate, t_rel, "integral"),
-            yaw_rate=_channel(self._yaw_rate, t_rel, "value"),
-            pitch=_channel(self._pitch, t_rel, "value"),
-            pitch_rate=_channel(self._pitch, t_rel, "rate"),
+            accel=_channel(accel, t_rel, "value"),
+            yaw=yaw0 + yaw_int,
+            yaw_rate=_channel(yaw_rate, t_rel, "value"),
+            pitch=_channel(pitch, t_rel, "value"),
+            pitch_rate=_channel(pitch, t_rel, "rate"),
         )
+        return kin, (speed_end, yaw_end)
+
+    def _overlapping(self, pulses: list[Pulse], t: np.ndarray) -> list[Pulse]:
+        """The pulses (in list order) that end at or after ``t[0]`` and start before ``t[-1]``."""
+        spans = self._spans.get(id(pulses))
+        if spans is None or len(spans[0]) != len(pulses):
+            spans = (np.array([p.t0 for p in pulses]), np.array([p.t0 + p.duration for p in pulses]))
+            self._spans[id(pulses)] = spans
+        return [pulses[i] for i in np.flatnonzero((spans[1] >= t[0]) & (spans[0] < t[-1]))]
 
     def segments_until(self, t_end: float) -> list[dict]:
         """The segments that start before ``t_end`` [s] (relative), the last one clipped."""

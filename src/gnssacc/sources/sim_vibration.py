@@ -20,6 +20,8 @@ degree) is not put into the truth. The simulated IMU integrates: sample k is the
 """
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from .sim_imu_errors import DEG, per_axis, gauss_markov
@@ -60,14 +62,7 @@ def engine_frequency(speed_mid: np.ndarray, dt: float, model: dict, rng: np.rand
     ``w`` a Gauss-Markov wander (relative 1-sigma ``vib_engine_wander``, correlation time
     ``vib_engine_wander_time_s``) drawn on a ``wander_step_s`` grid and interpolated linearly.
     """
-    n = len(speed_mid)
-    f_nom = np.minimum(float(model["vib_engine_idle_hz"]) + float(model["vib_engine_hz_per_mps"])
-                       * np.abs(speed_mid), float(model["vib_engine_max_hz"]))
-    m = int(np.ceil(n * dt / wander_step_s)) + 1
-    w = gauss_markov(m, wander_step_s, float(model["vib_engine_wander_time_s"]),
-                     np.array([float(model["vib_engine_wander"])]), rng)[:, 0]
-    w_mid = np.interp((np.arange(n) + 0.5) * dt, wander_step_s * np.arange(m), w)
-    return np.maximum(f_nom * (1.0 + w_mid), 0.0)
+    return EngineVibration(len(speed_mid), dt, model, rng, wander_step_s, phases=False).frequency(speed_mid)
 
 
 def engine_vibration(speed_mid: np.ndarray, dt: float, model: dict, rng: np.random.Generator) -> dict:
@@ -91,17 +86,64 @@ def engine_vibration(speed_mid: np.ndarray, dt: float, model: dict, rng: np.rand
         ``engine_phase0`` [rad] (fundamental phase at ``t[0] - dt``),
         ``engine_harmonic_phase`` [rad] (shape (2, H, 3): accel/gyro, harmonic, axis).
     """
-    f = engine_frequency(speed_mid, dt, model, rng)
-    rel = np.atleast_1d(np.asarray(model["vib_engine_harmonics"], float))
-    phase0 = rng.uniform(0.0, 2.0 * np.pi)
-    theta = rng.uniform(0.0, 2.0 * np.pi, size=(2, len(rel), 3))
-    edges = phase0 + 2.0 * np.pi * dt * np.concatenate([[0.0], np.cumsum(f)])
-    amp = np.concatenate([per_axis(model["vib_engine_accel_mps2"]), per_axis(model["vib_engine_gyro_dps"]) * DEG])
-    vib = np.zeros((len(f), 6))
-    for h, r in enumerate(rel, start=1):
-        if r != 0.0:
-            vib += (r * amp) * harmonic_interval_mean(edges, h, theta[:, h - 1].reshape(6))
-    return {"vib_a": vib[:, :3], "vib_g": vib[:, 3:], "engine_phase0": phase0, "engine_harmonic_phase": theta}
+    engine = EngineVibration(len(speed_mid), dt, model, rng)
+    vib = engine.take(speed_mid)
+    return {"vib_a": vib[:, :3], "vib_g": vib[:, 3:], **engine.draws}
+
+
+class EngineVibration:
+    """:func:`engine_vibration` of a run of ``n`` samples in consecutive chunks (:meth:`take`), bit for bit.
+
+    The draws (the frequency wander on its coarse grid, the phases) are made at construction;
+    the phase of the fundamental is carried from chunk to chunk. Parameters are those of
+    :func:`engine_vibration` and :func:`engine_frequency`.
+
+    Attributes
+    ----------
+    draws : dict
+        ``engine_phase0``, ``engine_harmonic_phase`` (see :func:`engine_vibration`).
+    """
+
+    def __init__(self, n: int, dt: float, model: dict, rng: np.random.Generator, wander_step_s: float = 0.05,
+                 phases: bool = True):
+        self.dt, self.model, self.k = dt, model, 0
+        m = int(np.ceil(n * dt / wander_step_s)) + 1
+        self._wander = gauss_markov(m, wander_step_s, float(model["vib_engine_wander_time_s"]),
+                                    np.array([float(model["vib_engine_wander"])]), rng)[:, 0]
+        self._wander_t = wander_step_s * np.arange(m)
+        self._rel = np.atleast_1d(np.asarray(model["vib_engine_harmonics"], float))
+        if phases:
+            phase0 = rng.uniform(0.0, 2.0 * np.pi)
+            theta = rng.uniform(0.0, 2.0 * np.pi, size=(2, len(self._rel), 3))
+            self.draws = {"engine_phase0": phase0, "engine_harmonic_phase": theta}
+        self._amp = np.concatenate([per_axis(model["vib_engine_accel_mps2"]),
+                                    per_axis(model["vib_engine_gyro_dps"]) * DEG])
+        self._cycles = None   # cumulative sum of the frequencies up to the next chunk's first edge
+
+    def frequency(self, speed_mid: np.ndarray) -> np.ndarray:
+        """Engine fundamental [Hz] over the next ``len(speed_mid)`` intervals (does not advance)."""
+        model, k0 = self.model, self.k
+        f_nom = np.minimum(float(model["vib_engine_idle_hz"]) + float(model["vib_engine_hz_per_mps"])
+                           * np.abs(speed_mid), float(model["vib_engine_max_hz"]))
+        w_mid = np.interp((np.arange(k0, k0 + len(speed_mid)) + 0.5) * self.dt, self._wander_t, self._wander)
+        return np.maximum(f_nom * (1.0 + w_mid), 0.0)
+
+    def take(self, speed_mid: np.ndarray) -> np.ndarray:
+        """Vibration over the next ``len(speed_mid)`` intervals: accelerometers [m/s^2] in columns
+        0-2, gyros [rad/s] in 3-5."""
+        f = self.frequency(speed_mid)
+        if self._cycles is None:
+            cycles = np.concatenate([[0.0], np.cumsum(f)])
+        else:
+            cycles = np.cumsum(np.concatenate([[self._cycles], f]))
+        self._cycles, self.k = cycles[-1], self.k + len(f)
+        edges = self.draws["engine_phase0"] + 2.0 * np.pi * self.dt * cycles
+        theta = self.draws["engine_harmonic_phase"]
+        vib = np.zeros((len(f), 6))
+        for h, r in enumerate(self._rel, start=1):
+            if r != 0.0:
+                vib += (r * self._amp) * harmonic_interval_mean(edges, h, theta[:, h - 1].reshape(6))
+        return vib
 
 
 def _fast_len(n: int) -> int:
@@ -144,6 +186,19 @@ def band_limited_interval_means(n: int, dt: float, band_hz, rng: np.random.Gener
     ndarray, shape (n, channels)
         Dimensionless (unit continuous-time RMS); variance ``integral of S sinc^2(f dt) df`` < 1.
     """
+    out = np.empty((n, channels))
+    for c, z in band_limited_columns(n, dt, band_hz, rng, channels):
+        out[:, c] = z
+    return out
+
+
+def band_limited_columns(n: int, dt: float, band_hz, rng: np.random.Generator, channels: int = 3):
+    """The columns of :func:`band_limited_interval_means`, one at a time: ``(c, z)``, ``z`` shape (n,).
+
+    Bit for bit the same numbers. The spectrum's draws (real parts of every bin and channel,
+    then imaginary parts) are read again from a copy of ``rng`` for each column, so only one
+    column's spectrum is held at a time; ``rng`` is left where the one-pass synthesis leaves it.
+    """
     lo, hi = (float(x) for x in band_hz)
     size = _fast_len(max(n, 2))
     fs = 1.0 / dt
@@ -153,13 +208,34 @@ def band_limited_interval_means(n: int, dt: float, band_hz, rng: np.random.Gener
         fm = np.abs(f + m * fs)
         psd += ((fm >= lo) & (fm <= hi)) * np.sinc(fm * dt) ** 2
     psd /= 2.0 * (hi - lo)
+    del f
     # Complex Gaussian bins of variance size * P * fs, real at DC and Nyquist: var(x) = sum P fs / size.
-    spec = rng.standard_normal((len(f), channels)) + 1j * rng.standard_normal((len(f), channels))
-    spec *= np.sqrt(0.5 * size * psd * fs)[:, None]
-    spec[0] = spec[0].real * np.sqrt(2.0)
-    if size % 2 == 0:
-        spec[-1] = spec[-1].real * np.sqrt(2.0)
-    return np.fft.irfft(spec, n=size, axis=0)[:n]
+    gain = np.sqrt(0.5 * size * psd * fs)
+    del psd
+    start = copy.deepcopy(rng)
+    for c in range(channels):
+        draws = copy.deepcopy(start)
+        spec = np.empty(len(gain), complex)
+        for part in (spec.real, spec.imag):
+            for r0 in range(0, len(gain), 1 << 14):
+                r1 = min(r0 + (1 << 14), len(gain))
+                part[r0:r1] = draws.standard_normal((r1 - r0, channels))[:, c]
+        spec *= gain
+        spec[0] = spec[0].real * np.sqrt(2.0)
+        if size % 2 == 0:
+            spec[-1] = spec[-1].real * np.sqrt(2.0)
+        z = np.fft.irfft(spec, n=size)[:n]
+        del spec
+        yield c, z
+    rng.bit_generator.state = draws.bit_generator.state
+
+
+def road_scale(speed_mid: np.ndarray, model: dict) -> np.ndarray:
+    """Road vibration RMS per interval and channel: accelerometers [m/s^2] in columns 0-2, gyros
+    [rad/s] in 3-5, shape (n, 6) (``(|v| / v_ref) ** p`` times the RMS at the reference speed)."""
+    gain = (np.abs(speed_mid) / float(model["vib_road_ref_speed_mps"])) ** float(model["vib_road_speed_exponent"])
+    rms = np.concatenate([per_axis(model["vib_road_accel_mps2"]), per_axis(model["vib_road_gyro_dps"]) * DEG])
+    return gain[:, None] * rms
 
 
 def road_vibration(speed_mid: np.ndarray, dt: float, model: dict, rng: np.random.Generator) -> dict:
@@ -175,7 +251,5 @@ def road_vibration(speed_mid: np.ndarray, dt: float, model: dict, rng: np.random
         ``vib_a`` [m/s^2], ``vib_g`` [rad/s] (shape (n, 3)).
     """
     z = band_limited_interval_means(len(speed_mid), dt, model["vib_road_band_hz"], rng, channels=6)
-    gain = (np.abs(speed_mid) / float(model["vib_road_ref_speed_mps"])) ** float(model["vib_road_speed_exponent"])
-    rms = np.concatenate([per_axis(model["vib_road_accel_mps2"]), per_axis(model["vib_road_gyro_dps"]) * DEG])
-    z *= gain[:, None] * rms
+    z *= road_scale(speed_mid, model)
     return {"vib_a": z[:, :3], "vib_g": z[:, 3:]}
