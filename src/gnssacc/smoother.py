@@ -252,30 +252,35 @@ class _Smoother:
         """Keys of node ``i``: pose, velocity, bias[, GNSS error]."""
         return [X(i), V(i), B(i)] + ([G(i)] if self.gm else [])
 
-    def covariances(self, i: int):
-        """Marginal covariances of X_i (6x6, tangent), V_i (3x3), B_i (6x6), and the pose-GNSS-error
-        cross-covariance (6x3) and GNSS-error covariance (3x3) (zeros when not modelled).
+    def covariances(self, nodes: list) -> list:
+        """Per node of ``nodes`` (ascending): marginal covariances of X_i (6x6, tangent), V_i (3x3),
+        B_i (6x6), and the pose-GNSS-error cross-covariance (6x3) and GNSS-error covariance (3x3)
+        (zeros when not modelled).
 
         From :class:`gnssacc.window_marginals.WindowMarginals` (the window's linear system, kept
-        in step with iSAM2); iSAM2's own joint query, by QR, if that system is not at hand (its
-        per-key marginals when the window holds no chain and no GNSS-error states).
+        in step with iSAM2), all nodes in one query; iSAM2's own joint query, by QR, per node if
+        that system is not at hand (its per-key marginals when the window holds no chain and no
+        GNSS-error states).
         """
-        full = None
         if self.marginals is not None and self.marginals.first is not None:
             try:
-                full = self.marginals.covariance(i)
+                return [self._split(full) for full in self.marginals.covariances(nodes)]
             except np.linalg.LinAlgError:
                 self.marginals.clear()   # rebuilt at the next update
-        if full is None and self.marginals is None and not self.gm:
+        return [self._isam_covariances(i) for i in nodes]
+
+    def _isam_covariances(self, i: int):
+        isam = self.isam.getISAM2()
+        if self.marginals is None and not self.gm:
             # Only the diagonal blocks are used without GNSS-error states: iSAM2's per-key
             # marginals cost a third of its joint query (measured, smoother-accw).
-            isam = self.isam.getISAM2()
             return (isam.marginalCovariance(X(i)), isam.marginalCovariance(V(i)), isam.marginalCovariance(B(i)),
                     _ZERO_XG, _ZERO_G)
-        if full is None:
-            keys = self.keys(i)
-            info, _ = self.isam.getISAM2().joint(keys, gtsam.EliminateQR).hessian(gtsam.Ordering(keys))
-            full = np.linalg.inv(info)
+        keys = self.keys(i)
+        info, _ = isam.joint(keys, gtsam.EliminateQR).hessian(gtsam.Ordering(keys))
+        return self._split(np.linalg.inv(info))
+
+    def _split(self, full: np.ndarray):
         gm = (full[0:6, 15:18], full[15:18, 15:18]) if self.gm else (_ZERO_XG, _ZERO_G)
         return full[0:6, 0:6], full[6:9, 6:9], full[9:15, 9:15], *gm
 
@@ -590,7 +595,7 @@ class _Loop:
             values.insert(key, value)
         self._node_factors(graph, 0, self.times[0], R0, self.vel, c_vel)
         self.smoother.update(graph, values, [(key, self.times[0]) for key in self.smoother.keys(0)])
-        self._record_online(0)
+        self._record(0, self.times[1] if len(self.times) > 1 else np.inf)
 
     def _node_factors(self, graph, i, t, R_nb, v_pred, c_vel):
         """GNSS, acceleration and stationary factors of node ``i``; ``v_pred`` [m/s] (NED) and
@@ -613,14 +618,24 @@ class _Loop:
         c_pim = np.asarray(pim.preintMeasCov())[6:9, 6:9]
         return self.online.cov_vel[i - 1] + R @ c_pim @ R.T
 
-    def _record_online(self, i):
-        """Record the newest node's estimate and marginal covariances; return the estimate."""
+    def _record(self, i: int, t_next: float):
+        """Record node ``i``'s online estimate right after its update, and the fixed-lag estimate
+        of every node that leaves the window before the next node (``t_next`` [s], ``inf`` at the
+        end), whose value it is now; their covariances come from one marginal query. Returns node
+        ``i``'s estimate."""
+        self.oldest = max(self.oldest, self.window_start)
+        leaving = []
+        while self.oldest < i + 1 and self.times[self.oldest] < t_next - self.smoother.lag:
+            if not (t_next == np.inf and self.fixed.done[self.oldest]):   # at the end: not the nodes a
+                leaving.append(self.oldest)                                # restart already recorded
+            self.oldest += 1
+        nodes = leaving if leaving and leaving[-1] == i else leaving + [i]
+        covs = dict(zip(nodes, self.smoother.covariances(nodes)))
         est = self.smoother.estimate(i)
-        self.online.put(i, est, self.smoother.covariances(i))
+        self.online.put(i, est, covs[i])
+        for m in leaving:
+            self.fixed.put(m, est if m == i else self.smoother.estimate(m), covs[m])
         return est
-
-    def _record_fixed(self, i):
-        self.fixed.put(i, self.smoother.estimate(i), self.smoother.covariances(i))
 
     def score(self) -> None:
         """Whitened GNSS residuals of both estimates at every node with a fix (vectorised)."""
@@ -652,11 +667,6 @@ class _Loop:
             self.f.gm_chain(graph, values, i, t - t_prev, self.g)
             c_vel = self._predicted_velocity_cov(i, pim) if i in self.stationary_at else None   # for the ZUPT gate
             self._node_factors(graph, i, t, nav.pose().rotation().matrix(), nav.velocity(), c_vel)
-            # Nodes about to leave the window: their fixed-lag estimate is the value they have now.
-            self.oldest = max(self.oldest, self.window_start)
-            while self.oldest < i and times[self.oldest] < t - self.smoother.lag:
-                self._record_fixed(self.oldest)
-                self.oldest += 1
             try:
                 self.smoother.update(graph, values, [(key, t) for key in self.smoother.keys(i)])
             except RuntimeError as exc:
@@ -664,10 +674,7 @@ class _Loop:
                     raise
                 self.stats["n_ill_posed_recovered"] += 1
                 self.window_start = _reinitialise(self, i, graph, values)
-            self.pose, self.vel, self.bias, self.g = self._record_online(i)
-        for m in range(self.window_start, n):
-            if not self.fixed.done[m]:
-                self._record_fixed(m)
+            self.pose, self.vel, self.bias, self.g = self._record(i, times[i + 1] if i + 1 < n else np.inf)
 
 
 def _reinitialise(loop: _Loop, i: int, graph, values) -> int:

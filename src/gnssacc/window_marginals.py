@@ -134,16 +134,20 @@ def _layout(key):
 
 @njit(cache=True)
 def _scatter(D, O, info, keys, first, start):
-    """Add a factor's information ``info`` (over ``keys``, in order) to the blocks.
+    """Add the information ``info`` of linear factors over ``keys`` (in that order) to the blocks.
 
-    Returns the lowest storage row touched, -1 for an unknown variable, -2 for a factor on nodes
-    that are not neighbours or older than the window.
+    ``info`` may be the joint information of several factors (a graph's dense Hessian): blocks
+    between nodes that are not neighbours must then be zero. Returns the lowest storage row
+    touched, -1 for an unknown variable, -2 for a coupling of nodes that are not neighbours or a
+    node older than the window.
     """
     nk = len(keys)
     rows = np.empty(nk, np.int64)
     offs = np.empty(nk, np.int64)
     dims = np.empty(nk, np.int64)
+    pos = np.empty(nk, np.int64)         # first row of each key in ``info``
     low = 1 << 62
+    p0 = 0
     for p in range(nk):
         offs[p], dims[p] = _layout(keys[p])
         if dims[p] == 0:
@@ -152,42 +156,72 @@ def _scatter(D, O, info, keys, first, start):
         if rows[p] < start:
             return -2
         low = min(low, rows[p])
-    p0 = 0
+        pos[p] = p0
+        p0 += dims[p]
     for p in range(nk):
-        q0 = 0
         for q in range(nk):
             a, c = rows[p], rows[q]
             if a == c or c == a + 1:
                 T = D[a] if a == c else O[a]
                 for r in range(dims[p]):
                     for t in range(dims[q]):
-                        T[offs[p] + r, offs[q] + t] += info[p0 + r, q0 + t]
+                        T[offs[p] + r, offs[q] + t] += info[pos[p] + r, pos[q] + t]
             elif a != c + 1:
-                return -2
-            q0 += dims[q]
-        p0 += dims[p]
+                for r in range(dims[p]):
+                    for t in range(dims[q]):
+                        if info[pos[p] + r, pos[q] + t] != 0.0:
+                            return -2
     return low
 
 
 @njit(cache=True)
-def _node_covariance(D, O, F, start, f_valid, j, last):
-    """Covariance of storage row ``j``; extends the forward sweep ``F`` (valid up to ``f_valid``).
+def _node_covariances(D, O, F, start, f_valid, rows, last):
+    """Covariances of storage ``rows`` (ascending); extends the forward sweep ``F`` (valid up to
+    ``f_valid``) to ``last``, and one backward sweep serves every row.
 
-    Returns the covariance (NaN if not positive definite) and the new ``f_valid``.
+    Returns the covariances (NaN where not positive definite) and the new ``f_valid``.
     """
     if f_valid < start:
         F[start] = D[start]
         f_valid = start
-    for k in range(f_valid, j):          # F_{k+1} = D_{k+1} - O_k^T F_k^-1 O_k
+    for k in range(f_valid, last):       # F_{k+1} = D_{k+1} - O_k^T F_k^-1 O_k
         F[k + 1] = D[k + 1] - _schur(F[k], O[k], False)
-    f_valid = max(f_valid, j)
-    info = F[j].copy()
-    if j < last:                         # less the newer nodes' Schur complement (backward sweep)
-        G = D[last].copy()
-        for k in range(last - 1, j, -1):
+    f_valid = max(f_valid, last)
+    b = D.shape[1]
+    out = np.empty((len(rows), b, b))
+    G = D[last].copy()                   # G_k: the information of nodes k.. newest on node k
+    k = last
+    for m in range(len(rows) - 1, -1, -1):
+        j = rows[m]
+        while k > j + 1:                 # G_k = D_k - O_k G_{k+1}^-1 O_k^T
+            k -= 1
             G = D[k] - _schur(G, O[k], True)
-        info -= _schur(G, O[j], True)
-    return _inverse(info), f_valid
+        info = F[j].copy()
+        if j < last:                     # less the newer nodes' Schur complement
+            info -= _schur(G, O[j], True)
+        out[m] = _inverse(info)
+    ok = True
+    for m in range(len(rows)):
+        ok = ok and np.isfinite(out[m, 0, 0])
+    return out, f_valid, ok
+
+
+@njit(cache=True)
+def _marginalize(D, O, F, start, count, f_valid):
+    """Schur complements of the ``count`` oldest nodes onto their successors; drops them.
+
+    Returns the new storage row of the oldest node and the new ``f_valid``.
+    """
+    for _ in range(count):
+        k = start
+        D[k + 1] -= _schur(D[k], O[k], False)
+        D[k] = 0.0
+        O[k] = 0.0
+        start += 1
+        if f_valid < start:              # F of the oldest node is its D (kept if already valid)
+            F[start] = D[start]
+            f_valid = start
+    return start, f_valid
 
 
 class WindowMarginals:
@@ -227,8 +261,13 @@ class WindowMarginals:
             self.rebuild(isam.getFactors(), theta)   # shorter than the node spacing)
             return
         self.add(gfg)
-        while self.n > 1 and not theta.exists(X(self.first)):
-            self.marginalize_first()
+        count = 0
+        while count < self.n - 1 and not theta.exists(X(self.first + count)):
+            count += 1
+        if count:
+            self.start, self.f_valid = _marginalize(self.D, self.O, self.F, self.start, count, self.f_valid)
+            self.first += count
+            self.n -= count
 
     def rebuild(self, factors: gtsam.NonlinearFactorGraph, theta: gtsam.Values) -> None:
         """The blocks of all ``factors`` linearised at ``theta``."""
@@ -240,43 +279,41 @@ class WindowMarginals:
 
     def add(self, gfg: gtsam.GaussianFactorGraph) -> None:
         """Add the information of linear factors (appending new nodes as needed)."""
-        for j in range(gfg.size()):
-            f = gfg.at(j)
-            if f is None:
-                continue
-            keys = np.array(f.keys(), np.int64)
-            last = int((keys & _INDEX_MASK).max())
-            if last >= self.first + self.n:
-                self._grow(last)
-            low = _scatter(self.D, self.O, f.information(), keys, self.first, self.start)
-            if low < 0:
-                raise NotAChain(f"a factor on {[gtsam.DefaultKeyFormatter(int(k)) for k in keys]} does not fit "
-                                "the window's chain of nodes")
-            self.f_valid = min(self.f_valid, low - 1)
+        keys = gfg.keyVector()
+        if not keys:
+            return
+        keys = np.array(keys, np.int64)
+        last = int((keys & _INDEX_MASK).max())
+        if last >= self.first + self.n:
+            self._grow(last)
+        # One dense (augmented) Hessian of the whole graph, its variables in key order: far
+        # cheaper than a Python loop over its factors.
+        info = gfg.augmentedHessian()
+        low = _scatter(self.D, self.O, info, keys, self.first, self.start)
+        if low < 0:
+            raise NotAChain(f"a factor on {[gtsam.DefaultKeyFormatter(int(k)) for k in keys]} does not fit "
+                            "the window's chain of nodes")
+        self.f_valid = min(self.f_valid, low - 1)
 
     def marginalize_first(self) -> None:
         """Schur complement of the oldest node onto the next one; drop it."""
-        k = self.start
-        self.D[k + 1] -= _schur(self.D[k], self.O[k], False)
-        self.D[k] = 0.0
-        self.O[k] = 0.0
-        self.start += 1
+        self.start, self.f_valid = _marginalize(self.D, self.O, self.F, self.start, 1, self.f_valid)
         self.first += 1
         self.n -= 1
-        if self.f_valid < self.start:    # F of the oldest node is its D (kept if already valid)
-            self.F[self.start] = self.D[self.start]
-            self.f_valid = self.start
 
-    def covariance(self, node: int) -> np.ndarray:
-        """Marginal covariance of ``node``'s block: pose tangent (6), velocity (3), bias (6)[,
-        GNSS error (3)]."""
-        j, last = self.start + node - self.first, self.start + self.n - 1
-        if not self.start <= j <= last:
-            raise KeyError(f"node {node} is not in the window")
-        cov, self.f_valid = _node_covariance(self.D, self.O, self.F, self.start, self.f_valid, j, last)
-        if not np.isfinite(cov[0, 0]):
-            raise np.linalg.LinAlgError(f"the marginal information of node {node} is not positive definite")
-        return cov
+    def covariances(self, nodes) -> np.ndarray:
+        """Marginal covariances of ``nodes``' blocks (ascending node indices), one query: pose
+        tangent (6), velocity (3), bias (6)[, GNSS error (3)] each; array (len(nodes), b, b)."""
+        last, shift = self.start + self.n - 1, self.start - self.first
+        rows = [node + shift for node in nodes]
+        if not (self.start <= rows[0] and rows[-1] <= last and all(a < b for a, b in zip(rows, rows[1:]))):
+            raise KeyError(f"nodes {list(nodes)} are not ascending nodes of the window")
+        covs, self.f_valid, ok = _node_covariances(self.D, self.O, self.F, self.start, self.f_valid,
+                                                   np.array(rows, np.int64), last)
+        if not ok:
+            raise np.linalg.LinAlgError(f"the marginal information of a node of {list(nodes)} is not positive "
+                                        "definite")
+        return covs
 
     def _alloc(self, cap: int) -> None:
         b = self.b
