@@ -145,35 +145,34 @@ def _initial_prior(init: InitialState, cfg: RunConfig) -> tuple[np.ndarray, np.n
 class _Record:
     """Per-node estimates and marginal covariances (one of: online, fixed-lag)."""
 
-    def __init__(self, n: int):
+    def __init__(self, n: int, gm: bool):
         self.p_n = np.full((n, 3), np.nan)
         self.R = np.full((n, 3, 3), np.nan)
         self.v_n = np.full((n, 3), np.nan)
         self.bias = np.full((n, 6), np.nan)
-        self.cov_pose = np.full((n, 6, 6), np.nan)   # Pose3 tangent (body rotation, body translation)
-        self.cov_vel = np.full((n, 3, 3), np.nan)
-        self.cov_bias = np.full((n, 6, 6), np.nan)
+        # Joint marginal of the node's variables: Pose3 tangent (body rotation, body translation),
+        # velocity, bias[, GNSS Gauss-Markov error] (the views below are its blocks).
+        self.cov = np.full((n, 18 if gm else 15, 18 if gm else 15), np.nan)
         self.done = np.zeros(n, bool)
         self.chi2 = np.full((n, 2), np.nan)   # whitened GNSS residual and its expectation, nodes with a fix
-        # GNSS Gauss-Markov error (zeros when not modelled): estimate, its covariance and its
-        # cross-covariance with the pose tangent.
-        self.g = np.zeros((n, 3))
-        self.cov_g = np.zeros((n, 3, 3))
-        self.cov_xg = np.zeros((n, 6, 3))
+        self.g = np.zeros((n, 3))             # GNSS error estimate (zeros when not modelled)
+        zeros = np.zeros((n, 9, 9))
+        self.cov_pose, self.cov_vel, self.cov_bias = self.cov[:, 0:6, 0:6], self.cov[:, 6:9, 6:9], self.cov[:, 9:15, 9:15]
+        self.cov_g = self.cov[:, 15:18, 15:18] if gm else zeros[:, 0:3, 0:3]    # GNSS error
+        self.cov_xg = self.cov[:, 0:6, 15:18] if gm else zeros[:, 0:6, 0:3]     # pose x GNSS error
 
-    def put(self, i: int, est, covs) -> None:
+    def put(self, i: int, est, cov: np.ndarray) -> None:
         pose, v_n, bias, g = est
         self.p_n[i] = pose.translation()
         self.R[i] = pose.rotation().matrix()
         self.v_n[i] = v_n
         self.bias[i] = bias.vector()
         self.g[i] = g
-        self.cov_pose[i], self.cov_vel[i], self.cov_bias[i], self.cov_xg[i], self.cov_g[i] = covs
+        self.cov[i] = cov
         self.done[i] = True
 
     def copy_from(self, other: "_Record", i: int) -> None:
-        for name in ("p_n", "R", "v_n", "bias", "cov_pose", "cov_vel", "cov_bias", "done", "chi2", "g", "cov_g",
-                     "cov_xg"):
+        for name in ("p_n", "R", "v_n", "bias", "cov", "done", "chi2", "g"):
             getattr(self, name)[i] = getattr(other, name)[i]
 
     def sigmas(self) -> np.ndarray:
@@ -252,40 +251,33 @@ class _Smoother:
         """Keys of node ``i``: pose, velocity, bias[, GNSS error]."""
         return [X(i), V(i), B(i)] + ([G(i)] if self.gm else [])
 
-    def covariances(self, nodes: list) -> list:
-        """Per node of ``nodes`` (ascending): marginal covariances of X_i (6x6, tangent), V_i (3x3),
-        B_i (6x6), and the pose-GNSS-error cross-covariance (6x3) and GNSS-error covariance (3x3)
-        (zeros when not modelled).
+    def covariances(self, nodes: list) -> np.ndarray:
+        """Joint marginal covariance of each node's variables, for ``nodes`` (ascending): X_i
+        (Pose3 tangent), V_i, B_i[, G_i]; array (len(nodes), 15 or 18, 15 or 18).
 
         From :class:`gnssacc.window_marginals.WindowMarginals` (the window's linear system, kept
         in step with iSAM2), all nodes in one query; iSAM2's own joint query, by QR, per node if
-        that system is not at hand (its per-key marginals when the window holds no chain and no
-        GNSS-error states).
+        that system is not at hand (its per-key marginals, and zero cross-covariances, when the
+        window holds no chain and no GNSS-error states: only the diagonal blocks are used then).
         """
         if self.marginals is not None and self.marginals.first is not None:
             try:
-                return [self._split(full) for full in self.marginals.covariances(nodes)]
+                return self.marginals.covariances(nodes)
             except np.linalg.LinAlgError:
                 self.marginals.clear()   # rebuilt at the next update
-        return [self._isam_covariances(i) for i in nodes]
+        return np.array([self._isam_covariance(i) for i in nodes])
 
-    def _isam_covariances(self, i: int):
+    def _isam_covariance(self, i: int) -> np.ndarray:
         isam = self.isam.getISAM2()
         if self.marginals is None and not self.gm:
-            # Only the diagonal blocks are used without GNSS-error states: iSAM2's per-key
-            # marginals cost a third of its joint query (measured, smoother-accw).
-            return (isam.marginalCovariance(X(i)), isam.marginalCovariance(V(i)), isam.marginalCovariance(B(i)),
-                    _ZERO_XG, _ZERO_G)
+            # iSAM2's per-key marginals cost a third of its joint query (measured, smoother-accw).
+            full = np.zeros((15, 15))
+            for key, sl in ((X(i), slice(0, 6)), (V(i), slice(6, 9)), (B(i), slice(9, 15))):
+                full[sl, sl] = isam.marginalCovariance(key)
+            return full
         keys = self.keys(i)
         info, _ = isam.joint(keys, gtsam.EliminateQR).hessian(gtsam.Ordering(keys))
-        return self._split(np.linalg.inv(info))
-
-    def _split(self, full: np.ndarray):
-        gm = (full[0:6, 15:18], full[15:18, 15:18]) if self.gm else (_ZERO_XG, _ZERO_G)
-        return full[0:6, 0:6], full[6:9, 6:9], full[9:15, 9:15], *gm
-
-
-_ZERO_XG, _ZERO_G = np.zeros((6, 3)), np.zeros((3, 3))
+        return np.linalg.inv(info)
 
 
 def _is_ill_posed(exc: Exception) -> bool:
@@ -340,6 +332,7 @@ class _Factors:
         self.p_fix = origin.to_ned(gnss.lat, gnss.lon, gnss.h)
         self.fix_at = {float(t): i for i, t in enumerate(gnss.t)}
         self.lever = cfg.lever_arm_b
+        self.has_lever = bool(np.any(self.lever != 0))
         self.g_n = np.array([0.0, 0.0, float(normal_gravity(origin.lat0, origin.h0))])
         self.w_ie = earth_rate_n(origin.lat0)
         self.f_avg = float(cfg["accel"]["specific_force_avg_s"])
@@ -368,7 +361,7 @@ class _Factors:
         noise = self._noise.get(tuple(sig))
         if noise is None:  # most runs have a handful of distinct fix sigmas
             noise = self._noise[tuple(sig)] = gtsam.noiseModel.Diagonal.Sigmas(sig)
-        if np.any(self.lever != 0):
+        if self.has_lever:
             graph.add(gtsam.GPSFactorArm(X(i), self.p_fix[k], self.lever, noise))
         else:
             graph.add(gtsam.GPSFactor(X(i), self.p_fix[k], noise))
@@ -558,7 +551,7 @@ class _Loop:
         origin = run.origin
         self.model = _ImuModel(cfg, float(factors.g_n[2]), earth_rate_n(origin.lat0))
         n = len(times)
-        self.online, self.fixed = _Record(n), _Record(n)
+        self.online, self.fixed = _Record(n, factors.gm), _Record(n, factors.gm)
         self.smoother = _Smoother(cfg, chain=use_acc != "window")
         self.fix_of = np.full(n, -1)
         self.window_start, self.oldest = 0, 0
@@ -593,14 +586,15 @@ class _Loop:
         graph.add(gtsam.PriorFactorVector(V(0), self.vel, gtsam.noiseModel.Gaussian.Covariance(c_vel)))
         for key, value in ((X(0), self.pose), (V(0), self.vel), (B(0), self.bias)) + (((G(0), self.g),) if self.f.gm else ()):
             values.insert(key, value)
-        self._node_factors(graph, 0, self.times[0], R0, self.vel, c_vel)
+        self._start_gate = (R0, self.vel, c_vel)
+        self._node_factors(graph, 0, self.times[0])
         self.smoother.update(graph, values, [(key, self.times[0]) for key in self.smoother.keys(0)])
         self._record(0, self.times[1] if len(self.times) > 1 else np.inf)
 
-    def _node_factors(self, graph, i, t, R_nb, v_pred, c_vel):
-        """GNSS, acceleration and stationary factors of node ``i``; ``v_pred`` [m/s] (NED) and
-        ``c_vel`` its 3x3 covariance: the velocity predicted for the node, which gates the
-        stationary factors (:meth:`_Factors.stationary`)."""
+    def _node_factors(self, graph, i, t, nav=None, pim=None):
+        """GNSS, acceleration and stationary factors of node ``i``; ``nav`` (``gtsam.NavState``)
+        and ``pim`` are the node's prediction and preintegration (``None`` at the start), whose
+        velocity and its covariance gate the stationary factors (:meth:`_Factors.stationary`)."""
         k = self.f.gps(graph, i, t)
         if k is not None:
             self.fix_of[i] = k
@@ -609,6 +603,10 @@ class _Loop:
             elif self.use_acc:
                 self.f.accel(graph, i, t, k, self.segs[0], self.segs[1])
         if i in self.stationary_at:
+            if nav is None:      # the start: its own velocity and covariance
+                R_nb, v_pred, c_vel = self._start_gate
+            else:
+                R_nb, v_pred, c_vel = nav.pose().rotation().matrix(), nav.velocity(), self._predicted_velocity_cov(i, pim)
             self.f.stationary(graph, i, self.stationary_at[i], R_nb, self.bias, v_pred, c_vel)
 
     def _predicted_velocity_cov(self, i, pim) -> np.ndarray:
@@ -630,11 +628,11 @@ class _Loop:
                 leaving.append(self.oldest)                                # restart already recorded
             self.oldest += 1
         nodes = leaving if leaving and leaving[-1] == i else leaving + [i]
-        covs = dict(zip(nodes, self.smoother.covariances(nodes)))
+        covs = self.smoother.covariances(nodes)
         est = self.smoother.estimate(i)
-        self.online.put(i, est, covs[i])
-        for m in leaving:
-            self.fixed.put(m, est if m == i else self.smoother.estimate(m), covs[m])
+        self.online.put(i, est, covs[-1])
+        for m, cov in zip(leaving, covs):
+            self.fixed.put(m, est if m == i else self.smoother.estimate(m), cov)
         return est
 
     def score(self) -> None:
@@ -665,8 +663,7 @@ class _Loop:
             values.insert(V(i), nav.velocity())
             values.insert(B(i), self.bias)
             self.f.gm_chain(graph, values, i, t - t_prev, self.g)
-            c_vel = self._predicted_velocity_cov(i, pim) if i in self.stationary_at else None   # for the ZUPT gate
-            self._node_factors(graph, i, t, nav.pose().rotation().matrix(), nav.velocity(), c_vel)
+            self._node_factors(graph, i, t, nav, pim)
             try:
                 self.smoother.update(graph, values, [(key, t) for key in self.smoother.keys(i)])
             except RuntimeError as exc:
