@@ -38,6 +38,7 @@ so they change no estimate that a constant bias would not give.
 from __future__ import annotations
 
 import time
+from collections import deque
 
 import gtsam
 import numpy as np
@@ -468,10 +469,12 @@ def _preintegrate(imu, model, bias, t_prev, t, j_start, k_end, inflation, dt_all
     dts[0] = min(imu_t[j_start], t) - t_prev
     if k_end - j_start > 1 and imu_t[k_end - 1] > t:
         dts[-1] = t - imu_t[k_end - 2]
-    integrate = pim.integrateMeasurement
-    for f_b, w_b, dt in zip(imu.f_b[j_start:k_end], imu.omega_ib_b[j_start:k_end], dts):
-        if dt > 0.0:
-            integrate(f_b, w_b, dt)
+    f_b, w_b = imu.f_b[j_start:k_end], imu.omega_ib_b[j_start:k_end]
+    if min(dts) <= 0.0:                   # repeated time stamps: nothing to integrate
+        keep = [k for k, dt in enumerate(dts) if dt > 0.0]
+        f_b, w_b, dts = f_b[keep], w_b[keep], [dts[k] for k in keep]
+    # map() drives the C++ calls without a Python loop body (the samples are most of the run's calls).
+    deque(map(pim.integrateMeasurement, f_b, w_b, dts), maxlen=0)
     return pim
 
 
@@ -648,11 +651,13 @@ class _Loop:
         seg_i0, seg_i1, seg_qg, seg_qa = self.segs
         first = np.searchsorted(imu.t, times, side="right")
         last = np.minimum(np.searchsorted(imu.t, times, side="left") + 1, len(imu.t))
-        touches = _touches(first, last, seg_i0, seg_i1)
+        touches = _touches(first, last, seg_i0, seg_i1).tolist()
         dt_all = np.diff(imu.t, prepend=imu.t[0])
+        # Python scalars: the loop runs once per node and numpy scalars cost more than floats.
+        times_l, first, last = (times.tolist() + [np.inf]), first.tolist(), last.tolist()
         for i in progress(range(1, n), desc=method, enable=show_progress):
-            t_prev, t = times[i - 1], times[i]
-            j0, k1 = int(first[i - 1]), int(last[i])
+            t_prev, t = times_l[i - 1], times_l[i]
+            j0, k1 = first[i - 1], last[i]
             inflation = (_inflation_over(imu.t, j0, k1, t_prev, t, seg_i0, seg_i1, seg_qa, seg_qg)
                          if touches[i] else (None, None))
             pim = _preintegrate(imu, self.model, self.bias, t_prev, t, j0, k1, inflation, dt_all)
@@ -662,7 +667,8 @@ class _Loop:
             values.insert(X(i), nav.pose())
             values.insert(V(i), nav.velocity())
             values.insert(B(i), self.bias)
-            self.f.gm_chain(graph, values, i, t - t_prev, self.g)
+            if self.f.gm:
+                self.f.gm_chain(graph, values, i, t - t_prev, self.g)
             self._node_factors(graph, i, t, nav, pim)
             try:
                 self.smoother.update(graph, values, [(key, t) for key in self.smoother.keys(i)])
@@ -671,7 +677,7 @@ class _Loop:
                     raise
                 self.stats["n_ill_posed_recovered"] += 1
                 self.window_start = _reinitialise(self, i, graph, values)
-            self.pose, self.vel, self.bias, self.g = self._record(i, times[i + 1] if i + 1 < n else np.inf)
+            self.pose, self.vel, self.bias, self.g = self._record(i, times_l[i + 1])
 
 
 def _reinitialise(loop: _Loop, i: int, graph, values) -> int:
