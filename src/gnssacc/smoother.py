@@ -199,10 +199,11 @@ class _Record:
 class _Smoother:
     """The incremental fixed-lag smoother with bookkeeping and recovery."""
 
-    def __init__(self, cfg: RunConfig, chain: bool = True):
-        """``chain``: factors link consecutive nodes only, so the window's marginals can be kept
-        by :class:`WindowMarginals`; otherwise (window-consistent acceleration factors on three
-        nodes) they come from iSAM2's joint queries."""
+    def __init__(self, cfg: RunConfig, bandwidth: int = 1):
+        """``bandwidth``: how many nodes apart a factor reaches (1: a chain of nodes; the
+        window-consistent acceleration factors reach across their window of fixes). The
+        window's marginals are kept by :class:`WindowMarginals` for that band; a wider factor
+        makes them come from iSAM2's queries while it is in the window."""
         sm = cfg["smoother"]
         self.lag = float(sm["lag_s"])
         self.gm = bool(np.any(cfg.gnss_gm_sigma > 0))
@@ -213,7 +214,7 @@ class _Smoother:
         # Reuse the slots of marginalised factors so the factor list stays bounded on long runs.
         self.params.findUnusedFactorSlots = True
         self.isam = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
-        self.marginals = WindowMarginals(self.gm) if chain else None
+        self.marginals = WindowMarginals(self.gm, bandwidth)
 
     def reset(self, robust: bool = False) -> None:
         """A new, empty smoother; ``robust`` switches to QR factorization (returns whether it did)."""
@@ -221,8 +222,7 @@ class _Smoother:
         if switched:
             self.params.setFactorization("QR")
         self.isam = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
-        if self.marginals is not None:
-            self.marginals.clear()
+        self.marginals.clear()
         return switched
 
     def update(self, graph, values, stamps) -> None:
@@ -230,8 +230,6 @@ class _Smoother:
         for key, t in stamps:
             ts.insert((key, t))
         self.isam.update(graph, values, ts)
-        if self.marginals is None:
-            return
         try:
             self.marginals.sync(self.isam, graph)
         except NotAChain:
@@ -257,11 +255,12 @@ class _Smoother:
         (Pose3 tangent), V_i, B_i[, G_i]; array (len(nodes), 15 or 18, 15 or 18).
 
         From :class:`gnssacc.window_marginals.WindowMarginals` (the window's linear system, kept
-        in step with iSAM2), all nodes in one query; iSAM2's own joint query, by QR, per node if
-        that system is not at hand (its per-key marginals, and zero cross-covariances, when the
-        window holds no chain and no GNSS-error states: only the diagonal blocks are used then).
+        in step with iSAM2), all nodes in one query; iSAM2's own queries, per node, while that
+        system is not at hand (a factor wider than its band): the joint one by QR with GNSS-error
+        states, else the per-key marginals and zero cross-covariances (only the diagonal blocks
+        are used then).
         """
-        if self.marginals is not None and self.marginals.first is not None:
+        if self.marginals.first is not None:
             try:
                 return self.marginals.covariances(nodes)
             except np.linalg.LinAlgError:
@@ -270,7 +269,7 @@ class _Smoother:
 
     def _isam_covariance(self, i: int) -> np.ndarray:
         isam = self.isam.getISAM2()
-        if self.marginals is None and not self.gm:
+        if not self.gm:
             # iSAM2's per-key marginals cost a third of its joint query (measured, smoother-accw).
             full = np.zeros((15, 15))
             for key, sl in ((X(i), slice(0, 6)), (V(i), slice(6, 9)), (B(i), slice(9, 15))):
@@ -555,7 +554,7 @@ class _Loop:
         self.model = _ImuModel(cfg, float(factors.g_n[2]), earth_rate_n(origin.lat0))
         n = len(times)
         self.online, self.fixed = _Record(n, factors.gm), _Record(n, factors.gm)
-        self.smoother = _Smoother(cfg, chain=use_acc != "window")
+        self.smoother = _Smoother(cfg, _bandwidth(cfg) if use_acc == "window" else 1)
         self.fix_of = np.full(n, -1)
         self.window_start, self.oldest = 0, 0
         self._start(init)
@@ -680,6 +679,15 @@ class _Loop:
             self.pose, self.vel, self.bias, self.g = self._record(i, times_l[i + 1])
 
 
+def _bandwidth(cfg: RunConfig) -> int:
+    """How many nodes apart a window-consistent acceleration factor may reach: its window's m
+    fixes are at most ``[accel] max_gap_s`` apart, with fill nodes at most ``[smoother]
+    max_node_spacing_s`` apart between them (stationary nodes may add more: such a factor makes
+    the marginals come from iSAM2 while it is in the window)."""
+    per_gap = int(np.ceil(float(cfg["accel"]["max_gap_s"]) / float(cfg["smoother"]["max_node_spacing_s"]) - 1e-9))
+    return (int(cfg["accel"]["window"]) - 1) * max(per_gap, 1)
+
+
 def _reinitialise(loop: _Loop, i: int, graph, values) -> int:
     """Restart the window after an ill-posed update of node ``i``; return the new window start.
 
@@ -735,5 +743,7 @@ def warm_up() -> float:
 
     t0 = time.perf_counter()
     run = simulate("car", 6.0, give_init=True, seed=0)
-    run_smoother(run, load_config(overrides={"smoother": {"lag_s": 2.0}}), "smoother")
+    cfg = load_config(overrides={"smoother": {"lag_s": 2.0}})
+    for method in ("smoother", "smoother-accw"):     # the chain's kernels and the band's
+        run_smoother(run, cfg, method)
     return time.perf_counter() - t0

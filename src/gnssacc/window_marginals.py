@@ -38,21 +38,21 @@ _INDEX_MASK = (1 << 56) - 1
 
 
 class NotAChain(RuntimeError):
-    """A factor links nodes that are not neighbours (the block-tridiagonal form does not hold)."""
+    """A factor links nodes further apart than the band (the block-banded form does not hold)."""
 
 
 @njit(cache=True)
 def _gram(W, scale):
     """``W^T W`` scaled by ``scale_i scale_j`` (explicit loops: numba's ``@`` would call BLAS)."""
-    b = W.shape[0]
-    out = np.zeros((b, b))
-    for k in range(b):                   # row by row, contiguous inner loops
-        for i in range(b):
+    r, m = W.shape
+    out = np.zeros((m, m))
+    for k in range(r):                   # row by row, contiguous inner loops
+        for i in range(m):
             w = W[k, i]
-            for j in range(i, b):
+            for j in range(i, m):
                 out[i, j] += w * W[k, j]
-    for i in range(b):
-        for j in range(i, b):
+    for i in range(m):
+        for j in range(i, m):
             out[i, j] *= scale[i] * scale[j]
             out[j, i] = out[i, j]
     return out
@@ -133,14 +133,15 @@ def _layout(key):
 
 
 @njit(cache=True)
-def _scatter(D, O, info, keys, first, start):
+def _scatter(D, O, Ox, info, keys, first, start):
     """Add the information ``info`` of linear factors over ``keys`` (in that order) to the blocks.
 
     ``info`` may be the joint information of several factors (a graph's dense Hessian): blocks
-    between nodes that are not neighbours must then be zero. Returns the lowest storage row
-    touched, -1 for an unknown variable, -2 for a coupling of nodes that are not neighbours or a
-    node older than the window.
+    between nodes further apart than the band (``1 + Ox.shape[1]`` nodes) must then be zero.
+    Returns the lowest storage row touched, -1 for an unknown variable, -2 for a coupling wider
+    than the band or a node older than the window.
     """
+    w = Ox.shape[1] + 1
     nk = len(keys)
     rows = np.empty(nk, np.int64)
     offs = np.empty(nk, np.int64)
@@ -161,12 +162,12 @@ def _scatter(D, O, info, keys, first, start):
     for p in range(nk):
         for q in range(nk):
             a, c = rows[p], rows[q]
-            if a == c or c == a + 1:
-                T = D[a] if a == c else O[a]
+            if a <= c <= a + w:
+                T = D[a] if a == c else _coupling(O, Ox, a, c - a)
                 for r in range(dims[p]):
                     for t in range(dims[q]):
                         T[offs[p] + r, offs[q] + t] += info[pos[p] + r, pos[q] + t]
-            elif a != c + 1:
+            elif not c < a <= c + w:
                 for r in range(dims[p]):
                     for t in range(dims[q]):
                         if info[pos[p] + r, pos[q] + t] != 0.0:
@@ -224,6 +225,99 @@ def _marginalize(D, O, F, start, count, f_valid):
     return start, f_valid
 
 
+@njit(cache=True)
+def _coupling(O, Ox, a, d):
+    """The block ``H[a, a + d]`` (``1 <= d``): ``O`` holds ``d = 1``, ``Ox`` ``d = 2 ..``."""
+    return O[a] if d == 1 else Ox[a, d - 2]
+
+
+@njit(cache=True)
+def _nonzero(A):
+    for x in A.ravel():
+        if x != 0.0:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _eliminate(D, O, Ox, k, lo, hi):
+    """Eliminate storage row ``k`` of a block-banded ``H``: subtract its Schur complement from the
+    blocks of its neighbours among rows ``[lo, hi]`` (``k`` excluded; bandwidth ``1 + Ox.shape[1]``).
+    Row ``k``'s own blocks are left as they were."""
+    b, w = D.shape[1], Ox.shape[1] + 1
+    nbr = np.empty(2 * w, np.int64)
+    m = 0
+    for r in range(max(lo, k - w), min(hi, k + w) + 1):
+        if r != k and _nonzero(_coupling(O, Ox, k, r - k) if r > k else _coupling(O, Ox, r, k - r)):
+            nbr[m] = r           # (a wide band costs only where factors actually reach)
+            m += 1
+    C = np.empty((b, m * b))             # H[k, neighbours]
+    for p in range(m):
+        r = nbr[p]
+        if r > k:
+            blk = _coupling(O, Ox, k, r - k)
+            for i in range(b):
+                for j in range(b):
+                    C[i, p * b + j] = blk[i, j]
+        else:
+            blk = _coupling(O, Ox, r, k - r)
+            for i in range(b):
+                for j in range(b):
+                    C[i, p * b + j] = blk[j, i]
+    L, s = _chol(D[k])
+    for i in range(b):                   # C <- L^-1 S C (scaled pivot, as in _schur)
+        for j in range(m * b):
+            C[i, j] *= s[i]
+        for q in range(i):
+            l = L[i, q]
+            for j in range(m * b):
+                C[i, j] -= l * C[q, j]
+        d = 1.0 / L[i, i]
+        for j in range(m * b):
+            C[i, j] *= d
+    S = _gram(C, np.ones(m * b))
+    for p in range(m):
+        for q in range(p, m):
+            T = D[nbr[p]] if p == q else _coupling(O, Ox, nbr[p], nbr[q] - nbr[p])
+            for i in range(b):
+                for j in range(b):
+                    T[i, j] -= S[p * b + i, q * b + j]
+
+
+@njit(cache=True)
+def _band_covariances(D, O, Ox, start, rows, last):
+    """Covariances of storage ``rows`` of a block-banded ``H`` (rows ``start .. last``): per row,
+    on a copy, eliminate the older rows oldest first and the newer rows newest first, and invert
+    what is left of the row. Returns them and whether all were positive definite."""
+    b = D.shape[1]
+    out = np.empty((len(rows), b, b))
+    ok = True
+    for m in range(len(rows)):
+        j = rows[m] - start
+        n = last - start
+        D2, O2, Ox2 = D[start:last + 1].copy(), O[start:last + 1].copy(), Ox[start:last + 1].copy()
+        for k in range(j):
+            _eliminate(D2, O2, Ox2, k, k + 1, n)
+        for k in range(n, j, -1):
+            _eliminate(D2, O2, Ox2, k, j, k - 1)
+        out[m] = _inverse(D2[j])
+        ok = ok and np.isfinite(out[m, 0, 0])
+    return out, ok
+
+
+@njit(cache=True)
+def _band_marginalize(D, O, Ox, start, count, last):
+    """Schur complements of the ``count`` oldest rows onto their successors; drops them. Returns
+    the new storage row of the oldest node."""
+    for _ in range(count):
+        _eliminate(D, O, Ox, start, start + 1, last)
+        D[start] = 0.0
+        O[start] = 0.0
+        Ox[start] = 0.0
+        start += 1
+    return start
+
+
 class WindowMarginals:
     """The window's information matrix as blocks, oldest node first, and its marginals.
 
@@ -231,10 +325,16 @@ class WindowMarginals:
     ----------
     gm : bool
         Nodes carry a GNSS-error state (blocks of 18 instead of 15).
+    bandwidth : int
+        How many nodes apart a factor may reach: 1 for a chain (block-tridiagonal ``H``, the
+        kept forward sweep); more for factors on several nodes (``smoother-accw``'s window
+        factors), whose marginals come from :func:`_band_covariances`. A wider factor raises
+        :class:`NotAChain`.
     """
 
-    def __init__(self, gm: bool):
+    def __init__(self, gm: bool, bandwidth: int = 1):
         self.b = 18 if gm else 15
+        self.w = int(bandwidth)
         self.clear()
 
     def clear(self) -> None:
@@ -265,9 +365,7 @@ class WindowMarginals:
         while count < self.n - 1 and not theta.exists(X(self.first + count)):
             count += 1
         if count:
-            self.start, self.f_valid = _marginalize(self.D, self.O, self.F, self.start, count, self.f_valid)
-            self.first += count
-            self.n -= count
+            self._marginalize(count)
 
     def rebuild(self, factors: gtsam.NonlinearFactorGraph, theta: gtsam.Values) -> None:
         """The blocks of all ``factors`` linearised at ``theta``."""
@@ -289,17 +387,23 @@ class WindowMarginals:
         # One dense (augmented) Hessian of the whole graph, its variables in key order: far
         # cheaper than a Python loop over its factors.
         info = gfg.augmentedHessian()
-        low = _scatter(self.D, self.O, info, keys, self.first, self.start)
+        low = _scatter(self.D, self.O, self.Ox, info, keys, self.first, self.start)
         if low < 0:
             raise NotAChain(f"a factor on {[gtsam.DefaultKeyFormatter(int(k)) for k in keys]} does not fit "
                             "the window's chain of nodes")
         self.f_valid = min(self.f_valid, low - 1)
 
     def marginalize_first(self) -> None:
-        """Schur complement of the oldest node onto the next one; drop it."""
-        self.start, self.f_valid = _marginalize(self.D, self.O, self.F, self.start, 1, self.f_valid)
-        self.first += 1
-        self.n -= 1
+        """Schur complement of the oldest node onto the next ones; drop it."""
+        self._marginalize(1)
+
+    def _marginalize(self, count: int) -> None:
+        if self.w == 1:
+            self.start, self.f_valid = _marginalize(self.D, self.O, self.F, self.start, count, self.f_valid)
+        else:
+            self.start = _band_marginalize(self.D, self.O, self.Ox, self.start, count, self.start + self.n - 1)
+        self.first += count
+        self.n -= count
 
     def covariances(self, nodes) -> np.ndarray:
         """Marginal covariances of ``nodes``' blocks (ascending node indices), one query: pose
@@ -308,8 +412,11 @@ class WindowMarginals:
         rows = [node + shift for node in nodes]
         if not (self.start <= rows[0] and rows[-1] <= last and all(a < b for a, b in zip(rows, rows[1:]))):
             raise KeyError(f"nodes {list(nodes)} are not ascending nodes of the window")
-        covs, self.f_valid, ok = _node_covariances(self.D, self.O, self.F, self.start, self.f_valid,
-                                                   np.array(rows, np.int64), last)
+        if self.w == 1:
+            covs, self.f_valid, ok = _node_covariances(self.D, self.O, self.F, self.start, self.f_valid,
+                                                       np.array(rows, np.int64), last)
+        else:
+            covs, ok = _band_covariances(self.D, self.O, self.Ox, self.start, np.array(rows, np.int64), last)
         if not ok:
             raise np.linalg.LinAlgError(f"the marginal information of a node of {list(nodes)} is not positive "
                                         "definite")
@@ -318,14 +425,15 @@ class WindowMarginals:
     def _alloc(self, cap: int) -> None:
         b = self.b
         self.D, self.O, self.F = (np.zeros((cap, b, b)) for _ in range(3))
+        self.Ox = np.zeros((cap, self.w - 1, b, b))    # couplings two or more nodes apart
 
     def _grow(self, last: int) -> None:
         """Hold nodes up to ``last``; moves the window to the front of storage when it runs out."""
         n = last - self.first + 1
         if self.start + n > len(self.D):
-            D, O, F, s, m = self.D, self.O, self.F, self.start, self.n
+            D, O, Ox, F, s, m = self.D, self.O, self.Ox, self.F, self.start, self.n
             self._alloc(max(2 * n, 64))
-            self.D[:m], self.O[:m], self.F[:m] = D[s:s + m], O[s:s + m], F[s:s + m]
+            self.D[:m], self.O[:m], self.Ox[:m], self.F[:m] = D[s:s + m], O[s:s + m], Ox[s:s + m], F[s:s + m]
             self.f_valid -= s
             self.start = 0
         self.n = n
