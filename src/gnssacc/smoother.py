@@ -147,33 +147,38 @@ class _Record:
     """Per-node estimates and marginal covariances (one of: online, fixed-lag)."""
 
     def __init__(self, n: int, gm: bool):
+        self.gm = gm
         self.p_n = np.full((n, 3), np.nan)
         self.R = np.full((n, 3, 3), np.nan)
         self.v_n = np.full((n, 3), np.nan)
         self.bias = np.full((n, 6), np.nan)
-        # Joint marginal of the node's variables: Pose3 tangent (body rotation, body translation),
-        # velocity, bias[, GNSS Gauss-Markov error] (the views below are its blocks).
-        self.cov = np.full((n, 18 if gm else 15, 18 if gm else 15), np.nan)
+        self.cov_pose = np.full((n, 6, 6), np.nan)   # Pose3 tangent (body rotation, body translation)
+        self.cov_vel = np.full((n, 3, 3), np.nan)
+        self.cov_bias = np.full((n, 6, 6), np.nan)
         self.done = np.zeros(n, bool)
         self.chi2 = np.full((n, 2), np.nan)   # whitened GNSS residual and its expectation, nodes with a fix
-        self.g = np.zeros((n, 3))             # GNSS error estimate (zeros when not modelled)
-        zeros = np.zeros((n, 9, 9))
-        self.cov_pose, self.cov_vel, self.cov_bias = self.cov[:, 0:6, 0:6], self.cov[:, 6:9, 6:9], self.cov[:, 9:15, 9:15]
-        self.cov_g = self.cov[:, 15:18, 15:18] if gm else zeros[:, 0:3, 0:3]    # GNSS error
-        self.cov_xg = self.cov[:, 0:6, 15:18] if gm else zeros[:, 0:6, 0:3]     # pose x GNSS error
+        # GNSS Gauss-Markov error (zeros when not modelled): estimate, its covariance and its
+        # cross-covariance with the pose tangent.
+        self.g = np.zeros((n, 3))
+        self.cov_g = np.zeros((n, 3, 3))
+        self.cov_xg = np.zeros((n, 6, 3))
 
     def put(self, i: int, est, cov: np.ndarray) -> None:
+        """Node ``i``'s estimate and the blocks of its joint marginal ``cov`` (X, V, B[, G])."""
         pose, v_n, bias, g = est
         self.p_n[i] = pose.translation()
         self.R[i] = pose.rotation().matrix()
         self.v_n[i] = v_n
         self.bias[i] = bias.vector()
         self.g[i] = g
-        self.cov[i] = cov
+        self.cov_pose[i], self.cov_vel[i], self.cov_bias[i] = cov[0:6, 0:6], cov[6:9, 6:9], cov[9:15, 9:15]
+        if self.gm:
+            self.cov_xg[i], self.cov_g[i] = cov[0:6, 15:18], cov[15:18, 15:18]
         self.done[i] = True
 
     def copy_from(self, other: "_Record", i: int) -> None:
-        for name in ("p_n", "R", "v_n", "bias", "cov", "done", "chi2", "g"):
+        for name in ("p_n", "R", "v_n", "bias", "cov_pose", "cov_vel", "cov_bias", "done", "chi2", "g", "cov_g",
+                     "cov_xg"):
             getattr(self, name)[i] = getattr(other, name)[i]
 
     def sigmas(self) -> np.ndarray:
