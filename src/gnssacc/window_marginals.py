@@ -368,29 +368,34 @@ class WindowMarginals:
             self._marginalize(count)
 
     def rebuild(self, factors: gtsam.NonlinearFactorGraph, theta: gtsam.Values) -> None:
-        """The blocks of all ``factors`` linearised at ``theta``."""
+        """The blocks of all ``factors`` linearised at ``theta``, factor by factor (the dense
+        Hessian of the whole window grows with the square of its nodes: 10 Hz nodes, 10 s lag)."""
         nodes = [k & _INDEX_MASK for k in theta.keys() if k >> 56 == ord("x")]
         self.clear()
         self.first = min(nodes)
         self._grow(max(nodes))
-        self.add(factors.linearize(theta))
+        gfg = factors.linearize(theta)
+        for j in range(gfg.size()):
+            f = gfg.at(j)
+            if f is not None:
+                self._scatter(f.information(), np.array(f.keys(), np.int64))
 
     def add(self, gfg: gtsam.GaussianFactorGraph) -> None:
-        """Add the information of linear factors (appending new nodes as needed)."""
+        """Add the information of an update's new linear factors (appending new nodes as needed),
+        from one dense (augmented) Hessian of the graph, its variables in key order: for the few
+        variables of an update far cheaper than a Python loop over its factors."""
         keys = gfg.keyVector()
-        if not keys:
-            return
-        keys = np.array(keys, np.int64)
+        if keys:
+            self._scatter(gfg.augmentedHessian(), np.array(keys, np.int64))
+
+    def _scatter(self, info: np.ndarray, keys: np.ndarray) -> None:
         last = int((keys & _INDEX_MASK).max())
         if last >= self.first + self.n:
             self._grow(last)
-        # One dense (augmented) Hessian of the whole graph, its variables in key order: far
-        # cheaper than a Python loop over its factors.
-        info = gfg.augmentedHessian()
         low = _scatter(self.D, self.O, self.Ox, info, keys, self.first, self.start)
         if low < 0:
             raise NotAChain(f"a factor on {[gtsam.DefaultKeyFormatter(int(k)) for k in keys]} does not fit "
-                            "the window's chain of nodes")
+                            "the window's band of nodes")
         self.f_valid = min(self.f_valid, low - 1)
 
     def marginalize_first(self) -> None:
