@@ -285,17 +285,22 @@ def _eliminate(D, O, Ox, k, lo, hi):
 
 
 @njit(cache=True)
-def _band_covariances(D, O, Ox, start, rows, last):
+def _band_covariances(D, O, Ox, Dc, Oc, Oxc, start, fe, rows, last):
     """Covariances of storage ``rows`` of a block-banded ``H`` (rows ``start .. last``): per row,
     on a copy, eliminate the older rows oldest first and the newer rows newest first, and invert
-    what is left of the row. Returns them and whether all were positive definite."""
+    what is left of the row. ``Dc, Oc, Oxc`` hold ``H`` with rows ``start .. fe - 1`` already
+    eliminated (kept between updates), the copy a row ``>= fe`` starts from. Returns the
+    covariances and whether all were positive definite."""
     b = D.shape[1]
     out = np.empty((len(rows), b, b))
     ok = True
     for m in range(len(rows)):
-        j = rows[m] - start
-        n = last - start
-        D2, O2, Ox2 = D[start:last + 1].copy(), O[start:last + 1].copy(), Ox[start:last + 1].copy()
+        s = fe if rows[m] >= fe else start
+        j, n = rows[m] - s, last - s
+        if s == fe:
+            D2, O2, Ox2 = Dc[s:last + 1].copy(), Oc[s:last + 1].copy(), Oxc[s:last + 1].copy()
+        else:
+            D2, O2, Ox2 = D[s:last + 1].copy(), O[s:last + 1].copy(), Ox[s:last + 1].copy()
         for k in range(j):
             _eliminate(D2, O2, Ox2, k, k + 1, n)
         for k in range(n, j, -1):
@@ -303,6 +308,13 @@ def _band_covariances(D, O, Ox, start, rows, last):
         out[m] = _inverse(D2[j])
         ok = ok and np.isfinite(out[m, 0, 0])
     return out, ok
+
+
+@njit(cache=True)
+def _band_advance(Dc, Oc, Oxc, fe, target, last):
+    """Eliminate rows ``fe .. target - 1`` of the kept copy (oldest first)."""
+    for k in range(fe, target):
+        _eliminate(Dc, Oc, Oxc, k, k + 1, last)
 
 
 @njit(cache=True)
@@ -343,6 +355,8 @@ class WindowMarginals:
         self.n = 0                       # nodes held
         self.start = 0                   # storage row of the oldest node
         self.f_valid = -1                # storage rows <= this have a valid forward sweep F
+        self.fe = -1                     # band: the kept copy has rows < fe eliminated (-1: none)
+        self.reach = 1                   # band: widest factor seen since the last rebuild [nodes]
         self._alloc(64)
 
     def sync(self, isam, new_factors: gtsam.NonlinearFactorGraph) -> None:
@@ -397,6 +411,12 @@ class WindowMarginals:
             raise NotAChain(f"a factor on {[gtsam.DefaultKeyFormatter(int(k)) for k in keys]} does not fit "
                             "the window's band of nodes")
         self.f_valid = min(self.f_valid, low - 1)
+        self.reach = max(self.reach, last - (low - self.start + self.first))
+        if self.fe >= 0:                 # the kept copy of a band: the same information, unless
+            if low >= self.fe:           # it reaches a row already eliminated there
+                _scatter(self.Dc, self.Oc, self.Oxc, info, keys, self.first, self.start)
+            else:
+                self.fe = -1
 
     def marginalize_first(self) -> None:
         """Schur complement of the oldest node onto the next ones; drop it."""
@@ -407,6 +427,8 @@ class WindowMarginals:
             self.start, self.f_valid = _marginalize(self.D, self.O, self.F, self.start, count, self.f_valid)
         else:
             self.start = _band_marginalize(self.D, self.O, self.Ox, self.start, count, self.start + self.n - 1)
+            if self.fe < self.start:     # the kept copy had not eliminated them yet
+                self.fe = -1
         self.first += count
         self.n -= count
 
@@ -421,24 +443,44 @@ class WindowMarginals:
             covs, self.f_valid, ok = _node_covariances(self.D, self.O, self.F, self.start, self.f_valid,
                                                        np.array(rows, np.int64), last)
         else:
-            covs, ok = _band_covariances(self.D, self.O, self.Ox, self.start, np.array(rows, np.int64), last)
+            covs, ok = self._band_covariances(np.array(rows, np.int64), last)
         if not ok:
             raise np.linalg.LinAlgError(f"the marginal information of a node of {list(nodes)} is not positive "
                                         "definite")
         return covs
 
+    def _band_covariances(self, rows: np.ndarray, last: int):
+        """Band covariances; first eliminates the kept copy up to the widest factor's reach before
+        the newest row (new factors are not expected further back; if one is, the copy is made
+        again), so the newest node's query costs that many eliminations."""
+        s, n = self.start, last + 1
+        if self.fe < 0:
+            self.Dc[s:n], self.Oc[s:n], self.Oxc[s:n] = self.D[s:n], self.O[s:n], self.Ox[s:n]
+            self.fe = s
+        target = last - self.reach
+        if target > self.fe:
+            _band_advance(self.Dc, self.Oc, self.Oxc, self.fe, target, last)
+            self.fe = target
+        return _band_covariances(self.D, self.O, self.Ox, self.Dc, self.Oc, self.Oxc, s, self.fe, rows, last)
+
     def _alloc(self, cap: int) -> None:
         b = self.b
         self.D, self.O, self.F = (np.zeros((cap, b, b)) for _ in range(3))
         self.Ox = np.zeros((cap, self.w - 1, b, b))    # couplings two or more nodes apart
+        if self.w > 1:                                  # the band's kept, partly eliminated copy
+            self.Dc, self.Oc, self.Oxc = np.zeros_like(self.D), np.zeros_like(self.O), np.zeros_like(self.Ox)
 
     def _grow(self, last: int) -> None:
         """Hold nodes up to ``last``; moves the window to the front of storage when it runs out."""
         n = last - self.first + 1
         if self.start + n > len(self.D):
             D, O, Ox, F, s, m = self.D, self.O, self.Ox, self.F, self.start, self.n
+            kept = (self.Dc, self.Oc, self.Oxc) if self.w > 1 else ()
             self._alloc(max(2 * n, 64))
             self.D[:m], self.O[:m], self.Ox[:m], self.F[:m] = D[s:s + m], O[s:s + m], Ox[s:s + m], F[s:s + m]
+            for new, old in zip((self.Dc, self.Oc, self.Oxc) if self.w > 1 else (), kept):
+                new[:m] = old[s:s + m]
             self.f_valid -= s
+            self.fe = self.fe - s if self.fe >= s else -1
             self.start = 0
         self.n = n
