@@ -24,8 +24,18 @@ newer nodes onto it, computed by a forward sweep ``F_{k+1} = D_{k+1} - O_k^T F_k
 backward sweep ``G_k = D_k - O_k G_{k+1}^-1 O_k^T`` (block Cholesky; each pivot is scaled to
 unit diagonal first, since the variables span twelve orders of magnitude). The forward sweep is
 kept from update to update: neither new factors at the newest end nor the Schur complement of the
-oldest node change ``F`` of the nodes in between. Kernels are compiled with numba, which also
-keeps these small dense operations off the BLAS thread pool.
+oldest node change ``F`` of the nodes in between. One query after each update gives the newest
+node and every node about to leave the window (one backward sweep serves them all).
+
+Factors on several nodes (``smoother-accw``'s window factors) make ``H`` block-banded: couplings
+``H[k, k+d]`` up to the band's width. A node's marginal is then what is left of its block after
+eliminating, on a copy, the older nodes oldest first and the newer nodes newest first (each
+elimination a Schur complement onto the node's neighbours in the band). A copy with the older
+rows already eliminated is kept between updates, as the forward sweep is for a chain.
+
+New factors come in as one dense Hessian of the update's graph; a rebuild goes factor by factor
+(a whole window's dense Hessian grows with the square of its nodes). Kernels are compiled with
+numba, which also keeps these small dense operations off the BLAS thread pool.
 """
 from __future__ import annotations
 
