@@ -71,19 +71,28 @@ def gnss_accel_factor(pose_key: int, bias_key: int, f_b: np.ndarray, a_n: np.nda
     cov : ndarray (3, 3)
         Covariance of ``a_n`` [m^2/s^4].
     """
-    f_b, a_n, g_n = (np.asarray(x, float).copy() for x in (f_b, a_n, g_n))
+    f_b = np.asarray(f_b, float).copy()
+    g_minus_a = np.asarray(g_n, float) - np.asarray(a_n, float)
     pose_key, bias_key = int(pose_key), int(bias_key)
-    zero = np.zeros((3, 3))
+    # Jacobian buffers reused by every call: GTSAM copies H out before the next call, and the
+    # zero translation / gyro-bias columns never change.
+    J_pose, J_bias = np.zeros((3, 6)), np.zeros((3, 6))
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
+        # iSAM2 calls this a few times per factor (insertion, relinearisations, marginalisation):
+        # one lookup per variable and no temporaries beyond H_a_blocks'.
         R_nb = values.atPose3(pose_key).rotation().matrix()
         f_corr = f_b - values.atConstantBias(bias_key).accelerometer()
         if H is not None:
-            # smoother_jacobians_from_H_a without the zero-padded copies (same numbers).
-            H_phi, H_ba = H_a_blocks(R_nb, f_corr)
-            H[0] = np.hstack((H_phi @ R_nb, zero))
-            H[1] = np.hstack((-H_ba, zero))
-        return R_nb @ f_corr + g_n - a_n   # predicted_acceleration(R_nb, f_corr, g_n) - a_n
+            H_phi, H_ba = H_a_blocks(R_nb, f_corr)    # smoother_jacobians_from_H_a, same numbers
+            np.matmul(H_phi, R_nb, out=J_pose[:, 0:3])
+            np.negative(H_ba, out=J_bias[:, 0:3])
+            H[0], H[1] = J_pose, J_bias
+        return R_nb @ f_corr + g_minus_a   # predicted_acceleration(R_nb, f_corr, g_n) - a_n
 
-    noise = gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, float))
+    # The LS window's acceleration errors are uncorrelated across axes (diagonal covariance): a
+    # Diagonal model whitens with three divisions instead of a 3x3 triangular solve.
+    cov = np.asarray(cov, float)
+    noise = (gtsam.noiseModel.Diagonal.Variances(np.diag(cov)) if np.count_nonzero(cov - np.diag(np.diag(cov))) == 0
+             else gtsam.noiseModel.Gaussian.Covariance(cov))
     return gtsam.CustomFactor(noise, [pose_key, bias_key], error)

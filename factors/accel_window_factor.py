@@ -60,7 +60,9 @@ def window_accel_factor(pose_keys: list, B_row: np.ndarray, a_n: np.ndarray, lev
     a_n, lever_b = np.asarray(a_n, float).copy(), np.asarray(lever_b, float).copy()
     L = skew(lever_b)
     has_arm = bool(np.any(lever_b != 0))
-    zero = np.zeros((3, 3))
+    # Jacobian buffers reused by every call (GTSAM copies H out before the next call); without
+    # a lever arm the rotation columns stay zero.
+    J = [np.zeros((3, 6)) for _ in keys]
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
         e = -a_n
@@ -69,8 +71,13 @@ def window_accel_factor(pose_keys: list, B_row: np.ndarray, a_n: np.ndarray, lev
             R = pose.rotation().matrix()
             e = e + b * (pose.translation() + R @ lever_b if has_arm else pose.translation())
             if H is not None:
-                H[j] = np.hstack((-b * (R @ L) if has_arm else zero, b * R))
+                if has_arm:
+                    np.multiply(R @ L, -b, out=J[j][:, 0:3])
+                np.multiply(R, b, out=J[j][:, 3:6])
+                H[j] = J[j]
         return e
 
-    noise = gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, float))
+    cov = np.asarray(cov, float)
+    noise = (gtsam.noiseModel.Diagonal.Variances(np.diag(cov)) if np.count_nonzero(cov - np.diag(np.diag(cov))) == 0
+             else gtsam.noiseModel.Gaussian.Covariance(cov))
     return gtsam.CustomFactor(noise, keys, error)

@@ -22,13 +22,17 @@ def gnss_position_gm_factor(pose_key: int, gm_key: int, p_fix: np.ndarray, lever
     ``sigma_ned`` [m] and the Gauss-Markov error held by ``gm_key`` (a Vector3)."""
     p_fix, lever_b = np.asarray(p_fix, float).copy(), np.asarray(lever_b, float).copy()
     keys = (pose_key, gm_key)
+    # Jacobian buffers reused by every call (GTSAM copies H out before the next call; iSAM2
+    # linearises this factor dozens of times in a 10 Hz window).
+    J_pose, J_g, minus_L = np.zeros((3, 6)), np.eye(3), -skew(lever_b)
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
         pose = values.atPose3(keys[0])
         R = pose.rotation().matrix()
         if H is not None:
-            H[0] = np.hstack([-R @ skew(lever_b), R])
-            H[1] = np.eye(3)
+            np.matmul(R, minus_L, out=J_pose[:, 0:3])
+            J_pose[:, 3:6] = R
+            H[0], H[1] = J_pose, J_g
         return pose.translation() + R @ lever_b + values.atVector(keys[1]) - p_fix
 
     return gtsam.CustomFactor(gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigma_ned, float)), list(keys), error)

@@ -38,6 +38,7 @@ so they change no estimate that a constant bias would not give.
 from __future__ import annotations
 
 import time
+from collections import deque
 
 import gtsam
 import numpy as np
@@ -145,7 +146,8 @@ def _initial_prior(init: InitialState, cfg: RunConfig) -> tuple[np.ndarray, np.n
 class _Record:
     """Per-node estimates and marginal covariances (one of: online, fixed-lag)."""
 
-    def __init__(self, n: int):
+    def __init__(self, n: int, gm: bool):
+        self.gm = gm
         self.p_n = np.full((n, 3), np.nan)
         self.R = np.full((n, 3, 3), np.nan)
         self.v_n = np.full((n, 3), np.nan)
@@ -161,14 +163,17 @@ class _Record:
         self.cov_g = np.zeros((n, 3, 3))
         self.cov_xg = np.zeros((n, 6, 3))
 
-    def put(self, i: int, est, covs) -> None:
+    def put(self, i: int, est, cov: np.ndarray) -> None:
+        """Node ``i``'s estimate and the blocks of its joint marginal ``cov`` (X, V, B[, G])."""
         pose, v_n, bias, g = est
         self.p_n[i] = pose.translation()
         self.R[i] = pose.rotation().matrix()
         self.v_n[i] = v_n
         self.bias[i] = bias.vector()
         self.g[i] = g
-        self.cov_pose[i], self.cov_vel[i], self.cov_bias[i], self.cov_xg[i], self.cov_g[i] = covs
+        self.cov_pose[i], self.cov_vel[i], self.cov_bias[i] = cov[0:6, 0:6], cov[6:9, 6:9], cov[9:15, 9:15]
+        if self.gm:
+            self.cov_xg[i], self.cov_g[i] = cov[0:6, 15:18], cov[15:18, 15:18]
         self.done[i] = True
 
     def copy_from(self, other: "_Record", i: int) -> None:
@@ -199,10 +204,11 @@ class _Record:
 class _Smoother:
     """The incremental fixed-lag smoother with bookkeeping and recovery."""
 
-    def __init__(self, cfg: RunConfig, chain: bool = True):
-        """``chain``: factors link consecutive nodes only, so the window's marginals can be kept
-        by :class:`WindowMarginals`; otherwise (window-consistent acceleration factors on three
-        nodes) they come from iSAM2's joint queries."""
+    def __init__(self, cfg: RunConfig, bandwidth: int = 1):
+        """``bandwidth``: how many nodes apart a factor reaches (1: a chain of nodes; the
+        window-consistent acceleration factors reach across their window of fixes). The
+        window's marginals are kept by :class:`WindowMarginals` for that band; a wider factor
+        makes them come from iSAM2's queries while it is in the window."""
         sm = cfg["smoother"]
         self.lag = float(sm["lag_s"])
         self.gm = bool(np.any(cfg.gnss_gm_sigma > 0))
@@ -213,7 +219,7 @@ class _Smoother:
         # Reuse the slots of marginalised factors so the factor list stays bounded on long runs.
         self.params.findUnusedFactorSlots = True
         self.isam = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
-        self.marginals = WindowMarginals(self.gm) if chain else None
+        self.marginals = WindowMarginals(self.gm, bandwidth)
 
     def reset(self, robust: bool = False) -> None:
         """A new, empty smoother; ``robust`` switches to QR factorization (returns whether it did)."""
@@ -221,8 +227,7 @@ class _Smoother:
         if switched:
             self.params.setFactorization("QR")
         self.isam = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
-        if self.marginals is not None:
-            self.marginals.clear()
+        self.marginals.clear()
         return switched
 
     def update(self, graph, values, stamps) -> None:
@@ -230,8 +235,6 @@ class _Smoother:
         for key, t in stamps:
             ts.insert((key, t))
         self.isam.update(graph, values, ts)
-        if self.marginals is None:
-            return
         try:
             self.marginals.sync(self.isam, graph)
         except NotAChain:
@@ -252,35 +255,34 @@ class _Smoother:
         """Keys of node ``i``: pose, velocity, bias[, GNSS error]."""
         return [X(i), V(i), B(i)] + ([G(i)] if self.gm else [])
 
-    def covariances(self, i: int):
-        """Marginal covariances of X_i (6x6, tangent), V_i (3x3), B_i (6x6), and the pose-GNSS-error
-        cross-covariance (6x3) and GNSS-error covariance (3x3) (zeros when not modelled).
+    def covariances(self, nodes: list) -> np.ndarray:
+        """Joint marginal covariance of each node's variables, for ``nodes`` (ascending): X_i
+        (Pose3 tangent), V_i, B_i[, G_i]; array (len(nodes), 15 or 18, 15 or 18).
 
         From :class:`gnssacc.window_marginals.WindowMarginals` (the window's linear system, kept
-        in step with iSAM2); iSAM2's own joint query, by QR, if that system is not at hand (its
-        per-key marginals when the window holds no chain and no GNSS-error states).
+        in step with iSAM2), all nodes in one query; iSAM2's own queries, per node, while that
+        system is not at hand (a factor wider than its band): the joint one by QR with GNSS-error
+        states, else the per-key marginals and zero cross-covariances (only the diagonal blocks
+        are used then).
         """
-        full = None
-        if self.marginals is not None and self.marginals.first is not None:
+        if self.marginals.first is not None:
             try:
-                full = self.marginals.covariance(i)
+                return self.marginals.covariances(nodes)
             except np.linalg.LinAlgError:
                 self.marginals.clear()   # rebuilt at the next update
-        if full is None and self.marginals is None and not self.gm:
-            # Only the diagonal blocks are used without GNSS-error states: iSAM2's per-key
-            # marginals cost a third of its joint query (measured, smoother-accw).
-            isam = self.isam.getISAM2()
-            return (isam.marginalCovariance(X(i)), isam.marginalCovariance(V(i)), isam.marginalCovariance(B(i)),
-                    _ZERO_XG, _ZERO_G)
-        if full is None:
-            keys = self.keys(i)
-            info, _ = self.isam.getISAM2().joint(keys, gtsam.EliminateQR).hessian(gtsam.Ordering(keys))
-            full = np.linalg.inv(info)
-        gm = (full[0:6, 15:18], full[15:18, 15:18]) if self.gm else (_ZERO_XG, _ZERO_G)
-        return full[0:6, 0:6], full[6:9, 6:9], full[9:15, 9:15], *gm
+        return np.array([self._isam_covariance(i) for i in nodes])
 
-
-_ZERO_XG, _ZERO_G = np.zeros((6, 3)), np.zeros((3, 3))
+    def _isam_covariance(self, i: int) -> np.ndarray:
+        isam = self.isam.getISAM2()
+        if not self.gm:
+            # iSAM2's per-key marginals cost a third of its joint query (measured, smoother-accw).
+            full = np.zeros((15, 15))
+            for key, sl in ((X(i), slice(0, 6)), (V(i), slice(6, 9)), (B(i), slice(9, 15))):
+                full[sl, sl] = isam.marginalCovariance(key)
+            return full
+        keys = self.keys(i)
+        info, _ = isam.joint(keys, gtsam.EliminateQR).hessian(gtsam.Ordering(keys))
+        return np.linalg.inv(info)
 
 
 def _is_ill_posed(exc: Exception) -> bool:
@@ -335,6 +337,7 @@ class _Factors:
         self.p_fix = origin.to_ned(gnss.lat, gnss.lon, gnss.h)
         self.fix_at = {float(t): i for i, t in enumerate(gnss.t)}
         self.lever = cfg.lever_arm_b
+        self.has_lever = bool(np.any(self.lever != 0))
         self.g_n = np.array([0.0, 0.0, float(normal_gravity(origin.lat0, origin.h0))])
         self.w_ie = earth_rate_n(origin.lat0)
         self.f_avg = float(cfg["accel"]["specific_force_avg_s"])
@@ -363,7 +366,7 @@ class _Factors:
         noise = self._noise.get(tuple(sig))
         if noise is None:  # most runs have a handful of distinct fix sigmas
             noise = self._noise[tuple(sig)] = gtsam.noiseModel.Diagonal.Sigmas(sig)
-        if np.any(self.lever != 0):
+        if self.has_lever:
             graph.add(gtsam.GPSFactorArm(X(i), self.p_fix[k], self.lever, noise))
         else:
             graph.add(gtsam.GPSFactor(X(i), self.p_fix[k], noise))
@@ -470,10 +473,12 @@ def _preintegrate(imu, model, bias, t_prev, t, j_start, k_end, inflation, dt_all
     dts[0] = min(imu_t[j_start], t) - t_prev
     if k_end - j_start > 1 and imu_t[k_end - 1] > t:
         dts[-1] = t - imu_t[k_end - 2]
-    integrate = pim.integrateMeasurement
-    for f_b, w_b, dt in zip(imu.f_b[j_start:k_end], imu.omega_ib_b[j_start:k_end], dts):
-        if dt > 0.0:
-            integrate(f_b, w_b, dt)
+    f_b, w_b = imu.f_b[j_start:k_end], imu.omega_ib_b[j_start:k_end]
+    if min(dts) <= 0.0:                   # repeated time stamps: nothing to integrate
+        keep = [k for k, dt in enumerate(dts) if dt > 0.0]
+        f_b, w_b, dts = f_b[keep], w_b[keep], [dts[k] for k in keep]
+    # map() drives the C++ calls without a Python loop body (the samples are most of the run's calls).
+    deque(map(pim.integrateMeasurement, f_b, w_b, dts), maxlen=0)
     return pim
 
 
@@ -553,8 +558,8 @@ class _Loop:
         origin = run.origin
         self.model = _ImuModel(cfg, float(factors.g_n[2]), earth_rate_n(origin.lat0))
         n = len(times)
-        self.online, self.fixed = _Record(n), _Record(n)
-        self.smoother = _Smoother(cfg, chain=use_acc != "window")
+        self.online, self.fixed = _Record(n, factors.gm), _Record(n, factors.gm)
+        self.smoother = _Smoother(cfg, _bandwidth(cfg) if use_acc == "window" else 1)
         self.fix_of = np.full(n, -1)
         self.window_start, self.oldest = 0, 0
         self._start(init)
@@ -588,14 +593,15 @@ class _Loop:
         graph.add(gtsam.PriorFactorVector(V(0), self.vel, gtsam.noiseModel.Gaussian.Covariance(c_vel)))
         for key, value in ((X(0), self.pose), (V(0), self.vel), (B(0), self.bias)) + (((G(0), self.g),) if self.f.gm else ()):
             values.insert(key, value)
-        self._node_factors(graph, 0, self.times[0], R0, self.vel, c_vel)
+        self._start_gate = (R0, self.vel, c_vel)
+        self._node_factors(graph, 0, self.times[0])
         self.smoother.update(graph, values, [(key, self.times[0]) for key in self.smoother.keys(0)])
-        self._record_online(0)
+        self._record(0, self.times[1] if len(self.times) > 1 else np.inf)
 
-    def _node_factors(self, graph, i, t, R_nb, v_pred, c_vel):
-        """GNSS, acceleration and stationary factors of node ``i``; ``v_pred`` [m/s] (NED) and
-        ``c_vel`` its 3x3 covariance: the velocity predicted for the node, which gates the
-        stationary factors (:meth:`_Factors.stationary`)."""
+    def _node_factors(self, graph, i, t, nav=None, pim=None):
+        """GNSS, acceleration and stationary factors of node ``i``; ``nav`` (``gtsam.NavState``)
+        and ``pim`` are the node's prediction and preintegration (``None`` at the start), whose
+        velocity and its covariance gate the stationary factors (:meth:`_Factors.stationary`)."""
         k = self.f.gps(graph, i, t)
         if k is not None:
             self.fix_of[i] = k
@@ -604,6 +610,10 @@ class _Loop:
             elif self.use_acc:
                 self.f.accel(graph, i, t, k, self.segs[0], self.segs[1])
         if i in self.stationary_at:
+            if nav is None:      # the start: its own velocity and covariance
+                R_nb, v_pred, c_vel = self._start_gate
+            else:
+                R_nb, v_pred, c_vel = nav.pose().rotation().matrix(), nav.velocity(), self._predicted_velocity_cov(i, pim)
             self.f.stationary(graph, i, self.stationary_at[i], R_nb, self.bias, v_pred, c_vel)
 
     def _predicted_velocity_cov(self, i, pim) -> np.ndarray:
@@ -613,14 +623,24 @@ class _Loop:
         c_pim = np.asarray(pim.preintMeasCov())[6:9, 6:9]
         return self.online.cov_vel[i - 1] + R @ c_pim @ R.T
 
-    def _record_online(self, i):
-        """Record the newest node's estimate and marginal covariances; return the estimate."""
+    def _record(self, i: int, t_next: float):
+        """Record node ``i``'s online estimate right after its update, and the fixed-lag estimate
+        of every node that leaves the window before the next node (``t_next`` [s], ``inf`` at the
+        end), whose value it is now; their covariances come from one marginal query. Returns node
+        ``i``'s estimate."""
+        self.oldest = max(self.oldest, self.window_start)
+        leaving = []
+        while self.oldest < i + 1 and self.times[self.oldest] < t_next - self.smoother.lag:
+            if not (t_next == np.inf and self.fixed.done[self.oldest]):   # at the end: not the nodes a
+                leaving.append(self.oldest)                                # restart already recorded
+            self.oldest += 1
+        nodes = leaving if leaving and leaving[-1] == i else leaving + [i]
+        covs = self.smoother.covariances(nodes)
         est = self.smoother.estimate(i)
-        self.online.put(i, est, self.smoother.covariances(i))
+        self.online.put(i, est, covs[-1])
+        for m, cov in zip(leaving, covs):
+            self.fixed.put(m, est if m == i else self.smoother.estimate(m), cov)
         return est
-
-    def _record_fixed(self, i):
-        self.fixed.put(i, self.smoother.estimate(i), self.smoother.covariances(i))
 
     def score(self) -> None:
         """Whitened GNSS residuals of both estimates at every node with a fix (vectorised)."""
@@ -635,11 +655,13 @@ class _Loop:
         seg_i0, seg_i1, seg_qg, seg_qa = self.segs
         first = np.searchsorted(imu.t, times, side="right")
         last = np.minimum(np.searchsorted(imu.t, times, side="left") + 1, len(imu.t))
-        touches = _touches(first, last, seg_i0, seg_i1)
+        touches = _touches(first, last, seg_i0, seg_i1).tolist()
         dt_all = np.diff(imu.t, prepend=imu.t[0])
+        # Python scalars: the loop runs once per node and numpy scalars cost more than floats.
+        times_l, first, last = (times.tolist() + [np.inf]), first.tolist(), last.tolist()
         for i in progress(range(1, n), desc=method, enable=show_progress):
-            t_prev, t = times[i - 1], times[i]
-            j0, k1 = int(first[i - 1]), int(last[i])
+            t_prev, t = times_l[i - 1], times_l[i]
+            j0, k1 = first[i - 1], last[i]
             inflation = (_inflation_over(imu.t, j0, k1, t_prev, t, seg_i0, seg_i1, seg_qa, seg_qg)
                          if touches[i] else (None, None))
             pim = _preintegrate(imu, self.model, self.bias, t_prev, t, j0, k1, inflation, dt_all)
@@ -649,14 +671,9 @@ class _Loop:
             values.insert(X(i), nav.pose())
             values.insert(V(i), nav.velocity())
             values.insert(B(i), self.bias)
-            self.f.gm_chain(graph, values, i, t - t_prev, self.g)
-            c_vel = self._predicted_velocity_cov(i, pim) if i in self.stationary_at else None   # for the ZUPT gate
-            self._node_factors(graph, i, t, nav.pose().rotation().matrix(), nav.velocity(), c_vel)
-            # Nodes about to leave the window: their fixed-lag estimate is the value they have now.
-            self.oldest = max(self.oldest, self.window_start)
-            while self.oldest < i and times[self.oldest] < t - self.smoother.lag:
-                self._record_fixed(self.oldest)
-                self.oldest += 1
+            if self.f.gm:
+                self.f.gm_chain(graph, values, i, t - t_prev, self.g)
+            self._node_factors(graph, i, t, nav, pim)
             try:
                 self.smoother.update(graph, values, [(key, t) for key in self.smoother.keys(i)])
             except RuntimeError as exc:
@@ -664,10 +681,16 @@ class _Loop:
                     raise
                 self.stats["n_ill_posed_recovered"] += 1
                 self.window_start = _reinitialise(self, i, graph, values)
-            self.pose, self.vel, self.bias, self.g = self._record_online(i)
-        for m in range(self.window_start, n):
-            if not self.fixed.done[m]:
-                self._record_fixed(m)
+            self.pose, self.vel, self.bias, self.g = self._record(i, times_l[i + 1])
+
+
+def _bandwidth(cfg: RunConfig) -> int:
+    """How many nodes apart a window-consistent acceleration factor may reach: its window's m
+    fixes are at most ``[accel] max_gap_s`` apart, with fill nodes at most ``[smoother]
+    max_node_spacing_s`` apart between them (stationary nodes may add more: such a factor makes
+    the marginals come from iSAM2 while it is in the window)."""
+    per_gap = int(np.ceil(float(cfg["accel"]["max_gap_s"]) / float(cfg["smoother"]["max_node_spacing_s"]) - 1e-9))
+    return (int(cfg["accel"]["window"]) - 1) * max(per_gap, 1)
 
 
 def _reinitialise(loop: _Loop, i: int, graph, values) -> int:
@@ -725,5 +748,7 @@ def warm_up() -> float:
 
     t0 = time.perf_counter()
     run = simulate("car", 6.0, give_init=True, seed=0)
-    run_smoother(run, load_config(overrides={"smoother": {"lag_s": 2.0}}), "smoother")
+    cfg = load_config(overrides={"smoother": {"lag_s": 2.0}})
+    for method in ("smoother", "smoother-accw"):     # the chain's kernels and the band's
+        run_smoother(run, cfg, method)
     return time.perf_counter() - t0
