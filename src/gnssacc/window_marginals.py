@@ -186,6 +186,24 @@ def _scatter(D, O, Ox, info, keys, first, start):
 
 
 @njit(cache=True)
+def _diff_into(out, A, B):
+    """``out[:] = A - B`` for square blocks (explicit loops: numba's array expressions cost about
+    a second of compilation each, on a first run's critical path)."""
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            out[i, j] = A[i, j] - B[i, j]
+
+
+@njit(cache=True)
+def _copy_into(out, A):
+    """``out[:] = A`` for square blocks (a slice assignment compiles numba's broadcast checks and
+    their message formatting: seconds on a first run)."""
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            out[i, j] = A[i, j]
+
+
+@njit(cache=True)
 def _node_covariances(D, O, F, start, f_valid, rows, last):
     """Covariances of storage ``rows`` (ascending); extends the forward sweep ``F`` (valid up to
     ``f_valid``) to ``last``, and one backward sweep serves every row.
@@ -193,24 +211,27 @@ def _node_covariances(D, O, F, start, f_valid, rows, last):
     Returns the covariances (NaN where not positive definite) and the new ``f_valid``.
     """
     if f_valid < start:
-        F[start] = D[start]
+        _copy_into(F[start], D[start])
         f_valid = start
     for k in range(f_valid, last):       # F_{k+1} = D_{k+1} - O_k^T F_k^-1 O_k
-        F[k + 1] = D[k + 1] - _schur(F[k], O[k], False)
+        _diff_into(F[k + 1], D[k + 1], _schur(F[k], O[k], False))
     f_valid = max(f_valid, last)
     b = D.shape[1]
     out = np.empty((len(rows), b, b))
-    G = D[last].copy()                   # G_k: the information of nodes k.. newest on node k
+    G = np.empty((b, b))                 # G_k: the information of nodes k.. newest on node k
+    _copy_into(G, D[last])
+    info = np.empty((b, b))
     k = last
     for m in range(len(rows) - 1, -1, -1):
         j = rows[m]
         while k > j + 1:                 # G_k = D_k - O_k G_{k+1}^-1 O_k^T
             k -= 1
-            G = D[k] - _schur(G, O[k], True)
-        info = F[j].copy()
+            _diff_into(G, D[k], _schur(G, O[k], True))
         if j < last:                     # less the newer nodes' Schur complement
-            info -= _schur(G, O[j], True)
-        out[m] = _inverse(info)
+            _diff_into(info, F[j], _schur(G, O[j], True))
+        else:
+            _copy_into(info, F[j])
+        _copy_into(out[m], _inverse(info))
     ok = True
     for m in range(len(rows)):
         ok = ok and np.isfinite(out[m, 0, 0])
@@ -225,12 +246,12 @@ def _marginalize(D, O, F, start, count, f_valid):
     """
     for _ in range(count):
         k = start
-        D[k + 1] -= _schur(D[k], O[k], False)
+        _diff_into(D[k + 1], D[k + 1], _schur(D[k], O[k], False))
         D[k] = 0.0
         O[k] = 0.0
         start += 1
         if f_valid < start:              # F of the oldest node is its D (kept if already valid)
-            F[start] = D[start]
+            _copy_into(F[start], D[start])
             f_valid = start
     return start, f_valid
 
@@ -315,7 +336,7 @@ def _band_covariances(D, O, Ox, Dc, Oc, Oxc, start, fe, rows, last):
             _eliminate(D2, O2, Ox2, k, k + 1, n)
         for k in range(n, j, -1):
             _eliminate(D2, O2, Ox2, k, j, k - 1)
-        out[m] = _inverse(D2[j])
+        _copy_into(out[m], _inverse(D2[j]))
         ok = ok and np.isfinite(out[m, 0, 0])
     return out, ok
 
