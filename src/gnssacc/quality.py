@@ -264,15 +264,18 @@ def _saturated(t: np.ndarray, x: tuple[np.ndarray, np.ndarray], min_samples: int
     for c, name in enumerate(CHANNELS):   # channel by channel: a long run's temporaries stay one column
         col = _channel(x, c)
         med = float(np.median(col))
+        dev = col - med                      # one work column, reused in place
+        np.abs(dev, out=dev)
         # A coarsely quantised channel can have MAD = 0; fall back to the plain std then.
-        sigma = 1.4826 * float(np.median(np.abs(col - med))) or float(np.std(col))
+        sigma = 1.4826 * float(np.median(dev, overwrite_input=True)) or float(np.std(col))
         if sigma == 0:
             continue                         # constant channel: nothing to tell apart
         for which, ext in (("max", col.max()), ("min", col.min())):
             far = abs(ext - med) / sigma
             if far <= SATURATION_ROBUST_SIGMAS:
                 continue
-            at_ext = np.abs(col - ext) <= 1e-9 * max(abs(ext), 1.0)
+            np.subtract(col, ext, out=dev)
+            at_ext = np.abs(dev, out=dev) <= 1e-9 * max(abs(ext), 1.0)
             for s, f in zip(*_runs(at_ext)):
                 if f - s >= min_samples:
                     spans.append(_span("saturated", t, s, f, name,

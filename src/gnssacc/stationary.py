@@ -314,16 +314,38 @@ def params_from_config(cfg) -> StationaryParams:
 
 # --- IMU stillness ---------------------------------------------------------------------------
 
+def _median_interval(t: np.ndarray) -> float:
+    """Median sampling interval [s] of at least two times, with one run-long work array."""
+    return float(np.median(np.diff(t), overwrite_input=True))
+
+
+#: Cells whose IMU gaps :func:`_cells` finds at once (bounded temporaries on a long run).
+GAP_BLOCK_CELLS = 1 << 14
+
+
+def _gap_cells(t: np.ndarray, c: int, J: int, longest: float) -> np.ndarray:
+    """Whether each of ``J`` cells of ``c`` samples holds an interval longer than ``longest`` [s],
+    interval ``k`` being the step from sample ``k-1`` to ``k`` (none before sample 0)."""
+    out = np.empty(J, bool)
+    for a in range(0, J, GAP_BLOCK_CELLS):
+        b = min(a + GAP_BLOCK_CELLS, J)
+        lo = max(a * c - 1, 0)                       # the sample before the block's first interval
+        gap = np.diff(t[lo:b * c]) > longest
+        if a == 0:
+            gap = np.concatenate([[False], gap])
+        out[a:b] = gap.reshape(b - a, c).any(axis=1)
+    return out
+
+
 def _cells(imu: ImuData, p: StationaryParams):
     """Cell means (J, 6), samples per cell, whether a cell touches an IMU gap (J,), median interval [s]."""
-    dt = float(np.median(np.diff(imu.t)))
+    dt = _median_interval(imu.t)
     c = max(int(round(p.cell_s / dt)), 1)
     J = len(imu) // c
     # Reshapes are views: no copy of a 10 h record.
     M = np.hstack([imu.f_b[:J * c].reshape(J, c, 3).mean(axis=1), imu.omega_ib_b[:J * c].reshape(J, c, 3).mean(axis=1)])
-    # Interval k holds the step from sample k-1 to k: a long one means unseen motion may hide there.
-    gap = np.concatenate([[False], np.diff(imu.t) > p.gap_factor * dt])[:J * c]
-    return M, c, gap.reshape(J, c).any(axis=1), dt
+    # A long interval means unseen motion may hide there.
+    return M, c, _gap_cells(np.asarray(imu.t), c, J, p.gap_factor * dt), dt
 
 
 def _block_stats(M: np.ndarray, B: int, window: int, p: StationaryParams):
@@ -726,7 +748,7 @@ def detect_stationary(imu: ImuData, gnss: GnssFixes, origin: LocalTangentFrame,
         Disjoint spans in time order; see the module notes for the algorithm.
     """
     p = params or StationaryParams()
-    dt = float(np.median(np.diff(imu.t))) if len(imu) > 1 else 0.0
+    dt = _median_interval(imu.t) if len(imu) > 1 else 0.0
     block = max(int(round(p.block_s / dt)), 1) if dt > 0 else 1
     p_n = origin.to_ned(gnss.lat, gnss.lon, gnss.h) if len(gnss) else np.zeros((0, 3))
     spans, rejected = [], []

@@ -59,9 +59,10 @@ JACKKNIFE_BLOCKS = 8
 #: (measured on simulated car and slow-UGV runs) stands clear while chance peaks do not.
 MIN_PEAK = 0.5
 MIN_MARGIN = 0.2
-#: Most (lag, centre) pairs the correlations evaluate at once: bounds their temporaries to a few
-#: MB whatever the run length (a 6000 s run has ~6000 centres and thousands of lags).
-CHUNK_ENTRIES = 250_000
+#: Most (lag, centre) pairs the correlations evaluate at once: bounds their temporaries (about
+#: 80 bytes a pair) to a few MB whatever the run length (a 6000 s run has ~6000 centres and
+#: thousands of lags); each lag's sums are over its own row, so the chunking changes no number.
+CHUNK_ENTRIES = 65_536
 #: Fewest comparison epochs for any verdict.
 MIN_CENTRES = 12
 #: Least GNSS acceleration signal-to-noise power ratio (:attr:`GnssKinematics.snr`) for a verdict:
