@@ -117,3 +117,30 @@ def test_gap_cells_in_blocks_equal_the_whole_record(monkeypatch, block):
     c, J = 5, 1003 // 5
     gap = np.concatenate([[False], np.diff(t) > 0.03])[:J * c]
     np.testing.assert_array_equal(st._gap_cells(t, c, J, 0.03), gap.reshape(J, c).any(axis=1))
+
+
+@pytest.mark.parametrize("block", [5, 4096])
+def test_running_median_in_blocks_equals_each_window_median(monkeypatch, block):
+    import gnssacc.stationary as st
+
+    monkeypatch.setattr(st, "MEDIAN_BLOCK_ROWS", block)
+    x = np.random.default_rng(6).standard_normal((103, 6))
+    ref = np.array([[np.median(x[i:i + 11, c]) for c in range(6)] for i in range(103 - 10)])
+    np.testing.assert_array_equal(st._running_median(x, 11), ref)
+
+
+def test_still_positions_in_blocks_equal_the_whole_record(monkeypatch):
+    # The verdicts of a simulated run's cells, compared 7 positions at a time and all at once.
+    import gnssacc.stationary as st
+    from gnssacc.sources.sim import simulate
+
+    imu = simulate("car", duration_s=300.0, imu_grade="industrial", seed=2).imu
+    p = st.StationaryParams()
+    M, c, gap_cells, dt = st._cells(imu, p)
+    B = max(int(round(p.block_s / (c * dt))), 2)
+    mu, se2 = st._block_stats(M, B, 11, p)
+    gap_cells[100:103] = True
+    whole = st._still_positions(mu, se2, gap_cells, B, p)
+    monkeypatch.setattr(st, "STILL_BLOCK", 7)
+    np.testing.assert_array_equal(st._still_positions(mu, se2, gap_cells, B, p), whole)
+    assert 0 < whole.sum() < len(whole)             # both verdicts occur

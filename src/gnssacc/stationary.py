@@ -348,6 +348,21 @@ def _cells(imu: ImuData, p: StationaryParams):
     return M, c, _gap_cells(np.asarray(imu.t), c, J, p.gap_factor * dt), dt
 
 
+#: Windows :func:`_running_median` takes at once: np.median copies its windows, so a long run's
+#: are taken in blocks (the same medians, a few MiB of work).
+MEDIAN_BLOCK_ROWS = 4096
+
+
+def _running_median(x: np.ndarray, window: int) -> np.ndarray:
+    """Median of every ``window`` consecutive rows of ``x`` (n, k), per column: (n - window + 1, k)."""
+    n_out = len(x) - window + 1
+    out = np.empty((n_out,) + x.shape[1:])
+    for a in range(0, n_out, MEDIAN_BLOCK_ROWS):
+        b = min(a + MEDIAN_BLOCK_ROWS, n_out)
+        out[a:b] = np.median(sliding_window_view(x[a:b + window - 1], window, axis=0), axis=-1)
+    return out
+
+
 def _block_stats(M: np.ndarray, B: int, window: int, p: StationaryParams):
     """Tapered mean of every block of ``B`` cells (one starting at each cell) and the squared
     standard error of such a mean at rest.
@@ -367,33 +382,41 @@ def _block_stats(M: np.ndarray, B: int, window: int, p: StationaryParams):
     half = window // 2
     padded = np.pad(d2, ((half, half), (0, 0)), mode="edge")
     # Var(d) = 2 var(mean); the median of chi2_1 is 0.4549.
-    local = np.median(sliding_window_view(padded, window, axis=0), axis=-1) / (2.0 * 0.4549)
+    local = _running_median(padded, window) / (2.0 * 0.4549)
     q = np.percentile(local, 5.0, axis=0)
     se2 = np.clip(local, q, p.noise_spread**2 * q)
     return mu, se2[np.minimum(np.arange(len(mu)) // B, len(se2) - 1)]
+
+
+#: Blocks :func:`_still_positions` compares at once (bounded temporaries on a long run).
+STILL_BLOCK = 8192
 
 
 def _still_positions(mu, se2, gap_cells, B: int, p: StationaryParams) -> np.ndarray:
     """Blocks (by first cell) that are still: small mean rate, agreement with both neighbours, no gap.
 
     At the ends of the record a block has one neighbour only, and needs to agree with that one.
+    Compared :data:`STILL_BLOCK` positions at a time (each position on its own: the same verdicts).
     """
     P = len(mu)
     floor = np.array([p.floor_accel_mps2] * 3 + [p.floor_gyro_dps * DEG] * 3)
     if P <= B:
         return np.zeros(P, bool)
-    j = np.arange(P)
-
-    def agree(other):
-        b = np.clip(other, 0, P - 1)
-        tol2 = p.z**2 * (se2 + se2[b]) + floor**2
-        return np.all((mu - mu[b]) ** 2 <= tol2, axis=1) | (other < 0) | (other >= P)
-
-    slow = np.linalg.norm(mu[:, 3:], axis=1) <= p.omega_max_dps * DEG
     # A gap anywhere in the previous, own or next block vetoes (window of 3B cells from j - B).
     g = np.concatenate([[0], np.cumsum(gap_cells)])
-    no_gap = g[np.minimum(j + 2 * B, len(gap_cells))] - g[np.maximum(j - B, 0)] == 0
-    return slow & agree(j - B) & agree(j + B) & no_gap
+    out = np.empty(P, bool)
+    for a in range(0, P, STILL_BLOCK):
+        j = np.arange(a, min(a + STILL_BLOCK, P))
+
+        def agree(other):
+            b = np.clip(other, 0, P - 1)
+            tol2 = p.z**2 * (se2[j] + se2[b]) + floor**2
+            return np.all((mu[j] - mu[b]) ** 2 <= tol2, axis=1) | (other < 0) | (other >= P)
+
+        slow = np.linalg.norm(mu[j, 3:], axis=1) <= p.omega_max_dps * DEG
+        no_gap = g[np.minimum(j + 2 * B, len(gap_cells))] - g[np.maximum(j - B, 0)] == 0
+        out[j] = slow & agree(j - B) & agree(j + B) & no_gap
+    return out
 
 
 def _coverage(still: np.ndarray, B: int, J: int) -> np.ndarray:
