@@ -174,9 +174,9 @@ def _channel(x: tuple[np.ndarray, np.ndarray], c: int) -> np.ndarray:
 # --- the four checks -------------------------------------------------------------------------------
 
 #: Rows of the IMU table the interpolation check differences at once: its temporaries (first and
-#: second differences, chord distances: about ten copies of a block) stay a few MiB whatever the
+#: second differences, chord distances: about ten copies of a block, ~8 MiB) stay bounded whatever the
 #: run length.
-CHECK_BLOCK_ROWS = 65_536
+CHECK_BLOCK_ROWS = 16_384
 
 
 def _straight(t: np.ndarray, x: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
