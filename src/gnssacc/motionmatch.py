@@ -106,9 +106,72 @@ class LevelledImu:
         return self.t0 + self.step * (len(self.omega_v) - 1)
 
 
+#: Samples (and grid cells) per block of :class:`BoxGrid`'s work: a long run's temporaries stay
+#: a few MiB, beside the two run-long arrays it keeps (cell edges and running integral).
+BOX_BLOCK = 1 << 16
+
+
+class BoxGrid:
+    """Box averages of channels sampled at times ``t`` over a uniform grid, one channel at a time.
+
+    Sample ``k`` holds over ``(t[k-1], t[k]]`` (the first over one interval before ``t[0]``);
+    cell ``j`` is ``[t0 + (j - 1/2) step, t0 + (j + 1/2) step]``, ``j = 0 .. n-1``. The running
+    integral and the interpolation at the cell edges go block by block, so a channel costs two
+    float64 per sample (edges and integral, shared by the channels) plus bounded blocks; the
+    arithmetic is that of the whole-array computation, element by element.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Sample times [s], increasing, N >= 2.
+    t0, step : float
+        Grid [s].
+    n : int
+        Number of grid cells.
+    """
+
+    def __init__(self, t: np.ndarray, t0: float, step: float, n: int):
+        self.t, self.t0, self.step, self.n = np.asarray(t, float), float(t0), float(step), int(n)
+        t = self.t
+        self.dt0 = t[0] - (t[0] - (t[1] - t[0]))      # the first sample's interval, as np.diff(prepend=) gives it
+        self.edges = np.empty(len(t) + 1)
+        self.edges[0] = t[0] - self.dt0
+        self.edges[1:] = t
+        self.cum = np.zeros(len(t) + 1)
+
+    def _integrate(self, x: np.ndarray) -> None:
+        """``cum[1:] = cumsum(x * dt)`` block by block (the carry added as the next term, so the
+        sums are the sequential ones of a whole-array cumsum)."""
+        t, cum, N = self.t, self.cum, len(self.t)
+        for a in range(0, N, BOX_BLOCK):
+            b = min(a + BOX_BLOCK, N)
+            seg = cum[a + 1:b + 1]
+            if a == 0:
+                seg[0] = self.dt0
+                np.subtract(t[1:b], t[:b - 1], out=seg[1:])
+            else:
+                np.subtract(t[a:b], t[a - 1:b - 1], out=seg)
+            seg *= x[a:b]
+            if a > 0:
+                seg[0] += cum[a]
+            np.cumsum(seg, out=seg)
+
+    def average(self, x: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """Fills ``out`` (n,) with the cell averages of one channel ``x`` (N,) and returns it."""
+        self._integrate(x)
+        lo_t, hi_t = self.edges[0], self.edges[-1]
+        for a in range(0, self.n, BOX_BLOCK):
+            b = min(a + BOX_BLOCK, self.n)
+            g = self.t0 + self.step * (np.arange(a, b + 1) - 0.5)
+            np.clip(g, lo_t, hi_t, out=g)
+            width = np.maximum(np.diff(g), 1e-12)
+            out[a:b] = np.diff(np.interp(g, self.edges, self.cum)) / width
+        return out
+
+
 def box_average(t: np.ndarray, x: np.ndarray, t0: float, step: float, n: int) -> np.ndarray:
     """Averages of samples ``x`` (sample k holds over ``(t[k-1], t[k]]``) over grid cells
-    ``[t0 + (j - 1/2) step, t0 + (j + 1/2) step]``, ``j = 0 .. n-1``.
+    ``[t0 + (j - 1/2) step, t0 + (j + 1/2) step]``, ``j = 0 .. n-1`` (:class:`BoxGrid`).
 
     Parameters
     ----------
@@ -124,16 +187,10 @@ def box_average(t: np.ndarray, x: np.ndarray, t0: float, step: float, n: int) ->
     -------
     ndarray, shape (n, k)
     """
-    dt = np.diff(t, prepend=t[0] - (t[1] - t[0]))
-    edges = np.concatenate([[t[0] - dt[0]], t])
-    g = t0 + step * (np.arange(n + 1) - 0.5)
-    g = np.clip(g, edges[0], edges[-1])
-    width = np.maximum(np.diff(g), 1e-12)
+    grid = BoxGrid(t, t0, step, n)
     out = np.empty((n, x.shape[1]))
-    cum = np.zeros(len(t) + 1)
     for i in range(x.shape[1]):   # one channel at a time: a long run's temporaries stay one column
-        np.cumsum(x[:, i] * dt, out=cum[1:])
-        out[:, i] = np.diff(np.interp(g, edges, cum)) / width
+        grid.average(x[:, i], out[:, i])
     return out
 
 
@@ -162,13 +219,25 @@ def level_imu(imu, step: float | None = None) -> LevelledImu:
     step = float(step or max(float(np.median(np.diff(t))), MIN_STEP_S))
     dt = np.diff(t, prepend=t[0] - (t[1] - t[0]))
     f_mean = dt @ imu.f_b / dt.sum()
+    del dt
     norm = float(np.linalg.norm(f_mean))
     down = -f_mean / norm if norm > 0 else np.array([0.0, 0.0, 1.0])
     e1, e2 = _horizontal_basis(down)
     n = max(int(np.floor((t[-1] - t[0]) / step)) + 1, 1)
-    proj = np.column_stack([imu.f_b @ e1, imu.f_b @ e2, imu.omega_ib_b @ down])
-    grid = box_average(t, proj, float(t[0]), step, n)
-    return LevelledImu(float(t[0]), step, down, e1, e2, grid[:, :2], grid[:, 2], norm)
+    grid = BoxGrid(t, float(t[0]), step, n)
+    f_h, omega_v = np.empty((n, 2)), np.empty(n)
+    # one projection at a time (each one column of the run), averaged into its output column
+    grid.average(imu.f_b @ e1, f_h[:, 0])
+    grid.average(imu.f_b @ e2, f_h[:, 1])
+    grid.average(imu.omega_ib_b @ down, omega_v)
+    return LevelledImu(float(t[0]), step, down, e1, e2, f_h, omega_v, norm)
+
+
+def _kernel(step: float, window_s: float, kernel: str) -> np.ndarray:
+    """The weights of :func:`smooth`'s kernel over its ``2 half + 1`` grid points."""
+    half = max(int(round(0.5 * window_s / step)), 1)
+    s = np.arange(-half, half + 1) / (half + 1.0)
+    return {"biweight": (1 - s * s) ** 2, "epanechnikov": 1 - s * s, "box": np.ones_like(s)}[kernel]
 
 
 def smooth(x: np.ndarray, step: float, window_s: float, kernel: str = "biweight") -> np.ndarray:
@@ -178,14 +247,13 @@ def smooth(x: np.ndarray, step: float, window_s: float, kernel: str = "biweight"
     sees), ``"epanechnikov"`` ``1 - s^2`` (its velocity), or ``"box"``. Samples within half a
     window of either end are averaged over the part of the kernel that exists.
     """
-    half = max(int(round(0.5 * window_s / step)), 1)
-    s = np.arange(-half, half + 1) / (half + 1.0)
-    k = {"biweight": (1 - s * s) ** 2, "epanechnikov": 1 - s * s, "box": np.ones_like(s)}[kernel]
+    k = _kernel(step, window_s, kernel)
     x2 = x.reshape(len(x), -1)
-    den = np.maximum(_convolve_same(np.ones(len(x)), k), 1e-12)
     out = np.empty(x2.shape, np.result_type(x2, float))
-    for i in range(x2.shape[1]):
-        out[:, i] = _convolve_same(x2[:, i], k) / den
+    for a, b, lo, hi in _blocks(len(x), len(k) // 2):   # the normalisation shared by the channels
+        den = _weights(k, a, b, lo, hi)
+        for i in range(x2.shape[1]):
+            out[a:b, i] = _convolve_block(x2[lo:hi, i], k, a - lo, b - lo) / den
     return out.reshape(x.shape)
 
 
@@ -209,17 +277,30 @@ def _convolve_full(x: np.ndarray, k: np.ndarray) -> np.ndarray:
     return sp_fft.irfft(sp_fft.rfft(x, size) * sp_fft.rfft(k, size), size)[:n]
 
 
-def _convolve_same(x: np.ndarray, k: np.ndarray) -> np.ndarray:
-    """``scipy.signal.fftconvolve(x, k, "same")`` for an odd-length kernel, block by block."""
-    half, n = len(k) // 2, len(x)
-    if n <= SMOOTH_BLOCK:
-        return _convolve_full(x, k)[half:half + n]
-    out = np.empty(n, np.result_type(x, k))
+def _blocks(n: int, half: int):
+    """``(a, b, lo, hi)`` per block of outputs ``a .. b-1`` of :func:`_convolve_same` with a kernel
+    of half width ``half``: ``lo .. hi-1`` are the samples that reach them."""
     for a in range(0, n, SMOOTH_BLOCK):
         b = min(a + SMOOTH_BLOCK, n)
-        lo, hi = max(a - half, 0), min(b + half, n)   # every sample that reaches outputs a .. b-1
-        full = _convolve_full(x[lo:hi], k)            # full[j] is output lo + j - half
-        out[a:b] = full[a - lo + half:b - lo + half]
+        yield a, b, max(a - half, 0), min(b + half, n)
+
+
+def _convolve_block(x: np.ndarray, k: np.ndarray, a: int, b: int) -> np.ndarray:
+    """Outputs ``a .. b-1`` of the "same" convolution of the samples ``x`` with an odd kernel ``k``."""
+    half = len(k) // 2
+    return _convolve_full(x, k)[a + half:b + half]   # full[j] is output j - half
+
+
+def _weights(k: np.ndarray, a: int, b: int, lo: int, hi: int) -> np.ndarray:
+    """The kernel weight within the record at outputs ``a .. b-1`` (block ``lo .. hi-1``), at least 1e-12."""
+    return np.maximum(_convolve_block(np.ones(hi - lo), k, a - lo, b - lo), 1e-12)
+
+
+def _convolve_same(x: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """``scipy.signal.fftconvolve(x, k, "same")`` for an odd-length kernel, block by block."""
+    out = np.empty(len(x), np.result_type(x, k))
+    for a, b, lo, hi in _blocks(len(x), len(k) // 2):
+        out[a:b] = _convolve_block(x[lo:hi], k, a - lo, b - lo)
     return out
 
 
@@ -229,7 +310,8 @@ def smooth_horizontal(lev: LevelledImu, window_s: float) -> np.ndarray:
 
     The frame is the IMU's turned back by the heading the gyro integrates about ``down`` (a gyro
     bias turns it by a few degrees over a window, which the average does not notice); with
-    ``lev.ground_frame`` false, the IMU axes themselves.
+    ``lev.ground_frame`` false, the IMU axes themselves. Block by block (:func:`smooth`'s
+    blocks): besides the output, one float64 per grid point (the integrated heading).
 
     Parameters
     ----------
@@ -244,15 +326,19 @@ def smooth_horizontal(lev: LevelledImu, window_s: float) -> np.ndarray:
     """
     if not lev.ground_frame:
         return smooth(lev.f_h, lev.step, window_s)
-    turn = np.cumsum(lev.omega_v) * (1j * lev.step)   # in place from here: a long run's grid is large
-    np.exp(turn, out=turn)
-    z = lev.f_h[:, 1] * 1j
-    z += lev.f_h[:, 0]
-    z *= turn
-    f = smooth(z, lev.step, window_s)
-    del z
-    f /= turn
-    return np.column_stack([f.real, f.imag])
+    k = _kernel(lev.step, window_s, "biweight")
+    heading = np.cumsum(lev.omega_v)
+    out = np.empty((len(heading), 2))
+    for a, b, lo, hi in _blocks(len(heading), len(k) // 2):
+        turn = heading[lo:hi] * (1j * lev.step)
+        np.exp(turn, out=turn)
+        z = lev.f_h[lo:hi, 1] * 1j
+        z += lev.f_h[lo:hi, 0]
+        z *= turn
+        f = _convolve_block(z, k, a - lo, b - lo) / _weights(k, a, b, lo, hi)
+        f /= turn[a - lo:b - lo]
+        out[a:b, 0], out[a:b, 1] = f.real, f.imag
+    return out
 
 
 def at_times(t0: float, step: float, x: np.ndarray, t: np.ndarray) -> np.ndarray:

@@ -155,17 +155,28 @@ def _span(kind: str, t: np.ndarray, i_start: int, i_end: int, channels: str, not
     return Span(kind, t_start, float(t[i_end - 1]), int(i_start), int(i_end), channels, note)
 
 
-def _stack(imu: ImuData) -> np.ndarray:
-    """IMU channels as one (N, 6) array ``[f_b, omega_ib_b]`` (SI units, body frame)."""
-    return np.hstack([np.asarray(imu.f_b, float), np.asarray(imu.omega_ib_b, float)])
+def _sensors(imu: ImuData) -> tuple[np.ndarray, np.ndarray]:
+    """The IMU's ``f_b`` and ``omega_ib_b`` (N, 3) as float arrays (SI units, body frame): the
+    checks read them in place, never as one (N, 6) copy of the run."""
+    return np.asarray(imu.f_b, float), np.asarray(imu.omega_ib_b, float)
+
+
+def _rows(x: tuple[np.ndarray, np.ndarray], a: int, b: int) -> np.ndarray:
+    """Rows ``a .. b-1`` of the channels :data:`CHANNELS` as one (b - a, 6) block."""
+    return np.hstack([x[0][a:b], x[1][a:b]])
+
+
+def _channel(x: tuple[np.ndarray, np.ndarray], c: int) -> np.ndarray:
+    """Channel ``c`` of :data:`CHANNELS` (a view)."""
+    return x[c // 3][:, c % 3]
 
 
 # --- the four checks -------------------------------------------------------------------------------
 
 #: Rows of the IMU table the interpolation check differences at once: its temporaries (first and
-#: second differences, chord distances: about ten copies of a block) stay a few MiB whatever the
+#: second differences, chord distances: about ten copies of a block, ~8 MiB) stay bounded whatever the
 #: run length.
-CHECK_BLOCK_ROWS = 65_536
+CHECK_BLOCK_ROWS = 16_384
 
 
 def _straight(t: np.ndarray, x: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
@@ -187,14 +198,14 @@ def _straight(t: np.ndarray, x: np.ndarray, tol: float) -> tuple[np.ndarray, np.
     return straight & ~(still[:-1] & still[1:]), worst
 
 
-def _interpolated(t: np.ndarray, x: np.ndarray, tol: float, min_s: float) -> list[Span]:
+def _interpolated(t: np.ndarray, x: tuple[np.ndarray, np.ndarray], tol: float, min_s: float) -> list[Span]:
     if len(t) < 3:
         return []
     n = len(t) - 2
     straight, worst = np.empty(n, bool), np.empty(n)
     for a in range(0, n, CHECK_BLOCK_ROWS):   # centres a+1 .. b need samples a .. b+1
         b = min(a + CHECK_BLOCK_ROWS, n)
-        straight[a:b], worst[a:b] = _straight(t[a:b + 2], x[a:b + 2], tol)
+        straight[a:b], worst[a:b] = _straight(t[a:b + 2], _rows(x, a, b + 2), tol)
     spans = []
     for s, f in zip(*_runs(straight)):
         i0, i1 = s + 1, f + 1               # the centres; the two end samples are the real anchors
@@ -234,10 +245,11 @@ def _gaps(t: np.ndarray, factor: float) -> tuple[list[Span], float, float]:
     return spans, dt_med, float(dt.max())
 
 
-def _frozen(t: np.ndarray, x: np.ndarray, min_samples: int) -> list[Span]:
+def _frozen(t: np.ndarray, x: tuple[np.ndarray, np.ndarray], min_samples: int) -> list[Span]:
     if len(t) < 2:
         return []
-    still = np.all(x[1:] == x[:-1], axis=1)   # index k: sample k+1 repeats sample k (no float temporary)
+    # index k: sample k+1 repeats sample k (sensor by sensor, no float temporary)
+    still = np.all(x[0][1:] == x[0][:-1], axis=1) & np.all(x[1][1:] == x[1][:-1], axis=1)
     spans = []
     for s, f in zip(*_runs(still)):
         if f - s >= min_samples:
@@ -247,20 +259,23 @@ def _frozen(t: np.ndarray, x: np.ndarray, min_samples: int) -> list[Span]:
     return spans
 
 
-def _saturated(t: np.ndarray, x: np.ndarray, min_samples: int) -> list[Span]:
+def _saturated(t: np.ndarray, x: tuple[np.ndarray, np.ndarray], min_samples: int) -> list[Span]:
     spans = []
     for c, name in enumerate(CHANNELS):   # channel by channel: a long run's temporaries stay one column
-        col = x[:, c]
+        col = _channel(x, c)
         med = float(np.median(col))
+        dev = col - med                      # one work column, reused in place
+        np.abs(dev, out=dev)
         # A coarsely quantised channel can have MAD = 0; fall back to the plain std then.
-        sigma = 1.4826 * float(np.median(np.abs(col - med))) or float(np.std(col))
+        sigma = 1.4826 * float(np.median(dev, overwrite_input=True)) or float(np.std(col))
         if sigma == 0:
             continue                         # constant channel: nothing to tell apart
         for which, ext in (("max", col.max()), ("min", col.min())):
             far = abs(ext - med) / sigma
             if far <= SATURATION_ROBUST_SIGMAS:
                 continue
-            at_ext = np.abs(col - ext) <= 1e-9 * max(abs(ext), 1.0)
+            np.subtract(col, ext, out=dev)
+            at_ext = np.abs(dev, out=dev) <= 1e-9 * max(abs(ext), 1.0)
             for s, f in zip(*_runs(at_ext)):
                 if f - s >= min_samples:
                     spans.append(_span("saturated", t, s, f, name,
@@ -288,7 +303,7 @@ def check_imu(imu: ImuData, cfg: RunConfig) -> QualityReport:
     """
     q = cfg["quality"]
     t = np.asarray(imu.t, float)
-    x = _stack(imu)
+    x = _sensors(imu)
     stuck = int(q["stuck_min_samples"])
     gaps, dt_med, dt_max = _gaps(t, float(q["gap_factor"]))
     spans = (_interpolated(t, x, float(q["interp_tol"]), float(q["interp_min_s"])) + gaps

@@ -314,16 +314,53 @@ def params_from_config(cfg) -> StationaryParams:
 
 # --- IMU stillness ---------------------------------------------------------------------------
 
+def _median_interval(t: np.ndarray) -> float:
+    """Median sampling interval [s] of at least two times, with one run-long work array."""
+    return float(np.median(np.diff(t), overwrite_input=True))
+
+
+#: Cells whose IMU gaps :func:`_cells` finds at once (bounded temporaries on a long run).
+GAP_BLOCK_CELLS = 1 << 14
+
+
+def _gap_cells(t: np.ndarray, c: int, J: int, longest: float) -> np.ndarray:
+    """Whether each of ``J`` cells of ``c`` samples holds an interval longer than ``longest`` [s],
+    interval ``k`` being the step from sample ``k-1`` to ``k`` (none before sample 0)."""
+    out = np.empty(J, bool)
+    for a in range(0, J, GAP_BLOCK_CELLS):
+        b = min(a + GAP_BLOCK_CELLS, J)
+        lo = max(a * c - 1, 0)                       # the sample before the block's first interval
+        gap = np.diff(t[lo:b * c]) > longest
+        if a == 0:
+            gap = np.concatenate([[False], gap])
+        out[a:b] = gap.reshape(b - a, c).any(axis=1)
+    return out
+
+
 def _cells(imu: ImuData, p: StationaryParams):
     """Cell means (J, 6), samples per cell, whether a cell touches an IMU gap (J,), median interval [s]."""
-    dt = float(np.median(np.diff(imu.t)))
+    dt = _median_interval(imu.t)
     c = max(int(round(p.cell_s / dt)), 1)
     J = len(imu) // c
     # Reshapes are views: no copy of a 10 h record.
     M = np.hstack([imu.f_b[:J * c].reshape(J, c, 3).mean(axis=1), imu.omega_ib_b[:J * c].reshape(J, c, 3).mean(axis=1)])
-    # Interval k holds the step from sample k-1 to k: a long one means unseen motion may hide there.
-    gap = np.concatenate([[False], np.diff(imu.t) > p.gap_factor * dt])[:J * c]
-    return M, c, gap.reshape(J, c).any(axis=1), dt
+    # A long interval means unseen motion may hide there.
+    return M, c, _gap_cells(np.asarray(imu.t), c, J, p.gap_factor * dt), dt
+
+
+#: Windows :func:`_running_median` takes at once: np.median copies its windows, so a long run's
+#: are taken in blocks (the same medians, a few MiB of work).
+MEDIAN_BLOCK_ROWS = 4096
+
+
+def _running_median(x: np.ndarray, window: int) -> np.ndarray:
+    """Median of every ``window`` consecutive rows of ``x`` (n, k), per column: (n - window + 1, k)."""
+    n_out = len(x) - window + 1
+    out = np.empty((n_out,) + x.shape[1:])
+    for a in range(0, n_out, MEDIAN_BLOCK_ROWS):
+        b = min(a + MEDIAN_BLOCK_ROWS, n_out)
+        out[a:b] = np.median(sliding_window_view(x[a:b + window - 1], window, axis=0), axis=-1)
+    return out
 
 
 def _block_stats(M: np.ndarray, B: int, window: int, p: StationaryParams):
@@ -345,33 +382,41 @@ def _block_stats(M: np.ndarray, B: int, window: int, p: StationaryParams):
     half = window // 2
     padded = np.pad(d2, ((half, half), (0, 0)), mode="edge")
     # Var(d) = 2 var(mean); the median of chi2_1 is 0.4549.
-    local = np.median(sliding_window_view(padded, window, axis=0), axis=-1) / (2.0 * 0.4549)
+    local = _running_median(padded, window) / (2.0 * 0.4549)
     q = np.percentile(local, 5.0, axis=0)
     se2 = np.clip(local, q, p.noise_spread**2 * q)
     return mu, se2[np.minimum(np.arange(len(mu)) // B, len(se2) - 1)]
+
+
+#: Blocks :func:`_still_positions` compares at once (bounded temporaries on a long run).
+STILL_BLOCK = 8192
 
 
 def _still_positions(mu, se2, gap_cells, B: int, p: StationaryParams) -> np.ndarray:
     """Blocks (by first cell) that are still: small mean rate, agreement with both neighbours, no gap.
 
     At the ends of the record a block has one neighbour only, and needs to agree with that one.
+    Compared :data:`STILL_BLOCK` positions at a time (each position on its own: the same verdicts).
     """
     P = len(mu)
     floor = np.array([p.floor_accel_mps2] * 3 + [p.floor_gyro_dps * DEG] * 3)
     if P <= B:
         return np.zeros(P, bool)
-    j = np.arange(P)
-
-    def agree(other):
-        b = np.clip(other, 0, P - 1)
-        tol2 = p.z**2 * (se2 + se2[b]) + floor**2
-        return np.all((mu - mu[b]) ** 2 <= tol2, axis=1) | (other < 0) | (other >= P)
-
-    slow = np.linalg.norm(mu[:, 3:], axis=1) <= p.omega_max_dps * DEG
     # A gap anywhere in the previous, own or next block vetoes (window of 3B cells from j - B).
     g = np.concatenate([[0], np.cumsum(gap_cells)])
-    no_gap = g[np.minimum(j + 2 * B, len(gap_cells))] - g[np.maximum(j - B, 0)] == 0
-    return slow & agree(j - B) & agree(j + B) & no_gap
+    out = np.empty(P, bool)
+    for a in range(0, P, STILL_BLOCK):
+        j = np.arange(a, min(a + STILL_BLOCK, P))
+
+        def agree(other):
+            b = np.clip(other, 0, P - 1)
+            tol2 = p.z**2 * (se2[j] + se2[b]) + floor**2
+            return np.all((mu[j] - mu[b]) ** 2 <= tol2, axis=1) | (other < 0) | (other >= P)
+
+        slow = np.linalg.norm(mu[j, 3:], axis=1) <= p.omega_max_dps * DEG
+        no_gap = g[np.minimum(j + 2 * B, len(gap_cells))] - g[np.maximum(j - B, 0)] == 0
+        out[j] = slow & agree(j - B) & agree(j + B) & no_gap
+    return out
 
 
 def _coverage(still: np.ndarray, B: int, J: int) -> np.ndarray:
@@ -726,7 +771,7 @@ def detect_stationary(imu: ImuData, gnss: GnssFixes, origin: LocalTangentFrame,
         Disjoint spans in time order; see the module notes for the algorithm.
     """
     p = params or StationaryParams()
-    dt = float(np.median(np.diff(imu.t))) if len(imu) > 1 else 0.0
+    dt = _median_interval(imu.t) if len(imu) > 1 else 0.0
     block = max(int(round(p.block_s / dt)), 1) if dt > 0 else 1
     p_n = origin.to_ned(gnss.lat, gnss.lon, gnss.h) if len(gnss) else np.zeros((0, 3))
     spans, rejected = [], []

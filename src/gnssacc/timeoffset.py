@@ -59,9 +59,10 @@ JACKKNIFE_BLOCKS = 8
 #: (measured on simulated car and slow-UGV runs) stands clear while chance peaks do not.
 MIN_PEAK = 0.5
 MIN_MARGIN = 0.2
-#: Most (lag, centre) pairs the correlations evaluate at once: bounds their temporaries to a few
-#: MB whatever the run length (a 6000 s run has ~6000 centres and thousands of lags).
-CHUNK_ENTRIES = 250_000
+#: Most (lag, centre) pairs the correlations evaluate at once: bounds their temporaries (about
+#: 80 bytes a pair) to a few MB whatever the run length (a 6000 s run has ~6000 centres and
+#: thousands of lags); each lag's sums are over its own row, so the chunking changes no number.
+CHUNK_ENTRIES = 65_536
 #: Fewest comparison epochs for any verdict.
 MIN_CENTRES = 12
 #: Least GNSS acceleration signal-to-noise power ratio (:attr:`GnssKinematics.snr`) for a verdict:
@@ -236,7 +237,12 @@ def coarse_offset(lev: LevelledImu, kin: GnssKinematics, max_offset_s: float = M
     W = kin.window_s
     fh_s = smooth_horizontal(lev, W)
     lags = np.arange(-max_offset_s, max_offset_s + 1e-9, max(COARSE_STEP_S, COARSE_STEP_FRACTION * W))
-    rho, count = _magnitude_rho(lev, np.hypot(fh_s[:, 0], fh_s[:, 1]), kin, lags, 0.5 * W)
+    mag = np.hypot(fh_s[:, 0], fh_s[:, 1])
+    rho, count = _magnitude_rho(lev, mag, kin, lags, 0.5 * W)
+    np.square(fh_s[:, 0], out=mag)     # the power per grid point, in the magnitude's array
+    mag += np.square(fh_s[:, 1])
+    imu_rms = float(np.sqrt(np.mean(mag)))
+    del mag
     z = _significance(rho, count, kin)
     if np.all(np.isnan(z)):
         return none
@@ -250,7 +256,6 @@ def coarse_offset(lev: LevelledImu, kin: GnssKinematics, max_offset_s: float = M
     rho_f = _complex_rho(lev, fh_s, kin, fine, np.ones(len(kin), bool))
     tau = _peak(fine, rho_f) if np.any(np.isfinite(rho_f)) else tau0
     sigma = _jackknife(lev, fh_s, kin, tau)
-    imu_rms = float(np.sqrt(np.mean(np.sum(fh_s**2, axis=1))))
     ok = (rho_peak >= MIN_PEAK and rho_peak - rho_other >= MIN_MARGIN and sigma <= MAX_SIGMA_FRACTION * W
           and imu_rms >= MIN_IMU_RMS_MPS2)
     sigma = float(np.hypot(sigma, STAGE1_MODEL_SIGMA_S))
