@@ -112,6 +112,7 @@ def identify(run: RecordedRun, cfg: RunConfig, tune_mode: str | None = None) -> 
     quality = check_imu(run.imu, cfg)
     release_free_memory()
     stationary = detect_stationary(run.imu, run.gnss, run.origin, params_from_config(cfg))
+    release_free_memory()   # before the estimators build on the heap
     secs["quality_and_stationary_s"] = time.perf_counter() - t
     t = time.perf_counter()
     est_run = scaled_gnss(run, float(cfg["gnss"]["sigma_scale"]))

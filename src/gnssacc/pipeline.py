@@ -16,6 +16,7 @@ from .ekf import run_ekf
 from .errors import InputError, raise_if_interrupted, warn_data
 from .gnss_noise import apply_outages, parse_outages
 from .identify import Identified, identify
+from .memory import release_free_memory
 from .metrics import gnss_score, score
 from .outdir import ResultDir
 from .report import format_table, metrics_dict, plot_errors, plot_trajectory, write_json, write_trajectory_csv
@@ -177,6 +178,7 @@ def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: s
         try:
             extra = {"observer": observers[m]} if observers and m in observers else {}
             out.update(METHODS[m](ident, m, show_progress, **extra))
+            release_free_memory()   # one method's work arrays, before the next one's
         except InputError:
             raise
         except Exception as exc:  # an estimator failure costs that method only
