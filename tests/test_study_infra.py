@@ -257,3 +257,21 @@ def test_gm_methods_are_judged_by_their_own_noise_model():
     warned = {m: " ".join(c["warnings"]) for m, c in res.metrics["consistency"].items()}
     assert "the noise model does not fit" in warned["smoother"]
     assert "noise model" not in warned["smoother-gm"] and "noise model" not in warned["smoother-gm-online"]
+
+
+def test_gm_model_check_reuses_the_ekf_gm_pass_unchanged(monkeypatch):
+    # With ekf-gm in the run, its own pass is the -gm model check: no second EKF pass, and the
+    # same figures as a separate pass without outputs.
+    import gnssacc.gm_variant as gv
+    from gnssacc.consistency import ModelCheck
+
+    calls = []
+    real = gv.run_ekf
+    monkeypatch.setattr(gv, "run_ekf", lambda *a, **k: calls.append(1) or real(*a, **k))
+    res = gnssacc.process("sim:car,imu=industrial,duration=120", methods=["ekf-gm", "smoother-gm"], tune="none",
+                          noise="gm", seed=0)
+    assert calls == []
+    gi, used = res.ident.derived["gm_model"]
+    own = real(gi.run, gi.cfg, "ekf", init=gi.init, stationary=gi.stationary, quality=gi.quality,
+               output_times=np.zeros(0))
+    assert used == ModelCheck.from_stats(own.stats, res.ident.model.rest)

@@ -81,15 +81,17 @@ def _from_profile(ident: Identified) -> Identified:
     return replace(ident, cfg=cfg, run=scaled_gnss(ident.run, white_ratio))
 
 
-def gm_model(ident: Identified) -> tuple[Identified, ModelCheck]:
+def gm_model(ident: Identified, ekf_gm=None) -> tuple[Identified, ModelCheck]:
     """The ``-gm`` setup and its noise-model check (one EKF pass with the Gauss-Markov states, as
     :func:`gnssacc.identify.identify` checks the baselines' model), made once per identification:
     what the ``-gm`` methods' consistency is judged with (a smoother's own figures cannot show
-    the model; the baselines' check is of the white model)."""
+    the model; the baselines' check is of the white model). ``ekf_gm``: the ``ekf-gm`` solution
+    when the run has one, which is that pass (its outputs change nothing in the filter)."""
     if "gm_model" not in ident.derived:
         gm_ident, _ = gm_setup(ident)
-        check = run_ekf(gm_ident.run, gm_ident.cfg, "ekf", init=gm_ident.init, stationary=gm_ident.stationary,
-                        quality=gm_ident.quality, output_times=np.zeros(0))
+        check = ekf_gm or run_ekf(gm_ident.run, gm_ident.cfg, "ekf", init=gm_ident.init,
+                                  stationary=gm_ident.stationary, quality=gm_ident.quality,
+                                  output_times=np.zeros(0))
         rest = ident.model.rest if ident.model is not None else []
         ident.derived["gm_model"] = (gm_ident, ModelCheck.from_stats(check.stats, rest))
     return ident.derived["gm_model"]

@@ -237,7 +237,7 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
     for m, s in list(sols.items()):
         try:  # scoring one solution must not cost the others either
             scores[m] = score(run, s, window)
-            judged, model = _noise_model_of(ident, m)
+            judged, model = _noise_model_of(ident, m, sols)
             cons[m] = assess(judged.run, s, scores[m].prmse_m, raw.prmse_m, model, judged.cfg.gnss_gm_sigma)
         except Exception as exc:
             raise_if_interrupted(exc)
@@ -260,12 +260,13 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
     return metrics_dict(run, sols, scores, raw, extra, failed), sols, ident
 
 
-def _noise_model_of(ident: Identified, sid: str):
+def _noise_model_of(ident: Identified, sid: str, sols: dict):
     """The identification whose run (fix sigmas) and configuration (Gauss-Markov sigmas) a solution
-    used, and the check of its noise model: the ``-gm`` methods' own, else the run's."""
+    used, and the check of its noise model: the ``-gm`` methods' own (from ``ekf-gm``'s pass when
+    ``sols`` has it), else the run's."""
     if METHODS.get(sid.removesuffix("-online")) is _gm:
         from .gm_variant import gm_model
-        return gm_model(ident)
+        return gm_model(ident, sols.get("ekf-gm"))
     return ident, ident.model
 
 
