@@ -1,0 +1,16 @@
+"""Shared test set-up."""
+import pytest
+
+import gnssacc.jit as jit
+
+
+@pytest.fixture(scope="session", autouse=True)
+def compiled_kernels():
+    """Compile (or load) every numba kernel before the first test.
+
+    On a first run (a clean clone, or after a kernel's source changed) the package compiles its
+    kernels in the background, and its in-process fallback smooths a short warm-up drive in a
+    thread. Tests that patch a method and count its calls would count that drive's calls too.
+    """
+    jit.warm_up()
+    jit.smoother_ready()
