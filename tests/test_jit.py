@@ -85,3 +85,20 @@ def test_failed_compiling_processes_fall_back_to_compiling_in_process(tmp_path):
     assert list(folder.rglob("window_marginals.*.nbi")) and list(folder.rglob("gnssacc-kernels-*.stamp"))
     second = _probe(root, cache_home)
     assert "gnssacc: " not in second.stderr
+
+
+def test_a_touched_kernel_source_is_compiled_again_with_the_notice(tmp_path):
+    """numba recompiles a kernel whose source file has a new modification time (a reinstall of the
+    same code): the run must say so and compile in the background, not silently in the estimators."""
+    root = _read_only_copy(tmp_path)
+    cache_home = tmp_path / "cache"
+    _probe(root, cache_home)
+    source = root / "gnssacc" / "mechanization.py"
+    st = source.stat()
+    os.utime(source, ns=(st.st_atime_ns, st.st_mtime_ns + 10**10))   # 10 s newer, same content
+    again = _probe(root, cache_home)
+    assert any(line.startswith("gnssacc: ") and "compiling" in line for line in again.stderr.splitlines())
+    hits, misses = again.stdout.splitlines()[1].split()
+    assert hits != "0" and misses == "0"      # compiled by the child processes again, then loaded
+    third = _probe(root, cache_home)
+    assert "gnssacc: " not in third.stderr

@@ -73,15 +73,22 @@ KERNEL_SOURCES = ("mechanization.py", "kalman.py", "window_marginals.py")
 
 def kernels_stamp() -> Path:
     """The file that marks the kernels as compiled into the cache, named by a hash of what
-    numba's cache depends on (the kernels' sources, numba, Python, the machine); found without
-    importing numba, so the notice can come at once."""
+    numba's cache depends on (the kernels' sources with their modification times and sizes,
+    numba, Python, the machine); found without importing numba, so the notice can come at once.
+
+    numba takes a cached kernel as stale when its source file's modification time changed, even
+    if its content did not (a reinstall, a checkout): the stamp must change with it, or such a
+    run would compile without a notice, inside the estimators' wall times."""
     import hashlib
     import platform
     from importlib.metadata import version
 
     h = hashlib.sha256(f"{version('numba')} {sys.version} {platform.machine()}".encode())
     for name in KERNEL_SOURCES:
-        h.update((PACKAGE_DIR / name).read_bytes())
+        path = PACKAGE_DIR / name
+        st = path.stat()
+        h.update(f"{name} {st.st_mtime!r} {st.st_size}".encode())
+        h.update(path.read_bytes())
     return cache_folder() / f"gnssacc-kernels-{h.hexdigest()[:16]}.stamp"
 
 
