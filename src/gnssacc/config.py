@@ -95,7 +95,8 @@ DEFAULTS: dict[str, dict] = {
         # fix covariances through B (the default), Sigma_a = sum_j B_j^2 Sigma_p_j.
         "sigma_mps2": [],
         # Average the specific force over this many seconds before the epoch (0 = the paper's
-        # choice: the sample at the epoch).
+        # choice: the sample at the epoch). ekf-acc and smoother-acc only: the window-consistent
+        # methods (-accw) weight the specific force over the fixes' whole window instead.
         "specific_force_avg_s": 0.0,
     },
     "init": {
