@@ -47,6 +47,7 @@ from gtsam.symbol_shorthand import B, G, V, X
 from .config import RunConfig
 from .earth import earth_rate_n, normal_gravity
 from .ekf import initial_state
+from .fixed_lag import FixedLagISAM2
 from .factors import (gauss_markov_factor, gnss_accel_factor, gnss_position_gm_factor, joint_prior_factor,
                       window_accel_factor)
 from .gnss_accel import acceleration_row, measured_specific_force, window_accelerations
@@ -214,11 +215,12 @@ class _Smoother:
         self.gm = bool(np.any(cfg.gnss_gm_sigma > 0))
         self.params = gtsam.ISAM2Params()
         self.params.setFactorization(str(sm["factorization"]).upper())
-        self.params.setRelinearizeThreshold(float(sm["relinearize_threshold"]))
+        self.threshold = float(sm["relinearize_threshold"])
+        self.params.setRelinearizeThreshold(self.threshold)
         self.params.relinearizeSkip = int(sm["relinearize_skip"])
         # Reuse the slots of marginalised factors so the factor list stays bounded on long runs.
         self.params.findUnusedFactorSlots = True
-        self.isam = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
+        self.isam = FixedLagISAM2(self.lag, self.params, self.threshold)
         self.marginals = WindowMarginals(self.gm, bandwidth)
 
     def reset(self, robust: bool = False) -> None:
@@ -226,15 +228,12 @@ class _Smoother:
         switched = robust and self.params.getFactorization() != "QR"
         if switched:
             self.params.setFactorization("QR")
-        self.isam = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
+        self.isam = FixedLagISAM2(self.lag, self.params, self.threshold)
         self.marginals.clear()
         return switched
 
     def update(self, graph, values, stamps) -> None:
-        ts = gtsam.FixedLagSmootherKeyTimestampMap()
-        for key, t in stamps:
-            ts.insert((key, t))
-        self.isam.update(graph, values, ts)
+        self.isam.update(graph, values, stamps)
         try:
             self.marginals.sync(self.isam, graph)
         except NotAChain:

@@ -393,7 +393,7 @@ class WindowMarginals:
     def sync(self, isam, new_factors: gtsam.NonlinearFactorGraph) -> None:
         """Bring the blocks to the smoother's state right after an update with ``new_factors``.
 
-        ``isam`` is the ``IncrementalFixedLagSmoother``. Rebuilt from all its factors after a
+        ``isam`` is the :class:`gnssacc.fixed_lag.FixedLagISAM2`. Rebuilt from all its factors after a
         relinearisation or when nothing is held, else updated incrementally.
         """
         theta = isam.getLinearizationPoint()

@@ -1,0 +1,165 @@
+r"""A fixed-lag smoother on iSAM2 whose Bayes tree stays in time order, newest node at the root.
+
+GTSAM's ``IncrementalFixedLagSmoother`` orders the variables it re-eliminates in two groups:
+those to marginalise, then all others in whatever order COLAMD picks. On a chain of navigation
+nodes COLAMD takes the chain's ends first, so the newest node often lands deep in the Bayes
+tree, and the next update, which attaches the next node to it, re-eliminates the whole path from
+it to the root. Measured on a 10 Hz recording with a 10 s lag and Gauss-Markov GNSS-error
+states: 225 of the window's ~390 variables re-eliminated at every update.
+
+:class:`FixedLagISAM2` keeps the elimination order chronological by node (a *node* here: the
+variables stamped with one time), so the Bayes tree is a path from the oldest node (a leaf) to
+the newest (the root):
+
+* an ordinary update re-eliminates the nodes its new factors touch and those above them; their
+  ordering groups follow time, counted from the oldest node touched (CCOLAMD's groups must not
+  outnumber the variables re-eliminated, so a group per node of the whole window is not
+  possible here);
+* an update in which iSAM2 will relinearise (every ``relinearizeSkip``-th, when a variable's
+  update reaches the threshold) re-eliminates the whole window, in time order: relinearisation
+  would re-eliminate the paths from the relinearised variables anyway, in COLAMD's order;
+* the variables older than the lag are marginalised after every update, as by
+  ``IncrementalFixedLagSmoother``: in a path ordered in time they are leaves, as iSAM2's
+  ``marginalizeLeaves`` requires (GTSAM's release build does not check it; the wrapper does not
+  expose the Bayes tree to check it here).
+
+Factors, linearisation points, relinearisation and marginalisation are those of
+``IncrementalFixedLagSmoother``; only the elimination order differs, so the estimates agree to
+rounding (tested against it on simulated runs with every kind of factor).
+"""
+from __future__ import annotations
+
+from collections import deque
+
+import gtsam
+import numpy as np
+
+class FixedLagISAM2:
+    """Fixed-lag smoothing over ``lag`` [s] with iSAM2 (``params``: ``gtsam.ISAM2Params``;
+    ``relinearize_threshold``: the threshold set in it). Every node (time stamp) must hold at
+    least two variables (the ordering groups' bound, :func:`_older_groups`).
+
+    Offers the part of ``IncrementalFixedLagSmoother``'s interface :mod:`gnssacc.smoother` uses.
+    """
+
+    def __init__(self, lag: float, params: gtsam.ISAM2Params, relinearize_threshold: float):
+        self.lag = float(lag)
+        params.enableAdaptiveReorder = False    # a batch reorder would not keep the time order
+        self.isam = gtsam.ISAM2(params)
+        self._skip = max(int(params.relinearizeSkip), 1) if params.enableRelinearization else 0
+        self._threshold = float(relinearize_threshold)
+        self._count = 0                         # updates so far (iSAM2's own count)
+        self._nodes: deque = deque()            # (t, [keys]) per node, oldest first
+        self._result = None
+        self._unordered = False                 # the last update may have broken the time order
+        self.unordered_updates = 0              # how often (diagnostics)
+
+    def update(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, stamps) -> None:
+        """Add ``graph``'s factors and the new variables ``values`` with their time stamps
+        ``stamps`` (pairs ``(key, t)`` [s], not earlier than the newest so far), then
+        marginalise the variables older than the newest stamp less the lag."""
+        new = _by_time(stamps)
+        if self._nodes and new and new[0][0] < self._nodes[-1][0]:
+            raise ValueError("time stamps must not go back in time")
+        self._count += 1
+        up, lo = gtsam.ISAM2UpdateParams(), 0   # lo: the oldest node with a group of its own
+        if self._nodes:                         # (the first update: iSAM2 puts new variables last)
+            if self._unordered or self._relinearizes():
+                up.extraReelimKeys = self._all_keys()
+            else:
+                first = self._oldest_touched(graph)
+                lo = max(first - _older_groups(self._nodes, first, new), 0)
+            up.constrainedKeys = self._groups(lo, new)
+        self._result = self.isam.update(graph, values, up)
+        # iSAM2 counts the re-eliminated variables of the old tree plus the new factors' variables.
+        reordered = self._result.getVariablesReeliminated() - len(set(graph.keyVector()))
+        ordered = sum(len(keys) for _, keys in list(self._nodes)[lo:])
+        self._nodes.extend(new)
+        # More old variables re-eliminated than had groups in time order: older nodes shared
+        # group 0 (a clique held several). Re-eliminate all in order in the next update and
+        # marginalise after it (an update of its own would shift iSAM2's relinearisation turns).
+        self._unordered = reordered > ordered
+        self.unordered_updates += self._unordered
+        if not self._unordered:
+            self._marginalize(self._nodes[-1][0] - self.lag)
+
+    def _relinearizes(self) -> bool:
+        """Whether iSAM2 may relinearise in this update: its relinearisation turn, and a
+        variable's pending update at the threshold (a superset of what iSAM2 relinearises)."""
+        if not self._skip or self._count % self._skip:
+            return False
+        delta = self.isam.getDelta().vector()
+        return delta.size > 0 and float(np.max(np.abs(delta))) >= self._threshold
+
+    def _oldest_touched(self, graph: gtsam.NonlinearFactorGraph) -> int:
+        """Index in the window of the oldest node ``graph``'s factors touch (the window's length
+        when they touch only new variables)."""
+        touched = set(graph.keyVector())
+        for j, (_, keys) in enumerate(self._nodes):
+            if touched.intersection(keys):
+                return j
+        return len(self._nodes)
+
+    def _groups(self, lo: int, new: list) -> gtsam.KeyGroupMap:
+        """Ordering groups in time order from node ``lo`` on (older nodes: 0), new nodes last.
+        Every variable is listed: iSAM2 puts unlisted ones in group 0."""
+        groups = gtsam.KeyGroupMap()
+        for j, (_, keys) in enumerate(list(self._nodes) + new):
+            g = max(0, j - lo)
+            for key in keys:
+                groups.insert2(key, g)
+        return groups
+
+    def _all_keys(self) -> gtsam.KeyList:
+        out = gtsam.KeyList()
+        for _, keys in self._nodes:
+            for key in keys:
+                out.push_back(key)
+        return out
+
+    def _marginalize(self, t_cut: float) -> None:
+        """Marginalise the nodes stamped before ``t_cut`` [s] (leaves of the Bayes tree)."""
+        leaves = gtsam.KeyList()
+        while self._nodes and self._nodes[0][0] < t_cut:
+            for key in self._nodes.popleft()[1]:
+                leaves.push_back(key)
+        if leaves.size():
+            self.isam.marginalizeLeaves(leaves)
+
+    def getISAM2(self) -> gtsam.ISAM2:   # noqa: N802 (gtsam's names)
+        return self.isam
+
+    def getISAM2Result(self):   # noqa: N802
+        """The last update's ``gtsam.ISAM2Result``."""
+        return self._result
+
+    def getFactors(self) -> gtsam.NonlinearFactorGraph:   # noqa: N802
+        return self.isam.getFactorsUnsafe()
+
+    def getLinearizationPoint(self) -> gtsam.Values:   # noqa: N802
+        return self.isam.getLinearizationPoint()
+
+    def calculateEstimatePose3(self, key: int) -> gtsam.Pose3:   # noqa: N802
+        return self.isam.calculateEstimatePose3(key)
+
+    def calculateEstimateVector(self, key: int) -> np.ndarray:   # noqa: N802
+        return self.isam.calculateEstimateVector(key)
+
+    def calculateEstimateConstantBias(self, key: int):   # noqa: N802
+        return self.isam.calculateEstimateConstantBias(key)
+
+
+def _by_time(stamps) -> list:
+    """``(t, [keys])`` per distinct time stamp of ``stamps`` (pairs ``(key, t)``), in time order."""
+    nodes: dict = {}
+    for key, t in stamps:
+        nodes.setdefault(float(t), []).append(key)
+    return sorted(nodes.items())
+
+
+def _older_groups(nodes, first: int, new: list) -> int:
+    """How many nodes older than node ``first`` (the oldest an update's factors touch) can have
+    groups of their own: iSAM2 re-eliminates at least the variables of nodes ``first`` on and the
+    new ones, and CCOLAMD takes no group number above the number of variables it orders."""
+    n_vars = sum(len(keys) for _, keys in list(nodes)[first:] + new)
+    return max(n_vars - (len(nodes) - first + len(new)), 0)
