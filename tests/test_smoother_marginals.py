@@ -155,3 +155,22 @@ def test_band_refuses_a_factor_wider_than_the_band():
     wm._grow(5)
     with pytest.raises(W.NotAChain):
         wm._scatter(np.ones((13, 13)), np.array([X(1), X(4)], np.int64))
+
+
+@pytest.mark.parametrize("w", [1, 2])
+def test_an_indefinite_window_is_reported_not_divided_by_zero(w):
+    """A block that is not positive definite (here: a node with no information on its bias)
+    makes the query raise LinAlgError, which the smoother answers from iSAM2 instead."""
+    b, n = 15, 4
+    rng = np.random.default_rng(7)
+    wm = W.WindowMarginals(gm=False, bandwidth=w)
+    wm.first = 0
+    wm._grow(n - 1)
+    _add_random_factors(wm, np.zeros((n * b, n * b)), rng, range(n), n - 1, w, np.ones(b))
+    wm.D[wm.start + 2][9:15, :] = 0.0
+    wm.D[wm.start + 2][:, 9:15] = 0.0
+    wm.O[wm.start + 1][:, 9:15] = 0.0
+    wm.O[wm.start + 2][9:15, :] = 0.0
+    wm.Ox[:] = 0.0
+    with pytest.raises(np.linalg.LinAlgError):
+        wm.covariances(list(range(n)))

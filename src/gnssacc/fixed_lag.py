@@ -15,9 +15,10 @@ the newest (the root):
   ordering groups follow time, counted from the oldest node touched (CCOLAMD's groups must not
   outnumber the variables re-eliminated, so a group per node of the whole window is not
   possible here);
-* an update in which iSAM2 will relinearise (every ``relinearizeSkip``-th, when a variable's
-  update reaches the threshold) re-eliminates the whole window, in time order: relinearisation
-  would re-eliminate the paths from the relinearised variables anyway, in COLAMD's order;
+* an update in which iSAM2 may relinearise (every ``relinearizeSkip``-th, when a variable's
+  update reaches the threshold) re-eliminates the whole window, in time order: iSAM2 would
+  re-eliminate the paths from the relinearised variables and their factors' other variables to
+  the root anyway (far back: the factors reach further than the variables), in COLAMD's order;
 * the variables older than the lag are marginalised after every update, as by
   ``IncrementalFixedLagSmoother``: in a path ordered in time they are leaves, as iSAM2's
   ``marginalizeLeaves`` requires (GTSAM's release build does not check it; the wrapper does not
@@ -64,11 +65,11 @@ class FixedLagISAM2:
         self._count += 1
         up, lo = gtsam.ISAM2UpdateParams(), 0   # lo: the oldest node with a group of its own
         if self._nodes:                         # (the first update: iSAM2 puts new variables last)
+            first = self._oldest_touched(graph)
+            lo = max(first - _older_groups(self._nodes, first, new), 0)
             if self._unordered or self._relinearizes():
-                up.extraReelimKeys = self._all_keys()
-            else:
-                first = self._oldest_touched(graph)
-                lo = max(first - _older_groups(self._nodes, first, new), 0)
+                lo = 0                          # all in time order (see the module notes)
+                up.extraReelimKeys = self._keys_from(0)
             up.constrainedKeys = self._groups(lo, new)
         self._result = self.isam.update(graph, values, up)
         # iSAM2 counts the re-eliminated variables of the old tree plus the new factors' variables.
@@ -85,7 +86,7 @@ class FixedLagISAM2:
 
     def _relinearizes(self) -> bool:
         """Whether iSAM2 may relinearise in this update: its relinearisation turn, and a
-        variable's pending update at the threshold (a superset of what iSAM2 relinearises)."""
+        variable's pending update at the threshold (a superset of what it relinearises)."""
         if not self._skip or self._count % self._skip:
             return False
         delta = self.isam.getDelta().vector()
@@ -110,9 +111,10 @@ class FixedLagISAM2:
                 groups.insert2(key, g)
         return groups
 
-    def _all_keys(self) -> gtsam.KeyList:
+    def _keys_from(self, lo: int) -> gtsam.KeyList:
+        """The variables of node ``lo`` (index in the window) and newer."""
         out = gtsam.KeyList()
-        for _, keys in self._nodes:
+        for _, keys in list(self._nodes)[lo:]:
             for key in keys:
                 out.push_back(key)
         return out

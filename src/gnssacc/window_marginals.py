@@ -80,8 +80,10 @@ def _chol(A):
         d = A[j, j] * s[j] * s[j]
         for k in range(j):
             d -= L[j, k] * L[j, k]
-        if not d > 0.0:
-            L[0, 0] = np.nan
+        if not d > 0.0:                  # not positive definite: all NaN, so that what
+            for i in range(b):           # divides by it gives NaN (numba raises on / 0.0)
+                for k in range(b):
+                    L[i, k] = np.nan
             return L, s
         L[j, j] = np.sqrt(d)
         for i in range(j + 1, b):
