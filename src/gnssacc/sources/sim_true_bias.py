@@ -1,0 +1,95 @@
+"""The true IMU biases of a simulated run, drawn again from the run's random streams when asked.
+
+A run's true biases (turn-on + Gauss-Markov + drift, :mod:`.sim_imu_errors`) are six floats per
+IMU sample, as much as the IMU's own specific force and rate; they are only read to score the
+estimated biases at the solution epochs. :class:`TrueBias` keeps what draws them (the streams'
+starts, the turn-on biases and the drift, a few hundred bytes plus the drift's one-second walk)
+and draws them again, block by block, bit for bit the numbers the simulator added to the IMU.
+"""
+from __future__ import annotations
+
+from typing import Iterator
+
+import numpy as np
+
+from . import sim_path
+from .sim_imu_errors import BiasDrift, BiasSeed
+
+
+class TrueBias:
+    """The accelerometer [m/s^2] and gyro [rad/s] bias in effect at each IMU sample, body axes.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        The IMU sample times [s] (the run's own array: no copy).
+    seed : BiasSeed
+        The turn-on and Gauss-Markov biases' draws (:attr:`ImuErrorStream.bias_seed`).
+    drift : BiasDrift or None
+        The slow drift (None: zero).
+    """
+
+    def __init__(self, t: np.ndarray, seed: BiasSeed, drift: BiasDrift | None):
+        if len(t) != seed.n:
+            raise ValueError(f"{len(t)} sample times for {seed.n} biases")
+        self.t, self.seed, self.drift = t, seed, drift
+
+    def __len__(self) -> int:
+        return self.seed.n
+
+    def with_drift(self, bias_a: np.ndarray, bias_g: np.ndarray, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray]:
+        """Samples ``k0 .. k1-1``'s turn-on + Gauss-Markov biases plus the drift: the one sum the
+        simulator's sweep and :meth:`blocks` both make, so their numbers agree bit for bit."""
+        if self.drift is None:
+            return bias_a, bias_g
+        drift_a, drift_g = self.drift.at(self.t[k0:k1] - self.t[0])
+        return bias_a + drift_a, bias_g + drift_g
+
+    def blocks(self, size: int | None = None) -> Iterator[tuple[int, int, np.ndarray, np.ndarray]]:
+        """``(k0, k1, bias_a, bias_g)`` for consecutive blocks of ``size`` samples ``k0 .. k1-1``
+        ((m, 3) each; default :data:`gnssacc.sources.sim_path.IMU_BLOCK`)."""
+        size = sim_path.IMU_BLOCK if size is None else int(size)
+        gm_a, gm_g = self.seed.streams()
+        s = self.seed
+        for k0 in range(0, s.n, size):
+            k1 = min(k0 + size, s.n)
+            yield (k0, k1) + self.with_drift(s.turn_on_a + gm_a.take(k1 - k0), s.turn_on_g + gm_g.take(k1 - k0), k0, k1)
+
+    def samples(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every sample's biases: accelerometer [m/s^2] and gyro [rad/s], shape (n, 3) each (drawn on each call)."""
+        out_a, out_g = np.empty((self.seed.n, 3)), np.empty((self.seed.n, 3))
+        for k0, k1, b_a, b_g in self.blocks():
+            out_a[k0:k1], out_g[k0:k1] = b_a, b_g
+        return out_a, out_g
+
+    def at(self, t: np.ndarray, t_samples: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The biases interpolated linearly at times ``t`` [s], held constant outside the samples.
+
+        Equal bit for bit to ``np.interp(t, t_samples, samples()[.][:, i])`` per axis, with
+        memory in the number of epochs, not of samples: only the samples bracketing an epoch
+        are kept as the blocks pass (``np.interp`` reads nothing else).
+
+        Parameters
+        ----------
+        t : ndarray, shape (K,)
+            Query times [s].
+        t_samples : ndarray, shape (n,), optional
+            The samples' times [s] (default: :attr:`t`; a caller whose IMU clock was shifted
+            passes its own).
+
+        Returns
+        -------
+        bias_a, bias_g : ndarray, shape (K, 3)
+        """
+        t = np.asarray(t, float)
+        t_samples = self.t if t_samples is None else np.asarray(t_samples, float)
+        n = self.seed.n
+        j = np.clip(np.searchsorted(t_samples, t, side="right") - 1, 0, n - 1)
+        need = np.unique(np.concatenate([j, np.minimum(j + 1, n - 1)]))
+        b_a, b_g = np.empty((len(need), 3)), np.empty((len(need), 3))
+        for k0, k1, blk_a, blk_g in self.blocks():
+            lo, hi = np.searchsorted(need, (k0, k1))
+            b_a[lo:hi], b_g[lo:hi] = blk_a[need[lo:hi] - k0], blk_g[need[lo:hi] - k0]
+        tn = t_samples[need]
+        return tuple(np.column_stack([np.interp(t, tn, b[:, i]) for i in range(3)]) if len(t) else np.zeros((0, 3))
+                     for b in (b_a, b_g))
