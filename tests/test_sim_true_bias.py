@@ -35,9 +35,9 @@ def test_redrawn_biases_are_those_the_sweep_added(monkeypatch, sweep_block):
     added = []
     with_drift = TrueBias.with_drift
 
-    def record(self, b_a, b_g, k0, k1):
-        out = with_drift(self, b_a, b_g, k0, k1)
-        added.append((k0, k1) + out)
+    def record(self, b_a, b_g, rows):
+        out = with_drift(self, b_a, b_g, rows)
+        added.append((rows.start, rows.stop) + out)
         return out
 
     monkeypatch.setattr(sim_path, "IMU_BLOCK", sweep_block)

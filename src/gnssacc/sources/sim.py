@@ -201,7 +201,7 @@ def simulate_imu(traj: Trajectory, t: np.ndarray, model: dict, seed: int,
 
     def finish(k0, k1, f_true, omega_true, speed_mid):
         err = basic.take(k1 - k0)
-        ba, bg = true_bias.with_drift(err["bias_a"], err["bias_g"], k0, k1)
+        ba, bg = true_bias.with_drift(err["bias_a"], err["bias_g"], slice(k0, k1))
         vib = []
         if extra.engine is not None:
             engine = extra.engine.take(speed_mid)

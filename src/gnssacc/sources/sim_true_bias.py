@@ -37,12 +37,13 @@ class TrueBias:
     def __len__(self) -> int:
         return self.seed.n
 
-    def with_drift(self, bias_a: np.ndarray, bias_g: np.ndarray, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray]:
-        """Samples ``k0 .. k1-1``'s turn-on + Gauss-Markov biases plus the drift: the one sum the
-        simulator's sweep and :meth:`blocks` both make, so their numbers agree bit for bit."""
+    def with_drift(self, bias_a: np.ndarray, bias_g: np.ndarray, rows) -> tuple[np.ndarray, np.ndarray]:
+        """The turn-on + Gauss-Markov biases of samples ``rows`` (a slice or indices) plus the
+        drift: the one sum the simulator's sweep, :meth:`blocks` and :meth:`at` make, so their
+        numbers agree bit for bit (each term is per sample)."""
         if self.drift is None:
             return bias_a, bias_g
-        drift_a, drift_g = self.drift.at(self.t[k0:k1] - self.t[0])
+        drift_a, drift_g = self.drift.at(self.t[rows] - self.t[0])
         return bias_a + drift_a, bias_g + drift_g
 
     def blocks(self, size: int | None = None) -> Iterator[tuple[int, int, np.ndarray, np.ndarray]]:
@@ -53,7 +54,8 @@ class TrueBias:
         s = self.seed
         for k0 in range(0, s.n, size):
             k1 = min(k0 + size, s.n)
-            yield (k0, k1) + self.with_drift(s.turn_on_a + gm_a.take(k1 - k0), s.turn_on_g + gm_g.take(k1 - k0), k0, k1)
+            yield (k0, k1) + self.with_drift(s.turn_on_a + gm_a.take(k1 - k0), s.turn_on_g + gm_g.take(k1 - k0),
+                                             slice(k0, k1))
 
     def samples(self) -> tuple[np.ndarray, np.ndarray]:
         """Every sample's biases: accelerometer [m/s^2] and gyro [rad/s], shape (n, 3) each (drawn on each call)."""
@@ -87,9 +89,12 @@ class TrueBias:
         j = np.clip(np.searchsorted(t_samples, t, side="right") - 1, 0, n - 1)
         need = np.unique(np.concatenate([j, np.minimum(j + 1, n - 1)]))
         b_a, b_g = np.empty((len(need), 3)), np.empty((len(need), 3))
-        for k0, k1, blk_a, blk_g in self.blocks():
+        gm_a, gm_g = self.seed.streams()
+        for k0 in range(0, n, sim_path.IMU_BLOCK):   # the Gauss-Markov recursion passes every sample
+            k1 = min(k0 + sim_path.IMU_BLOCK, n)
             lo, hi = np.searchsorted(need, (k0, k1))
-            b_a[lo:hi], b_g[lo:hi] = blk_a[need[lo:hi] - k0], blk_g[need[lo:hi] - k0]
+            b_a[lo:hi], b_g[lo:hi] = gm_a.take(k1 - k0)[need[lo:hi] - k0], gm_g.take(k1 - k0)[need[lo:hi] - k0]
+        b_a, b_g = self.with_drift(self.seed.turn_on_a + b_a, self.seed.turn_on_g + b_g, need)   # the drift: only there
         tn = t_samples[need]
         return tuple(np.column_stack([np.interp(t, tn, b[:, i]) for i in range(3)]) if len(t) else np.zeros((0, 3))
                      for b in (b_a, b_g))
