@@ -82,6 +82,7 @@ def test_the_run_keeps_no_per_sample_bias():
     # Only the drift's 1-s random walk (6 floats and its time per second) grows with the run.
     assert kept[1] - kept[0] == 7 * 8 * 540
     assert kept[1] < 0.05 * long.imu.f_b.nbytes   # per-sample biases would be 2x f_b
+    assert [r.sim.bias.nbytes for r in (short, long)] == kept
 
 
 def test_scored_bias_errors_are_estimate_minus_interpolated_truth():

@@ -37,6 +37,12 @@ class TrueBias:
     def __len__(self) -> int:
         return self.seed.n
 
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the arrays it holds beyond the run's sample times (the draws, the drift's walk)."""
+        held = [*vars(self.seed).values(), *(vars(self.drift).values() if self.drift is not None else ())]
+        return sum(v.nbytes for v in held if isinstance(v, np.ndarray))
+
     def with_drift(self, bias_a: np.ndarray, bias_g: np.ndarray, rows) -> tuple[np.ndarray, np.ndarray]:
         """The turn-on + Gauss-Markov biases of samples ``rows`` (a slice or indices) plus the
         drift: the one sum the simulator's sweep, :meth:`blocks` and :meth:`at` make, so their
