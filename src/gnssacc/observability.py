@@ -129,7 +129,7 @@ def state_errors(run: RecordedRun, sol: NavSolution) -> np.ndarray:
 
     Position needs ``run.truth``; velocity ``run.truth.v_n``; attitude ``run.truth.rpy`` (an
     attitude reference; yaw wrapped to [-pi, pi)); biases the simulator's
-    ``run.sim.true_bias_a`` / ``true_bias_g`` (per IMU sample, IMU axes = body axes for
+    ``run.sim.bias`` (per IMU sample, interpolated over ``run.imu.t``; IMU axes = body axes for
     simulated runs). Epochs outside the truth's span are NaN.
 
     Returns
@@ -148,10 +148,10 @@ def state_errors(run: RecordedRun, sol: NavSolution) -> np.ndarray:
             ref = _interp_cols(t, tr.t, np.unwrap(tr.rpy, axis=0))
             err[:, 6:9] = wrap_angle(sol.rpy - ref)
         err[~inside, :9] = np.nan
-    for key, cols, est in (("true_bias_a", slice(9, 12), sol.b_a), ("true_bias_g", slice(12, 15), sol.b_g)):
-        b = getattr(run.sim, key) if run.sim is not None else None
-        if b is not None and len(b) == len(run.imu.t):
-            err[:, cols] = est - _interp_cols(t, run.imu.t, np.asarray(b, float))
+    bias = run.sim.bias if run.sim is not None else None
+    if bias is not None and len(bias) == len(run.imu.t):
+        b_a, b_g = bias.at(t, run.imu.t)   # drawn again, at these epochs only
+        err[:, 9:12], err[:, 12:15] = sol.b_a - b_a, sol.b_g - b_g
     return err
 
 

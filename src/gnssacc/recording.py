@@ -9,12 +9,16 @@ times are seconds on one clock, angles radians, positions geodetic (lat, lon [ra
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .earth import LocalTangentFrame
 from .errors import InputError, warn_data
 from .rotations import euler_to_dcm
+
+if TYPE_CHECKING:
+    from .sources.sim_true_bias import TrueBias
 
 
 @dataclass
@@ -160,9 +164,10 @@ class SimTruth:
 
     Attributes
     ----------
-    true_bias_a, true_bias_g : ndarray, shape (N, 3)
+    bias : gnssacc.sources.sim_true_bias.TrueBias
         The accelerometer [m/s^2] and gyro [rad/s] bias in effect at each IMU sample (turn-on +
-        Gauss-Markov + drift), body axes.
+        Gauss-Markov + drift), body axes: drawn again from the run's streams when asked
+        (``bias.at(t)`` at chosen epochs), not kept per sample.
     segments : list of dict
         The scenario log: one dict per motion segment (``kind``, ``t0``, ``t1`` [s], ``reverse``, ...).
     imu_error_draws : dict
@@ -173,12 +178,21 @@ class SimTruth:
         The full error description it was drawn from.
     """
 
-    true_bias_a: np.ndarray
-    true_bias_g: np.ndarray
+    bias: "TrueBias"
     segments: list
     imu_error_draws: dict
     imu_params: dict
     imu_error_model: dict
+
+    @property
+    def true_bias_a(self) -> np.ndarray:
+        """The accelerometer bias at every IMU sample [m/s^2], shape (N, 3) (drawn on each access)."""
+        return self.bias.samples()[0]
+
+    @property
+    def true_bias_g(self) -> np.ndarray:
+        """The gyro bias at every IMU sample [rad/s], shape (N, 3) (drawn on each access)."""
+        return self.bias.samples()[1]
 
 
 @dataclass

@@ -7,10 +7,11 @@ the ellipsoid, the error-free IMU), :mod:`.sim_imu_errors` (grades and IMU error
 are re-exported here.
 
 Memory: a run is made in one sweep over its time span in blocks (:mod:`.sim_path`), each block's
-IMU samples finished (errors added) as it passes, so beside the run's own arrays (the IMU and
-the true biases, 13 floats per IMU sample) the simulator holds a few blocks and, for the road
-vibration's FFT synthesis, about three floats per sample at a time; every number is the one a
-single pass over whole-run arrays gives, bit for bit.
+IMU samples finished (errors added) as it passes, so beside the run's own arrays (the IMU, 7
+floats per sample) the simulator holds a few blocks and, for the road vibration's FFT synthesis,
+about three floats per sample at a time; every number is the one a single pass over whole-run
+arrays gives, bit for bit. The true biases are not kept per sample: :class:`.sim_true_bias.TrueBias`
+draws them again from the run's streams when they are scored.
 
 Conventions
 -----------
@@ -58,6 +59,7 @@ from .sim_path import (IMU_BLOCK, GridBlock, Trajectory, TruthSamples, build_tra
                        dense_truth, perfect_imu, sample_times, sweep_imu)
 from .sim_scenarios import (SCENARIOS, Kinematics, Pulse, Scenario, R_nb_batch,  # noqa: F401 (re-exported)
                             make_scenario, reversing_spans)
+from .sim_true_bias import TrueBias  # noqa: F401 (re-exported)
 from .sim_vibration import EngineVibration, band_limited_columns, engine_vibration, road_scale, road_vibration  # noqa: F401
 
 DEG = np.pi / 180.0
@@ -179,16 +181,17 @@ def simulate_imu(traj: Trajectory, t: np.ndarray, model: dict, seed: int,
     -------
     ImuData
     dict
-        ``true_bias_a`` [m/s^2], ``true_bias_g`` [rad/s] (turn-on + Gauss-Markov + drift per
-        sample, shape (n, 3)) and ``imu_error_draws`` (per-run constants: ``accel_turn_on_bias``
-        [m/s^2], ``gyro_turn_on_bias`` [rad/s] and those of :func:`unmodelled_errors`).
+        ``true_bias`` (:class:`TrueBias`: turn-on + Gauss-Markov + drift per sample, drawn again
+        when asked) and ``imu_error_draws`` (per-run constants: ``accel_turn_on_bias`` [m/s^2],
+        ``gyro_turn_on_bias`` [rad/s] and those of :func:`unmodelled_errors`).
     list of (lat, lon, h)
         True positions at ``truth_times`` [rad, rad, m].
     """
     n, dt = len(t), 2.0 * traj.step
-    f_b, omega_ib_b, bias_a, bias_g = (np.empty((n, 3)) for _ in range(4))
+    f_b, omega_ib_b = np.empty((n, 3)), np.empty((n, 3))
     basic = ImuErrorStream(n, dt, model, np.random.default_rng([seed, 1]))
     extra = unmodelled_errors(model, n, dt, float(t[-1] - t[0]), seed)
+    true_bias = TrueBias(t, basic.bias_seed, extra.drift)
     if extra.road is not None:
         # The road vibration's unit-RMS columns (an FFT synthesis over the whole run) wait in the
         # output arrays until the sweep reaches their samples.
@@ -198,10 +201,7 @@ def simulate_imu(traj: Trajectory, t: np.ndarray, model: dict, seed: int,
 
     def finish(k0, k1, f_true, omega_true, speed_mid):
         err = basic.take(k1 - k0)
-        ba, bg = err["bias_a"], err["bias_g"]
-        if extra.drift is not None:
-            drift_a, drift_g = extra.drift.at(t[k0:k1] - t[0])
-            ba, bg = ba + drift_a, bg + drift_g
+        ba, bg = true_bias.with_drift(err["bias_a"], err["bias_g"], slice(k0, k1))
         vib = []
         if extra.engine is not None:
             engine = extra.engine.take(speed_mid)
@@ -210,14 +210,12 @@ def simulate_imu(traj: Trajectory, t: np.ndarray, model: dict, seed: int,
             scale = road_scale(speed_mid, model)
             vib.append((f_b[k0:k1] * scale[:, :3], omega_ib_b[k0:k1] * scale[:, 3:]))
         vib_a, vib_g = (sum(v[0] for v in vib), sum(v[1] for v in vib)) if vib else (None, None)
-        bias_a[k0:k1], bias_g[k0:k1] = ba, bg
         f_b[k0:k1] = _measure(f_true, extra.K_a, ba, err["noise_a"], vib_a)
         omega_ib_b[k0:k1] = _measure(omega_true, extra.K_g, bg, err["noise_g"], vib_g)
 
     positions = sweep_imu(traj, n, finish, truth_times)
     draws = {"accel_turn_on_bias": basic.turn_on_a, "gyro_turn_on_bias": basic.turn_on_g, **extra.draws}
-    return (ImuData(t, f_b, omega_ib_b), {"true_bias_a": bias_a, "true_bias_g": bias_g, "imu_error_draws": draws},
-            positions)
+    return ImuData(t, f_b, omega_ib_b), {"true_bias": true_bias, "imu_error_draws": draws}, positions
 
 
 def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_grade: str = "industrial",
@@ -271,9 +269,9 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
         records every argument and the GNSS seed; ``sim`` (:class:`gnssacc.recording.SimTruth`) the
         filter-visible IMU parameters (``imu_params``, as :func:`grade_config`), the full error
         description (``imu_error_model``), the per-run error draws (``imu_error_draws``, small
-        arrays), the true biases per IMU sample ``true_bias_a`` [m/s^2] and ``true_bias_g``
-        [rad/s] (arrays (N, 3)) and the scenario ``segments`` (times absolute; ``reverse`` marks
-        reversing).
+        arrays), the true biases per IMU sample (``bias``, a :class:`TrueBias`; also as arrays
+        ``true_bias_a`` [m/s^2] and ``true_bias_g`` [rad/s], shape (N, 3), drawn on each access)
+        and the scenario ``segments`` (times absolute; ``reverse`` marks reversing).
     """
     args = dict(scenario=scenario, duration_s=duration_s, imu_grade=imu_grade, imu_rate_hz=imu_rate_hz,
                 gnss_rate_hz=gnss_rate_hz, noise=noise, seed=seed, origin_llh_deg=list(origin_llh_deg),
@@ -315,5 +313,5 @@ def _sim_truth(traj: Trajectory, imu_info: dict, model: dict, duration_s: float,
     """The run's :class:`SimTruth`: true biases and draws (:func:`simulate_imu`), the scenario log
     with absolute times, the grade's filter-visible parameters and the full error model."""
     segments = [{**s, "t0": s["t0"] + t_start_s, "t1": s["t1"] + t_start_s} for s in traj.scenario.segments_until(duration_s)]
-    return SimTruth(imu_info["true_bias_a"], imu_info["true_bias_g"], segments, imu_info["imu_error_draws"],
+    return SimTruth(imu_info["true_bias"], segments, imu_info["imu_error_draws"],
                     {k: model[k] for k in GRADE_KEYS}, model)

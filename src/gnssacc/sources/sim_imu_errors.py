@@ -37,6 +37,7 @@ For comparison, the datasheet white noise alone gives 0.10 deg/s and 0.033 m/s^2
 from __future__ import annotations
 
 import copy
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -326,6 +327,44 @@ def skip_normals(rng: np.random.Generator, count: int, chunk: int = 1 << 16) -> 
         rng.standard_normal(min(chunk, count - k))
 
 
+@dataclass
+class BiasSeed:
+    """What draws a run's turn-on + Gauss-Markov biases (:class:`ImuErrorStream`): enough to draw
+    them again, bit for bit, instead of keeping them per sample (a few hundred bytes).
+
+    Attributes
+    ----------
+    n : int
+        Number of IMU samples.
+    dt : float
+        IMU interval [s].
+    tau : float
+        Gauss-Markov correlation time [s].
+    sigma_a, sigma_g : ndarray
+        Gauss-Markov 1-sigma, accelerometer [m/s^2] and gyro [rad/s].
+    turn_on_a, turn_on_g : ndarray, shape (3,)
+        Turn-on biases [m/s^2], [rad/s].
+    rng_a, rng_g : numpy.random.Generator
+        At the starts of the two Gauss-Markov sections of the stream; never advanced (each
+        :meth:`streams` reads copies).
+    """
+
+    n: int
+    dt: float
+    tau: float
+    sigma_a: np.ndarray
+    sigma_g: np.ndarray
+    turn_on_a: np.ndarray
+    turn_on_g: np.ndarray
+    rng_a: np.random.Generator
+    rng_g: np.random.Generator
+
+    def streams(self) -> tuple["GaussMarkovStream", "GaussMarkovStream"]:
+        """Fresh Gauss-Markov streams (accelerometer, gyro) from the first sample."""
+        return (GaussMarkovStream(self.n, self.dt, self.tau, self.sigma_a, copy.deepcopy(self.rng_a)),
+                GaussMarkovStream(self.n, self.dt, self.tau, self.sigma_g, copy.deepcopy(self.rng_g)))
+
+
 class ImuErrorStream:
     """:func:`imu_errors` in consecutive chunks (:meth:`take`): the same numbers, bit for bit.
 
@@ -350,8 +389,9 @@ class ImuErrorStream:
         for _ in range(4):
             starts.append(copy.deepcopy(rng))
             skip_normals(rng, 3 * n)
-        self._gm_a = GaussMarkovStream(n, dt, si["tau"], si["accel_bi"], starts[0])
-        self._gm_g = GaussMarkovStream(n, dt, si["tau"], si["gyro_bi"], starts[1])
+        self.bias_seed = BiasSeed(n, dt, si["tau"], si["accel_bi"], si["gyro_bi"], self.turn_on_a,
+                                  self.turn_on_g, starts[0], starts[1])
+        self._gm_a, self._gm_g = self.bias_seed.streams()
         self._noise = ((starts[2], si["accel_density"] / np.sqrt(dt)), (starts[3], si["gyro_density"] / np.sqrt(dt)))
 
     def take(self, m: int) -> dict:
