@@ -18,7 +18,20 @@ from gnssacc.pipeline import with_outages
 from gnssacc.sources.sim import grade_config, simulate
 
 
-def test_linear_chain_matches_the_batch_solution_of_all_factors():
+@pytest.mark.parametrize("unordered_every", [0, 7], ids=["ordered", "fallback-every-7th"])
+def test_linear_chain_matches_the_batch_solution_of_all_factors(monkeypatch, unordered_every):
+    """(Also with the fallback for a broken time order forced every 7th update: the
+    marginalisation waits, the next update re-eliminates the whole window in order.)"""
+    if unordered_every:
+        real, calls = FixedLagISAM2._marginalize, [0]
+
+        def marginalize(self, t_cut):
+            calls[0] += 1
+            if calls[0] % unordered_every == 0:
+                self._unordered = True
+                return
+            real(self, t_cut)
+        monkeypatch.setattr(FixedLagISAM2, "_marginalize", marginalize)
     rng = np.random.default_rng(3)
     params = gtsam.ISAM2Params()
     params.relinearizeSkip = 1
