@@ -287,3 +287,20 @@ def test_a_campaign_made_through_the_api_resumes_from_the_command_line(recording
     code, _, err = _cli(["batch", "--resume", out, "--jobs", "1"], capsys)
     assert code == 0, err
     assert _records(out).keys() == first.keys()
+
+
+@pytest.mark.parametrize("source,warned", [("sim:ugv,imu=consumer", False), ("kitti", False), ("/data/run1", True)])
+def test_seeds_warning_only_where_the_seed_changes_nothing(source, warned):
+    """Without --noise a recording keeps its own fixes, so its seeds all give the same result; a
+    simulated run draws its IMU and fixes from the seed (and KITTI its fixes): no warning there."""
+    import warnings
+
+    from gnssacc.campaign_args import _warn_if_seeds_do_nothing
+    from gnssacc.errors import DataWarning
+
+    settings = {"sources": [("x", source)], "seeds": [0, 1, 2], "noise": None, "bag": {"gnss_from_truth_hz": None}}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _warn_if_seeds_do_nothing(settings)
+    said = [w for w in caught if issubclass(w.category, DataWarning) and "--seeds" in str(w.message)]
+    assert bool(said) == warned

@@ -14,6 +14,7 @@ from .argcheck import seeds as parse_seeds
 from .campaign import OPTION_OF, Campaign, Pattern, differing_setting, full_bag, make_settings
 from .errors import InputError, warn_data
 from .pipeline import parse_methods
+from .simspec import is_sim_spec
 
 #: ``gnssacc batch``'s bag options: setting -> argument (defaults: :data:`gnssacc.campaign.BAG_DEFAULTS`).
 BAG_ARGUMENTS = {"imu_topic": "imu_topic", "gnss_topic": "gnss_topic", "truth_topic": "truth_topic",
@@ -78,8 +79,9 @@ def _patterns(args) -> list[Pattern]:
 
 
 def _warn_if_seeds_do_nothing(settings: dict) -> None:
-    """Several seeds change nothing for a recording with its own fixes and no ``--noise``."""
-    own = [name for name, path in settings["sources"] if path != "kitti"]
+    """Several seeds change nothing for a recording with its own fixes and no ``--noise`` (the
+    KITTI source and simulated runs draw their fixes, and a simulated run its IMU, from the seed)."""
+    own = [name for name, path in settings["sources"] if path != "kitti" and not is_sim_spec(path)]
     if len(settings["seeds"]) > 1 and own and settings["noise"] is None and not settings["bag"]["gnss_from_truth_hz"]:
         warn_data("--seeds", f"without --noise, {own[0]}{' and the others' if len(own) > 1 else ''} keep their own "
                              f"GNSS fixes, so every seed gives the same result there")
