@@ -13,7 +13,7 @@ from gtsam.symbol_shorthand import X
 
 import gnssacc.smoother as S
 from gnssacc.config import load_config
-from gnssacc.fixed_lag import FixedLagISAM2
+from gnssacc.fixed_lag import FixedLagISAM2, GtsamFixedLag
 from gnssacc.pipeline import with_outages
 from gnssacc.sources.sim import grade_config, simulate
 
@@ -60,22 +60,6 @@ def test_linear_chain_matches_the_batch_solution_of_all_factors(monkeypatch, uno
     assert np.allclose(C, C_ref, rtol=1e-9, atol=1e-12)
 
 
-class _Gtsam:
-    """GTSAM's IncrementalFixedLagSmoother behind FixedLagISAM2's interface (the reference)."""
-
-    def __init__(self, lag, params, threshold):
-        self.s = gtsam.IncrementalFixedLagSmoother(lag, params)
-
-    def update(self, graph, values, stamps):
-        ts = gtsam.FixedLagSmootherKeyTimestampMap()
-        for key, t in stamps:
-            ts.insert((key, t))
-        self.s.update(graph, values, ts)
-
-    def __getattr__(self, name):
-        return getattr(self.s, name)
-
-
 def _run(monkeypatch, cls, run, cfg, method):
     """The smoother's solutions with ``cls`` as its fixed-lag smoother, and how many variables
     iSAM2 re-eliminated in all."""
@@ -99,7 +83,7 @@ def test_same_estimates_as_gtsams_fixed_lag_smoother_with_fewer_eliminations(mon
     cfg = load_config(overrides={"imu": grade_config("industrial"), **overrides})
     run = simulate("ugv", duration_s=90.0, imu_grade="industrial", noise="white", seed=5, gnss_rate_hz=rate)
     run = with_outages(run, "40:8", None)            # fill nodes, then a window without fixes
-    ref, n_ref = _run(monkeypatch, _Gtsam, run, cfg, method)
+    ref, n_ref = _run(monkeypatch, GtsamFixedLag, run, cfg, method)
     ours, n_ours = _run(monkeypatch, FixedLagISAM2, run, cfg, method)
     for key in (method, method + "-online"):
         a, b = ref[key], ours[key]

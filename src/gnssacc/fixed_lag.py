@@ -156,6 +156,23 @@ class FixedLagISAM2:
         return self.isam.calculateEstimateConstantBias(key)
 
 
+class GtsamFixedLag:
+    """GTSAM's own ``IncrementalFixedLagSmoother`` behind :class:`FixedLagISAM2`'s interface: the
+    reference the tests and ``bench/bench_fixed_lag.py`` compare with."""
+
+    def __init__(self, lag: float, params: gtsam.ISAM2Params, relinearize_threshold: float):
+        self.smoother = gtsam.IncrementalFixedLagSmoother(float(lag), params)
+
+    def update(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, stamps) -> None:
+        ts = gtsam.FixedLagSmootherKeyTimestampMap()
+        for key, t in stamps:
+            ts.insert((key, float(t)))
+        self.smoother.update(graph, values, ts)
+
+    def __getattr__(self, name: str):
+        return getattr(self.smoother, name)
+
+
 def _by_time(stamps) -> list:
     """``(t, [keys])`` per distinct time stamp of ``stamps`` (pairs ``(key, t)``), in time order."""
     nodes: dict = {}
