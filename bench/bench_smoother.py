@@ -12,11 +12,12 @@ of 600 s and 6000 s (10x longer), above the process's memory just before the smo
 
 Usage::
 
-    python bench/bench_smoother.py [--repeats 5]
+    python bench/bench_smoother.py [--repeats 5] [--breakdown]
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import subprocess
 import sys
@@ -77,6 +78,25 @@ def plain_fixed_lag(run, cfg, init) -> float:
     return time.perf_counter() - t0
 
 
+@contextlib.contextmanager
+def _without_marginals():
+    """The smoother with its per-node marginal upkeep switched off (identity covariances): what
+    the sigmas cost, by difference. For this bench only; the estimates are unchanged."""
+    from gnssacc import window_marginals as W
+
+    sync, covs = W.WindowMarginals.sync, W.WindowMarginals.covariances
+
+    def no_sync(self, isam, new_factors):
+        self.first = 0
+
+    W.WindowMarginals.sync = no_sync
+    W.WindowMarginals.covariances = lambda self, nodes: np.tile(np.eye(self.b), (len(nodes), 1, 1))
+    try:
+        yield
+    finally:
+        W.WindowMarginals.sync, W.WindowMarginals.covariances = sync, covs
+
+
 def _rss_mib() -> float:
     with open("/proc/self/statm") as fh:
         return int(fh.read().split()[1]) * 4096 / 2**20
@@ -117,6 +137,8 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--memory-child", type=float, default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--breakdown", action="store_true",
+                    help="also time each smoother with the marginal upkeep switched off (where the time goes)")
     args = ap.parse_args()
     if args.memory_child is not None:
         _memory_child(args.memory_child)
@@ -134,18 +156,25 @@ def main():
     run_smoother(run, cfg, "smoother", **kw)  # warm-up (imports, caches)
     smoothers = ("smoother", "smoother-acc", "smoother-accw")
     walls = {"plain gtsam script": [], **{m: [] for m in smoothers}}
+    if args.breakdown:
+        walls.update({f"{m} (no sigmas)": [] for m in smoothers})
     for _ in range(args.repeats):  # interleaved, so slow phases of the machine hit all alike
         walls["plain gtsam script"].append(plain_fixed_lag(run, cfg, init))
         for m in smoothers:
             t0 = time.perf_counter()
             run_smoother(run, cfg, m, **kw)
             walls[m].append(time.perf_counter() - t0)
+            if args.breakdown:
+                with _without_marginals():
+                    t0 = time.perf_counter()
+                    run_smoother(run, cfg, m, **kw)
+                    walls[f"{m} (no sigmas)"].append(time.perf_counter() - t0)
     plain = float(np.median(walls["plain gtsam script"]))
     print(f"KITTI {run.duration_s:.1f} s, {len(run.gnss)} nodes; median of {args.repeats} interleaved runs, one core")
-    print(f"{'method':20s} {'wall [s]':>9s} {'min [s]':>8s} {'real-time factor':>17s} {'x plain script':>15s}")
+    print(f"{'method':26s} {'wall [s]':>9s} {'min [s]':>8s} {'real-time factor':>17s} {'x plain script':>15s}")
     for m, w in walls.items():
         med = float(np.median(w))
-        print(f"{m:20s} {med:9.3f} {min(w):8.3f} {run.duration_s / med:17.0f} {med / plain:15.2f}")
+        print(f"{m:26s} {med:9.3f} {min(w):8.3f} {run.duration_s / med:17.0f} {med / plain:15.2f}")
     base = float(np.median(walls["smoother"]))
     for m in smoothers[1:]:
         print(f"{m} / smoother: {float(np.median(walls[m])) / base:.2f} (median wall over median wall)")
