@@ -68,18 +68,19 @@ class FixedLagISAM2:
         if self._nodes and new and new[0][0] < self._nodes[-1][0]:
             raise ValueError("time stamps must not go back in time")
         self._count += 1
+        nodes, touched = list(self._nodes), set(graph.keyVector())
         up, lo = gtsam.ISAM2UpdateParams(), 0   # lo: the oldest node with a group of its own
-        if self._nodes:                         # (the first update: iSAM2 puts new variables last)
-            first = self._oldest_touched(graph)
-            lo = max(first - _older_groups(self._nodes, first, new), 0)
+        if nodes:                               # (the first update: iSAM2 puts new variables last)
+            first = _oldest_touched(nodes, touched)
+            lo = max(first - _older_groups(nodes, first, new), 0)
             if self._unordered or self._relinearizes():
                 lo = 0                          # all in time order (see the module notes)
-                up.extraReelimKeys = self._keys_from(0)
-            up.constrainedKeys = self._groups(lo, new)
+                up.extraReelimKeys = _key_list(nodes)
+            up.constrainedKeys = _groups(nodes + new, lo)
         self._result = self.isam.update(graph, values, up)
         # iSAM2 counts the re-eliminated variables of the old tree plus the new factors' variables.
-        reordered = self._result.getVariablesReeliminated() - len(set(graph.keyVector()))
-        ordered = sum(len(keys) for _, keys in list(self._nodes)[lo:])
+        reordered = self._result.getVariablesReeliminated() - len(touched)
+        ordered = sum(len(keys) for _, keys in nodes[lo:])
         self._nodes.extend(new)
         # More old variables re-eliminated than had groups in time order: older nodes shared
         # group 0 (a clique held several). Re-eliminate all in order in the next update and
@@ -96,33 +97,6 @@ class FixedLagISAM2:
             return False
         delta = self.isam.getDelta().vector()
         return delta.size > 0 and float(np.max(np.abs(delta))) >= self._threshold
-
-    def _oldest_touched(self, graph: gtsam.NonlinearFactorGraph) -> int:
-        """Index in the window of the oldest node ``graph``'s factors touch (the window's length
-        when they touch only new variables)."""
-        touched = set(graph.keyVector())
-        for j, (_, keys) in enumerate(self._nodes):
-            if touched.intersection(keys):
-                return j
-        return len(self._nodes)
-
-    def _groups(self, lo: int, new: list) -> gtsam.KeyGroupMap:
-        """Ordering groups in time order from node ``lo`` on (older nodes: 0), new nodes last.
-        Every variable is listed: iSAM2 puts unlisted ones in group 0."""
-        groups = gtsam.KeyGroupMap()
-        for j, (_, keys) in enumerate(list(self._nodes) + new):
-            g = max(0, j - lo)
-            for key in keys:
-                groups.insert2(key, g)
-        return groups
-
-    def _keys_from(self, lo: int) -> gtsam.KeyList:
-        """The variables of node ``lo`` (index in the window) and newer."""
-        out = gtsam.KeyList()
-        for _, keys in list(self._nodes)[lo:]:
-            for key in keys:
-                out.push_back(key)
-        return out
 
     def _marginalize(self, t_cut: float) -> None:
         """Marginalise the nodes stamped before ``t_cut`` [s] (leaves of the Bayes tree)."""
@@ -181,9 +155,38 @@ def _by_time(stamps) -> list:
     return sorted(nodes.items())
 
 
-def _older_groups(nodes, first: int, new: list) -> int:
+def _oldest_touched(nodes: list, touched: set) -> int:
+    """Index in ``nodes`` (``(t, [keys])``, oldest first) of the oldest node holding a key of
+    ``touched`` (the new factors' keys); ``len(nodes)`` when they touch only new variables."""
+    for j, (_, keys) in enumerate(nodes):
+        if touched.intersection(keys):
+            return j
+    return len(nodes)
+
+
+def _groups(nodes: list, lo: int) -> gtsam.KeyGroupMap:
+    """Ordering groups in time order from node ``lo`` of ``nodes`` on (older nodes: 0). Every
+    variable is listed: iSAM2 puts unlisted ones in group 0."""
+    groups = gtsam.KeyGroupMap()
+    for j, (_, keys) in enumerate(nodes):
+        g = max(0, j - lo)
+        for key in keys:
+            groups.insert2(key, g)
+    return groups
+
+
+def _key_list(nodes: list) -> gtsam.KeyList:
+    """The variables of ``nodes``."""
+    out = gtsam.KeyList()
+    for _, keys in nodes:
+        for key in keys:
+            out.push_back(key)
+    return out
+
+
+def _older_groups(nodes: list, first: int, new: list) -> int:
     """How many nodes older than node ``first`` (the oldest an update's factors touch) can have
     groups of their own: iSAM2 re-eliminates at least the variables of nodes ``first`` on and the
     new ones, and CCOLAMD takes no group number above the number of variables it orders."""
-    n_vars = sum(len(keys) for _, keys in list(nodes)[first:] + new)
+    n_vars = sum(len(keys) for _, keys in nodes[first:] + new)
     return max(n_vars - (len(nodes) - first + len(new)), 0)

@@ -47,9 +47,9 @@ from gtsam.symbol_shorthand import B, G, V, X
 from .config import RunConfig
 from .earth import earth_rate_n, normal_gravity
 from .ekf import initial_state
-from .fixed_lag import FixedLagISAM2
 from .factors import (gauss_markov_factor, gnss_accel_factor, gnss_position_gm_factor, joint_prior_factor,
                       window_accel_factor)
+from .fixed_lag import FixedLagISAM2
 from .gnss_accel import acceleration_row, measured_specific_force, window_accelerations
 from .progress import progress
 from .quality import QualityReport, inflation_segments, touches_segments
