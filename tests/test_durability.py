@@ -16,6 +16,7 @@ import pytest
 from gnssacc import outdir
 from gnssacc.cli import main
 from gnssacc.errors import InputError
+from gnssacc.interrupts import Terminated, raise_if_interrupted, signals_raise
 from gnssacc.outdir import MARKER, FolderLock, ResultDir, clean_stale, signals_held
 from gnssacc.pipeline import failure_reason
 from gnssacc.report import format_table
@@ -266,12 +267,63 @@ def test_signals_are_held_back_during_the_swap():
             time.sleep(0.05)
             reached = True
     assert reached
-    with pytest.raises(outdir.Terminated):
-        with outdir.sigterm_raises():
+    with pytest.raises(Terminated):
+        with signals_raise():
             with signals_held():
                 os.kill(os.getpid(), signal.SIGTERM)
                 time.sleep(0.05)
     assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL
+
+
+def _swallow(sig):
+    """What compiled code can do with a signal that lands inside it: run the handler, drop the
+    exception it raised (matplotlib's Agg renderer: 'ValueError: Invalid bounding box')."""
+    try:
+        os.kill(os.getpid(), sig)
+        time.sleep(0.05)
+    except (KeyboardInterrupt, Terminated):
+        pass
+
+
+@pytest.mark.parametrize("sig, expected", [(signal.SIGTERM, Terminated), (signal.SIGINT, KeyboardInterrupt)])
+def test_an_error_after_a_swallowed_signal_is_the_interruption(sig, expected):
+    """Within signals_raise, any exception met after a signal arrived is that interruption; outside
+    it, or before a signal, an exception is only itself; the handlers are restored."""
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    with signals_raise():
+        raise_if_interrupted(ValueError("before any signal"))   # no signal yet: not raised
+        _swallow(sig)
+        with pytest.raises(expected) as info:
+            raise_if_interrupted(ValueError("Invalid bounding box"))
+        assert isinstance(info.value.__cause__, ValueError)
+    raise_if_interrupted(ValueError("after the block"))
+    assert {s: signal.getsignal(s) for s in handlers} == handlers
+
+
+@pytest.mark.parametrize("sig, then", [(signal.SIGTERM, "raise"), (signal.SIGINT, "raise"),
+                                       (signal.SIGTERM, "return")])
+def test_a_signal_swallowed_while_plotting_interrupts_the_run(run_dir, tmp_path, capsys, monkeypatch, sig, then):
+    """The CI failure of 2026-11-24: SIGTERM inside matplotlib came back as 'ValueError: Invalid
+    bounding box' and the run ended as an internal error (exit 1) instead of an interruption."""
+    out = tmp_path / "res"
+    assert _cli(["run", run_dir, "--methods", "ekf", "--out", out] + FAST, capsys)[0] == 0
+    before = _snapshot(out)
+
+    def plot(*args, **kwargs):
+        _swallow(sig)
+        if then == "raise":
+            raise ValueError("Invalid bounding box")
+
+    monkeypatch.setattr("gnssacc.pipeline.plot_errors", plot)
+    code, _, stderr = _cli(["run", run_dir, "--methods", "ekf,ekf-acc", "--tune", "none", "--out", out], capsys)
+    assert code == (143 if sig == signal.SIGTERM else 130), stderr
+    assert "internal error" not in stderr and _leftovers(tmp_path) == []
+    said = [ln for ln in stderr.splitlines() if ln.startswith("gnssacc: interrupted:")]
+    if then == "raise":   # the plot failed: the old result stays
+        assert said == [f"gnssacc: interrupted: {out} left unchanged"] and _snapshot(out) == before
+    else:                 # the plot went on: the new result is complete, and the run still stops
+        assert said == [f"gnssacc: interrupted: {out} holds the new complete result"]
+        _assert_complete(out, ["ekf", "ekf-acc"])
 
 
 def test_a_failed_rename_restores_the_old_result(tmp_path, monkeypatch):

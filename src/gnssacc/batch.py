@@ -28,7 +28,8 @@ from pathlib import Path
 from .api import configure, load
 from .campaign import TASK_FILE, Campaign, TaskSpec, config_identity, write_atomic, write_record
 from .campaign_summary import SummaryMarkdown, csv_text, task_rows
-from .errors import DataWarning, InputError, raise_if_interrupted
+from .errors import DataWarning, InputError
+from .interrupts import raise_if_interrupted
 from .outdir import ResultDir
 from .pipeline import compare, compare_and_write, failure_reason
 from .progress import CampaignProgress

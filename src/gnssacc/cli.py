@@ -13,8 +13,9 @@ from pathlib import Path
 
 from . import __version__
 from .config import PRESETS, load_config
-from .errors import DataWarning, InputError, raise_if_interrupted
+from .errors import DataWarning, InputError
 from .gnss_noise import PROFILES
+from .interrupts import raise_if_interrupted
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -181,15 +182,15 @@ def _cmd_run(args) -> int:
     or SIGTERM leave its old or its new complete result, say which, and exit 130 or 143."""
     import contextlib
 
-    from .outdir import Terminated, sigterm_raises
+    from .interrupts import Terminated, signals_raise
 
     held: list = []   # the locked output folder (a ResultDir), once there is one
-    with sigterm_raises():
+    with signals_raise():
         try:
             with contextlib.ExitStack() as stack:
                 try:
                     return _run_locked(args, stack, held)
-                except Exception as exc:   # Ctrl-C inside a numba kernel comes as a SystemError
+                except Exception as exc:   # a signal inside compiled code may come as another error
                     raise_if_interrupted(exc)
                     raise
         except (KeyboardInterrupt, Terminated) as exc:
@@ -209,7 +210,7 @@ def _lock_out(path, args, stack, held):
 def _run_locked(args, stack, held) -> int:
     """Compute and write; exit code 0 when at least one method succeeded, 1 when none did."""
     from .api import configure, evaluate, load
-    from .outdir import Terminated, terminate_requested
+    from .interrupts import raise_if_arrived
     from .pipeline import default_out_dir, parse_methods
     from .report import failed_methods
 
@@ -223,8 +224,7 @@ def _run_locked(args, stack, held) -> int:
     target = target or _lock_out(default_out_dir(run), args, stack, held)
     res = evaluate(run, cfg, methods, tune=args.tune, show_progress=True, observe=args.report)
     out = res.write(target, plots=not args.no_plots, report=args.report, export=args.export)
-    if terminate_requested():   # SIGTERM inside compiled code may have surfaced as a method's failure
-        raise Terminated()
+    raise_if_arrived()   # a signal that compiled code swallowed interrupts all the same
     if out is None:
         reasons = "; ".join(f"{m}: {r}" for m, r in failed_methods(res.metrics).items())
         print(f"gnssacc: error: every method failed ({reasons}); {target.kept()}", file=sys.stderr)
@@ -293,11 +293,11 @@ def _cmd_batch(args) -> int:
     130/143 when interrupted (the finished tasks stay; ``--resume`` runs the rest)."""
     from .batch import open_executor, run_campaign
     from .campaign_args import campaign_from_args
-    from .outdir import Terminated, sigterm_raises
+    from .interrupts import Terminated, signals_raise
 
     camp = campaign_from_args(args)
     executor = open_executor(args.jobs, args.scheduler)
-    with sigterm_raises():
+    with signals_raise():
         try:
             with camp:
                 print(f"campaign: {camp.root} ({len(camp.tasks())} tasks, settings hash {camp.hash})", flush=True)

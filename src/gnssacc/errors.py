@@ -33,17 +33,3 @@ def warn_data(where: str, problem: str) -> None:
     """Emit a :class:`DataWarning` naming the file and the repair that was made."""
     warnings.warn(f"{where}: {problem}", DataWarning, stacklevel=2)
 
-
-def raise_if_interrupted(exc: BaseException) -> None:
-    """Re-raise the interruption (Ctrl-C, SIGTERM: not an ``Exception``) behind ``exc``, if any.
-
-    A signal that arrives inside a numba kernel surfaces as ``SystemError: ... returned a result
-    with an exception set``, caused by the ``KeyboardInterrupt``; code that turns an estimator's
-    exceptions into a reported failure must let the interruption through instead.
-    """
-    seen = set()
-    while exc is not None and id(exc) not in seen:
-        seen.add(id(exc))
-        if not isinstance(exc, Exception):
-            raise exc
-        exc = exc.__cause__ or exc.__context__

@@ -19,8 +19,8 @@ On-disk protocol, for an output folder ``<parent>/<name>``:
   is not held (left by a process killed with SIGKILL, or by a power cut); a trash folder whose
   result folder is missing (killed between the two renames) is renamed back instead.
 
-SIGTERM is turned into :class:`Terminated` (:func:`sigterm_raises`), so that it unwinds like
-Ctrl-C (``KeyboardInterrupt``); :meth:`ResultDir.kept` says what an interruption left.
+SIGTERM unwinds like Ctrl-C (:func:`gnssacc.interrupts.signals_raise`); :meth:`ResultDir.kept`
+says what an interruption left.
 """
 from __future__ import annotations
 
@@ -46,41 +46,6 @@ PARTIAL_PREFIX = ".gnssacc-partial-"
 TRASH_PREFIX = ".gnssacc-trash-"
 #: Signals held back while the old result is swapped for the new one.
 SWAP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
-
-
-class Terminated(BaseException):
-    """SIGTERM, raised in the main thread; like ``KeyboardInterrupt``, not an ``Exception``."""
-
-
-_TERMINATE_REQUESTED = [False]
-
-
-def _raise_terminated(signum, frame):
-    _TERMINATE_REQUESTED[0] = True
-    raise Terminated()
-
-
-def terminate_requested() -> bool:
-    """Whether SIGTERM arrived inside :func:`sigterm_raises`: a signal that lands inside compiled
-    code (numba) can surface as another exception, which a caller that isolates failures would
-    otherwise record as an ordinary error."""
-    return _TERMINATE_REQUESTED[0]
-
-
-@contextlib.contextmanager
-def sigterm_raises():
-    """Within the block, SIGTERM raises :class:`Terminated` (the previous handler is restored).
-    Outside the main thread (where handlers cannot be set) this does nothing."""
-    _TERMINATE_REQUESTED[0] = False
-    try:
-        old = (signal.signal(signal.SIGTERM, _raise_terminated),)
-    except ValueError:
-        old = ()
-    try:
-        yield
-    finally:
-        if old:
-            signal.signal(signal.SIGTERM, old[0] if old[0] is not None else signal.SIG_DFL)
 
 
 def is_result(path: Path) -> bool:

@@ -13,7 +13,8 @@ from . import jit
 from .config import RunConfig
 from .consistency import assess
 from .ekf import run_ekf
-from .errors import InputError, raise_if_interrupted, warn_data
+from .errors import InputError, warn_data
+from .interrupts import raise_if_interrupted
 from .gnss_noise import apply_outages, parse_outages
 from .identify import Identified, identify
 from .memory import release_free_memory
