@@ -534,3 +534,17 @@ def test_interrupt_stays_130(monkeypatch, capsys):
     monkeypatch.setattr(cli, "_cmd_config", interrupted)
     code, _, err = _cli(capsys, ["config"])
     assert code == 130 and "interrupted" in err and "Traceback" not in err
+
+
+def test_a_reader_that_goes_away_is_not_a_bug(tmp_path):
+    """``gnssacc config | true``: the pipe closes before gnssacc prints; it stops quietly
+    (exit 141, as a shell reports SIGPIPE) instead of reporting an internal error."""
+    import subprocess
+
+    env = dict(os.environ, TMPDIR=str(tmp_path))   # a crash file would land here
+    proc = subprocess.Popen([sys.executable, "-c", "import sys; from gnssacc.cli import main; "
+                             "sys.exit(main(['config']))"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    proc.stdout.close()   # at once: long before the interpreter has imported gnssacc and prints
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 141, err
+    assert err == "" and list(tmp_path.iterdir()) == []

@@ -368,6 +368,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("gnssacc: interrupted; no results written", file=sys.stderr)
         return 130
+    except BrokenPipeError:   # the reader of stdout went away (``| head``): not a bug
+        return _stdout_gone()
     except OSError as exc:
         if exc.filename is None:
             return _internal_error(exc, argv)
@@ -375,6 +377,18 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except Exception as exc:  # a bug: one line for the user, the traceback in a file for us
         return _internal_error(exc, argv)
+
+
+def _stdout_gone() -> int:
+    """Point stdout at the null device, so that the interpreter's last flush does not fail again;
+    return 141 (128 + SIGPIPE, as a shell reports a writer its reader left). Results already
+    written stay; ``gnssacc run`` prints its summary only after the swap."""
+    import os
+
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
+    return 141
 
 
 def _internal_error(exc: Exception, argv: list[str] | None) -> int:
