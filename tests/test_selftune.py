@@ -14,7 +14,7 @@ from gnssacc.identify import identify
 from gnssacc.metrics import score, truth_at
 from gnssacc.pipeline import compare
 from gnssacc.sources.sim import grade_config, simulate
-from gnssacc.tuning import ml_search, tune
+from gnssacc.tuning import SHRINK_TOLERANCE, draw_back, ml_search, tune
 
 pytestmark = pytest.mark.filterwarnings("ignore::gnssacc.errors.DataWarning")
 
@@ -45,6 +45,42 @@ def test_ml_search_recovers_known_noise_on_a_linear_gaussian_toy():
     # ML standard errors for n = 3000: ~3 % on r, ~12 % on q; tolerance 25 % on both.
     assert q == pytest.approx(q_true, rel=0.25), q
     assert r == pytest.approx(r_true, rel=0.25), r
+
+
+def test_draw_back_moves_a_flat_parameter_to_the_likelihood_bound_and_leaves_a_sharp_one():
+    # Coordinate 0: likelihood flat above 0.5 (a turn-on sigma once the bias is learnt), rising
+    # below; coordinate 1: sharply informed at 1.0. Closed form of the bound on coordinate 0:
+    # 10 (0.5 - t)^2 <= 1.92  <=>  t >= 0.5 - sqrt(0.192) = 0.062.
+    calls = []
+
+    def nll(th):
+        calls.append(np.array(th))
+        return 10.0 * max(0.0, 0.5 - th[0]) ** 2 + 50.0 * (th[1] - 1.0) ** 2
+
+    theta, n, moved = draw_back(nll, np.array([1.5, 1.0]), 1.0, value=0.0)
+    assert moved == [0] and n == len(calls) <= 6
+    assert 0.062 <= theta[0] <= 0.062 + 0.25 * 1.5   # within one bisection step of the bound
+    assert theta[1] == 1.0
+    assert nll(theta) <= SHRINK_TOLERANCE
+    assert draw_back(nll, np.array([1.5, 1.0]), 1.0, np.array([False, True]), value=0.0)[2] == []
+    # The order is by distance in prior widths: coordinate 1 first when its prior is 10x tighter.
+    calls.clear()
+    draw_back(nll, np.array([1.5, 1.0]), np.array([1.0, 0.1]), value=0.0)
+    assert calls[0][0] == 1.5 and calls[0][1] == 0.0
+
+
+def test_a_turn_on_sigma_the_data_hardly_inform_stays_near_its_start():
+    # A consumer IMU on a slow UGV (true accelerometer turn-on sigma 30 mg, default start 20 mg):
+    # the likelihood is flat above ~60 mg, and the search alone ended at 526 mg, where the
+    # fixed-lag smoother drifted to 10.3 m against the EKF's 2.2 m.
+    run = simulate("ugv", 180.0, imu_grade="consumer", noise="white", seed=2)
+    metrics, _, ident = compare(run, load_config(), ["ekf", "smoother"])
+    sigma0 = ident.tuning.values["imu"]["accel_bias_sigma0_mg"]
+    assert 10.0 < np.mean(sigma0) < 150.0, sigma0
+    m = metrics["methods"]
+    assert m["smoother"]["prmse_m"] < 1.1 * m["ekf"]["prmse_m"], (m["smoother"]["prmse_m"], m["ekf"]["prmse_m"])
+    for mid, c in metrics["consistency"].items():
+        assert 0.7 < c["nis"]["pos"] < 1.4, (mid, c["nis"])
 
 
 @pytest.fixture(scope="module")
