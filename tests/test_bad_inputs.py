@@ -536,6 +536,18 @@ def test_interrupt_stays_130(monkeypatch, capsys):
     assert code == 130 and "interrupted" in err and "Traceback" not in err
 
 
+def test_a_sigterm_that_reaches_main_stays_143(monkeypatch, capsys):
+    """E.g. one landing as a command's signal handling is being undone: no traceback, exit 143."""
+    from gnssacc.interrupts import Terminated
+
+    def terminated(args):
+        raise Terminated()
+
+    monkeypatch.setattr(cli, "_cmd_config", terminated)
+    code, _, err = _cli(capsys, ["config"])
+    assert code == 143 and err.strip() == "gnssacc: terminated"
+
+
 def test_a_reader_that_goes_away_is_not_a_bug(tmp_path):
     """``gnssacc config | true``: the pipe closes before gnssacc prints; it stops quietly
     (exit 141, as a shell reports SIGPIPE) instead of reporting an internal error."""

@@ -15,7 +15,7 @@ from . import __version__
 from .config import PRESETS, load_config
 from .errors import DataWarning, InputError
 from .gnss_noise import PROFILES
-from .interrupts import raise_if_interrupted
+from .interrupts import Terminated, raise_if_interrupted
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -182,7 +182,7 @@ def _cmd_run(args) -> int:
     or SIGTERM leave its old or its new complete result, say which, and exit 130 or 143."""
     import contextlib
 
-    from .interrupts import Terminated, signals_raise
+    from .interrupts import signals_raise
 
     held: list = []   # the locked output folder (a ResultDir), once there is one
     with signals_raise():
@@ -293,7 +293,7 @@ def _cmd_batch(args) -> int:
     130/143 when interrupted (the finished tasks stay; ``--resume`` runs the rest)."""
     from .batch import open_executor, run_campaign
     from .campaign_args import campaign_from_args
-    from .interrupts import Terminated, signals_raise
+    from .interrupts import signals_raise
 
     camp = campaign_from_args(args)
     executor = open_executor(args.jobs, args.scheduler)
@@ -368,6 +368,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("gnssacc: interrupted; no results written", file=sys.stderr)
         return 130
+    except Terminated:   # a command without its own handling, or a SIGTERM as a block of it ends
+        print("gnssacc: terminated", file=sys.stderr)
+        return 143
     except BrokenPipeError:   # the reader of stdout went away (``| head``): not a bug
         return _stdout_gone()
     except OSError as exc:
