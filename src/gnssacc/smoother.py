@@ -68,6 +68,9 @@ MIN_NODE_DT = 1e-3
 ACCEL_BIAS_RW_FLOOR = 1e-6
 #: Smallest gyro bias random walk the smoother uses [rad/s/sqrt(s)] (~0.002 deg/h/sqrt(s)).
 GYRO_BIAS_RW_FLOOR = 1e-8
+#: Symbol character of the bias variables ``B(i)``: relinearised before they are marginalised
+#: when far from their linearisation point (the IMU factors' first-order bias correction).
+BIAS_SYMBOL = chr(gtsam.Symbol(B(0)).chr())
 
 
 def node_times(t0: float, t_end: float, gnss_t: np.ndarray, max_spacing: float) -> np.ndarray:
@@ -220,7 +223,7 @@ class _Smoother:
         self.params.relinearizeSkip = int(sm["relinearize_skip"])
         # Reuse the slots of marginalised factors so the factor list stays bounded on long runs.
         self.params.findUnusedFactorSlots = True
-        self.isam = FixedLagISAM2(self.lag, self.params, self.threshold)
+        self.isam = FixedLagISAM2(self.lag, self.params, self.threshold, guard=BIAS_SYMBOL)
         self.marginals = WindowMarginals(self.gm, bandwidth)
 
     def reset(self, robust: bool = False) -> None:
@@ -228,7 +231,7 @@ class _Smoother:
         switched = robust and self.params.getFactorization() != "QR"
         if switched:
             self.params.setFactorization("QR")
-        self.isam = FixedLagISAM2(self.lag, self.params, self.threshold)
+        self.isam = FixedLagISAM2(self.lag, self.params, self.threshold, guard=BIAS_SYMBOL)
         self.marginals.clear()
         return switched
 
