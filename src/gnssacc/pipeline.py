@@ -14,9 +14,9 @@ from .config import RunConfig
 from .consistency import assess
 from .ekf import run_ekf
 from .errors import InputError, warn_data
-from .interrupts import raise_if_interrupted
 from .gnss_noise import apply_outages, parse_outages
 from .identify import Identified, identify
+from .interrupts import raise_if_interrupted
 from .memory import release_free_memory
 from .metrics import gnss_score, score
 from .outdir import ResultDir

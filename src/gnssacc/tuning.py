@@ -1,7 +1,7 @@
 r"""Noise identification from the recording itself (``--tune auto``, the default).
 
 Every IMU noise key the user's configuration does not set (and ``gnss.sigma_scale``) is
-identified without truth, in two steps:
+identified without truth, in four steps:
 
 1. **Stationary stretches** (:mod:`gnssacc.stationary`): the white-noise densities of the gyros
    and accelerometers per axis, read from the Allan deviation in its white-noise region (robust
@@ -45,9 +45,9 @@ identified without truth, in two steps:
    can suffer where the likelihood does not show it (on a simulated consumer IMU with a true
    30 mg accelerometer turn-on sigma the search ended at 526 mg, where the fixed-lag smoother
    drifted to 10.3 m against the EKF's 2.2 m). So a turn-on sigma that ended above its start is
-   drawn back toward it by bisection (three passes) to the smallest value whose log-likelihood
-   stays within :data:`SHRINK_TOLERANCE` of the search's best, shared by both sigmas
-   (:func:`draw_back`). The noise densities and the GNSS scale are left at the optimum: a value too
+   drawn back toward it by bisection (at most three passes) to the smallest value whose
+   log-likelihood stays within :data:`SHRINK_TOLERANCE` of the search's best, shared by both
+   sigmas (:func:`draw_back`). The noise densities and the GNSS scale are left at the optimum: a value too
    large widens every innovation, so the likelihood bounds them on both sides, and drawing them
    toward a default would trade accuracy for a prior that is no better informed.
 
@@ -335,16 +335,15 @@ def draw_back(negloglik, theta, prior_decades, eligible=None,
         if abs(theta[i]) < SHRINK_MIN_DECADES or (eligible is not None and not eligible[i]):
             continue
         fails, keeps = 0.0, 1.0   # fractions of theta[i] kept: too little / enough for the data
-        for frac in (0.0, 0.5, None):
-            frac = 0.5 * (fails + keeps) if frac is None else frac
-            if frac < keeps:
-                trial = theta.copy()
-                trial[i] *= frac
-                n += 1
-                if float(negloglik(trial)) <= worst:
-                    keeps = frac
-                else:
-                    fails = frac
+        for step in range(3):     # all the way back, then bisection: 0, 0.5, 0.25 or 0.75
+            frac = 0.5 * (fails + keeps) if step else 0.0
+            trial = theta.copy()
+            trial[i] *= frac
+            n += 1
+            if float(negloglik(trial)) <= worst:
+                keeps = frac
+            else:
+                fails = frac
             if keeps == 0.0:
                 break
         if keeps < 1.0:
