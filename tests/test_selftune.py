@@ -3,7 +3,6 @@ with known answers: a linear-Gaussian toy and simulated runs with known truth an
 from __future__ import annotations
 
 import re
-import warnings
 
 import numpy as np
 import pytest
@@ -77,6 +76,11 @@ def test_a_turn_on_sigma_the_data_hardly_inform_stays_near_its_start():
     metrics, _, ident = compare(run, load_config(), ["ekf", "smoother"])
     sigma0 = ident.tuning.values["imu"]["accel_bias_sigma0_mg"]
     assert 10.0 < np.mean(sigma0) < 150.0, sigma0
+    assert "drawn back toward the start, as far as the likelihood allows: " in ident.tuning.line()
+    assert "accel_bias_sigma0_mg" in ident.tuning.line().split("drawn back")[1]
+    from gnssacc.htmlreport import tuning_html
+    row = tuning_html(metrics).split(" (drawn back toward the start)")[0].rsplit("<tr>", 1)[1]
+    assert "imu.accel_bias_sigma0_mg" in row
     m = metrics["methods"]
     assert m["smoother"]["prmse_m"] < 1.1 * m["ekf"]["prmse_m"], (m["smoother"]["prmse_m"], m["ekf"]["prmse_m"])
     for mid, c in metrics["consistency"].items():

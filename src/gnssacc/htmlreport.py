@@ -95,8 +95,10 @@ def tuning_html(metrics: dict) -> str:
     t = metrics.get("tuning")
     if not t:
         return "<p>The configuration was used as given (<code>--tune none</code>).</p>"
+    back = set(t.get("from_stationary", {}).get("drawn_back", []))
     rows = "".join(f"<tr><td>{html.escape(sec)}.{html.escape(k)}</td><td>{html.escape(str(t['start'].get(f'{sec}.{k}', '-')))}"
-                   f"</td><td>{html.escape(str(v))}</td></tr>" for sec, vals in t["values"].items() for k, v in vals.items())
+                   f"</td><td>{html.escape(str(v))}{' (drawn back toward the start)' if f'{sec}.{k}' in back else ''}"
+                   f"</td></tr>" for sec, vals in t["values"].items() for k, v in vals.items())
     return (f"<p>{t['n_evaluations']} EKF passes in {t['seconds']:.1f} s; position NIS per dof {_fmt(t['nis_before'])} "
             f"at the start, {_fmt(t['nis_after'])} tuned. Kept from the configuration: "
             f"{html.escape(', '.join(t['fixed']) or 'nothing')}. Written to <code>tuned.toml</code>.</p>"

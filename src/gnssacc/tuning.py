@@ -138,7 +138,9 @@ class TuneResult:
         parts = [f"{key}={_short(v)}" for sec in self.values.values() for key, v in sec.items()]
         nis = (f"; position NIS/dof {self.nis_before:.2f} -> {self.nis_after:.2f}"
                if self.nis_before is not None and self.nis_after is not None else "")
+        back = [k.split(".")[-1] for k in self.from_stationary.get("drawn_back", [])]
         return (f"tuned noise ({self.n_evaluations} EKF passes, {self.seconds:.1f} s): " + ", ".join(parts) + nis
+                + (f"; drawn back toward the start, as far as the likelihood allows: {', '.join(back)}" if back else "")
                 + (f"; kept from config: {', '.join(self.fixed)}" if self.fixed else ""))
 
     def to_toml(self, cfg: RunConfig) -> str:
