@@ -158,6 +158,20 @@ def test_gauss_markov_gnss_errors_are_found_and_make_the_estimators_honest():
     assert _nees_pos(run, sm) < 3.0 and 0.7 < sm.stats["nis_pos_mean"] < 1.5
 
 
+def test_a_gauss_markov_time_constant_far_from_the_default_is_found(monkeypatch):
+    # The tuner starts tau at the configuration's 60 s, which is also the simulator's own: with
+    # fixes whose correlated errors have tau 10 s it must move there (measured over 6 runs: 7-23 s).
+    import gnssacc.gnss_noise as gn
+
+    monkeypatch.setitem(gn.PROFILES, "gm", dict(gn.PROFILES["gm"], tau_s=10.0))
+    run = simulate("ugv-slow", 235.0, imu_grade="industrial", noise="gm", seed=1)
+    metrics, _, ident = compare(run, load_config(), ["ekf"])
+    g = ident.tuning.values["gnss"]
+    assert 4.0 < g["gm_tau_s"] < 25.0, g["gm_tau_s"]
+    assert np.mean(g["gm_sigma_m"][:2]) == pytest.approx(2.5, rel=0.5)
+    assert metrics["methods"]["ekf"]["nees_pos"] < 3.0
+
+
 def _optimistic(params: dict) -> dict:
     return {k: (v if k == "bias_correlation_time_s" else float(np.mean(v)) / 10.0) for k, v in params.items()}
 
