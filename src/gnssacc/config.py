@@ -126,6 +126,7 @@ DEFAULTS: dict[str, dict] = {
         # Order of the transition-matrix series Phi = I + F dt (+ (F dt)^2 / 2 for 2).
         "phi_order": 1,
         # Reject a position fix whose normalised innovation squared exceeds this (0 = never).
+        # The noise tuner identifies the noise from every fix (a gate would steer it).
         "position_gate_nis": 0.0,
     },
     "zupt": {

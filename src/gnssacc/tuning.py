@@ -225,7 +225,7 @@ class _Objective:
         run = scaled_gnss(self.run, scale)
         # The start's position sigma is that of the fixes it came from: it scales with them.
         init = replace(self.init, sigma_pos_m=self.init.sigma_pos_m * scale / self.init_scale)
-        sol = run_ekf(run, cfg, self.method, init=init, stationary=self.stationary, quality=self.quality,
+        sol = run_ekf(run, ungated(cfg), self.method, init=init, stationary=self.stationary, quality=self.quality,
                       output_times=np.zeros(0), cov_every=self.cov_every)
         self.stats[tuple(np.round(theta, 12))] = sol.stats
         return -_loglik(sol.stats, self.kinds)
@@ -398,6 +398,19 @@ def _loglik(stats: dict, kinds) -> float:
     return float(sum(stats[f"loglik_{k}"] for k in kinds))
 
 
+def ungated(cfg: RunConfig) -> RunConfig:
+    """``cfg`` without the EKF's position gate, for the tuner's passes.
+
+    A gate makes the likelihood blind to the innovations it rejects, so the search is rewarded
+    for shrinking the noise until most fixes are rejected: with ``[ekf] position_gate_nis = 16.3``
+    on a clean simulated run the tuned EKF ended 426 m off (1.4 m ungated). The noise is identified
+    from every innovation; the gate applies to the estimates made with it.
+    """
+    if float(cfg["ekf"]["position_gate_nis"]) == 0.0:
+        return cfg
+    return cfg.with_values({"ekf": {"position_gate_nis": 0.0}}, "tuning passes, ungated")
+
+
 def scaled_gnss(run, scale: float):
     """The run with every fix's sigma multiplied by ``scale``."""
     if scale == 1.0:
@@ -522,5 +535,5 @@ def run_white_stats(run, cfg: RunConfig, stationary=None, quality=None, init=Non
     """The innovation statistics of one EKF pass with ``cfg`` as it is on ``run`` (already scaled)."""
     from .ekf import run_ekf
 
-    return run_ekf(run, cfg, "ekf", init=init, stationary=stationary, quality=quality, output_times=np.zeros(0),
-                   cov_every=int(cfg["tune"]["cov_every"])).stats
+    return run_ekf(run, ungated(cfg), "ekf", init=init, stationary=stationary, quality=quality,
+                   output_times=np.zeros(0), cov_every=int(cfg["tune"]["cov_every"])).stats
