@@ -278,3 +278,50 @@ def test_tuned_toml_reproduces_the_tuned_run(tmp_path, consumer_car):
     a, b = _ekf(consumer_car, auto), _ekf(consumer_car, again)
     # The file keeps four significant digits.
     assert score(consumer_car, b).prmse_m == pytest.approx(score(consumer_car, a).prmse_m, rel=0.01)
+
+
+def _binomial_sf(k: int, n: int, p: float) -> float:
+    """P(X >= k), X ~ Binomial(n, p), summed term by term (independent of scipy)."""
+    import math
+    return 1.0 - sum(math.comb(n, i) * p**i * (1 - p) ** (n - i) for i in range(k))
+
+
+def test_heavy_tail_check_against_its_closed_form():
+    from gnssacc.consistency import TAIL_ALARM, TAIL_P, heavy_tails, tail_bound
+
+    assert tail_bound(3) == pytest.approx(16.2662, abs=1e-3)   # chi-square table, 3 dof, 0.1 %
+    for n in (50, 579, 5000):
+        first = next(k for k in range(3, n) if _binomial_sf(k, n, TAIL_P) < TAIL_ALARM)
+        assert heavy_tails(first - 1, n, "its") is None
+        said = heavy_tails(first, n, "its")
+        assert said is not None and f"{first} of its {n} position innovations" in said
+
+
+def _with_outliers(run, fraction: float, metres: float, seed: int):
+    """``run`` with ``fraction`` of its fixes moved by N(0, metres) per axis (multipath jumps);
+    their stated sigma unchanged."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(seed)
+    g = run.gnss
+    bad = rng.random(len(g.t)) < fraction
+    d = rng.normal(0.0, metres, (len(g.t), 3)) * bad[:, None]
+    r = 6378137.0 + g.h
+    lat = g.lat + d[:, 0] / r
+    lon = g.lon + d[:, 1] / (r * np.cos(g.lat))
+    return run.with_gnss(replace(g, lat=lat, lon=lon, h=g.h - d[:, 2])), int(bad.sum())
+
+
+def test_fixes_with_outliers_are_reported_for_every_method_and_clean_ones_are_not():
+    # 3-4 % of the fixes 20 m off: the tuner widens the fix sigma to cover them, so the NIS stays
+    # near 1 and only the tails show them.
+    clean = simulate("ugv-slow", 235.0, imu_grade="industrial", noise="white", seed=1)
+    run, n_bad = _with_outliers(clean, 0.03, 20.0, seed=5)
+    assert n_bad >= 5
+    metrics, _, _ = compare(run, load_config(), ["ekf", "smoother"])
+    for mid, c in metrics["consistency"].items():
+        assert any("the fixes carry outliers" in w for w in c["warnings"]), (mid, c["warnings"])
+        assert 0.7 < c["nis"]["pos"] < 1.3
+    metrics, _, _ = compare(clean, load_config(), ["ekf", "smoother"])
+    for mid, c in metrics["consistency"].items():
+        assert not any("outliers" in w for w in c["warnings"]), (mid, c["warnings"])

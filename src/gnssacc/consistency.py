@@ -23,6 +23,10 @@ Warnings (``gnssacc: warning: <method>: ...``) are raised when
   by more than a factor ``sqrt(2)`` (too small above the band: the errors are larger than the
   method thinks; too large below it: it discards information);
 * the innovations are correlated in time (lag-1 autocorrelation above :data:`ACF_MAX`);
+* the position innovations have heavy tails: more of them beyond the chi-square bound of tail
+  probability :data:`TAIL_P` than Gaussian errors would give (binomial tail probability below
+  :data:`TAIL_ALARM`): the fixes carry outliers (multipath, jumps) that the noise model does not
+  cover, and the stated uncertainty averages over them;
 * the fix residual ratio exceeds :data:`FIX_RATIO_MAX`, or, with truth, the method's PRMSE
   exceeds that of the raw fixes by more than :data:`WORSE_MARGIN`;
 * the configured white IMU noise is below what the IMU shows at rest by more than
@@ -62,9 +66,40 @@ ACF_MAX = 0.1
 #: came out within 0.89-1.11x of the simulator's true values on 12 car-city / slow-UGV runs of every
 #: grade with 95-110 s at rest; a factor 2 (4x in variance) is far outside that scatter.
 REST_FACTOR = 2.0
+#: Tail probability of the chi-square bound an innovation's NIS is counted beyond (one in 1000).
+TAIL_P = 1e-3
+#: Heavy tails are reported when the count beyond the bound has a binomial tail probability
+#: below this under Gaussian errors (and at least 3 are beyond): a false alarm once in 10,000 runs.
+TAIL_ALARM = 1e-4
 #: Update kinds and their names in messages.
 KIND_NAMES = {"pos": "position", "acc": "acceleration", "zupt": "zero-velocity", "zaru": "zero-rate"}
 _DOF = {"pos": 3, "acc": 3, "zupt": 3, "zaru": 3}
+
+
+_TAIL_BOUNDS: dict = {}
+
+
+def tail_bound(dof: int) -> float:
+    """The NIS exceeded with probability :data:`TAIL_P` by Gaussian innovations of ``dof``."""
+    if dof not in _TAIL_BOUNDS:
+        from scipy.stats import chi2
+        _TAIL_BOUNDS[dof] = float(chi2.isf(TAIL_P, dof))
+    return _TAIL_BOUNDS[dof]
+
+
+def heavy_tails(n_beyond: int, n: int, who: str) -> str | None:
+    """The warning when ``n_beyond`` of ``n`` position innovations beyond :func:`tail_bound` are
+    too many for Gaussian errors (``who``: whose innovations), else ``None``."""
+    if n <= 0 or n_beyond < 3:
+        return None
+    from scipy.stats import binom
+    if binom.sf(n_beyond - 1, n, TAIL_P) >= TAIL_ALARM:
+        return None
+    return (f"the fixes carry outliers the noise model does not cover: {n_beyond} of {who} {n} position "
+            f"innovations lie beyond the 0.1 % chi-square bound ({n * TAIL_P:.1f} expected for Gaussian errors); "
+            f"the stated uncertainty averages over them, too large for most fixes and too small for these "
+            f"([ekf] position_gate_nis = {tail_bound(3):.1f} makes the EKF reject them; the noise is still "
+            f"identified from every fix)")
 
 
 @dataclass
@@ -113,6 +148,10 @@ class ModelCheck:
         Mean NIS per dof of the zero-velocity updates: above the band, the model lets the velocity
         error grow more slowly than it does (the IMU noise is set too low).
     n_zupt : int
+    rest : list of str
+        The at-rest findings.
+    n_beyond, n_rejected : int
+        Position innovations beyond :func:`tail_bound`, and fixes a position gate rejected.
     """
 
     nis: float | None
@@ -121,12 +160,15 @@ class ModelCheck:
     nis_zupt: float | None = None
     n_zupt: int = 0
     rest: list = field(default_factory=list)
+    n_beyond: int = 0
+    n_rejected: int = 0
 
     @classmethod
     def from_stats(cls, stats: dict, rest: list | None = None) -> "ModelCheck":
         """From an EKF pass's ``stats`` and the at-rest findings (:func:`rest_noise_findings`)."""
         return cls(stats.get("nis_pos_mean"), stats.get("acf1_pos"), int(stats.get("n_pos_updates", 0) or 0),
-                   stats.get("nis_zupt_mean"), int(stats.get("n_zupt_updates", 0) or 0), list(rest or []))
+                   stats.get("nis_zupt_mean"), int(stats.get("n_zupt_updates", 0) or 0), list(rest or []),
+                   int(stats.get("n_pos_beyond", 0) or 0), int(stats.get("n_pos_rejected", 0) or 0))
 
     def warnings(self) -> list[str]:
         """The model-level findings, worded for any method that uses the model."""
@@ -144,11 +186,14 @@ class ModelCheck:
             out.append(f"the noise model lets the velocity error grow too slowly: the EKF's zero-velocity NIS per dof "
                        f"with it is {self.nis_zupt:.2f} > {band(self.n_zupt)[1]:.2f} while the vehicle stands "
                        f"(IMU noise set too low)")
-        return out
+        # Fixes a position gate rejected count as beyond the bound: the smoothers take them.
+        tails = heavy_tails(self.n_beyond + self.n_rejected, self.n + self.n_rejected, "the EKF's")
+        return out + ([tails] if tails else [])
 
     def to_dict(self) -> dict:
         return {"nis_pos": self.nis, "innovation_acf1": self.acf1, "n_pos_updates": self.n,
-                "nis_zupt": self.nis_zupt, "n_zupt_updates": self.n_zupt, "at_rest": self.rest}
+                "nis_zupt": self.nis_zupt, "n_zupt_updates": self.n_zupt, "at_rest": self.rest,
+                "n_pos_beyond": self.n_beyond, "n_pos_rejected": self.n_rejected}
 
 
 def rest_noise_findings(measured: np.ndarray, configured: np.ndarray, seconds: float) -> list[str]:
@@ -234,6 +279,9 @@ def assess(run, sol: NavSolution, prmse_m: float | None = None, gnss_prmse_m: fl
         c.warnings.append(f"its position innovations are correlated in time (lag-1 autocorrelation {c.acf1:.2f} > "
                           f"{ACF_MAX}): the model misses a slowly varying error (IMU noise set too low, or "
                           f"time-correlated GNSS errors not modelled), so its stated uncertainty is not to be trusted")
+    tails = heavy_tails(int(st.get("n_pos_beyond", 0) or 0), n["pos"], "its") if c.acf1 is not None else None
+    if tails:
+        c.warnings.append(tails)
     if model is not None and c.acf1 is None:   # not an EKF: its own figures cannot see the model
         c.warnings.extend(model.warnings())
     if model is not None:   # no method's own figures can see it

@@ -25,6 +25,7 @@ import numpy as np
 
 from . import jit, measurements as meas_models
 from .config import RunConfig
+from .consistency import tail_bound
 from .earth import earth_rate_n, gravity_n
 from .gnss_accel import AccelWindow, measured_specific_force, window_samples
 from .initialise import initial_sigmas
@@ -185,6 +186,7 @@ class _Tally:
         self.nis_sum = {k: 0.0 for k in meas_models.KINDS}
         self.dof = {k: 0 for k in meas_models.KINDS}
         self.loglik = {k: 0.0 for k in meas_models.KINDS}
+        self.beyond = {k: 0 for k in meas_models.KINDS}   # NIS beyond the chi-square tail bound
         self.series = {k: ([], [], []) for k in meas_models.KINDS}   # t, NIS per dof, log-likelihood
 
     def add(self, t: float, m: meas_models.Measurement, nis: float, loglik: float, used: bool, wz) -> None:
@@ -199,6 +201,7 @@ class _Tally:
         self.nis_sum[k] += nis
         self.dof[k] += len(m.dz)
         self.loglik[k] += loglik
+        self.beyond[k] += nis > tail_bound(len(m.dz))
         if self.keep:
             for lst, v in zip(self.series[k], (t, nis / len(m.dz), loglik)):
                 lst.append(v)
@@ -210,6 +213,9 @@ class _Tally:
             out[f"n_{k}_rejected"] = self.rejected[k]
             # Normalised innovation squared per degree of freedom: ~1 for a consistent filter.
             out[f"nis_{k}_mean"] = self.nis_sum[k] / self.dof[k] if self.dof[k] else None
+            # Updates beyond the chi-square bound of tail probability TAIL_P: ~TAIL_P of them for
+            # Gaussian errors; far more when the errors have heavy tails (outliers, multipath).
+            out[f"n_{k}_beyond"] = self.beyond[k]
             out[f"loglik_{k}"] = self.loglik[k]
             # Whitened innovations of a correct model are white: ~0 here; a slowly varying
             # error the model misses (too little IMU noise, correlated GNSS errors) makes it > 0.
