@@ -295,6 +295,8 @@ def test_heavy_tail_check_against_its_closed_form():
         assert heavy_tails(first - 1, n, "its") is None
         said = heavy_tails(first, n, "its")
         assert said is not None and f"{first} of its {n} position innovations" in said
+        # Innovations correlated in time: the count assumes independent ones; not reported.
+        assert heavy_tails(first, n, "its", acf1=0.9) is None and heavy_tails(first, n, "its", acf1=0.0)
 
 
 def _with_outliers(run, fraction: float, metres: float, seed: int):

@@ -25,8 +25,8 @@ Warnings (``gnssacc: warning: <method>: ...``) are raised when
 * the innovations are correlated in time (lag-1 autocorrelation above :data:`ACF_MAX`);
 * the position innovations have heavy tails: more of them beyond the chi-square bound of tail
   probability :data:`TAIL_P` than Gaussian errors would give (binomial tail probability below
-  :data:`TAIL_ALARM`): the fixes carry outliers (multipath, jumps) that the noise model does not
-  cover, and the stated uncertainty averages over them;
+  :data:`TAIL_ALARM`; white innovations only): the fixes carry outliers (multipath, jumps) that
+  the noise model does not cover, and the stated uncertainty averages over them;
 * the fix residual ratio exceeds :data:`FIX_RATIO_MAX`, or, with truth, the method's PRMSE
   exceeds that of the raw fixes by more than :data:`WORSE_MARGIN`;
 * the configured white IMU noise is below what the IMU shows at rest by more than
@@ -87,10 +87,18 @@ def tail_bound(dof: int) -> float:
     return _TAIL_BOUNDS[dof]
 
 
-def heavy_tails(n_beyond: int, n: int, who: str) -> str | None:
+def correlated(acf1: float | None, n: int) -> bool:
+    """Whether ``n`` whitened innovations with lag-1 autocorrelation ``acf1`` are correlated in
+    time: above :data:`ACF_MAX` and three standard errors of it."""
+    return acf1 is not None and n > 10 and acf1 > max(ACF_MAX, 3.0 / math.sqrt(3 * n))
+
+
+def heavy_tails(n_beyond: int, n: int, who: str, acf1: float | None = None) -> str | None:
     """The warning when ``n_beyond`` of ``n`` position innovations beyond :func:`tail_bound` are
-    too many for Gaussian errors (``who``: whose innovations), else ``None``."""
-    if n <= 0 or n_beyond < 3:
+    too many for Gaussian errors (``who``: whose innovations), else ``None``. Not for innovations
+    correlated in time (``acf1``, :func:`correlated`): the count assumes independent ones, and the
+    model is already reported as missing a slowly varying error, whose excursions it would count."""
+    if n <= 0 or n_beyond < 3 or correlated(acf1, n):
         return None
     from scipy.stats import binom
     if binom.sf(n_beyond - 1, n, TAIL_P) >= TAIL_ALARM:
@@ -178,7 +186,7 @@ class ModelCheck:
             if not lo <= self.nis <= hi:
                 out.append(f"the noise model does not fit this recording: the EKF's position NIS per dof with it is "
                            f"{self.nis:.2f}, outside [{lo:.2f}, {hi:.2f}]")
-        if self.acf1 is not None and self.n > 10 and self.acf1 > max(ACF_MAX, 3.0 / math.sqrt(3 * self.n)):
+        if correlated(self.acf1, self.n):
             out.append(f"the noise model misses a slowly varying error: the EKF's position innovations with it are "
                        f"correlated in time (lag-1 autocorrelation {self.acf1:.2f} > {ACF_MAX}); IMU noise set too low "
                        f"or time-correlated GNSS errors not modelled")
@@ -187,7 +195,7 @@ class ModelCheck:
                        f"with it is {self.nis_zupt:.2f} > {band(self.n_zupt)[1]:.2f} while the vehicle stands "
                        f"(IMU noise set too low)")
         # Fixes a position gate rejected count as beyond the bound: the smoothers take them.
-        tails = heavy_tails(self.n_beyond + self.n_rejected, self.n + self.n_rejected, "the EKF's")
+        tails = heavy_tails(self.n_beyond + self.n_rejected, self.n + self.n_rejected, "the EKF's", self.acf1)
         return out + ([tails] if tails else [])
 
     def to_dict(self) -> dict:
@@ -275,11 +283,11 @@ def assess(run, sol: NavSolution, prmse_m: float | None = None, gnss_prmse_m: fl
             c.warnings.append(f"{KIND_NAMES[kind]} NIS per dof {value:.2f} outside the consistent band "
                               f"[{lo:.2f}, {hi:.2f}] ({n[kind]} updates): {what}; check the noise configuration "
                               f"(--tune auto identifies it from the recording)")
-    if c.acf1 is not None and n["pos"] > 10 and c.acf1 > max(ACF_MAX, 3.0 / math.sqrt(3 * n["pos"])):
+    if correlated(c.acf1, n["pos"]):
         c.warnings.append(f"its position innovations are correlated in time (lag-1 autocorrelation {c.acf1:.2f} > "
                           f"{ACF_MAX}): the model misses a slowly varying error (IMU noise set too low, or "
                           f"time-correlated GNSS errors not modelled), so its stated uncertainty is not to be trusted")
-    tails = heavy_tails(int(st.get("n_pos_beyond", 0) or 0), n["pos"], "its") if c.acf1 is not None else None
+    tails = heavy_tails(int(st.get("n_pos_beyond", 0) or 0), n["pos"], "its", c.acf1) if c.acf1 is not None else None
     if tails:
         c.warnings.append(tails)
     if model is not None and c.acf1 is None:   # not an EKF: its own figures cannot see the model
