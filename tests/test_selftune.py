@@ -287,7 +287,8 @@ def _binomial_sf(k: int, n: int, p: float) -> float:
 
 
 def test_heavy_tail_check_against_its_closed_form():
-    from gnssacc.consistency import TAIL_ALARM, TAIL_P, heavy_tails, tail_bound
+    from gnssacc.consistency import TAIL_ALARM, heavy_tails
+    from gnssacc.measurements import TAIL_P, tail_bound
 
     assert tail_bound(3) == pytest.approx(16.2662, abs=1e-3)   # chi-square table, 3 dof, 0.1 %
     for n in (50, 579, 5000):

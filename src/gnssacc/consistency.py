@@ -24,9 +24,10 @@ Warnings (``gnssacc: warning: <method>: ...``) are raised when
   method thinks; too large below it: it discards information);
 * the innovations are correlated in time (lag-1 autocorrelation above :data:`ACF_MAX`);
 * the position innovations have heavy tails: more of them beyond the chi-square bound of tail
-  probability :data:`TAIL_P` than Gaussian errors would give (binomial tail probability below
-  :data:`TAIL_ALARM`; white innovations only): the fixes carry outliers (multipath, jumps) that
-  the noise model does not cover, and the stated uncertainty averages over them;
+  probability 0.1 % (:func:`gnssacc.measurements.tail_bound`) than Gaussian errors would give
+  (binomial tail probability below :data:`TAIL_ALARM`; white innovations only): the fixes carry
+  outliers (multipath, jumps) that the noise model does not cover, and the stated uncertainty
+  averages over them;
 * the fix residual ratio exceeds :data:`FIX_RATIO_MAX`, or, with truth, the method's PRMSE
   exceeds that of the raw fixes by more than :data:`WORSE_MARGIN`;
 * the configured white IMU noise is below what the IMU shows at rest by more than
@@ -48,6 +49,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .measurements import TAIL_P, tail_bound
 from .solution import NavSolution
 
 #: Consistent band of a mean NIS per degree of freedom: the stated sigmas right within sqrt(2).
@@ -66,25 +68,12 @@ ACF_MAX = 0.1
 #: came out within 0.89-1.11x of the simulator's true values on 12 car-city / slow-UGV runs of every
 #: grade with 95-110 s at rest; a factor 2 (4x in variance) is far outside that scatter.
 REST_FACTOR = 2.0
-#: Tail probability of the chi-square bound an innovation's NIS is counted beyond (one in 1000).
-TAIL_P = 1e-3
 #: Heavy tails are reported when the count beyond the bound has a binomial tail probability
 #: below this under Gaussian errors (and at least 3 are beyond): a false alarm once in 10,000 runs.
 TAIL_ALARM = 1e-4
 #: Update kinds and their names in messages.
 KIND_NAMES = {"pos": "position", "acc": "acceleration", "zupt": "zero-velocity", "zaru": "zero-rate"}
 _DOF = {"pos": 3, "acc": 3, "zupt": 3, "zaru": 3}
-
-
-_TAIL_BOUNDS: dict = {}
-
-
-def tail_bound(dof: int) -> float:
-    """The NIS exceeded with probability :data:`TAIL_P` by Gaussian innovations of ``dof``."""
-    if dof not in _TAIL_BOUNDS:
-        from scipy.stats import chi2
-        _TAIL_BOUNDS[dof] = float(chi2.isf(TAIL_P, dof))
-    return _TAIL_BOUNDS[dof]
 
 
 def correlated(acf1: float | None, n: int) -> bool:
@@ -94,7 +83,7 @@ def correlated(acf1: float | None, n: int) -> bool:
 
 
 def heavy_tails(n_beyond: int, n: int, who: str, acf1: float | None = None) -> str | None:
-    """The warning when ``n_beyond`` of ``n`` position innovations beyond :func:`tail_bound` are
+    """The warning when ``n_beyond`` of ``n`` position innovations beyond ``tail_bound(3)`` are
     too many for Gaussian errors (``who``: whose innovations), else ``None``. Not for innovations
     correlated in time (``acf1``, :func:`correlated`): the count assumes independent ones, and the
     model is already reported as missing a slowly varying error, whose excursions it would count."""
@@ -159,7 +148,7 @@ class ModelCheck:
     rest : list of str
         The at-rest findings.
     n_beyond, n_rejected : int
-        Position innovations beyond :func:`tail_bound`, and fixes a position gate rejected.
+        Position innovations beyond ``tail_bound(3)``, and fixes a position gate rejected.
     """
 
     nis: float | None

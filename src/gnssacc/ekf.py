@@ -25,7 +25,6 @@ import numpy as np
 
 from . import jit, measurements as meas_models
 from .config import RunConfig
-from .consistency import tail_bound
 from .earth import earth_rate_n, gravity_n
 from .gnss_accel import AccelWindow, measured_specific_force, window_samples
 from .initialise import initial_sigmas
@@ -201,7 +200,7 @@ class _Tally:
         self.nis_sum[k] += nis
         self.dof[k] += len(m.dz)
         self.loglik[k] += loglik
-        self.beyond[k] += nis > tail_bound(len(m.dz))
+        self.beyond[k] += nis > meas_models.tail_bound(len(m.dz))
         if self.keep:
             for lst, v in zip(self.series[k], (t, nis / len(m.dz), loglik)):
                 lst.append(v)

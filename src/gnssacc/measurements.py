@@ -39,6 +39,17 @@ from .rotations import skew
 
 #: Update kinds, in the order they are reported.
 KINDS = ("pos", "acc", "zupt", "zaru")
+#: Tail probability of the chi-square bound an innovation's NIS is counted beyond (one in 1000).
+TAIL_P = 1e-3
+_TAIL_BOUNDS: dict = {}
+
+
+def tail_bound(dof: int) -> float:
+    """The NIS exceeded with probability :data:`TAIL_P` by Gaussian innovations of ``dof``."""
+    if dof not in _TAIL_BOUNDS:
+        from scipy.stats import chi2
+        _TAIL_BOUNDS[dof] = float(chi2.isf(TAIL_P, dof))
+    return _TAIL_BOUNDS[dof]
 
 
 @dataclass
