@@ -9,6 +9,7 @@ import pytest
 
 from gnssacc.config import load_config
 from gnssacc.ekf import run_ekf
+from gnssacc.gnss_noise import add_outliers
 from gnssacc.identify import identify
 from gnssacc.metrics import score, truth_at
 from gnssacc.pipeline import compare
@@ -300,27 +301,22 @@ def test_heavy_tail_check_against_its_closed_form():
         assert heavy_tails(first, n, "its", acf1=0.9) is None and heavy_tails(first, n, "its", acf1=0.0)
 
 
-def _with_outliers(run, fraction: float, metres: float, seed: int):
-    """``run`` with ``fraction`` of its fixes moved by N(0, metres) per axis (multipath jumps);
-    their stated sigma unchanged."""
-    from dataclasses import replace
-
-    rng = np.random.default_rng(seed)
-    g = run.gnss
-    bad = rng.random(len(g.t)) < fraction
-    d = rng.normal(0.0, metres, (len(g.t), 3)) * bad[:, None]
-    r = 6378137.0 + g.h
-    lat = g.lat + d[:, 0] / r
-    lon = g.lon + d[:, 1] / (r * np.cos(g.lat))
-    return run.with_gnss(replace(g, lat=lat, lon=lon, h=g.h - d[:, 2])), int(bad.sum())
+def test_add_outliers_moves_only_the_chosen_fixes_by_the_stated_spread():
+    run = simulate("car", 60.0, imu_grade="industrial", noise="white", seed=0)
+    out, moved = add_outliers(run, 0.5, 10.0, seed=3)
+    d = run.origin.to_ned(out.gnss.lat, out.gnss.lon, out.gnss.h) - \
+        run.origin.to_ned(run.gnss.lat, run.gnss.lon, run.gnss.h)
+    assert np.abs(d[~moved]).max() < 1e-6 and 15 < moved.sum() < 45
+    assert np.std(d[moved]) == pytest.approx(10.0, rel=0.25)
+    assert np.array_equal(out.gnss.sigma_ned, run.gnss.sigma_ned)
 
 
 def test_fixes_with_outliers_are_reported_for_every_method_and_clean_ones_are_not():
     # 3-4 % of the fixes 20 m off: the tuner widens the fix sigma to cover them, so the NIS stays
     # near 1 and only the tails show them.
     clean = simulate("ugv-slow", 235.0, imu_grade="industrial", noise="white", seed=1)
-    run, n_bad = _with_outliers(clean, 0.03, 20.0, seed=5)
-    assert n_bad >= 5
+    run, moved = add_outliers(clean, 0.03, 20.0, seed=5)
+    assert moved.sum() >= 5
     metrics, _, _ = compare(run, load_config(), ["ekf", "smoother"])
     for mid, c in metrics["consistency"].items():
         assert any("the fixes carry outliers" in w for w in c["warnings"]), (mid, c["warnings"])

@@ -190,3 +190,23 @@ def apply_outages(run: RecordedRun, spans: list[tuple[float, float]]) -> Recorde
     if not np.any(keep):
         raise InputError(run.where, "the outages remove every GNSS fix")
     return replace(run, gnss=run.gnss.select(keep), outages=tuple((float(a), float(b)) for a, b in spans))
+
+
+def add_outliers(run: RecordedRun, fraction: float, sigma_m: float, seed: int) -> tuple[RecordedRun, np.ndarray]:
+    """``run`` with about ``fraction`` of its fixes moved by N(0, ``sigma_m``^2) per NED axis
+    (multipath, jumps), their stated sigma unchanged: heavy-tailed fix errors for simulated runs.
+
+    Returns
+    -------
+    run : RecordedRun
+    moved : ndarray of bool, shape (M,)
+        Which fixes were moved.
+    """
+    if not (0.0 <= fraction <= 1.0 and sigma_m >= 0.0):
+        raise ValueError(f"add_outliers: fraction {fraction} must be in [0, 1] and sigma_m {sigma_m} >= 0")
+    g = run.gnss
+    rng = np.random.default_rng(seed)
+    moved = rng.random(len(g.t)) < fraction
+    p_n = run.origin.to_ned(g.lat, g.lon, g.h) + rng.normal(0.0, sigma_m, (len(g.t), 3)) * moved[:, None]
+    lat, lon, h = run.origin.to_llh(p_n)
+    return run.with_gnss(replace(g, lat=lat, lon=lon, h=h)), moved
