@@ -31,7 +31,7 @@ Conventions (every module follows them; they are stated here once):
 """
 __version__ = "0.1.0"
 
-from .jit import configure_cache as _configure_cache
+from .core.jit import configure_cache as _configure_cache
 
 _configure_cache()   # before anything imports numba: a read-only install caches in the user's folder
 

@@ -12,20 +12,20 @@ Settings are resolved exactly as ``gnssacc run`` resolves them (the command line
 this module): KITTI runs with the ``kitti`` preset unless another (or ``"none"``) is asked for;
 ``noise`` makes fixes from the truth; the input checks, self-tuning and scoring are those of
 :func:`gnssacc.pipeline.compare`. A run made in Python (:func:`simulate`, or a
-:class:`gnssacc.recording.RecordedRun` of your own) can be given instead of a source.
+:class:`gnssacc.core.recording.RecordedRun` of your own) can be given instead of a source.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
 
-from .config import RunConfig, load_config
-from .identify import Identified
+from .core.config import RunConfig, load_config
+from .core.recording import RecordedRun
+from .core.solution import NavSolution
+from .outputs.report import TRAJECTORY_COLUMNS, format_table, ok_methods, trajectory_table
 from .pipeline import compare_observed, load_source, parse_methods, resolve_preset, with_outages, write_result
-from .report import TRAJECTORY_COLUMNS, format_table, ok_methods, trajectory_table
-from .recording import RecordedRun
-from .simspec import known_noise_config
-from .solution import NavSolution
+from .prepare.identify import Identified
+from .sources.simspec import known_noise_config
 
 
 def configure(source=None, *, preset: str | None = None, config=None) -> RunConfig:
@@ -82,7 +82,7 @@ def process(source=None, *, methods=None, config=None, preset: str | None = None
     ----------
     source : str, Path, RecordedRun or None
         ``"kitti"`` (or ``None``), a ROS 1 ``.bag``, an ``.mcap``, a ROS 2 bag directory, a CSV run
-        directory, a simulated run ``"sim:SCENARIO[,key=value...]"`` (:mod:`gnssacc.simspec`; with
+        directory, a simulated run ``"sim:SCENARIO[,key=value...]"`` (:mod:`gnssacc.sources.simspec`; with
         ``tune="none"`` it runs with the simulator's IMU noise), or a run made in Python.
     methods : list of str or str, optional
         Method ids (default: ``ekf, ekf-acc, smoother, smoother-acc``).
@@ -91,7 +91,7 @@ def process(source=None, *, methods=None, config=None, preset: str | None = None
     tune : {"auto", "none"}, optional
         Noise identification from the recording (default: as ``[tuning] mode`` says, ``auto``).
     noise : str, optional
-        GNSS noise made from the truth, a profile of :data:`gnssacc.gnss_noise.PROFILES` (``white``,
+        GNSS noise made from the truth, a profile of :data:`gnssacc.sources.gnss_noise.PROFILES` (``white``,
         ``gm``, ``precise``, ``rtk``, ``none``; KITTI and ``sim:`` sources: ``white`` by default).
     seed : int
         Noise seed.
@@ -110,7 +110,7 @@ def process(source=None, *, methods=None, config=None, preset: str | None = None
 
     Raises
     ------
-    gnssacc.errors.InputError
+    gnssacc.core.errors.InputError
         Bad input, naming the file or option and the problem.
     """
     ids = parse_methods(methods if methods is None or isinstance(methods, str) else ",".join(methods))
@@ -152,9 +152,9 @@ class Result:
         Per method that succeeded (``<id>-online`` too for the smoothers).
     ident : Identified
         The shared start, stationary spans, input findings and tuned configuration.
-    replay : gnssacc.observability.EkfReplay or None
+    replay : gnssacc.analysis.observability.EkfReplay or None
         The ``ekf-acc`` pass's matrices at every GNSS epoch (for the report's observability
-        section and :func:`gnssacc.observability.aiding_information`).
+        section and :func:`gnssacc.analysis.observability.aiding_information`).
     """
 
     run: RecordedRun
@@ -191,17 +191,17 @@ class Result:
 
         Raises
         ------
-        gnssacc.errors.InputError
+        gnssacc.core.errors.InputError
             The folder holds something else (without ``overwrite``), or another writer holds it.
         """
-        from .outdir import ResultDir
+        from .outputs.outdir import ResultDir
 
         with ResultDir(Path(folder), overwrite=overwrite) as target:
             return self.write(target, plots=plots, report=report, export=export)
 
     def write(self, target, *, plots: bool = True, report: bool = False, export: tuple = (),
               extra_files=None) -> Path | None:
-        """Write into a locked :class:`gnssacc.outdir.ResultDir` (``None`` when every method failed:
+        """Write into a locked :class:`gnssacc.outputs.outdir.ResultDir` (``None`` when every method failed:
         nothing is written)."""
         return write_result(target, self.run, self.solutions, self.metrics, self.ident, plots=plots, report=report,
                             export=tuple(export), extra_files=extra_files, replay=self.replay)

@@ -1,9 +1,9 @@
 """Up-front checks of the command-line arguments, before anything is loaded or computed.
 
-Every check raises :class:`gnssacc.errors.InputError` naming the option (or the path) and the
+Every check raises :class:`gnssacc.core.errors.InputError` naming the option (or the path) and the
 problem with the range expected, so a bad argument costs the user nothing but one line.
-The same parsers serve the Python API (:func:`gnssacc.gnss_noise.parse_outages`,
-:func:`gnssacc.montecarlo.parse_seeds`, :func:`gnssacc.pipeline.parse_methods`).
+The same parsers serve the Python API (:func:`gnssacc.sources.gnss_noise.parse_outages`,
+:func:`gnssacc.analysis.montecarlo.parse_seeds`, :func:`gnssacc.pipeline.parse_methods`).
 """
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ import re
 import tempfile
 from pathlib import Path
 
-from .config_check import Bound, number_problem
-from .errors import InputError
+from .core.config_check import Bound, number_problem
+from .core.errors import InputError
 
 #: Largest seed (numpy takes more, but a 32-bit seed is plenty and portable).
 MAX_SEED = 2**32 - 1
@@ -46,8 +46,8 @@ def check_input_file(path: str, flag: str) -> None:
 
 def check_source(source: str | None) -> None:
     """Raise :class:`InputError` unless ``source`` is omitted, ``"kitti"``, a valid ``sim:`` spec
-    (:func:`gnssacc.simspec.parse_sim_spec`) or an existing path."""
-    from .simspec import is_sim_spec, parse_sim_spec
+    (:func:`gnssacc.sources.simspec.parse_sim_spec`) or an existing path."""
+    from .sources.simspec import is_sim_spec, parse_sim_spec
 
     if is_sim_spec(source):
         parse_sim_spec(source)
@@ -90,8 +90,8 @@ def writable(folder: Path) -> bool:
 
 
 def seeds(text: str) -> list[int]:
-    """``--seeds`` as a list (:func:`gnssacc.montecarlo.parse_seeds`), or :class:`InputError`."""
-    from .montecarlo import MAX_SEEDS, parse_seeds
+    """``--seeds`` as a list (:func:`gnssacc.analysis.montecarlo.parse_seeds`), or :class:`InputError`."""
+    from .analysis.montecarlo import MAX_SEEDS, parse_seeds
 
     try:
         return parse_seeds(text)
@@ -112,8 +112,8 @@ def check_args(args) -> None:
 
 def _estimation(args) -> None:
     """What ``run`` and ``bench`` share: the source, the methods and the outages."""
-    from .gnss_noise import parse_outages
     from .pipeline import parse_methods
+    from .sources.gnss_noise import parse_outages
 
     check_source(args.source)
     parse_methods(args.methods)
@@ -138,8 +138,8 @@ def _bench(args) -> None:
 
 def _batch(args) -> None:
     """``gnssacc batch``: every source, pattern and option, before a campaign folder is touched."""
-    from .gnss_noise import parse_outages
     from .pipeline import parse_methods
+    from .sources.gnss_noise import parse_outages
 
     if not args.sources and args.resume is None:
         raise InputError("SOURCE", "give the recordings to process ('kitti', bags, CSV run directories), or "

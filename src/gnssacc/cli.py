@@ -12,10 +12,10 @@ import warnings
 from pathlib import Path
 
 from . import __version__
-from .config import PRESETS, load_config
-from .errors import DataWarning, InputError
-from .gnss_noise import PROFILES
-from .interrupts import Terminated, raise_if_interrupted
+from .core.config import PRESETS, load_config
+from .core.errors import DataWarning, InputError
+from .core.interrupts import Terminated, raise_if_interrupted
+from .sources.gnss_noise import PROFILES
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -178,11 +178,11 @@ def _cmd_inspect(args) -> int:
 
 
 def _cmd_run(args) -> int:
-    """``gnssacc run``. The output folder is locked from the start (:mod:`gnssacc.outdir`); Ctrl-C
+    """``gnssacc run``. The output folder is locked from the start (:mod:`gnssacc.outputs.outdir`); Ctrl-C
     or SIGTERM leave its old or its new complete result, say which, and exit 130 or 143."""
     import contextlib
 
-    from .interrupts import signals_raise
+    from .core.interrupts import signals_raise
 
     held: list = []   # the locked output folder (a ResultDir), once there is one
     with signals_raise():
@@ -200,7 +200,7 @@ def _cmd_run(args) -> int:
 
 def _lock_out(path, args, stack, held):
     """Lock and check the output folder (refused at once: :class:`InputError`); hold it in ``stack``."""
-    from .outdir import ResultDir
+    from .outputs.outdir import ResultDir
 
     keep = [args.source] if args.source not in (None, "kitti") else []   # never replace the input
     held.append(stack.enter_context(ResultDir(path, overwrite=args.overwrite, keep_out=keep)))
@@ -210,9 +210,9 @@ def _lock_out(path, args, stack, held):
 def _run_locked(args, stack, held) -> int:
     """Compute and write; exit code 0 when at least one method succeeded, 1 when none did."""
     from .api import configure, evaluate, load
-    from .interrupts import raise_if_arrived
+    from .core.interrupts import raise_if_arrived
+    from .outputs.report import failed_methods
     from .pipeline import default_out_dir, parse_methods
-    from .report import failed_methods
 
     target = _lock_out(args.out, args, stack, held) if args.out else None
     methods = parse_methods(args.methods)
@@ -234,7 +234,7 @@ def _run_locked(args, stack, held) -> int:
 
 
 def _print_summary(run, cfg, metrics: dict, ident, out) -> None:
-    from .report import format_table
+    from .outputs.report import format_table
 
     print(f"{run.name}: {run.duration_s:.1f} s, {len(run.imu)} IMU samples, {len(run.gnss)} GNSS fixes"
           + (f", noise {run.meta['noise']} seed {run.meta['seed']}" if "noise" in run.meta else "")
@@ -263,12 +263,12 @@ def _quality_lines(metrics: dict) -> list[str]:
 
 
 def _cmd_bench(args) -> int:
-    """``gnssacc bench``: a one-source campaign (:func:`gnssacc.batch.bench`) and its table."""
+    """``gnssacc bench``: a one-source campaign (:func:`gnssacc.campaign.batch.bench`) and its table."""
     import json
 
+    from .analysis.montecarlo import format_summary, summarise
     from .argcheck import seeds as parse_seeds
-    from .batch import bench
-    from .montecarlo import format_summary, summarise
+    from .campaign.batch import bench
     from .pipeline import parse_methods, resolve_preset
 
     methods = parse_methods(args.methods)
@@ -291,9 +291,9 @@ def _cmd_bench(args) -> int:
 def _cmd_batch(args) -> int:
     """``gnssacc batch``: exit 0 when every task succeeded, 1 when some failed (all recorded),
     130/143 when interrupted (the finished tasks stay; ``--resume`` runs the rest)."""
-    from .batch import open_executor, run_campaign
-    from .campaign_args import campaign_from_args
-    from .interrupts import signals_raise
+    from .campaign.batch import open_executor, run_campaign
+    from .campaign.campaign_args import campaign_from_args
+    from .core.interrupts import signals_raise
 
     camp = campaign_from_args(args)
     executor = open_executor(args.jobs, args.scheduler)
@@ -315,7 +315,7 @@ def _cmd_batch(args) -> int:
 def _cmd_config(args) -> int:
     cfg = load_config(args.preset, args.config)
     if args.template:
-        from .config_docs import template_toml
+        from .core.config_docs import template_toml
 
         print(template_toml(cfg), end="")
     else:
@@ -353,7 +353,7 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     warnings.showwarning = _show_warning
     if args.command == "run" or (args.command == "bench" and args.jobs <= 1):
-        from .jit import start_background
+        from .core.jit import start_background
         # At once: the kernels compile (first run, with a one-line notice) or load in the
         # background while the arguments are checked, the modules imported and the data loaded.
         start_background()

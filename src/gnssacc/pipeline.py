@@ -9,21 +9,22 @@ from datetime import datetime
 from pathlib import Path
 from typing import Callable
 
-from . import jit
-from .config import RunConfig
-from .consistency import assess
-from .ekf import run_ekf
-from .errors import InputError, warn_data
-from .gnss_noise import apply_outages, parse_outages
-from .identify import Identified, identify
-from .interrupts import raise_if_interrupted
-from .memory import release_free_memory
-from .metrics import gnss_score, score
-from .outdir import ResultDir
-from .report import format_table, metrics_dict, plot_errors, plot_trajectory, write_json, write_trajectory_csv
-from .recording import RecordedRun
-from .simspec import is_sim_spec, load_sim
-from .solution import NavSolution
+from .analysis.consistency import assess
+from .analysis.metrics import gnss_score, score
+from .core import jit
+from .core.config import RunConfig
+from .core.errors import InputError, warn_data
+from .core.interrupts import raise_if_interrupted
+from .core.memory import release_free_memory
+from .core.recording import RecordedRun
+from .core.solution import NavSolution
+from .estimators.ekf import run_ekf
+from .outputs.outdir import ResultDir
+from .outputs.report import format_table, metrics_dict, plot_errors, plot_trajectory, write_json, write_trajectory_csv
+from .prepare.identify import Identified, identify
+from .sources.gnss_noise import apply_outages, parse_outages
+from .sources.simspec import is_sim_spec, load_sim
+
 
 def _ekf(ident: Identified, method: str, show_progress: bool, observer=None) -> dict[str, NavSolution]:
     return {method: run_ekf(ident.run, ident.cfg, method, quality=ident.quality, init=ident.init,
@@ -31,13 +32,13 @@ def _ekf(ident: Identified, method: str, show_progress: bool, observer=None) -> 
 
 
 def _smoother(ident: Identified, method: str, show_progress: bool) -> dict[str, NavSolution]:
-    from .smoother import run_smoother  # gtsam import only when a smoother method is asked for
+    from .estimators.smoother import run_smoother  # gtsam import only when a smoother method is asked for
     return run_smoother(ident.run, ident.cfg, method, quality=ident.quality, init=ident.init,
                         stationary=ident.stationary, show_progress=show_progress)
 
 
 def _gm(ident: Identified, method: str, show_progress: bool) -> dict[str, NavSolution]:
-    from .gm_variant import BASE_OF, run_gm
+    from .estimators.gm_variant import BASE_OF, run_gm
     return run_gm(ident, method, show_progress, METHODS[BASE_OF[method]])
 
 
@@ -92,7 +93,7 @@ def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None,
     ----------
     source : str or None
         ``None`` or ``"kitti"``: the KITTI sequence in the gtsam wheel. ``sim:SCENARIO[,key=value...]``:
-        a simulated run (:mod:`gnssacc.simspec`; ``noise`` default ``white``, ``seed`` draws the IMU
+        a simulated run (:mod:`gnssacc.sources.simspec`; ``noise`` default ``white``, ``seed`` draws the IMU
         errors and the GNSS noise). A ROS 1 ``.bag``, a bare
         ``.mcap`` or a ROS 2 bag directory: read through rosbags. Another directory: a CSV run
         directory (``imu.csv``, ``gnss.csv``, optional ``truth.csv``, ``init.json``).
@@ -158,15 +159,15 @@ def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: s
     tune : {"auto", "none"}, optional
         Noise identification (default: the configuration's ``[tune] mode``).
     ident : Identified, optional
-        A result of :func:`gnssacc.identify.identify` to reuse (then ``run``/``cfg``/``tune`` are
+        A result of :func:`gnssacc.prepare.identify.identify` to reuse (then ``run``/``cfg``/``tune`` are
         not looked at again).
     failures : dict, optional
         When given, a method whose estimator raises (any ``Exception`` but
-        :class:`gnssacc.errors.InputError`) is recorded here as ``{method: one-line reason}``
+        :class:`gnssacc.core.errors.InputError`) is recorded here as ``{method: one-line reason}``
         and the other methods still run; when omitted the exception propagates.
     observers : dict, optional
-        ``{method: gnssacc.ekf.EkfObserver}`` watching an EKF method's own pass (e.g. the
-        :class:`gnssacc.observability.EpochCollector` of the report's observability section).
+        ``{method: gnssacc.estimators.ekf.EkfObserver}`` watching an EKF method's own pass (e.g. the
+        :class:`gnssacc.analysis.observability.EpochCollector` of the report's observability section).
 
     Returns
     -------
@@ -266,7 +267,7 @@ def _noise_model_of(ident: Identified, sid: str, sols: dict):
     used, and the check of its noise model: the ``-gm`` methods' own (from ``ekf-gm``'s pass when
     ``sols`` has it), else the run's."""
     if METHODS.get(sid.removesuffix("-online")) is _gm:
-        from .gm_variant import gm_model
+        from .estimators.gm_variant import gm_model
         return gm_model(ident, sols.get("ekf-gm"))
     return ident, ident.model
 
@@ -338,11 +339,11 @@ def compare_observed(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tu
     -------
     metrics, solutions, ident
         As from :func:`compare`.
-    replay : gnssacc.observability.EkfReplay or None
+    replay : gnssacc.analysis.observability.EkfReplay or None
     """
     collector = None
     if observe and "ekf-acc" in methods:
-        from .observability import EpochCollector
+        from .analysis.observability import EpochCollector
 
         collector = EpochCollector(False)
     metrics, sols, ident = compare(run, cfg, methods, tune=tune, show_progress=show_progress,
@@ -396,10 +397,10 @@ def default_out_dir(run: RecordedRun) -> Path:
 def write_outputs(out_dir: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict, cfg: RunConfig,
                   plots: bool = True, report: bool = False, export: tuple = (), tuned_toml: str | None = None,
                   overwrite: bool = False) -> Path:
-    """Replace ``out_dir`` as a whole by a complete result (:class:`gnssacc.outdir.ResultDir`).
+    """Replace ``out_dir`` as a whole by a complete result (:class:`gnssacc.outputs.outdir.ResultDir`).
 
     Takes the folder's lock for the time of writing; the CLI instead holds a
-    :class:`~gnssacc.outdir.ResultDir` over the whole run and calls :func:`write_result_files`
+    :class:`~gnssacc.outputs.outdir.ResultDir` over the whole run and calls :func:`write_result_files`
     through it. ``overwrite`` also replaces a folder that is not a gnssacc result. The other
     parameters are those of :func:`write_result_files`.
     """
@@ -419,7 +420,7 @@ def write_result_files(folder: Path, run: RecordedRun, sols: dict[str, NavSoluti
     (``trajectory_<id>.tum`` and the truth's, for ``evo``), ``"bag"`` (``trajectories/``, a ROS 2
     bag of ``nav_msgs/Odometry``) and ``"ros1bag"`` (``trajectories.bag``); ``tuned_toml`` is written as
     ``tuned.toml`` (the identified noise, reusable with ``--config``); ``replay`` is the
-    ``ekf-acc`` pass's :class:`gnssacc.observability.EkfReplay` for the report (``None``: the
+    ``ekf-acc`` pass's :class:`gnssacc.analysis.observability.EkfReplay` for the report (``None``: the
     report runs that filter once more).
     """
     folder = Path(folder)
@@ -433,16 +434,16 @@ def write_result_files(folder: Path, run: RecordedRun, sols: dict[str, NavSoluti
             plot_errors(run, sols, folder / "errors.png")
         plot_trajectory(run, sols, folder / "trajectory.png")
     if "tum" in export:
-        from .export import write_truth_tum, write_tum
+        from .outputs.export import write_truth_tum, write_tum
         for mid, sol in sols.items():
             write_tum(sol, run, folder / f"trajectory_{mid}.tum")
         if run.truth is not None:
             write_truth_tum(run, folder)
     for kind in set(export) & {"bag", "ros1bag"}:
-        from .odombag import BAG_EXPORTS, write_odometry_bag
+        from .outputs.odombag import BAG_EXPORTS, write_odometry_bag
         write_odometry_bag(sols, run, folder / BAG_EXPORTS[kind])
     if report:
-        from .htmlreport import write_html_report
+        from .outputs.htmlreport import write_html_report
         write_html_report(folder, run, sols, metrics, cfg, replay=replay)
     (folder / "table.txt").write_text(format_table(metrics) + "\n")
     write_json(metrics, folder / "metrics.json")

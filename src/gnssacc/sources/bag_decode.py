@@ -16,9 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config_check import FIX_MAPPING_FIELDS
-from ..errors import InputError
-from ..rotations import ENU_NED, FLU_FRD, dcm_to_euler, quaternion_to_dcm, ros_to_R_nb
+from ..core.config_check import FIX_MAPPING_FIELDS
+from ..core.errors import InputError
+from ..core.rotations import ENU_NED, FLU_FRD, dcm_to_euler, quaternion_to_dcm, ros_to_R_nb
 from .common import one_line
 
 IMU_TYPE = "sensor_msgs/msg/Imu"

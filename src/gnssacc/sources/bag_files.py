@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import InputError, warn_data
+from ..core.errors import InputError, warn_data
 from .bag_salvage import Ros1Salvage
 from .common import one_line
 

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..earth import LocalTangentFrame
-from ..rotations import ENU_NED, FLU_FRD, R_nb_to_ros, dcm_to_quaternion, euler_to_dcm
-from ..recording import RecordedRun
+from ..core.earth import LocalTangentFrame
+from ..core.recording import RecordedRun
+from ..core.rotations import ENU_NED, FLU_FRD, R_nb_to_ros, dcm_to_quaternion, euler_to_dcm
 
 LLH_MSG = "float64 lat\nfloat64 lon\nfloat64 height\n"
 HPPOSLLH_MSG = "ubxtranslator/llh llh\nubxtranslator/llh err\n"

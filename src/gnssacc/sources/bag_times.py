@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import warn_data
-from ..quality import gap_indices
+from ..checks.quality import gap_indices
+from ..core.errors import warn_data
 
 
 def sorted_unique(tab: np.ndarray, where: str, what: str, meta: dict, key: str) -> np.ndarray:
@@ -31,7 +31,7 @@ def sorted_unique(tab: np.ndarray, where: str, what: str, meta: dict, key: str) 
     Returns
     -------
     ndarray, shape (M, K)
-        Strictly increasing times; a :class:`~gnssacc.errors.DataWarning` for each repair made.
+        Strictly increasing times; a :class:`~gnssacc.core.errors.DataWarning` for each repair made.
     """
     if len(tab) == 0:
         return tab
@@ -62,7 +62,7 @@ def sorted_unique(tab: np.ndarray, where: str, what: str, meta: dict, key: str) 
 
 def find_gaps(t: np.ndarray, factor: float) -> dict:
     """Pauses longer than ``factor`` times the median sample interval (the rule of
-    :func:`gnssacc.quality.gap_indices`, with ``[quality] gap_factor`` as the IMU checks use it).
+    :func:`gnssacc.checks.quality.gap_indices`, with ``[quality] gap_factor`` as the IMU checks use it).
 
     Parameters
     ----------

@@ -1,7 +1,7 @@
 """Which topics of a bag are the IMU, the GNSS and the truth: a survey of the topics and the rules
 that pick them (:func:`select_topics`).
 
-A choice that is not unambiguous raises :class:`~gnssacc.errors.InputError` listing the
+A choice that is not unambiguous raises :class:`~gnssacc.core.errors.InputError` listing the
 candidates and the command-line flag that picks one; every choice made comes with its reason
 (``Selection.reasons``, shown by ``gnssacc inspect`` and kept in ``run.meta["selection"]``).
 """
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..errors import InputError
+from ..core.errors import InputError
 from .bag_decode import IMU_TYPE, NAVSATFIX_TYPE, POSE_TYPES, TF_TYPE, merge_fix_mappings
 
 #: Types never taken for a GNSS fix, left out of the hint when no fix topic is found.

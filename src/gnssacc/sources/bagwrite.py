@@ -1,4 +1,4 @@
-"""Write a :class:`~gnssacc.recording.RecordedRun` as a ROS bag, so every bag path can be tested end to
+"""Write a :class:`~gnssacc.core.recording.RecordedRun` as a ROS bag, so every bag path can be tested end to
 end with known truth (and benchmarked).
 
 Kinds
@@ -23,12 +23,24 @@ from pathlib import Path
 
 import numpy as np
 
-from ..earth import LocalTangentFrame
-from ..errors import InputError
-from ..rotations import R_nb_to_ros
-from ..recording import RecordedRun
-from .bag_streams import (HPPOSLLH_TYPE, IMAGE_TYPE, IMU_TYPE, NAVSATFIX_TYPE, ODOMETRY_TYPE, TF_TYPE, MessageTypes,
-                          fix_messages, image_messages, imu_messages, odometry_messages, tf_static_messages)
+from ..core.earth import LocalTangentFrame
+from ..core.errors import InputError
+from ..core.recording import RecordedRun
+from ..core.rotations import R_nb_to_ros
+from .bag_streams import (
+    HPPOSLLH_TYPE,
+    IMAGE_TYPE,
+    IMU_TYPE,
+    NAVSATFIX_TYPE,
+    ODOMETRY_TYPE,
+    TF_TYPE,
+    MessageTypes,
+    fix_messages,
+    image_messages,
+    imu_messages,
+    odometry_messages,
+    tf_static_messages,
+)
 
 KINDS = ("ros1-rooad", "ros2-sqlite3", "ros2-mcap", "mcap")
 #: Sigmas N, E, D [m] written with a fix-type truth (an RTK receiver's).

@@ -6,16 +6,15 @@ Every source must pass its IMU samples through :func:`apply_mounting` exactly on
 from __future__ import annotations
 
 from contextlib import contextmanager
-
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from ..config import RunConfig
-from ..errors import InputError, warn_data
-from ..gnss_noise import fixes_from_truth
-from ..recording import ImuData, RecordedRun, Truth, drop_nonfinite
+from ..core.config import RunConfig
+from ..core.errors import InputError, warn_data
+from ..core.recording import ImuData, RecordedRun, Truth, drop_nonfinite
+from .gnss_noise import fixes_from_truth
 
 
 def apply_mounting(imu: ImuData, cfg: RunConfig) -> ImuData:
@@ -29,7 +28,7 @@ def apply_mounting(imu: ImuData, cfg: RunConfig) -> ImuData:
     cfg : RunConfig
         ``mounting.imu_to_body_rpy_deg`` (via ``cfg.R_bi``, ``x_b = R_bi @ x_imu``) and
         ``mounting.imu_time_offset_s`` [s], added to every time stamp. ``"auto"`` stands for the
-        identity and zero here: the input checks (:mod:`gnssacc.plausibility`) measure and apply
+        identity and zero here: the input checks (:mod:`gnssacc.checks.plausibility`) measure and apply
         them later.
 
     Returns
@@ -62,7 +61,7 @@ def with_noisy_fixes(run: RecordedRun, truth: Truth, noise: str, seed: int) -> R
     truth : Truth
         Positions (geodetic, radians and metres) at the epochs [s] the fixes get.
     noise : str
-        GNSS noise profile (:data:`gnssacc.gnss_noise.PROFILES`).
+        GNSS noise profile (:data:`gnssacc.sources.gnss_noise.PROFILES`).
     seed : int
         Noise seed.
 
@@ -166,7 +165,7 @@ def read_table(path, required: Sequence[str], optional: Sequence[str] = (),
     is free and extra columns are ignored (they may hold anything). Blank lines and lines whose
     first non-blank character is ``#`` are skipped anywhere in the file. Empty cells count as
     missing (NaN). Rows with NaN/inf in a column that is read are dropped with a
-    :class:`~gnssacc.errors.DataWarning` giving the count (see :func:`gnssacc.recording.drop_nonfinite`).
+    :class:`~gnssacc.core.errors.DataWarning` giving the count (see :func:`gnssacc.core.recording.drop_nonfinite`).
     A truncated last line (fewer cells than the header, as left by a logger that stopped
     mid-write) is dropped with a warning.
 

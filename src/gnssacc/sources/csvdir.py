@@ -34,13 +34,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import DEG, RunConfig
-from ..earth import LocalTangentFrame
-from ..errors import InputError
-from ..rotations import flu_to_frd
-from ..memory import release_free_memory
-from ..plausibility import fix_imu_time_units
-from ..recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth, check_increasing
+from ..checks.plausibility import fix_imu_time_units
+from ..core.config import DEG, RunConfig
+from ..core.earth import LocalTangentFrame
+from ..core.errors import InputError
+from ..core.memory import release_free_memory
+from ..core.recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth, check_increasing
+from ..core.rotations import flu_to_frd
 from .common import apply_mounting, check_degrees, read_table
 
 IMU_COLUMNS = ("t", "ax", "ay", "az", "gx", "gy", "gz")

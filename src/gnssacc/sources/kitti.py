@@ -14,7 +14,7 @@ Conversions made here:
   sets gravity and earth rate, which vary by far less than the IMU noise over the run.
 
 The positions are the truth; the estimators' fixes are truth plus a seeded noise profile
-(:mod:`gnssacc.gnss_noise`).
+(:mod:`gnssacc.sources.gnss_noise`).
 """
 from __future__ import annotations
 
@@ -22,11 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import RunConfig
-from ..earth import LocalTangentFrame
-from ..errors import InputError
-from ..rotations import flu_to_frd
-from ..recording import GnssFixes, ImuData, RecordedRun, Truth
+from ..core.config import RunConfig
+from ..core.earth import LocalTangentFrame
+from ..core.errors import InputError
+from ..core.recording import GnssFixes, ImuData, RecordedRun, Truth
+from ..core.rotations import flu_to_frd
 from .common import apply_mounting, with_noisy_fixes
 
 #: Geodetic origin assigned to the KITTI local frame: latitude, longitude [deg], height [m].

@@ -9,7 +9,7 @@ Topics
     Truth (optional): ``nav_msgs/msg/Odometry``, ``geometry_msgs/msg/PoseStamped``,
     ``geometry_msgs/msg/PoseWithCovarianceStamped`` or a second fix topic (e.g. an RTK receiver).
     Topics are picked by type and rate when unambiguous (see :func:`select_topics`); otherwise
-    an :class:`~gnssacc.errors.InputError` lists the candidates and the argument that picks one.
+    an :class:`~gnssacc.core.errors.InputError` lists the candidates and the argument that picks one.
 
 Frames (ROS REP-103 -> gnssacc)
     IMU samples are body Front-Left-Up and converted to Front-Right-Down ``(x, -y, -z)`` before
@@ -28,7 +28,7 @@ Only the chosen connections are read (``reader.messages(connections=...)``): ima
 topics are skipped without being decoded, and memory is bounded by the IMU/GNSS data.
 
 Modules
-    This module composes the others into a :class:`~gnssacc.recording.RecordedRun` (frames, units,
+    This module composes the others into a :class:`~gnssacc.core.recording.RecordedRun` (frames, units,
     origin, initial state) and re-exports their public names: :mod:`.bag_files` (bag paths and
     opening), :mod:`.bag_salvage` (damaged ROS 1 bags), :mod:`.bag_topics` (survey and topic
     selection), :mod:`.bag_decode` (messages to rows, fix mappings, ``/tf_static``) and
@@ -40,14 +40,23 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import DEG, RunConfig
-from ..earth import LocalTangentFrame
-from ..errors import InputError, warn_data
-from ..rotations import FLU_FRD, dcm_to_euler, quaternion_to_dcm, ros_to_R_nb
-from ..memory import release_free_memory
-from ..recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth, drop_nonfinite
-from .bag_decode import FIX_MAPPINGS, TIME_SOURCES, Collector, Decoded, RowDecoder, decode_topics, \
-    merge_fix_mappings, normalize_type, tf_mounting
+from ..core.config import DEG, RunConfig
+from ..core.earth import LocalTangentFrame
+from ..core.errors import InputError, warn_data
+from ..core.memory import release_free_memory
+from ..core.recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth, drop_nonfinite
+from ..core.rotations import FLU_FRD, dcm_to_euler, quaternion_to_dcm, ros_to_R_nb
+from .bag_decode import (
+    FIX_MAPPINGS,
+    TIME_SOURCES,
+    Collector,
+    Decoded,
+    RowDecoder,
+    decode_topics,
+    merge_fix_mappings,
+    normalize_type,
+    tf_mounting,
+)
 from .bag_files import MAGIC, STORAGE_SUFFIXES, check_bag_path, open_reader, storage_files
 from .bag_times import find_gaps, sorted_unique, subsample
 from .bag_topics import Selection, TopicStat, select_topics, survey

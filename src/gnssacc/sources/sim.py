@@ -1,6 +1,6 @@
 """Ground-vehicle simulator: scenarios with known truth, WGS-84-consistent IMU, GNSS fixes.
 
-The simulator produces :class:`gnssacc.recording.RecordedRun` objects for tests of the estimators.
+The simulator produces :class:`gnssacc.core.recording.RecordedRun` objects for tests of the estimators.
 Its parts: :mod:`.sim_scenarios` (speed / yaw / pitch profiles), :mod:`.sim_path` (the path on
 the ellipsoid, the error-free IMU), :mod:`.sim_imu_errors` (grades and IMU errors),
 :mod:`.sim_vibration` (engine and road vibration) and this module (the run). Their public names
@@ -47,18 +47,41 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..earth import LocalTangentFrame
-from ..errors import InputError
-from ..gnss_noise import PROFILES, fixes_from_truth
-from ..memory import release_free_memory
-from ..recording import GnssFixes, ImuData, InitialState, RecordedRun, SimTruth
-from .sim_imu_errors import (GRADE_KEYS, IMU_EXTRA_ERRORS, IMU_GRADES, MODEL_KEYS,  # noqa: F401 (re-exported)
-                             UNMODELLED_KEYS, VIBRATION_ENVIRONMENT, BiasDrift, ImuErrorStream, per_axis, bias_drift,
-                             gauss_markov, grade_config, imu_error_model, imu_errors, imu_sigmas_si, sensor_matrices)
-from .sim_path import (IMU_BLOCK, GridBlock, Trajectory, TruthSamples, build_trajectory,  # noqa: F401 (re-exported)
-                       dense_truth, perfect_imu, sample_times, sweep_imu)
-from .sim_scenarios import (SCENARIOS, Kinematics, Pulse, Scenario, R_nb_batch,  # noqa: F401 (re-exported)
-                            make_scenario, reversing_spans)
+from ..core.earth import LocalTangentFrame
+from ..core.errors import InputError
+from ..core.memory import release_free_memory
+from ..core.recording import GnssFixes, ImuData, InitialState, RecordedRun, SimTruth
+from .gnss_noise import PROFILES, fixes_from_truth
+from .sim_imu_errors import (  # noqa: F401 (re-exported)
+    GRADE_KEYS,
+    IMU_EXTRA_ERRORS,
+    IMU_GRADES,
+    MODEL_KEYS,
+    UNMODELLED_KEYS,
+    VIBRATION_ENVIRONMENT,
+    BiasDrift,
+    ImuErrorStream,
+    bias_drift,
+    gauss_markov,
+    grade_config,
+    imu_error_model,
+    imu_errors,
+    imu_sigmas_si,
+    per_axis,
+    sensor_matrices,
+)
+from .sim_path import (  # noqa: F401 (re-exported)
+    IMU_BLOCK,
+    GridBlock,
+    Trajectory,
+    TruthSamples,
+    build_trajectory,
+    dense_truth,
+    perfect_imu,
+    sample_times,
+    sweep_imu,
+)
+from .sim_scenarios import SCENARIOS, Kinematics, Pulse, R_nb_batch, Scenario, make_scenario, reversing_spans  # noqa: F401 (re-exported)
 from .sim_true_bias import TrueBias  # noqa: F401 (re-exported)
 from .sim_vibration import EngineVibration, band_limited_columns, engine_vibration, road_scale, road_vibration  # noqa: F401
 
@@ -242,7 +265,7 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
     gnss_rate_hz : float
         GNSS fix rate [Hz], at most the IMU rate; fixes at ``t_start_s + k / gnss_rate_hz``.
     noise : {"white", "gm", "none"}
-        GNSS noise profile of :mod:`gnssacc.gnss_noise`.
+        GNSS noise profile of :mod:`gnssacc.sources.gnss_noise`.
     seed : int
         Seeds the IMU errors and (through an independent stream) the GNSS noise.
     origin_llh_deg : (float, float, float)
@@ -255,7 +278,7 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
         Attach the true initial state (with 1 m / 0.1 m/s / 1-2 deg sigmas) as ``run.init``;
         otherwise the estimators self-initialise.
     imu_overrides : dict, optional
-        Error parameters to replace: keys of ``gnssacc.config.DEFAULTS["imu"]`` or any other key
+        Error parameters to replace: keys of ``gnssacc.core.config.DEFAULTS["imu"]`` or any other key
         of :func:`imu_error_model` (e.g. ``{"vib_road_gyro_dps": 0.0}``).
     truth_rate_hz : float, optional
         Rate of ``run.truth`` [Hz]; by default the truth is at the GNSS epochs.
@@ -266,7 +289,7 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
     -------
     RecordedRun
         ``name = "sim-<scenario>"``, ``where = "simulator(<scenario>, seed=<seed>)"``. ``meta``
-        records every argument and the GNSS seed; ``sim`` (:class:`gnssacc.recording.SimTruth`) the
+        records every argument and the GNSS seed; ``sim`` (:class:`gnssacc.core.recording.SimTruth`) the
         filter-visible IMU parameters (``imu_params``, as :func:`grade_config`), the full error
         description (``imu_error_model``), the per-run error draws (``imu_error_draws``, small
         arrays), the true biases per IMU sample (``bias``, a :class:`TrueBias`; also as arrays

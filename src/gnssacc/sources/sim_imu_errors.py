@@ -41,14 +41,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import DEFAULTS, G0
-from ..errors import InputError
+from ..core.config import DEFAULTS, G0
+from ..core.errors import InputError
 
 DEG = np.pi / 180.0
 MG = 1e-3 * G0
 WHERE = "simulator"
 
-#: Keys of an IMU grade known to the filter; identical to ``gnssacc.config.DEFAULTS["imu"]``.
+#: Keys of an IMU grade known to the filter; identical to ``gnssacc.core.config.DEFAULTS["imu"]``.
 GRADE_KEYS = tuple(DEFAULTS["imu"])
 
 
@@ -58,7 +58,7 @@ def _grade(arw, vrw, gbi, abi, g0, a0, tau=300.0) -> dict:
             "gyro_bias_sigma0_deg_h": g0, "accel_bias_sigma0_mg": a0}
 
 
-#: Filter-visible parameters of each grade, in the units of ``gnssacc.config.DEFAULTS["imu"]``:
+#: Filter-visible parameters of each grade, in the units of ``gnssacc.core.config.DEFAULTS["imu"]``:
 #: ARW [deg/sqrt(h)], VRW [m/s/sqrt(h)], bias instability [deg/h] and [mg] (Gauss-Markov
 #: sigma), correlation time [s], turn-on bias 1-sigma [deg/h] and [mg].
 IMU_GRADES: dict[str, dict] = {
@@ -153,13 +153,13 @@ def grade_config(grade: str, overrides: dict | None = None) -> dict:
         A key of :data:`IMU_GRADES`: ``perfect``, ``consumer``, ``industrial``, ``tactical`` or
         the original ``consumer-basic``, ``industrial-basic``, ``tactical-basic``.
     overrides : dict, optional
-        Keys of ``gnssacc.config.DEFAULTS["imu"]`` to replace (scalar or three per-axis values).
+        Keys of ``gnssacc.core.config.DEFAULTS["imu"]`` to replace (scalar or three per-axis values).
 
     Returns
     -------
     dict
-        The keys of ``gnssacc.config.DEFAULTS["imu"]``, usable as
-        ``gnssacc.config.load_config(overrides={"imu": grade_config(grade)})``. ``"perfect"``
+        The keys of ``gnssacc.core.config.DEFAULTS["imu"]``, usable as
+        ``gnssacc.core.config.load_config(overrides={"imu": grade_config(grade)})``. ``"perfect"``
         gives zeros, which a filter cannot use as process noise.
 
     Raises

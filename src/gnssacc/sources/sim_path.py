@@ -13,10 +13,10 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from ..earth import OMEGA_IE, normal_gravity, radii
-from ..errors import InputError
-from ..rotations import wrap_angle
-from ..recording import Truth
+from ..core.earth import OMEGA_IE, normal_gravity, radii
+from ..core.errors import InputError
+from ..core.recording import Truth
+from ..core.rotations import wrap_angle
 from .sim_scenarios import Kinematics, Scenario, make_scenario
 
 DEG = np.pi / 180.0
@@ -27,7 +27,7 @@ IMU_BLOCK = 8192
 
 
 def _R_en_batch(lat, lon) -> np.ndarray:
-    """ECEF-to-NED rotations (``gnssacc.earth.R_en``) for arrays, shape (K, 3, 3)."""
+    """ECEF-to-NED rotations (``gnssacc.core.earth.R_en``) for arrays, shape (K, 3, 3)."""
     sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
     R = np.empty((len(sl), 3, 3))
     R[:, 0, 0], R[:, 0, 1], R[:, 0, 2] = -sl * co, -sl * so, cl
@@ -117,7 +117,7 @@ class TruthSamples:
     speed: np.ndarray
 
     def to_truth(self) -> Truth:
-        """As a :class:`gnssacc.recording.Truth`."""
+        """As a :class:`gnssacc.core.recording.Truth`."""
         return Truth(self.t.copy(), self.lat.copy(), self.lon.copy(), self.h.copy(),
                      self.v_n.copy(), self.rpy.copy())
 

@@ -24,7 +24,7 @@ import copy
 
 import numpy as np
 
-from .sim_imu_errors import DEG, per_axis, gauss_markov
+from .sim_imu_errors import DEG, gauss_markov, per_axis
 
 
 def harmonic_interval_mean(phase_edges: np.ndarray, order: int, offset=0.0) -> np.ndarray:

@@ -1,0 +1,312 @@
+"""The recorded-run model: IMU samples, GNSS fixes, optional truth and initial state.
+
+Every source (KITTI, CSV directory, simulator, bags) produces a :class:`RecordedRun`; every
+estimator consumes one. Validation lives here so that all sources get the same checks.
+
+Frames and units: body frame b is Front-Right-Down, navigation frame n is North-East-Down,
+times are seconds on one clock, angles radians, positions geodetic (lat, lon [rad], h [m]).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .earth import LocalTangentFrame
+from .errors import InputError, warn_data
+from .rotations import euler_to_dcm
+
+if TYPE_CHECKING:
+    from ..sources.sim_true_bias import TrueBias
+
+
+@dataclass
+class ImuData:
+    """Strapdown IMU samples.
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+        Sample times [s]. Sample k holds over the interval ``(t[k-1], t[k]]``.
+    f_b : ndarray, shape (N, 3)
+        Specific force in the body frame (FRD) [m/s^2].
+    omega_ib_b : ndarray, shape (N, 3)
+        Angular rate of the body w.r.t. inertial space, body frame [rad/s].
+    """
+
+    t: np.ndarray
+    f_b: np.ndarray
+    omega_ib_b: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def select(self, mask) -> "ImuData":
+        return ImuData(self.t[mask], self.f_b[mask], self.omega_ib_b[mask])
+
+    def sample_range(self, t: float, avg_s: float = 0.0) -> tuple[int, int]:
+        """Indices ``[k0, k1)`` of the samples covering ``[t - avg_s, t]`` (the one holding at ``t`` if 0)."""
+        k = min(int(np.searchsorted(self.t, t, side="left")), len(self.t) - 1)
+        k0 = int(np.searchsorted(self.t, t - avg_s, side="left")) if avg_s > 0 else k
+        return min(k0, k), k + 1
+
+
+@dataclass
+class GnssFixes:
+    """GNSS position fixes of the antenna.
+
+    Attributes
+    ----------
+    t : ndarray, shape (M,)
+        Fix times [s].
+    lat, lon : ndarray, shape (M,)
+        Geodetic latitude and longitude [rad].
+    h : ndarray, shape (M,)
+        Ellipsoidal height [m].
+    sigma_ned : ndarray, shape (M, 3)
+        1-sigma position uncertainty along north, east, down [m].
+    """
+
+    t: np.ndarray
+    lat: np.ndarray
+    lon: np.ndarray
+    h: np.ndarray
+    sigma_ned: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def select(self, mask) -> "GnssFixes":
+        return GnssFixes(self.t[mask], self.lat[mask], self.lon[mask], self.h[mask], self.sigma_ned[mask])
+
+
+@dataclass
+class Truth:
+    """Reference trajectory.
+
+    Attributes
+    ----------
+    t : ndarray, shape (K,)
+    lat, lon : ndarray [rad]
+    h : ndarray [m]
+    v_n : ndarray, shape (K, 3) or None
+        NED velocity [m/s], when known.
+    rpy : ndarray, shape (K, 3) or None
+        Roll, pitch, yaw [rad], when known.
+    """
+
+    t: np.ndarray
+    lat: np.ndarray
+    lon: np.ndarray
+    h: np.ndarray
+    v_n: np.ndarray | None = None
+    rpy: np.ndarray | None = None
+
+
+@dataclass
+class InitialState:
+    """Initial navigation state and its 1-sigma uncertainty.
+
+    Attributes
+    ----------
+    t : float
+        Time of the state [s].
+    lat, lon : float
+        [rad].
+    h : float
+        [m].
+    v_n : ndarray, shape (3,)
+        NED velocity [m/s].
+    rpy : ndarray, shape (3,)
+        Roll, pitch, yaw [rad].
+    sigma_pos_m, sigma_vel_mps, sigma_att_rad : ndarray, shape (3,)
+        1-sigma of the NED position, NED velocity and of the attitude error (n frame).
+    how : str
+        A short account of how the state was obtained (shown in reports).
+    b_a, b_g : ndarray, shape (3,)
+        Initial accelerometer [m/s^2] and gyro [rad/s] bias estimates, body axes (zero unless
+        measured, e.g. the gyro bias from a static start).
+    sigma_b_a, sigma_b_g : ndarray, shape (3,) or None
+        Their 1-sigma; ``None``: the configured turn-on bias sigmas.
+    fit_window : tuple of float or None
+        ``(t_first, t_last)`` of the fixes the initial position/velocity were fitted to [s].
+    levelled : bool
+        Roll and pitch come from accelerometer levelling: their error is then tied to the
+        accelerometer bias (the estimators start with that correlation).
+    """
+
+    t: float
+    lat: float
+    lon: float
+    h: float
+    v_n: np.ndarray
+    rpy: np.ndarray
+    sigma_pos_m: np.ndarray
+    sigma_vel_mps: np.ndarray
+    sigma_att_rad: np.ndarray
+    how: str = "given"
+    b_a: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    b_g: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    sigma_b_a: np.ndarray | None = None
+    sigma_b_g: np.ndarray | None = None
+    fit_window: tuple | None = None
+    levelled: bool = False
+
+    @property
+    def R_nb(self) -> np.ndarray:
+        return euler_to_dcm(*self.rpy)
+
+
+@dataclass
+class SimTruth:
+    """What only a simulation knows about its IMU (:func:`gnssacc.sources.sim.simulate`).
+
+    Attributes
+    ----------
+    bias : gnssacc.sources.sim_true_bias.TrueBias
+        The accelerometer [m/s^2] and gyro [rad/s] bias in effect at each IMU sample (turn-on +
+        Gauss-Markov + drift), body axes: drawn again from the run's streams when asked
+        (``bias.at(t)`` at chosen epochs), not kept per sample.
+    segments : list of dict
+        The scenario log: one dict per motion segment (``kind``, ``t0``, ``t1`` [s], ``reverse``, ...).
+    imu_error_draws : dict
+        Per-run constants of the IMU error model (turn-on biases, scale factors, misalignments ...).
+    imu_params : dict
+        The filter-visible noise parameters of the simulated grade (configuration keys and units).
+    imu_error_model : dict
+        The full error description it was drawn from.
+    """
+
+    bias: "TrueBias"
+    segments: list
+    imu_error_draws: dict
+    imu_params: dict
+    imu_error_model: dict
+
+    @property
+    def true_bias_a(self) -> np.ndarray:
+        """The accelerometer bias at every IMU sample [m/s^2], shape (N, 3) (drawn on each access)."""
+        return self.bias.samples()[0]
+
+    @property
+    def true_bias_g(self) -> np.ndarray:
+        """The gyro bias at every IMU sample [rad/s], shape (N, 3) (drawn on each access)."""
+        return self.bias.samples()[1]
+
+
+@dataclass
+class RecordedRun:
+    """One recorded (or simulated) run, ready for the estimators.
+
+    Attributes
+    ----------
+    name : str
+        Short name used in output folder names (e.g. ``kitti``).
+    where : str
+        Where the data came from (a path or a description); named in every error message.
+    imu : ImuData
+    gnss : GnssFixes
+        The fixes the estimators may use (after noise and outages, for sources with truth).
+    origin : LocalTangentFrame
+        Tangent-plane origin for metric work and plots.
+    truth : Truth or None
+    init : InitialState or None
+        Given initial state; ``None`` lets the estimators initialise themselves.
+    outages : tuple of (float, float)
+        GNSS outage spans applied to the fixes, seconds from the start (:func:`gnssacc.sources.gnss_noise.apply_outages`).
+    sim : SimTruth or None
+        A simulated run's IMU truths (true biases, scenario segments).
+    meta : dict
+        Small facts about the source (noise profile, seed, bag topics, ...): those of
+        :data:`gnssacc.outputs.report.RUN_FIELDS` are written to ``metrics.json``.
+    """
+
+    name: str
+    where: str
+    imu: ImuData
+    gnss: GnssFixes
+    origin: LocalTangentFrame
+    truth: Truth | None = None
+    init: InitialState | None = None
+    outages: tuple = ()
+    sim: SimTruth | None = None
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def t_start(self) -> float:
+        return float(self.imu.t[0])
+
+    @property
+    def t_end(self) -> float:
+        return float(self.imu.t[-1])
+
+    @property
+    def duration_s(self) -> float:
+        return self.t_end - self.t_start
+
+    def validate(self) -> "RecordedRun":
+        """Check shapes, finiteness and time order; raise :class:`InputError` naming the problem."""
+        imu, gnss = self.imu, self.gnss
+        if len(imu) < 2:
+            raise InputError(self.where, "no IMU samples (need at least two)")
+        if imu.f_b.shape != (len(imu), 3) or imu.omega_ib_b.shape != (len(imu), 3):
+            raise InputError(self.where, "IMU arrays must have shape (N, 3)")
+        check_increasing(imu.t, self.where, "IMU")
+        if len(gnss) == 0:
+            raise InputError(self.where, "no GNSS fix at all: at least one fix is needed to initialise")
+        check_increasing(gnss.t, self.where, "GNSS")
+        for name, arr in (("IMU time", imu.t), ("specific force", imu.f_b), ("angular rate", imu.omega_ib_b),
+                          ("GNSS time", gnss.t), ("GNSS latitude", gnss.lat), ("GNSS longitude", gnss.lon),
+                          ("GNSS height", gnss.h), ("GNSS sigma", gnss.sigma_ned)):
+            if not np.all(np.isfinite(arr)):
+                raise InputError(self.where, f"{name} contains NaN or inf values")
+        if np.any(gnss.sigma_ned <= 0):
+            raise InputError(self.where, "GNSS sigmas must be positive metres")
+        if np.any(np.abs(gnss.lat) > np.pi / 2) or np.any(np.abs(gnss.lon) > 2 * np.pi):
+            raise InputError(self.where, "GNSS latitude/longitude out of range (are they degrees, not radians?)")
+        overlap = (gnss.t >= imu.t[0]) & (gnss.t <= imu.t[-1])
+        if not np.any(overlap):
+            raise InputError(self.where, f"GNSS fixes ({gnss.t[0]:.3f}..{gnss.t[-1]:.3f} s) do not overlap the IMU "
+                                         f"time span ({imu.t[0]:.3f}..{imu.t[-1]:.3f} s): different clocks?")
+        if self.truth is not None:
+            check_increasing(self.truth.t, self.where, "truth")
+        return self
+
+    def with_gnss(self, gnss: GnssFixes, **meta) -> "RecordedRun":
+        """A copy with other GNSS fixes (e.g. noisy or with outages) and extra metadata."""
+        return replace(self, gnss=gnss, meta={**self.meta, **meta})
+
+
+def check_increasing(t: np.ndarray, where: str, what: str) -> None:
+    """Raise :class:`InputError` if time stamps are not strictly increasing."""
+    d = np.diff(t)
+    bad = np.flatnonzero(d <= 0)
+    if bad.size:
+        k = int(bad[0])
+        kind = "goes backwards" if d[k] < 0 else "repeats"
+        raise InputError(where, f"{what} time {kind} at sample {k + 1} ({t[k]:.6f} s -> {t[k + 1]:.6f} s); "
+                                f"{bad.size} such place(s)")
+
+
+def drop_nonfinite(table: np.ndarray, where: str, what: str, max_fraction: float) -> np.ndarray:
+    """Drop rows with NaN/inf, warning with the count; error above ``max_fraction`` of the rows.
+
+    Parameters
+    ----------
+    table : ndarray, shape (N, K)
+    where, what : str
+        File and table names for the messages.
+    max_fraction : float
+        Largest tolerated fraction of bad rows (0..1).
+    """
+    good = np.all(np.isfinite(table), axis=1)
+    n_bad = int((~good).sum())
+    if n_bad:
+        frac = n_bad / len(table)
+        if frac > max_fraction:
+            raise InputError(where, f"{n_bad} of {len(table)} {what} rows ({100 * frac:.1f}%) contain NaN/inf, "
+                                    f"more than the allowed {100 * max_fraction:.1f}% (data.max_bad_fraction)")
+        warn_data(where, f"dropped {n_bad} of {len(table)} {what} rows with NaN/inf values")
+        return table[good]
+    return table   # no copy when every row is good: the common case, and a long run's largest array

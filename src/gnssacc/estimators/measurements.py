@@ -1,0 +1,142 @@
+r"""The EKF's measurement models, all of one shape: a :class:`Measurement` ``(dz, H, R)``.
+
+Error state (estimate minus truth), order as in the paper::
+
+    dx = [dp_n (N, E, D m), dv_n (m/s), phi (rad, n frame), b_a (m/s^2, body), b_g (rad/s, body)]
+
+with ``R_nb_est = (I + [phi x]) R_nb``, ``f_est = f + b_a``, ``omega_est = omega + b_g``; with
+time-correlated GNSS errors modelled (``gnss.gm_sigma_m > 0``) three more states follow, the
+estimated Gauss-Markov part of the fix error ``x_g`` [m, NED] (estimate minus truth).
+Every innovation is *predicted minus measured*, ``dz = H dx - noise``, so the closed-loop
+correction subtracts ``K dz`` (:func:`gnssacc.estimators.ekf.correct`).
+
+Models
+------
+``pos``
+    GNSS antenna position: ``H = [I, 0, -[(R l_b) x], 0, 0 (, I)]`` (``l_b`` the lever arm; the
+    fix is the antenna plus its Gauss-Markov error ``x_g`` plus white noise).
+``acc``
+    GNSS-derived acceleration (the paper's): ``H_a = [0, 0, -[(R f) x], R, 0]`` from
+    :func:`gnssacc.estimators.gnss_accel.H_a_blocks`; or its window-consistent form (``ekf-accw``), the
+    kernel-weighted INS acceleration over the fixes' window, ``H_w = [0, 0, -[(R F) x], R M, R G]``
+    from :func:`gnssacc.estimators.gnss_accel.H_w_blocks`.
+``zupt``
+    Zero velocity while the vehicle stands still: ``dz = v_est``, ``H = [0, I, 0, 0, 0]``.
+``zaru``
+    Zero angular rate while it stands still: the gyro then reads the bias plus the earth rate,
+    ``dz = (omega_mean - b_g_hat) - R_est^T omega_ie^n``. To first order
+    ``dz = b_g - R^T [omega_ie x] phi + noise``, so ``H = [0, 0, -R^T [omega_ie x], 0, I]``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.earth import radii
+from ..core.rotations import skew
+from .gnss_accel import H_a_blocks, H_w_blocks, predicted_acceleration
+
+#: Update kinds, in the order they are reported.
+KINDS = ("pos", "acc", "zupt", "zaru")
+#: Tail probability of the chi-square bound an innovation's NIS is counted beyond (one in 1000).
+TAIL_P = 1e-3
+_TAIL_BOUNDS: dict = {}
+
+
+def tail_bound(dof: int) -> float:
+    """The NIS exceeded with probability :data:`TAIL_P` by Gaussian innovations of ``dof``."""
+    if dof not in _TAIL_BOUNDS:
+        from scipy.stats import chi2
+        _TAIL_BOUNDS[dof] = float(chi2.isf(TAIL_P, dof))
+    return _TAIL_BOUNDS[dof]
+
+
+@dataclass
+class Measurement:
+    """One linearised measurement at the current state.
+
+    Attributes
+    ----------
+    kind : str
+        One of :data:`KINDS`.
+    dz : ndarray, shape (m,)
+        Innovation, predicted minus measured.
+    H : ndarray, shape (m, 15)
+        Jacobian of the prediction w.r.t. the error state.
+    R : ndarray, shape (m, m)
+        Measurement noise covariance.
+    gate : float
+        Reject the update when its normalised innovation squared exceeds this (0: never).
+    """
+
+    kind: str
+    dz: np.ndarray
+    H: np.ndarray
+    R: np.ndarray
+    gate: float = 0.0
+
+
+def position(s, lat: float, lon: float, h: float, sigma_ned: np.ndarray, lever_arm_b: np.ndarray,
+             gate: float = 0.0) -> Measurement:
+    """GNSS antenna position fix (lat, lon [rad], h [m]) with 1-sigma ``sigma_ned`` [m]."""
+    R_M, R_N = radii(s.pos[0])
+    l_n = s.R_nb @ lever_arm_b
+    dz = np.array([(s.pos[0] - lat) * (R_M + s.pos[2]), (s.pos[1] - lon) * (R_N + s.pos[2]) * np.cos(s.pos[0]),
+                   -(s.pos[2] - h)]) + l_n
+    H = _H(s, 3)
+    H[:, 0:3] = np.eye(3)
+    H[:, 6:9] = -skew(l_n)
+    if H.shape[1] > 15:
+        dz += s.gm
+        H[:, 15:18] = np.eye(3)
+    return Measurement("pos", dz, H, np.diag(np.asarray(sigma_ned, float) ** 2), gate)
+
+
+def _H(s, m: int) -> np.ndarray:
+    """A zero Jacobian with as many columns as the filter has states."""
+    return np.zeros((m, s.P.shape[0]))
+
+
+def acceleration(s, a_n: np.ndarray, cov: np.ndarray, f_meas_b: np.ndarray, g_n: np.ndarray) -> Measurement:
+    """GNSS-derived acceleration ``a_n`` [m/s^2] (covariance ``cov``) against the INS prediction
+    from the measured specific force ``f_meas_b`` [m/s^2, body] and gravity ``g_n``."""
+    f_b = f_meas_b - s.b_a
+    a_pred = predicted_acceleration(s.R_nb, f_b, g_n)
+    d_phi, d_ba = H_a_blocks(s.R_nb, f_b)
+    H = _H(s, 3)
+    H[:, 6:9] = d_phi
+    H[:, 9:12] = d_ba
+    return Measurement("acc", a_pred - a_n, H, cov)
+
+
+def window_acceleration(s, a_n: np.ndarray, cov: np.ndarray, F_b: np.ndarray, M: np.ndarray, G: np.ndarray,
+                        g_n: np.ndarray) -> Measurement:
+    """GNSS-derived acceleration ``a_n`` [m/s^2] (covariance ``cov``) against the window-consistent
+    INS prediction ``R_nb F_b + g_n``, ``F_b, M, G`` the kernel integrals of
+    :func:`gnssacc.estimators.mechanization.kernel_force_integrals` at the state's biases (body frame at the
+    update epoch)."""
+    d_phi, d_ba, d_bg = H_w_blocks(s.R_nb, F_b, M, G)
+    H = _H(s, 3)
+    H[:, 6:9] = d_phi
+    H[:, 9:12] = d_ba
+    H[:, 12:15] = d_bg
+    return Measurement("acc", predicted_acceleration(s.R_nb, F_b, g_n) - a_n, H, cov)
+
+
+def zero_velocity(s, sigma_mps: float, gate: float = 0.0) -> Measurement:
+    """The vehicle stands still: NED velocity zero within ``sigma_mps`` [m/s]."""
+    H = _H(s, 3)
+    H[:, 3:6] = np.eye(3)
+    return Measurement("zupt", s.v_n.copy(), H, np.eye(3) * sigma_mps**2, gate)
+
+
+def zero_rate(s, omega_mean_b: np.ndarray, var_b: np.ndarray, w_ie_n: np.ndarray, gate: float = 0.0) -> Measurement:
+    """The vehicle stands still: the mean raw gyro reading ``omega_mean_b`` [rad/s] over a block
+    (variance of that mean ``var_b`` [(rad/s)^2] per axis) is the bias plus the earth rate
+    ``w_ie_n`` [rad/s, NED]."""
+    dz = (omega_mean_b - s.b_g) - s.R_nb.T @ w_ie_n
+    H = _H(s, 3)
+    H[:, 6:9] = -s.R_nb.T @ skew(w_ie_n)
+    H[:, 12:15] = np.eye(3)
+    return Measurement("zaru", dz, H, np.diag(var_b), gate)

@@ -1,0 +1,664 @@
+r"""Strapdown mechanization in geodetic coordinates / NED (paper eqs. 1-3) and the 15-state
+error model F, G, compiled with numba.
+
+Nominal state: ``pos = [lat, lon, h]`` [rad, rad, m], ``v_n`` [m/s], ``R_nb``, and the
+accumulated bias estimates ``b_a`` [m/s^2], ``b_g`` [rad/s].
+
+Error state (estimate minus truth), order as in the paper:
+``dx = [dp_n (N, E, D metres), dv_n, phi, b_a, b_g]`` with ``R_nb_est = (I + [phi x]) R_nb``,
+``f_est = f + b_a``, ``omega_est = omega + b_g``. In this convention
+
+* ``d(dp)/dt  = F_pp dp + dv``
+* ``d(dv)/dt  = F_vp dp + F_vv dv - [(R_nb f) x] phi + R_nb b_a + R_nb w_a``
+* ``d(phi)/dt = F_phi_p dp + F_phi_v dv - [omega_in x] phi + R_nb b_g + R_nb w_g``
+* ``d(b)/dt   = w_b`` (random walks)
+
+which is the paper's F and G (``F_v,ba = F_phi,bg = R_nb``). The position error is in metres,
+``dp_N = (R_M + h) dlat``, ``dp_E = (R_N + h) cos(lat) dlon``, ``dp_D = -dh``; the blocks are
+derived in ``system_matrix`` and checked against finite differences of the nonlinear model in
+the tests.
+
+IMU samples: sample ``k`` is held over ``(t[k-1], t[k]]``. Intervals are split exactly at event
+times (GNSS epochs, outputs).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..core import earth
+
+_A, _E2, _W, _F = earth.A, earth.E2, earth.OMEGA_IE, earth.F
+_GE, _K, _M = earth.GAMMA_E, earth.SOMIGLIANA_K, earth.M_RATIO
+
+
+@njit(cache=True)
+def _radii(lat):
+    s2 = np.sin(lat) ** 2
+    w = 1.0 - _E2 * s2
+    return _A * (1.0 - _E2) / w**1.5, _A / np.sqrt(w)
+
+
+@njit(cache=True)
+def _gravity(lat, h):
+    """Normal gravity magnitude [m/s^2] and its height derivative [1/s^2]."""
+    s2 = np.sin(lat) ** 2
+    g0 = _GE * (1.0 + _K * s2) / np.sqrt(1.0 - _E2 * s2)
+    c1 = 2.0 / _A * (1.0 + _F + _M - 2.0 * _F * s2)
+    g = g0 * (1.0 - c1 * h + 3.0 * h * h / (_A * _A))
+    dg_dh = g0 * (-c1 + 6.0 * h / (_A * _A))
+    return g, dg_dh
+
+
+# Small products are written out: numba's `@` goes through BLAS (and needs scipy), which costs
+# more than the arithmetic for 3x3 matrices.
+@njit(cache=True)
+def _mm(A, B):
+    n, m, p = A.shape[0], A.shape[1], B.shape[1]
+    C = np.zeros((n, p))
+    for i in range(n):
+        for k in range(m):
+            a = A[i, k]
+            if a != 0.0:
+                for j in range(p):
+                    C[i, j] += a * B[k, j]
+    return C
+
+
+@njit(cache=True)
+def _exp_so3_into(p0, p1, p2, out):
+    """``out = Exp([p x])`` by Rodrigues' formula, ``I + a K + b (p p^T - |p|^2 I)``, no allocation."""
+    th2 = p0 * p0 + p1 * p1 + p2 * p2
+    if th2 < 1e-16:
+        a, b = 1.0, 0.5
+    else:
+        th = np.sqrt(th2)
+        a = np.sin(th) / th
+        b = (1.0 - np.cos(th)) / th2
+    out[0, 0] = 1.0 + b * (p0 * p0 - th2)
+    out[1, 1] = 1.0 + b * (p1 * p1 - th2)
+    out[2, 2] = 1.0 + b * (p2 * p2 - th2)
+    out[0, 1] = -a * p2 + b * p0 * p1
+    out[1, 0] = a * p2 + b * p0 * p1
+    out[0, 2] = a * p1 + b * p0 * p2
+    out[2, 0] = -a * p1 + b * p0 * p2
+    out[1, 2] = -a * p0 + b * p1 * p2
+    out[2, 1] = a * p0 + b * p1 * p2
+
+
+@njit(cache=True)
+def _mm3_into(A, B, out):
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
+
+
+@njit(cache=True)
+def _strapdown(pos, v_n, R_nb, f_b, omega_ib_b, dt, w_ie_sign, work):
+    """:func:`strapdown_step` with a (3, 3, 3) work array: no allocation in the per-sample path."""
+    lat, h = pos[0], pos[2]
+    R_M, R_N = _radii(lat)
+    W = _W * w_ie_sign
+    wie0, wie2 = W * np.cos(lat), -W * np.sin(lat)
+    wen0, wen1, wen2 = v_n[1] / (R_N + h), -v_n[0] / (R_M + h), -v_n[1] * np.tan(lat) / (R_N + h)
+    g, _ = _gravity(lat, h)
+    E_n, E_b, T = work[0], work[1], work[2]
+    _exp_so3_into(-(wie0 + wen0) * dt, -wen1 * dt, -(wie2 + wen2) * dt, E_n)
+    _exp_so3_into(omega_ib_b[0] * dt, omega_ib_b[1] * dt, omega_ib_b[2] * dt, E_b)
+    _mm3_into(E_n, R_nb, T)
+    _mm3_into(T, E_b, E_n)                     # E_n now holds R_new
+    # Specific force rotated by the mean of the old and new attitude.
+    f0 = 0.5 * ((R_nb[0, 0] + E_n[0, 0]) * f_b[0] + (R_nb[0, 1] + E_n[0, 1]) * f_b[1] + (R_nb[0, 2] + E_n[0, 2]) * f_b[2])
+    f1 = 0.5 * ((R_nb[1, 0] + E_n[1, 0]) * f_b[0] + (R_nb[1, 1] + E_n[1, 1]) * f_b[1] + (R_nb[1, 2] + E_n[1, 2]) * f_b[2])
+    f2 = 0.5 * ((R_nb[2, 0] + E_n[2, 0]) * f_b[0] + (R_nb[2, 1] + E_n[2, 1]) * f_b[1] + (R_nb[2, 2] + E_n[2, 2]) * f_b[2])
+    # Coriolis (2 w_ie + w_en) x v.
+    c0, c1, c2 = 2.0 * wie0 + wen0, wen1, 2.0 * wie2 + wen2
+    vN, vE, vD = v_n[0], v_n[1], v_n[2]
+    nN = vN + (f0 - (c1 * vD - c2 * vE)) * dt
+    nE = vE + (f1 - (c2 * vN - c0 * vD)) * dt
+    nD = vD + (f2 - (c0 * vE - c1 * vN) + g) * dt
+    pos[0] += 0.5 * (vN + nN) / (R_M + h) * dt
+    pos[1] += 0.5 * (vE + nE) / ((R_N + h) * np.cos(pos[0])) * dt
+    pos[2] -= 0.5 * (vD + nD) * dt
+    v_n[0], v_n[1], v_n[2] = nN, nE, nD
+    for i in range(3):
+        for j in range(3):
+            R_nb[i, j] = E_n[i, j]
+
+
+@njit(cache=True)
+def kernel_force_integrals(f_b, omega_b, h, w, b_a, b_g):
+    """Kernel-weighted specific force over an acceleration window, in the body frame at its end.
+
+    Walks the samples backward from the window's end ``t_k``, integrating the body rotation
+    ``R_{b_k b_s}`` from the bias-corrected gyro (earth rate neglected: see
+    :mod:`gnssacc.estimators.gnss_accel`), each sample taken at the midpoint of its overlap.
+
+    Parameters
+    ----------
+    f_b, omega_b : ndarray (n, 3)
+        The window's raw IMU samples in time order, body [m/s^2], [rad/s].
+    h : ndarray (n,)
+        Each sample's overlap with the window [s].
+    w : ndarray (n,)
+        Its kernel weight ``int K`` [-] (:func:`gnssacc.estimators.gnss_accel.window_samples`).
+    b_a, b_g : ndarray (3,)
+        Bias estimates [m/s^2], [rad/s].
+
+    Returns
+    -------
+    F : ndarray (3,)
+        ``int K R_{b_k b_s} (f - b_a) ds`` [m/s^2].
+    M : ndarray (3, 3)
+        ``int K R_{b_k b_s} ds`` [-].
+    G : ndarray (3, 3)
+        ``int K [u x] Gamma ds`` [m/s], ``u = R_{b_k b_s} (f - b_a)``, ``Gamma(s) = int_s^{t_k}
+        R_{b_k b_tau} d tau``: the sensitivity of ``F`` to the gyro-bias error.
+    """
+    F = np.zeros(3)
+    M = np.zeros((3, 3))
+    G = np.zeros((3, 3))
+    R = np.eye(3)                 # R_{b_k b(s)} at the start of the current step (walking back)
+    Gam = np.zeros((3, 3))        # Gamma at that time
+    E = np.empty((3, 3))
+    Rm = np.empty((3, 3))
+    Gm = np.empty((3, 3))
+    u = np.empty(3)
+    for i in range(h.shape[0] - 1, -1, -1):
+        hi = h[i]
+        p0, p1, p2 = omega_b[i, 0] - b_g[0], omega_b[i, 1] - b_g[1], omega_b[i, 2] - b_g[2]
+        _exp_so3_into(-0.5 * hi * p0, -0.5 * hi * p1, -0.5 * hi * p2, E)
+        _mm3_into(R, E, Rm)
+        for r in range(3):
+            for c in range(3):
+                Gm[r, c] = Gam[r, c] + 0.5 * hi * Rm[r, c]
+        for r in range(3):
+            u[r] = (Rm[r, 0] * (f_b[i, 0] - b_a[0]) + Rm[r, 1] * (f_b[i, 1] - b_a[1])
+                    + Rm[r, 2] * (f_b[i, 2] - b_a[2]))
+        wi = w[i]
+        for r in range(3):
+            F[r] += wi * u[r]
+            for c in range(3):
+                M[r, c] += wi * Rm[r, c]
+                # [u x] Gm, row r
+                G[r, c] += wi * (u[(r + 1) % 3] * Gm[(r + 2) % 3, c] - u[(r + 2) % 3] * Gm[(r + 1) % 3, c])
+        for r in range(3):
+            for c in range(3):
+                Gam[r, c] += hi * Rm[r, c]
+        _exp_so3_into(-0.5 * hi * p0, -0.5 * hi * p1, -0.5 * hi * p2, E)
+        _mm3_into(Rm, E, R)
+    return F, M, G
+
+
+@njit(cache=True)
+def apply_correction(pos, v_n, R_nb, b_a, b_g, gm, dx):
+    """Closed-loop feedback of an estimated error ``dx`` (estimate minus truth, order
+    ``[dp, dv, phi, b_a, b_g (, x_g)]``) into the nominal state, in place.
+
+    ``R_nb <- Exp(-phi) R_nb``; the biases are added because ``f_est = f_raw - b_a_hat`` carries
+    the residual ``b_a``.
+    """
+    R_M, R_N = _radii(pos[0])
+    pos[0] -= dx[0] / (R_M + pos[2])
+    pos[1] -= dx[1] / ((R_N + pos[2]) * np.cos(pos[0]))
+    pos[2] += dx[2]
+    E = np.empty((3, 3))
+    T = np.empty((3, 3))
+    _exp_so3_into(-dx[6], -dx[7], -dx[8], E)
+    _mm3_into(E, R_nb, T)
+    for i in range(3):
+        v_n[i] -= dx[3 + i]
+        b_a[i] += dx[9 + i]
+        b_g[i] += dx[12 + i]
+        for j in range(3):
+            R_nb[i, j] = T[i, j]
+    if dx.shape[0] > 15:
+        for i in range(3):
+            gm[i] -= dx[15 + i]
+
+
+@njit(cache=True)
+def strapdown_step(pos, v_n, R_nb, f_b, omega_ib_b, dt, w_ie_sign=1.0):
+    """Advance the nominal state by ``dt`` [s] with a held IMU sample (in place).
+
+    Attitude: ``R <- Exp(-omega_in dt) R Exp(omega_ib dt)`` (paper eq. 3); velocity: paper eq. 2
+    with the specific force rotated by the mean of the old and new attitude; position: paper
+    eq. 1 with the trapezoidal velocity. ``w_ie_sign = -1`` reverses the earth rate, which makes
+    the same equations integrate a time-reversed recording exactly.
+    """
+    _strapdown(pos, v_n, R_nb, f_b, omega_ib_b, dt, w_ie_sign, np.empty((3, 3, 3)))
+
+
+@njit(cache=True)
+def system_matrix(pos, v_n, R_nb, f_b, w_ie_sign=1.0):
+    """Continuous-time error-state matrix F (15 x 15) at the current nominal state.
+
+    Parameters
+    ----------
+    pos : ndarray (3,)
+        lat, lon [rad], h [m].
+    v_n : ndarray (3,)
+        NED velocity [m/s].
+    R_nb : ndarray (3, 3)
+    f_b : ndarray (3,)
+        Bias-corrected specific force [m/s^2].
+    w_ie_sign : float
+        +1, or -1 for a time-reversed recording.
+    """
+    F = np.zeros((15, 15))
+    _system_matrix_into(F, pos, v_n, R_nb, f_b, w_ie_sign)
+    return F
+
+
+@njit(cache=True)
+def _cross(a0, a1, a2, b0, b1, b2):
+    """``a x b`` as three scalars (``[a x] b``)."""
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@njit(cache=True)
+def _system_matrix_into(F, pos, v_n, R_nb, f_b, w_ie_sign):
+    """:func:`system_matrix` written into ``F``, scalar arithmetic only: the per-sample path
+    allocates nothing. Every call writes the same entries, so the rest of ``F`` (zero from the
+    caller) stays zero."""
+    lat, h = pos[0], pos[2]
+    vN, vE, vD = v_n[0], v_n[1], v_n[2]
+    R_M, R_N = _radii(lat)
+    W = _W * w_ie_sign
+    g, dg_dh = _gravity(lat, h)
+    rm, rn = R_M + h, R_N + h
+    tl, cl, sl = np.tan(lat), np.cos(lat), np.sin(lat)
+    wie0, wie2 = W * cl, -W * sl                       # earth rate, NED (east component 0)
+    wen0, wen1, wen2 = vE / rn, -vN / rm, -vE * tl / rn   # transport rate
+    # Position rows (metres): d(dp)/dt = F_pp dp + dv.
+    F[0, 0] = -vD / rm
+    F[0, 2] = vN / rm
+    F[1, 0] = vE * tl / rm
+    F[1, 1] = -(vD / rn + vN * tl / rm)
+    F[1, 2] = vE / rn
+    for i in range(3):
+        F[i, 3 + i] = 1.0
+    # Sensitivities of omega_ie + omega_en (d/dlat, d/dh) and of omega_en (d/dv):
+    # drho_dv has [0, 1] = 1/rn, [1, 0] = -1/rm, [2, 1] = -tl/rn.
+    rho_lat2 = -vE / (rn * cl * cl)                    # d(w_en_D)/dlat
+    dh0, dh1, dh2 = -vE / rn**2, vN / rm**2, vE * tl / rn**2
+    # Velocity rows: dv_dot = -[(2 w_ie + w_en) x] dv + [v x] d(2 w_ie + w_en) + dg - [(R f) x] phi + R b_a.
+    c0, c1, c2 = 2.0 * wie0 + wen0, wen1, 2.0 * wie2 + wen2
+    # -[c x] + [v x] drho_dv, column by column ([v x] e_k = v x e_k).
+    x0, x1, x2 = _cross(vN, vE, vD, 0.0, -1.0 / rm, 0.0)
+    F[3, 3], F[4, 3], F[5, 3] = x0, -c2 + x1, c1 + x2
+    y0, y1, y2 = _cross(vN, vE, vD, 1.0 / rn, 0.0, -tl / rn)
+    F[3, 4], F[4, 4], F[5, 4] = c2 + y0, y1, -c0 + y2
+    F[3, 5], F[4, 5], F[5, 5] = -c1, c0, 0.0
+    n0, n1, n2 = _cross(vN, vE, vD, 2.0 * (-W * sl), 0.0, 2.0 * (-W * cl) + rho_lat2)
+    d0, d1, d2 = _cross(vN, vE, vD, dh0, dh1, dh2)
+    F[3, 0], F[4, 0], F[5, 0] = n0 / rm, n1 / rm, n2 / rm
+    F[3, 2], F[4, 2], F[5, 2] = -d0, -d1, -d2 - dg_dh   # dp_D = -dh and g_D = g(h)
+    a0 = R_nb[0, 0] * f_b[0] + R_nb[0, 1] * f_b[1] + R_nb[0, 2] * f_b[2]
+    a1 = R_nb[1, 0] * f_b[0] + R_nb[1, 1] * f_b[1] + R_nb[1, 2] * f_b[2]
+    a2 = R_nb[2, 0] * f_b[0] + R_nb[2, 1] * f_b[1] + R_nb[2, 2] * f_b[2]
+    _neg_skew_into(F, 3, 6, a0, a1, a2)
+    # Attitude rows: phi_dot = -[w_in x] phi - d(w_in) + R b_g.
+    F[6, 0], F[7, 0], F[8, 0] = W * sl / rm, 0.0, (W * cl - rho_lat2) / rm
+    F[6, 2], F[7, 2], F[8, 2] = dh0, dh1, dh2
+    F[6, 3], F[6, 4], F[6, 5] = 0.0, -1.0 / rn, 0.0
+    F[7, 3], F[7, 4], F[7, 5] = 1.0 / rm, 0.0, 0.0
+    F[8, 3], F[8, 4], F[8, 5] = 0.0, tl / rn, 0.0
+    _neg_skew_into(F, 6, 6, wie0 + wen0, wen1, wie2 + wen2)
+    for i in range(3):
+        for j in range(3):
+            F[3 + i, 9 + j] = R_nb[i, j]
+            F[6 + i, 12 + j] = R_nb[i, j]
+
+
+@njit(cache=True)
+def _neg_skew_into(F, r, c, a0, a1, a2):
+    """``F[r:r+3, c:c+3] = -[a x]``."""
+    F[r, c], F[r, c + 1], F[r, c + 2] = 0.0, a2, -a1
+    F[r + 1, c], F[r + 1, c + 1], F[r + 1, c + 2] = -a2, 0.0, a0
+    F[r + 2, c], F[r + 2, c + 1], F[r + 2, c + 2] = a1, -a0, 0.0
+
+
+# Column ranges of the non-zero entries of F, per block row (rows 9..14 of F are zero).
+_NZ_P = (0, 6)     # position rows: dp, dv
+_NZ_V = (0, 12)    # velocity rows: dp, dv, phi, b_a
+
+
+@njit(cache=True)
+def _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order):
+    """P <- Phi P Phi^T + Q with Phi = I + F dt (+ (F dt)^2 / 2) and Q = G Qc G^T dt.
+
+    For the first-order case ``Phi P Phi^T = P + dt (F P + P F^T) + dt^2 F P F^T`` is evaluated
+    with F's sparsity (only rows 0..8 are non-zero), about 4x fewer operations than dense.
+    ``A`` is a (9, 15) work array. Only ``P[:15, :15]`` is touched, so ``P`` may carry more
+    states (passing the whole array, not a view, keeps one compiled version of this kernel).
+    """
+    if phi_order == 2:
+        Phi = _transition(F, dt, phi_order)
+        Pn = np.empty((15, 15))
+        PhiT = np.empty((15, 15))
+        for i in range(15):
+            for j in range(15):
+                Pn[i, j] = P[i, j]
+                PhiT[i, j] = Phi[j, i]
+        Pn = _mm(_mm(Phi, Pn), PhiT)
+        for i in range(15):
+            for j in range(15):
+                P[i, j] = Pn[i, j]
+    else:
+        # A = F P over the non-zero columns of each row of F.
+        for i in range(9):
+            for j in range(15):
+                acc = 0.0
+                if i < 3:
+                    for k in range(_NZ_P[0], _NZ_P[1]):
+                        acc += F[i, k] * P[k, j]
+                elif i < 6:
+                    for k in range(_NZ_V[0], _NZ_V[1]):
+                        acc += F[i, k] * P[k, j]
+                else:
+                    for k in range(9):
+                        acc += F[i, k] * P[k, j]
+                    for k in range(12, 15):
+                        acc += F[i, k] * P[k, j]
+                A[i, j] = acc
+        dt2 = dt * dt
+        for i in range(9):
+            for j in range(i, 15):
+                if j < 9:
+                    # (F P F^T)[i, j] = sum_k A[i, k] F[j, k]
+                    fpf = 0.0
+                    for k in range(15):
+                        fpf += A[i, k] * F[j, k]
+                    v = P[i, j] + dt * (A[i, j] + A[j, i]) + dt2 * fpf
+                else:
+                    v = P[i, j] + dt * A[i, j]
+                P[i, j] = v
+                P[j, i] = v
+    # G Qc G^T: R diag(q) R^T for the white sensor noise (body axes).
+    for i in range(3):
+        for j in range(3):
+            sa = 0.0
+            sg = 0.0
+            for k in range(3):
+                sa += R_nb[i, k] * q_a[k] * R_nb[j, k]
+                sg += R_nb[i, k] * q_g[k] * R_nb[j, k]
+            P[3 + i, 3 + j] += sa * dt
+            P[6 + i, 6 + j] += sg * dt
+        P[9 + i, 9 + i] += q_ba[i] * dt
+        P[12 + i, 12 + i] += q_bg[i] * dt
+
+
+@njit(cache=True)
+def _propagate_gm(P, F, dt, gm_tau, gm_var):
+    """The GNSS Gauss-Markov error states (rows/columns 15.. of P): ``x_g' = a x_g + w``,
+    ``a = exp(-dt / tau)``, stationary variance ``gm_var``. Their cross-covariance with the
+    navigation states follows ``P_xg' = (I + F dt) P_xg a``; nothing couples them in F."""
+    n = P.shape[0]
+    for c in range(15, n):
+        a = np.exp(-dt / gm_tau[c - 15])
+        col = np.empty(15)
+        for i in range(15):
+            v = P[i, c]
+            if i < 9:
+                for k in range(15):
+                    v += dt * F[i, k] * P[k, c]
+            col[i] = a * v
+        for i in range(15):
+            P[i, c] = col[i]
+            P[c, i] = col[i]
+        for d in range(15, n):
+            P[c, d] *= a * np.exp(-dt / gm_tau[d - 15])
+        P[c, c] += gm_var[c - 15] * (1.0 - a * a)
+    for c in range(15, n):
+        for d in range(c + 1, n):
+            P[d, c] = P[c, d]
+
+
+@njit(cache=True)
+def _propagate_all(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order, gm_tau, gm_var):
+    """The 15 navigation states, then the GNSS error states when P has them."""
+    if P.shape[0] > 15:
+        _propagate_gm(P, F, dt, gm_tau, gm_var)  # needs only P_xg and F: order-independent
+    _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order)
+
+
+@njit(cache=True)
+def _segment_index(k, seg_i0, seg_i1):
+    """Index of the disjoint sorted segment ``[i0, i1)`` containing sample ``k``, or -1."""
+    lo, hi = 0, seg_i0.shape[0]
+    while lo < hi:  # first segment whose end is beyond k
+        mid = (lo + hi) // 2
+        if seg_i1[mid] <= k:
+            lo = mid + 1
+        else:
+            hi = mid
+    if lo < seg_i0.shape[0] and seg_i0[lo] <= k:
+        return lo
+    return -1
+
+
+@njit(cache=True)
+def _transition(F, dt, phi_order):
+    """``I + F dt (+ (F dt)^2 / 2)``, the error-state transition over one step. Explicit loops:
+    numba's array expressions (``F * dt``) cost seconds of compilation each."""
+    S = np.empty((15, 15))
+    for i in range(15):
+        for j in range(15):
+            S[i, j] = F[i, j] * dt
+    if phi_order == 2:
+        S2 = _mm(S, S)
+        for i in range(15):
+            for j in range(15):
+                S[i, j] = S[i, j] + 0.5 * S2[i, j]
+    for i in range(15):
+        S[i, i] += 1.0
+    return S
+
+
+@njit(cache=True)
+def _step_phi(Phi, F, dt, phi_order):
+    """Phi <- (I + F dt (+ (F dt)^2 / 2)) Phi: the error-state transition over one step."""
+    C = _mm(_transition(F, dt, phi_order), Phi)
+    for i in range(15):
+        for j in range(15):
+            Phi[i, j] = C[i, j]
+
+
+@njit(cache=True)
+def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
+              q_a, q_g, q_ba, q_bg, seg_i0, seg_i1, seg_qa, seg_qg, phi_order, with_cov, cov_every, Phi, with_phi,
+              w_ie_sign, gm_tau, gm_var):
+    """Propagate nominal state and covariance from ``t_cur`` to ``t_to`` (in place).
+
+    Parameters
+    ----------
+    t_imu, f_imu, w_imu : ndarray
+        IMU times [s] (N,), specific force [m/s^2] and rates [rad/s] (N, 3), body frame.
+    k : int
+        Index of the IMU sample whose interval ``(t[k-1], t[k]]`` contains ``t_cur``
+        (i.e. the first sample with ``t[k] > t_cur``).
+    t_cur, t_to : float
+        Current and target time [s].
+    pos, v_n, R_nb, b_a, b_g, P : ndarray
+        Nominal state and covariance, updated in place.
+    q_a, q_g, q_ba, q_bg : ndarray (3,)
+        Noise PSDs: accel [(m/s^2)^2/s], gyro [rad^2/s], bias random walks.
+    seg_i0, seg_i1 : ndarray (S,) of int
+    seg_qa, seg_qg : ndarray (S, 3)
+        Data-quality inflation as disjoint sample segments ``[i0, i1)`` with additive accel and
+        gyro PSDs per body axis (:func:`gnssacc.checks.quality.inflation_segments`).
+    phi_order : int
+        1 or 2.
+    with_cov : bool
+        Propagate P too.
+    cov_every : int
+        Propagate P once every this many IMU samples (and always at ``t_to``) with the summed
+        interval and noise; 1 (the default everywhere but the noise tuner) is every sample.
+    Phi : ndarray (15, 15)
+        Transition-matrix accumulator, ``Phi <- Phi_step Phi`` per sample when ``with_phi``
+        (for the observability analysis; needs ``cov_every == 1``).
+    with_phi : bool
+    w_ie_sign : float
+        +1, or -1 to integrate a time-reversed recording (the earth then turns the other way).
+    gm_tau, gm_var : ndarray (3,)
+        Correlation time [s] and stationary variance [m^2] of the GNSS Gauss-Markov error states,
+        used when P has them (18 x 18).
+
+    Returns
+    -------
+    k, t_cur : int, float
+        Updated sample index and time (``t_cur == t_to`` unless the IMU data ended first).
+    """
+    n = t_imu.shape[0]
+    if with_phi and P.shape[0] > 15:
+        with_phi = False  # the transition-matrix accumulator covers the 15 navigation states only
+    f = np.empty(3)
+    w = np.empty(3)
+    A = np.empty((9, 15))
+    F = np.zeros((15, 15))
+    work = np.empty((3, 3, 3))
+    qa_k = np.empty(3)
+    qg_k = np.empty(3)
+    qa_int = np.zeros(3)
+    qg_int = np.zeros(3)
+    dt_acc = 0.0
+    count = 0
+    while t_cur < t_to and k < n:
+        t_end = t_imu[k] if t_imu[k] < t_to else t_to
+        dt = t_end - t_cur
+        if dt > 0.0:
+            for i in range(3):
+                f[i] = f_imu[k, i] - b_a[i]
+                w[i] = w_imu[k, i] - b_g[i]
+            if with_cov:
+                j = _segment_index(k, seg_i0, seg_i1)
+                for i in range(3):
+                    qa_int[i] += (q_a[i] + (seg_qa[j, i] if j >= 0 else 0.0)) * dt
+                    qg_int[i] += (q_g[i] + (seg_qg[j, i] if j >= 0 else 0.0)) * dt
+                dt_acc += dt
+                count += 1
+                if count >= cov_every or t_end >= t_to:
+                    _cov_step(P, F, A, Phi, with_phi, pos, v_n, R_nb, f, w_ie_sign, qa_int, qg_int, qa_k, qg_k, dt_acc,
+                              q_ba, q_bg, phi_order, gm_tau, gm_var)
+                    dt_acc = 0.0
+                    count = 0
+            _strapdown(pos, v_n, R_nb, f, w, dt, w_ie_sign, work)
+        t_cur = t_end
+        if t_cur >= t_imu[k]:
+            k += 1
+    if with_cov and count > 0:  # the IMU data ended before t_to: flush what was accumulated
+        _cov_step(P, F, A, Phi, with_phi, pos, v_n, R_nb, f, w_ie_sign, qa_int, qg_int, qa_k, qg_k, dt_acc,
+                  q_ba, q_bg, phi_order, gm_tau, gm_var)
+    return k, t_cur
+
+
+@njit(cache=True)
+def _cov_step(P, F, A, Phi, with_phi, pos, v_n, R_nb, f, w_ie_sign, qa_int, qg_int, qa_k, qg_k, dt_acc, q_ba, q_bg,
+              phi_order, gm_tau, gm_var):
+    """One covariance (and transition-matrix) step over ``dt_acc`` [s] with the noise integrated
+    over it (``qa_int``, ``qg_int``: PSD x time, reset to zero here; ``qa_k``, ``qg_k``: scratch)."""
+    _system_matrix_into(F, pos, v_n, R_nb, f, w_ie_sign)
+    for i in range(3):
+        qa_k[i] = qa_int[i] / dt_acc
+        qg_k[i] = qg_int[i] / dt_acc
+        qa_int[i] = 0.0
+        qg_int[i] = 0.0
+    _propagate_all(P, F, A, R_nb, dt_acc, qa_k, qg_k, q_ba, q_bg, phi_order, gm_tau, gm_var)
+    if with_phi:
+        _step_phi(Phi, F, dt_acc, phi_order)
+
+
+def kernel_array(x, dtype) -> np.ndarray:
+    """``x`` as the kernels take it: C-contiguous and writable. numba compiles a separate version
+    of a kernel for read-only arrays (a broadcast, a memory map), which would cost a second full
+    compilation; the IMU arrays are copied only when they are read-only or not contiguous."""
+    a = np.ascontiguousarray(x, dtype)
+    return a if a.flags.writeable else a.copy()
+
+
+class Propagator:
+    """The IMU samples and the noise model, bound once; :meth:`advance` moves a state in time.
+
+    Parameters
+    ----------
+    t, f_b, omega_ib_b : ndarray
+        IMU times [s] (N,), specific force [m/s^2] and angular rate [rad/s] (N, 3), body frame.
+    q_a, q_g, q_ba, q_bg : ndarray (3,)
+        White-noise and bias random-walk PSDs (see :func:`propagate`).
+    segments : tuple
+        ``(seg_i0, seg_i1, seg_qg, seg_qa)`` from :func:`gnssacc.checks.quality.inflation_segments`.
+    phi_order : int
+        1 or 2.
+    cov_every : int
+        Covariance propagated every this many samples (1: every sample).
+    w_ie_sign : float
+        +1, or -1 for a time-reversed recording.
+    gm_tau_s, gm_sigma_m : ndarray (3,), optional
+        GNSS Gauss-Markov error model (correlation time [s], 1-sigma [m]), for an 18-state P.
+    """
+
+    def __init__(self, t, f_b, omega_ib_b, q_a, q_g, q_ba, q_bg, segments, phi_order: int = 1,
+                 cov_every: int = 1, w_ie_sign: float = 1.0, gm_tau_s=None, gm_sigma_m=None):
+        self.t, self.f, self.w = (kernel_array(x, float) for x in (t, f_b, omega_ib_b))
+        self.q = tuple(np.array(q, float) for q in (q_a, q_g, q_ba, q_bg))
+        seg_i0, seg_i1, seg_qg, seg_qa = segments
+        self.segments = (np.array(seg_i0, np.int64), np.array(seg_i1, np.int64),
+                         np.array(seg_qa, float).reshape(-1, 3), np.array(seg_qg, float).reshape(-1, 3))
+        self.phi_order, self.cov_every, self.w_ie_sign = int(phi_order), max(int(cov_every), 1), float(w_ie_sign)
+        self.gm_tau = np.array(np.broadcast_to(60.0 if gm_tau_s is None else gm_tau_s, (3,)), float)
+        self.gm_var = np.array(np.broadcast_to(0.0 if gm_sigma_m is None else gm_sigma_m, (3,)), float) ** 2
+        #: Transition-matrix accumulator (used when ``with_phi``); reset it with :meth:`reset_phi`.
+        self.Phi = np.eye(15)
+        self.with_phi = False
+
+    def reset_phi(self) -> None:
+        self.Phi[:, :] = np.eye(15)
+
+    def advance(self, s, k: int, t_cur: float, t_to: float, with_cov: bool = True) -> tuple[int, float]:
+        """Propagate the state ``s`` (``pos, v_n, R_nb, b_a, b_g, P``, in place) to ``t_to``.
+
+        ``k`` is the first sample with ``t[k] > t_cur``; returns the updated ``k, t_cur``.
+        """
+        seg_i0, seg_i1, seg_qa, seg_qg = self.segments
+        return propagate(self.t, self.f, self.w, k, t_cur, t_to, s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, s.P,
+                         *self.q, seg_i0, seg_i1, seg_qa, seg_qg, self.phi_order, with_cov, self.cov_every,
+                         self.Phi, self.with_phi, self.w_ie_sign, self.gm_tau, self.gm_var)
+
+
+def warm_up(propagation: bool = True, update: bool = True) -> float:
+    """Compile (or load from cache) the numba kernels of an EKF run: ``propagation``, and
+    ``update`` (the update and the correction); return the seconds it took. See
+    :mod:`gnssacc.core.jit` for the background version."""
+    import time
+    from types import SimpleNamespace
+
+    from .kalman import joseph_update
+
+    t0 = time.perf_counter()
+    z3 = np.zeros(3)
+    s = SimpleNamespace(pos=np.array([0.5, 0.1, 0.0]), v_n=z3.copy(), R_nb=np.eye(3), b_a=z3.copy(), b_g=z3.copy(),
+                        P=np.eye(15))
+    if propagation:
+        seg_i = np.zeros(1, np.int64)
+        prop = Propagator(np.array([0.0, 0.01, 0.02]), np.zeros((3, 3)), np.zeros((3, 3)), z3, z3, z3, z3,
+                          (seg_i, seg_i + 1, np.zeros((1, 3)), np.zeros((1, 3))))
+        prop.advance(s, 1, 0.0, 0.015)
+    if update:
+        H = np.zeros((3, 15))
+        H[:, :3] = np.eye(3)
+        dx = joseph_update(s.P, H, np.eye(3), np.ones(3), 0.0)[0]
+        apply_correction(s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, z3.copy(), dx)
+    return time.perf_counter() - t0
+
+
+def warm_up_window() -> float:
+    """Compile (or load) the window-consistent acceleration update's kernel
+    (:func:`kernel_force_integrals`); return the seconds it took."""
+    import time
+
+    t0 = time.perf_counter()
+    n = 4
+    kernel_force_integrals(np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, 0.01), np.full(n, 0.25),
+                           np.zeros(3), np.zeros(3))
+    return time.perf_counter() - t0

@@ -1,0 +1,539 @@
+r"""Noise identification from the recording itself (``--tune auto``, the default).
+
+Every IMU noise key the user's configuration does not set (and ``gnss.sigma_scale``) is
+identified without truth, in four steps:
+
+1. **Stationary stretches** (:mod:`gnssacc.prepare.stationary`): the white-noise densities of the gyros
+   and accelerometers per axis, read from the Allan deviation in its white-noise region (robust
+   to engine vibration), become the starting values of ARW and VRW.
+2. **Maximum likelihood of the EKF's innovations.** With ``theta`` the log10 scale factors of
+   the seven parameters (gyro ARW, accelerometer VRW, gyro and accelerometer bias instability,
+   gyro and accelerometer turn-on sigma, GNSS sigma scale) relative to their starting values,
+   the objective is
+
+       J(theta) = -sum_k log N(nu_k; 0, S_k(theta)) + sum_i theta_i^2 / (2 d_i^2)
+
+   over every position and zero-rate update (acceleration updates too with ``[tune] likelihood =
+   "position+accel"``) of one EKF pass from the start. The zero-velocity updates are left out:
+   their noise is a chosen bound, not a sensor property, and their likelihood would pull the
+   accelerometer noise down. The second term is a
+   log-normal prior around the starting values, ``d_i = [tune] prior_decades`` (weak), or
+   ``[tune] stationary_prior_decades`` for a density measured at standstill in step 1 (which is
+   also a floor: the search stays above 1/1.25 of it, :data:`REST_FLOOR_DECADES`): it keeps the
+   parameters the data barely inform from wandering (the one-step position innovations of 1 Hz
+   metre-level fixes say little about the white noise, and will trade it for unmodelled errors
+   such as scale factors) and costs a well-informed parameter nothing. ``J`` is minimised by Nelder-Mead (scipy) within
+   ``[tune] max_evaluations`` EKF passes (after a probe of each parameter at +-1 decade,
+   :func:`ml_search`), each bounded to +-2 decades; the passes propagate the covariance every
+   ``[tune] cov_every`` samples for speed.
+
+3. **Time-correlated GNSS errors.** A white-noise fix model misses the slowly varying part of
+   real fix errors (multipath, atmosphere); its one-step innovations then stay correlated in
+   time, and chasing NIS = 1 with a smaller sigma makes the stated position uncertainty far too
+   small. When the lag-1 autocorrelation of the whitened position innovations at the step-2
+   optimum exceeds :data:`ACF_CORRELATED` (and three standard errors of it), a first-order
+   Gauss-Markov error is added to every fix (three more EKF states, ``gnss.gm_sigma_m`` and
+   ``gnss.gm_tau_s``) and the search is run again over all parameters plus these two, from the
+   step-1 starting values (the white-noise search has distorted the IMU values while chasing the
+   correlated errors); the model is kept when it raises the log-likelihood by more than
+   :data:`GM_MIN_GAIN` (a likelihood-ratio test).
+
+4. **Turn-on sigmas: no larger than the data need.** The likelihood bounds a turn-on bias sigma
+   from below only: once it is large enough for the filter to learn the bias from the first
+   updates, a larger one only widens those few innovations, and the likelihood stays flat for
+   decades. The search can then end anywhere up there, and an estimator that trusts such a value
+   can suffer where the likelihood does not show it (on a simulated consumer IMU with a true
+   30 mg accelerometer turn-on sigma the search ended at 526 mg, where the fixed-lag smoother
+   drifted to 10.3 m against the EKF's 2.2 m). So a turn-on sigma that ended above its start is
+   drawn back toward it by bisection (at most three passes) to the smallest value whose
+   log-likelihood stays within :data:`SHRINK_TOLERANCE` of the search's best, shared by both
+   sigmas (:func:`draw_back`). The noise densities and the GNSS scale are left at the optimum: a value too
+   large widens every innovation, so the likelihood bounds them on both sides, and drawing them
+   toward a default would trade accuracy for a prior that is no better informed.
+
+The result is a :class:`TuneResult`: the tuned values in configuration units (a reusable
+``tuned.toml``), the NIS before and after, and the time it took.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..core.config import RunConfig, toml_value
+from ..core.errors import InputError
+
+#: The identified parameters: (section, key), in the order of the search vector.
+PARAMETERS = (("imu", "gyro_arw_deg_rth"), ("imu", "accel_vrw_mps_rth"), ("imu", "gyro_bias_instability_deg_h"),
+              ("imu", "accel_bias_instability_mg"), ("imu", "gyro_bias_sigma0_deg_h"), ("imu", "accel_bias_sigma0_mg"),
+              ("gnss", "sigma_scale"))
+#: The Gauss-Markov GNSS error model, identified in a second stage (see the module docstring).
+GM_PARAMETERS = (("gnss", "sigma_scale"), ("gnss", "gm_sigma_m"), ("gnss", "gm_tau_s"))
+#: Lag-1 autocorrelation of the whitened position innovations above which the fix errors are
+#: taken as time-correlated (a correct model gives ~0; white fixes with a tuned IMU give < 0.1).
+ACF_CORRELATED = 0.3
+#: Log-likelihood gain the two extra Gauss-Markov parameters must bring: half the 1e-4 quantile of
+#: chi-square with 2 dof (a likelihood-ratio test).
+GM_MIN_GAIN = 9.2
+#: Passes of the white-noise search after which the whiteness of the innovations is checked (the
+#: coordinate probe of 7 parameters takes 15): a search that cannot fit correlated errors is
+#: abandoned then for the Gauss-Markov one.
+CHECK_AFTER = 20
+#: Smallest white part of a fix's 1-sigma the tuner accepts [m]: no receiver's fix output is
+#: better than that (below it, the filter only becomes numerically stiff).
+MIN_WHITE_SIGMA_M = 0.01
+#: The parameters whose likelihood is bounded from below only (step 4).
+TURN_ON_SIGMAS = (("imu", "gyro_bias_sigma0_deg_h"), ("imu", "accel_bias_sigma0_mg"))
+#: Log-likelihood the tuned point may give up, in all, when the turn-on sigmas are drawn back
+#: toward their starting values (step 4): half the 95 % quantile of chi-square with 1 dof.
+SHRINK_TOLERANCE = 1.92
+#: A parameter closer than this to its starting value [decades] is not drawn back (not worth passes).
+SHRINK_MIN_DECADES = 0.1
+#: Each parameter stays within this many decades of its starting value.
+_BOUND_DECADES = 2.0
+#: A white-noise density measured at rest is a floor for the search: in motion, vibration only adds
+#: to the sensor's noise. The floor sits this many decades below the measurement (1/1.25: the
+#: at-rest estimates scatter by +-11 % on simulated runs with 95-110 s at rest).
+REST_FLOOR_DECADES = float(np.log10(1.25))
+_RAD_S_TO_DEG_RTH = 180.0 / np.pi * 60.0     # rad/sqrt(s) -> deg/sqrt(h)
+_MPS2_RTHZ_TO_MPS_RTH = 60.0                 # m/s^2/sqrt(Hz) -> m/s/sqrt(h)
+
+
+@dataclass
+class TuneResult:
+    """Outcome of :func:`tune`.
+
+    Attributes
+    ----------
+    values : dict
+        Section -> key -> tuned value (configuration units), the keys that were identified.
+    start : dict
+        The same keys' starting values (configuration or stationary analysis).
+    fixed : list of str
+        ``section.key`` of the parameters the user set, left alone.
+    from_stationary : dict
+        What the stationary stretches gave (densities, seconds used), or empty.
+    nis_before, nis_after : float or None
+        Mean position NIS per dof of the EKF at the start and at the tuned values.
+    loglik_before, loglik_after : float
+        Innovation log-likelihood at the start and at the tuned values.
+    n_evaluations : int
+    seconds : float
+    """
+
+    values: dict
+    start: dict
+    fixed: list
+    from_stationary: dict = field(default_factory=dict)
+    nis_before: float | None = None
+    nis_after: float | None = None
+    loglik_before: float = 0.0
+    loglik_after: float = 0.0
+    n_evaluations: int = 0
+    seconds: float = 0.0
+
+    def line(self) -> str:
+        """One line for the terminal."""
+        parts = [f"{key}={_short(v)}" for sec in self.values.values() for key, v in sec.items()]
+        nis = (f"; position NIS/dof {self.nis_before:.2f} -> {self.nis_after:.2f}"
+               if self.nis_before is not None and self.nis_after is not None else "")
+        back = [k.split(".")[-1] for k in self.from_stationary.get("drawn_back", [])]
+        return (f"tuned noise ({self.n_evaluations} EKF passes, {self.seconds:.1f} s): " + ", ".join(parts) + nis
+                + (f"; drawn back toward the start, as far as the likelihood allows: {', '.join(back)}" if back else "")
+                + (f"; kept from config: {', '.join(self.fixed)}" if self.fixed else ""))
+
+    def to_toml(self, cfg: RunConfig) -> str:
+        """A reusable configuration file: every ``[imu]`` key and ``gnss.sigma_scale`` as tuned."""
+        lines = ["# Noise identified by gnssacc --tune auto from this recording (no truth used).",
+                 "# Reuse it with: gnssacc run ... --config tuned.toml --tune none", "", "[imu]"]
+        lines += [f"{k} = {toml_value(_plain(v))}" for k, v in cfg["imu"].items()]
+        lines += ["", "[gnss]"] + [f"{k} = {toml_value(_plain(cfg['gnss'][k]))}"
+                                    for k in ("sigma_scale", "gm_sigma_m", "gm_tau_s")]
+        return "\n".join(lines) + "\n"
+
+    def to_dict(self) -> dict:
+        return {"values": self.values, "start": self.start, "fixed": self.fixed, "from_stationary": self.from_stationary,
+                "nis_before": self.nis_before, "nis_after": self.nis_after, "loglik_before": self.loglik_before,
+                "loglik_after": self.loglik_after, "n_evaluations": self.n_evaluations, "seconds": self.seconds}
+
+
+def _plain(v):
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return [float(f"{float(x):.4g}") for x in v]
+    return float(f"{float(v):.4g}")
+
+
+def _short(v) -> str:
+    v = _plain(v)
+    if isinstance(v, list):
+        return "[" + ",".join(f"{x:g}" for x in v) + "]" if len(set(v)) > 1 else f"{v[0]:g}"
+    return f"{v:g}"
+
+
+def _prior_widths(cfg: RunConfig, params: list, info: dict) -> np.ndarray:
+    """Prior 1-sigma per parameter [decades]: tighter where the stationary stretches measured it."""
+    wide, tight = float(cfg["tune"]["prior_decades"]), float(cfg["tune"]["stationary_prior_decades"])
+    return np.array([tight if key in info else wide for _, key in params])
+
+
+def _lower_bounds(params: list, info: dict) -> np.ndarray:
+    """Lower search bound per parameter [decades]: the at-rest floor where the stationary stretches
+    measured the density (:data:`REST_FLOOR_DECADES`)."""
+    return np.array([-REST_FLOOR_DECADES if key in info else -_BOUND_DECADES for _, key in params])
+
+
+def _start_values(cfg: RunConfig, free: list, noise) -> tuple[dict, dict]:
+    """Starting value per free parameter (numpy arrays), from the configuration or the stationary noise."""
+    start = {p: np.atleast_1d(np.asarray(cfg[p[0]][p[1]], float)).copy() for p in free}
+    info = {}
+    if noise is not None:
+        dens = {("imu", "gyro_arw_deg_rth"): (noise.gyro_density, _RAD_S_TO_DEG_RTH),
+                ("imu", "accel_vrw_mps_rth"): (noise.accel_density, _MPS2_RTHZ_TO_MPS_RTH)}
+        for p, (d, scale) in dens.items():
+            if p in start and d is not None and np.all(np.isfinite(d)) and np.all(np.asarray(d) > 0):
+                start[p] = np.asarray(d, float) * scale
+                info[p[1]] = _plain(start[p])
+        info["stationary_s"] = float(noise.seconds)
+    return start, info
+
+
+class _Objective:
+    """Negative innovation log-likelihood of one EKF pass at log10 scale factors ``theta``."""
+
+    def __init__(self, run, cfg, free, start, stationary, quality, init, method, kinds):
+        self.run, self.cfg, self.free, self.start = run, cfg, free, start
+        self.stationary, self.quality, self.init, self.method, self.kinds = stationary, quality, init, method, kinds
+        self.cov_every = int(cfg["tune"]["cov_every"])
+        self.init_scale = float(cfg["gnss"]["sigma_scale"])   # the scale the start was made with
+        self.stats: dict = {}
+
+    def config(self, theta) -> RunConfig:
+        upd: dict = {}
+        for p, th in zip(self.free, theta):
+            v = self.start[p] * 10.0**th
+            if p == ("gnss", "sigma_scale"):
+                v = np.maximum(v, MIN_WHITE_SIGMA_M / float(np.median(self.run.gnss.sigma_ned)))
+            upd.setdefault(p[0], {})[p[1]] = v.tolist() if v.size > 1 else float(v[0])
+        return self.cfg.with_values(upd, "tuned")
+
+    def __call__(self, theta) -> float:
+        from ..estimators.ekf import run_ekf  # tuning runs the EKF; the pipeline imports this module first
+
+        cfg = self.config(theta)
+        scale = float(cfg["gnss"]["sigma_scale"])
+        run = scaled_gnss(self.run, scale)
+        # The start's position sigma is that of the fixes it came from: it scales with them.
+        init = replace(self.init, sigma_pos_m=self.init.sigma_pos_m * scale / self.init_scale)
+        sol = run_ekf(run, ungated(cfg), self.method, init=init, stationary=self.stationary, quality=self.quality,
+                      output_times=np.zeros(0), cov_every=self.cov_every)
+        self.stats[tuple(np.round(theta, 12))] = sol.stats
+        return -_loglik(sol.stats, self.kinds)
+
+
+def ml_search(negloglik, n: int, budget: int, prior_decades: float, step_decades: float = 0.5,
+              theta0: np.ndarray | None = None, probe_decades: float | None = 1.0,
+              lower: np.ndarray | None = None):
+    """Minimise ``negloglik(theta) + |theta|^2 / (2 d^2)`` over log10 scale factors ``theta``.
+
+    The generic part of the tuner: first each coordinate in turn is probed at ``+-probe_decades``
+    and moved there when that is better (the starting values can be decades off, e.g. industrial
+    defaults for a tactical IMU, and a local simplex does not travel that far within a small
+    budget); then Nelder-Mead (scipy) from there with an initial simplex of ``step_decades`` per
+    axis; at most ``budget`` evaluations in all, each ``theta`` clipped to +-:data:`_BOUND_DECADES`.
+
+    Parameters
+    ----------
+    negloglik : callable
+        ``theta (n,) -> float``, the negative log-likelihood (``inf`` where it cannot be evaluated).
+    n : int
+    budget : int
+    prior_decades : float or ndarray (n,)
+        ``d``, the 1-sigma of the log-normal prior around the starting values [decades].
+    step_decades : float
+    theta0 : ndarray (n,), optional
+        Where the search starts (default: the starting values, ``theta = 0``).
+    probe_decades : float or None
+        Coordinate probe step; ``None`` skips the probe (e.g. to continue an earlier search).
+    lower : ndarray (n,), optional
+        Lower bound per parameter [decades] (default ``-_BOUND_DECADES``).
+
+    Returns
+    -------
+    theta : ndarray (n,)
+        The best point evaluated.
+    value : float
+        Its objective value.
+    n_evaluations : int
+    """
+    from scipy.optimize import minimize
+
+    best = [np.inf, np.zeros(n)]
+    count = [0]
+    lo = np.full(n, -_BOUND_DECADES) if lower is None else np.maximum(np.asarray(lower, float), -_BOUND_DECADES)
+
+    def objective(theta):
+        theta = np.clip(theta, lo, _BOUND_DECADES)
+        count[0] += 1
+        j = float(negloglik(theta)) + 0.5 * float(np.sum(np.square(theta / prior_decades)))
+        if not np.isfinite(j):
+            return 1e300
+        if j < best[0]:
+            best[:] = [j, np.array(theta)]
+        return j
+
+    x0 = np.zeros(n) if theta0 is None else np.asarray(theta0, float)
+    f0 = objective(x0)
+    for i in range(n if probe_decades else 0):
+        for d in (-probe_decades, probe_decades):
+            if count[0] >= budget:
+                break
+            x = x0.copy()
+            x[i] += d
+            f = objective(x)
+            if f < f0:
+                f0, x0 = f, x
+    left = budget - count[0]
+    if left > 1:
+        simplex = x0 + np.vstack([np.zeros(n), step_decades * np.eye(n)])
+        minimize(objective, x0, method="Nelder-Mead",
+                 options={"maxfev": left, "initial_simplex": simplex, "xatol": 0.02, "fatol": 0.5})
+    return best[1], best[0], count[0]
+
+
+def draw_back(negloglik, theta, prior_decades, eligible=None,
+              value: float | None = None) -> tuple[np.ndarray, int, list]:
+    """Step 4 of the module docstring: each eligible coordinate of ``theta`` drawn toward 0 (the
+    starting values) while ``negloglik`` stays within :data:`SHRINK_TOLERANCE` of its value at
+    ``theta`` (the tolerance is shared by all coordinates).
+
+    Parameters
+    ----------
+    negloglik : callable
+        ``theta (n,) -> float``, the negative log-likelihood (no prior term).
+    theta : ndarray (n,)
+        The search's best point [decades from the starting values].
+    prior_decades : float or ndarray (n,)
+        Prior widths: the coordinates are visited in decreasing ``|theta / prior_decades|``.
+    eligible : ndarray of bool (n,), optional
+        Which coordinates may be drawn back (default: all).
+    value : float, optional
+        ``negloglik(theta)``, when known (saves a pass).
+
+    Returns
+    -------
+    theta : ndarray (n,)
+        The drawn-back point (``theta`` itself when nothing moved).
+    n_evaluations : int
+        Passes made (at most three per coordinate).
+    moved : list of int
+        The coordinates that were drawn back.
+    """
+    theta = np.array(theta, float)
+    n, moved = (1, []) if value is None else (0, [])
+    worst = float(negloglik(theta) if value is None else value) + SHRINK_TOLERANCE
+    order = np.argsort(-np.abs(theta / np.broadcast_to(prior_decades, theta.shape)), kind="stable")
+    for i in order:
+        if abs(theta[i]) < SHRINK_MIN_DECADES or (eligible is not None and not eligible[i]):
+            continue
+        fails, keeps = 0.0, 1.0   # fractions of theta[i] kept: too little / enough for the data
+        for step in range(3):     # all the way back, then bisection: 0, 0.5, 0.25 or 0.75
+            frac = 0.5 * (fails + keeps) if step else 0.0
+            trial = theta.copy()
+            trial[i] *= frac
+            n += 1
+            if float(negloglik(trial)) <= worst:
+                keeps = frac
+            else:
+                fails = frac
+            if keeps == 0.0:
+                break
+        if keeps < 1.0:
+            theta[i] *= keeps
+            moved.append(int(i))
+    return theta, n, moved
+
+
+def _gauss_markov_stage(run, cfg, free, start, stats, stationary, quality, init, method, kinds, info):
+    """Step 3 of the module docstring; returns the configuration, its EKF stats, the passes made and
+    whether the Gauss-Markov model was kept."""
+    acf, n = stats.get("acf1_pos"), stats.get("n_pos_updates", 0)
+    info["innovation_acf1"] = acf
+    gm_free = [p for p in GM_PARAMETERS[1:] if p not in cfg.explicit]
+    if acf is None or n < 10 or acf < max(ACF_CORRELATED, 3.0 / np.sqrt(3 * n)) or len(gm_free) < 2:
+        return None, stats, 0, False
+    # Start: the stated sigmas as the correlated part and a fifth of them as the white part.
+    scale = float(cfg["gnss"]["sigma_scale"])
+    start = dict(start)
+    if ("gnss", "sigma_scale") in start:
+        start[("gnss", "sigma_scale")] = np.atleast_1d(0.2 * scale)
+    start[("gnss", "gm_sigma_m")] = np.median(run.gnss.sigma_ned, axis=0) * scale
+    start[("gnss", "gm_tau_s")] = np.atleast_1d(cfg.gnss_gm_tau.mean())
+    params = list(free) + gm_free
+    obj = _Objective(run, cfg, params, start, stationary, quality, init, method, kinds)
+    theta, j_best, n_eval = ml_search(obj, len(params), int(cfg["tune"]["max_evaluations"]),
+                                      _prior_widths(cfg, params, info), lower=_lower_bounds(params, info))
+    gm_stats = obj.stats[tuple(np.round(theta, 12))]
+    gain = _loglik(gm_stats, kinds) - _loglik(stats, kinds)
+    info["gauss_markov_loglik_gain"] = float(gain)
+    if gain <= GM_MIN_GAIN:
+        return None, stats, n_eval, False
+    theta, n_back = _draw_back(obj, theta, _prior_widths(cfg, params, info), kinds, info)
+    return obj.config(theta), obj.stats[tuple(np.round(theta, 12))], n_eval + n_back, True
+
+
+def _draw_back(obj, theta, prior, kinds, info) -> tuple[np.ndarray, int]:
+    """:func:`draw_back` of the turn-on sigmas above their start, on an :class:`_Objective` at its
+    best ``theta``; notes what moved in ``info``."""
+    eligible = np.array([p in TURN_ON_SIGMAS for p in obj.free]) & (np.asarray(theta) > 0)
+    if not eligible.any():
+        info["drawn_back"] = []
+        return np.asarray(theta), 0
+    theta, n, moved = draw_back(obj, theta, prior, eligible, -_loglik(obj.stats[tuple(np.round(theta, 12))], kinds))
+    info["drawn_back"] = [f"{obj.free[i][0]}.{obj.free[i][1]}" for i in moved]
+    return theta, n
+
+
+def _loglik(stats: dict, kinds) -> float:
+    return float(sum(stats[f"loglik_{k}"] for k in kinds))
+
+
+def ungated(cfg: RunConfig) -> RunConfig:
+    """``cfg`` without the EKF's position gate, for the tuner's passes.
+
+    A gate makes the likelihood blind to the innovations it rejects, so the search is rewarded
+    for shrinking the noise until most fixes are rejected: with ``[ekf] position_gate_nis = 16.3``
+    on a clean simulated run the tuned EKF ended 426 m off (1.4 m ungated). The noise is identified
+    from every innovation; the gate applies to the estimates made with it.
+    """
+    if float(cfg["ekf"]["position_gate_nis"]) == 0.0:
+        return cfg
+    return cfg.with_values({"ekf": {"position_gate_nis": 0.0}}, "tuning passes, ungated")
+
+
+def scaled_gnss(run, scale: float):
+    """The run with every fix's sigma multiplied by ``scale``."""
+    if scale == 1.0:
+        return run
+    return run.with_gnss(replace(run.gnss, sigma_ned=run.gnss.sigma_ned * scale))
+
+
+def tune(run, cfg: RunConfig, stationary=None, quality=None, init=None, noise=None) -> tuple[RunConfig, TuneResult]:
+    """Identify the free noise parameters (see the module docstring).
+
+    Parameters
+    ----------
+    run : RecordedRun
+    cfg : RunConfig
+        Starting values; keys in ``cfg.explicit`` are never changed.
+    stationary : gnssacc.prepare.stationary.StationaryReport, optional
+    quality : gnssacc.checks.quality.QualityReport, optional
+    init : InitialState
+        Where the EKF passes start (e.g. from :func:`gnssacc.prepare.yawbank.select_yaw`).
+    noise : gnssacc.prepare.stationary.StationaryNoise, optional
+        White-noise densities from stationary stretches (starting values of ARW / VRW).
+
+    Returns
+    -------
+    cfg : RunConfig
+        The configuration with the tuned values.
+    result : TuneResult
+    """
+    t0 = time.perf_counter()
+    free = [p for p in PARAMETERS if p not in cfg.explicit]
+    fixed = [f"{s}.{k}" for s, k in PARAMETERS if (s, k) in cfg.explicit]
+    start, info = _start_values(cfg, free, noise)
+    if not free:
+        return cfg, TuneResult({}, {}, fixed, info, seconds=time.perf_counter() - t0)
+    kinds = ("pos", "zaru") + (("acc",) if cfg["tune"]["likelihood"] == "position+accel" else ())
+    method = "ekf-acc" if "acc" in kinds else "ekf"
+    obj = _Objective(run, cfg, free, start, stationary, quality, init, method, kinds)
+    budget, prior = int(cfg["tune"]["max_evaluations"]), _prior_widths(cfg, free, info)
+    lower = _lower_bounds(free, info)
+    theta, j_best, n_eval = ml_search(obj, len(free), min(CHECK_AFTER, budget), prior, lower=lower)
+    if not np.isfinite(j_best):
+        raise InputError(run.where, "noise identification failed: the EKF diverged for every candidate; "
+                                    "set the IMU noise in a config file and use --tune none")
+    before, after = obj.stats[tuple(np.zeros(len(free)))], obj.stats[tuple(np.round(theta, 12))]
+    tuned, after_gm, n_gm, gm_kept = _gauss_markov_stage(run, cfg, free, start, after, stationary, quality, init,
+                                                         method, kinds, info)
+    if gm_kept:
+        tuned, after = tuned, after_gm
+    else:   # white fixes: finish the white-noise search where it stood
+        more = budget - n_eval
+        if more > 1:
+            theta, _, n_more = ml_search(obj, len(free), more, prior, theta0=theta, probe_decades=None,
+                                         lower=lower)
+            n_eval += n_more
+        theta, n_back = _draw_back(obj, theta, prior, kinds, info)
+        n_eval += n_back
+        tuned, after = obj.config(theta), obj.stats[tuple(np.round(theta, 12))]
+    values: dict = {}
+    for sec, key in free + (list(GM_PARAMETERS[1:]) if gm_kept else []):
+        values.setdefault(sec, {})[key] = _plain(tuned[sec][key])
+    result = TuneResult(values, {f"{s}.{k}": _plain(v) for (s, k), v in start.items()}, fixed, info,
+                        before.get("nis_pos_mean"), after.get("nis_pos_mean"), _loglik(before, kinds),
+                        _loglik(after, kinds), n_eval + n_gm, time.perf_counter() - t0)
+    return tuned, result
+
+
+def tune_gauss_markov(run, cfg: RunConfig, stationary=None, quality=None, init=None) -> tuple[RunConfig, dict]:
+    """Fit the Gauss-Markov fix-error model alone, the IMU noise of ``cfg`` held (the ``-gm`` methods
+    on a run where :func:`tune` kept white fixes).
+
+    The free keys of :data:`GM_PARAMETERS` (not in ``cfg.explicit``) are searched by maximum
+    likelihood of one EKF pass's position and zero-rate innovations, from the start of step 3 of
+    the module docstring: the stated sigmas as the correlated part, a fifth of them as the white part.
+
+    Parameters
+    ----------
+    run : RecordedRun
+        As the estimators see it (fix sigmas already times ``cfg``'s ``gnss.sigma_scale``).
+    cfg : RunConfig
+    stationary, quality, init
+        As for :func:`tune`.
+
+    Returns
+    -------
+    cfg : RunConfig
+        With ``gnss.gm_sigma_m``, ``gnss.gm_tau_s`` and ``gnss.sigma_scale`` (relative to the raw
+        fixes, as :func:`tune` gives it) as fitted.
+    info : dict
+        ``loglik_gain`` over the white model, ``n_evaluations``, ``seconds``, ``run_scale`` (the
+        factor to apply to ``run``'s fix sigmas: the white part of the fitted model).
+
+    Raises
+    ------
+    InputError
+        ``gnss.gm_sigma_m`` is set explicitly (to zero: the user asked for white fixes).
+    """
+    t0 = time.perf_counter()
+    if ("gnss", "gm_sigma_m") in cfg.explicit:
+        raise InputError("gnss.gm_sigma_m", "is set to 0 (white fixes); a -gm method needs it > 0 or unset")
+    free_scale = ("gnss", "sigma_scale") not in cfg.explicit
+    base = cfg.with_values({"gnss": {"sigma_scale": 1.0}}, "sigma scale of the run") if free_scale else cfg
+    params = [p for p in GM_PARAMETERS if p not in cfg.explicit]
+    start = {("gnss", "sigma_scale"): np.atleast_1d(0.2),
+             ("gnss", "gm_sigma_m"): np.median(run.gnss.sigma_ned, axis=0),
+             ("gnss", "gm_tau_s"): np.atleast_1d(cfg.gnss_gm_tau.mean())}
+    start = {p: start[p] for p in params}
+    kinds = ("pos", "zaru")
+    obj = _Objective(run, base, params, start, stationary, quality, init, "ekf", kinds)
+    theta, _, n_eval = ml_search(obj, len(params), int(cfg["tune"]["max_evaluations"]),
+                                 _prior_widths(cfg, params, {}), lower=_lower_bounds(params, {}))
+    white_stats = run_white_stats(run, cfg, stationary, quality, init)
+    gain = _loglik(obj.stats[tuple(np.round(theta, 12))], kinds) - _loglik(white_stats, kinds)
+    fitted = obj.config(theta)
+    rel = float(fitted["gnss"]["sigma_scale"]) if free_scale else 1.0
+    out = fitted.with_values({"gnss": {"sigma_scale": rel * float(cfg["gnss"]["sigma_scale"])}}, "tuned") \
+        if free_scale else fitted
+    return out, {"loglik_gain": float(gain), "n_evaluations": n_eval + 1, "run_scale": rel,
+                 "seconds": time.perf_counter() - t0}
+
+
+def run_white_stats(run, cfg: RunConfig, stationary=None, quality=None, init=None) -> dict:
+    """The innovation statistics of one EKF pass with ``cfg`` as it is on ``run`` (already scaled)."""
+    from ..estimators.ekf import run_ekf
+
+    return run_ekf(run, ungated(cfg), "ekf", init=init, stationary=stationary, quality=quality,
+                   output_times=np.zeros(0), cov_every=int(cfg["tune"]["cov_every"])).stats
