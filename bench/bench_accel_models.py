@@ -16,7 +16,7 @@ import argparse
 
 import numpy as np
 
-from gnssacc.gnss_accel import model_errors
+from gnssacc.estimators.gnss_accel import model_errors
 from gnssacc.sources.sim import simulate
 
 

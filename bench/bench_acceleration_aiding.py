@@ -10,7 +10,7 @@ with the same settings is resumed (only what is missing runs). Then:
 * per cell and variant against its baseline (``ekf`` for ``ekf-*``, ``smoother`` for
   ``smoother-*``): the mean paired difference [%] with its 95 % bootstrap interval and the
   sign-flip p-value, for PRMSE, outage PRMSE, tilt, yaw, bias errors and NEES
-  (:mod:`gnssacc.study`), and which cells each variant helps or hurts on PRMSE;
+  (:mod:`gnssacc.analysis.study`), and which cells each variant helps or hurts on PRMSE;
 * the time per task (median, with the load average), per scenario, IMU grade and fix rate, to size
   a grid for this machine.
 
@@ -36,11 +36,12 @@ import statistics
 import time
 from pathlib import Path
 
-from gnssacc import pipeline, study
-from gnssacc.batch import open_executor, run_campaign
-from gnssacc.campaign import CAMPAIGN_FILE, Campaign, Pattern, make_settings
-from gnssacc.gnss_noise import PROFILES
-from gnssacc.montecarlo import parse_seeds
+from gnssacc import pipeline
+from gnssacc.analysis import study
+from gnssacc.analysis.montecarlo import parse_seeds
+from gnssacc.campaign.batch import open_executor, run_campaign
+from gnssacc.campaign.campaign import CAMPAIGN_FILE, Campaign, Pattern, make_settings
+from gnssacc.sources.gnss_noise import PROFILES
 
 CANDIDATES = ("ekf", "ekf-acc", "ekf-accw", "ekf-gm", "smoother", "smoother-acc", "smoother-accw", "smoother-gm")
 GM_METHODS = ("ekf-gm", "smoother-gm")

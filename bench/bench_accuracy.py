@@ -29,10 +29,10 @@ def _one(args):
     source, preset, noise, outage, seed = args
     from dataclasses import replace
 
-    from gnssacc.config import load_config
-    from gnssacc.identify import identify
-    from gnssacc.metrics import gnss_score, score
+    from gnssacc.analysis.metrics import gnss_score, score
+    from gnssacc.core.config import load_config
     from gnssacc.pipeline import load_source, run_methods, with_outages
+    from gnssacc.prepare.identify import identify
 
     cfg = load_config(preset)
     run = with_outages(load_source(source, cfg, noise=noise, seed=seed), None, outage)

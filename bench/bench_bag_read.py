@@ -33,7 +33,7 @@ def hwm_kb():
     for line in open("/proc/self/status"):
         if line.startswith("VmHWM:"):
             return int(line.split()[1])
-from gnssacc.config import load_config
+from gnssacc.core.config import load_config
 from gnssacc.sources.rosbag import load_bag_run
 import rosbags.highlevel
 cfg = load_config()

@@ -29,10 +29,10 @@ from pathlib import Path
 import numpy as np
 import psutil
 
-from gnssacc.batch import Ledger, SerialExecutor, run_tasks
-from gnssacc.campaign import Pattern, make_settings, plan
-from gnssacc.cluster import DaskExecutor
-from gnssacc.progress import CampaignProgress
+from gnssacc.campaign.batch import Ledger, SerialExecutor, run_tasks
+from gnssacc.campaign.campaign import Pattern, make_settings, plan
+from gnssacc.campaign.cluster import DaskExecutor
+from gnssacc.core.progress import CampaignProgress
 from gnssacc.sources.csvdir import write_csv_run
 from gnssacc.sources.sim import simulate
 

@@ -72,7 +72,7 @@ def fresh_venv(tmp: str) -> tuple[str, float]:
 
 def clear_kernels(python: str, env: dict) -> None:
     """Delete the installed package's cached kernels (numba's index and data files, the stamp)."""
-    out = subprocess.run([python, "-c", "from gnssacc import jit; print(jit.cache_folder())"], env=env,
+    out = subprocess.run([python, "-c", "from gnssacc.core import jit; print(jit.cache_folder())"], env=env,
                          capture_output=True, text=True, check=True)
     folder = Path(out.stdout.strip())
     for pattern in ("**/*.nbi", "**/*.nbc", "gnssacc-kernels-*.stamp"):

@@ -20,12 +20,12 @@ import functools
 import os
 import time
 
-from gnssacc import identify as identify_module
-from gnssacc import jit, pipeline
-from gnssacc.config import load_config
+import gnssacc.estimators.smoother  # noqa: F401  (gtsam: part of the fixed cost, before the baseline)
+from gnssacc import pipeline
+from gnssacc.core import jit
+from gnssacc.core.config import load_config
+from gnssacc.prepare import identify as identify_module
 from gnssacc.sources.sim import simulate
-
-import gnssacc.smoother  # noqa: F401  (gtsam: part of the fixed cost, before the baseline)
 
 
 def _status(key: str) -> float:

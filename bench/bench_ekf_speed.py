@@ -1,7 +1,7 @@
 """EKF speed and memory on the KITTI default (and simulated long runs).
 
 Prints, for `ekf`, `ekf-acc` and `ekf-accw`: median wall time over interleaved repeats of the
-filter pass itself (from the start, noise and stationary spans that ``gnssacc.identify`` found
+filter pass itself (from the start, noise and stationary spans that ``gnssacc.prepare.identify`` found
 once, as the pipeline runs it), real-time factor (data duration / wall time, one core), the wall-time ratio to ``ekf``
 (median over rounds of the per-round ratio), the identification time, the
 one-off JIT compilation time (cold cache, measured in a fresh process) and peak traced memory
@@ -23,18 +23,18 @@ import tracemalloc
 
 import numpy as np
 
-from gnssacc import mechanization
-from gnssacc.config import load_config
-from gnssacc.ekf import run_ekf
-from gnssacc.identify import identify
+from gnssacc.core.config import load_config
+from gnssacc.estimators import mechanization
+from gnssacc.estimators.ekf import run_ekf
 from gnssacc.pipeline import load_source
+from gnssacc.prepare.identify import identify
 from gnssacc.sources.sim import grade_config, simulate
 
 
 def cold_jit_seconds() -> float:
     """Compile time of the numba kernels in a fresh process with an empty cache."""
     with tempfile.TemporaryDirectory() as cache:
-        code = "from gnssacc import mechanization; print(mechanization.warm_up())"
+        code = "from gnssacc.estimators import mechanization; print(mechanization.warm_up())"
         env = {**os.environ, "NUMBA_CACHE_DIR": cache}
         # The package cache (if any) would hide the compile: point numba at an empty one.
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)

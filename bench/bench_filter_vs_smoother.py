@@ -39,7 +39,7 @@ def errors_of_run(scenario: str, grade: str, noise: str, duration: float, seed: 
                   tune: str) -> dict:
     """Per method: position [m], velocity [m/s], tilt and yaw [deg] RMS errors (after 10 s)."""
     import gnssacc
-    from gnssacc.observability import state_errors
+    from gnssacc.analysis.observability import state_errors
 
     run = gnssacc.simulate(scenario, duration, imu_grade=grade, noise=noise, seed=seed)
     with warnings.catch_warnings():

@@ -1,7 +1,7 @@
 """The smoother with its time-ordered fixed-lag smoother against GTSAM's own, on one recording.
 
-Runs each smoother method with :class:`gnssacc.fixed_lag.FixedLagISAM2` (what ``gnssacc run``
-uses) and with :class:`gnssacc.fixed_lag.GtsamFixedLag` (``gtsam.IncrementalFixedLagSmoother``),
+Runs each smoother method with :class:`gnssacc.estimators.fixed_lag.FixedLagISAM2` (what ``gnssacc run``
+uses) and with :class:`gnssacc.estimators.fixed_lag.GtsamFixedLag` (``gtsam.IncrementalFixedLagSmoother``),
 interleaved, from the same identification, and prints per method: the median CPU seconds of the
 smoother pass (CPU time: less sensitive to a shared machine than wall time), their ratio, the
 variables iSAM2 re-eliminated per update, and how far the two estimates are apart (position,
@@ -20,12 +20,12 @@ import time
 
 import numpy as np
 
-import gnssacc.smoother as S
-from gnssacc.config import load_config
-from gnssacc.fixed_lag import FixedLagISAM2, GtsamFixedLag
-from gnssacc.identify import identify
-from gnssacc.metrics import score
+import gnssacc.estimators.smoother as S
+from gnssacc.analysis.metrics import score
+from gnssacc.core.config import load_config
+from gnssacc.estimators.fixed_lag import FixedLagISAM2, GtsamFixedLag
 from gnssacc.pipeline import load_source
+from gnssacc.prepare.identify import identify
 
 
 def _counting(cls, count: list):

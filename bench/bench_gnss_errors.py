@@ -2,7 +2,7 @@
 time constant is not the 60 s the tuner starts from (and the simulator uses by default).
 
 * ``outliers``: simulated ``car-city`` 280 s and ``ugv-slow`` 235 s (industrial IMU, 3 m white
-  fixes), each clean and with a fraction of the fixes moved (:func:`gnssacc.gnss_noise.add_outliers`),
+  fixes), each clean and with a fraction of the fixes moved (:func:`gnssacc.sources.gnss_noise.add_outliers`),
   default settings and with ``[ekf] position_gate_nis``. Printed per run: PRMSE of the raw fixes,
   ``ekf``, ``smoother`` and ``smoother-online``; position NIS and NEES; how many methods got the
   heavy-tail warning.
@@ -22,8 +22,8 @@ import warnings
 
 import numpy as np
 
-import gnssacc.gnss_noise as gn
-from gnssacc.config import load_config
+import gnssacc.sources.gnss_noise as gn
+from gnssacc.core.config import load_config
 from gnssacc.pipeline import compare
 from gnssacc.sources.sim import grade_config, simulate
 

@@ -38,9 +38,9 @@ from pathlib import Path
 import numpy as np
 
 from gnssacc import cli
-from gnssacc.config import load_config
-from gnssacc.plausibility import check_run
-from gnssacc.recording import GnssFixes, ImuData
+from gnssacc.checks.plausibility import check_run
+from gnssacc.core.config import load_config
+from gnssacc.core.recording import GnssFixes, ImuData
 from gnssacc.sources.csvdir import write_csv_run
 from gnssacc.sources.sim import simulate
 

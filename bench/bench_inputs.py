@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from gnssacc.config import load_config
+from gnssacc.checks.quality import check_imu
+from gnssacc.core.config import load_config
 from gnssacc.pipeline import load_source
-from gnssacc.quality import check_imu
 from gnssacc.sources.common import read_table
 from gnssacc.sources.csvdir import write_csv_run
 from gnssacc.sources.sim import simulate

@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from gnssacc.earth import LocalTangentFrame, ecef_to_llh
-from gnssacc.recording import GnssFixes, ImuData, RecordedRun, Truth
+from gnssacc.core.earth import LocalTangentFrame, ecef_to_llh
+from gnssacc.core.recording import GnssFixes, ImuData, RecordedRun, Truth
 from gnssacc.sources.csvdir import write_csv_run
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"

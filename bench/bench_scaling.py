@@ -28,11 +28,11 @@ import numpy as np
 CHILD = r"""
 import json, resource, sys, time
 t0 = time.perf_counter()
-from gnssacc import jit
-from gnssacc.config import load_config
+from gnssacc.core import jit
+from gnssacc.core.config import load_config
 from gnssacc.pipeline import compare
 from gnssacc.sources.sim import grade_config, simulate
-import gnssacc.smoother  # gtsam: part of the fixed cost
+import gnssacc.estimators.smoother  # gtsam: part of the fixed cost
 jit.warm_up()
 # VmHWM: the peak resident set of this process image (ru_maxrss would carry the parent's from the fork)
 rss = lambda: int(next(l for l in open("/proc/self/status") if l.startswith("VmHWM")).split()[1]) / 1024

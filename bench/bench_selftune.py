@@ -26,7 +26,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 # Imported here, before the worker processes fork, so that every run uses the same code.
-from gnssacc.config import load_config
+from gnssacc.core.config import load_config
 from gnssacc.pipeline import compare
 from gnssacc.sources.sim import grade_config, simulate
 

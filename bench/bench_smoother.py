@@ -31,7 +31,7 @@ def plain_fixed_lag(run, cfg, init) -> float:
     import gtsam
     from gtsam.symbol_shorthand import B, V, X
 
-    from gnssacc.earth import normal_gravity
+    from gnssacc.core.earth import normal_gravity
 
     t0 = time.perf_counter()
     p = gtsam.PreintegrationCombinedParams.MakeSharedD(float(normal_gravity(run.origin.lat0, run.origin.h0)))
@@ -82,7 +82,7 @@ def plain_fixed_lag(run, cfg, init) -> float:
 def _without_marginals():
     """The smoother with its per-node marginal upkeep switched off (identity covariances): what
     the sigmas cost, by difference. For this bench only; the estimates are unchanged."""
-    from gnssacc import window_marginals as W
+    from gnssacc.estimators import window_marginals as W
 
     sync, covs = W.WindowMarginals.sync, W.WindowMarginals.covariances
 
@@ -105,9 +105,9 @@ def _rss_mib() -> float:
 def _memory_child(duration: float) -> None:
     import threading
 
-    from gnssacc.config import load_config
-    from gnssacc.quality import check_imu
-    from gnssacc.smoother import run_smoother
+    from gnssacc.checks.quality import check_imu
+    from gnssacc.core.config import load_config
+    from gnssacc.estimators.smoother import run_smoother
     from gnssacc.sources.sim import grade_config, simulate
 
     cfg = load_config(overrides={"imu": grade_config("industrial")})
@@ -144,10 +144,10 @@ def main():
         _memory_child(args.memory_child)
         return
 
-    from gnssacc.config import load_config
-    from gnssacc.identify import identify
+    from gnssacc.core.config import load_config
+    from gnssacc.estimators.smoother import run_smoother
     from gnssacc.pipeline import load_source
-    from gnssacc.smoother import run_smoother
+    from gnssacc.prepare.identify import identify
 
     cfg = load_config("kitti")
     ident = identify(load_source("kitti", cfg, noise="white", seed=0), cfg)  # the start and noise `run` uses

@@ -15,9 +15,9 @@ import warnings
 
 import numpy as np
 
-from gnssacc import mechanization
-from gnssacc.config import load_config
-from gnssacc.identify import identify
+from gnssacc.core.config import load_config
+from gnssacc.estimators import mechanization
+from gnssacc.prepare.identify import identify
 from gnssacc.sources.sim import simulate
 
 

@@ -2,7 +2,7 @@
 
 Per GNSS quality and fix rate, for each variant against its baseline: the mean over the cells of
 the paired change [%] of a figure, and in how many cells it is significantly better / worse
-(:func:`gnssacc.study.classify`: false-discovery rate 5 % over the variant's cells); then the
+(:func:`gnssacc.analysis.study.classify`: false-discovery rate 5 % over the variant's cells); then the
 median position NEES per dof of every method.
 
     python bench/study_tables.py [notebooks/data/acceleration_aiding/*.csv.gz]
@@ -14,7 +14,7 @@ import sys
 
 import numpy as np
 
-from gnssacc import study
+from gnssacc.analysis import study
 
 VARIANTS = ("ekf-acc", "ekf-accw", "ekf-gm", "smoother-acc", "smoother-accw", "smoother-gm")
 METHODS = ("ekf", "ekf-acc", "ekf-accw", "ekf-gm", "smoother", "smoother-acc", "smoother-accw", "smoother-gm")

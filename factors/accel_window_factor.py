@@ -5,7 +5,7 @@ Error (NED, m/s^2)::
 
     e = sum_j B_j p_ant(X_j) - a~^n,      p_ant(X) = t + R l_b
 
-with ``B`` the least-squares row of :func:`gnssacc.gnss_accel.acceleration_row` for the window's
+with ``B`` the least-squares row of :func:`gnssacc.estimators.gnss_accel.acceleration_row` for the window's
 fix times and ``a~^n = sum_j B_j p_fix_j``. The operator that made the measurement from the fixes
 is applied to the antenna positions the estimate predicts at the same times, so a noise-free
 window gives zero error whatever the vehicle does between the fixes (the paper's factor compares
@@ -20,7 +20,7 @@ The error is linear in the positions but not in the Pose3 tangent (``tau`` is bo
 linear GTSAM factor is not exact here: it is a CustomFactor (its cost is in ``bench/bench_smoother.py``).
 Noise: the propagated ``sum_j B_j^2 Sigma_j`` (fixes independent) or a fixed sigma, as for the
 paper's factor. It is not correlated with the position factors of the same fixes: like the
-paper's factor it counts their information twice (:mod:`gnssacc.aiding_theory`). With the
+paper's factor it counts their information twice (:mod:`gnssacc.analysis.aiding_theory`). With the
 Gauss-Markov GNSS-error states the factor still compares with the antenna positions alone (the
 second difference of a slow error is small, but it is not modelled here).
 """
@@ -29,7 +29,7 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from gnssacc.rotations import skew
+from gnssacc.core.rotations import skew
 
 
 def window_accel_error(poses: list, B_row: np.ndarray, lever_b: np.ndarray, a_n: np.ndarray) -> np.ndarray:

@@ -1,5 +1,5 @@
 r"""Factors for time-correlated GNSS errors: a first-order Gauss-Markov error ``g`` (NED, metres)
-per fix, as in the EKF's three extra states (:mod:`gnssacc.measurements`).
+per fix, as in the EKF's three extra states (:mod:`gnssacc.estimators.measurements`).
 
 * :func:`gnss_position_gm_factor` on (X_k, G_k): the fix is the antenna plus its correlated
   error, ``e = t + R l_b + g - p_fix`` with white noise ``Sigma``. Jacobians on GTSAM's Pose3
@@ -13,7 +13,7 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from gnssacc.rotations import skew
+from gnssacc.core.rotations import skew
 
 
 def gnss_position_gm_factor(pose_key: int, gm_key: int, p_fix: np.ndarray, lever_b: np.ndarray,

@@ -1,7 +1,7 @@
 """Shared test set-up."""
 import pytest
 
-import gnssacc.jit as jit
+import gnssacc.core.jit as jit
 
 
 @pytest.fixture(scope="session", autouse=True)

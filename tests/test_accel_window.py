@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from gnssacc.config import load_config
-from gnssacc.ekf import FilterState, run_ekf
-from gnssacc.gnss_accel import acceleration_row, model_errors, peano_kernel, peano_weights, window_samples
-from gnssacc.measurements import window_acceleration
-from gnssacc.mechanization import kernel_force_integrals
-from gnssacc.rotations import euler_to_dcm, rotvec_to_dcm
+from gnssacc.core.config import load_config
+from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm
+from gnssacc.estimators.ekf import FilterState, run_ekf
+from gnssacc.estimators.gnss_accel import acceleration_row, model_errors, peano_kernel, peano_weights, window_samples
+from gnssacc.estimators.measurements import window_acceleration
+from gnssacc.estimators.mechanization import kernel_force_integrals
 from gnssacc.sources.sim import grade_config, simulate
 
 WINDOWS = [100.0 + np.arange(3.0), 5.0 + 0.2 * np.arange(3.0), np.array([10.0, 10.7, 12.1]),
@@ -145,13 +145,13 @@ def test_ekf_accw_runs_end_to_end_with_finite_nis(sigma):
     assert st["n_acc_updates"] >= st["n_pos_updates"] - 5
     assert np.all(np.isfinite(st["nis_acc"])) and np.isfinite(st["nis_pos_mean"])
     assert 0.3 < st["nis_acc_mean"] < 3.0 and 0.3 < st["nis_pos_mean"] < 3.0
-    from gnssacc.metrics import gnss_score, score
+    from gnssacc.analysis.metrics import gnss_score, score
     assert score(run, sol).prmse_m < gnss_score(run).prmse_m
 
 
 def test_windows_touching_a_suspect_imu_span_are_skipped():
     """A window whose IMU samples touch a flagged span gives no update; the others still do."""
-    from gnssacc.quality import QualityReport, Span, touches_segments
+    from gnssacc.checks.quality import QualityReport, Span, touches_segments
 
     cfg = load_config(overrides={"imu": grade_config("industrial")})
     run = simulate("car", duration_s=120.0, imu_grade="industrial", noise="white", seed=1)
@@ -170,7 +170,7 @@ def test_windows_touching_a_suspect_imu_span_are_skipped():
 def test_H_w_reduces_to_the_paper_H_a_without_rotation():
     """No rotation over the window and a constant specific force: F_b = f, M = I, and H_w's
     attitude and accelerometer-bias blocks are the paper's H_a (same sign convention)."""
-    from gnssacc.gnss_accel import H_a_blocks, H_w_blocks
+    from gnssacc.estimators.gnss_accel import H_a_blocks, H_w_blocks
 
     t_imu = np.arange(-0.1, 2.2, 0.01)
     k0, k1, h, w = window_samples(t_imu, np.array([0.0, 1.0, 2.0]))

@@ -1,17 +1,17 @@
 """The window-consistent GNSS-acceleration factor (smoother-accw) and the factor-graph identity
-of gnssacc.aiding_theory."""
+of gnssacc.analysis.aiding_theory."""
 import gtsam
 import numpy as np
 import pytest
+from gnssacc.factors import window_accel_error, window_accel_factor
 from gtsam.symbol_shorthand import X
 
-from gnssacc.aiding_theory import FgChain, fg_departure, fg_draw, fg_posterior
-from gnssacc.config import load_config
-from gnssacc.factors import window_accel_error, window_accel_factor
-from gnssacc.gnss_accel import acceleration_row
-from gnssacc.metrics import gnss_score, score
-from gnssacc.rotations import euler_to_dcm
-from gnssacc.smoother import run_smoother
+from gnssacc.analysis.aiding_theory import FgChain, fg_departure, fg_draw, fg_posterior
+from gnssacc.analysis.metrics import gnss_score, score
+from gnssacc.core.config import load_config
+from gnssacc.core.rotations import euler_to_dcm
+from gnssacc.estimators.gnss_accel import acceleration_row
+from gnssacc.estimators.smoother import run_smoother
 from gnssacc.sources.sim import grade_config, simulate
 
 POSES = [gtsam.Pose3(gtsam.Rot3(euler_to_dcm(0.1 * j, -0.2, 2.5 - 0.3 * j)), np.array([10.0 + 8 * j, -4.0, 1.0]))
@@ -72,7 +72,7 @@ def test_smoother_accw_runs_end_to_end_on_a_simulated_run():
 
 
 def test_smoother_accw_recorded_covariances_equal_isam2_joint_marginals(monkeypatch):
-    import gnssacc.smoother as S
+    import gnssacc.estimators.smoother as S
 
     cfg = load_config(overrides={"imu": grade_config("industrial")})
     run = simulate("car", duration_s=40.0, imu_grade="industrial", noise="white", seed=4)

@@ -11,8 +11,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gnssacc.allan import (allan_deviation, allan_deviation_pooled, bias_instability, remove_spectral_lines,
-                           white_noise_density)
+from gnssacc.prepare.allan import (
+    allan_deviation,
+    allan_deviation_pooled,
+    bias_instability,
+    remove_spectral_lines,
+    white_noise_density,
+)
 
 DEG = np.pi / 180.0
 

@@ -9,8 +9,8 @@ import pytest
 
 import gnssacc
 from gnssacc.cli import main
-from gnssacc.errors import InputError
-from gnssacc.report import RUN_FIELDS, TRAJECTORY_COLUMNS
+from gnssacc.core.errors import InputError
+from gnssacc.outputs.report import RUN_FIELDS, TRAJECTORY_COLUMNS
 from gnssacc.sources.bagwrite import write_bag
 from gnssacc.sources.csvdir import write_csv_run
 
@@ -94,9 +94,9 @@ def test_bad_input_raises_input_error_naming_it(tmp_path):
 
 def test_run_is_process_and_the_data_model_is_gnssacc_recording():
     """``gnssacc.run`` is the verb (it used to be the data-model module, not callable)."""
-    import gnssacc.recording
+    import gnssacc.core.recording
 
-    assert gnssacc.run is gnssacc.process and isinstance(gnssacc.simulate("car", 10.0), gnssacc.recording.RecordedRun)
+    assert gnssacc.run is gnssacc.process and isinstance(gnssacc.simulate("car", 10.0), gnssacc.core.recording.RecordedRun)
 
 
 def test_python_dash_m_is_the_command():

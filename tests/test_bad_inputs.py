@@ -23,11 +23,11 @@ import pytest
 pytest.importorskip("rosbags")
 
 from gnssacc import cli  # noqa: E402
-from gnssacc.gnss_noise import MAX_OUTAGES, parse_outages  # noqa: E402
-from gnssacc.errors import InputError  # noqa: E402
-from gnssacc.recording import ImuData  # noqa: E402
+from gnssacc.core.errors import InputError  # noqa: E402
+from gnssacc.core.recording import ImuData  # noqa: E402
 from gnssacc.sources.bagwrite import write_bag  # noqa: E402
 from gnssacc.sources.csvdir import write_csv_run  # noqa: E402
+from gnssacc.sources.gnss_noise import MAX_OUTAGES, parse_outages  # noqa: E402
 from gnssacc.sources.sim import simulate  # noqa: E402
 
 FAST = ["--methods", "ekf", "--no-plots", "--tune", "none"]
@@ -516,7 +516,7 @@ def test_a_bug_is_one_line_and_a_crash_file(env, capsys, monkeypatch):
         raise ZeroDivisionError("float division by zero")
 
     monkeypatch.setattr(tempfile, "tempdir", str(env.tmp))
-    monkeypatch.setattr("gnssacc.config.RunConfig.to_toml", broken)
+    monkeypatch.setattr("gnssacc.core.config.RunConfig.to_toml", broken)
     code, out, err = _cli(capsys, ["config"])
     assert code == 1 and "Traceback" not in err
     lines = err.strip().splitlines()
@@ -538,7 +538,7 @@ def test_interrupt_stays_130(monkeypatch, capsys):
 
 def test_a_sigterm_that_reaches_main_stays_143(monkeypatch, capsys):
     """E.g. one landing as a command's signal handling is being undone: no traceback, exit 143."""
-    from gnssacc.interrupts import Terminated
+    from gnssacc.core.interrupts import Terminated
 
     def terminated(args):
         raise Terminated()

@@ -14,8 +14,8 @@ pytest.importorskip("rosbags")
 
 from rosbags.highlevel import AnyReader  # noqa: E402
 
-from gnssacc.config import load_config  # noqa: E402
-from gnssacc.errors import DataWarning, InputError  # noqa: E402
+from gnssacc.core.config import load_config  # noqa: E402
+from gnssacc.core.errors import DataWarning, InputError  # noqa: E402
 from gnssacc.sources.bag_salvage import Ros1Salvage  # noqa: E402
 from gnssacc.sources.bag_times import find_gaps, sorted_unique  # noqa: E402
 from gnssacc.sources.bag_topics import TopicStat, select_topics  # noqa: E402

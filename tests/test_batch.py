@@ -15,12 +15,13 @@ distributed = pytest.importorskip("distributed")
 
 from distributed.diagnostics.plugin import SchedulerPlugin  # noqa: E402
 
-from gnssacc import batch, pipeline  # noqa: E402
-from gnssacc.campaign import CAMPAIGN_FILE, TASK_FILE  # noqa: E402
-from gnssacc.campaign_summary import TIMING_COLUMNS  # noqa: E402
+from gnssacc import pipeline  # noqa: E402
+from gnssacc.analysis.montecarlo import summarise  # noqa: E402
+from gnssacc.campaign import batch
+from gnssacc.campaign.campaign import CAMPAIGN_FILE, TASK_FILE  # noqa: E402
+from gnssacc.campaign.campaign_summary import TIMING_COLUMNS  # noqa: E402
 from gnssacc.cli import main  # noqa: E402
-from gnssacc.montecarlo import summarise  # noqa: E402
-from gnssacc.outdir import MARKER, FolderLock  # noqa: E402
+from gnssacc.outputs.outdir import MARKER, FolderLock  # noqa: E402
 from gnssacc.sources.csvdir import write_csv_run  # noqa: E402
 from gnssacc.sources.sim import simulate  # noqa: E402
 
@@ -244,7 +245,7 @@ def test_bad_input_stops_before_any_task(recordings, tmp_path, capsys, monkeypat
     assert not out.exists()
     # Without Dask, a pool of processes is refused in one line (one job runs in this process).
     monkeypatch.setitem(sys.modules, "distributed", None)
-    monkeypatch.delitem(sys.modules, "gnssacc.cluster", raising=False)
+    monkeypatch.delitem(sys.modules, "gnssacc.campaign.cluster", raising=False)
     _expect_error(capsys, ["batch", recordings[0], *FAST, "--jobs", "2", "--out", out], "batch: needs dask.distributed",
                   'pip install "gnssacc[cluster]"')
     assert not out.exists()
@@ -273,8 +274,8 @@ def test_outage_patterns_and_summary_tables(recordings, tmp_path, capsys):
 
 def test_a_campaign_made_through_the_api_resumes_from_the_command_line(recordings, tmp_path, capsys):
     # The API leaves the bag options out; the command line gives every one (None = not given).
-    from gnssacc.batch import SerialExecutor, run_campaign
-    from gnssacc.campaign import Campaign, Pattern, make_settings
+    from gnssacc.campaign.batch import SerialExecutor, run_campaign
+    from gnssacc.campaign.campaign import Campaign, Pattern, make_settings
 
     out = tmp_path / "api"
     settings = make_settings([recordings[0]], ["ekf"], [0, 1], [Pattern(None, None)], noise="white", tune="none",
@@ -295,8 +296,8 @@ def test_seeds_warning_only_where_the_seed_changes_nothing(source, warned):
     simulated run draws its IMU and fixes from the seed (and KITTI its fixes): no warning there."""
     import warnings
 
-    from gnssacc.campaign_args import _warn_if_seeds_do_nothing
-    from gnssacc.errors import DataWarning
+    from gnssacc.campaign.campaign_args import _warn_if_seeds_do_nothing
+    from gnssacc.core.errors import DataWarning
 
     settings = {"sources": [("x", source)], "seeds": [0, 1, 2], "noise": None, "bag": {"gnss_from_truth_hz": None}}
     with warnings.catch_warnings(record=True) as caught:

@@ -166,7 +166,7 @@ def test_config_show_round_trips(tmp_path, capsys):
     f = _write(tmp_path / "resolved.toml", stdout)
     code2, stdout2, _ = _run_cli(["config", "--config", f], capsys)
     assert code2 == 0
-    import tomllib   # the same values (the notes say what set them: the preset, then the file)
+    import tomllib  # the same values (the notes say what set them: the preset, then the file)
     assert tomllib.loads(stdout) == tomllib.loads(stdout2)
     assert "# set by preset kitti" in stdout and f"# set by {f}" in stdout2
 

@@ -3,8 +3,8 @@ starting file whose uncommented lines are exactly what the user sets."""
 import tomllib
 
 from gnssacc.cli import main
-from gnssacc.config import DEFAULTS, load_config
-from gnssacc.config_docs import key_comments
+from gnssacc.core.config import DEFAULTS, load_config
+from gnssacc.core.config_docs import key_comments
 
 
 def test_every_key_is_documented_by_its_own_comment_or_its_group():

@@ -7,10 +7,10 @@ import warnings
 import numpy as np
 import pytest
 
-from gnssacc.config import DEG, load_config
-from gnssacc.earth import LocalTangentFrame
-from gnssacc.errors import DataWarning, InputError
-from gnssacc.recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth
+from gnssacc.core.config import DEG, load_config
+from gnssacc.core.earth import LocalTangentFrame
+from gnssacc.core.errors import DataWarning, InputError
+from gnssacc.core.recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth
 from gnssacc.sources.common import apply_mounting, read_table
 from gnssacc.sources.csvdir import load_csv_run, write_csv_run
 
@@ -337,7 +337,7 @@ def test_read_table_in_blocks_equals_one_pass_and_keeps_line_numbers(tmp_path, m
     line in a later block, and a truncated last line dropped even when it opens a block."""
     import warnings
 
-    from gnssacc.errors import DataWarning, InputError
+    from gnssacc.core.errors import DataWarning, InputError
     from gnssacc.sources import common
 
     rows = [f"{0.01 * k:.2f},{k},{-k}" for k in range(23)]

@@ -13,13 +13,13 @@ import time
 import numpy as np
 import pytest
 
-from gnssacc import outdir
 from gnssacc.cli import main
-from gnssacc.errors import InputError
-from gnssacc.interrupts import Terminated, raise_if_interrupted, signals_raise
-from gnssacc.outdir import MARKER, FolderLock, ResultDir, clean_stale, signals_held
+from gnssacc.core.errors import InputError
+from gnssacc.core.interrupts import Terminated, raise_if_interrupted, signals_raise
+from gnssacc.outputs import outdir
+from gnssacc.outputs.outdir import MARKER, FolderLock, ResultDir, clean_stale, signals_held
+from gnssacc.outputs.report import format_table
 from gnssacc.pipeline import failure_reason
-from gnssacc.report import format_table
 from gnssacc.sources.csvdir import write_csv_run
 from gnssacc.sources.sim import simulate
 
@@ -72,7 +72,7 @@ def _failing_smoother(*args, **kwargs):
 
 
 def test_a_failing_smoother_keeps_the_ekf_results(run_dir, tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr("gnssacc.smoother.run_smoother", _failing_smoother)
+    monkeypatch.setattr("gnssacc.estimators.smoother.run_smoother", _failing_smoother)
     out = tmp_path / "res"
     code, stdout, stderr = _cli(["run", run_dir, "--methods", "ekf,smoother", "--out", out] + FAST, capsys)
     assert code == 0, stderr
@@ -98,7 +98,7 @@ def test_every_method_failing_exits_1_and_keeps_the_old_result(run_dir, tmp_path
     def boom(*args, **kwargs):
         raise FloatingPointError("covariance lost positive definiteness")
     monkeypatch.setattr("gnssacc.pipeline.run_ekf", boom)
-    monkeypatch.setattr("gnssacc.smoother.run_smoother", _failing_smoother)
+    monkeypatch.setattr("gnssacc.estimators.smoother.run_smoother", _failing_smoother)
     code, _, stderr = _cli(["run", run_dir, "--methods", "ekf,smoother", "--out", out] + FAST, capsys)
     assert code == 1
     err = [ln for ln in stderr.splitlines() if ln.startswith("gnssacc: error:")]
@@ -110,7 +110,7 @@ def test_every_method_failing_exits_1_and_keeps_the_old_result(run_dir, tmp_path
 def test_bad_input_inside_a_method_is_still_an_input_error(run_dir, tmp_path, capsys, monkeypatch):
     def bad(*args, **kwargs):
         raise InputError("cfg.toml", "[smoother] lag_s must be positive")
-    monkeypatch.setattr("gnssacc.smoother.run_smoother", bad)
+    monkeypatch.setattr("gnssacc.estimators.smoother.run_smoother", bad)
     code, _, stderr = _cli(["run", run_dir, "--methods", "ekf,smoother", "--out", tmp_path / "res"] + FAST, capsys)
     assert code == 2 and "gnssacc: error: cfg.toml: [smoother] lag_s must be positive" in stderr
     assert not (tmp_path / "res").exists() and _leftovers(tmp_path) == []
@@ -363,7 +363,7 @@ sys.exit(main(sys.argv[4:]))
 HOOK_WHEN = {"pipeline.load_source": "before",           # the very start, the lock just taken
              "pipeline.run_methods": "before",           # computing
              "pipeline.write_trajectory_csv": "after",   # writing the new result (one file written)
-             "report.format_table": "before"}            # printing the summary (the pipeline has its own name)
+             "outputs.report.format_table": "before"}            # printing the summary (the pipeline has its own name)
 
 
 def _start(hook, pause, args):
@@ -386,7 +386,7 @@ def _wait_for(proc, text):
     (signal.SIGTERM, "pipeline.run_methods", False),
     (signal.SIGTERM, "pipeline.write_trajectory_csv", True),
     (signal.SIGINT, "pipeline.write_trajectory_csv", False),
-    (signal.SIGINT, "report.format_table", True),
+    (signal.SIGINT, "outputs.report.format_table", True),
 ])
 def test_interrupted_leaves_the_old_result_or_the_new(run_dir, tmp_path, capsys, sig, hook, old):
     out = tmp_path / "res"
@@ -403,7 +403,7 @@ def test_interrupted_leaves_the_old_result_or_the_new(run_dir, tmp_path, capsys,
     assert proc.returncode == (130 if sig == signal.SIGINT else 143)
     said = [ln for ln in stderr.splitlines() if ln.startswith("gnssacc: interrupted:")]
     assert "Traceback" not in stderr and _leftovers(tmp_path) == []
-    if hook == "report.format_table":   # after the swap
+    if hook == "outputs.report.format_table":   # after the swap
         assert said == [f"gnssacc: interrupted: {out} holds the new complete result"]
         _assert_complete(out, ["ekf", "ekf-acc"])
         return
@@ -479,8 +479,8 @@ def test_truth_shorter_than_the_run_leaves_full_outputs(run_dir, tmp_path, capsy
 
 
 def test_output_epochs_do_not_depend_on_the_truth(run_dir, tmp_path):
-    from gnssacc.config import load_config
-    from gnssacc.ekf import default_output_times
+    from gnssacc.core.config import load_config
+    from gnssacc.estimators.ekf import default_output_times
     from gnssacc.pipeline import with_outages
     from gnssacc.sources.csvdir import load_csv_run
     run = load_csv_run(run_dir, load_config())

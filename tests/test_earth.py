@@ -2,9 +2,8 @@
 import numpy as np
 import pytest
 
-from gnssacc import earth
-from gnssacc.rotations import (dcm_to_euler, dcm_to_rotvec, euler_error_jacobian, euler_to_dcm, rotvec_to_dcm,
-                               skew)
+from gnssacc.core import earth
+from gnssacc.core.rotations import dcm_to_euler, dcm_to_rotvec, euler_error_jacobian, euler_to_dcm, rotvec_to_dcm, skew
 
 
 def test_normal_gravity_published_values():

@@ -4,11 +4,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from gnssacc import earth, mechanization as mech
-from gnssacc.config import load_config
-from gnssacc.ekf import run_ekf
-from gnssacc.metrics import gnss_score, score
-from gnssacc.rotations import dcm_to_rotvec, euler_to_dcm
+from gnssacc.analysis.metrics import gnss_score, score
+from gnssacc.core import earth
+from gnssacc.core.config import load_config
+from gnssacc.core.rotations import dcm_to_rotvec, euler_to_dcm
+from gnssacc.estimators import mechanization as mech
+from gnssacc.estimators.ekf import run_ekf
 from gnssacc.sources.sim import grade_config, simulate
 
 
@@ -107,7 +108,7 @@ def test_ekf_estimates_the_heading_and_biases_of_a_simulated_ugv():
 
 def test_suspect_spans_get_inflated_noise():
     """Interpolated IMU stretches increase the attitude sigma versus the same run unflagged."""
-    from gnssacc.quality import QualityReport, Span, check_imu
+    from gnssacc.checks.quality import QualityReport, Span, check_imu
 
     cfg = load_config(overrides={"imu": grade_config("industrial")})
     run = simulate("turns", duration_s=120.0, imu_grade="industrial", noise="white", seed=1)
@@ -139,8 +140,8 @@ def test_kitti_integration():
 
 def test_self_initialisation_of_a_slow_ugv_with_correlated_gnss_noise():
     """UGV speeds (<= 3 m/s) with Gauss-Markov GNSS noise: the yaw bank's start yaw is honest."""
-    from gnssacc.stationary import detect_stationary
-    from gnssacc.yawbank import select_yaw
+    from gnssacc.prepare.stationary import detect_stationary
+    from gnssacc.prepare.yawbank import select_yaw
 
     cfg = load_config(overrides={"imu": grade_config("industrial")})
     z = []

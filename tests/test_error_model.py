@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from gnssacc import earth
-from gnssacc.mechanization import strapdown_step, system_matrix
-from gnssacc.rotations import dcm_to_rotvec, euler_to_dcm, rotvec_to_dcm
+from gnssacc.core import earth
+from gnssacc.core.rotations import dcm_to_rotvec, euler_to_dcm, rotvec_to_dcm
+from gnssacc.estimators.mechanization import strapdown_step, system_matrix
 
 
 def _error(est, true):
@@ -81,7 +81,7 @@ def test_F_matches_finite_differences(lat_deg, v_n):
 
 @pytest.mark.parametrize("order", [1, 2])
 def test_sparse_covariance_propagation_equals_dense(order):
-    from gnssacc.mechanization import _propagate_cov
+    from gnssacc.estimators.mechanization import _propagate_cov
 
     rng = np.random.default_rng(1)
     pos = np.array([0.8, 0.1, 50.0])

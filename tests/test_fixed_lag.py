@@ -1,4 +1,4 @@
-"""The fixed-lag smoother on iSAM2 (:mod:`gnssacc.fixed_lag`).
+"""The fixed-lag smoother on iSAM2 (:mod:`gnssacc.estimators.fixed_lag`).
 
 * On a linear chain, marginalising old variables is exact: the newest variable's estimate and
   covariance must equal a batch solution of every factor ever added.
@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from gtsam.symbol_shorthand import X
 
-import gnssacc.smoother as S
-from gnssacc.config import load_config
-from gnssacc.fixed_lag import FixedLagISAM2, GtsamFixedLag
+import gnssacc.estimators.smoother as S
+from gnssacc.core.config import load_config
+from gnssacc.estimators.fixed_lag import FixedLagISAM2, GtsamFixedLag
 from gnssacc.pipeline import with_outages
 from gnssacc.sources.sim import grade_config, simulate
 
@@ -103,9 +103,9 @@ def test_biases_far_from_their_linearisation_point_are_relinearised_before_margi
     """A consumer IMU on a slow UGV with a loose accelerometer turn-on sigma (526 mg; true 30 mg),
     1 Hz nodes in a 10 s lag: without the guard the fixed-lag estimate drifted to 10.3 m where the
     EKF holds 2.2 m (the biases' factors marginalised at their first linearisation point)."""
-    from gnssacc.ekf import run_ekf
-    from gnssacc.identify import identify
-    from gnssacc.metrics import score
+    from gnssacc.analysis.metrics import score
+    from gnssacc.estimators.ekf import run_ekf
+    from gnssacc.prepare.identify import identify
 
     run = simulate("ugv", 180.0, imu_grade="consumer", noise="white", seed=2)
     cfg = load_config(overrides={"imu": {"gyro_arw_deg_rth": 0.65, "accel_vrw_mps_rth": 0.41,

@@ -2,12 +2,20 @@
 import numpy as np
 import pytest
 
-from gnssacc.ekf import FilterState
-from gnssacc.measurements import position
-from gnssacc.earth import radii
-from gnssacc.gnss_accel import (AccelWindow, H_a, H_a_blocks, acceleration_row, design_matrix, ls_acceleration,
-                                paper_H_a_blocks, predicted_acceleration)
-from gnssacc.rotations import euler_to_dcm, rotvec_to_dcm
+from gnssacc.core.earth import radii
+from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm
+from gnssacc.estimators.ekf import FilterState
+from gnssacc.estimators.gnss_accel import (
+    AccelWindow,
+    H_a,
+    H_a_blocks,
+    acceleration_row,
+    design_matrix,
+    ls_acceleration,
+    paper_H_a_blocks,
+    predicted_acceleration,
+)
+from gnssacc.estimators.measurements import position
 
 
 @pytest.mark.parametrize("dt", [1.0, 0.2, 0.1])
@@ -139,7 +147,7 @@ def test_H_p_with_lever_arm_by_finite_differences():
 @pytest.mark.parametrize("override", [None, np.array([0.1, 0.2, 0.3])])
 def test_window_accelerations_equal_the_sliding_window(override):
     """The vectorised accelerations (the smoother's) equal AccelWindow's, gaps and resets included."""
-    from gnssacc.gnss_accel import AccelWindow, window_accelerations
+    from gnssacc.estimators.gnss_accel import AccelWindow, window_accelerations
 
     rng = np.random.default_rng(5)
     t = np.cumsum(rng.choice([0.2, 1.0, 1.0, 3.0], size=80))          # 3 s steps exceed the gap

@@ -4,8 +4,8 @@ same, and the exact averages where those are known in closed form."""
 import numpy as np
 import pytest
 
-import gnssacc.motionmatch as mm
-from gnssacc.recording import ImuData
+import gnssacc.checks.motionmatch as mm
+from gnssacc.core.recording import ImuData
 
 
 def whole_box_average(t, x, t0, step, n):
@@ -108,7 +108,7 @@ def test_smooth_horizontal_keeps_the_whole_array_arithmetic(monkeypatch, block):
 @pytest.mark.parametrize("block", [3, 1 << 14])
 def test_gap_cells_in_blocks_equal_the_whole_record(monkeypatch, block):
     # Interval k (sample k-1 to k) marks the cell of sample k; gaps on block edges and in cell 0.
-    import gnssacc.stationary as st
+    import gnssacc.prepare.stationary as st
 
     monkeypatch.setattr(st, "GAP_BLOCK_CELLS", block)
     t = np.arange(1003) * 0.01
@@ -121,7 +121,7 @@ def test_gap_cells_in_blocks_equal_the_whole_record(monkeypatch, block):
 
 @pytest.mark.parametrize("block", [5, 4096])
 def test_running_median_in_blocks_equals_each_window_median(monkeypatch, block):
-    import gnssacc.stationary as st
+    import gnssacc.prepare.stationary as st
 
     monkeypatch.setattr(st, "MEDIAN_BLOCK_ROWS", block)
     x = np.random.default_rng(6).standard_normal((103, 6))
@@ -131,7 +131,7 @@ def test_running_median_in_blocks_equals_each_window_median(monkeypatch, block):
 
 def test_still_positions_in_blocks_equal_the_whole_record(monkeypatch):
     # The verdicts of a simulated run's cells, compared 7 positions at a time and all at once.
-    import gnssacc.stationary as st
+    import gnssacc.prepare.stationary as st
     from gnssacc.sources.sim import simulate
 
     imu = simulate("car", duration_s=300.0, imu_grade="industrial", seed=2).imu

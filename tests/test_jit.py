@@ -16,7 +16,8 @@ import gnssacc
 
 PROBE = """
 import os, subprocess, sys
-from gnssacc import jit, mechanization
+from gnssacc.core import jit
+from gnssacc.estimators import mechanization
 if os.environ.get("CHILDREN_FAIL"):   # the compiling processes die at once: this process compiles
     jit._spawn = lambda part: subprocess.Popen([sys.executable, "-c", "raise SystemExit(3)"])
 b = jit.start_background()
@@ -93,7 +94,7 @@ def test_a_touched_kernel_source_is_compiled_again_with_the_notice(tmp_path):
     root = _read_only_copy(tmp_path)
     cache_home = tmp_path / "cache"
     _probe(root, cache_home)
-    source = root / "gnssacc" / "mechanization.py"
+    source = root / "gnssacc" / "estimators" / "mechanization.py"
     st = source.stat()
     os.utime(source, ns=(st.st_atime_ns, st.st_mtime_ns + 10**10))   # 10 s newer, same content
     again = _probe(root, cache_home)

@@ -7,13 +7,13 @@ from types import SimpleNamespace
 import gtsam
 import numpy as np
 import pytest
+from gnssacc.factors import gauss_markov_factor, gnss_position_gm_factor
 from gtsam.symbol_shorthand import G, X
 
-from gnssacc import measurements as mm
-from gnssacc.earth import earth_rate_n, radii
-from gnssacc.factors import gauss_markov_factor, gnss_position_gm_factor
-from gnssacc.mechanization import Propagator
-from gnssacc.rotations import euler_to_dcm, rotvec_to_dcm
+from gnssacc.core.earth import earth_rate_n, radii
+from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm
+from gnssacc.estimators import measurements as mm
+from gnssacc.estimators.mechanization import Propagator
 
 LAT, LON, H = np.radians(47.3), np.radians(8.5), 420.0
 R_TRUE = euler_to_dcm(0.04, -0.03, 2.1)

@@ -2,11 +2,11 @@
 import numpy as np
 import pytest
 
-from gnssacc.config import load_config
-from gnssacc.ekf import run_ekf
-from gnssacc.metrics import score
-from gnssacc.rotations import euler_to_dcm
-from gnssacc.recording import ImuData
+from gnssacc.analysis.metrics import score
+from gnssacc.core.config import load_config
+from gnssacc.core.recording import ImuData
+from gnssacc.core.rotations import euler_to_dcm
+from gnssacc.estimators.ekf import run_ekf
 from gnssacc.sources.csvdir import load_csv_run, write_csv_run
 from gnssacc.sources.sim import grade_config, simulate
 
@@ -33,7 +33,7 @@ def test_mounting_and_time_offset_from_config(tmp_path):
     # own axes), but what it reports is the attitude of those axes: roll about 180 deg.
     raw = load_csv_run(tmp_path / "logged", plain_cfg)
     sol = run_ekf(raw, plain_cfg, "ekf")
-    from gnssacc.metrics import gnss_score
+    from gnssacc.analysis.metrics import gnss_score
     assert score(raw, sol).prmse_m < gnss_score(raw).prmse_m
     assert np.all(np.abs(np.degrees(sol.rpy[:, 0])) > 170.0)
 
@@ -42,7 +42,7 @@ def test_mounting_and_time_offset_from_config(tmp_path):
 def test_smoothing_in_blocks_equals_one_convolution(monkeypatch, kernel):
     # A long run's grid is smoothed block by block (bounded memory): the same values as one FFT
     # convolution, for complex and real signals, at the ends and across block edges.
-    import gnssacc.motionmatch as mm
+    import gnssacc.checks.motionmatch as mm
 
     rng = np.random.default_rng(3)
     x = rng.standard_normal(1000) + 1j * rng.standard_normal(1000)
@@ -58,7 +58,7 @@ def test_smoothing_in_blocks_equals_one_convolution(monkeypatch, kernel):
 def test_fft_convolution_equals_the_direct_sum(monkeypatch, block):
     # The FFT convolution behind the smoothing against numpy's direct sum, real and complex,
     # whole and in blocks.
-    import gnssacc.motionmatch as mm
+    import gnssacc.checks.motionmatch as mm
 
     monkeypatch.setattr(mm, "SMOOTH_BLOCK", block)
     rng = np.random.default_rng(5)

@@ -1,13 +1,13 @@
-"""Known-answer tests of gnssacc.observability and gnssacc.motion (simulated runs, < 30 s)."""
+"""Known-answer tests of gnssacc.analysis.observability and gnssacc.analysis.motion (simulated runs, < 30 s)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from gnssacc import motion
-from gnssacc import observability as ob
-from gnssacc.config import load_config
-from gnssacc.ekf import run_ekf
+from gnssacc.analysis import motion
+from gnssacc.analysis import observability as ob
+from gnssacc.core.config import load_config
+from gnssacc.estimators.ekf import run_ekf
 from gnssacc.sources.sim import grade_config, simulate
 
 G = 9.80665

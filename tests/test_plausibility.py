@@ -1,4 +1,4 @@
-"""Input checks (:mod:`gnssacc.plausibility` and the modules it runs) against simulated runs whose
+"""Input checks (:mod:`gnssacc.checks.plausibility` and the modules it runs) against simulated runs whose
 truth is known: every corruption is made here from a clean run, so the expected repair is the
 clean run itself, and the value a message tells the user to write is checked by writing it
 (through the sources' own :func:`gnssacc.sources.common.apply_mounting`), not by its text.
@@ -19,12 +19,12 @@ import numpy as np
 import pytest
 
 from gnssacc import cli
-from gnssacc.config import load_config
-from gnssacc.earth import LocalTangentFrame
-from gnssacc.errors import DataWarning, InputError
-from gnssacc.plausibility import CHECKS, check_run, fix_imu_time_units
-from gnssacc.rotations import euler_to_dcm
-from gnssacc.recording import ImuData, InitialState
+from gnssacc.checks.plausibility import CHECKS, check_run, fix_imu_time_units
+from gnssacc.core.config import load_config
+from gnssacc.core.earth import LocalTangentFrame
+from gnssacc.core.errors import DataWarning, InputError
+from gnssacc.core.recording import ImuData, InitialState
+from gnssacc.core.rotations import euler_to_dcm
 from gnssacc.sources.common import apply_mounting
 from gnssacc.sources.csvdir import load_csv_run, write_csv_run
 from gnssacc.sources.sim import simulate
@@ -395,7 +395,7 @@ def test_mounting_error_names_the_line_that_fixes_it(scenario, mounting, sims):
 def test_short_run_with_outages_is_not_taken_for_a_yawed_imu(seed):
     """40 s with 5-s outages every 20 s leaves about one independent turn window: the yaw is
     undetermined, never "+-3 deg" off by 50 deg (it was, for 3 of these 6 draws)."""
-    from gnssacc.gnss_noise import apply_outages, parse_outages
+    from gnssacc.sources.gnss_noise import apply_outages, parse_outages
 
     run = simulate("car", duration_s=40.0, imu_grade="industrial", noise="white", seed=seed)
     run = apply_outages(run, parse_outages(None, "20:5", run.duration_s))

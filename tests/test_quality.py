@@ -7,9 +7,9 @@ import os
 import numpy as np
 import pytest
 
-from gnssacc.config import DEG, load_config
-from gnssacc.quality import KINDS, check_imu, inflation_psd
-from gnssacc.recording import ImuData
+from gnssacc.checks.quality import KINDS, check_imu, inflation_psd
+from gnssacc.core.config import DEG, load_config
+from gnssacc.core.recording import ImuData
 
 RATE_HZ = 100.0
 
@@ -85,7 +85,7 @@ def test_each_kind_found_at_the_right_place(cfg):
 def test_interpolation_check_in_blocks_finds_the_same_spans(cfg, monkeypatch, block):
     # Blocks of rows (bounded memory on long runs) with the defect straddling block edges:
     # the same spans, anchors and notes (the largest second difference) as in one piece.
-    import gnssacc.quality as quality
+    import gnssacc.checks.quality as quality
     imu, _ = _with_defects()
     whole = check_imu(imu, cfg).spans
     monkeypatch.setattr(quality, "CHECK_BLOCK_ROWS", block)
@@ -125,7 +125,7 @@ def test_report_summary_and_json(cfg):
 
 @pytest.mark.parametrize("mode", ["fixed", "local"])
 def test_inflation_psd_integrates_to_sigma_T_squared(cfg, mode):
-    from gnssacc.config import load_config
+    from gnssacc.core.config import load_config
 
     cfg = load_config(overrides={"quality": {"suspect_sigma_mode": mode}})
     imu, _ = _with_defects()

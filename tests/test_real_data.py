@@ -23,16 +23,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gnssacc.config import load_config
-from gnssacc.earth import LocalTangentFrame, ecef_to_llh
-from gnssacc.ekf import run_ekf
-from gnssacc.errors import InputError
-from gnssacc.stationary import detect_stationary
-from gnssacc.yawbank import select_yaw
-from gnssacc.metrics import gnss_score, score
-from gnssacc.quality import check_imu
-from gnssacc.rotations import wrap_angle
-from gnssacc.recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth
+from gnssacc.analysis.metrics import gnss_score, score
+from gnssacc.checks.quality import check_imu
+from gnssacc.core.config import load_config
+from gnssacc.core.earth import LocalTangentFrame, ecef_to_llh
+from gnssacc.core.errors import InputError
+from gnssacc.core.recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth
+from gnssacc.core.rotations import wrap_angle
+from gnssacc.estimators.ekf import run_ekf
+from gnssacc.prepare.stationary import detect_stationary
+from gnssacc.prepare.yawbank import select_yaw
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 METHODS = ("ekf", "ekf-acc")
@@ -47,7 +47,7 @@ def _data_dir(name: str) -> Path:
     return path
 
 
-# --- independent geodesy (so error metrics do not reuse gnssacc.earth) ---------------------------
+# --- independent geodesy (so error metrics do not reuse gnssacc.core.earth) ---------------------------
 
 _A, _F = 6378137.0, 1.0 / 298.257223563
 _E2 = _F * (2.0 - _F)
@@ -346,7 +346,7 @@ def test_comma_ublox_fixes_near_reference(comma):
     assert _hrmse(err) < 3.0                                     # raw: a few metres at most
     # With the documented antenna-camera offset removed, the scatter is SOURCE.txt's (~0.3 m).
     assert _hrmse(err - UBLOX_MINUS_POSE_NED) < 3.0 * UBLOX_POSE_STD_H + 0.1
-    # gnssacc.metrics computes the same number through its own path.
+    # gnssacc.analysis.metrics computes the same number through its own path.
     assert gnss_score(run).hrmse_m == pytest.approx(_hrmse(err), abs=0.01)
 
 
@@ -383,8 +383,8 @@ def test_comma_with_white_noise_fixes_is_not_taken_for_a_late_clock(seed, comma)
     """60 s of highway with 3 m fixes made from the reference: a clock offset check that compared
     correlations over different overlaps found -32.6 s (+-0.2 s) for 3 of these 8 draws, from a
     chance peak over 27 s of overlap; the checks must pass."""
-    from gnssacc.gnss_noise import fixes_from_truth
-    from gnssacc.plausibility import check_run
+    from gnssacc.checks.plausibility import check_run
+    from gnssacc.sources.gnss_noise import fixes_from_truth
 
     run = comma.run.with_gnss(fixes_from_truth(comma.run, comma.run.truth, "white", seed), noise="white", seed=seed)
     _, _, findings = check_run(run, load_config())

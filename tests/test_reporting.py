@@ -4,10 +4,10 @@ import json
 import numpy as np
 import pytest
 
+from gnssacc.analysis.montecarlo import paired_permutation_pvalue, parse_seeds
 from gnssacc.cli import main
-from gnssacc.export import dcm_to_quaternion
-from gnssacc.montecarlo import paired_permutation_pvalue, parse_seeds
-from gnssacc.rotations import euler_to_dcm, rotvec_to_dcm
+from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm
+from gnssacc.outputs.export import dcm_to_quaternion
 from gnssacc.sources.csvdir import write_csv_run
 from gnssacc.sources.sim import simulate
 
@@ -142,8 +142,8 @@ def _read_odometry(path):
 
 @pytest.mark.parametrize("kind, name", [("bag", "trajectories"), ("ros1bag", "trajectories.bag")])
 def test_odometry_bag_export_reads_back_as_the_csv_trajectory(kind, name, run_dir, tmp_path, capsys):
-    from gnssacc.earth import LocalTangentFrame
-    from gnssacc.odombag import ORIGIN_TOPIC, topic_of
+    from gnssacc.core.earth import LocalTangentFrame
+    from gnssacc.outputs.odombag import ORIGIN_TOPIC, topic_of
 
     out = tmp_path / "o"
     assert main(["run", str(run_dir), "--methods", "ekf,smoother", "--tune", "none", "--no-plots", "--export", kind,
@@ -183,8 +183,8 @@ def test_odometry_bag_export_reads_back_as_the_csv_trajectory(kind, name, run_di
 def test_truth_without_attitude_is_exported_as_positions_only_and_says_so(tmp_path):
     from dataclasses import replace
 
-    from gnssacc.errors import DataWarning
-    from gnssacc.export import write_truth_tum
+    from gnssacc.core.errors import DataWarning
+    from gnssacc.outputs.export import write_truth_tum
 
     run = simulate("car", 30.0, noise="white", seed=1)
     run = replace(run, truth=replace(run.truth, rpy=None))
@@ -200,7 +200,7 @@ def test_report_reads_the_filters_own_pass(run_dir, tmp_path, monkeypatch):
     """One pass: the observability section comes from the ekf-acc run itself (no second EKF
     run), and equals a separate replay of that filter from the same start."""
     import gnssacc
-    from gnssacc import observability as ob
+    from gnssacc.analysis import observability as ob
 
     res = gnssacc.process(str(run_dir), methods=["ekf", "ekf-acc"], tune="none")
     ident = res.ident

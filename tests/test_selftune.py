@@ -7,16 +7,16 @@ import re
 import numpy as np
 import pytest
 
-from gnssacc.config import load_config
-from gnssacc.ekf import run_ekf
-from gnssacc.gnss_noise import add_outliers
-from gnssacc.identify import identify
-from gnssacc.metrics import score, truth_at
+from gnssacc.analysis.metrics import score, truth_at
+from gnssacc.core.config import load_config
+from gnssacc.estimators.ekf import run_ekf
 from gnssacc.pipeline import compare
+from gnssacc.prepare.identify import identify
+from gnssacc.prepare.tuning import SHRINK_TOLERANCE, draw_back, ml_search, tune
+from gnssacc.sources.gnss_noise import add_outliers
 from gnssacc.sources.sim import grade_config, simulate
-from gnssacc.tuning import SHRINK_TOLERANCE, draw_back, ml_search, tune
 
-pytestmark = pytest.mark.filterwarnings("ignore::gnssacc.errors.DataWarning")
+pytestmark = pytest.mark.filterwarnings("ignore::gnssacc.core.errors.DataWarning")
 
 
 def _local_level_loglik(z: np.ndarray, q: float, r: float) -> float:
@@ -79,7 +79,7 @@ def test_a_turn_on_sigma_the_data_hardly_inform_stays_near_its_start():
     assert 10.0 < np.mean(sigma0) < 150.0, sigma0
     assert "drawn back toward the start, as far as the likelihood allows: " in ident.tuning.line()
     assert "accel_bias_sigma0_mg" in ident.tuning.line().split("drawn back")[1]
-    from gnssacc.htmlreport import tuning_html
+    from gnssacc.outputs.htmlreport import tuning_html
     row = tuning_html(metrics).split(" (drawn back toward the start)")[0].rsplit("<tr>", 1)[1]
     assert "imu.accel_bias_sigma0_mg" in row
     m = metrics["methods"]
@@ -153,7 +153,7 @@ def test_gauss_markov_gnss_errors_are_found_and_make_the_estimators_honest():
     assert _nees_pos(run, ekf_w) > 8.0
     assert _nees_pos(run, ekf_a) < 3.0
     assert abs(ekf_a.stats["acf1_pos"]) < 0.15 and 0.8 < ekf_a.stats["nis_pos_mean"] < 1.25
-    from gnssacc.smoother import run_smoother
+    from gnssacc.estimators.smoother import run_smoother
     sm = run_smoother(auto.run, auto.cfg, "smoother", init=auto.init, stationary=auto.stationary,
                       quality=auto.quality)["smoother"]
     assert _nees_pos(run, sm) < 3.0 and 0.7 < sm.stats["nis_pos_mean"] < 1.5
@@ -173,7 +173,7 @@ def test_the_position_gate_does_not_steer_the_noise_identification():
 def test_a_gauss_markov_time_constant_far_from_the_default_is_found(monkeypatch):
     # The tuner starts tau at the configuration's 60 s, which is also the simulator's own: with
     # fixes whose correlated errors have tau 10 s it must move there (measured over 6 runs: 7-23 s).
-    import gnssacc.gnss_noise as gn
+    import gnssacc.sources.gnss_noise as gn
 
     monkeypatch.setitem(gn.PROFILES, "gm", dict(gn.PROFILES["gm"], tau_s=10.0))
     run = simulate("ugv-slow", 235.0, imu_grade="industrial", noise="gm", seed=1)
@@ -243,7 +243,7 @@ def test_a_vehicle_that_starts_by_reversing_gets_the_right_heading():
 
 
 def test_zero_velocity_updates_hold_a_parked_vehicle_through_a_gnss_gap():
-    from gnssacc.gnss_noise import apply_outages
+    from gnssacc.sources.gnss_noise import apply_outages
 
     run = simulate("ugv-slow", 235.0, imu_grade="consumer", noise="white", seed=3)
     run = apply_outages(run, [(170.0, 235.0)])   # the parked tail (from 160 s) without GNSS
@@ -266,7 +266,7 @@ def test_every_method_covers_the_whole_recording_and_the_table_states_the_window
     for mid, cov in metrics["coverage"].items():
         assert cov["first_s"] == pytest.approx(0.0) and cov["fraction"] == pytest.approx(1.0), (mid, cov)
     assert metrics["scored_window_s"] == pytest.approx([run.t_start, run.t_end])
-    from gnssacc.report import format_table
+    from gnssacc.outputs.report import format_table
     assert "scored over t = 0.0 .. 120.0 s" in format_table(metrics)
 
 
@@ -288,8 +288,8 @@ def _binomial_sf(k: int, n: int, p: float) -> float:
 
 
 def test_heavy_tail_check_against_its_closed_form():
-    from gnssacc.consistency import TAIL_ALARM, heavy_tails
-    from gnssacc.measurements import TAIL_P, tail_bound
+    from gnssacc.analysis.consistency import TAIL_ALARM, heavy_tails
+    from gnssacc.estimators.measurements import TAIL_P, tail_bound
 
     assert tail_bound(3) == pytest.approx(16.2662, abs=1e-3)   # chi-square table, 3 dof, 0.1 %
     for n in (50, 579, 5000):

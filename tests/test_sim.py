@@ -2,19 +2,18 @@
 
 The central check is an independent strapdown integrator (plain numpy, written here, not in the
 package) that must reproduce the truth from the perfect IMU: it proves that the simulated IMU
-is consistent with the WGS-84 model of gnssacc.earth and with the sample convention "sample k
+is consistent with the WGS-84 model of gnssacc.core.earth and with the sample convention "sample k
 is the average over (t[k-1], t[k]]".
 """
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
-from gnssacc.config import G0, load_config
-from gnssacc.earth import earth_rate_n, gravity_n, radii, transport_rate_n
-from gnssacc.errors import InputError
-from gnssacc.rotations import dcm_to_euler, euler_to_dcm, rotvec_to_dcm, wrap_angle
+from gnssacc.core.config import G0, load_config
+from gnssacc.core.earth import earth_rate_n, gravity_n, radii, transport_rate_n
+from gnssacc.core.errors import InputError
+from gnssacc.core.rotations import dcm_to_euler, euler_to_dcm, rotvec_to_dcm, wrap_angle
 from gnssacc.sources import sim
 
 DEG = np.pi / 180.0

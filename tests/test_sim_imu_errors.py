@@ -14,9 +14,9 @@ import time
 import numpy as np
 import pytest
 
-from gnssacc.config import G0
-from gnssacc.errors import InputError
-from gnssacc.report import _json_default
+from gnssacc.core.config import G0
+from gnssacc.core.errors import InputError
+from gnssacc.outputs.report import _json_default
 from gnssacc.sources import sim
 
 DEG = np.pi / 180.0

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gnssacc.errors import InputError
+from gnssacc.core.errors import InputError
 from gnssacc.sources import sim
 
 DEG = np.pi / 180.0

@@ -7,7 +7,7 @@
   them, at block edges, outside the run, unsorted, on a shifted clock).
 * The run holds no per-sample bias array: what it keeps does not grow with the run beyond the
   drift's one-second walk.
-* A run's bias errors as scored (:func:`gnssacc.observability.state_errors`) are the estimate
+* A run's bias errors as scored (:func:`gnssacc.analysis.observability.state_errors`) are the estimate
   minus the interpolated per-sample truth.
 """
 from __future__ import annotations
@@ -17,8 +17,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from gnssacc.observability import state_errors
-from gnssacc.solution import NavSolution
+from gnssacc.analysis.observability import state_errors
+from gnssacc.core.solution import NavSolution
 from gnssacc.sources import sim, sim_path
 from gnssacc.sources.sim_true_bias import TrueBias
 

@@ -2,16 +2,16 @@
 import gtsam
 import numpy as np
 import pytest
+from gnssacc.factors import accel_error, gnss_accel_factor, smoother_jacobians_from_H_a
 from gtsam.symbol_shorthand import B, X
 
-from gnssacc.config import load_config
-from gnssacc.ekf import run_ekf
-from gnssacc.factors import accel_error, gnss_accel_factor, smoother_jacobians_from_H_a
-from gnssacc.gnss_accel import H_a_blocks, paper_H_a_blocks
-from gnssacc.metrics import gnss_score, score, truth_at
+from gnssacc.analysis.metrics import gnss_score, score, truth_at
+from gnssacc.core.config import load_config
+from gnssacc.core.rotations import euler_to_dcm
+from gnssacc.estimators.ekf import run_ekf
+from gnssacc.estimators.gnss_accel import H_a_blocks, paper_H_a_blocks
+from gnssacc.estimators.smoother import MIN_NODE_DT, node_times, run_smoother
 from gnssacc.pipeline import with_outages
-from gnssacc.rotations import euler_to_dcm
-from gnssacc.smoother import MIN_NODE_DT, node_times, run_smoother
 from gnssacc.sources.sim import grade_config, simulate
 
 POSE = gtsam.Pose3(gtsam.Rot3(euler_to_dcm(0.1, -0.2, 2.5)), np.array([10.0, -4.0, 1.0]))
@@ -132,7 +132,7 @@ def test_ill_posed_updates_are_recovered_and_counted():
 def test_injected_failure_mid_run_is_recovered(monkeypatch, method, dropped):
     """Two ill-posed updates are recovered by a restart; a restart keeps nodes i-1 and i only, so
     ``smoother-accw`` drops (and counts) its window factor on node i-2 each time."""
-    import gnssacc.smoother as S
+    import gnssacc.estimators.smoother as S
 
     cfg = load_config(overrides={"imu": grade_config("industrial")})
     run = simulate("car", duration_s=90.0, imu_grade="industrial", noise="white", seed=2)
@@ -221,7 +221,7 @@ def _gm_exact_model_errors(seeds=range(12)):
     profile's own parameters). Per seed and method: position and
     velocity RMSE [m, m/s] over the output epochs after the first 10 s."""
     import gnssacc
-    from gnssacc.observability import state_errors
+    from gnssacc.analysis.observability import state_errors
 
     rms = lambda e: float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
     out = []

@@ -1,6 +1,6 @@
 """The smoother's per-node covariances are the full marginals of the graph iSAM2 holds.
 
-:class:`gnssacc.window_marginals.WindowMarginals` keeps its own copy of the window's linear
+:class:`gnssacc.estimators.window_marginals.WindowMarginals` keeps its own copy of the window's linear
 system; these tests compare every covariance the smoother records (online and fixed-lag) with
 two independent references computed at the same moment: iSAM2's own joint marginal (QR on the
 Bayes tree) and a batch QR elimination of all the smoother's factors linearised at its
@@ -10,9 +10,9 @@ import gtsam
 import numpy as np
 import pytest
 
-import gnssacc.smoother as S
-import gnssacc.window_marginals as W
-from gnssacc.config import load_config
+import gnssacc.estimators.smoother as S
+import gnssacc.estimators.window_marginals as W
+from gnssacc.core.config import load_config
 from gnssacc.pipeline import with_outages
 from gnssacc.sources.sim import grade_config, simulate
 

@@ -22,12 +22,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gnssacc.earth import LocalTangentFrame
-from gnssacc.errors import InputError
-from gnssacc.recording import GnssFixes, ImuData, RecordedRun
+from gnssacc.core.earth import LocalTangentFrame
+from gnssacc.core.errors import InputError
+from gnssacc.core.recording import GnssFixes, ImuData, RecordedRun
+from gnssacc.prepare.stationary import (
+    StationaryParams,
+    StationaryReport,
+    detect_stationary,
+    imu_still_stretches,
+    noise_from_stationary,
+    params_from_config,
+)
 from gnssacc.sources import sim
-from gnssacc.stationary import (StationaryParams, StationaryReport, detect_stationary, imu_still_stretches,
-                                noise_from_stationary, params_from_config)
 
 DEG = np.pi / 180.0
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -228,7 +234,7 @@ def test_report_interface():
 
 
 def test_params_from_config():
-    from gnssacc.config import load_config
+    from gnssacc.core.config import load_config
     assert params_from_config(load_config()) == StationaryParams()       # no section: the defaults
     p = params_from_config({"stationary": {"z": 5, "min_duration_s": 3}})
     assert p.z == 5.0 and p.min_duration_s == 3.0 and p.block_s == StationaryParams().block_s
@@ -319,7 +325,7 @@ def test_comma_highway_minute_has_no_stationary_time():
 
 
 def test_kitti_no_stationary_time_while_moving():
-    from gnssacc.config import load_config
+    from gnssacc.core.config import load_config
     from gnssacc.sources.kitti import load_kitti
     try:
         run = load_kitti(load_config("kitti"), "white", 0)

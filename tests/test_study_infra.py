@@ -7,18 +7,18 @@ import numpy as np
 import pytest
 
 import gnssacc
-from gnssacc.batch import SerialExecutor, run_campaign
-from gnssacc.campaign import Campaign, Pattern, make_settings
+from gnssacc.analysis.metrics import TRUTH_FIGURES, truth_figures
+from gnssacc.campaign.batch import SerialExecutor, run_campaign
+from gnssacc.campaign.campaign import Campaign, Pattern, make_settings
 from gnssacc.cli import main
-from gnssacc.errors import InputError
-from gnssacc.gnss_noise import noise_ned
-from gnssacc.metrics import TRUTH_FIGURES, truth_figures
-from gnssacc.simspec import parse_sim_spec
-from gnssacc.solution import NavSolution
+from gnssacc.core.errors import InputError
+from gnssacc.core.solution import NavSolution
+from gnssacc.sources.gnss_noise import noise_ned
 from gnssacc.sources.sim import simulate
+from gnssacc.sources.simspec import parse_sim_spec
 
 # the white-model baselines on Gauss-Markov fixes are inconsistent on purpose: their warnings are expected
-pytestmark = pytest.mark.filterwarnings("ignore::gnssacc.errors.DataWarning")
+pytestmark = pytest.mark.filterwarnings("ignore::gnssacc.core.errors.DataWarning")
 
 
 @pytest.mark.parametrize("profile, sigma", [("precise", [0.5, 0.5, 0.8]), ("rtk", [0.02, 0.02, 0.04])])
@@ -141,7 +141,7 @@ def test_truth_figures_of_a_solution_with_known_errors():
 
 def _synthetic_rows(effect_pct, n_seeds=12, noise_pct=2.0, seed=0):
     """Rows of one cell: ekf PRMSE around 2 m, ekf-acc ``effect_pct`` % off it per seed, plus scatter."""
-    from gnssacc.study import CELL_KEYS
+    from gnssacc.analysis.study import CELL_KEYS
 
     rng = np.random.default_rng(seed)
     cell = dict(zip(CELL_KEYS, ("gm", "consumer", "car", "1", "none")))
@@ -155,7 +155,7 @@ def _synthetic_rows(effect_pct, n_seeds=12, noise_pct=2.0, seed=0):
 
 
 def test_study_statistics_find_a_known_effect_and_no_effect():
-    from gnssacc import study
+    from gnssacc.analysis import study
 
     (e,) = study.effects(_synthetic_rows(-10.0), figures=("prmse_m",))
     assert e.variant == "ekf-acc" and e.baseline == "ekf" and e.n == 12
@@ -173,9 +173,9 @@ def test_study_statistics_find_a_known_effect_and_no_effect():
 def test_verdict_controls_false_discoveries_over_many_null_cells():
     # 60 cells without any effect: at p < 0.05 about three would "help or hurt" by chance; at a
     # false-discovery rate of 0.05 none does, while one real -10 % cell among them is still found.
-    from gnssacc import study
-
     from dataclasses import replace
+
+    from gnssacc.analysis import study
 
     null = [replace(e, cell=(str(k),) * 5) for k in range(60)
             for e in study.effects(_synthetic_rows(0.0, seed=100 + k), figures=("prmse_m",))]
@@ -186,7 +186,7 @@ def test_verdict_controls_false_discoveries_over_many_null_cells():
 
 
 def test_study_baselines():
-    from gnssacc.study import baseline_of
+    from gnssacc.analysis.study import baseline_of
 
     assert [baseline_of(m) for m in ("ekf-gm", "ekf-accw", "smoother-gm", "smoother-gm-online", "ekf", "smoother",
                                      "smoother-online")] == ["ekf", "ekf", "smoother", "smoother-online", None, None,
@@ -210,7 +210,7 @@ def test_study_rows_read_from_parts_and_gzip(tmp_path):
     import csv
     import gzip
 
-    from gnssacc import study
+    from gnssacc.analysis import study
 
     rows = _synthetic_rows(-10.0)
     cols = list(rows[0])
@@ -232,9 +232,9 @@ def test_study_rows_read_from_parts_and_gzip(tmp_path):
 def test_gm_setup_is_made_once_per_identification(monkeypatch):
     # ekf-gm and smoother-gm share one Gauss-Markov search of the tuned run; another
     # identification (here a copy with another configuration) gets its own.
-    import gnssacc.gm_variant as gv
-    from gnssacc.config import load_config
-    from gnssacc.identify import identify
+    import gnssacc.estimators.gm_variant as gv
+    from gnssacc.core.config import load_config
+    from gnssacc.prepare.identify import identify
 
     calls = []
     real = gv.tune_gauss_markov
@@ -262,8 +262,8 @@ def test_gm_methods_are_judged_by_their_own_noise_model():
 def test_gm_model_check_reuses_the_ekf_gm_pass_unchanged(monkeypatch):
     # With ekf-gm in the run, its own pass is the -gm model check: no second EKF pass, and the
     # same figures as a separate pass without outputs.
-    import gnssacc.gm_variant as gv
-    from gnssacc.consistency import ModelCheck
+    import gnssacc.estimators.gm_variant as gv
+    from gnssacc.analysis.consistency import ModelCheck
 
     calls = []
     real = gv.run_ekf
