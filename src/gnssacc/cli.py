@@ -11,10 +11,10 @@ import sys
 import warnings
 from pathlib import Path
 
-from . import __version__
 from .core.config import PRESETS, load_config
 from .core.errors import DataWarning, InputError
 from .core.interrupts import Terminated, raise_if_interrupted
+from .core.version import __version__
 from .sources.gnss_noise import PROFILES
 
 
@@ -229,11 +229,11 @@ def _run_locked(args, stack, held) -> int:
         reasons = "; ".join(f"{m}: {r}" for m, r in failed_methods(res.metrics).items())
         print(f"gnssacc: error: every method failed ({reasons}); {target.kept()}", file=sys.stderr)
         return 1
-    _print_summary(res.run, cfg, res.metrics, res.ident, out)
+    _print_summary(res.run, cfg, res.metrics, res.prepared, out)
     return 0
 
 
-def _print_summary(run, cfg, metrics: dict, ident, out) -> None:
+def _print_summary(run, cfg, metrics: dict, prep, out) -> None:
     from .outputs.report import format_table
 
     print(f"{run.name}: {run.duration_s:.1f} s, {len(run.imu)} IMU samples, {len(run.gnss)} GNSS fixes"
@@ -241,10 +241,10 @@ def _print_summary(run, cfg, metrics: dict, ident, out) -> None:
           + f"; config: {', '.join(cfg.sources)}")
     for line in _quality_lines(metrics):
         print(line)
-    print(ident.stationary.summary())
-    print(f"start: {ident.init.how}")
-    if ident.tuning is not None:
-        print(ident.tuning.line())
+    print(prep.stationary.summary())
+    print(f"start: {prep.init.how}")
+    if prep.tuning is not None:
+        print(prep.tuning.line())
     print()
     print(format_table(metrics))
     print(f"\n(one-off JIT compilation {metrics['jit_compile_s']:.2f} s, not included in wall times)")
@@ -292,7 +292,7 @@ def _cmd_batch(args) -> int:
     """``gnssacc batch``: exit 0 when every task succeeded, 1 when some failed (all recorded),
     130/143 when interrupted (the finished tasks stay; ``--resume`` runs the rest)."""
     from .campaign.batch import open_executor, run_campaign
-    from .campaign.campaign_args import campaign_from_args
+    from .campaign_args import campaign_from_args
     from .core.interrupts import signals_raise
 
     camp = campaign_from_args(args)
@@ -313,13 +313,13 @@ def _cmd_batch(args) -> int:
 
 
 def _cmd_config(args) -> int:
+    from .core.config_docs import resolved_toml, template_toml
+
     cfg = load_config(args.preset, args.config)
     if args.template:
-        from .core.config_docs import template_toml
-
         print(template_toml(cfg), end="")
     else:
-        print(cfg.to_toml(), end="")
+        print(resolved_toml(cfg), end="")
     return 0
 
 
@@ -353,7 +353,7 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     warnings.showwarning = _show_warning
     if args.command == "run" or (args.command == "bench" and args.jobs <= 1):
-        from .core.jit import start_background
+        from .estimators.kernels import start_background
         # At once: the kernels compile (first run, with a one-line notice) or load in the
         # background while the arguments are checked, the modules imported and the data loaded.
         start_background()
