@@ -1,8 +1,12 @@
-"""Where the numba kernels are cached, the first-run notice, and who compiles them.
+"""Where the numba kernels are cached, the first-run notice, which kernels a run compiles, and who
+compiles them.
 
 The package is copied to a temporary folder whose ``gnssacc/__pycache__`` cannot be created (a
 read-only install: the folder is made read-only, or, as root, who may write anywhere, a file
-takes the cache folder's name), and run in fresh processes with an empty user cache folder.
+takes the cache folder's name), and run in fresh processes with an empty user cache folder. A
+probe process starts the background compilation for the methods in ``$METHODS`` (the default
+methods when unset) and prints the cache folder, the EKF propagation kernel's cache hits and
+misses in the probe itself, the number of compiling child processes and the groups loaded.
 """
 from __future__ import annotations
 
@@ -19,12 +23,14 @@ import os, subprocess, sys
 from gnssacc.estimators import kernels as jit
 from gnssacc.estimators import mechanization
 if os.environ.get("CHILDREN_FAIL"):   # the compiling processes die at once: this process compiles
-    jit._spawn = lambda part: subprocess.Popen([sys.executable, "-c", "raise SystemExit(3)"])
-b = jit.start_background()
+    jit._spawn = lambda groups: subprocess.Popen([sys.executable, "-c", "raise SystemExit(3)"])
+methods = os.environ["METHODS"].split(",") if os.environ.get("METHODS") else None
+b = jit.start_background(methods)
 b.wait_all()
 s = mechanization.propagate.stats
 print(os.environ.get("NUMBA_CACHE_DIR"))
 print(len(s.cache_hits), len(s.cache_misses))
+print(len(b._children), ",".join(b.groups))
 """
 
 
@@ -60,7 +66,8 @@ def test_read_only_install_caches_in_the_user_folder_and_says_so_once(tmp_path):
     assert hits != "0" and misses == "0"      # compiled by the child processes, loaded from the cache
     assert list(folder.rglob("mechanization.propagate-*.nbi"))      # ... written to the user folder
     assert list(folder.rglob("window_marginals.*.nbi"))             # the smoother's too
-    assert list(folder.rglob("mechanization.kernel_force_integrals-*.nbi"))
+    assert not list(folder.rglob("mechanization.kernel_force_integrals-*.nbi"))   # only ekf-accw's
+    assert not list(folder.rglob("window_marginals._band_*.nbi"))                 # only smoother-accw's
     assert not (root / "gnssacc" / "__pycache__").is_dir()
 
     second = _probe(root, cache_home)
@@ -83,23 +90,91 @@ def test_failed_compiling_processes_fall_back_to_compiling_in_process(tmp_path):
     hits, misses = first.stdout.splitlines()[1].split()
     assert misses != "0"                      # compiled here
     folder = cache_home / "gnssacc" / "numba"
-    assert list(folder.rglob("window_marginals.*.nbi")) and list(folder.rglob("gnssacc-kernels-*.stamp"))
+    assert list(folder.rglob("window_marginals.*.nbi"))
+    assert not list(folder.rglob("*.stamp"))  # numba's own index files say what is compiled
     second = _probe(root, cache_home)
     assert "gnssacc: " not in second.stderr
 
 
-def test_a_touched_kernel_source_is_compiled_again_with_the_notice(tmp_path):
-    """numba recompiles a kernel whose source file has a new modification time (a reinstall of the
-    same code): the run must say so and compile in the background, not silently in the estimators."""
+def _notice(proc: subprocess.CompletedProcess) -> list[str]:
+    return [line for line in proc.stderr.splitlines() if line.startswith("gnssacc: ") and "compiling" in line]
+
+
+def _counts(proc: subprocess.CompletedProcess) -> tuple[int, int, int]:
+    """Cache hits and misses of the propagation kernel in the probe, compiling children started."""
+    hits, misses = proc.stdout.splitlines()[1].split()
+    return int(hits), int(misses), int(proc.stdout.splitlines()[2].split()[0])
+
+
+def _writable(path: Path) -> Path:
+    path.chmod(path.stat().st_mode | 0o200)
+    return path
+
+
+def test_compiled_is_decided_by_the_source_content_as_numba_decides(tmp_path):
+    """numba (0.68) keeps a kernel whose source file only has a new modification time (a reinstall
+    or ``touch`` of the same code) and compiles again one whose content changed: a touched source
+    must start no compilation and print no notice, an edited one must do both."""
     root = _read_only_copy(tmp_path)
     cache_home = tmp_path / "cache"
-    _probe(root, cache_home)
+    first = _probe(root, cache_home, METHODS="ekf")
+    assert len(_notice(first)) == 1 and _counts(first)[2] > 0
     source = root / "gnssacc" / "estimators" / "mechanization.py"
     st = source.stat()
     os.utime(source, ns=(st.st_atime_ns, st.st_mtime_ns + 10**10))   # 10 s newer, same content
-    again = _probe(root, cache_home)
-    assert any(line.startswith("gnssacc: ") and "compiling" in line for line in again.stderr.splitlines())
-    hits, misses = again.stdout.splitlines()[1].split()
-    assert hits != "0" and misses == "0"      # compiled by the child processes again, then loaded
-    third = _probe(root, cache_home)
-    assert "gnssacc: " not in third.stderr
+    touched = _probe(root, cache_home, METHODS="ekf")
+    hits, misses, children = _counts(touched)
+    assert not _notice(touched) and children == 0     # no notice, no compiling process
+    assert hits > 0 and misses == 0                   # and numba loads it: nothing compiled
+
+    _writable(source).write_text(source.read_text() + "\n# an edit: the content changed\n")
+    edited = _probe(root, cache_home, METHODS="ekf")
+    hits, misses, children = _counts(edited)
+    assert len(_notice(edited)) == 1 and children > 0   # said at once, compiled by the children
+    assert hits > 0 and misses == 0                     # then loaded here
+    again = _probe(root, cache_home, METHODS="ekf")
+    assert not _notice(again) and _counts(again)[2] == 0
+
+
+def test_a_run_compiles_only_the_kernels_its_methods_need(tmp_path):
+    root = _read_only_copy(tmp_path)
+    cache_home = tmp_path / "cache"
+    folder = cache_home / "gnssacc" / "numba"
+    ekf = _probe(root, cache_home, METHODS="ekf,ekf-acc")
+    assert ekf.stdout.splitlines()[2].split()[1] == "propagation,update"
+    assert not list(folder.rglob("window_marginals.*.nbi")) and not list(folder.rglob("*kernel_force_integrals*"))
+    more = _probe(root, cache_home, METHODS="ekf,ekf-accw,smoother-accw")
+    hits, misses, children = _counts(more)
+    assert len(_notice(more)) == 1 and children == 1    # one process for what is missing
+    assert hits > 0 and misses == 0                     # the EKF's are not compiled again
+    assert list(folder.rglob("window_marginals._band_covariances-*.nbi"))
+    assert list(folder.rglob("mechanization.kernel_force_integrals-*.nbi"))
+    assert not _notice(_probe(root, cache_home, METHODS="ekf-accw,smoother-accw"))
+
+
+RUN_TYPES = """
+from gnssacc import pipeline
+from gnssacc.core.config import load_config
+from gnssacc.estimators import kalman, kernels, mechanization, window_marginals
+from gnssacc.sources.sim import simulate
+
+def signatures():
+    return {(m.__name__, name): set(d.signatures) for m in (mechanization, kalman, window_marginals)
+            for name, d in vars(m).items() if hasattr(d, "signatures")}
+
+kernels.compile_groups()
+warmed = signatures()
+run = simulate("car", 40.0, seed=3)
+pipeline.compare(run, load_config(None, overrides={"gnss": {"gm_sigma_m": 0.5, "gm_tau_s": 60.0}}), ["ekf", "ekf-acc", "ekf-accw", "smoother", "smoother-acc",
+                 "smoother-accw", "ekf-gm", "smoother-gm"], tune="none")
+new = {k: v - warmed.get(k, set()) for k, v in signatures().items() if v - warmed.get(k, set())}
+print(sorted(k[1] for k in new))
+"""
+
+
+def test_the_group_warm_ups_compile_every_kernel_a_run_calls():
+    """The warm-ups (also the install's) call each kernel with the types a real run gives it (a
+    kernel compiled with other types, or not at all, is compiled again inside an estimator); a
+    run of every method then compiles nothing new."""
+    out = subprocess.run([sys.executable, "-c", RUN_TYPES], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

@@ -354,9 +354,10 @@ def main(argv: list[str] | None = None) -> int:
     warnings.showwarning = _show_warning
     if args.command == "run" or (args.command == "bench" and args.jobs <= 1):
         from .estimators.kernels import start_background
-        # At once: the kernels compile (first run, with a one-line notice) or load in the
-        # background while the arguments are checked, the modules imported and the data loaded.
-        start_background()
+        # At once: the kernels the methods need compile (first run, with a one-line notice) or
+        # load in the background while the arguments are checked, the modules imported and the
+        # data loaded (unknown method ids are refused later, with the other arguments).
+        start_background(args.methods.split(",") if args.methods else None)
     try:
         check_args(args)  # every argument's syntax and range, before anything is loaded
         commands = {"run": _cmd_run, "inspect": _cmd_inspect, "config": _cmd_config, "sim": _cmd_sim,

@@ -292,9 +292,9 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
     t = time.perf_counter()
     models = {"": check_model(prep)}   # the final noise model against the recording
     seconds = {**prep.seconds, "model_check_s": time.perf_counter() - t}
-    jit_s = kernels.warm_up()   # the kernels' compile (or load) time, in the background
-    if any(m.startswith("smoother") or m.endswith("accw") for m in methods):   # not inside their wall time
-        jit_s += kernels.smoother_ready()
+    # The kernels' compile (or load) time, in the background, and the wait for the kernels of
+    # the methods (not inside their wall times).
+    jit_s = kernels.warm_up() + kernels.ready(methods)
     run = prep.run   # as the input checks left it: repaired units, the measured clock offset applied
     failed: dict[str, str] = {}
     sols = run_methods(run, cfg, methods, prep=prep, show_progress=show_progress, failures=failed,

@@ -1,13 +1,21 @@
-"""The estimators' numba kernels: which they are, and compiling them in the background.
+"""The estimators' numba kernels: which ones a run needs, whether numba holds them, and compiling
+them in the background.
 
-:func:`start_background` compiles (or loads) the kernels in the background while the caller loads
-data, and prints one notice line at once when they are not in the cache yet (a stamp file
-written after a compilation says they are; see :func:`kernels_stamp`). A first run compiles in
-child processes (numba's compiler holds the GIL, so a thread would mostly take turns with the
-loading); a thread then loads what they cached. The estimators wait for the kernels where they
-first need them (:func:`warm_up`, :func:`smoother_ready`), never compile them twice in one
-process (numba's compile lock); without a background start, :func:`warm_up` compiles. Where the
-cache lives is :mod:`gnssacc.core.jit`'s business.
+The kernels come in groups (:data:`GROUPS`), and a run compiles or loads only the groups of its
+methods (:func:`groups_for`): the EKF's propagation and update always (the preparation stage
+decides with the EKF), ``ekf-accw``'s window integrals, the smoothers' window marginals, and
+``smoother-accw``'s banded ones. Whether numba holds a group is decided by numba's own rules,
+without importing numba (:func:`gnssacc.core.jit.kernel_cached`), so the notice comes at once.
+
+:func:`start_background` compiles (or loads) the groups in the background while the caller loads
+data, and prints one notice line when some are not in the cache. A first run compiles in child
+processes (numba's compiler holds the GIL, so a thread would mostly take turns with the loading):
+one for the EKF's propagation (the biggest kernel, needed first) and one for the other missing
+groups; a thread then loads what they cached. The estimators wait for the kernels where they first
+need them (:func:`warm_up` for the EKF's, :func:`ready` for a run's methods), never compile them
+twice in one process (numba's compile lock). ``setup.py`` compiles every group into the wheel at
+install time (:func:`compile_groups`), so that a first run after ``pip install`` finds them all.
+Where the cache lives is :mod:`gnssacc.core.jit`'s business.
 """
 from __future__ import annotations
 
@@ -15,72 +23,77 @@ import os
 import sys
 import threading
 import time
-from pathlib import Path
 
-from ..core.jit import KERNEL_DIR, PACKAGE_DIR, cache_folder
+from ..core.jit import KERNEL_DIR, PACKAGE_DIR, cache_folder, kernel_cached
 
-#: The modules whose kernels :func:`gnssacc.estimators.mechanization.warm_up` compiles.
-KERNEL_SOURCES = ("mechanization.py", "kalman.py", "window_marginals.py")
-
-
-def kernels_stamp() -> Path:
-    """The file that marks the kernels as compiled into the cache, named by a hash of what
-    numba's cache depends on (the kernels' sources with their modification times and sizes,
-    numba, Python, the machine); found without importing numba, so the notice can come at once.
-
-    numba takes a cached kernel as stale when its source file's modification time changed, even
-    if its content did not (a reinstall, a checkout): the stamp must change with it, or such a
-    run would compile without a notice, inside the estimators' wall times."""
-    import hashlib
-    import platform
-    from importlib.metadata import version
-
-    h = hashlib.sha256(f"{version('numba')} {sys.version} {platform.machine()}".encode())
-    for name in KERNEL_SOURCES:
-        path = KERNEL_DIR / name
-        st = path.stat()
-        h.update(f"{name} {st.st_mtime!r} {st.st_size}".encode())
-        h.update(path.read_bytes())
-    return cache_folder() / f"gnssacc-kernels-{h.hexdigest()[:16]}.stamp"
+#: The kernels Python calls, by group, as ``(module file in gnssacc/estimators, function names)``
+#: pairs (numba compiles and caches each kernel's callees with it).
+GROUPS = {
+    "propagation": (("mechanization.py", ("propagate",)),),
+    "update": (("kalman.py", ("joseph_update",)), ("mechanization.py", ("apply_correction",))),
+    "window": (("mechanization.py", ("kernel_force_integrals",)),),
+    "chain": (("window_marginals.py", ("_scatter", "_marginalize", "_node_covariances")),),
+    "band": (("window_marginals.py", ("_scatter", "_band_marginalize", "_band_advance", "_band_covariances")),),
+}
+#: The EKF's groups: every run needs them, the preparation stage first.
+EKF_GROUPS = ("propagation", "update")
+#: The groups of a run of the default methods (``gnssacc.pipeline.DEFAULT_METHODS``, which the
+#: command line cannot import before the notice without importing numba).
+DEFAULT_GROUPS = ("propagation", "update", "chain")
 
 
-def kernels_cached() -> bool:
-    """Whether a previous process compiled the kernels into the cache (see :func:`kernels_stamp`)."""
+def groups_for(methods) -> tuple[str, ...]:
+    """The kernel groups a run of ``methods`` (method ids) needs, in :data:`GROUPS` order."""
+    methods = set(methods)
+    need = set(EKF_GROUPS)
+    if "ekf-accw" in methods:
+        need.add("window")
+    if any(m.startswith("smoother") for m in methods):
+        need.add("chain")
+    if "smoother-accw" in methods:
+        need.add("band")
+    return tuple(g for g in GROUPS if g in need)
+
+
+def group_cached(group: str) -> bool:
+    """Whether numba would load every kernel of ``group`` from its cache (no compilation)."""
     try:
-        return kernels_stamp().exists()
+        return all(kernel_cached(KERNEL_DIR / module, name) for module, names in GROUPS[group] for name in names)
     except OSError:
         return False
 
 
-#: The compiling processes of a first run: the EKF's propagation (the biggest kernel, needed
-#: first), and the rest (the EKF's update, the smoother's, the window-consistent update's).
-PARTS = ("propagation", "rest")
+def compile_group(group: str) -> float:
+    """Compile (or load from the cache) the kernels of ``group``; the seconds it took."""
+    from . import mechanization
+
+    if group == "propagation":
+        return mechanization.warm_up(update=False)
+    if group == "update":
+        return mechanization.warm_up(propagation=False)
+    if group == "window":
+        return mechanization.warm_up_window()
+    if group in ("chain", "band"):
+        from .window_marginals import warm_up
+
+        return warm_up(band=group == "band")
+    raise ValueError(f"unknown kernel group {group!r}; expected one of {', '.join(GROUPS)}")
 
 
-def compile_part(part: str) -> None:
-    """Compile (or load) one of :data:`PARTS` into the cache."""
-    from .mechanization import warm_up, warm_up_window
-
-    if part == "propagation":
-        warm_up(update=False)
-    elif part == "rest":
-        from .smoother import warm_up as smoother_warm_up
-
-        warm_up(propagation=False)
-        smoother_warm_up()
-        warm_up_window()
-    else:
-        raise ValueError(f"unknown kernel part {part!r}; expected one of {PARTS}")
+def compile_groups(groups=tuple(GROUPS)) -> None:
+    """Compile (or load) ``groups`` into the cache (a compiling child process; the install)."""
+    for group in groups:
+        compile_group(group)
 
 
-def _spawn(part: str):
-    """A process compiling ``part`` into the cache (numba's compilation holds the GIL: a thread
+def _spawn(groups: list[str]):
+    """A process compiling ``groups`` into the cache (numba's compilation holds the GIL: a thread
     would take turns with the loading it is meant to overlap); ``None`` when it cannot start."""
     import subprocess
 
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(PACKAGE_DIR.parent),
                                                                        os.environ.get("PYTHONPATH")]))}
-    code = f"from gnssacc.estimators.kernels import compile_part; compile_part({part!r})"
+    code = f"from gnssacc.estimators.kernels import compile_groups; compile_groups({list(groups)!r})"
     try:
         return subprocess.Popen([sys.executable, "-c", code], env=env, stdin=subprocess.DEVNULL,
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -94,40 +107,47 @@ def _compiled_by(proc) -> bool:
 
 
 class BackgroundWarmUp:
-    """Compiles (or loads) the kernels in the background; :meth:`wait` returns the seconds it took.
+    """Compiles (or loads) kernel groups in the background; :meth:`wait` returns the seconds the
+    EKF's took, :meth:`wait_all` waits for the others too.
 
-    A daemon thread loads the EKF's kernels, then (first run) makes sure the smoother's are in
-    the cache. With ``processes=True`` a first run compiles in two child processes, one per
-    :data:`PARTS`, which use the machine's other cores while this process loads and checks the
-    data; the thread then loads what they cached (a failed child: it compiles here instead).
+    A daemon thread loads the EKF's groups, then the others. With ``processes=True`` a first run
+    compiles the missing groups in child processes (the EKF's propagation in one, the rest in
+    another), which use the machine's other cores while this process loads and checks the data;
+    the thread then loads what they cached (a failed child: it compiles here instead).
 
     Parameters
     ----------
+    groups : sequence of str
+        Groups of :data:`GROUPS` (the EKF's are always added).
     notice : file-like, optional
-        Where the one-line notice goes, at once, when the kernels are not in the cache yet
+        Where the one-line notice goes, at once, when some groups are not in the cache yet
         (``None``: no notice).
     processes : bool
         Compile a first run's kernels in child processes (else in the thread).
     """
 
-    def __init__(self, notice=None, processes: bool = False):
+    def __init__(self, groups=EKF_GROUPS, notice=None, processes: bool = False):
+        self.groups = tuple(dict.fromkeys((*EKF_GROUPS, *groups)))
         self.seconds: float | None = None
         self.error: BaseException | None = None
-        self.compiling = not kernels_cached()
+        self.missing = [g for g in self.groups if not group_cached(g)]
+        self.compiling = bool(self.missing)
         self._processes = processes and self.compiling
         self._children: dict = {}
         self._done = threading.Event()
-        self._smoother_done = threading.Event()
+        self._all_done = threading.Event()
         self._thread = threading.Thread(target=self._run, name="gnssacc-jit", daemon=True)
         if notice is not None and self.compiling:
-            print(f"gnssacc: first run: compiling the numba kernels (once, about 10 s; cache: {cache_folder()}) "
-                  "while the data loads", file=notice, flush=True)
+            print(f"gnssacc: first run: compiling the numba kernels it needs (once, several seconds; cache: "
+                  f"{cache_folder()}) while the data loads", file=notice, flush=True)
 
     def start(self) -> "BackgroundWarmUp":
         if self._processes:
             import atexit
 
-            self._children = {part: _spawn(part) for part in PARTS}
+            first = [g for g in self.missing if g == "propagation"]
+            rest = [g for g in self.missing if g != "propagation"]
+            self._children = {tuple(part): _spawn(part) for part in (first, rest) if part}
             atexit.register(self.stop)
         self._thread.start()
         return self
@@ -138,75 +158,77 @@ class BackgroundWarmUp:
             if proc is not None and proc.poll() is None:
                 proc.terminate()
 
+    def _wait_children(self, groups) -> None:
+        """Wait for the children compiling any of ``groups``; compile here what a failed one left."""
+        for part, proc in self._children.items():
+            if set(part) & set(groups) and not _compiled_by(proc):
+                compile_groups(part)
+
     def _run(self) -> None:
         t0 = time.perf_counter()
         try:
-            from .mechanization import warm_up
-
-            _compiled_by(self._children.get("propagation"))
-            warm_up()   # loads what the children cached, or compiles
+            self._wait_children(["propagation"])
+            compile_groups(EKF_GROUPS)   # loads what the children cached, or compiles
         except BaseException as exc:   # re-raised in the waiting thread
             self.error = exc
         self.seconds = time.perf_counter() - t0
-        self._done.set()   # the EKF's kernels: the estimators may start
-        try:               # then, on a first run, the smoother's while the EKF and the tuner run
-            if self.compiling and self.error is None:
-                if not _compiled_by(self._children.get("rest")):
-                    compile_part("rest")
-                _write_stamp()
-        except Exception:  # the smoother compiles them itself when it first runs
+        self._done.set()   # the EKF's kernels: the preparation stage may start
+        try:               # then the other groups', while the EKF and the tuner run
+            if self.error is None:
+                others = [g for g in self.groups if g not in EKF_GROUPS]
+                self._wait_children(others)
+                compile_groups(others)
+        except Exception:  # an estimator compiles them itself when it first runs
             pass
-        self._smoother_done.set()
+        self._all_done.set()
 
     def wait_all(self) -> float:
-        """Block until the smoother's kernels are ready too (:meth:`wait` is the EKF's)."""
-        self._smoother_done.wait()
+        """Block until every group is ready (:meth:`wait` is the EKF's)."""
+        self._all_done.wait()
         return self.wait()
 
     def wait(self) -> float:
-        """Block until the kernels are ready; their compile (or load) time [s], imports included."""
+        """Block until the EKF's kernels are ready; their compile (or load) time [s], imports included."""
         self._done.wait()
         if self.error is not None:
             raise self.error
         return float(self.seconds)
 
 
-def _write_stamp() -> None:
-    try:
-        stamp = kernels_stamp()
-        stamp.parent.mkdir(parents=True, exist_ok=True)
-        stamp.touch()
-    except OSError:   # no cache folder to write to: numba did not cache either, the notice repeats
-        pass
-
-
 _background: BackgroundWarmUp | None = None
-
-
 _start_lock = threading.Lock()
 
 
-def start_background(notice=sys.stderr, processes: bool = True) -> BackgroundWarmUp:
-    """Start compiling the kernels in the background (once per process; later calls return the
-    same one); a first run compiles in child processes unless ``processes=False``."""
+def start_background(methods=None, notice=sys.stderr, processes: bool = True) -> BackgroundWarmUp:
+    """Start compiling the kernels ``methods`` need in the background (``None``: the default
+    methods'); once per process: later calls return the same one. A first run compiles in child
+    processes unless ``processes=False``."""
     global _background
     with _start_lock:   # estimators in several threads may ask at once
         if _background is None:
-            _background = BackgroundWarmUp(notice, processes).start()
+            groups = DEFAULT_GROUPS if methods is None else groups_for(methods)
+            _background = BackgroundWarmUp(groups, notice, processes).start()
     return _background
 
 
 def warm_up() -> float:
     """The EKF kernels' compile (or load) time [s]: the background one's when started, else now
-    (the smoother's then follow in the background on a first run)."""
-    return start_background(notice=None, processes=False).wait()
+    (in a thread)."""
+    return start_background(methods=(), notice=None, processes=False).wait()
+
+
+def ready(methods) -> float:
+    """Wait until the kernels ``methods`` need are loaded (compiled in the background on a first
+    run, or now when the background does not do them); the seconds waited."""
+    t0 = time.perf_counter()
+    background = start_background(methods=methods, notice=None, processes=False)
+    background.wait_all()
+    for group in groups_for(methods):
+        if group not in background.groups:
+            compile_group(group)
+    return time.perf_counter() - t0
 
 
 def smoother_ready() -> float:
-    """Wait for the smoother's (and the window-consistent update's) kernels compiled in the
-    background on a first run; the seconds waited."""
-    if _background is None:
-        return 0.0
-    t0 = time.perf_counter()
-    _background.wait_all()
-    return time.perf_counter() - t0
+    """Wait for every kernel group (the smoothers' included); the seconds waited."""
+    return ready(("smoother", "smoother-accw", "ekf-accw"))

@@ -763,16 +763,3 @@ def _inflation_over(imu_t, k0, k1, t_a, t_b, seg_i0, seg_i1, seg_qa, seg_qg):
     span = max(t_b - t_a, 1e-9)
     return qa / span, qg / span
 
-
-def warm_up() -> float:
-    """Compile (or load) the smoother's numba kernels (:mod:`gnssacc.estimators.window_marginals`) by
-    smoothing a few seconds of a simulated drive; return the seconds it took."""
-    from ..core.config import load_config
-    from ..sources.sim import simulate
-
-    t0 = time.perf_counter()
-    run = simulate("car", 6.0, give_init=True, seed=0)
-    cfg = load_config(overrides={"smoother": {"lag_s": 2.0}})
-    for method in ("smoother", "smoother-accw"):     # the chain's kernels and the band's
-        run_smoother(run, cfg, method)
-    return time.perf_counter() - t0

@@ -39,12 +39,26 @@ numba, which also keeps these small dense operations off the BLAS thread pool.
 """
 from __future__ import annotations
 
-import gtsam
+import time
+from typing import TYPE_CHECKING
+
 import numpy as np
-from gtsam.symbol_shorthand import X
 from numba import njit
 
+if TYPE_CHECKING:   # the kernels compile without gtsam (at install time, kernels.compile_groups)
+    import gtsam
+
 _INDEX_MASK = (1 << 56) - 1
+
+
+def symbol_key(char: str, index: int) -> int:
+    """The key of GTSAM's symbol ``char`` ``index`` (``gtsam.symbol_shorthand.X(i)`` for "x")."""
+    return (ord(char) << 56) | index
+
+
+def key_name(key: int) -> str:
+    """A symbol key as GTSAM's ``DefaultKeyFormatter`` writes it (``x12``)."""
+    return f"{chr(key >> 56)}{key & _INDEX_MASK}"
 
 
 class NotAChain(RuntimeError):
@@ -409,7 +423,7 @@ class WindowMarginals:
             return
         self.add(gfg)
         count = 0
-        while count < self.n - 1 and not theta.exists(X(self.first + count)):
+        while count < self.n - 1 and not theta.exists(symbol_key("x", self.first + count)):
             count += 1
         if count:
             self._marginalize(count)
@@ -439,9 +453,10 @@ class WindowMarginals:
         last = int((keys & _INDEX_MASK).max())
         if last >= self.first + self.n:
             self._grow(last)
+        info = np.asfortranarray(info)   # as gtsam gives it: one compiled version of the kernel
         low = _scatter(self.D, self.O, self.Ox, info, keys, self.first, self.start)
         if low < 0:
-            raise NotAChain(f"a factor on {[gtsam.DefaultKeyFormatter(int(k)) for k in keys]} does not fit "
+            raise NotAChain(f"a factor on {[key_name(int(k)) for k in keys]} does not fit "
                             "the window's band of nodes")
         self.f_valid = min(self.f_valid, low - 1)
         self.reach = max(self.reach, last - (low - self.start + self.first))
@@ -517,3 +532,19 @@ class WindowMarginals:
             self.fe = self.fe - s if self.fe >= s else -1
             self.start = 0
         self.n = n
+
+
+def warm_up(band: bool = False) -> float:
+    """Compile (or load) the kernels of a chain of nodes' window (or of a band, ``band``: the
+    window-consistent acceleration factors') by running them on a window of three nodes with the
+    array types a smoother gives them; the seconds it took. No gtsam (the install compiles them)."""
+    t0 = time.perf_counter()
+    window = WindowMarginals(gm=False, bandwidth=2 if band else 1)
+    window.first = 0
+    window._grow(2)
+    for i in range(3):
+        keys = np.array([symbol_key(c, i) for c in "xvb"], np.int64)
+        window._scatter(np.asfortranarray(np.eye(window.b)), keys)
+    window.covariances([0, 1, 2])
+    window.marginalize_first()
+    return time.perf_counter() - t0
