@@ -125,7 +125,7 @@ def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None,
     if path.is_dir():
         from .sources.common import with_noisy_fixes
         from .sources.csvdir import load_csv_run
-        if not (path / "imu.csv").exists() and not (path / "gnss.csv").exists():
+        if not (path / "imu.csv").exists() and not any((path / n).exists() for n in ("gnss.csv", "gnss.pos", "gnss.nmea")):
             names = sorted(p.name for p in path.iterdir())
             held = f"it holds {', '.join(names[:5])}{', ...' if len(names) > 5 else ''}" if names else "it is empty"
             raise InputError(source, f"not a run directory: no imu.csv and gnss.csv (a CSV run) and no metadata.yaml "

@@ -37,7 +37,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..core.config import RunConfig
-from ..core.recording import ImuData, RecordedRun
+from ..core.recording import RecordedRun
 from ..prepare.stationary import detect_stationary, params_from_config
 from .motionmatch import GnssKinematics, LevelledImu, at_times, smooth_horizontal, velocity_frame
 from .quality import check_imu
@@ -263,9 +263,9 @@ def coarse_offset(lev: LevelledImu, kin: GnssKinematics, max_offset_s: float = M
 
 
 def shifted(run: RecordedRun, delta_s: float) -> RecordedRun:
-    """The run with ``delta_s`` [s] added to every IMU time stamp."""
-    imu = run.imu
-    return replace(run, imu=ImuData(imu.t + delta_s, imu.f_b, imu.omega_ib_b))
+    """The run with ``delta_s`` [s] added to every IMU time stamp (and the wheel odometry's, on
+    the same clock)."""
+    return run.with_imu_shift(delta_s)
 
 
 class _ShiftLikelihood:
