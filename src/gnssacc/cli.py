@@ -112,13 +112,22 @@ def _tool_parsers(sub) -> None:
 
     s = sub.add_parser("sim", help="write a simulated run (with truth) as a CSV run directory")
     s.add_argument("out", help="output directory")
-    s.add_argument("--scenario", default="car", help="static, straight, turns, ugv or car (default car)")
+    s.add_argument("--scenario", default="car",
+                   help="static, straight, turns, ugv, car, ugv-slow or car-city (default car)")
     s.add_argument("--duration", type=float, default=300.0, help="seconds (default 300)")
     s.add_argument("--grade", default="industrial", help="IMU grade: perfect, consumer, industrial, tactical")
     s.add_argument("--imu-rate", type=float, default=100.0, help="Hz (default 100)")
     s.add_argument("--gnss-rate", type=float, default=1.0, help="Hz (default 1)")
     s.add_argument("--noise", choices=list(PROFILES), default="white")
     s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--odom-rate", type=float, default=None, metavar="HZ",
+                   help="also write wheel odometry at this rate as odom.csv (scale-factor error, noise, slip)")
+    s.add_argument("--gnss-format", choices=["csv", "pos", "nmea"], default="csv",
+                   help="write the fixes as gnss.csv (default), gnss.pos (RTKLIB, GPST) or gnss.nmea (NMEA 0183); "
+                        "the last two hold absolute times, so the run is then stamped in UNIX seconds from --t-start")
+    s.add_argument("--t-start", type=float, default=None, metavar="UNIX_S",
+                   help="time of the first IMU sample [s] (default 0, or 1709294400 = 2024-03-01 12:00 UTC for "
+                        "--gnss-format pos or nmea)")
 
 
 def _batch_parser(sub) -> None:
@@ -327,11 +336,19 @@ def _cmd_sim(args) -> int:
     from .sources.csvdir import write_csv_run
     from .sources.sim import simulate
 
+    t_start = args.t_start if args.t_start is not None else (0.0 if args.gnss_format == "csv" else SIM_UNIX_START_S)
     run = simulate(scenario=args.scenario, duration_s=args.duration, imu_grade=args.grade,
-                   imu_rate_hz=args.imu_rate, gnss_rate_hz=args.gnss_rate, noise=args.noise, seed=args.seed)
-    path = write_csv_run(run, args.out)
-    print(f"wrote {path}: {run.duration_s:.0f} s {args.scenario}, {len(run.imu)} IMU samples, {len(run.gnss)} fixes")
+                   imu_rate_hz=args.imu_rate, gnss_rate_hz=args.gnss_rate, noise=args.noise, seed=args.seed,
+                   t_start_s=t_start, odom_hz=args.odom_rate)
+    path = write_csv_run(run, args.out, gnss_format=args.gnss_format)
+    extra = f", {len(run.odometry)} odometry samples" if run.odometry is not None else ""
+    print(f"wrote {path}: {run.duration_s:.0f} s {args.scenario}, {len(run.imu)} IMU samples, {len(run.gnss)} fixes "
+          f"(gnss.{args.gnss_format}){extra}")
     return 0
+
+
+#: First IMU sample of ``gnssacc sim`` when it writes absolute fix times: 2024-03-01 12:00:00 UTC [s].
+SIM_UNIX_START_S = 1709294400.0
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):

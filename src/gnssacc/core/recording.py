@@ -101,17 +101,18 @@ class GnssFixes:
                          None if self.quality is None else self.quality[mask],
                          None if self.corr_ned is None else self.corr_ned[mask])
 
-    def cov_ned(self, k: int) -> np.ndarray:
-        """The 3x3 NED covariance [m^2] of fix ``k``: ``diag(sigma) C diag(sigma)``, ``C`` from
-        :attr:`corr_ned` (the identity without it)."""
+    def cov_ned(self, k) -> np.ndarray:
+        """The NED covariance [m^2] of fix ``k`` (shape (3, 3)) or of fixes ``k`` (an index array:
+        shape (K, 3, 3)): ``diag(sigma) C diag(sigma)``, ``C`` from :attr:`corr_ned` (the
+        identity without it)."""
         s = np.asarray(self.sigma_ned[k], float)
-        C = np.eye(3)
+        C = np.broadcast_to(np.eye(3), s.shape[:-1] + (3, 3)).copy()
         if self.corr_ned is not None:
-            r_ne, r_nd, r_ed = self.corr_ned[k]
-            C[0, 1] = C[1, 0] = r_ne
-            C[0, 2] = C[2, 0] = r_nd
-            C[1, 2] = C[2, 1] = r_ed
-        return s[:, None] * C * s[None, :]
+            r = np.asarray(self.corr_ned[k], float)
+            C[..., 0, 1] = C[..., 1, 0] = r[..., 0]
+            C[..., 0, 2] = C[..., 2, 0] = r[..., 1]
+            C[..., 1, 2] = C[..., 2, 1] = r[..., 2]
+        return s[..., :, None] * C * s[..., None, :]
 
 
 @dataclass
@@ -253,6 +254,9 @@ class SimTruth:
         The filter-visible noise parameters of the simulated grade (configuration keys and units).
     imu_error_model : dict
         The full error description it was drawn from.
+    odometry : dict or None
+        The wheel odometry's per-run draws (``scale_factor``, ``yaw_factor``, ``kind`` ...:
+        :func:`gnssacc.sources.sim_odometry.simulate_odometry`), when the run has odometry.
     """
 
     bias: "TrueBias"
@@ -260,6 +264,7 @@ class SimTruth:
     imu_error_draws: dict
     imu_params: dict
     imu_error_model: dict
+    odometry: dict | None = None
 
     @property
     def true_bias_a(self) -> np.ndarray:

@@ -64,6 +64,7 @@ from .gnssfile import (
     optional_group,
     read_gnss_csv,
     read_positions,
+    write_gnss_file,
 )
 
 IMU_COLUMNS = ("t", "ax", "ay", "az", "gx", "gy", "gz")
@@ -289,7 +290,7 @@ def _write_table(path: Path, names, columns, comment: str) -> None:
     np.savetxt(path, table, fmt="%.17g", delimiter=",", header=f"{comment}\n" + ",".join(names), comments="")
 
 
-def write_csv_run(run: RecordedRun, path) -> Path:
+def write_csv_run(run: RecordedRun, path, gnss_format: str = "csv") -> Path:
     """Write a run as a CSV run directory (imu, gnss, truth, odom.csv and init.json when present).
 
     The IMU samples are written as they are held, i.e. in the body frame (FRD) on the GNSS
@@ -301,6 +302,10 @@ def write_csv_run(run: RecordedRun, path) -> Path:
     run : RecordedRun
     path : str or Path
         The directory; created if needed, existing files of the format are overwritten.
+    gnss_format : {"csv", "pos", "nmea"}
+        The fixes as ``gnss.csv`` (full precision), or as ``gnss.pos`` (RTKLIB, GPST) or
+        ``gnss.nmea`` (NMEA 0183) in those formats' precision; the latter two need the run's
+        times in UNIX seconds.
 
     Returns
     -------
@@ -313,9 +318,12 @@ def write_csv_run(run: RecordedRun, path) -> Path:
     imu = run.imu
     _write_table(root / "imu.csv", IMU_COLUMNS, [imu.t, *imu.f_b.T, *imu.omega_ib_b.T],
                  f"{src}\n# body frame FRD; t [s], specific force [m/s^2], angular rate [rad/s]")
-    write_gnss_csv(root / "gnss.csv", run.gnss, src)
-    for stale in ("truth.csv", "init.json", "odom.csv", "gnss.pos", "gnss.nmea"):
+    for stale in ("truth.csv", "init.json", "odom.csv") + GNSS_FILES:
         (root / stale).unlink(missing_ok=True)
+    if gnss_format == "csv":
+        write_gnss_csv(root / "gnss.csv", run.gnss, src)
+    else:
+        write_gnss_file(root / f"gnss.{gnss_format}", run.gnss, gnss_format, truth=run.truth)
     if run.odometry is not None:
         write_odometry_csv(root / "odom.csv", run.odometry, src)
     if run.truth is not None:

@@ -24,7 +24,7 @@ from ..core.config_check import QUALITY_NAMES
 from ..core.errors import InputError, warn_data
 from ..core.recording import FIX_QUALITY, FIX_QUALITY_NAMES, GnssFixes, check_increasing
 from .common import check_degrees, read_table
-from .gnss_time import place_on_clock
+from .gnss_time import ABSOLUTE_CLOCK_MIN_S, place_on_clock
 
 POS_COLUMNS = ("t", "lat_deg", "lon_deg", "h_m")
 SIGMA_COLUMNS = ("sn", "se", "sd")
@@ -191,6 +191,41 @@ def apply_quality_policy(gnss: GnssFixes, policy: dict, where: str) -> tuple[Gns
                          + ", ".join(f"{k} {v}" for k, v in out["gnss_quality_dropped"].items()) + ")")
     fixes = GnssFixes(gnss.t, gnss.lat, gnss.lon, gnss.h, sigma, gnss.quality, gnss.corr_ned)
     return (fixes if keep.all() else fixes.select(keep)), out
+
+
+def write_gnss_file(path, gnss: GnssFixes, kind: str, *, truth=None, form: str = "llh",
+                    time_system: str = "GPST", time_format: str = "calendar") -> Path:
+    """Write fixes held on a UNIX clock as an RTKLIB ``.pos`` (``kind="pos"``) or an NMEA log
+    (``kind="nmea"``; RMC's speed and course from ``truth.v_n`` at the fix epochs when given).
+
+    ``form``, ``time_system``, ``time_format``: of the ``.pos`` (:func:`gnssacc.sources.rtklib.write_pos`).
+    The NMEA HDOP is the one that gives the fixes' horizontal sigma with the default UERE of their
+    quality (GST carries the sigmas themselves).
+
+    Raises
+    ------
+    InputError
+        The fixes' times are not UNIX seconds (an absolute file needs an absolute clock).
+    """
+    path = Path(path)
+    if len(gnss) and gnss.t[0] < ABSOLUTE_CLOCK_MIN_S:
+        raise InputError(str(path), f"the fixes' times ({gnss.t[0]:.3f} s ..) are not UNIX seconds: a .{kind} file "
+                                    f"holds absolute times (simulate with t_start_s set to a UNIX time)")
+    cov = gnss.cov_ned(np.arange(len(gnss)))
+    if kind == "pos":
+        from .rtklib import write_pos
+
+        return write_pos(path, gnss.t, gnss.lat, gnss.lon, gnss.h, cov, gnss.quality, form=form,
+                         time_system=time_system, time_format=time_format)
+    from .nmea import write_nmea
+
+    speed = course = None
+    if truth is not None and truth.v_n is not None:
+        v = np.column_stack([np.interp(gnss.t, truth.t, truth.v_n[:, i]) for i in range(3)])
+        speed, course = np.hypot(v[:, 0], v[:, 1]), np.degrees(np.arctan2(v[:, 1], v[:, 0]))
+    return write_nmea(path, gnss.t, gnss.lat, gnss.lon, gnss.h, gnss.sigma_ned, gnss.corr_ned, gnss.quality,
+                      uere_m=uere_by_code({}), vertical_factor=float(DEFAULTS["gnss"]["nmea_vertical_factor"]),
+                      speed_mps=speed, course_deg=course)
 
 
 # --- gnss.csv --------------------------------------------------------------------------------------------
