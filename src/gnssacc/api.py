@@ -49,19 +49,22 @@ def configure(source=None, *, preset: str | None = None, config=None) -> RunConf
 
 
 def load(source=None, *, config=None, preset: str | None = None, noise: str | None = None, seed: int = 0,
-         outage: str | None = None, outage_every: str | None = None, imu_frame: str = "frd",
+         outage: str | None = None, outage_every: str | None = None, imu_frame: str = "frd", gnss=None,
          **bag_options) -> RecordedRun:
     """A recorded run, as ``gnssacc run`` loads it (see :func:`process` for the parameters)."""
     return _load(source, configure(source, preset=preset, config=config), noise, seed, outage, outage_every,
-                 imu_frame, bag_options)
+                 imu_frame, gnss, bag_options)
 
 
-def _load(source, cfg, noise, seed, outage, outage_every, imu_frame, bag_options) -> RecordedRun:
+def _load(source, cfg, noise, seed, outage, outage_every, imu_frame, gnss, bag_options) -> RecordedRun:
     if isinstance(source, RecordedRun):
         run = source
+        if gnss is not None:
+            from .sources.gnssfile import with_gnss_file
+            run = with_gnss_file(run, str(gnss), cfg)
     else:
         run = load_source(None if source is None else str(source), cfg, noise=noise, seed=seed,
-                          imu_frame=imu_frame, **bag_options)
+                          imu_frame=imu_frame, gnss=None if gnss is None else str(gnss), **bag_options)
     return with_outages(run, outage, outage_every)
 
 
@@ -75,7 +78,7 @@ def simulate(scenario: str = "car", duration_s: float = 300.0, **options) -> Rec
 
 def process(source=None, *, methods=None, config=None, preset: str | None = None, tune: str | None = None,
             noise: str | None = None, seed: int = 0, outage: str | None = None, outage_every: str | None = None,
-            imu_frame: str = "frd", show_progress: bool = False, **bag_options) -> "Result":
+            imu_frame: str = "frd", gnss=None, show_progress: bool = False, **bag_options) -> "Result":
     """Run the estimators on a source and score them: ``gnssacc run`` without the files.
 
     Parameters
@@ -99,10 +102,15 @@ def process(source=None, *, methods=None, config=None, preset: str | None = None
         GNSS outages, ``"START:LEN[,...]"`` and ``"PERIOD:LEN"`` [s].
     imu_frame : {"frd", "flu"}
         Axes of a CSV run's ``imu.csv``.
+    gnss : str or Path, optional
+        A GNSS file whose fixes replace the source's: an RTKLIB ``.pos``, an NMEA log or a CSV
+        with ``gnss.csv``'s columns (:mod:`gnssacc.sources.gnssfile`; absolute fix times need the
+        IMU stamped in UNIX or GPS seconds).
     show_progress : bool
         Progress bars on a terminal.
     **bag_options
-        ``imu_topic``, ``gnss_topic``, ``truth_topic``, ``time_source``, ``gnss_from_truth_hz``.
+        ``imu_topic``, ``gnss_topic``, ``truth_topic``, ``odom_topic``, ``time_source``,
+        ``gnss_from_truth_hz``.
 
     Returns
     -------
@@ -115,7 +123,7 @@ def process(source=None, *, methods=None, config=None, preset: str | None = None
     """
     ids = parse_methods(methods if methods is None or isinstance(methods, str) else ",".join(methods))
     cfg = configure(source, preset=preset, config=config)
-    run = _load(source, cfg, noise, seed, outage, outage_every, imu_frame, bag_options)
+    run = _load(source, cfg, noise, seed, outage, outage_every, imu_frame, gnss, bag_options)
     return evaluate(run, cfg, ids, tune=tune, show_progress=show_progress)
 
 

@@ -106,6 +106,8 @@ def check_args(args) -> None:
         check_input_file(args.config, "--config")
     if getattr(args, "seed", None) is not None:
         check_option(args.seed, "--seed", SEED, integer=True)
+    if getattr(args, "gnss", None):
+        check_input_file(args.gnss, "--gnss")
     checks = {"run": _run, "bench": _bench, "batch": _batch, "sim": _sim, "inspect": lambda a: check_source(a.bag)}
     checks.get(args.command, lambda a: None)(args)
 

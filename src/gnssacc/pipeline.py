@@ -86,8 +86,9 @@ def is_bag(path: Path) -> bool:
 def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None, seed: int = 0,
                 imu_frame: str = "frd", imu_topic: str | None = None, gnss_topic: str | None = None,
                 truth_topic: str | None = None, time_source: str = "header",
-                gnss_from_truth_hz: float | None = None) -> RecordedRun:
-    """Load a run from a source spec.
+                gnss_from_truth_hz: float | None = None, odom_topic: str | None = None,
+                gnss: str | None = None) -> RecordedRun:
+    """Load a run from a source spec (with ``gnss``: its fixes replaced by a file's).
 
     Parameters
     ----------
@@ -105,10 +106,21 @@ def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None,
         Noise seed.
     imu_frame : {"frd", "flu"}
         Axes of a CSV directory's ``imu.csv``.
-    imu_topic, gnss_topic, truth_topic, time_source, gnss_from_truth_hz
+    imu_topic, gnss_topic, truth_topic, time_source, gnss_from_truth_hz, odom_topic
         Bag options (see :func:`gnssacc.sources.rosbag.load_bag_run`); for a bag, ``noise``
         applies to the fixes made from the truth with ``gnss_from_truth_hz``.
+    gnss : str, optional
+        A GNSS file (``.pos``, NMEA, ``gnss.csv`` columns) whose fixes replace the source's
+        (:func:`gnssacc.sources.gnssfile.with_gnss_file`: absolute times need an absolute IMU clock).
     """
+    if gnss is not None:
+        if noise is not None or gnss_from_truth_hz is not None:
+            raise InputError("--gnss", "the fixes come from the GNSS file: --noise and --gnss-from-truth (fixes made "
+                                       "from the truth) do not apply")
+        from .sources.gnssfile import with_gnss_file
+        run = load_source(source, cfg, seed=seed, imu_frame=imu_frame, imu_topic=imu_topic, gnss_topic=gnss_topic,
+                          truth_topic=truth_topic, time_source=time_source, odom_topic=odom_topic)
+        return with_gnss_file(run, gnss, cfg)
     if source in (None, "kitti"):
         from .sources.kitti import load_kitti
         return load_kitti(cfg, noise or "white", seed)
@@ -121,7 +133,7 @@ def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None,
         from .sources.rosbag import load_bag_run
         return load_bag_run(path, cfg, imu_topic=imu_topic, gnss_topic=gnss_topic, truth_topic=truth_topic,
                             time_source=time_source, gnss_from_truth_hz=gnss_from_truth_hz,
-                            noise=noise, seed=seed)
+                            noise=noise, seed=seed, odom_topic=odom_topic)
     if path.is_dir():
         from .sources.common import with_noisy_fixes
         from .sources.csvdir import load_csv_run

@@ -15,6 +15,7 @@ Sigmas and quality
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +23,7 @@ import numpy as np
 from ..core.config import DEFAULTS, RunConfig
 from ..core.config_check import QUALITY_NAMES
 from ..core.errors import InputError, warn_data
-from ..core.recording import FIX_QUALITY, FIX_QUALITY_NAMES, GnssFixes, check_increasing
+from ..core.recording import FIX_QUALITY, FIX_QUALITY_NAMES, GnssFixes, RecordedRun, check_increasing
 from .common import check_degrees, read_table
 from .gnss_time import ABSOLUTE_CLOCK_MIN_S, place_on_clock
 
@@ -90,6 +91,16 @@ def load_gnss_file(path, cfg: RunConfig, imu_t: np.ndarray) -> tuple[GnssFixes, 
     gnss, counts = apply_quality_policy(gnss, cfg["gnss"]["quality"], where)
     meta.update(counts)
     return gnss, meta
+
+
+def with_gnss_file(run: RecordedRun, path, cfg: RunConfig) -> RecordedRun:
+    """``run`` with its fixes replaced by those of a GNSS file (``--gnss FILE``), on its IMU's clock.
+
+    The run keeps its origin, truth, odometry and given initial state; ``meta`` records the file
+    (:func:`load_gnss_file`).
+    """
+    gnss, meta = load_gnss_file(path, cfg, run.imu.t)
+    return replace(run, gnss=gnss, meta={**run.meta, **meta}).validate()
 
 
 def _absolute_fixes(path: Path, kind: str, cfg: RunConfig, meta: dict):
