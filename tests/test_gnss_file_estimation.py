@@ -85,3 +85,38 @@ def test_gnss_option_replaces_a_sources_fixes(sim_run, tmp_path):
     np.testing.assert_allclose((run.gnss.lat - sim_run.gnss.lat) * 6.4e6, 0, atol=1e-3)
     with pytest.raises(InputError, match="--noise and --gnss-from-truth"):
         gnssacc.load(str(tmp_path / "run"), gnss=tmp_path / "pos" / "gnss.pos", noise="white")
+
+
+def test_smoother_gnss_factors_use_the_full_covariance(tmp_path):
+    """The GM factor's error with a full covariance is 0.5 e^T C^-1 e; the smoother's residual
+    chi-square whitens with C too (with no estimate uncertainty: expectation 3); and a smoother pass
+    on correlated .pos fixes runs and scores them."""
+    gtsam = pytest.importorskip("gtsam")
+    from gnssacc.estimators.smoother import residual_chi2, run_smoother
+    from gnssacc.factors.gnss_error_factors import gnss_position_gm_factor
+    from types import SimpleNamespace
+
+    cov = np.array([[4.0, 1.2, -0.5], [1.2, 2.0, 0.3], [-0.5, 0.3, 9.0]])
+    p_fix, lever = np.array([1.0, -2.0, 0.5]), np.array([0.3, 0.1, -0.2])
+    f = gnss_position_gm_factor(0, 1, p_fix, lever, np.sqrt(np.diag(cov)), cov)
+    values = gtsam.Values()
+    pose = gtsam.Pose3(gtsam.Rot3.Ypr(0.3, -0.1, 0.05), np.array([2.0, 1.0, -1.0]))
+    g = np.array([0.2, -0.1, 0.4])
+    values.insert(0, pose)
+    values.insert(1, g)
+    e = pose.translation() + pose.rotation().matrix() @ lever + g - p_fix
+    assert f.error(values) == pytest.approx(0.5 * e @ np.linalg.solve(cov, e), rel=1e-9)
+    R = pose.rotation().matrix()
+    rec = SimpleNamespace(R=R[None], p_n=np.array([pose.translation()]), g=g[None], cov_xg=np.zeros((1, 6, 3)),
+                          cov_pose=np.zeros((1, 6, 6)), cov_g=np.zeros((1, 3, 3)))
+    chi2, expected = residual_chi2(rec, np.array([0]), p_fix[None], cov[None], lever)
+    assert chi2[0] == pytest.approx(e @ np.linalg.solve(cov, e)) and expected[0] == pytest.approx(3.0)
+
+    run = simulate("car", 60.0, t_start_s=UNIX_2024, noise="white", seed=5)
+    run.gnss.corr_ned = np.tile([0.4, -0.2, 0.1], (len(run.gnss), 1))
+    write_csv_run(run, tmp_path, gnss_format="pos")
+    cfg = load_config(None, overrides=CONFIG)
+    ident = identify(load_csv_run(tmp_path, cfg), cfg, "none")
+    sols = run_smoother(ident.run, ident.cfg, "smoother", init=ident.init, quality=ident.quality,
+                        stationary=ident.stationary)
+    assert sols["smoother"].stats["n_gps_factors"] > 40
