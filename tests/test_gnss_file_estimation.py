@@ -120,3 +120,26 @@ def test_smoother_gnss_factors_use_the_full_covariance(tmp_path):
     sols = run_smoother(ident.run, ident.cfg, "smoother", init=ident.init, quality=ident.quality,
                         stationary=ident.stationary)
     assert sols["smoother"].stats["n_gps_factors"] > 40
+
+
+def test_gnss_file_on_a_bags_unix_clock(tmp_path):
+    """A bag's header stamps are UNIX time: a GPST .pos of the same fixes lands on exactly the
+    bag's own fix stamps (18 leap seconds removed), and so does an NMEA log in UTC."""
+    pytest.importorskip("rosbags")
+    from dataclasses import replace
+
+    from gnssacc.sources.bagwrite import write_bag
+    from gnssacc.sources.gnssfile import write_gnss_file
+
+    run = simulate("car", 60.0, noise="white", seed=5)
+    bag = write_bag(run, tmp_path / "bag", "ros2-sqlite3", time_offset_s=UNIX_2024)
+    shifted = replace(run.gnss, t=run.gnss.t + UNIX_2024)
+    for kind in ("pos", "nmea"):
+        path = write_gnss_file(tmp_path / f"fixes.{kind}", shifted, kind, truth=None)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DataWarning)
+            own = gnssacc.load(str(bag), config=CONFIG, preset="none")
+            other = gnssacc.load(str(bag), config=CONFIG, preset="none", gnss=path)
+        np.testing.assert_allclose(other.gnss.t, own.gnss.t, atol=5e-3)
+        np.testing.assert_allclose((other.gnss.lat - own.gnss.lat) * 6.4e6, 0, atol=1e-3)
+        assert other.meta["gnss_clock"] == "unix"
