@@ -283,3 +283,33 @@ def test_gga_without_dates_takes_the_day_of_a_unix_imu_clock(tmp_path):
     g, meta = load_gnss_file(path, load_config(), UNIX_2024 + np.arange(0, 10, 0.01))
     np.testing.assert_allclose(g.t, UNIX_2024 + np.arange(5))
     assert meta["gnss_time_system"] == "UTC"
+
+
+def test_rtklib_dms_and_enu_forms(tmp_path):
+    """The degrees-minutes-seconds form (RTKLIB labels its third cross term "sdue") and the
+    e/n/u-baseline form from the reference position, written as RTKLIB's format strings do."""
+    dms = tmp_path / "dms.pos"
+    dms.write_text(
+        "% (lat/lon/height=WGS84/ellipsoidal,Q=1:fix,2:float,3:sbas,4:dgps,5:single,6:ppp,ns=# of satellites)\n"
+        "%  GPST                  latitude(d'\")  longitude(d'\")  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)  "
+        "sdne(m)  sdeu(m)  sdue(m) age(s)  ratio\n"
+        "2015/06/01 00:00:00.000   47 28 51.43588    -0 03 23.52266   181.7826   1   9   0.0125   0.0103   0.0333"
+        "   0.0028  -0.0061   0.0049   1.00   12.5\n")
+    pos = read_pos(dms)
+    assert np.degrees(pos.lat[0]) == pytest.approx(47 + 28 / 60 + 51.43588 / 3600, abs=1e-12)
+    assert np.degrees(pos.lon[0]) == pytest.approx(-(3 / 60 + 23.52266 / 3600), abs=1e-12)   # "-0" keeps its sign
+    assert pos.cov_ned[0][0, 2] == pytest.approx(-(0.0049**2))                                   # N-D = -(U-N)
+    enu = tmp_path / "enu.pos"
+    enu.write_text(
+        "% ref pos   : 47.480000000   19.050000000   180.0000\n"
+        "%\n"
+        "% (e/n/u-baseline=WGS84,Q=1:fix,2:float,3:sbas,4:dgps,5:single,6:ppp,ns=# of satellites)\n"
+        "%  GPST                  e-baseline(m)  n-baseline(m)  u-baseline(m)   Q  ns   sde(m)   sdn(m)   sdu(m)  "
+        "sden(m)  sdnu(m)  sdue(m) age(s)  ratio\n"
+        "2015/06/01 00:00:00.000        10.0000        20.0000        -1.0000   1   9   0.0100   0.0200   0.0300"
+        "   0.0000   0.0000   0.0000   1.00   12.5\n")
+    pos = read_pos(enu)
+    from gnssacc.core.earth import LocalTangentFrame
+    base = LocalTangentFrame(np.radians(47.48), np.radians(19.05), 180.0)
+    np.testing.assert_allclose(base.to_ned(pos.lat, pos.lon, pos.h)[0], [20.0, 10.0, 1.0], atol=1e-6)
+    np.testing.assert_allclose(np.sqrt(np.diag(pos.cov_ned[0])), [0.02, 0.01, 0.03], atol=1e-6)

@@ -129,7 +129,9 @@ def read_pos(path) -> PosFile:
     cells = np.array(rows, dtype=object)
     t_scale = _times(cells[:, :2], numbers, head, where)
     values = _numbers(cells[:, 2:], numbers, where)
-    col = {name: k for k, name in enumerate(head.value_names)}
+    col: dict = {}
+    for k, name in enumerate(head.value_names):
+        col.setdefault(name, k)            # a d'" column's first of three fields
     lat, lon, h, cov = _positions(values, col, head, where)
     quality = values[:, col["q"]].astype(int) if "q" in col else np.zeros(len(values), int)
     n_sat = values[:, col["ns"]].astype(int) if "ns" in col else None
