@@ -201,7 +201,8 @@ def _verdict(stat, kind: str, dec, ctx: Context, truth: Truth | None) -> dict:
     why = f"{a.describe()}; {where_from}"
     if not a.ok and a.n >= 5:
         why = f"its positions disagree with the fixes: {why}"
-    return {"ok": a.ok, "frame": frame, "n": a.n, "rms_m": a.rms_m, "ratio": a.ratio, "why": why}
+    finite = {k: (float(v) if np.isfinite(v) else None) for k, v in (("rms_m", a.rms_m), ("ratio", a.ratio))}
+    return {"ok": a.ok, "frame": frame, "n": a.n, **finite, "why": why}
 
 
 def _choose_odometry(sel, dec, ctx: Context, out: Chosen) -> None:

@@ -32,7 +32,7 @@ SIGMA_COLUMNS = ("sn", "se", "sd")
 CORR_COLUMNS = ("rho_ne", "rho_nd", "rho_ed")
 QUALITY_COLUMN = "quality"
 #: File kinds by suffix (anything else is recognised by its first line).
-SUFFIXES = {".pos": "pos", ".nmea": "nmea", ".nma": "nmea", ".gps": "nmea", ".csv": "csv"}
+SUFFIXES = {".pos": "pos", ".nmea": "nmea", ".nma": "nmea", ".csv": "csv"}
 #: A fix whose correlation matrix has a determinant below this is taken as uncorrelated.
 MIN_CORRELATION_DET = 1e-6
 
