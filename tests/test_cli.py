@@ -1,6 +1,7 @@
 """The gnssacc command end to end: outputs, and one clear line with exit code 2 for bad input."""
 import csv
 import json
+import re
 import subprocess
 import sys
 
@@ -84,6 +85,39 @@ def _bad(capsys, args):
     assert code == 2
     assert len(lines) == 1 and "Traceback" not in stderr
     return lines[0]
+
+
+def test_the_table_comes_before_the_files_and_figures(run_dir, tmp_path, capsys, monkeypatch):
+    """What the user waits for first: the table is on the terminal before the files and figures
+    are written; where they went comes last."""
+    import gnssacc.api as api
+
+    printed = []
+
+    def write_result(*args, **kwargs):
+        printed.append(capsys.readouterr().out)   # what was on the terminal when writing began
+        return real(*args, **kwargs)
+
+    real = api.write_result
+    monkeypatch.setattr(api, "write_result", write_result)
+    out = tmp_path / "res"
+    code, rest, stderr = _run_cli(["run", run_dir, "--methods", "ekf", "--tune", "none", "--out", out], capsys)
+    assert code == 0, stderr
+    assert len(printed) == 1 and re.search(r"^method\s+PRMSE", printed[0], re.M) and "results:" not in printed[0]
+    assert rest.strip() == f"results: {out}" and (out / "metrics.json").is_file() and (out / "errors.png").is_file()
+
+
+def test_a_reader_gone_before_the_table_still_gets_the_files(run_dir, tmp_path):
+    """``gnssacc run ... | head -0``: the table cannot be printed (exit 141, as a shell reports
+    SIGPIPE), but the results are written all the same."""
+    out = tmp_path / "res"
+    args = ["run", str(run_dir), "--methods", "ekf", "--tune", "none", "--no-plots", "--out", str(out)]
+    proc = subprocess.Popen([sys.executable, "-c", f"import sys; from gnssacc.cli import main; sys.exit(main({args!r}))"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=300) == 141, err
+    assert "error" not in err and json.loads((out / "metrics.json").read_text())["methods"]["ekf"]["status"] == "ok"
 
 
 def test_missing_source(tmp_path, capsys):

@@ -247,17 +247,24 @@ def _run_locked(args, stack, held) -> int:
                gnss_from_truth_hz=args.gnss_from_truth, odom_topic=args.odom_topic)
     target = target or _lock_out(default_out_dir(run), args, stack, held)
     res = evaluate(run, cfg, methods, tune=args.tune, show_progress=True, observe=args.report)
-    out = res.write(target, plots=not args.no_plots, report=args.report, export=args.export)
     raise_if_arrived()   # a signal that compiled code swallowed interrupts all the same
-    if out is None:
+    if not res.solutions:   # nothing to show or write
         reasons = "; ".join(f"{m}: {r}" for m, r in failed_methods(res.metrics).items())
         print(f"gnssacc: error: every method failed ({reasons}); {target.kept()}", file=sys.stderr)
         return 1
-    _print_summary(res.run, cfg, res.metrics, res.prepared, out)
-    return 0
+    gone = 0
+    try:   # the table first; then the files and figures
+        _print_summary(res.run, cfg, res.metrics, res.prepared)
+    except BrokenPipeError:   # the reader went away (``| head``): the results are still written
+        gone = _stdout_gone()
+    out = res.write(target, plots=not args.no_plots, report=args.report, export=args.export)
+    raise_if_arrived()
+    if not gone:
+        print(f"results: {out}", flush=True)
+    return gone
 
 
-def _print_summary(run, cfg, metrics: dict, prep, out) -> None:
+def _print_summary(run, cfg, metrics: dict, prep) -> None:
     from .outputs.report import format_table
 
     print(f"{run.name}: {run.duration_s:.1f} s, {len(run.imu)} IMU samples, {len(run.gnss)} GNSS fixes"
@@ -271,8 +278,7 @@ def _print_summary(run, cfg, metrics: dict, prep, out) -> None:
         print(prep.tuning.line())
     print()
     print(format_table(metrics))
-    print(f"\n(one-off JIT compilation {metrics['jit_compile_s']:.2f} s, not included in wall times)")
-    print(f"results: {out}")
+    print(f"\n(one-off JIT compilation {metrics['jit_compile_s']:.2f} s, not included in wall times)", flush=True)
 
 
 def _quality_lines(metrics: dict) -> list[str]:
@@ -415,10 +421,28 @@ def main(argv: list[str] | None = None) -> int:
         return _internal_error(exc, argv)
 
 
+def entry() -> None:
+    """The ``gnssacc`` command: :func:`main`, then, after ``run``, exit at once. The results are
+    written and the output flushed by then; what is skipped is the interpreter's teardown of
+    gtsam's, numba's and matplotlib's objects (tenths of a second the user would wait for nothing).
+    Other commands exit as usual (``batch`` closes a cluster through its exit handlers)."""
+    code = main()
+    if sys.argv[1:2] == ["run"]:
+        import os
+
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (BrokenPipeError, ValueError):   # the reader went away; a closed stream
+                pass
+        os._exit(code)
+    sys.exit(code)
+
+
 def _stdout_gone() -> int:
     """Point stdout at the null device, so that the interpreter's last flush does not fail again;
     return 141 (128 + SIGPIPE, as a shell reports a writer its reader left). Results already
-    written stay; ``gnssacc run`` prints its summary only after the swap."""
+    written stay; ``gnssacc run``, which prints its table before it writes, still writes them."""
     import os
 
     devnull = os.open(os.devnull, os.O_WRONLY)
@@ -453,4 +477,4 @@ def _internal_error(exc: Exception, argv: list[str] | None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()
