@@ -1,0 +1,153 @@
+"""The whole ``gnssacc run`` on KITTI against the plain GTSAM script doing the core of the same job.
+
+Fresh processes, interleaved rounds (so that a slow phase of the machine hits every case alike),
+warm numba cache: the plain script (``bench/plain_gtsam_kitti.py``: load, fixed-lag smoother,
+print; with and without per-node sigmas), the default ``gnssacc run`` (four methods, input
+checks, noise tuning, files and figures), and ``gnssacc run --methods ekf,smoother,smoother-acc
+--no-plots``. Prints per case the median wall time of the whole process (start to exit), the
+time to the table, and the ratio to the plain script.
+
+``--breakdown`` adds one instrumented run per gnssacc case: where the time goes, from the start
+of the process (interpreter and imports, data, each preparation stage, the methods, scoring,
+table, files, figures, exit).
+
+Usage::
+
+    python bench/bench_whole_run.py [--repeats 5] [--breakdown]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+RUNS = {"default run": ["run", "--overwrite"],
+        "ekf,smoother,smoother-acc --no-plots": ["run", "--overwrite", "--methods", "ekf,smoother,smoother-acc",
+                                                 "--no-plots"]}
+PLAIN = {"plain gtsam script": [], "plain gtsam script + sigmas": ["--sigmas"]}
+
+
+def timed(cmd: list[str]) -> dict:
+    """Seconds to the table's header line (gnssacc) and to the exit of one process."""
+    t0 = time.perf_counter()
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                         env={**os.environ, "OMP_NUM_THREADS": "1"})
+    table = None
+    for line in p.stdout:
+        if table is None and re.match(r"method\s+PRMSE", line):
+            table = time.perf_counter() - t0
+    if p.wait() != 0:
+        raise SystemExit(f"{' '.join(cmd)} failed with exit code {p.returncode}")
+    return {"table": table, "end": time.perf_counter() - t0}
+
+
+#: An instrumented ``gnssacc run``: times the stages from the process start and prints them.
+BREAKDOWN_CHILD = r"""
+import json, os, sys, time
+t_start = time.perf_counter()
+marks = []
+def mark(name):
+    marks.append((name, time.perf_counter() - t_start))
+import gnssacc.cli as cli
+mark("imports (cli)")
+import gnssacc.api as api, gnssacc.pipeline as pipeline
+
+def wrap(mod, name, label):
+    real = getattr(mod, name)
+    def inner(*a, **k):
+        mark(label + " start")
+        out = real(*a, **k)
+        mark(label + " end")
+        return out
+    setattr(mod, name, inner)
+
+wrap(api, "load", "data")
+wrap(pipeline, "prepare", "preparation")
+wrap(pipeline, "run_methods", "methods")
+wrap(pipeline, "compare", "compare")
+wrap(cli, "_print_summary", "table")
+wrap(api, "write_result", "files")
+wrap(pipeline, "plot_errors", "errors.png")
+wrap(pipeline, "plot_trajectory", "trajectory.png")
+code = cli.main(sys.argv[1:])
+mark("main returned")
+print(json.dumps(marks), file=sys.stderr, flush=True)
+sys.stdout.flush()
+os._exit(code)
+"""
+
+
+def breakdown(name: str, args: list[str], out_dir: str) -> None:
+    t0 = time.perf_counter()
+    p = subprocess.run([sys.executable, "-c", BREAKDOWN_CHILD, *args, "--out", out_dir], capture_output=True,
+                       text=True, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    end = time.perf_counter() - t0
+    marks = dict(json.loads(p.stderr.strip().splitlines()[-1]))
+    metrics = json.loads((Path(out_dir) / "metrics.json").read_text())
+    prep = metrics["identify_s"]
+    rows = [("interpreter, imports, arguments", marks["data start"])]
+    rows.append(("data (KITTI files)", marks["data end"] - marks["data start"]))
+    rows.append(("imports until the preparation", marks["preparation start"] - marks["data end"]))
+    for key in ("input_checks_s", "quality_and_stationary_s", "initialisation_s", "tuning_s", "model_check_s"):
+        if key in prep:
+            rows.append((f"  preparation: {key.removesuffix('_s').replace('_', ' ')}", prep[key]))
+    rows.append(("preparation (all)", marks["preparation end"] - marks["preparation start"]))
+    rows.append(("model check, kernels wait", marks["methods start"] - marks["preparation end"]))
+    for m, v in metrics["methods"].items():
+        if not m.endswith("-online") and v.get("runtime_s") is not None:
+            rows.append((f"  method {m}", v["runtime_s"]))
+    rows.append(("methods (all)", marks["methods end"] - marks["methods start"]))
+    rows.append(("scoring, consistency", marks["compare end"] - marks["methods end"]))
+    rows.append(("until the table is printed", marks["table end"] - marks["compare end"]))
+    figures = sum(marks.get(f"{f} end", 0) - marks.get(f"{f} start", 0) for f in ("errors.png", "trajectory.png"))
+    rows.append(("files (without figures)", marks["files end"] - marks["files start"] - figures))
+    rows.append(("figures", figures))
+    rows.append(("exit", end - marks["main returned"]))
+    print(f"\n{name}: where the time goes (one instrumented run, whole process {end:.2f} s; "
+          f"the table at {marks['table end']:.2f} s)")
+    for label, sec in rows:
+        print(f"  {label:40s} {sec:6.2f} s")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--breakdown", action="store_true")
+    args = ap.parse_args()
+    rows: dict[str, list] = {}
+    load0 = os.getloadavg()
+    with tempfile.TemporaryDirectory() as tmp:
+        out = os.path.join(tmp, "out")
+        timed([sys.executable, "-m", "gnssacc.cli", *RUNS["default run"], "--out", out])   # a warm cache
+        for r in range(args.repeats):
+            for name, extra in PLAIN.items():
+                rows.setdefault(name, []).append(timed([sys.executable, str(HERE / "plain_gtsam_kitti.py"), *extra]))
+            for name, extra in RUNS.items():
+                rows.setdefault(name, []).append(timed([sys.executable, "-m", "gnssacc.cli", *extra, "--out", out]))
+            print(f"round {r + 1}/{args.repeats} done", file=sys.stderr)
+        load1 = os.getloadavg()
+        print(f"KITTI, fresh process each, median of {args.repeats} interleaved rounds; load average "
+              f"{load0[0]:.1f} at the start, {load1[0]:.1f} at the end, on {os.cpu_count()} cores")
+        plain = {n: float(np.median([v["end"] for v in rows[n]])) for n in PLAIN}
+        print(f"{'case':40s} {'exit [s]':>9s} {'table [s]':>10s} {'x plain':>8s} {'x plain+sigmas':>15s}")
+        for name, vals in rows.items():
+            end = float(np.median([v["end"] for v in vals]))
+            table = np.median([v["table"] for v in vals]) if vals[0]["table"] is not None else float("nan")
+            print(f"{name:40s} {end:9.2f} {table:10.2f} {end / plain['plain gtsam script']:8.2f} "
+                  f"{end / plain['plain gtsam script + sigmas']:15.2f}")
+        if args.breakdown:
+            for name, extra in RUNS.items():
+                breakdown(name, extra, out)
+
+
+if __name__ == "__main__":
+    main()
