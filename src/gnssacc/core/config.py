@@ -183,6 +183,11 @@ DEFAULTS: dict[str, dict] = {
         # Largest spacing of nodes [s]; during GNSS outages nodes are added at this spacing so
         # IMU-only segments stay short.
         "max_node_spacing_s": 1.0,
+        # Shortest spacing of the fixes taken as nodes [s]: faster fixes are folded into the node
+        # before them as factors through the preintegrated IMU (the smoother's time per second
+        # of data stays that of this node rate; 0: a node per fix). Fixes at up to 1 / this rate
+        # are all nodes.
+        "min_node_spacing_s": 0.5,
         # iSAM2 factorization: "QR" (robust to the stiff bias random walk of good IMUs) or
         # "CHOLESKY" (faster, but ill-conditioned problems raise and are recovered from).
         "factorization": "QR",

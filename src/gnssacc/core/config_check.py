@@ -98,7 +98,7 @@ BOUNDS: dict[tuple[str, str], Bound] = {
     ("tune", "max_evaluations"): Bound(1, 100_000),
     ("tune", "cov_every"): Bound(1, 10_000),
     **_all("smoother", "lag_s max_node_spacing_s", POSITIVE),
-    **_all("smoother", "relinearize_threshold integration_sigma", NON_NEGATIVE),
+    **_all("smoother", "relinearize_threshold integration_sigma min_node_spacing_s", NON_NEGATIVE),
     ("smoother", "relinearize_skip"): Bound(1),
     **_all("quality", "interp_min_s suspect_local_window_s", POSITIVE),
     **_all("quality", "interp_tol suspect_gyro_sigma_dps suspect_accel_sigma_mps2", NON_NEGATIVE),

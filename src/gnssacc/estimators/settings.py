@@ -182,6 +182,9 @@ class SmootherSettings(_Common):
         Fixed lag [s].
     max_node_spacing_s : float
         Longest interval between nodes [s] (nodes are added in long gaps between fixes).
+    min_node_spacing_s : float
+        Shortest interval between fixes taken as nodes [s] (faster fixes are folded into the
+        node before them; 0: every fix is a node).
     factorization : str
         iSAM2's ``"QR"`` or ``"CHOLESKY"``.
     relinearize_threshold : float
@@ -192,6 +195,7 @@ class SmootherSettings(_Common):
 
     lag_s: float = 10.0
     max_node_spacing_s: float = 1.0
+    min_node_spacing_s: float = 0.5
     factorization: str = "QR"
     relinearize_threshold: float = 0.1
     relinearize_skip: int = 10
@@ -201,6 +205,7 @@ class SmootherSettings(_Common):
     def from_config(cls, cfg: RunConfig) -> "SmootherSettings":
         s = cfg["smoother"]
         return cls(**cls.common(cfg), lag_s=float(s["lag_s"]), max_node_spacing_s=float(s["max_node_spacing_s"]),
+                   min_node_spacing_s=float(s["min_node_spacing_s"]),
                    factorization=str(s["factorization"]).upper(),
                    relinearize_threshold=float(s["relinearize_threshold"]),
                    relinearize_skip=int(s["relinearize_skip"]), integration_sigma=float(s["integration_sigma"]))

@@ -2,13 +2,18 @@
 
 Graph, in a local NED tangent frame at the run's origin:
 
-* nodes (pose X, velocity V, IMU bias B) at every GNSS epoch after the start, plus fill nodes
-  at most ``[smoother] max_node_spacing_s`` apart during GNSS outages;
+* nodes (pose X, velocity V, IMU bias B) at the GNSS epochs after the start, at most one per
+  ``[smoother] min_node_spacing_s`` (:func:`node_fixes`: faster fixes are folded into the node
+  before them, below), plus fill nodes at most ``[smoother] max_node_spacing_s`` apart during
+  GNSS outages;
 * ``CombinedImuFactor`` between consecutive nodes (``PreintegratedCombinedMeasurements`` with
   gravity from the WGS-84 model at the origin and the earth rate as Coriolis), noise densities
   and bias random walks from the same configuration as the EKF, and the same data-quality
   inflation over suspect IMU spans;
-* ``GPSFactor`` (``GPSFactorArm`` with a lever arm) with each fix's covariance;
+* ``GPSFactor`` (``GPSFactorArm`` with a lever arm) with each fix's covariance; a fix between
+  two nodes (faster fixes) is a factor on the earlier node through the IMU preintegrated up to
+  the fix (:func:`gnssacc.factors.preintegrated_position_factor`), so the number of nodes, and
+  the time per second of data, stay those of ``min_node_spacing_s`` whatever the fix rate;
 * for ``smoother-acc``, the GNSS-acceleration factor of :mod:`gnssacc.factors` on (X_k, B_k),
   built from the same least-squares window as the EKF's update; for ``smoother-accw`` the
   window-consistent one on the poses of the window's fixes (``sum_j B_j p_ant(X_j) - a~``);
@@ -55,6 +60,7 @@ from ..factors import (
     gnss_accel_factor,
     gnss_position_gm_factor,
     joint_prior_factor,
+    preintegrated_position_factor,
     window_accel_factor,
 )
 from ..prepare.yawbank import start_and_quality
@@ -95,6 +101,35 @@ def node_times(t0: float, t_end: float, gnss_t: np.ndarray, max_spacing: float) 
         out.extend(out[-1] + gap * np.arange(1, n_fill + 1) / (n_fill + 1))
         out.append(t)
     return np.asarray(out)
+
+
+def node_fixes(gnss_t: np.ndarray, min_spacing: float) -> np.ndarray:
+    """Which fixes are nodes (a mask): the first, then each fix at least ``min_spacing`` [s] after
+    the last one taken, less half the median fix interval (fixes at a steady rate up to
+    ``1 / min_spacing`` are all taken, jitter or not; at 20 Hz every tenth for 0.5 s). The others
+    are folded into the node before them; ``min_spacing <= 0``: every fix is a node."""
+    keep = np.ones(len(gnss_t), bool)
+    if min_spacing <= 0 or len(gnss_t) < 2:
+        return keep
+    step = min_spacing - 0.5 * float(np.median(np.diff(gnss_t)))
+    last = -np.inf
+    for k, t in enumerate(gnss_t.tolist()):
+        if t - last >= step:
+            last = t
+        else:
+            keep[k] = False
+    return keep
+
+
+def _folded_by_node(times: np.ndarray, gnss_t: np.ndarray, is_node_fix: np.ndarray) -> dict:
+    """``{node i: [fix indices]}``: the fixes that are not nodes, strictly between nodes ``i - 1``
+    and ``i`` (their factors go on node ``i - 1`` with node ``i``'s update)."""
+    k = np.flatnonzero(~is_node_fix & (gnss_t > times[0]) & (gnss_t < times[-1]))
+    k = k[~np.isin(gnss_t[k], times)]
+    out: dict = {}
+    for kk, i in zip(k.tolist(), np.searchsorted(times, gnss_t[k], side="right").tolist()):
+        out.setdefault(i, []).append(kk)
+    return out
 
 
 class _ImuModel:
@@ -385,6 +420,14 @@ class _Factors:
             graph.add(gtsam.GPSFactor(X(i), self.p_fix[k], noise))
         return k
 
+    def folded_gps(self, graph, i: int, k: int, pim, pose, vel, bias) -> None:
+        """Fix ``k`` (between node ``i`` and the next) on node ``i``'s variables, through ``pim``
+        preintegrated from node ``i`` to the fix; ``pose, vel, bias``: node ``i``'s estimate."""
+        R_f = pim.predict(gtsam.NavState(pose, vel), bias).attitude().matrix()
+        graph.add(preintegrated_position_factor((X(i), V(i), B(i)), pim, self.p_fix[k], self.lever,
+                                                self.run.gnss.cov_ned(k), R_f))
+        self.stats["n_gps_folded"] += 1
+
     def gm_chain(self, graph, values, i: int, dt: float, g_prev: np.ndarray) -> None:
         """The GNSS error of node ``i`` and its Gauss-Markov link to node ``i - 1`` (when modelled)."""
         if self.gm:
@@ -549,14 +592,18 @@ def run_smoother(run: RecordedRun, settings, method: str = "smoother", *,
     settings = SmootherSettings.of(settings)
     z = settings.zupt
     st = epochs_for(run, z, settings.imu.gyro_psd, stationary)
-    times = node_times(float(init.t), float(run.imu.t[-1]), _node_epochs(run.gnss.t, st.t, z.interval_s),
-                       settings.max_node_spacing_s)
-    stats = {"n_nodes": len(times), "n_gps_factors": 0, "n_acc_factors": 0, "n_acc_skipped_suspect_imu": 0,
+    # GNSS-error states (-gm) follow the fixes one by one: every fix is a node then.
+    is_node_fix = node_fixes(run.gnss.t, 0.0 if settings.gnss.gauss_markov else settings.min_node_spacing_s)
+    times = node_times(float(init.t), float(run.imu.t[-1]),
+                       _node_epochs(run.gnss.t[is_node_fix], st.t, z.interval_s), settings.max_node_spacing_s)
+    stats = {"n_nodes": len(times), "n_gps_factors": 0, "n_gps_folded": 0, "n_acc_factors": 0,
+             "n_acc_skipped_suspect_imu": 0,
              "n_zupt_factors": 0, "n_zupt_gated": 0, "n_ill_posed_recovered": 0, "factorization_switched_to_qr": False,
              "init": init.how, "t_init": float(init.t), "lag_s": settings.lag_s}
     checked = np.array([stationary.spans[j].gnss_checked for j in st.span], bool)
     loop = _Loop(run, settings, METHODS[method], quality, init, times, _Factors(run, settings, st, stats, checked),
                  _attach_stationary(times, st, z.interval_s), stats)
+    loop.folded = _folded_by_node(times, run.gnss.t, is_node_fix)
     loop.feed(method, show_progress)
     loop.score()
     stats["final_window_variables"] = int(loop.smoother.isam.getLinearizationPoint().size())
@@ -591,6 +638,7 @@ class _Loop:
         self.online, self.fixed = _Record(n, factors.gm), _Record(n, factors.gm)
         self.smoother = _Smoother(settings, _bandwidth(settings) if use_acc == "window" else 1)
         self.fix_of = np.full(n, -1)
+        self.folded: dict = {}   # node -> fixes between it and the node before (run_smoother sets it)
         self.window_start, self.oldest = 0, 0
         self._start(init)
 
@@ -689,6 +737,7 @@ class _Loop:
         dt_all = np.diff(imu.t, prepend=imu.t[0])
         # Python scalars: the loop runs once per node and numpy scalars cost more than floats.
         times_l, first, last = (times.tolist() + [np.inf]), first.tolist(), last.tolist()
+        fix_t = self.run.gnss.t
         for i in progress(range(1, n), desc=method, enable=show_progress):
             t_prev, t = times_l[i - 1], times_l[i]
             j0, k1 = first[i - 1], last[i]
@@ -703,6 +752,13 @@ class _Loop:
             values.insert(B(i), self.bias)
             if self.f.gm:
                 self.f.gm_chain(graph, values, i, t - t_prev, self.g)
+            for k in self.folded.get(i, ()):   # fixes between the nodes: on node i - 1
+                t_f = float(fix_t[k])
+                k_f = min(int(np.searchsorted(imu.t, t_f, side="left")) + 1, len(imu.t))
+                infl = (_inflation_over(imu.t, j0, k_f, t_prev, t_f, seg_i0, seg_i1, seg_qa, seg_qg)
+                        if touches[i] else (None, None))
+                self.f.folded_gps(graph, i - 1, k, _preintegrate(imu, self.model, self.bias, t_prev, t_f, j0, k_f,
+                                                                 infl, dt_all), self.pose, self.vel, self.bias)
             self._node_factors(graph, i, t, nav, pim)
             try:
                 self.smoother.update(graph, values, [(key, t) for key in self.smoother.keys(i)])
