@@ -10,9 +10,17 @@ Memory: peak resident memory of fresh processes running ``smoother-acc`` on simu
 of 600 s and 6000 s (10x longer), above the process's memory just before the smoother starts
 (gtsam allocations are not visible to tracemalloc, hence RSS).
 
+``--high-rate`` instead times the smoothers on fast fixes: simulated slow-UGV runs of 360 s with
+10 Hz and 20 Hz fixes (industrial IMU), and the real recordings of ``../shared/data`` (comma2k19:
+60 s, 10 Hz; VN-310 static: 32 s, 5 Hz), with the default node layout (fixes folded into nodes
+at most ``[smoother] min_node_spacing_s`` apart) and with a node per fix (``min_node_spacing_s =
+0``, the layout before): wall time, real-time factor, nodes, PRMSE against the truth, and the
+largest difference between the two at their common nodes in units of the node-per-fix sigma.
+
 Usage::
 
     python bench/bench_smoother.py [--repeats 5] [--breakdown]
+    python bench/bench_smoother.py --high-rate [--repeats 3]
 """
 from __future__ import annotations
 
@@ -97,6 +105,64 @@ def _without_marginals():
         W.WindowMarginals.sync, W.WindowMarginals.covariances = sync, covs
 
 
+def _high_rate_runs():
+    """(name, run, config) of the fast-fix cases: simulated, then the real recordings if present."""
+    from pathlib import Path
+
+    from gnssacc.core.config import load_config
+    from gnssacc.sources.sim import grade_config, simulate
+
+    cfg = load_config(overrides={"imu": grade_config("industrial")})
+    for rate in (10.0, 20.0):
+        yield f"sim ugv-slow 360 s, {rate:.0f} Hz fixes", simulate("ugv-slow", 360.0, gnss_rate_hz=rate, seed=0), cfg
+    data = Path(__file__).resolve().parents[2] / "shared" / "data"
+    if data.is_dir():
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from bench_real_recordings import comma, vn310
+
+        yield "comma2k19 60 s, 10 Hz fixes", comma(data / "comma2k19_example1"), load_config()
+        yield "VN-310 static 32 s, 5 Hz fixes", vn310(data / "vn310_static", "lckf"), load_config()
+
+
+def high_rate(repeats: int) -> None:
+    from dataclasses import replace
+
+    from gnssacc import pipeline
+    from gnssacc.analysis.metrics import score
+    from gnssacc.estimators.kernels import ready
+    from gnssacc.estimators.settings import SmootherSettings
+    from gnssacc.estimators.smoother import estimate
+
+    ready(["smoother", "smoother-acc"])
+    print(f"Fast fixes: smoother wall time (median of {repeats}; a node per fix: one run), one core")
+    print(f"{'case':34s} {'method':13s} {'layout':14s} {'wall [s]':>9s} {'x real time':>12s} {'nodes':>6s} "
+          f"{'PRMSE [m]':>10s} {'max |diff|/sigma':>17s}")
+    for name, run, cfg in _high_rate_runs():
+        prep = pipeline.prepare(run, cfg, "auto", ["smoother"])
+        base = SmootherSettings.from_config(prep.cfg)
+        for method in ("smoother", "smoother-acc"):
+            sols, walls = {}, {}
+            for layout, spacing, n in (("folded", base.min_node_spacing_s, repeats), ("node per fix", 0.0, 1)):
+                w = []
+                for _ in range(n):
+                    t0 = time.perf_counter()
+                    sols[layout] = estimate(prep, replace(base, min_node_spacing_s=spacing), method)[method]
+                    w.append(time.perf_counter() - t0)
+                walls[layout] = float(np.median(w))
+            a, b = sols["folded"], sols["node per fix"]
+            _, ia, ib = np.intersect1d(a.t, b.t, return_indices=True)
+            o = prep.run.origin
+            d = np.hstack([o.to_ned(a.lat[ia], a.lon[ia], a.h[ia]) - o.to_ned(b.lat[ib], b.lon[ib], b.h[ib]),
+                           a.v_n[ia] - b.v_n[ib], (a.rpy[ia] - b.rpy[ib] + np.pi) % (2 * np.pi) - np.pi,
+                           a.b_a[ia] - b.b_a[ib], a.b_g[ia] - b.b_g[ib]])
+            worst = float(np.max(np.abs(d) / b.sigma[ib]))
+            for layout, sol in sols.items():
+                prmse = score(prep.run, sol).prmse_m if prep.run.truth is not None else float("nan")
+                print(f"{name:34s} {method:13s} {layout:14s} {walls[layout]:9.2f} "
+                      f"{run.duration_s / walls[layout]:12.0f} {sol.stats['n_nodes']:6d} {prmse:10.3f} "
+                      f"{worst if layout == 'folded' else float('nan'):17.2f}")
+
+
 def _rss_mib() -> float:
     with open("/proc/self/statm") as fh:
         return int(fh.read().split()[1]) * 4096 / 2**20
@@ -139,9 +205,13 @@ def main():
     ap.add_argument("--memory-child", type=float, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--breakdown", action="store_true",
                     help="also time each smoother with the marginal upkeep switched off (where the time goes)")
+    ap.add_argument("--high-rate", action="store_true", help="fast fixes: folded nodes against a node per fix")
     args = ap.parse_args()
     if args.memory_child is not None:
         _memory_child(args.memory_child)
+        return
+    if args.high_rate:
+        high_rate(args.repeats)
         return
 
     from gnssacc.core.config import load_config

@@ -16,12 +16,17 @@ error's Jacobian on the predicted state's tangent is ``D = [-R_f [l_b x], R_f, 0
     de/dv_n       = (D J_s)[:, 6:9] R_i^T       (the velocity variable is a NED vector)
     de/db         = D J_b
 
+With the Gauss-Markov GNSS error (``-gm`` methods, and runs the tuner finds time-correlated
+fixes in), the fix's error is the node's ``g_i`` carried to the fix, ``e += a g_i`` with
+``a = exp(-dt/tau)`` per axis (``de/dg = diag(a)``), and the process noise over ``dt``,
+``sigma^2 (1 - a^2)``, joins the fix's variance.
+
 Noise: the fix's covariance plus the preintegration's over the interval, ``J_p C J_p^T`` with
 ``J_p = [-R_f [l_b x], R_f]`` on the preintegrated rotation and position (``R_f`` at the
-estimate the factor is made at). Two such factors from one node share the IMU noise of their
-common span, and the IMU factor to the next node shares it too: the correlation is left out
-(over a fraction of a second it is a small part of a fix's variance, which the configuration's
-``min_node_spacing_s`` keeps small).
+estimate the factor is made at). Two such factors from one node share the IMU noise (and the
+Gauss-Markov process noise) of their common span, and the next node's factors share it too: the
+correlation is left out (over a fraction of a second it is a small part of a fix's variance,
+which the configuration's ``min_node_spacing_s`` keeps small).
 """
 from __future__ import annotations
 
@@ -32,13 +37,15 @@ from gnssacc.core.rotations import skew
 
 
 def preintegrated_position_factor(keys: tuple, pim: gtsam.PreintegratedCombinedMeasurements, p_fix: np.ndarray,
-                                  lever_b: np.ndarray, cov_fix: np.ndarray, R_f: np.ndarray) -> gtsam.CustomFactor:
+                                  lever_b: np.ndarray, cov_fix: np.ndarray, R_f: np.ndarray,
+                                  gm: tuple | None = None) -> gtsam.CustomFactor:
     """Build the factor.
 
     Parameters
     ----------
     keys : tuple of int
-        ``(X_i, V_i, B_i)``: the earlier node's Pose3, NED velocity (Vector3) and IMU bias.
+        ``(X_i, V_i, B_i)``: the earlier node's Pose3, NED velocity (Vector3) and IMU bias, and
+        with ``gm`` its GNSS error ``G_i`` (Vector3) fourth.
     pim : gtsam.PreintegratedCombinedMeasurements
         The IMU preintegrated from the node's time to the fix's.
     p_fix : ndarray (3,)
@@ -49,8 +56,11 @@ def preintegrated_position_factor(keys: tuple, pim: gtsam.PreintegratedCombinedM
         The fix's covariance [m^2].
     R_f : ndarray (3, 3)
         Attitude predicted at the fix's time (for the noise of the preintegration).
+    gm : tuple, optional
+        ``(tau_s, sigma_m)`` of the Gauss-Markov GNSS error (per N, E, D axis, arrays (3,)).
     """
     keys = [int(k) for k in keys]
+    a = np.exp(-pim.deltaTij() / np.asarray(gm[0], float)) if gm is not None else None
     p_fix, lever_b = np.asarray(p_fix, float).copy(), np.asarray(lever_b, float).copy()
     L = skew(lever_b)
     # Jacobian buffers reused by every call (GTSAM copies H out before the next call).
@@ -67,8 +77,14 @@ def preintegrated_position_factor(keys: tuple, pim: gtsam.PreintegratedCombinedM
             D[:, 3:6] = R
             A = D @ J_s
             H[0], H[1], H[2] = A[:, 0:6], A[:, 6:9] @ pose.rotation().matrix().T, D @ J_b
-        return pred.position() + R @ lever_b - p_fix
+            if a is not None:
+                H[3] = J_g
+        e = pred.position() + R @ lever_b - p_fix
+        return e if a is None else e + a * values.atVector(keys[3])
 
     J_p = np.hstack([-R_f @ L, R_f])
     cov = np.asarray(cov_fix, float) + J_p @ np.asarray(pim.preintMeasCov())[0:6, 0:6] @ J_p.T
+    if a is not None:
+        J_g = np.diag(a)
+        cov = cov + np.diag(np.asarray(gm[1], float) ** 2 * (1.0 - a * a))
     return gtsam.CustomFactor(gtsam.noiseModel.Gaussian.Covariance(cov), keys, error)

@@ -6,7 +6,7 @@ import gtsam
 import numpy as np
 import pytest
 from gnssacc.factors import preintegrated_position_factor
-from gtsam.symbol_shorthand import B, V, X
+from gtsam.symbol_shorthand import B, G, V, X
 
 from gnssacc import pipeline
 from gnssacc.analysis.metrics import truth_at
@@ -40,7 +40,8 @@ def _error(pim, pose, vel, bias, z, lever):
     return pred.position() + pred.attitude().matrix() @ lever - z
 
 
-def test_folded_fix_factor_jacobians_by_finite_differences_on_the_manifold():
+@pytest.mark.parametrize("gm", [False, True], ids=["white", "gauss-markov"])
+def test_folded_fix_factor_jacobians_by_finite_differences_on_the_manifold(gm):
     rng = np.random.default_rng(4)
     n = 40   # 0.4 s of turning, accelerating IMU samples
     f_b = np.array([0.8, 0.3, -9.7]) + 0.3 * rng.normal(size=(n, 3))
@@ -51,21 +52,29 @@ def test_folded_fix_factor_jacobians_by_finite_differences_on_the_manifold():
     vel, bias = np.array([6.0, -2.0, 0.1]), gtsam.imuBias.ConstantBias(np.array([0.05, -0.03, 0.02]),
                                                                       np.array([2e-3, -1e-3, 5e-4]))
     z = np.array([14.0, -4.0, 0.0])
-    factor = preintegrated_position_factor((X(0), V(0), B(0)), pim, z, LEVER, np.eye(3), np.eye(3))
+    tau, g0 = np.array([20.0, 30.0, 5.0]), np.array([0.4, -0.7, 1.1])
+    a = np.exp(-pim.deltaTij() / tau) if gm else np.zeros(3)   # the GNSS error carried to the fix
+    keys = (X(0), V(0), B(0)) + ((G(0),) if gm else ())
+    factor = preintegrated_position_factor(keys, pim, z, LEVER, np.eye(3), np.eye(3),
+                                           (tau, np.array([1.0, 1.0, 2.0])) if gm else None)
     values = gtsam.Values()
     values.insert(X(0), pose)
     values.insert(V(0), vel)
     values.insert(B(0), bias)
-    np.testing.assert_allclose(factor.unwhitenedError(values), _error(pim, pose, vel, bias, z, LEVER), atol=1e-12)
+    if gm:
+        values.insert(G(0), g0)
+    err = lambda p, v, b, g: _error(pim, p, v, b, z, LEVER) + a * g  # noqa: E731
+    np.testing.assert_allclose(factor.unwhitenedError(values), err(pose, vel, bias, g0), atol=1e-12)
     A, b = factor.linearize(values).jacobian()
     L = np.linalg.cholesky(np.linalg.inv(factor.noiseModel().covariance()))   # the whitening GTSAM applied
     J = np.linalg.solve(L.T, A)   # back to the unwhitened Jacobian: A = L^T J
     eps = 1e-6
-    for k in range(15):
-        d = np.zeros(15)
+    for k in range(18 if gm else 15):
+        d = np.zeros(18)
         d[k] = eps
-        args = [(pose.retract(s * d[0:6]), vel + s * d[6:9], bias.retract(s * d[9:15])) for s in (1, -1)]
-        num = (_error(pim, *args[0], z, LEVER) - _error(pim, *args[1], z, LEVER)) / (2 * eps)
+        args = [(pose.retract(s * d[0:6]), vel + s * d[6:9], bias.retract(s * d[9:15]), g0 + s * d[15:18])
+                for s in (1, -1)]
+        num = (err(*args[0]) - err(*args[1])) / (2 * eps)
         np.testing.assert_allclose(J[:, k], num, atol=2e-6)
 
 
@@ -111,7 +120,7 @@ def test_fixes_taken_as_nodes():
 
 
 def _smoothed(run, methods, spacings, **over):
-    cfg = load_config(None, overrides={"smoother": over} if over else None)
+    cfg = load_config(None, overrides=over or None)
     prep = pipeline.prepare(run, cfg, "none", methods)
     base = SmootherSettings.from_config(prep.cfg)
     return prep, {(m, sp): estimate(prep, replace(base, min_node_spacing_s=sp), m)[m]
@@ -128,14 +137,17 @@ def test_one_hertz_fixes_keep_a_node_each_and_the_same_estimates():
             np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
 
 
-@pytest.mark.parametrize("method", ["smoother", "smoother-acc"])
-def test_twenty_hertz_fixes_folded_give_the_estimates_of_a_node_per_fix(method):
+@pytest.mark.parametrize("method,gm", [("smoother", False), ("smoother-acc", False), ("smoother", True)],
+                         ids=["smoother", "smoother-acc", "gauss-markov"])
+def test_twenty_hertz_fixes_folded_give_the_estimates_of_a_node_per_fix(method, gm):
     """Nodes every 0.5 s with the 9 fixes between them folded in, against a node at each of the
     fixes: at the common nodes every state within one sigma of the other's estimate (the same
     information: they differ by the IMU noise correlation the folded factors leave out and, for
     -acc, the acceleration windows over the nodes' fixes)."""
-    run = simulate("ugv-slow", 60.0, gnss_rate_hz=20.0, seed=7)
-    prep, sols = _smoothed(run, [method], (0.5, 0.0))
+    # (the car for the Gauss-Markov fixes: on the slow UGV their 2.5 m wander reads as a unit error)
+    run = simulate("car" if gm else "ugv-slow", 60.0, gnss_rate_hz=20.0, seed=7, noise="gm" if gm else "white")
+    over = {"gnss": {"gm_sigma_m": [2.5, 2.5, 4.0], "gm_tau_s": 60.0}} if gm else {}   # the simulator's
+    prep, sols = _smoothed(run, [method], (0.5, 0.0), **over)
     a, b = sols[(method, 0.5)], sols[(method, 0.0)]
     assert a.stats["n_gps_folded"] > 0.85 * len(run.gnss.t) and a.stats["n_nodes"] < 0.12 * b.stats["n_nodes"]
     common, ia, ib = np.intersect1d(a.t, b.t, return_indices=True)

@@ -424,8 +424,9 @@ class _Factors:
         """Fix ``k`` (between node ``i`` and the next) on node ``i``'s variables, through ``pim``
         preintegrated from node ``i`` to the fix; ``pose, vel, bias``: node ``i``'s estimate."""
         R_f = pim.predict(gtsam.NavState(pose, vel), bias).attitude().matrix()
-        graph.add(preintegrated_position_factor((X(i), V(i), B(i)), pim, self.p_fix[k], self.lever,
-                                                self.run.gnss.cov_ned(k), R_f))
+        keys, gm = ((X(i), V(i), B(i), G(i)), (self.gm_tau, self.gm_sigma)) if self.gm else ((X(i), V(i), B(i)), None)
+        graph.add(preintegrated_position_factor(keys, pim, self.p_fix[k], self.lever, self.run.gnss.cov_ned(k), R_f,
+                                                gm))
         self.stats["n_gps_folded"] += 1
 
     def gm_chain(self, graph, values, i: int, dt: float, g_prev: np.ndarray) -> None:
@@ -592,8 +593,7 @@ def run_smoother(run: RecordedRun, settings, method: str = "smoother", *,
     settings = SmootherSettings.of(settings)
     z = settings.zupt
     st = epochs_for(run, z, settings.imu.gyro_psd, stationary)
-    # GNSS-error states (-gm) follow the fixes one by one: every fix is a node then.
-    is_node_fix = node_fixes(run.gnss.t, 0.0 if settings.gnss.gauss_markov else settings.min_node_spacing_s)
+    is_node_fix = node_fixes(run.gnss.t, settings.min_node_spacing_s)
     times = node_times(float(init.t), float(run.imu.t[-1]),
                        _node_epochs(run.gnss.t[is_node_fix], st.t, z.interval_s), settings.max_node_spacing_s)
     stats = {"n_nodes": len(times), "n_gps_factors": 0, "n_gps_folded": 0, "n_acc_factors": 0,
