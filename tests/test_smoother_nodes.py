@@ -52,30 +52,53 @@ def test_folded_fix_factor_jacobians_by_finite_differences_on_the_manifold(gm):
     vel, bias = np.array([6.0, -2.0, 0.1]), gtsam.imuBias.ConstantBias(np.array([0.05, -0.03, 0.02]),
                                                                       np.array([2e-3, -1e-3, 5e-4]))
     z = np.array([14.0, -4.0, 0.0])
-    tau, g0 = np.array([20.0, 30.0, 5.0]), np.array([0.4, -0.7, 1.1])
-    a = np.exp(-pim.deltaTij() / tau) if gm else np.zeros(3)   # the GNSS error carried to the fix
-    keys = (X(0), V(0), B(0)) + ((G(0),) if gm else ())
+    tau, g0, g1 = np.array([20.0, 30.0, 5.0]), np.array([0.4, -0.7, 1.1]), np.array([0.5, -0.6, 0.9])
+    keys = (X(0), V(0), B(0)) + ((G(0), G(1)) if gm else ())
     factor = preintegrated_position_factor(keys, pim, z, LEVER, np.eye(3), np.eye(3),
-                                           (tau, np.array([1.0, 1.0, 2.0])) if gm else None)
+                                           (tau, np.array([1.0, 1.0, 2.0]), 0.5) if gm else None)
     values = gtsam.Values()
     values.insert(X(0), pose)
     values.insert(V(0), vel)
     values.insert(B(0), bias)
     if gm:
         values.insert(G(0), g0)
-    err = lambda p, v, b, g: _error(pim, p, v, b, z, LEVER) + a * g  # noqa: E731
-    np.testing.assert_allclose(factor.unwhitenedError(values), err(pose, vel, bias, g0), atol=1e-12)
+        values.insert(G(1), g1)
+    # the GNSS error at the fix: the bridge's mean between the two nodes' errors
+    phi = lambda t: np.exp(-t / tau)  # noqa: E731
+    s, T = pim.deltaTij(), 0.5
+    w_j = phi(T - s) * (1 - phi(s) ** 2) / (1 - phi(T) ** 2) if gm else np.zeros(3)
+    w_i = phi(s) - w_j * phi(T) if gm else np.zeros(3)
+    err = lambda p, v, b, ga, gb: _error(pim, p, v, b, z, LEVER) + w_i * ga + w_j * gb  # noqa: E731
+    np.testing.assert_allclose(factor.unwhitenedError(values), err(pose, vel, bias, g0, g1), atol=1e-12)
     A, b = factor.linearize(values).jacobian()
     L = np.linalg.cholesky(np.linalg.inv(factor.noiseModel().covariance()))   # the whitening GTSAM applied
     J = np.linalg.solve(L.T, A)   # back to the unwhitened Jacobian: A = L^T J
     eps = 1e-6
-    for k in range(18 if gm else 15):
-        d = np.zeros(18)
+    for k in range(21 if gm else 15):
+        d = np.zeros(21)
         d[k] = eps
-        args = [(pose.retract(s * d[0:6]), vel + s * d[6:9], bias.retract(s * d[9:15]), g0 + s * d[15:18])
-                for s in (1, -1)]
+        args = [(pose.retract(s * d[0:6]), vel + s * d[6:9], bias.retract(s * d[9:15]), g0 + s * d[15:18],
+                 g1 + s * d[18:21]) for s in (1, -1)]
         num = (err(*args[0]) - err(*args[1])) / (2 * eps)
         np.testing.assert_allclose(J[:, k], num, atol=2e-6)
+
+
+def test_gauss_markov_bridge_is_the_conditional_of_the_stationary_process():
+    """The folded fix's GNSS error given the two nodes' errors: the weights and variance of the
+    factor against Gaussian conditioning of the stationary process's joint covariance
+    (Cov(g(a), g(b)) = sigma^2 exp(-|a - b| / tau))."""
+    from importlib import import_module
+
+    bridge = import_module("gnssacc.factors.preintegrated_position_factor")._bridge
+    tau, sigma, T = np.array([5.0, 47.0, 300.0]), np.array([0.3, 0.5, 2.0]), 0.4
+    for s in (0.05, 0.2, 0.35):
+        A, K, var = bridge(s, tau, sigma, T)
+        for ax in range(3):
+            times = np.array([0.0, T, s])
+            C = sigma[ax] ** 2 * np.exp(-np.abs(times[:, None] - times[None, :]) / tau[ax])
+            w = np.linalg.solve(C[:2, :2], C[:2, 2])
+            np.testing.assert_allclose([A[ax], K[ax]], w, rtol=1e-9, atol=1e-12)
+            np.testing.assert_allclose(var[ax], C[2, 2] - C[2, :2] @ w, rtol=1e-6, atol=1e-15)
 
 
 def test_folded_fix_factor_predicts_the_true_antenna_from_a_perfect_imu():

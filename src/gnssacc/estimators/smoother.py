@@ -420,11 +420,14 @@ class _Factors:
             graph.add(gtsam.GPSFactor(X(i), self.p_fix[k], noise))
         return k
 
-    def folded_gps(self, graph, i: int, k: int, pim, pose, vel, bias) -> None:
-        """Fix ``k`` (between node ``i`` and the next) on node ``i``'s variables, through ``pim``
-        preintegrated from node ``i`` to the fix; ``pose, vel, bias``: node ``i``'s estimate."""
+    def folded_gps(self, graph, i: int, k: int, pim, pose, vel, bias, interval: float) -> None:
+        """Fix ``k`` (between node ``i`` and the next, ``interval`` [s] later) on node ``i``'s
+        variables, through ``pim`` preintegrated from node ``i`` to the fix (and with the GNSS
+        error of both nodes when modelled); ``pose, vel, bias``: node ``i``'s estimate."""
         R_f = pim.predict(gtsam.NavState(pose, vel), bias).attitude().matrix()
-        keys, gm = ((X(i), V(i), B(i), G(i)), (self.gm_tau, self.gm_sigma)) if self.gm else ((X(i), V(i), B(i)), None)
+        keys, gm = (X(i), V(i), B(i)), None
+        if self.gm:
+            keys, gm = keys + (G(i), G(i + 1)), (self.gm_tau, self.gm_sigma, interval)
         graph.add(preintegrated_position_factor(keys, pim, self.p_fix[k], self.lever, self.run.gnss.cov_ned(k), R_f,
                                                 gm))
         self.stats["n_gps_folded"] += 1
@@ -758,7 +761,7 @@ class _Loop:
                 infl = (_inflation_over(imu.t, j0, k_f, t_prev, t_f, seg_i0, seg_i1, seg_qa, seg_qg)
                         if touches[i] else (None, None))
                 self.f.folded_gps(graph, i - 1, k, _preintegrate(imu, self.model, self.bias, t_prev, t_f, j0, k_f,
-                                                                 infl, dt_all), self.pose, self.vel, self.bias)
+                                                                 infl, dt_all), self.pose, self.vel, self.bias, t - t_prev)
             self._node_factors(graph, i, t, nav, pim)
             try:
                 self.smoother.update(graph, values, [(key, t) for key in self.smoother.keys(i)])
