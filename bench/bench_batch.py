@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import psutil
 
-from gnssacc.campaign.batch import Ledger, SerialExecutor, run_tasks
+from gnssacc.campaign.batch import Ledger, SerialExecutor, failed_record, run_task, run_tasks
 from gnssacc.campaign.campaign import Pattern, make_settings, plan
 from gnssacc.campaign.cluster import DaskExecutor
 from gnssacc.core.progress import CampaignProgress
@@ -48,6 +48,11 @@ def campaign(sources: list[str], seeds: int, root: Path | None) -> list:
     settings = make_settings(sources, ["ekf", "ekf-acc", "smoother", "smoother-acc"], list(range(seeds)), [Pattern()],
                              noise="white")
     return plan(settings, root)
+
+
+def dask_executor(workers: int) -> DaskExecutor:
+    """A local Dask cluster of ``workers`` processes running campaign tasks (as ``gnssacc batch``)."""
+    return DaskExecutor(run_task, failed_record, workers=workers)
 
 
 def busy_cpu_s() -> float:
@@ -78,8 +83,8 @@ def throughput(sources: list[str], seeds: int, duration_s: float, repeats: int, 
     print(f"{'executor':<26} {'wall [s]':>8} {'tasks/min':>9} {'rec-h/h':>7} {'overhead/task [s]':>17} "
           f"{'CPU/wall of a task':>18} {'other load [cores]':>18}")
     for label, make, workers in (("this process (--jobs 1)", SerialExecutor, 1),
-                                 ("Dask, 1 worker process", lambda: DaskExecutor(workers=1), 1),
-                                 ("Dask, 2 worker processes", lambda: DaskExecutor(workers=2), 2)):
+                                 ("Dask, 1 worker process", lambda: dask_executor(1), 1),
+                                 ("Dask, 2 worker processes", lambda: dask_executor(2), 2)):
         runs = [run_once(campaign(sources, seeds, scratch / f"{label[:4]}-{workers}-{k}"), make())
                 for k in range(repeats)]
         med = {key: statistics.median(r[key] for r in runs) for key in runs[0]}
@@ -113,7 +118,7 @@ def rss_mib() -> float:
 def memory(sources: list[str], n_tasks: int, scratch: Path) -> None:
     tasks = campaign(sources, -(-n_tasks // len(sources)), scratch / "memory")[:n_tasks]
     rss = []
-    with DaskExecutor(workers=1) as ex:
+    with dask_executor(1) as ex:
         for _ in ex.run(tasks):
             rss.extend(ex.client.run(rss_mib).values())
     rss = np.array(rss)
@@ -140,7 +145,7 @@ def main():
             throughput(recordings(scratch / "runs", args.runs, args.duration), args.seeds, args.duration,
                        args.repeats, scratch)
         if "overhead" in parts:
-            with DaskExecutor(workers=2) as ex:
+            with dask_executor(2) as ex:
                 overhead(ex)
         if "memory" in parts:
             memory(recordings(scratch / "short", 5, 60.0), args.memory_tasks, scratch)
