@@ -18,6 +18,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 from setuptools import setup
 from setuptools.command.build_py import build_py
@@ -41,6 +42,9 @@ class BuildPyWithKernels(build_py):
 
     def run(self) -> None:
         super().run()
+        cache = Path(self.build_lib) / "gnssacc" / "estimators" / "__pycache__"
+        for old in [*cache.glob("*.nbi"), *cache.glob("*.nbc")]:   # a previous build's, maybe stale
+            old.unlink()
         if getattr(self, "editable_mode", False) or os.environ.get("GNSSACC_BUILD_KERNELS", "1") == "0":
             return
         found = _numba_version()
