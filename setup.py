@@ -53,7 +53,8 @@ class BuildPyWithKernels(build_py):
                           "kernels", level=3)
             return
         env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}   # the in-tree cache
-        env["PYTHONPATH"] = os.path.abspath(self.build_lib)
+        # The build folder first; pip's isolated build environment may itself be on PYTHONPATH.
+        env["PYTHONPATH"] = os.pathsep.join(filter(None, [os.path.abspath(self.build_lib), env.get("PYTHONPATH")]))
         code = "from gnssacc.estimators.kernels import compile_groups; compile_groups({})"
         procs = [subprocess.Popen([sys.executable, "-c", code.format(groups)], env=env, cwd=self.build_lib)
                  for groups in (["propagation"], ["update", "window", "chain", "band"])]

@@ -178,3 +178,27 @@ def test_the_group_warm_ups_compile_every_kernel_a_run_calls():
     run of every method then compiles nothing new."""
     out = subprocess.run([sys.executable, "-c", RUN_TYPES], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_the_install_compiles_the_kernels_into_the_package_and_a_first_run_loads_them(tmp_path):
+    """``setup.py``'s build step: the package in the build folder carries every kernel group in
+    numba's cache; installed elsewhere (copied, new modification times, as pip installs a wheel)
+    a first run finds them, prints no notice and compiles nothing, in-process or in children."""
+    repo = Path(__file__).resolve().parents[1]
+    if not (repo / "setup.py").is_file():
+        import pytest
+
+        pytest.skip("not a source checkout (no setup.py)")
+    build = tmp_path / "build"
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    subprocess.run([sys.executable, "setup.py", "-q", "build_py", "--build-lib", str(build)], cwd=repo, env=env,
+                   check=True, capture_output=True)
+    kernels = sorted(p.name for p in (build / "gnssacc" / "estimators" / "__pycache__").glob("*.nbi"))
+    assert any(n.startswith("mechanization.propagate-") for n in kernels)
+    assert any(n.startswith("window_marginals._band_covariances-") for n in kernels)
+    site = tmp_path / "site"
+    shutil.copytree(build, site)   # elsewhere, every file with a new modification time
+    probe = _probe(site, tmp_path / "cache", METHODS="ekf,ekf-accw,smoother,smoother-accw")
+    hits, misses, children = _counts(probe)
+    assert not _notice(probe) and children == 0 and misses == 0 and hits > 0
+    assert probe.stdout.splitlines()[2].split()[1] == "propagation,update,window,chain,band"
