@@ -363,7 +363,8 @@ sys.exit(main(sys.argv[4:]))
 HOOK_WHEN = {"pipeline.load_source": "before",           # the very start, the lock just taken
              "pipeline.run_methods": "before",           # computing
              "pipeline.write_trajectory_csv": "after",   # writing the new result (one file written)
-             "outputs.report.format_table": "before"}            # printing the summary (the pipeline has its own name)
+             "outputs.report.format_table": "before",    # printing the table, before the files (the pipeline has its own name)
+             "api.write_result": "after"}                # the new result in place, "results:" not yet printed
 
 
 def _start(hook, pause, args):
@@ -387,6 +388,7 @@ def _wait_for(proc, text):
     (signal.SIGTERM, "pipeline.write_trajectory_csv", True),
     (signal.SIGINT, "pipeline.write_trajectory_csv", False),
     (signal.SIGINT, "outputs.report.format_table", True),
+    (signal.SIGINT, "api.write_result", True),
 ])
 def test_interrupted_leaves_the_old_result_or_the_new(run_dir, tmp_path, capsys, sig, hook, old):
     out = tmp_path / "res"
@@ -403,7 +405,7 @@ def test_interrupted_leaves_the_old_result_or_the_new(run_dir, tmp_path, capsys,
     assert proc.returncode == (130 if sig == signal.SIGINT else 143)
     said = [ln for ln in stderr.splitlines() if ln.startswith("gnssacc: interrupted:")]
     assert "Traceback" not in stderr and _leftovers(tmp_path) == []
-    if hook == "outputs.report.format_table":   # after the swap
+    if hook == "api.write_result":   # after the swap
         assert said == [f"gnssacc: interrupted: {out} holds the new complete result"]
         _assert_complete(out, ["ekf", "ekf-acc"])
         return
