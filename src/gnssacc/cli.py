@@ -430,6 +430,9 @@ def entry() -> None:
     if sys.argv[1:2] == ["run"]:
         import os
 
+        from .estimators.kernels import stop_background
+
+        stop_background()   # compiling children of a first run that ended early (bad input)
         for stream in (sys.stdout, sys.stderr):
             try:
                 stream.flush()

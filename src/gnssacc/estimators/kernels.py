@@ -211,6 +211,13 @@ def start_background(methods=None, notice=sys.stderr, processes: bool = True) ->
     return _background
 
 
+def stop_background() -> None:
+    """End the compiling children still running (a process leaving at once, without its exit
+    handlers: they would go on compiling after the command ended)."""
+    if _background is not None:
+        _background.stop()
+
+
 def warm_up() -> float:
     """The EKF kernels' compile (or load) time [s]: the background one's when started, else now
     (in a thread)."""
