@@ -27,7 +27,7 @@ def _state(err: np.ndarray, n: int = 15, gm_true=np.zeros(3)):
     pos = np.array([LAT + err[0] / (R_M + H), LON + err[1] / ((R_N + H) * np.cos(LAT)), H - err[2]])
     gm = gm_true + (err[15:18] if n > 15 else 0.0)
     return SimpleNamespace(pos=pos, v_n=err[3:6].copy(), R_nb=rotvec_to_dcm(err[6:9]) @ R_TRUE, b_a=np.zeros(3),
-                           b_g=B_TRUE - err[12:15], gm=gm, P=np.eye(n))
+                           b_g=B_TRUE - err[12:15], gm=gm, P=np.eye(n), n_gm=3 if n > 15 else 0)
 
 
 def _check(dz, H, n, steps, atol):

@@ -56,6 +56,9 @@ def _run_parser(sub) -> None:
                    help="auto (default): identify every IMU noise key the config does not set (and the GNSS sigma "
                         "scale) from the recording itself, write tuned.toml; none: use the configuration as given")
     r.add_argument("--imu-frame", choices=["frd", "flu"], default="frd", help="axes of a CSV run's imu.csv")
+    r.add_argument("--nhc", choices=["on", "off"], default=None,
+                   help="the non-holonomic constraint in every method (default: [nhc] enabled, on); off: IMU-only "
+                        "bridging of GNSS outages, for comparison")
     _bag_arguments(r)
     r.add_argument("--time-source", choices=["header", "receive"], default="header",
                    help="bag time stamps: message header (default) or bag receive time")
@@ -217,6 +220,8 @@ def _run_locked(args, stack, held) -> int:
     target = _lock_out(args.out, args, stack, held) if args.out else None
     methods = parse_methods(args.methods)
     cfg = configure(args.source, preset=args.preset, config=args.config)
+    if args.nhc is not None:
+        cfg = cfg.with_values({"nhc": {"enabled": args.nhc == "on"}}, f"--nhc {args.nhc}")
     run = load(args.source, config=cfg, noise=args.noise, seed=args.seed, outage=args.outage,
                outage_every=args.outage_every, imu_frame=args.imu_frame, imu_topic=args.imu_topic,
                gnss_topic=args.gnss_topic, truth_topic=args.truth_topic, time_source=args.time_source,
@@ -234,6 +239,7 @@ def _run_locked(args, stack, held) -> int:
 
 
 def _print_summary(run, cfg, metrics: dict, prep, out) -> None:
+    from .outputs.aids import aids_line
     from .outputs.report import format_table
 
     print(f"{run.name}: {run.duration_s:.1f} s, {len(run.imu)} IMU samples, {len(run.gnss)} GNSS fixes"
@@ -245,6 +251,7 @@ def _print_summary(run, cfg, metrics: dict, prep, out) -> None:
     print(f"start: {prep.init.how}")
     if prep.tuning is not None:
         print(prep.tuning.line())
+    print(aids_line(metrics, prep.cfg))
     print()
     print(format_table(metrics))
     print(f"\n(one-off JIT compilation {metrics['jit_compile_s']:.2f} s, not included in wall times)")

@@ -73,8 +73,9 @@ REST_FACTOR = 2.0
 #: below this under Gaussian errors (and at least 3 are beyond): a false alarm once in 10,000 runs.
 TAIL_ALARM = 1e-4
 #: Update kinds and their names in messages.
-KIND_NAMES = {"pos": "position", "acc": "acceleration", "zupt": "zero-velocity", "zaru": "zero-rate"}
-_DOF = {"pos": 3, "acc": 3, "zupt": 3, "zaru": 3}
+KIND_NAMES = {"pos": "position", "acc": "acceleration", "zupt": "zero-velocity", "zaru": "zero-rate",
+              "nhc": "non-holonomic", "odo": "wheel-odometry"}
+_DOF = {"pos": 3, "acc": 3, "zupt": 3, "zaru": 3, "nhc": 2, "odo": 1}
 
 
 def correlated(acf1: float | None, n: int) -> bool:
@@ -296,8 +297,8 @@ def assess(run, sol: NavSolution, prmse_m: float | None = None, gnss_prmse_m: fl
         if value is None or n[kind] == 0:
             continue
         lo, hi = band(n[kind], _DOF[kind])
-        if kind in ("zupt", "zaru"):
-            lo = 0.0   # pseudo-measurements: a chosen, conservative noise
+        if kind in ("zupt", "zaru", "nhc"):
+            lo = 0.0   # pseudo-measurements: a conservative noise (the constraint's default) loses no trust
         if not lo <= value <= hi:
             what = ("its stated uncertainty is too small: its errors are larger than it thinks" if value > hi else
                     "its stated uncertainty is too large: it discards information")
