@@ -22,7 +22,9 @@ the translation and accelerometer-bias columns are zero. These are the EKF's ``H
 * :func:`odometry_factor`: ``e = (1 + k) v_l,x - v~`` with the scale-factor error ``k`` a
   1-vector variable; ``de/dk = v_l,x``.
 
-Without a lever arm the bias does not enter: the factors are then on (X, V) (and K) only.
+Without a lever arm the bias does not enter: the factors are then on (X, V) (and K) only. With
+``R_vb`` (body to the vehicle's axes, a constant small misalignment) the velocity and its
+Jacobians are taken in the vehicle's axes, ``R_vb v_l``.
 """
 from __future__ import annotations
 
@@ -52,19 +54,25 @@ def _keys_and_bias(pose_key, vel_key, bias_key, lever_b):
     return [int(pose_key), int(vel_key)] + ([int(bias_key)] if with_bias else []), with_bias
 
 
+def _in_vehicle_axes(R_vb, v_l, J_pose, J_vel, J_bias):
+    if R_vb is None:
+        return v_l, J_pose, J_vel, J_bias
+    return R_vb @ v_l, R_vb @ J_pose, R_vb @ J_vel, R_vb @ J_bias
+
+
 def nhc_factor(pose_key: int, vel_key: int, bias_key: int, omega_b: np.ndarray, lever_b: np.ndarray,
-               w_ie_n: np.ndarray, sigma_mps: np.ndarray) -> gtsam.CustomFactor:
-    """Zero lateral and vertical body-frame velocity at ``lever_b`` [m, body], 1-sigma ``sigma_mps``
-    [m/s] (lateral, vertical); ``omega_b`` the raw gyro at the node [rad/s], ``w_ie_n`` the earth
-    rate [rad/s, local NED]."""
+               w_ie_n: np.ndarray, sigma_mps: np.ndarray, R_vb: np.ndarray | None = None) -> gtsam.CustomFactor:
+    """Zero lateral and vertical velocity at ``lever_b`` [m, body] in the vehicle's axes (``R_vb``,
+    body to vehicle; ``None``: the body's), 1-sigma ``sigma_mps`` [m/s] (lateral, vertical);
+    ``omega_b`` the raw gyro at the node [rad/s], ``w_ie_n`` the earth rate [rad/s, local NED]."""
     omega_b, lever_b, w_ie_n = (np.asarray(a, float).copy() for a in (omega_b, lever_b, w_ie_n))
     keys, with_bias = _keys_and_bias(pose_key, vel_key, bias_key, lever_b)
     zero3 = np.zeros(3)
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
         b_g = values.atConstantBias(keys[2]).gyroscope() if with_bias else zero3
-        v_l, J_pose, J_vel, J_bias = vehicle_velocity(values.atPose3(keys[0]), values.atVector(keys[1]), b_g,
-                                                      omega_b, lever_b, w_ie_n)
+        v_l, J_pose, J_vel, J_bias = _in_vehicle_axes(R_vb, *vehicle_velocity(
+            values.atPose3(keys[0]), values.atVector(keys[1]), b_g, omega_b, lever_b, w_ie_n))
         if H is not None:
             H[0], H[1] = J_pose[1:3], J_vel[1:3]
             if with_bias:
@@ -75,10 +83,11 @@ def nhc_factor(pose_key: int, vel_key: int, bias_key: int, omega_b: np.ndarray, 
 
 
 def odometry_factor(pose_key: int, vel_key: int, bias_key: int, scale_key: int, v_odo: float, omega_b: np.ndarray,
-                    lever_b: np.ndarray, w_ie_n: np.ndarray, sigma_mps: float) -> gtsam.CustomFactor:
+                    lever_b: np.ndarray, w_ie_n: np.ndarray, sigma_mps: float,
+                    R_vb: np.ndarray | None = None) -> gtsam.CustomFactor:
     """Wheel odometry's forward speed ``v_odo`` [m/s] (1-sigma ``sigma_mps``) of the point ``lever_b``
-    [m, body], read with the scale-factor error held by ``scale_key`` (a 1-vector); ``omega_b``,
-    ``w_ie_n`` as for :func:`nhc_factor`."""
+    [m, body] along the vehicle's x axis, read with the scale-factor error held by ``scale_key`` (a
+    1-vector); ``omega_b``, ``w_ie_n``, ``R_vb`` as for :func:`nhc_factor`."""
     omega_b, lever_b, w_ie_n = (np.asarray(a, float).copy() for a in (omega_b, lever_b, w_ie_n))
     keys, with_bias = _keys_and_bias(pose_key, vel_key, bias_key, lever_b)
     keys.append(int(scale_key))
@@ -87,8 +96,8 @@ def odometry_factor(pose_key: int, vel_key: int, bias_key: int, scale_key: int, 
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
         b_g = values.atConstantBias(keys[2]).gyroscope() if with_bias else zero3
-        v_l, J_pose, J_vel, J_bias = vehicle_velocity(values.atPose3(keys[0]), values.atVector(keys[1]), b_g,
-                                                      omega_b, lever_b, w_ie_n)
+        v_l, J_pose, J_vel, J_bias = _in_vehicle_axes(R_vb, *vehicle_velocity(
+            values.atPose3(keys[0]), values.atVector(keys[1]), b_g, omega_b, lever_b, w_ie_n))
         k = 1.0 + float(values.atVector(keys[-1])[0])
         if H is not None:
             H[0], H[1] = k * J_pose[0:1], k * J_vel[0:1]

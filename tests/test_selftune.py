@@ -139,17 +139,15 @@ def _nees_pos(run, sol) -> float:
 
 def test_gauss_markov_gnss_errors_are_found_and_make_the_estimators_honest():
     # Fixes with 2.5/2.5/4 m Gauss-Markov errors (tau 60 s) plus 0.5/0.5/0.8 m white; each fix
-    # states the total sigma (2.55/2.55/4.08 m). The GNSS and IMU model alone: the non-holonomic
-    # constraint (identified the same either way) shrinks the EKF's position sigma more than its
-    # error, which the correlated fix errors dominate (position NEES 2.74 -> 3.14 on this run).
+    # states the total sigma (2.55/2.55/4.08 m).
     run = simulate("ugv-slow", 235.0, imu_grade="industrial", noise="gm", seed=1)
-    auto = prepare(run, load_config(overrides={"nhc": {"enabled": False}}), "auto")
+    auto = prepare(run, load_config(), "auto")
     g = auto.tuning.values["gnss"]
     assert auto.tuning.from_stationary["innovation_acf1"] > 0.3
     assert np.mean(g["gm_sigma_m"][:2]) == pytest.approx(2.5, rel=0.5)
     assert 20.0 < g["gm_tau_s"] < 200.0
     assert g["sigma_scale"] * 2.55 == pytest.approx(0.5, rel=0.4)
-    white = prepare(run, load_config(overrides={"imu": grade_config("industrial"), "nhc": {"enabled": False}}), "none")
+    white = prepare(run, load_config(overrides={"imu": grade_config("industrial")}), "none")
     ekf_a, ekf_w = _ekf(run, auto), _ekf(run, white)
     # The white-noise model is overconfident by an order of magnitude; the identified one is not.
     assert _nees_pos(run, ekf_w) > 8.0

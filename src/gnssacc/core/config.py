@@ -158,6 +158,12 @@ DEFAULTS: dict[str, dict] = {
         # The point of the vehicle that does not slip sideways (rear axle centre of a car,
         # centre of a skid-steer vehicle) from the IMU, body frame FRD [m].
         "lever_arm_b_m": [0.0, 0.0, 0.0],
+        # The vehicle's forward axis relative to the body's (the IMU after [mounting]): pitch and
+        # yaw [deg] of a residual misalignment, a fraction of a degree that the mounting check
+        # cannot resolve but that makes the constraint see speed x angle of side or vertical
+        # velocity; identified by the noise tuner unless set here.
+        "pitch_offset_deg": 0.0,
+        "yaw_offset_deg": 0.0,
         # How far along the vehicle the centre of a turn on the spot may lie from that point [m]:
         # a turn whose yaw rate times this exceeds the forward speed is not rolling, and gets
         # no constraint (see gnssacc.estimators.nhc).

@@ -406,21 +406,22 @@ def _nhc_measurements(setup, s, j, stats):
     says not (counted in ``stats``)."""
     ep, nhc = setup.nhc, setup.nhc_settings
     w_ie = earth_rate_n(s.pos[0])
-    v_b, H = meas_models.vehicle_velocity(s, ep.omega_b[j], nhc.lever_arm_b, w_ie)
+    v_b, H = meas_models.vehicle_velocity(s, ep.omega_b[j], nhc.lever_arm_b, w_ie, nhc.R_vb)
     yaw_rate = float(ep.omega_b[j, 2] - s.b_g[2] - s.R_nb[:, 2] @ w_ie)   # relative to the earth
     why = nhc_rules.decide(bool(ep.rest[j]), float(v_b[0]), _row_sigma(s.P, H[0]), yaw_rate, float(nhc.sigma_mps[0]),
                            nhc.pivot_offset_m)
     if why != nhc_rules.APPLY:
         stats[nhc_rules.SKIPPED[why]] += 1
         return
-    yield meas_models.non_holonomic(s, ep.omega_b[j], nhc.lever_arm_b, w_ie, nhc.sigma_mps), True
+    yield meas_models.non_holonomic(s, ep.omega_b[j], nhc.lever_arm_b, w_ie, nhc.sigma_mps, nhc.R_vb), True
 
 
 def _odometry_measurements(setup, s, j, stats):
     """The wheel odometry's sample ``j``, unless its sign contradicts the filter's
     (:func:`gnssacc.estimators.odometry.decide`, counted in ``stats``)."""
     ep, odo = setup.odometry, setup.odometry_settings
-    m = meas_models.odometry(s, ep.v[j], ep.sigma[j], ep.omega_b[j], odo.lever_arm_b, earth_rate_n(s.pos[0]))
+    m = meas_models.odometry(s, ep.v[j], ep.sigma[j], ep.omega_b[j], odo.lever_arm_b, earth_rate_n(s.pos[0]),
+                             setup.nhc_settings.R_vb)
     why = odo_rules.decide(float(ep.v[j]), float(ep.sigma[j]), float(m.dz[0] + ep.v[j]), _row_sigma(s.P, m.H[0]))
     if why != odo_rules.APPLY:
         stats[odo_rules.SKIPPED[why]] += 1

@@ -160,9 +160,11 @@ def zero_rate(s, omega_mean_b: np.ndarray, var_b: np.ndarray, w_ie_n: np.ndarray
     return Measurement("zaru", dz, H, np.diag(var_b), gate)
 
 
-def vehicle_velocity(s, omega_meas_b: np.ndarray, lever_b: np.ndarray, w_ie_n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def vehicle_velocity(s, omega_meas_b: np.ndarray, lever_b: np.ndarray, w_ie_n: np.ndarray,
+                     R_vb: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Velocity of the point ``lever_b`` [m, body] from the IMU, relative to the earth, in the body
-    frame [m/s], and its Jacobian ``H_v`` (3 x states) w.r.t. the error state (module docstring).
+    frame [m/s], and its Jacobian ``H_v`` (3 x states) w.r.t. the error state (module docstring);
+    with ``R_vb`` (body to vehicle axes, a constant), in the vehicle's axes: ``R_vb v``, ``R_vb H_v``.
 
     Parameters
     ----------
@@ -172,6 +174,7 @@ def vehicle_velocity(s, omega_meas_b: np.ndarray, lever_b: np.ndarray, w_ie_n: n
     lever_b : ndarray (3,)
     w_ie_n : ndarray (3,)
         Earth rate [rad/s, NED].
+    R_vb : ndarray (3, 3), optional
     """
     Rt = s.R_nb.T
     w_ie_b = Rt @ w_ie_n
@@ -181,23 +184,27 @@ def vehicle_velocity(s, omega_meas_b: np.ndarray, lever_b: np.ndarray, w_ie_n: n
     H[:, 3:6] = Rt
     H[:, 6:9] = Rt @ skew(s.v_n) + L @ Rt @ skew(w_ie_n)
     H[:, 12:15] = -L
-    return v_b, H
+    if R_vb is None:
+        return v_b, H
+    return R_vb @ v_b, R_vb @ H
 
 
-def non_holonomic(s, omega_meas_b: np.ndarray, lever_b: np.ndarray, w_ie_n: np.ndarray,
-                  sigma_mps: np.ndarray) -> Measurement:
+def non_holonomic(s, omega_meas_b: np.ndarray, lever_b: np.ndarray, w_ie_n: np.ndarray, sigma_mps: np.ndarray,
+                  R_vb: np.ndarray | None = None) -> Measurement:
     """Zero lateral and vertical velocity at the vehicle's reference point ``lever_b`` [m, body],
-    1-sigma ``sigma_mps`` [m/s] (lateral, vertical); ``omega_meas_b`` the raw gyro [rad/s] at the
-    epoch, ``w_ie_n`` the earth rate [rad/s, NED]."""
-    v_b, H = vehicle_velocity(s, omega_meas_b, lever_b, w_ie_n)
+    in the vehicle's axes (``R_vb``, see :func:`vehicle_velocity`), 1-sigma ``sigma_mps`` [m/s]
+    (lateral, vertical); ``omega_meas_b`` the raw gyro [rad/s] at the epoch, ``w_ie_n`` the earth
+    rate [rad/s, NED]."""
+    v_b, H = vehicle_velocity(s, omega_meas_b, lever_b, w_ie_n, R_vb)
     return Measurement("nhc", v_b[1:3], H[1:3], np.diag(np.asarray(sigma_mps, float) ** 2))
 
 
 def odometry(s, v_odo: float, sigma_mps: float, omega_meas_b: np.ndarray, lever_b: np.ndarray,
-             w_ie_n: np.ndarray) -> Measurement:
+             w_ie_n: np.ndarray, R_vb: np.ndarray | None = None) -> Measurement:
     """Wheel odometry's forward speed ``v_odo`` [m/s] (1-sigma ``sigma_mps``) of the point
-    ``lever_b`` [m, body], read with the scale factor of state ``s.i_scale`` (module docstring)."""
-    v_b, H = vehicle_velocity(s, omega_meas_b, lever_b, w_ie_n)
+    ``lever_b`` [m, body] along the vehicle's x axis (``R_vb``, see :func:`vehicle_velocity`), read
+    with the scale factor of state ``s.i_scale`` (module docstring)."""
+    v_b, H = vehicle_velocity(s, omega_meas_b, lever_b, w_ie_n, R_vb)
     k = 1.0 + s.scale
     H_x = H[0:1] * k
     H_x[0, s.i_scale] = v_b[0]

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..checks.quality import SuspectNoise
 from ..core.config import RunConfig, vec3
+from ..core.rotations import euler_to_dcm
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,6 +132,9 @@ class NhcSettings:
         The reference point from the IMU, body FRD [m].
     pivot_offset_m : float
         How far along the vehicle a turn's centre on the spot may lie from the reference point [m].
+    R_vb : ndarray (3, 3)
+        Body to vehicle axes (``[nhc] pitch_offset_deg``, ``yaw_offset_deg``: the vehicle's axes
+        are the body's turned by that yaw, then that pitch); the wheel odometry's too.
     """
 
     enabled: bool
@@ -138,13 +142,15 @@ class NhcSettings:
     sigma_mps: np.ndarray
     lever_arm_b: np.ndarray
     pivot_offset_m: float
+    R_vb: np.ndarray
 
     @classmethod
     def from_config(cls, cfg: RunConfig) -> "NhcSettings":
         c = cfg["nhc"]
+        R_bv = euler_to_dcm(0.0, np.radians(float(c["pitch_offset_deg"])), np.radians(float(c["yaw_offset_deg"])))
         return cls(bool(c["enabled"]), float(c["interval_s"]),
                    np.array([float(c["sigma_lateral_mps"]), float(c["sigma_vertical_mps"])]),
-                   vec3(c["lever_arm_b_m"], "[nhc] lever_arm_b_m", "config"), float(c["pivot_offset_m"]))
+                   vec3(c["lever_arm_b_m"], "[nhc] lever_arm_b_m", "config"), float(c["pivot_offset_m"]), R_bv.T)
 
 
 @dataclass(frozen=True, eq=False)

@@ -70,12 +70,12 @@ class NhcFactors:
             return
         cfg, omega = self.cfg, self.omega_b[i]
         w_b = omega - b_g - R_nb.T @ self.w_ie
-        v_b = R_nb.T @ v_n + np.cross(w_b, cfg.lever_arm_b)
-        fwd = R_nb[:, 0]
+        v_b = cfg.R_vb @ (R_nb.T @ v_n + np.cross(w_b, cfg.lever_arm_b))
+        fwd = R_nb @ cfg.R_vb[0]     # the vehicle's forward axis, NED
         why = nhc_rules.decide(self.rest[i], float(v_b[0]), math.sqrt(max(float(fwd @ c_vel @ fwd), 0.0)),
                                float(w_b[2]), float(cfg.sigma_mps[0]), cfg.pivot_offset_m)
         if why != nhc_rules.APPLY:
             self.stats[nhc_rules.SKIPPED[why]] += 1
             return
-        graph.add(nhc_factor(X(i), V(i), B(i), omega, cfg.lever_arm_b, self.w_ie, cfg.sigma_mps))
+        graph.add(nhc_factor(X(i), V(i), B(i), omega, cfg.lever_arm_b, self.w_ie, cfg.sigma_mps, cfg.R_vb))
         self.stats["n_nhc_factors"] += 1
