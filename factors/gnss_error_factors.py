@@ -17,9 +17,10 @@ from gnssacc.core.rotations import skew
 
 
 def gnss_position_gm_factor(pose_key: int, gm_key: int, p_fix: np.ndarray, lever_b: np.ndarray,
-                            sigma_ned: np.ndarray) -> gtsam.CustomFactor:
+                            sigma_ned: np.ndarray, cov_ned: np.ndarray | None = None) -> gtsam.CustomFactor:
     """A fix ``p_fix`` [m, local NED] of the antenna at ``lever_b`` [m, body] with white 1-sigma
-    ``sigma_ned`` [m] and the Gauss-Markov error held by ``gm_key`` (a Vector3)."""
+    ``sigma_ned`` [m] (or the full white covariance ``cov_ned`` [m^2] when given) and the
+    Gauss-Markov error held by ``gm_key`` (a Vector3)."""
     p_fix, lever_b = np.asarray(p_fix, float).copy(), np.asarray(lever_b, float).copy()
     keys = (pose_key, gm_key)
     # Jacobian buffers reused by every call (GTSAM copies H out before the next call; iSAM2
@@ -35,7 +36,9 @@ def gnss_position_gm_factor(pose_key: int, gm_key: int, p_fix: np.ndarray, lever
             H[0], H[1] = J_pose, J_g
         return pose.translation() + R @ lever_b + values.atVector(keys[1]) - p_fix
 
-    return gtsam.CustomFactor(gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigma_ned, float)), list(keys), error)
+    noise = (gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigma_ned, float)) if cov_ned is None
+             else gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov_ned, float)))
+    return gtsam.CustomFactor(noise, list(keys), error)
 
 
 #: The linearisation point of :func:`gauss_markov_factor`'s linear factor: zero GNSS errors.

@@ -78,12 +78,19 @@ def test_select_topics_rules_on_a_survey():
     stats = [_stat("/imu_fast", imu, 200.0), _stat("/imu_slow", imu, 100.0), _stat("/fix", fix, 1.0),
              _stat("/odom", "nav_msgs/msg/Odometry", 50.0), _stat("/cam", "sensor_msgs/msg/Image", 10.0)]
     sel = select_topics(stats, "bag")
-    assert (sel.imu.topic, sel.gnss.topic, sel.truth.topic, sel.truth_kind) == ("/imu_fast", "/fix", "/odom", "pose")
+    # An Odometry topic is only a candidate: truth if its data are geo-referenced and agree with the
+    # fixes, else the wheel odometry (decided when the bag is read).
+    assert (sel.imu.topic, sel.gnss.topic, sel.truth) == ("/imu_fast", "/fix", None)
+    assert [(c.topic, k) for c, k in sel.truth_candidates] == [("/odom", "pose")]
+    assert [c.topic for c in sel.odom_candidates] == ["/odom"]
     close = [_stat("/a", imu, 100.0), _stat("/b", imu, 80.0), _stat("/fix", fix, 1.0)]
     with pytest.raises(InputError, match=r"ambiguous IMU topic: 2 candidates: /a .*/b .*--imu-topic"):
         select_topics(close, "bag")
     sel = select_topics(close + [_stat("/rtk", fix, 10.0)], "bag", imu_topic="/b", gnss_topic="/fix")
-    assert (sel.imu.topic, sel.truth.topic, sel.truth_kind) == ("/b", "/rtk", "fix")
+    assert sel.imu.topic == "/b" and [(c.topic, k) for c, k in sel.truth_candidates] == [("/rtk", "fix")]
+    sel = select_topics(close + [_stat("/rtk", fix, 10.0)], "bag", imu_topic="/b", gnss_topic="/fix",
+                        truth_topic="/rtk")
+    assert (sel.truth.topic, sel.truth_kind, sel.truth_candidates) == ("/rtk", "fix", [])
     sel = select_topics(close[:1] + [_stat("/rtk", fix, 10.0)], "bag", gnss_from_truth=True)
     assert sel.gnss is None and sel.truth.topic == "/rtk"
 

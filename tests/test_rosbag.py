@@ -191,11 +191,11 @@ def test_autodetect_unique_and_ambiguous(sim, cfg, tmp_path):
                                          r"\(sensor_msgs/msg/NavSatFix, 121 msgs, ~1\.0 Hz\); /rtk/fix .*--gnss-topic"):
         load_bag_run(p, cfg)
     run, _ = _load(p, cfg, gnss_topic="/gnss/fix")
-    assert run.meta["topics"] == {"imu": "/imu/data", "gnss": "/gnss/fix", "truth": "/rtk/fix"}
+    assert run.meta["topics"] == {"imu": "/imu/data", "gnss": "/gnss/fix", "truth": "/rtk/fix", "odometry": None}
     text = inspect_bag(p)
     assert "/rtk/fix" in text and "ambiguous GNSS" in text and "121" in text
     text = inspect_bag(p, gnss_topic="/gnss/fix")
-    assert "IMU /imu/data: the only Imu topic" in text and "truth /rtk/fix: the only other fix topic" in text
+    assert "IMU /imu/data: the only Imu topic" in text and "truth /rtk/fix: geo-referenced and agrees" in text
 
 
 def test_autodetect_imu_rate_rules(cfg, tmp_path):

@@ -41,7 +41,7 @@ def simulate(scenario: str = "car", duration_s: float = 300.0, **options) -> Rec
 
 def process(source=None, *, methods=None, config=None, preset: str | None = None, tune: str | None = None,
             noise: str | None = None, seed: int = 0, outage: str | None = None, outage_every: str | None = None,
-            imu_frame: str = "frd", show_progress: bool = False, **bag_options) -> "Result":
+            imu_frame: str = "frd", gnss=None, show_progress: bool = False, **bag_options) -> "Result":
     """Run the estimators on a source and score them: ``gnssacc run`` without the files.
 
     Parameters
@@ -65,10 +65,15 @@ def process(source=None, *, methods=None, config=None, preset: str | None = None
         GNSS outages, ``"START:LEN[,...]"`` and ``"PERIOD:LEN"`` [s].
     imu_frame : {"frd", "flu"}
         Axes of a CSV run's ``imu.csv``.
+    gnss : str or Path, optional
+        A GNSS file whose fixes replace the source's: an RTKLIB ``.pos``, an NMEA log or a CSV
+        with ``gnss.csv``'s columns (:mod:`gnssacc.sources.gnssfile`; absolute fix times need the
+        IMU stamped in UNIX or GPS seconds).
     show_progress : bool
         Progress bars on a terminal.
     **bag_options
-        ``imu_topic``, ``gnss_topic``, ``truth_topic``, ``time_source``, ``gnss_from_truth_hz``.
+        ``imu_topic``, ``gnss_topic``, ``truth_topic``, ``odom_topic``, ``time_source``,
+        ``gnss_from_truth_hz``.
 
     Returns
     -------
@@ -81,7 +86,7 @@ def process(source=None, *, methods=None, config=None, preset: str | None = None
     """
     ids = parse_methods(methods if methods is None or isinstance(methods, str) else ",".join(methods))
     cfg = configure(source, preset=preset, config=config)
-    run = load_configured(source, cfg, noise, seed, outage, outage_every, imu_frame, bag_options)
+    run = load_configured(source, cfg, noise, seed, outage, outage_every, imu_frame, bag_options, gnss)
     return evaluate(run, cfg, ids, tune=tune, show_progress=show_progress)
 
 

@@ -100,6 +100,8 @@ def check_args(args) -> None:
         check_input_file(args.config, "--config")
     if getattr(args, "seed", None) is not None:
         check_option(args.seed, "--seed", SEED, integer=True)
+    if getattr(args, "gnss", None):
+        check_input_file(args.gnss, "--gnss")
     checks = {"run": _run, "bench": _bench, "batch": _batch, "sim": _sim, "inspect": lambda a: check_source(a.bag)}
     checks.get(args.command, lambda a: None)(args)
 
@@ -186,4 +188,11 @@ def _sim(args) -> None:
         raise InputError("--duration", f"{args.duration:g} s at --imu-rate {args.imu_rate:g} Hz makes "
                                        f"{args.duration * args.imu_rate:.3g} IMU samples, more than {SIM_MAX_SAMPLES}: "
                                        f"shorten the run or lower the rate")
+    if args.odom_rate is not None:
+        check_option(args.odom_rate, "--odom-rate", Bound(0.0, args.imu_rate, lo_open=True))
+    if args.t_start is not None:
+        check_option(args.t_start, "--t-start", Bound(0.0, 4.1e9))
+        if args.gnss_format != "csv" and args.t_start < 1e8:
+            raise InputError("--t-start", f"{args.t_start:g} s is not a UNIX time: gnss.{args.gnss_format} holds "
+                                          f"absolute times, so the run must start at one (e.g. 1709294400)")
     check_output(args.out, "output folder", folder=True)

@@ -18,7 +18,8 @@ from .sources.simspec import is_sim_spec
 
 #: ``gnssacc batch``'s bag options: setting -> argument (defaults: :data:`gnssacc.campaign.campaign.BAG_DEFAULTS`).
 BAG_ARGUMENTS = {"imu_topic": "imu_topic", "gnss_topic": "gnss_topic", "truth_topic": "truth_topic",
-                 "time_source": "time_source", "gnss_from_truth_hz": "gnss_from_truth"}
+                 "time_source": "time_source", "gnss_from_truth_hz": "gnss_from_truth", "odom_topic": "odom_topic",
+                 "gnss": "gnss"}
 #: The outputs of a task folder when no option says otherwise.
 DEFAULT_OUTPUTS = {"plots": True, "report": False, "export": []}
 

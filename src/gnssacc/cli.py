@@ -59,6 +59,7 @@ def _run_parser(sub) -> None:
     r.add_argument("--nhc", choices=["on", "off"], default=None,
                    help="the non-holonomic constraint in every method (default: [nhc] enabled, on); off: IMU-only "
                         "bridging of GNSS outages, for comparison")
+    _gnss_argument(r)
     _bag_arguments(r)
     r.add_argument("--time-source", choices=["header", "receive"], default="header",
                    help="bag time stamps: message header (default) or bag receive time")
@@ -93,6 +94,7 @@ def _bench_parser(sub) -> None:
     bch.add_argument("--preset", default=None, choices=PRESETS + ("none",))
     bch.add_argument("--tune", choices=["auto", "none"], default=None, help="noise identification per seed (default auto)")
     bch.add_argument("--imu-frame", choices=["frd", "flu"], default="frd")
+    _gnss_argument(bch)
     bch.add_argument("--jobs", type=int, default=1,
                      help="worker processes of a local Dask cluster (default 1: in this process, without Dask)")
     bch.add_argument("--out", default=None, help="also write the per-seed results and the summary as JSON")
@@ -115,13 +117,22 @@ def _tool_parsers(sub) -> None:
 
     s = sub.add_parser("sim", help="write a simulated run (with truth) as a CSV run directory")
     s.add_argument("out", help="output directory")
-    s.add_argument("--scenario", default="car", help="static, straight, turns, ugv or car (default car)")
+    s.add_argument("--scenario", default="car",
+                   help="static, straight, turns, ugv, car, ugv-slow or car-city (default car)")
     s.add_argument("--duration", type=float, default=300.0, help="seconds (default 300)")
     s.add_argument("--grade", default="industrial", help="IMU grade: perfect, consumer, industrial, tactical")
     s.add_argument("--imu-rate", type=float, default=100.0, help="Hz (default 100)")
     s.add_argument("--gnss-rate", type=float, default=1.0, help="Hz (default 1)")
     s.add_argument("--noise", choices=list(PROFILES), default="white")
     s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--odom-rate", type=float, default=None, metavar="HZ",
+                   help="also write wheel odometry at this rate as odom.csv (scale-factor error, noise, slip)")
+    s.add_argument("--gnss-format", choices=["csv", "pos", "nmea"], default="csv",
+                   help="write the fixes as gnss.csv (default), gnss.pos (RTKLIB, GPST) or gnss.nmea (NMEA 0183); "
+                        "the last two hold absolute times, so the run is then stamped in UNIX seconds from --t-start")
+    s.add_argument("--t-start", type=float, default=None, metavar="UNIX_S",
+                   help="time of the first IMU sample [s] (default 0, or 1709294400 = 2024-03-01 12:00 UTC for "
+                        "--gnss-format pos or nmea)")
 
 
 def _batch_parser(sub) -> None:
@@ -145,6 +156,7 @@ def _batch_parser(sub) -> None:
     b.add_argument("--preset", default=None, choices=PRESETS + ("none",))
     b.add_argument("--tune", choices=["auto", "none"], default=None)
     b.add_argument("--imu-frame", choices=["frd", "flu"], default=None)
+    _gnss_argument(b)
     _bag_arguments(b)
     b.add_argument("--time-source", choices=["header", "receive"], default=None)
     b.add_argument("--gnss-from-truth", type=float, default=None, metavar="RATE_HZ")
@@ -165,7 +177,19 @@ def _batch_parser(sub) -> None:
 def _bag_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--imu-topic", default=None, help="bag topic with sensor_msgs/Imu (default: auto-detect)")
     p.add_argument("--gnss-topic", default=None, help="bag topic with the GNSS fixes (default: auto-detect)")
-    p.add_argument("--truth-topic", default=None, help="bag topic with a reference trajectory (optional)")
+    p.add_argument("--truth-topic", default=None,
+                   help="bag topic with a reference trajectory (default: a geo-referenced topic that agrees with the "
+                        "fixes; given here it is used, with a warning if it disagrees)")
+    p.add_argument("--odom-topic", default=None,
+                   help="bag topic with wheel odometry, nav_msgs/Odometry or geometry_msgs/TwistStamped (default: "
+                        "the only such topic not taken as the truth)")
+
+
+def _gnss_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--gnss", default=None, metavar="FILE",
+                   help="replace the source's GNSS fixes by a file's: an RTKLIB .pos, an NMEA log (.nmea) or a CSV "
+                        "with gnss.csv's columns (times on the IMU's clock; absolute .pos/NMEA times need the IMU "
+                        "stamped in UNIX or GPS seconds)")
 
 
 def _cmd_inspect(args) -> int:
@@ -176,7 +200,7 @@ def _cmd_inspect(args) -> int:
         raise InputError(args.bag, "no such file or directory")
     cfg = load_config(None, args.config)
     print(inspect_bag(path, imu_topic=args.imu_topic, gnss_topic=args.gnss_topic, truth_topic=args.truth_topic,
-                      fix_mappings=cfg["bag"]["fix_mappings"]))
+                      odom_topic=args.odom_topic, fix_mappings=cfg["bag"]["fix_mappings"]))
     return 0
 
 
@@ -223,9 +247,9 @@ def _run_locked(args, stack, held) -> int:
     if args.nhc is not None:
         cfg = cfg.with_values({"nhc": {"enabled": args.nhc == "on"}}, f"--nhc {args.nhc}")
     run = load(args.source, config=cfg, noise=args.noise, seed=args.seed, outage=args.outage,
-               outage_every=args.outage_every, imu_frame=args.imu_frame, imu_topic=args.imu_topic,
+               outage_every=args.outage_every, imu_frame=args.imu_frame, gnss=args.gnss, imu_topic=args.imu_topic,
                gnss_topic=args.gnss_topic, truth_topic=args.truth_topic, time_source=args.time_source,
-               gnss_from_truth_hz=args.gnss_from_truth)
+               gnss_from_truth_hz=args.gnss_from_truth, odom_topic=args.odom_topic)
     target = target or _lock_out(default_out_dir(run), args, stack, held)
     res = evaluate(run, cfg, methods, tune=args.tune, show_progress=True, observe=args.report)
     out = res.write(target, plots=not args.no_plots, report=args.report, export=args.export)
@@ -283,7 +307,7 @@ def _cmd_bench(args) -> int:
     load_config(resolve_preset(args.preset, args.source), args.config)  # fail early on a bad configuration
     results = bench(args.source, methods, seeds, noise=args.noise, outage=args.outage, outage_every=args.outage_every,
                     preset=args.preset, config=args.config, tune=args.tune, imu_frame=args.imu_frame,
-                    jobs=max(args.jobs, 1))
+                    jobs=max(args.jobs, 1), gnss=args.gnss)
     table = summarise(results)
     title = (f"{args.source or 'kitti'}: {len(results)} seeds, noise {args.noise}"
              + (f", outages {args.outage or ''}{args.outage_every or ''}" if args.outage or args.outage_every else ""))
@@ -334,11 +358,19 @@ def _cmd_sim(args) -> int:
     from .sources.csvdir import write_csv_run
     from .sources.sim import simulate
 
+    t_start = args.t_start if args.t_start is not None else (0.0 if args.gnss_format == "csv" else SIM_UNIX_START_S)
     run = simulate(scenario=args.scenario, duration_s=args.duration, imu_grade=args.grade,
-                   imu_rate_hz=args.imu_rate, gnss_rate_hz=args.gnss_rate, noise=args.noise, seed=args.seed)
-    path = write_csv_run(run, args.out)
-    print(f"wrote {path}: {run.duration_s:.0f} s {args.scenario}, {len(run.imu)} IMU samples, {len(run.gnss)} fixes")
+                   imu_rate_hz=args.imu_rate, gnss_rate_hz=args.gnss_rate, noise=args.noise, seed=args.seed,
+                   t_start_s=t_start, odom_hz=args.odom_rate)
+    path = write_csv_run(run, args.out, gnss_format=args.gnss_format)
+    extra = f", {len(run.odometry)} odometry samples" if run.odometry is not None else ""
+    print(f"wrote {path}: {run.duration_s:.0f} s {args.scenario}, {len(run.imu)} IMU samples, {len(run.gnss)} fixes "
+          f"(gnss.{args.gnss_format}){extra}")
     return 0
+
+
+#: First IMU sample of ``gnssacc sim`` when it writes absolute fix times: 2024-03-01 12:00:00 UTC [s].
+SIM_UNIX_START_S = 1709294400.0
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):

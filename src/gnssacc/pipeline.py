@@ -111,8 +111,9 @@ def is_bag(path: Path) -> bool:
 def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None, seed: int = 0,
                 imu_frame: str = "frd", imu_topic: str | None = None, gnss_topic: str | None = None,
                 truth_topic: str | None = None, time_source: str = "header",
-                gnss_from_truth_hz: float | None = None) -> RecordedRun:
-    """Load a run from a source spec.
+                gnss_from_truth_hz: float | None = None, odom_topic: str | None = None,
+                gnss: str | None = None) -> RecordedRun:
+    """Load a run from a source spec (with ``gnss``: its fixes replaced by a file's).
 
     Parameters
     ----------
@@ -130,10 +131,21 @@ def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None,
         Noise seed.
     imu_frame : {"frd", "flu"}
         Axes of a CSV directory's ``imu.csv``.
-    imu_topic, gnss_topic, truth_topic, time_source, gnss_from_truth_hz
+    imu_topic, gnss_topic, truth_topic, time_source, gnss_from_truth_hz, odom_topic
         Bag options (see :func:`gnssacc.sources.rosbag.load_bag_run`); for a bag, ``noise``
         applies to the fixes made from the truth with ``gnss_from_truth_hz``.
+    gnss : str, optional
+        A GNSS file (``.pos``, NMEA, ``gnss.csv`` columns) whose fixes replace the source's
+        (:func:`gnssacc.sources.gnssfile.with_gnss_file`: absolute times need an absolute IMU clock).
     """
+    if gnss is not None:
+        if noise is not None or gnss_from_truth_hz is not None:
+            raise InputError("--gnss", "the fixes come from the GNSS file: --noise and --gnss-from-truth (fixes made "
+                                       "from the truth) do not apply")
+        from .sources.gnssfile import with_gnss_file
+        run = load_source(source, cfg, seed=seed, imu_frame=imu_frame, imu_topic=imu_topic, gnss_topic=gnss_topic,
+                          truth_topic=truth_topic, time_source=time_source, odom_topic=odom_topic)
+        return with_gnss_file(run, gnss, cfg)
     if source in (None, "kitti"):
         from .sources.kitti import load_kitti
         return load_kitti(cfg, noise or "white", seed)
@@ -146,12 +158,12 @@ def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None,
         from .sources.rosbag import load_bag_run
         return load_bag_run(path, cfg, imu_topic=imu_topic, gnss_topic=gnss_topic, truth_topic=truth_topic,
                             time_source=time_source, gnss_from_truth_hz=gnss_from_truth_hz,
-                            noise=noise, seed=seed)
+                            noise=noise, seed=seed, odom_topic=odom_topic)
     if path.is_dir():
         from .checks.plausibility import fix_imu_time_units
         from .sources.common import with_noisy_fixes
         from .sources.csvdir import load_csv_run
-        if not (path / "imu.csv").exists() and not (path / "gnss.csv").exists():
+        if not (path / "imu.csv").exists() and not any((path / n).exists() for n in ("gnss.csv", "gnss.pos", "gnss.nmea")):
             names = sorted(p.name for p in path.iterdir())
             held = f"it holds {', '.join(names[:5])}{', ...' if len(names) > 5 else ''}" if names else "it is empty"
             raise InputError(source, f"not a run directory: no imu.csv and gnss.csv (a CSV run) and no metadata.yaml "
@@ -192,19 +204,23 @@ def configure(source=None, *, preset: str | None = None, config=None) -> RunConf
 
 
 def load(source=None, *, config=None, preset: str | None = None, noise: str | None = None, seed: int = 0,
-         outage: str | None = None, outage_every: str | None = None, imu_frame: str = "frd",
+         outage: str | None = None, outage_every: str | None = None, imu_frame: str = "frd", gnss=None,
          **bag_options) -> RecordedRun:
-    """A recorded run, as ``gnssacc run`` loads it (see :func:`process` for the parameters)."""
+    """A recorded run, as ``gnssacc run`` loads it (see :func:`gnssacc.api.process` for the parameters)."""
     return load_configured(source, configure(source, preset=preset, config=config), noise, seed, outage, outage_every,
-                 imu_frame, bag_options)
+                           imu_frame, bag_options, gnss)
 
 
-def load_configured(source, cfg, noise, seed, outage, outage_every, imu_frame, bag_options) -> RecordedRun:
+def load_configured(source, cfg, noise, seed, outage, outage_every, imu_frame, bag_options, gnss=None) -> RecordedRun:
+    """:func:`load` with the configuration made (``gnss``: a GNSS file replacing the fixes)."""
     if isinstance(source, RecordedRun):
         run = source
+        if gnss is not None:
+            from .sources.gnssfile import with_gnss_file
+            run = with_gnss_file(run, str(gnss), cfg)
     else:
         run = load_source(None if source is None else str(source), cfg, noise=noise, seed=seed,
-                          imu_frame=imu_frame, **bag_options)
+                          imu_frame=imu_frame, gnss=None if gnss is None else str(gnss), **bag_options)
     return with_outages(run, outage, outage_every)
 
 

@@ -303,8 +303,10 @@ def run_campaign(camp: Campaign, executor, *, retry_failed: bool = False, lines:
 
 def bench(source: str | None, methods: list[str], seeds: list[int], *, noise: str = "white",
           outage: str | None = None, outage_every: str | None = None, preset: str | None = None,
-          config: str | None = None, tune: str | None = None, imu_frame: str = "frd", jobs: int = 1) -> dict:
-    """``gnssacc bench``: a campaign of one source and outage pattern that writes nothing.
+          config: str | None = None, tune: str | None = None, imu_frame: str = "frd", jobs: int = 1,
+          gnss: str | None = None) -> dict:
+    """``gnssacc bench``: a campaign of one source and outage pattern that writes nothing
+    (``gnss``: a GNSS file replacing the source's fixes; the noise is then not drawn).
 
     Returns
     -------
@@ -320,8 +322,9 @@ def bench(source: str | None, methods: list[str], seeds: list[int], *, noise: st
     from .campaign import Pattern, make_settings, plan
     from .campaign_summary import bench_results
 
-    settings = make_settings([source or "kitti"], methods, seeds, [Pattern(outage, outage_every)], noise=noise,
-                             preset=preset, tune=tune, config=config, imu_frame=imu_frame)
+    settings = make_settings([source or "kitti"], methods, seeds, [Pattern(outage, outage_every)],
+                             noise=None if gnss else noise, preset=preset, tune=tune, config=config,
+                             imu_frame=imu_frame, bag={"gnss": gnss} if gnss else None)
     tasks = plan(settings, None)
     ledger = Ledger(tasks)
     run_tasks(tasks, open_executor(jobs, None), ledger, CampaignProgress(len(tasks), lines=False))

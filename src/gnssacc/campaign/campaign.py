@@ -118,7 +118,7 @@ class TaskSpec:
 #: The bag options of a campaign and their defaults (``gnssacc run``'s), all stored, so that a
 #: campaign made through the API (which may give none) resumes from the command line.
 BAG_DEFAULTS = {"imu_topic": None, "gnss_topic": None, "truth_topic": None, "time_source": "header",
-                "gnss_from_truth_hz": None}
+                "gnss_from_truth_hz": None, "odom_topic": None, "gnss": None}
 
 
 def full_bag(bag: dict | None) -> dict:
@@ -157,6 +157,9 @@ def make_settings(sources: list[str], methods: list[str], seeds: list[int], patt
         if is_sim_spec(s):
             parse_sim_spec(s)   # a bad spec: one line before the campaign starts
     paths = [s if s == "kitti" or is_sim_spec(s) else os.path.abspath(s) for s in sources]
+    bag = full_bag(bag)
+    if bag["gnss"] is not None:
+        bag["gnss"] = os.path.abspath(bag["gnss"])
     twice = sorted({p for p in paths if paths.count(p) > 1})
     if twice:
         raise InputError(twice[0], "given twice as a source")
@@ -164,7 +167,7 @@ def make_settings(sources: list[str], methods: list[str], seeds: list[int], patt
             "methods": list(methods), "seeds": [int(s) for s in seeds],
             "outages": [[p.outage, p.outage_every] for p in patterns], "noise": noise, "preset": preset,
             "tune": tune, "config": config_identity(config) if config else None, "imu_frame": imu_frame,
-            "bag": full_bag(bag), "outputs": {"plots": bool(plots), "report": bool(report),
+            "bag": bag, "outputs": {"plots": bool(plots), "report": bool(report),
                                                 "export": sorted(export)}}
 
 

@@ -32,11 +32,11 @@ stage 1 alone is good to a few tenths of a second with 3 m fixes.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.recording import ImuData, RecordedRun
+from ..core.recording import RecordedRun
 from .motionmatch import GnssKinematics, LevelledImu, at_times, smooth_horizontal, velocity_frame
 
 #: Largest offset searched [s]: clock mix-ups of whole seconds (GPS-UTC is 18 s since 2017) and
@@ -249,8 +249,8 @@ def coarse_offset(lev: LevelledImu, kin: GnssKinematics, max_offset_s: float = M
 
 
 def shifted(run: RecordedRun, delta_s: float) -> RecordedRun:
-    """The run with ``delta_s`` [s] added to every IMU time stamp."""
-    imu = run.imu
-    return replace(run, imu=ImuData(imu.t + delta_s, imu.f_b, imu.omega_ib_b))
+    """The run with ``delta_s`` [s] added to every IMU time stamp (and the wheel odometry's, on
+    the same clock)."""
+    return run.with_imu_shift(delta_s)
 
 

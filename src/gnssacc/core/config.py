@@ -85,6 +85,17 @@ DEFAULTS: dict[str, dict] = {
         # innovations show time-correlated errors.
         "gm_sigma_m": 0.0,
         "gm_tau_s": 60.0,
+        # Fixes by their stated quality (RTKLIB .pos Q, NMEA GGA quality; names fix, float, sbas,
+        # dgps, single, ppp, estimated, unknown): "drop" leaves them out, a number multiplies their
+        # stated sigmas, e.g. quality = { single = "drop", float = 3.0 }. Empty: every fix is kept
+        # with its stated sigmas.
+        "quality": {},
+        # NMEA fixes without a GST sentence get sigmas from HDOP, an assumption: north and east
+        # HDOP x UERE / sqrt(2), down nmea_vertical_factor x HDOP x UERE, with this UERE [m] per fix
+        # quality (keys as for quality; a key not given keeps its default here).
+        "nmea_uere_m": {"fix": 0.02, "float": 0.3, "sbas": 1.0, "dgps": 0.7, "single": 3.0, "ppp": 0.2, "estimated": 10.0, "unknown": 5.0},
+        # VDOP / HDOP assumed for those fixes (open-sky geometries give about 1.5 to 2).
+        "nmea_vertical_factor": 1.7,
     },
     "accel": {
         # Number m of fixes in the least-squares acceleration window (>= 3).

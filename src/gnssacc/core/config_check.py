@@ -74,6 +74,7 @@ BOUNDS: dict[tuple[str, str], Bound] = {
     ("gnss", "lever_arm_b_m"): Bound(-1e3, 1e3),
     **_all("gnss", "default_sigma_m gm_tau_s", Bound(0.0, 1e9, lo_open=True)),
     ("gnss", "sigma_scale"): Bound(0.0, 1e6, lo_open=True),
+    ("gnss", "nmea_vertical_factor"): Bound(0.0, 100.0, lo_open=True),
     ("gnss", "gm_sigma_m"): Bound(0.0, 1e9),
     ("accel", "window"): Bound(3, 100),
     **_all("accel", "max_gap_s sigma_mps2", POSITIVE),
@@ -146,7 +147,13 @@ KINDS: dict[tuple[str, str], str] = {
     ("mounting", "imu_time_offset_s"): "number or auto",
     ("init", "roll_pitch_sigma_deg"): "number or empty",
     ("init", "yaw_sigma_deg"): "number or empty",
+    ("gnss", "quality"): "quality map",
+    ("gnss", "nmea_uere_m"): "quality map",
 }
+#: Names a ``quality map`` key takes (:data:`gnssacc.core.recording.FIX_QUALITY`).
+QUALITY_NAMES = ("fix", "float", "sbas", "dgps", "single", "ppp", "estimated", "unknown")
+#: Largest factor or UERE of a quality map (keeps squares finite).
+_QUALITY_MAX = 1e6
 
 
 def kind_of(section: str, key: str, default) -> str:
@@ -186,10 +193,30 @@ def check_value(section: str, key: str, value, default) -> str | None:
     bound, choices = BOUNDS.get((section, key)), CHOICES.get((section, key))
     if (section, key) in UPPER_CASE and isinstance(value, str):
         value = value.upper()
+    if kind == "quality map":
+        problem = quality_map_problem(value, drop_allowed=key == "quality")
+        return None if problem is None else f"[{section}] {key}: {problem}"
     problem = _problem(kind, value, bound, choices)
     if problem is None:
         return mappings_problem(value) if (section, key) == ("bag", "fix_mappings") else None
     return f"[{section}] {key}: {problem} (expected {expectation(kind, bound, choices)})"
+
+
+def quality_map_problem(value, drop_allowed: bool) -> str | None:
+    """What is wrong with a table of fix qualities (:data:`QUALITY_NAMES`) -> positive numbers
+    (or ``"drop"`` where ``drop_allowed``), or ``None``."""
+    what = 'a positive number or "drop"' if drop_allowed else "a positive number"
+    if not isinstance(value, dict):
+        example = '"drop"' if drop_allowed else "3.0"
+        return f"{show(value)} is not a table (expected e.g. {{ single = {example} }})"
+    for name, v in value.items():
+        if name not in QUALITY_NAMES:
+            return f"unknown fix quality {name!r} (known: {', '.join(QUALITY_NAMES)})"
+        if drop_allowed and v == "drop":
+            continue
+        if number_problem(v, False, Bound(0.0, _QUALITY_MAX, lo_open=True)):
+            return f"{name} = {show(v)} (expected {what})"
+    return None
 
 
 def mappings_problem(mappings: dict) -> str | None:

@@ -1,7 +1,8 @@
 """The recorded-run model: IMU samples, GNSS fixes, optional truth and initial state.
 
-Every source (KITTI, CSV directory, simulator, bags) produces a :class:`RecordedRun`; every
-estimator consumes one. Validation lives here so that all sources get the same checks.
+Every source (KITTI, CSV directory, simulator, bags, RTKLIB ``.pos``, NMEA) produces a
+:class:`RecordedRun`; every estimator consumes one. Validation lives here so that all sources get
+the same checks.
 
 Frames and units: body frame b is Front-Right-Down, navigation frame n is North-East-Down,
 times are seconds on one clock, angles radians, positions geodetic (lat, lon [rad], h [m]).
@@ -48,6 +49,13 @@ class ImuData:
         return min(k0, k), k + 1
 
 
+#: Fix quality codes of :attr:`GnssFixes.quality` (RTKLIB's ``Q`` numbering, which NMEA GGA
+#: qualities and other receivers' flags are mapped onto by their readers), by name.
+FIX_QUALITY = {"unknown": 0, "fix": 1, "float": 2, "sbas": 3, "dgps": 4, "single": 5, "ppp": 6, "estimated": 7}
+#: Quality code -> name.
+FIX_QUALITY_NAMES = {v: k for k, v in FIX_QUALITY.items()}
+
+
 @dataclass
 class GnssFixes:
     """GNSS position fixes of the antenna.
@@ -62,6 +70,15 @@ class GnssFixes:
         Ellipsoidal height [m].
     sigma_ned : ndarray, shape (M, 3)
         1-sigma position uncertainty along north, east, down [m].
+    quality : ndarray of int, shape (M,), or None
+        Per-fix quality code (:data:`FIX_QUALITY`: 1 fix, 2 float, 3 sbas, 4 dgps, 5 single,
+        6 ppp, 7 estimated, 0 unknown), when the source states one.
+    corr_ned : ndarray, shape (M, 3), or None
+        Correlation coefficients ``(rho_ne, rho_nd, rho_ed)`` of the position error, when the
+        source states them (e.g. RTKLIB's ``sdne, sdeu, sdun``); None: uncorrelated axes. Kept
+        as correlations rather than covariances so that every operation on ``sigma_ned`` (the
+        tuner's ``gnss.sigma_scale``, a quality's inflation) scales the whole covariance
+        (:meth:`cov_ned`).
     """
 
     t: np.ndarray
@@ -69,12 +86,73 @@ class GnssFixes:
     lon: np.ndarray
     h: np.ndarray
     sigma_ned: np.ndarray
+    quality: np.ndarray | None = None
+    corr_ned: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t)
 
     def select(self, mask) -> "GnssFixes":
-        return GnssFixes(self.t[mask], self.lat[mask], self.lon[mask], self.h[mask], self.sigma_ned[mask])
+        return GnssFixes(self.t[mask], self.lat[mask], self.lon[mask], self.h[mask], self.sigma_ned[mask],
+                         None if self.quality is None else self.quality[mask],
+                         None if self.corr_ned is None else self.corr_ned[mask])
+
+    def cov_ned(self, k) -> np.ndarray:
+        """The NED covariance [m^2] of fix ``k`` (shape (3, 3)) or of fixes ``k`` (an index array:
+        shape (K, 3, 3)): ``diag(sigma) C diag(sigma)``, ``C`` from :attr:`corr_ned` (the
+        identity without it)."""
+        s = np.asarray(self.sigma_ned[k], float)
+        C = np.broadcast_to(np.eye(3), s.shape[:-1] + (3, 3)).copy()
+        if self.corr_ned is not None:
+            r = np.asarray(self.corr_ned[k], float)
+            C[..., 0, 1] = C[..., 1, 0] = r[..., 0]
+            C[..., 0, 2] = C[..., 2, 0] = r[..., 1]
+            C[..., 1, 2] = C[..., 2, 1] = r[..., 2]
+        return s[..., :, None] * C * s[..., None, :]
+
+
+@dataclass
+class WheelOdometry:
+    """Wheel (drive-controller) odometry: the vehicle's forward speed, optionally its yaw rate.
+
+    Attributes
+    ----------
+    t : ndarray, shape (K,)
+        Sample times [s] on the run's clock (they share the IMU's clock: a source shifts them
+        with the IMU's time stamps).
+    v_forward : ndarray, shape (K,)
+        Forward speed of the vehicle's odometry reference point along the vehicle x axis
+        (forward) [m/s]; negative when reversing.
+    yaw_rate : ndarray, shape (K,), or None
+        Turn rate about the vehicle's z axis, down (FRD): positive turning right, i.e. clockwise
+        seen from above [rad/s]. (ROS REP-103's ``angular.z`` is about z up: the negative.)
+    sigma_v : ndarray, shape (K,), or None
+        Per-sample 1-sigma of ``v_forward`` [m/s] as the source states it.
+    sigma_yaw_rate : ndarray, shape (K,), or None
+        Per-sample 1-sigma of ``yaw_rate`` [rad/s] as the source states it.
+    frame : str
+        Where the samples came from (file, topic, frame id), for messages and reports.
+    """
+
+    t: np.ndarray
+    v_forward: np.ndarray
+    yaw_rate: np.ndarray | None = None
+    sigma_v: np.ndarray | None = None
+    sigma_yaw_rate: np.ndarray | None = None
+    frame: str = ""
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def select(self, mask) -> "WheelOdometry":
+        def pick(a):
+            return None if a is None else a[mask]
+        return WheelOdometry(self.t[mask], self.v_forward[mask], pick(self.yaw_rate), pick(self.sigma_v),
+                             pick(self.sigma_yaw_rate), self.frame)
+
+    def shifted(self, delta_s: float) -> "WheelOdometry":
+        """A copy with ``delta_s`` [s] added to every time stamp (a shift of the IMU's clock)."""
+        return replace(self, t=self.t + float(delta_s))
 
 
 @dataclass
@@ -172,6 +250,9 @@ class SimTruth:
         The filter-visible noise parameters of the simulated grade (configuration keys and units).
     imu_error_model : dict
         The full error description it was drawn from.
+    odometry : dict or None
+        The wheel odometry's per-run draws (``scale_factor``, ``yaw_factor``, ``kind`` ...:
+        :func:`gnssacc.sources.sim_odometry.simulate_odometry`), when the run has odometry.
     """
 
     bias: object   # gnssacc.sources.sim_true_bias.TrueBias (a source type: the model does not import it)
@@ -179,6 +260,7 @@ class SimTruth:
     imu_error_draws: dict
     imu_params: dict
     imu_error_model: dict
+    odometry: dict | None = None
 
     @property
     def true_bias_a(self) -> np.ndarray:
@@ -213,6 +295,8 @@ class RecordedRun:
         GNSS outage spans applied to the fixes, seconds from the start (:func:`gnssacc.sources.gnss_noise.apply_outages`).
     sim : SimTruth or None
         A simulated run's IMU truths (true biases, scenario segments).
+    odometry : WheelOdometry or None
+        Wheel odometry, on the IMU's clock (shifted with it), when the source has it.
     meta : dict
         Small facts about the source (noise profile, seed, bag topics, ...): those of
         :data:`gnssacc.outputs.report.RUN_FIELDS` are written to ``metrics.json``.
@@ -228,6 +312,7 @@ class RecordedRun:
     outages: tuple = ()
     sim: SimTruth | None = None
     meta: dict = field(default_factory=dict)
+    odometry: WheelOdometry | None = None
 
     @property
     def t_start(self) -> float:
@@ -265,13 +350,67 @@ class RecordedRun:
         if not np.any(overlap):
             raise InputError(self.where, f"GNSS fixes ({gnss.t[0]:.3f}..{gnss.t[-1]:.3f} s) do not overlap the IMU "
                                          f"time span ({imu.t[0]:.3f}..{imu.t[-1]:.3f} s): different clocks?")
+        _check_fix_extras(gnss, self.where)
         if self.truth is not None:
             check_increasing(self.truth.t, self.where, "truth")
+        if self.odometry is not None:
+            check_odometry(self.odometry, self.where)
+            odo_t = self.odometry.t
+            if odo_t[-1] < imu.t[0] or odo_t[0] > imu.t[-1]:
+                raise InputError(self.where, f"wheel odometry ({odo_t[0]:.3f}..{odo_t[-1]:.3f} s) does not overlap the "
+                                             f"IMU time span ({imu.t[0]:.3f}..{imu.t[-1]:.3f} s): its times must be on "
+                                             f"the IMU's clock")
         return self
+
+    def with_imu_shift(self, delta_s: float) -> "RecordedRun":
+        """A copy with ``delta_s`` [s] added to the IMU time stamps and to the wheel odometry's,
+        which share the IMU's clock."""
+        imu = self.imu
+        odo = None if self.odometry is None else self.odometry.shifted(delta_s)
+        return replace(self, imu=ImuData(imu.t + delta_s, imu.f_b, imu.omega_ib_b), odometry=odo)
 
     def with_gnss(self, gnss: GnssFixes, **meta) -> "RecordedRun":
         """A copy with other GNSS fixes (e.g. noisy or with outages) and extra metadata."""
         return replace(self, gnss=gnss, meta={**self.meta, **meta})
+
+
+def _check_fix_extras(gnss: GnssFixes, where: str) -> None:
+    """Shapes and ranges of the optional per-fix quality codes and correlations."""
+    m = len(gnss)
+    if gnss.quality is not None and np.shape(gnss.quality) != (m,):
+        raise InputError(where, f"GNSS quality codes must have shape ({m},)")
+    if gnss.corr_ned is None:
+        return
+    if np.shape(gnss.corr_ned) != (m, 3):
+        raise InputError(where, f"GNSS correlations must have shape ({m}, 3)")
+    if not np.all(np.isfinite(gnss.corr_ned)) or np.any(np.abs(gnss.corr_ned) >= 1.0):
+        raise InputError(where, "GNSS correlation coefficients must be finite and inside (-1, 1)")
+    r_ne, r_nd, r_ed = np.asarray(gnss.corr_ned, float).T
+    det = 1.0 + 2.0 * r_ne * r_nd * r_ed - r_ne**2 - r_nd**2 - r_ed**2   # det of the correlation matrix
+    bad = np.flatnonzero(det <= 0.0)
+    if bad.size:
+        k = int(bad[0])
+        raise InputError(where, f"the GNSS fix covariance at t = {gnss.t[k]:.3f} s is not positive definite "
+                                f"(correlations {r_ne[k]:.3f}, {r_nd[k]:.3f}, {r_ed[k]:.3f}); {bad.size} such fix(es)")
+
+
+def check_odometry(odo: WheelOdometry, where: str) -> None:
+    """Raise :class:`InputError` for wheel odometry of wrong shapes, non-finite values, times not
+    increasing or non-positive sigmas."""
+    k = len(odo.t)
+    what = f"wheel odometry ({odo.frame})" if odo.frame else "wheel odometry"
+    for name, arr in (("speed", odo.v_forward), ("yaw rate", odo.yaw_rate), ("speed sigma", odo.sigma_v),
+                      ("yaw-rate sigma", odo.sigma_yaw_rate)):
+        if arr is None:
+            continue
+        if np.shape(arr) != (k,):
+            raise InputError(where, f"{what}: {name} must have shape ({k},), as the times")
+        if not np.all(np.isfinite(arr)):
+            raise InputError(where, f"{what}: {name} contains NaN or inf values")
+    for name, arr in (("speed sigma", odo.sigma_v), ("yaw-rate sigma", odo.sigma_yaw_rate)):
+        if arr is not None and np.any(arr <= 0):
+            raise InputError(where, f"{what}: {name} must be positive")
+    check_increasing(odo.t, where, what)
 
 
 def check_increasing(t: np.ndarray, where: str, what: str) -> None:

@@ -387,7 +387,9 @@ def _gnss_measurements(run, setup, s, t, i, acc, use_acc, evaluate_acc, stats):
     the acceleration model applied, a value of :data:`METHODS`; the paper's is evaluated when
     only ``evaluate_acc``)."""
     gnss = run.gnss
-    yield meas_models.position(s, gnss.lat[i], gnss.lon[i], gnss.h[i], gnss.sigma_ned[i], setup.lever_b, setup.gate), True
+    cov = None if gnss.corr_ned is None else gnss.cov_ned(i)   # correlated axes: the full covariance
+    yield meas_models.position(s, gnss.lat[i], gnss.lon[i], gnss.h[i], gnss.sigma_ned[i], setup.lever_b, setup.gate,
+                               cov), True
     if acc is not None and (use_acc or evaluate_acc):
         m = acceleration_model(run, setup, s, t, acc, use_acc or "acc")
         if m is None:

@@ -96,8 +96,9 @@ class Measurement:
 
 
 def position(s, lat: float, lon: float, h: float, sigma_ned: np.ndarray, lever_arm_b: np.ndarray,
-             gate: float = 0.0) -> Measurement:
-    """GNSS antenna position fix (lat, lon [rad], h [m]) with 1-sigma ``sigma_ned`` [m]."""
+             gate: float = 0.0, cov_ned: np.ndarray | None = None) -> Measurement:
+    """GNSS antenna position fix (lat, lon [rad], h [m]) with 1-sigma ``sigma_ned`` [m], or with
+    the full NED covariance ``cov_ned`` [m^2] (correlated axes, e.g. an RTKLIB solution's) when given."""
     R_M, R_N = radii(s.pos[0])
     l_n = s.R_nb @ lever_arm_b
     dz = np.array([(s.pos[0] - lat) * (R_M + s.pos[2]), (s.pos[1] - lon) * (R_N + s.pos[2]) * np.cos(s.pos[0]),
@@ -108,7 +109,8 @@ def position(s, lat: float, lon: float, h: float, sigma_ned: np.ndarray, lever_a
     if s.n_gm:
         dz += s.gm
         H[:, 15:18] = np.eye(3)
-    return Measurement("pos", dz, H, np.diag(np.asarray(sigma_ned, float) ** 2), gate)
+    R = np.diag(np.asarray(sigma_ned, float) ** 2) if cov_ned is None else np.asarray(cov_ned, float)
+    return Measurement("pos", dz, H, R, gate)
 
 
 def _H(s, m: int) -> np.ndarray:

@@ -299,7 +299,7 @@ def _is_ill_posed(exc: Exception) -> bool:
     return "indeterminant" in text or "indeterminate" in text or "ill-posed" in text
 
 
-def residual_chi2(rec: "_Record", idx: np.ndarray, p_fix: np.ndarray, sigma_ned: np.ndarray,
+def residual_chi2(rec: "_Record", idx: np.ndarray, p_fix: np.ndarray, cov_fix: np.ndarray,
                   lever_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     r"""Whitened squared residuals of GNSS factors at nodes ``idx`` of an estimate, and their
     expectations.
@@ -316,8 +316,10 @@ def residual_chi2(rec: "_Record", idx: np.ndarray, p_fix: np.ndarray, sigma_ned:
     rec : _Record
     idx : ndarray (K,) of int
         Nodes with a fix.
-    p_fix, sigma_ned : ndarray (K, 3)
-        Their fixes (tangent frame) and white 1-sigma [m].
+    p_fix : ndarray (K, 3)
+        Their fixes (tangent frame) [m].
+    cov_fix : ndarray (K, 3, 3)
+        The fixes' white covariance [m^2] (:meth:`gnssacc.core.recording.GnssFixes.cov_ned`).
     lever_b : ndarray (3,)
 
     Returns
@@ -329,9 +331,9 @@ def residual_chi2(rec: "_Record", idx: np.ndarray, p_fix: np.ndarray, sigma_ned:
     J = np.concatenate([-R @ skew(lever_b), R], axis=2)
     cross = J @ rec.cov_xg[idx]
     JCJ = J @ rec.cov_pose[idx] @ J.transpose(0, 2, 1) + rec.cov_g[idx] + cross + cross.transpose(0, 2, 1)
-    w = 1.0 / sigma_ned**2
-    chi2 = np.sum(r**2 * w, axis=1)
-    expected = 3.0 - np.sum(np.diagonal(JCJ, axis1=1, axis2=2) * w, axis=1)
+    W = np.linalg.inv(cov_fix)
+    chi2 = np.einsum("ki,kij,kj->k", r, W, r)
+    expected = 3.0 - np.einsum("kij,kji->k", W, JCJ)
     return chi2, np.maximum(expected, 0.0)
 
 
@@ -367,15 +369,19 @@ class _Factors:
         k = self.fix_at.get(float(t))
         if k is None:
             return None
-        sig = self.run.gnss.sigma_ned[k]
+        gnss = self.run.gnss
+        sig = gnss.sigma_ned[k]
+        cov = None if gnss.corr_ned is None else gnss.cov_ned(k)   # correlated axes: the full covariance
         self.stats["n_gps_factors"] += 1
         self.node_of[k] = i
         if self.gm:
-            graph.add(gnss_position_gm_factor(X(i), G(i), self.p_fix[k], self.lever, sig))
+            graph.add(gnss_position_gm_factor(X(i), G(i), self.p_fix[k], self.lever, sig, cov))
             return k
-        noise = self._noise.get(tuple(sig))
+        key = tuple(sig) if cov is None else tuple(cov.ravel())
+        noise = self._noise.get(key)
         if noise is None:  # most runs have a handful of distinct fix sigmas
-            noise = self._noise[tuple(sig)] = gtsam.noiseModel.Diagonal.Sigmas(sig)
+            noise = self._noise[key] = (gtsam.noiseModel.Diagonal.Sigmas(sig) if cov is None
+                                        else gtsam.noiseModel.Gaussian.Covariance(cov))
         if self.has_lever:
             graph.add(gtsam.GPSFactorArm(X(i), self.p_fix[k], self.lever, noise))
         else:
@@ -693,7 +699,7 @@ class _Loop:
         for rec in (self.online, self.fixed):
             idx = np.flatnonzero((self.fix_of >= 0) & rec.done)
             k = self.fix_of[idx]
-            rec.chi2[idx] = np.column_stack(residual_chi2(rec, idx, self.f.p_fix[k], self.run.gnss.sigma_ned[k],
+            rec.chi2[idx] = np.column_stack(residual_chi2(rec, idx, self.f.p_fix[k], self.run.gnss.cov_ned(k),
                                                           self.f.lever))
 
     def feed(self, method, show_progress):

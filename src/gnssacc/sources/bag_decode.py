@@ -23,8 +23,11 @@ from .common import one_line
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 NAVSATFIX_TYPE = "sensor_msgs/msg/NavSatFix"
-POSE_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped",
-              "geometry_msgs/msg/PoseWithCovarianceStamped")
+ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
+TWIST_TYPE = "geometry_msgs/msg/TwistStamped"
+POSE_TYPES = (ODOMETRY_TYPE, "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
+#: Types that may carry wheel odometry (a forward speed and a yaw rate).
+ODOM_TYPES = (ODOMETRY_TYPE, TWIST_TYPE)
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 TIME_SOURCES = ("header", "receive")
 BASE_FRAMES = ("base_link", "base_footprint")
@@ -50,8 +53,12 @@ _MAPPING_DEFAULTS = {"latlon_scale_deg": 1.0, "height_scale_m": 1.0, "sigma_n": 
                      "sigma_d": None, "sigma_scale_m": 1.0, "stamp": None, "status": None, "no_fix_values": []}
 
 #: Columns of the rows: IMU ``t, f (3), omega (3), q (x, y, z, w), var(roll, pitch, yaw)``;
-#: fix ``t, lat, lon, h, sigma N, E, D``; pose ``t, p N, E, D, v N, E, D, roll, pitch, yaw``.
+#: fix ``t, lat, lon, h, sigma N, E, D``; pose ``t, p N, E, D, v N, E, D, roll, pitch, yaw``;
+#: Odometry: the pose's and then the twist's ``v x, y, z (FLU), omega z (FLU), var v x, var omega z``;
+#: TwistStamped: ``t`` and the twist's columns.
 IMU_COLS, FIX_COLS, POSE_COLS = 14, 7, 10
+TWIST_COLS = 6
+ODOM_COLS = POSE_COLS + TWIST_COLS
 
 
 def normalize_type(name: str) -> str:
@@ -112,6 +119,8 @@ class Collector:
         self.skipped_no_fix = 0         # fixes marked invalid (NO_FIX status)
         self.zero_cov = 0               # fixes with an all-zero covariance (default sigma used)
         self.total = 0                  # messages read
+        self.frame_id = ""              # header.frame_id of the first message
+        self.child_frame_id = ""        # child_frame_id of the first (Odometry) message
 
     def add(self, row) -> None:
         self._buf.extend(row)
@@ -230,6 +239,25 @@ def pose_row(msg, t: float, msgtype: str) -> tuple:
     return (t, p.y, p.x, -p.z, *v, *rpy)
 
 
+def twist_columns(twist, cov=None) -> tuple:
+    """A twist (FLU body axes) -> (v x, y, z [m/s], omega z [rad/s], var v x, var omega z); the
+    variances NaN when unknown (no covariance, or a non-positive one)."""
+    var_v = float(cov[0]) if cov is not None and float(cov[0]) > 0 else np.nan
+    var_w = float(cov[35]) if cov is not None and float(cov[35]) > 0 else np.nan
+    return (twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.z, var_v, var_w)
+
+
+def odometry_row(msg, t: float) -> tuple:
+    """``nav_msgs/Odometry`` -> the pose row (:func:`pose_row`) and the twist's columns
+    (:func:`twist_columns`; the twist is in the ``child_frame_id`` axes, REP-103 FLU)."""
+    return pose_row(msg, t, ODOMETRY_TYPE) + twist_columns(msg.twist.twist, msg.twist.covariance)
+
+
+def twist_row(msg, t: float) -> tuple:
+    """``geometry_msgs/TwistStamped`` -> (t, the twist's columns), variances unknown."""
+    return (t,) + twist_columns(msg.twist)
+
+
 class RowDecoder:
     """Turns one message of a chosen topic into a row (or None for a skipped fix).
 
@@ -262,9 +290,19 @@ class RowDecoder:
             return imu_row(msg, t)
         if typ == NAVSATFIX_TYPE:
             return navsat_row(msg, t, col, self.default_sigma)
+        if typ == ODOMETRY_TYPE:
+            return odometry_row(msg, t)
+        if typ == TWIST_TYPE:
+            return twist_row(msg, t)
         if typ in POSE_TYPES:
             return pose_row(msg, t, typ)
         return mapped_fix_row(msg, t, col, self.mappings[typ], self.default_sigma, self.where, col.topic, typ)
+
+
+def row_width(typ: str) -> int:
+    """Columns of a row of message type ``typ``."""
+    return {IMU_TYPE: IMU_COLS, ODOMETRY_TYPE: ODOM_COLS, TWIST_TYPE: 1 + TWIST_COLS}.get(
+        typ, POSE_COLS if typ in POSE_TYPES else FIX_COLS)
 
 
 @dataclass
@@ -293,8 +331,7 @@ def decode_topics(reader, topics: dict[str, str], decoder: RowDecoder) -> Decode
         A read error part-way (a damaged bag) ends the reading and is returned in ``damaged``;
         a message that cannot be deserialised raises :class:`InputError`.
     """
-    cols = {topic: Collector(topic, IMU_COLS if typ == IMU_TYPE else POSE_COLS if typ in POSE_TYPES else FIX_COLS)
-            for topic, typ in topics.items()}
+    cols = {topic: Collector(topic, row_width(typ)) for topic, typ in topics.items()}
     conns = [c for c in reader.connections if c.topic in topics]
     imu_frame_id = ""
     it = reader.messages(connections=conns)
@@ -314,6 +351,9 @@ def decode_topics(reader, topics: dict[str, str], decoder: RowDecoder) -> Decode
             raise InputError(decoder.where, f"topic {topic}: cannot decode a {typ} message: {one_line(err)}") from None
         if typ == IMU_TYPE and not imu_frame_id:
             imu_frame_id = msg.header.frame_id
+        if col.total == 1 and hasattr(msg, "header"):
+            col.frame_id = str(msg.header.frame_id)
+            col.child_frame_id = str(getattr(msg, "child_frame_id", ""))
         row = decoder.row(msg, t_recv_ns, typ, col)
         if row is not None:
             col.add(row)

@@ -67,17 +67,18 @@ class MessageTypes:
         """A ``geometry_msgs/Quaternion`` from ``(x, y, z, w)``."""
         return self.T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])
 
-    def odometry(self, t: float, p_enu, R_enu_flu, v_flu, pose_cov, twist_cov):
-        """A ``nav_msgs/Odometry`` stamped ``t`` [s] in ``map`` (ENU) of ``base_link`` (FLU):
-        position [m], orientation ENU <- FLU, body-axes velocity [m/s] (no angular rate), and the
-        6x6 pose and twist covariances."""
+    def odometry(self, t: float, p_enu, R_enu_flu, v_flu, pose_cov, twist_cov, frame_id: str = "map",
+                 w_flu=(0.0, 0.0, 0.0)):
+        """A ``nav_msgs/Odometry`` stamped ``t`` [s] in ``frame_id`` (ENU, or a local ``odom``
+        frame) of ``base_link`` (FLU): position [m], orientation frame <- FLU, body-axes velocity
+        [m/s] and angular rate [rad/s], and the 6x6 pose and twist covariances."""
         T = self.T
         pose = T["geometry_msgs/msg/Pose"](
             position=T["geometry_msgs/msg/Point"](x=float(p_enu[0]), y=float(p_enu[1]), z=float(p_enu[2])),
             orientation=self.quat(dcm_to_quaternion(R_enu_flu)))
-        twist = T["geometry_msgs/msg/Twist"](linear=self.vec3(v_flu), angular=self.vec3(np.zeros(3)))
+        twist = T["geometry_msgs/msg/Twist"](linear=self.vec3(v_flu), angular=self.vec3(w_flu))
         return T[ODOMETRY_TYPE](
-            header=self.header(t, "map"), child_frame_id="base_link",
+            header=self.header(t, frame_id), child_frame_id="base_link",
             pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.ravel(pose_cov)),
             twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=np.ravel(twist_cov)))
 
@@ -157,8 +158,9 @@ def fix_messages(ty: MessageTypes, key: str, typ: str, tt, lat, lon, h, sig, opt
         yield ns(tt[k] + opts.time_offset_s + opts.receive_delay_s), key, ty.serialize(msg, typ)
 
 
-def odometry_messages(ty: MessageTypes, run: RecordedRun, origin: LocalTangentFrame, opts, key: str = "truth"):
-    """The truth as ``nav_msgs/Odometry``: position ENU [m] about ``origin``, orientation
+def odometry_messages(ty: MessageTypes, run: RecordedRun, origin: LocalTangentFrame, opts, key: str = "truth",
+                      frame_id: str = "map"):
+    """The truth as ``nav_msgs/Odometry`` in ``frame_id``: position ENU [m] about ``origin``, orientation
     ENU <- FLU (identity without ``truth.rpy``), twist in body FLU [m/s] (zero without ``truth.v_n``)."""
     tr = run.truth
     p_n = origin.to_ned(tr.lat, tr.lon, tr.h)
@@ -166,8 +168,33 @@ def odometry_messages(ty: MessageTypes, run: RecordedRun, origin: LocalTangentFr
     for k in range(len(tr.t)):
         R = R_nb_to_ros(euler_to_dcm(*tr.rpy[k])) if tr.rpy is not None else np.eye(3)
         v_flu = R.T @ (ENU_NED @ tr.v_n[k]) if tr.v_n is not None else np.zeros(3)
-        msg = ty.odometry(tr.t[k] + opts.time_offset_s, ENU_NED @ p_n[k], R, v_flu, zero, zero)
+        msg = ty.odometry(tr.t[k] + opts.time_offset_s, ENU_NED @ p_n[k], R, v_flu, zero, zero, frame_id)
         yield ns(tr.t[k] + opts.time_offset_s + opts.receive_delay_s), key, ty.serialize(msg, ODOMETRY_TYPE)
+
+
+def wheel_odometry_messages(ty: MessageTypes, run: RecordedRun, opts, key: str = "odom"):
+    """``run.odometry`` as a drive controller publishes it: ``nav_msgs/Odometry`` in the local
+    ``odom`` frame (x forward at the start, z up), the pose dead-reckoned from the odometry itself
+    (forward speed and yaw rate, flat), the twist in ``base_link`` FLU (``linear.x`` the forward
+    speed, ``angular.z = -yaw_rate``) with the stated variances (zero when unknown)."""
+    odo = run.odometry
+    dt = np.diff(odo.t, prepend=odo.t[0])
+    w_up = -(odo.yaw_rate if odo.yaw_rate is not None else np.zeros(len(odo.t)))
+    heading = np.cumsum(w_up * dt)                               # about z up, from x forward at the start
+    x = np.cumsum(odo.v_forward * np.cos(heading) * dt)
+    y = np.cumsum(odo.v_forward * np.sin(heading) * dt)
+    zero = np.zeros(36)
+    for k in range(len(odo.t)):
+        c, sn = np.cos(heading[k]), np.sin(heading[k])
+        R = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
+        tw = zero.copy()
+        if odo.sigma_v is not None:
+            tw[0] = odo.sigma_v[k] ** 2
+        if odo.sigma_yaw_rate is not None:
+            tw[35] = odo.sigma_yaw_rate[k] ** 2
+        msg = ty.odometry(odo.t[k] + opts.time_offset_s, (x[k], y[k], 0.0), R, (odo.v_forward[k], 0.0, 0.0), zero, tw,
+                          frame_id="odom", w_flu=(0.0, 0.0, w_up[k]))
+        yield ns(odo.t[k] + opts.time_offset_s + opts.receive_delay_s), key, ty.serialize(msg, ODOMETRY_TYPE)
 
 
 def image_messages(ty: MessageTypes, run: RecordedRun, opts, key: str = "image"):

@@ -1,5 +1,9 @@
-"""Which topics of a bag are the IMU, the GNSS and the truth: a survey of the topics and the rules
-that pick them (:func:`select_topics`).
+"""Which topics of a bag are the IMU, the GNSS, the truth and the wheel odometry: a survey of the
+topics and the rules that pick them (:func:`select_topics`).
+
+The truth is only proposed here (``Selection.truth_candidates``): a candidate becomes the truth
+when its data show it geo-referenced and agreeing with the fixes
+(:mod:`gnssacc.sources.truth_check`), which the loader decides after decoding.
 
 A choice that is not unambiguous raises :class:`~gnssacc.core.errors.InputError` listing the
 candidates and the command-line flag that picks one; every choice made comes with its reason
@@ -7,14 +11,15 @@ candidates and the command-line flag that picks one; every choice made comes wit
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from ..core.errors import InputError
-from .bag_decode import IMU_TYPE, NAVSATFIX_TYPE, POSE_TYPES, TF_TYPE, merge_fix_mappings
+from .bag_decode import IMU_TYPE, NAVSATFIX_TYPE, ODOM_TYPES, POSE_TYPES, TF_TYPE, merge_fix_mappings
 
 #: Types never taken for a GNSS fix, left out of the hint when no fix topic is found.
 _NOT_FIX_PREFIXES = ("std_msgs/", "rosgraph_msgs/")
-_NOT_FIX_TYPES = (IMU_TYPE, TF_TYPE, "sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage", *POSE_TYPES)
+_NOT_FIX_TYPES = (IMU_TYPE, TF_TYPE, "sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage", *POSE_TYPES,
+                  *ODOM_TYPES)
 
 
 @dataclass
@@ -32,13 +37,35 @@ class TopicStat:
 
 @dataclass
 class Selection:
-    """The topics chosen, with the reason for each choice."""
+    """The topics chosen, with the reason for each choice.
+
+    Attributes
+    ----------
+    imu, gnss : TopicStat
+        ``gnss`` is None when the GNSS is made from the truth.
+    truth, truth_kind : TopicStat or None, str or None
+        The truth chosen without the agreement check: given by ``--truth-topic`` (checked, but only
+        warned about) or the fix topic ``--gnss-from-truth`` makes the fixes from; kind ``"fix"``
+        or ``"pose"``.
+    reasons : list of str
+    truth_candidates : list of (TopicStat, str)
+        Without a chosen truth: the topics (and kinds) that become the truth only when geo-referenced
+        and agreeing with the fixes.
+    odom : TopicStat or None
+        The wheel-odometry topic given by ``--odom-topic``.
+    odom_candidates : list of TopicStat
+        Without one given: the Odometry / TwistStamped topics (but a given truth), of which the one
+        left after the truth is decided is the wheel odometry.
+    """
 
     imu: TopicStat
     gnss: TopicStat | None          # None when the GNSS is made from the truth
     truth: TopicStat | None
     truth_kind: str | None          # "fix" or "pose"
     reasons: list[str]
+    truth_candidates: list = field(default_factory=list)
+    odom: TopicStat | None = None
+    odom_candidates: list = field(default_factory=list)
 
 
 def survey(reader) -> list[TopicStat]:
@@ -148,36 +175,47 @@ class _Picker:
         self.reasons.append(f"GNSS {fixes[0].topic}: the only fix topic" + (" besides the truth" if truth else ""))
         return fixes[0]
 
-    def default_truth(self, fixes: list[TopicStat], gnss: TopicStat, gnss_topic: str | None):
-        """(truth, kind) when none was given: the only pose topic, else the only other fix topic
-        when ``--gnss-topic`` was given; (None, None) with the reason otherwise."""
-        poses = [s for s in self.nonempty if s.msgtype in POSE_TYPES]
-        others = [s for s in fixes if s.topic != gnss.topic]
-        if len(poses) == 1:
-            self.reasons.append(f"truth {poses[0].topic}: the only Odometry/Pose topic")
-            return poses[0], "pose"
-        if len(poses) > 1:
-            self.reasons.append("no truth: several Odometry/Pose topics (" + ", ".join(p.topic for p in poses)
-                                + "); pick one with --truth-topic")
-        elif gnss_topic and len(others) == 1:
-            self.reasons.append(f"truth {others[0].topic}: the only other fix topic")
-            return others[0], "fix"
-        elif len(others) > 1:
-            self.reasons.append("no truth: several other fix topics; pick one with --truth-topic")
+    def truth_candidates(self, fixes: list[TopicStat], gnss: TopicStat) -> list[tuple[TopicStat, str]]:
+        """The pose topics and the fix topics beside the GNSS: each becomes the truth only when it is
+        geo-referenced and agrees with the fixes (decided when the bag is read)."""
+        cands = [(s, "pose") for s in self.nonempty if s.msgtype in POSE_TYPES]
+        cands += [(s, "fix") for s in fixes if s.topic != gnss.topic]
+        if cands:
+            self.reasons.append("truth candidate(s) " + ", ".join(c.topic for c, _ in cands)
+                                + ": taken only if geo-referenced and agreeing with the fixes as given")
         else:
             self.reasons.append("no truth topic")
-        return None, None
+        return cands
+
+    def odometry(self, odom_topic: str | None, truth: TopicStat | None):
+        """(the given wheel-odometry topic, None) or (None, the Odometry / TwistStamped candidates)."""
+        if odom_topic:
+            odom = self.find(odom_topic, "--odom-topic")
+            if odom.msgtype not in ODOM_TYPES:
+                raise InputError(self.where, f"--odom-topic {odom.topic} has type {odom.msgtype}, expected one of "
+                                             f"{', '.join(ODOM_TYPES)}")
+            if truth is not None and odom.topic == truth.topic:
+                raise InputError(self.where, f"--odom-topic {odom.topic} is also the truth topic")
+            self.reasons.append(f"wheel odometry {odom.topic}: given by --odom-topic")
+            return odom, []
+        cands = [s for s in self.nonempty if s.msgtype in ODOM_TYPES and (truth is None or s.topic != truth.topic)]
+        if cands:
+            self.reasons.append("wheel odometry candidate(s) " + ", ".join(c.topic for c in cands)
+                                + ": the one not taken as the truth (with a twist that moves)")
+        return None, cands
 
 
 def select_topics(stats: list[TopicStat], where: str, *, imu_topic=None, gnss_topic=None, truth_topic=None,
-                  gnss_from_truth: bool = False, mappings: dict | None = None) -> Selection:
-    """Pick the IMU, GNSS and truth topics.
+                  gnss_from_truth: bool = False, mappings: dict | None = None, odom_topic=None) -> Selection:
+    """Pick the IMU, GNSS, truth and wheel-odometry topics.
 
     Rules: IMU = the only ``Imu`` topic, or the highest-rate one if at least 1.5x the rate of
     the next; GNSS = the only fix topic (NavSatFix or a mapped custom type) left after the truth;
-    truth = the given topic, else the only Odometry/Pose topic, else the only fix topic left
-    beside the GNSS when ``gnss_topic`` was given. With ``gnss_from_truth`` the single fix topic
-    is the truth. Anything else raises :class:`InputError` listing the candidates and the flag.
+    truth = the given topic, else candidates (every Odometry/Pose topic and every fix topic beside
+    the GNSS) that the loader accepts only when geo-referenced and agreeing with the fixes. With
+    ``gnss_from_truth`` the single fix topic is the truth. Wheel odometry = the given topic, else
+    the Odometry / TwistStamped candidates (the loader keeps the one not taken as the truth).
+    Anything else raises :class:`InputError` listing the candidates and the flag.
 
     Parameters
     ----------
@@ -198,8 +236,9 @@ def select_topics(stats: list[TopicStat], where: str, *, imu_topic=None, gnss_to
     fixes = [s for s in pick.nonempty if pick.is_fix(s) and (truth is None or s.topic != truth.topic)]
     if gnss_from_truth:
         truth, truth_kind = pick.truth_for_gnss(truth, truth_kind, fixes, gnss_topic)
-        return Selection(imu, None, truth, truth_kind, pick.reasons)
+        odom, odoms = pick.odometry(odom_topic, truth)
+        return Selection(imu, None, truth, truth_kind, pick.reasons, [], odom, odoms)
     gnss = pick.gnss(gnss_topic, fixes, truth)
-    if truth is None:
-        truth, truth_kind = pick.default_truth(fixes, gnss, gnss_topic)
-    return Selection(imu, gnss, truth, truth_kind, pick.reasons)
+    cands = pick.truth_candidates(fixes, gnss) if truth is None else []
+    odom, odoms = pick.odometry(odom_topic, truth)
+    return Selection(imu, gnss, truth, truth_kind, pick.reasons, cands, odom, odoms)

@@ -40,6 +40,7 @@ from .bag_streams import (
     imu_messages,
     odometry_messages,
     tf_static_messages,
+    wheel_odometry_messages,
 )
 
 KINDS = ("ros1-rooad", "ros2-sqlite3", "ros2-mcap", "mcap")
@@ -81,6 +82,13 @@ class BagOptions:
         Swap the stamps of a few neighbouring IMU messages (out-of-order test data).
     fix_status : int or array of int
         NavSatStatus.status of the GNSS fixes (-1 NO_FIX, 0 FIX, ...); NavSatFix kinds only.
+    truth_frame_id : str
+        ``header.frame_id`` of an ``"odometry"`` truth (default ``map``; a test may say ``odom``).
+    truth_offset_enu_m : (e, n, u)
+        Shift of an ``"odometry"`` truth's positions [m] (a frame whose origin is not the first fix).
+    odom_topic : str, optional
+        Write ``run.odometry`` on this topic as a drive controller does: ``nav_msgs/Odometry`` in
+        the local ``odom`` frame (:func:`gnssacc.sources.bag_streams.wheel_odometry_messages`).
     """
 
     imu_topic: str | None = None
@@ -98,6 +106,9 @@ class BagOptions:
     receive_delay_s: float = 0.0
     shuffle_receive: bool = False
     fix_status: object = 0
+    truth_frame_id: str = "map"
+    truth_offset_enu_m: tuple = (0.0, 0.0, 0.0)
+    odom_topic: str | None = None
 
 
 def write_bag(run: RecordedRun, path, kind: str = "ros2-sqlite3", options: BagOptions | None = None,
@@ -132,6 +143,8 @@ def write_bag(run: RecordedRun, path, kind: str = "ros2-sqlite3", options: BagOp
         raise InputError(str(path), "exists already; write_bag does not overwrite")
     if opts.truth_topic and run.truth is None:
         raise InputError(str(path), "truth_topic given but the run has no truth")
+    if opts.odom_topic and run.odometry is None:
+        raise InputError(str(path), "odom_topic given but the run has no wheel odometry")
     ty = MessageTypes(kind == "ros1-rooad")
     writer, target = _open_writer(path, kind)
     try:
@@ -181,11 +194,17 @@ def _topics(ty: MessageTypes, run: RecordedRun, opts: BagOptions):
                                                          opts, opts.fix_status)
     if opts.truth_topic and opts.truth_type == "odometry":
         origin = LocalTangentFrame(g.lat[0], g.lon[0], g.h[0]) if len(g) else run.origin
-        yield "truth", opts.truth_topic, ODOMETRY_TYPE, odometry_messages(ty, run, origin, opts)
+        if np.any(opts.truth_offset_enu_m):   # the frame's origin elsewhere: positions shifted by -offset
+            e, n, u = opts.truth_offset_enu_m
+            origin = LocalTangentFrame(*origin.to_llh(np.array([-n, -e, u], float)))
+        yield "truth", opts.truth_topic, ODOMETRY_TYPE, odometry_messages(ty, run, origin, opts,
+                                                                          frame_id=opts.truth_frame_id)
     elif opts.truth_topic:
         sig = np.tile(TRUTH_FIX_SIGMA_M, (len(tr.t), 1))
         yield "truth", opts.truth_topic, fix_type, fix_messages(ty, "truth", fix_type, tr.t, tr.lat, tr.lon, tr.h,
                                                                 sig, opts)
+    if opts.odom_topic:
+        yield "odom", opts.odom_topic, ODOMETRY_TYPE, wheel_odometry_messages(ty, run, opts)
     if opts.imu_mount_rpy_deg is not None:
         yield "tf", "/tf_static", TF_TYPE, tf_static_messages(ty, run, opts)
     if opts.extra_image_topic_bytes > 0:

@@ -38,6 +38,16 @@ def apply_mounting(imu: ImuData, cfg: RunConfig) -> ImuData:
         the GNSS clock [s].
     """
     R_bi = cfg.R_bi
+    offset_s = configured_time_offset_s(cfg)
+    # Row vectors: x_b^T = x_imu^T R_bi^T.
+    return ImuData(np.asarray(imu.t, float) + offset_s,
+                   np.asarray(imu.f_b, float) @ R_bi.T,
+                   np.asarray(imu.omega_ib_b, float) @ R_bi.T)
+
+
+def configured_time_offset_s(cfg: RunConfig) -> float:
+    """``[mounting] imu_time_offset_s`` [s] as a number (``"auto"``: 0 here, measured later); the
+    IMU's time stamps and those on its clock (wheel odometry) are shifted by it."""
     value = cfg["mounting"]["imu_time_offset_s"]
     try:
         offset_s = 0.0 if value == "auto" else float(value)
@@ -45,10 +55,7 @@ def apply_mounting(imu: ImuData, cfg: RunConfig) -> ImuData:
         raise InputError("config", '[mounting] imu_time_offset_s must be a number of seconds or "auto"') from None
     if not np.isfinite(offset_s):
         raise InputError("config", "[mounting] imu_time_offset_s must be finite")
-    # Row vectors: x_b^T = x_imu^T R_bi^T.
-    return ImuData(np.asarray(imu.t, float) + offset_s,
-                   np.asarray(imu.f_b, float) @ R_bi.T,
-                   np.asarray(imu.omega_ib_b, float) @ R_bi.T)
+    return offset_s
 
 
 def with_noisy_fixes(run: RecordedRun, truth: Truth, noise: str, seed: int) -> RecordedRun:
@@ -91,6 +98,34 @@ def check_degrees(lat_deg: np.ndarray, lon_deg: np.ndarray, t: np.ndarray, where
             k = int(bad[0])
             raise InputError(where, f"{what} {name} out of range: {values[k]:.6g} deg at t = {t[k]:.6f} s "
                                     f"(|{name}| must be <= {limit:g} deg); {bad.size} such row(s)")
+
+
+def text_file_lines(path, kind: str) -> list[str]:
+    """The lines of a small text file (a GNSS log), line ends stripped.
+
+    Raises
+    ------
+    InputError
+        Missing file, a directory, or a line that is not text (not UTF-8), naming its number and
+        ``kind`` (e.g. "an RTKLIB .pos file").
+    """
+    where = str(path)
+    try:
+        raw = Path(path).read_bytes()
+    except FileNotFoundError:
+        raise InputError(where, "file not found") from None
+    except IsADirectoryError:
+        raise InputError(where, f"is a directory, expected {kind}") from None
+    if raw.startswith(b"\xef\xbb\xbf"):
+        raw = raw[3:]
+    lines = raw.splitlines()
+    out = []
+    for n, line in enumerate(lines, start=1):
+        try:
+            out.append(line.decode("utf-8"))
+        except UnicodeDecodeError:
+            raise InputError(where, f"line {n} is not text (bytes that are not UTF-8): expected {kind}") from None
+    return out
 
 
 #: Data lines parsed at once by :func:`read_table`: the text of one block is held at a time, so

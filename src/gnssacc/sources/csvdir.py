@@ -7,9 +7,21 @@ A run directory holds
     [rad/s], in the IMU axes, Front-Right-Down unless the loader is told ``imu_frame="flu"``
     (Front-Left-Up; converted by negating y and z). ``[mounting]`` in the config then rotates
     the IMU axes into the body frame and shifts the IMU time stamps onto the GNSS clock.
-``gnss.csv`` (required)
-    Columns ``t, lat_deg, lon_deg, h_m`` and optionally ``sn, se, sd``: the 1-sigma north, east,
-    down position uncertainty [m] (all three or none; without them ``gnss.default_sigma_m``).
+``gnss.csv``, or ``gnss.pos`` or ``gnss.nmea`` (exactly one of them)
+    ``gnss.csv``: columns ``t, lat_deg, lon_deg, h_m`` and optionally ``sn, se, sd``: the 1-sigma
+    north, east, down position uncertainty [m] (all three or none; without them
+    ``gnss.default_sigma_m``), ``rho_ne, rho_nd, rho_ed``: the correlations of those errors
+    (with the sigmas), and ``quality``: the fix quality code (1 fix, 2 float, 3 sbas, 4 dgps,
+    5 single, 6 ppp, 7 estimated, 0 unknown). ``gnss.pos``: an RTKLIB solution file
+    (:mod:`gnssacc.sources.rtklib`); ``gnss.nmea``: an NMEA 0183 log (:mod:`gnssacc.sources.nmea`):
+    their times are absolute (GPST, UTC), so ``imu.csv`` must then be stamped in UNIX (UTC) or GPS
+    seconds (:mod:`gnssacc.sources.gnssfile`).
+``odom.csv`` (optional)
+    Wheel odometry: columns ``t, v_forward`` and optionally ``yaw_rate``, ``sigma_v``,
+    ``sigma_yaw_rate``: time [s] on the IMU's clock (shifted with it by ``[mounting]
+    imu_time_offset_s``), the vehicle's forward speed [m/s] (negative reversing), its turn rate
+    about the vehicle's down axis [rad/s] (positive turning right, clockwise seen from above:
+    the negative of ROS's ``angular.z``), and their per-sample 1-sigma.
 ``truth.csv`` (optional)
     Columns ``t, lat_deg, lon_deg, h_m``, optionally ``vn, ve, vd`` [m/s] and
     ``roll_deg, pitch_deg, yaw_deg`` (each group all or none). It may span less than the run:
@@ -24,7 +36,7 @@ A run directory holds
 
 In every CSV file header names are case-insensitive, column order is free, extra columns are
 ignored, and lines starting with ``#`` are comments. All times are seconds; GNSS, truth and
-init times are on the GNSS clock.
+init times are on the GNSS clock, odometry times on the IMU's.
 """
 from __future__ import annotations
 
@@ -38,13 +50,26 @@ from ..core.config import DEG, RunConfig
 from ..core.earth import LocalTangentFrame
 from ..core.errors import InputError
 from ..core.memory import release_free_memory
-from ..core.recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth, check_increasing
+from ..core.recording import ImuData, InitialState, RecordedRun, Truth, WheelOdometry, check_increasing
 from ..core.rotations import flu_to_frd
-from .common import apply_mounting, check_degrees, read_table
+from .common import apply_mounting, check_degrees, configured_time_offset_s, read_table
+from .gnssfile import (
+    CORR_COLUMNS,
+    POS_COLUMNS,
+    QUALITY_COLUMN,
+    SIGMA_COLUMNS,
+    apply_quality_policy,
+    load_gnss_file,
+    optional_group,
+    read_gnss_csv,
+    read_positions,
+    write_gnss_file,
+)
 
 IMU_COLUMNS = ("t", "ax", "ay", "az", "gx", "gy", "gz")
-POS_COLUMNS = ("t", "lat_deg", "lon_deg", "h_m")
-SIGMA_COLUMNS = ("sn", "se", "sd")
+GNSS_FILES = ("gnss.csv", "gnss.pos", "gnss.nmea")
+ODOM_COLUMNS = ("t", "v_forward")
+ODOM_OPTIONAL = ("yaw_rate", "sigma_v", "sigma_yaw_rate")
 VEL_COLUMNS = ("vn", "ve", "vd")
 RPY_COLUMNS = ("roll_deg", "pitch_deg", "yaw_deg")
 INIT_KEYS = ("t", "lat_deg", "lon_deg", "h_m", "vn", "ve", "vd", "roll_deg", "pitch_deg", "yaw_deg")
@@ -100,28 +125,73 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) 
         raise InputError(where, "run directory not found")
     if not root.is_dir():
         raise InputError(where, "not a directory: a CSV run is a directory holding imu.csv and gnss.csv")
-    for name in ("imu.csv", "gnss.csv"):
-        if (root / name).is_dir():
-            raise InputError(str(root / name), "is a directory, expected a CSV file")
-        if not (root / name).is_file():
-            raise InputError(str(root / name), f"file not found: a CSV run directory needs {name}")
+    if (root / "imu.csv").is_dir():
+        raise InputError(str(root / "imu.csv"), "is a directory, expected a CSV file")
+    if not (root / "imu.csv").is_file():
+        raise InputError(str(root / "imu.csv"), "file not found: a CSV run directory needs imu.csv")
+    gnss_file = _gnss_file(root)
     max_bad = float(cfg["data"]["max_bad_fraction"])
-    gnss = _read_gnss(root / "gnss.csv", cfg.default_sigma_ned, max_bad)
     imu = _read_imu(root / "imu.csv", frame, max_bad)
-    # Stamps in ms/us/ns would never meet the fixes: found (and rescaled, or named) before the
-    # overlap check, which could only say "different clocks?".
-    if time_units is not None:
-        imu = time_units(imu, gnss.t, str(root / "imu.csv"), cfg)
-    imu = apply_mounting(imu, cfg)
+    meta = {"source": "csv", "imu_frame": frame}
+    if gnss_file.name == "gnss.csv":
+        gnss, _ = apply_quality_policy(read_gnss_csv(gnss_file, cfg.default_sigma_ned, max_bad),
+                                       cfg["gnss"]["quality"], str(gnss_file))
+        # Stamps in ms/us/ns would never meet the fixes: found (and rescaled, or named) before the
+        # overlap check, which could only say "different clocks?".
+        if time_units is not None:
+            imu = time_units(imu, gnss.t, str(root / "imu.csv"), cfg)
+        imu = apply_mounting(imu, cfg)
+    else:   # absolute fix times are put on the IMU's clock, which must be absolute too
+        imu = apply_mounting(imu, cfg)
+        gnss, read = load_gnss_file(gnss_file, cfg, imu.t)
+        meta.update(read)
     truth = _read_truth(root / "truth.csv", max_bad) if (root / "truth.csv").exists() else None
     init = _read_init(root / "init.json", gnss.sigma_ned[0]) if (root / "init.json").exists() else None
     if init is not None:
         check_init_time(init.t, imu.t[0], imu.t[-1], str(root / "init.json"))
+    odometry = None
+    if (root / "odom.csv").exists():
+        odometry = read_odometry_csv(root / "odom.csv", max_bad).shifted(configured_time_offset_s(cfg))
     run = RecordedRun(name=root.resolve().name, where=where, imu=imu, gnss=gnss,
                       origin=LocalTangentFrame(gnss.lat[0], gnss.lon[0], gnss.h[0]),
-                      truth=truth, init=init, meta={"source": "csv", "imu_frame": frame})
+                      truth=truth, init=init, meta=meta, odometry=odometry)
     release_free_memory()   # the parser's blocks
     return run.validate()
+
+
+def _gnss_file(root: Path) -> Path:
+    """The one GNSS file of a run directory (:data:`GNSS_FILES`)."""
+    found = [root / n for n in GNSS_FILES if (root / n).exists()]
+    if not found:
+        raise InputError(str(root / "gnss.csv"), "file not found: a CSV run directory needs gnss.csv (or gnss.pos, "
+                                                 "an RTKLIB solution, or gnss.nmea, an NMEA log)")
+    if len(found) > 1:
+        raise InputError(str(root), f"holds {' and '.join(p.name for p in found)}: keep one GNSS file (or choose "
+                                    f"with --gnss FILE)")
+    if found[0].is_dir():
+        raise InputError(str(found[0]), "is a directory, expected a file of GNSS fixes")
+    return found[0]
+
+
+def read_odometry_csv(path: Path, max_bad: float) -> WheelOdometry:
+    """``odom.csv`` (module docstring) -> :class:`WheelOdometry` on the IMU's clock as written."""
+    where = str(path)
+    tab = read_table(path, ODOM_COLUMNS, ODOM_OPTIONAL, max_bad)
+    if len(tab["t"]) < 2:
+        raise InputError(where, f"{len(tab['t'])} data row(s): need at least two odometry samples")
+    check_increasing(tab["t"], where, "odometry")
+
+    def column(name):
+        return tab[name].copy() if name in tab else None
+
+    for name in ("sigma_v", "sigma_yaw_rate"):
+        if name in tab and np.any(tab[name] <= 0):
+            k = int(np.flatnonzero(tab[name] <= 0)[0])
+            raise InputError(where, f"{name} must be positive; not so at t = {tab['t'][k]:.6f} s")
+    if "sigma_yaw_rate" in tab and "yaw_rate" not in tab:
+        raise InputError(where, "sigma_yaw_rate needs the yaw_rate column")
+    return WheelOdometry(tab["t"].copy(), tab["v_forward"].copy(), column("yaw_rate"), column("sigma_v"),
+                         column("sigma_yaw_rate"), frame=path.name)
 
 
 def check_init_time(t: float, t_start: float, t_end: float, where: str) -> None:
@@ -139,17 +209,6 @@ def _columns(tab: dict, names) -> np.ndarray:
     return np.column_stack([tab[c] for c in names])
 
 
-def _optional_group(tab: dict, names, where: str) -> np.ndarray | None:
-    """The (rows, 3) block of an all-or-none column group, or None when absent."""
-    found = [c for c in names if c in tab]
-    if not found:
-        return None
-    if len(found) != len(names):
-        raise InputError(where, f"give all of the columns {', '.join(names)} or none (found only "
-                                f"{', '.join(found)})")
-    return _columns(tab, names)
-
-
 def _read_imu(path: Path, frame: str, max_bad: float) -> ImuData:
     """imu.csv -> ImuData in FRD-labelled IMU axes on the IMU clock (mounting not yet applied)."""
     tab = read_table(path, IMU_COLUMNS, (), max_bad)
@@ -164,36 +223,12 @@ def _read_imu(path: Path, frame: str, max_bad: float) -> ImuData:
     return ImuData(tab["t"].copy(), f_imu, omega_imu)
 
 
-def _read_positions(path: Path, what: str, optional, max_bad: float) -> dict:
-    """Common part of gnss.csv and truth.csv: time order and degree ranges."""
-    tab = read_table(path, POS_COLUMNS, optional, max_bad)
-    check_increasing(tab["t"], str(path), what)
-    check_degrees(tab["lat_deg"], tab["lon_deg"], tab["t"], str(path), what)
-    return tab
-
-
-def _read_gnss(path: Path, default_sigma_ned: np.ndarray, max_bad: float) -> GnssFixes:
-    tab = _read_positions(path, "GNSS", SIGMA_COLUMNS, max_bad)
-    n = len(tab["t"])
-    if n == 0:
-        raise InputError(str(path), "no GNSS fix row at all: at least one fix is needed to initialise")
-    sigma_ned = _optional_group(tab, SIGMA_COLUMNS, str(path))
-    if sigma_ned is None:
-        sigma_ned = np.tile(default_sigma_ned, (n, 1))
-    bad = np.flatnonzero(np.any(sigma_ned <= 0, axis=1))
-    if bad.size:
-        k = int(bad[0])
-        raise InputError(str(path), f"sigmas sn, se, sd must be positive metres; not so at t = {tab['t'][k]:.6f} s "
-                                    f"({bad.size} row(s))")
-    return GnssFixes(tab["t"], tab["lat_deg"] * DEG, tab["lon_deg"] * DEG, tab["h_m"], sigma_ned)
-
-
 def _read_truth(path: Path, max_bad: float) -> Truth:
-    tab = _read_positions(path, "truth", VEL_COLUMNS + RPY_COLUMNS, max_bad)
+    tab = read_positions(path, "truth", VEL_COLUMNS + RPY_COLUMNS, max_bad)
     if len(tab["t"]) == 0:
         raise InputError(str(path), "no data rows (delete the file if there is no truth)")
-    v_n = _optional_group(tab, VEL_COLUMNS, str(path))
-    rpy_deg = _optional_group(tab, RPY_COLUMNS, str(path))
+    v_n = optional_group(tab, VEL_COLUMNS, str(path))
+    rpy_deg = optional_group(tab, RPY_COLUMNS, str(path))
     return Truth(tab["t"], tab["lat_deg"] * DEG, tab["lon_deg"] * DEG, tab["h_m"], v_n,
                  None if rpy_deg is None else rpy_deg * DEG)
 
@@ -262,8 +297,8 @@ def _write_table(path: Path, names, columns, comment: str) -> None:
     np.savetxt(path, table, fmt="%.17g", delimiter=",", header=f"{comment}\n" + ",".join(names), comments="")
 
 
-def write_csv_run(run: RecordedRun, path) -> Path:
-    """Write a run as a CSV run directory (imu, gnss, truth and init.json when present).
+def write_csv_run(run: RecordedRun, path, gnss_format: str = "csv") -> Path:
+    """Write a run as a CSV run directory (imu, gnss, truth, odom.csv and init.json when present).
 
     The IMU samples are written as they are held, i.e. in the body frame (FRD) on the GNSS
     clock; load the directory with an identity mounting and zero time offset to get the same
@@ -274,6 +309,10 @@ def write_csv_run(run: RecordedRun, path) -> Path:
     run : RecordedRun
     path : str or Path
         The directory; created if needed, existing files of the format are overwritten.
+    gnss_format : {"csv", "pos", "nmea"}
+        The fixes as ``gnss.csv`` (full precision), or as ``gnss.pos`` (RTKLIB, GPST) or
+        ``gnss.nmea`` (NMEA 0183) in those formats' precision; the latter two need the run's
+        times in UNIX seconds.
 
     Returns
     -------
@@ -286,17 +325,44 @@ def write_csv_run(run: RecordedRun, path) -> Path:
     imu = run.imu
     _write_table(root / "imu.csv", IMU_COLUMNS, [imu.t, *imu.f_b.T, *imu.omega_ib_b.T],
                  f"{src}\n# body frame FRD; t [s], specific force [m/s^2], angular rate [rad/s]")
-    g = run.gnss
-    _write_table(root / "gnss.csv", POS_COLUMNS + SIGMA_COLUMNS,
-                 [g.t, np.degrees(g.lat), np.degrees(g.lon), g.h, *g.sigma_ned.T],
-                 f"{src}\n# t [s], lat/lon [deg], h [m] ellipsoidal, 1-sigma N/E/D [m]")
-    for stale in ("truth.csv", "init.json"):
+    for stale in ("truth.csv", "init.json", "odom.csv") + GNSS_FILES:
         (root / stale).unlink(missing_ok=True)
+    if gnss_format == "csv":
+        write_gnss_csv(root / "gnss.csv", run.gnss, src)
+    else:
+        write_gnss_file(root / f"gnss.{gnss_format}", run.gnss, gnss_format, truth=run.truth)
+    if run.odometry is not None:
+        write_odometry_csv(root / "odom.csv", run.odometry, src)
     if run.truth is not None:
         _write_truth(root / "truth.csv", run.truth, src)
     if run.init is not None:
         _write_init(root / "init.json", run.init)
     return root
+
+
+def write_gnss_csv(path: Path, g, src: str = "# gnssacc GNSS fixes") -> None:
+    """Fixes as ``gnss.csv`` (with the correlations and quality codes when they have them)."""
+    names = list(POS_COLUMNS + SIGMA_COLUMNS)
+    cols = [g.t, np.degrees(g.lat), np.degrees(g.lon), g.h, *g.sigma_ned.T]
+    if g.corr_ned is not None:
+        names += CORR_COLUMNS
+        cols += list(np.asarray(g.corr_ned).T)
+    if g.quality is not None:
+        names.append(QUALITY_COLUMN)
+        cols.append(g.quality)
+    _write_table(path, names, cols, f"{src}\n# t [s], lat/lon [deg], h [m] ellipsoidal, 1-sigma N/E/D [m], "
+                                    f"correlations, quality code (1 fix .. 5 single)")
+
+
+def write_odometry_csv(path: Path, odo: WheelOdometry, src: str = "# gnssacc wheel odometry") -> None:
+    """Wheel odometry as ``odom.csv`` (the columns it has)."""
+    names, cols = list(ODOM_COLUMNS), [odo.t, odo.v_forward]
+    for name in ODOM_OPTIONAL:
+        if getattr(odo, name) is not None:
+            names.append(name)
+            cols.append(getattr(odo, name))
+    _write_table(path, names, cols, f"{src}\n# t [s] on the IMU clock, forward speed [m/s], yaw rate about the "
+                                    f"vehicle's down axis [rad/s] (positive turning right), 1-sigmas")
 
 
 def _write_truth(path: Path, tr: Truth, src: str) -> None:

@@ -34,6 +34,9 @@ PROFILES = {
     "none": {"gm_sigma": np.zeros(3), "tau_s": 60.0, "white_sigma": np.zeros(3)},
 }
 
+#: The fix quality a receiver of each profile would state (:data:`gnssacc.core.recording.FIX_QUALITY`).
+PROFILE_QUALITY = {"white": 5, "gm": 5, "precise": 4, "rtk": 1, "none": 1}
+
 
 def noise_ned(t: np.ndarray, profile: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Draw a noise sequence for fix times ``t``.

@@ -7,7 +7,12 @@ Topics
     IMU: ``sensor_msgs/msg/Imu``. GNSS: ``sensor_msgs/msg/NavSatFix`` or a custom fix type with
     a field mapping (:data:`FIX_MAPPINGS`, shipped for the ROOAD ``ubxtranslator/hpposllh``).
     Truth (optional): ``nav_msgs/msg/Odometry``, ``geometry_msgs/msg/PoseStamped``,
-    ``geometry_msgs/msg/PoseWithCovarianceStamped`` or a second fix topic (e.g. an RTK receiver).
+    ``geometry_msgs/msg/PoseWithCovarianceStamped`` or a second fix topic (e.g. an RTK receiver),
+    taken only when geo-referenced and agreeing with the fixes (:mod:`.bag_tables`,
+    :mod:`.truth_check`): a drive controller's Odometry in its ``odom`` frame is never the truth.
+    Wheel odometry (optional): the ``nav_msgs/msg/Odometry`` or ``geometry_msgs/msg/TwistStamped``
+    topic left after the truth (``linear.x`` forward, ``-angular.z`` the yaw rate about the body's
+    down axis), as ``run.odometry``, on the IMU's clock.
     Topics are picked by type and rate when unambiguous (see :func:`select_topics`); otherwise
     an :class:`~gnssacc.core.errors.InputError` lists the candidates and the argument that picks one.
 
@@ -16,7 +21,7 @@ Frames (ROS REP-103 -> gnssacc)
     the ``[mounting]`` rotation. Pose positions and orientations are in a local East-North-Up
     frame: ``(e, n, u) -> (n, e, -u)`` and ``R_nb = T_ned_enu @ R_enu_flu @ T_flu_frd``.
     ASSUMPTION for pose truth: the pose frame is ENU with its origin at the first GNSS fix,
-    unless ``truth_origin_llh_deg`` says otherwise.
+    unless ``truth_origin_llh_deg`` says otherwise; the agreement check tests it.
 
 Times
     Header stamps by default (the bag receive time for header-less types such as hpposllh);
@@ -44,7 +49,7 @@ from ..core.config import DEG, RunConfig
 from ..core.earth import LocalTangentFrame
 from ..core.errors import InputError, warn_data
 from ..core.memory import release_free_memory
-from ..core.recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth, drop_nonfinite
+from ..core.recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth
 from ..core.rotations import FLU_FRD, dcm_to_euler, quaternion_to_dcm, ros_to_R_nb
 from .bag_decode import (
     FIX_MAPPINGS,
@@ -58,9 +63,10 @@ from .bag_decode import (
     tf_mounting,
 )
 from .bag_files import MAGIC, STORAGE_SUFFIXES, check_bag_path, open_reader, storage_files
-from .bag_times import find_gaps, sorted_unique, subsample
+from .bag_tables import Context, choose, clean_rows, fix_table, fixes_of, pose_origin, pose_truth
+from .bag_times import find_gaps, subsample
 from .bag_topics import Selection, TopicStat, select_topics, survey
-from .common import apply_mounting, check_degrees, one_line, with_noisy_fixes
+from .common import apply_mounting, configured_time_offset_s, one_line, with_noisy_fixes
 
 # The bag source's public names, wherever they are defined.
 __all__ = ["FIX_MAPPINGS", "MAGIC", "STORAGE_SUFFIXES", "Selection", "TopicStat", "check_bag_path",
@@ -77,7 +83,8 @@ enu_flu_to_ned_frd = ros_to_R_nb  # name kept for callers of this module
 def load_bag_run(path, cfg: RunConfig, *, imu_topic: str | None = None, gnss_topic: str | None = None,
                  truth_topic: str | None = None, time_source: str = "header",
                  gnss_from_truth_hz: float | None = None, noise: str | None = None, seed: int = 0,
-                 fix_mappings: dict | None = None, truth_origin_llh_deg=None) -> RecordedRun:
+                 fix_mappings: dict | None = None, truth_origin_llh_deg=None,
+                 odom_topic: str | None = None) -> RecordedRun:
     """Load a ROS 1 / ROS 2 bag as a :class:`RecordedRun`.
 
     Parameters
@@ -86,8 +93,9 @@ def load_bag_run(path, cfg: RunConfig, *, imu_topic: str | None = None, gnss_top
         A ``.bag`` file, a ROS 2 bag directory (sqlite3 or MCAP storage) or a bare ``.mcap``.
     cfg : RunConfig
         Uses ``[mounting]``, ``gnss.default_sigma_m``, ``data.max_bad_fraction`` and ``[bag] fix_mappings``.
-    imu_topic, gnss_topic, truth_topic : str, optional
-        Topic choices; by default picked by :func:`select_topics`.
+    imu_topic, gnss_topic, truth_topic, odom_topic : str, optional
+        Topic choices; by default picked by :func:`select_topics` (the truth and the wheel
+        odometry then decided from the data: :func:`gnssacc.sources.bag_tables.choose`).
     time_source : {"header", "receive"}
         Header stamps (receive time for header-less types) or bag receive times.
     gnss_from_truth_hz : float, optional
@@ -117,28 +125,45 @@ def load_bag_run(path, cfg: RunConfig, *, imu_topic: str | None = None, gnss_top
     max_bad = float(cfg["data"]["max_bad_fraction"])
     meta: dict = {"source": "bag", "time_source": time_source}
     sel, dec, tf = _read(path, cfg, decoder, meta, imu_topic=imu_topic, gnss_topic=gnss_topic,
-                         truth_topic=truth_topic, gnss_from_truth=gnss_from_truth_hz is not None)
+                         truth_topic=truth_topic, gnss_from_truth=gnss_from_truth_hz is not None, odom_topic=odom_topic)
 
     itab, imu, R_bi_total = _imu(dec.cols[sel.imu.topic], tf, cfg, where, max_bad, meta)
     truth = None
     if sel.truth is not None and sel.truth_kind == "fix":
-        rows = _fix_table(dec.cols[sel.truth.topic], where, "truth", max_bad, meta, "truth")
+        rows = fix_table(dec.cols[sel.truth.topic], where, "truth", max_bad, meta, "truth")
         truth = Truth(rows[:, 0], rows[:, 1] * DEG, rows[:, 2] * DEG, rows[:, 3])
     if sel.gnss is not None:
-        g = _fix_table(dec.cols[sel.gnss.topic], where, "GNSS", max_bad, meta, "gnss")
-        gnss = GnssFixes(g[:, 0], g[:, 1] * DEG, g[:, 2] * DEG, g[:, 3], g[:, 4:7])
+        gnss = fixes_of(fix_table(dec.cols[sel.gnss.topic], where, "GNSS", max_bad, meta, "gnss"))
         origin = LocalTangentFrame(gnss.lat[0], gnss.lon[0], gnss.h[0])
     else:
         gnss, origin = _gnss_from_truth(truth, imu, where, float(gnss_from_truth_hz), noise or "white", seed, meta)
     meta["gaps"]["gnss"] = find_gaps(gnss.t, float(cfg["quality"]["gap_factor"]))
     if sel.truth is not None and sel.truth_kind == "pose":
-        truth = _pose_truth(dec.cols[sel.truth.topic], origin, truth_origin_llh_deg, where, max_bad, meta)
+        porigin, meta["truth_origin"] = pose_origin(origin, truth_origin_llh_deg)
+        truth = pose_truth(dec.cols[sel.truth.topic], porigin, where, max_bad, meta)
+    chosen = choose(sel, dec, Context(where, gnss, origin, truth_origin_llh_deg, float(np.linalg.norm(cfg.lever_arm_b)),
+                                      max_bad, meta), truth)
+    _record_choice(chosen, sel, meta, truth_origin_llh_deg, origin)
+    odometry = None if chosen.odometry is None else chosen.odometry.shifted(configured_time_offset_s(cfg))
     good_q = np.isfinite(itab[:, 7:11]).all(axis=1)
     init = _initial_state(itab, good_q, imu, gnss, R_bi_total, sel.imu.topic) if good_q.any() else None
     run = RecordedRun(name=path.stem if path.is_file() else path.name, where=where, imu=imu, gnss=gnss,
-                      origin=origin, truth=truth, init=init, meta=meta)
+                      origin=origin, truth=chosen.truth, init=init, meta=meta, odometry=odometry)
     release_free_memory()   # the decoded message columns
     return run.validate()
+
+
+def _record_choice(chosen, sel: Selection, meta: dict, truth_origin_llh_deg, origin) -> None:
+    """The truth and odometry decided, their reasons and checks, into ``meta``."""
+    meta["topics"].update(truth=chosen.truth_topic, odometry=chosen.odometry_topic)
+    meta["selection"] = list(sel.reasons) + list(chosen.reasons)
+    if chosen.checks:
+        meta["truth_checks"] = chosen.checks
+    if chosen.truth_topic is not None and sel.truth_kind != "fix" and "truth_origin" not in meta \
+            and any(s.topic == chosen.truth_topic and k == "pose" for s, k in sel.truth_candidates):
+        meta["truth_origin"] = pose_origin(origin, truth_origin_llh_deg)[1]
+    if chosen.odometry is not None:
+        meta["odometry_frame"] = chosen.odometry.frame
 
 
 def _check_options(where: str, time_source: str, noise: str | None, gnss_from_truth_hz) -> None:
@@ -165,8 +190,7 @@ def _read(path: Path, cfg: RunConfig, decoder: RowDecoder, meta: dict, **choices
         meta["topics"] = {"imu": sel.imu.topic, "gnss": sel.gnss.topic if sel.gnss else None,
                           "truth": sel.truth.topic if sel.truth else None}
         meta["selection"] = sel.reasons
-        dec = decode_topics(reader, {s.topic: s.msgtype for s in (sel.imu, sel.gnss, sel.truth) if s is not None},
-                            decoder)
+        dec = decode_topics(reader, chosen_topics(sel), decoder)
         _check_damage(dec, where, meta)
         tf = None
         if not np.any(cfg.imu_to_body_rpy_deg):      # a configured mounting wins over /tf_static
@@ -177,6 +201,14 @@ def _read(path: Path, cfg: RunConfig, decoder: RowDecoder, meta: dict, **choices
     finally:
         reader.close()
     return sel, dec, tf
+
+
+def chosen_topics(sel: Selection, with_imu: bool = True) -> dict[str, str]:
+    """Topic -> type of every topic the selection needs decoded (the IMU, the GNSS, the truth and
+    its candidates, the odometry and its candidates)."""
+    stats = [sel.imu if with_imu else None, sel.gnss, sel.truth, sel.odom]
+    stats += [s for s, _ in sel.truth_candidates] + list(sel.odom_candidates)
+    return {s.topic: s.msgtype for s in stats if s is not None}
 
 
 def _check_damage(dec: Decoded, where: str, meta: dict) -> None:
@@ -190,20 +222,6 @@ def _check_damage(dec: Decoded, where: str, meta: dict) -> None:
     meta["damaged"] = dec.damaged
 
 
-def _clean_rows(col: Collector, n_needed: int, where: str, what: str, max_bad: float, meta: dict,
-                key: str) -> np.ndarray:
-    """The rows of ``col`` whose first ``n_needed`` columns are finite (the others dropped with a
-    warning, or an error above ``max_bad``), sorted by time without repeated stamps."""
-    tab = col.table()
-    if len(tab) == 0:
-        raise InputError(where, f"{what}: no messages")
-    keep = np.all(np.isfinite(tab[:, :n_needed]), axis=1)
-    if not keep.all():
-        drop_nonfinite(tab[:, :n_needed], where, what, max_bad)      # warns with the count, or raises
-        tab = tab[keep]
-    return sorted_unique(tab, where, what, meta, key)
-
-
 def _imu(col: Collector, tf, cfg: RunConfig, where: str, max_bad: float, meta: dict):
     """IMU rows -> (sorted rows, ImuData in body FRD, R_bi of the IMU axes incl. /tf_static).
 
@@ -211,7 +229,7 @@ def _imu(col: Collector, tf, cfg: RunConfig, where: str, max_bad: float, meta: d
     by ``[mounting]`` (:func:`~gnssacc.sources.common.apply_mounting`).
     """
     what = f"IMU topic {col.topic}"
-    itab = _clean_rows(col, 7, where, what, max_bad, meta, "imu")
+    itab = clean_rows(col, 7, where, what, max_bad, meta, "imu")
     if len(itab) < 2:
         raise InputError(where, f"{what}: {len(itab)} usable message(s), need at least two")
     f_imu = itab[:, 1:4] @ FLU_FRD          # FLU -> FRD (diagonal: same as T @ x per row)
@@ -231,29 +249,6 @@ def _imu(col: Collector, tf, cfg: RunConfig, where: str, max_bad: float, meta: d
     return itab, imu, R_bi_total
 
 
-def _fix_table(col: Collector, where: str, what: str, max_bad: float, meta: dict, key: str) -> np.ndarray:
-    """Fix rows (t [s], lat [deg], lon [deg], h [m], sigma NED [m]): counted, checked, sorted."""
-    label = f"{what} topic {col.topic}"
-    tab = col.table()
-    if col.skipped_no_fix:
-        if len(tab) == 0:
-            raise InputError(where, f"{label}: all {col.skipped_no_fix} messages are NO_FIX (status -1); no usable fix")
-        warn_data(where, f"{label}: skipped {col.skipped_no_fix} NO_FIX message(s)")
-    if col.zero_cov:
-        warn_data(where, f"{label}: {col.zero_cov} message(s) with an all-zero covariance; "
-                         f"used gnss.default_sigma_m instead")
-    meta.setdefault("fix_counts", {})[key] = {"messages": col.total, "no_fix": col.skipped_no_fix,
-                                              "zero_covariance": col.zero_cov}
-    if len(tab) == 0:
-        raise InputError(where, f"{label}: no messages")
-    tab = drop_nonfinite(tab, where, label, max_bad)
-    if len(tab) == 0:
-        raise InputError(where, f"{label}: no usable fix")
-    tab = sorted_unique(tab, where, label, meta, key)
-    check_degrees(tab[:, 1], tab[:, 2], tab[:, 0], where, label)
-    return tab
-
-
 def _gnss_from_truth(truth: Truth, imu: ImuData, where: str, rate_hz: float, noise: str, seed: int, meta: dict):
     """(fixes, origin): the truth subsampled at ``rate_hz`` [Hz] plus ``noise``; origin at the first truth point."""
     origin = LocalTangentFrame(truth.lat[0], truth.lon[0], truth.h[0])
@@ -263,23 +258,6 @@ def _gnss_from_truth(truth: Truth, imu: ImuData, where: str, rate_hz: float, noi
     gnss = with_noisy_fixes(holder, sub_truth, noise, seed).gnss
     meta.update(gnss_from_truth_hz=rate_hz, noise=noise, seed=seed)
     return gnss, origin
-
-
-def _pose_truth(col: Collector, origin: LocalTangentFrame, truth_origin_llh_deg, where: str, max_bad: float,
-                meta: dict) -> Truth:
-    """Truth from pose rows (NED about the pose frame's origin: ``truth_origin_llh_deg`` or ``origin``)."""
-    ptab = _clean_rows(col, 4, where, f"truth topic {col.topic}", max_bad, meta, "truth")
-    if truth_origin_llh_deg is not None:
-        lat0, lon0, h0 = (float(v) for v in truth_origin_llh_deg)
-        porigin = LocalTangentFrame(lat0 * DEG, lon0 * DEG, h0)
-        meta["truth_origin"] = f"given: {lat0}, {lon0} deg, {h0} m"
-    else:
-        porigin = origin
-        meta["truth_origin"] = "assumed: the pose frame is ENU with origin at the first GNSS fix"
-    lat, lon, h = porigin.to_llh(ptab[:, 1:4])
-    v_n = ptab[:, 4:7] if np.all(np.isfinite(ptab[:, 4:7])) else None
-    rpy = ptab[:, 7:10] if np.all(np.isfinite(ptab[:, 7:10])) else None
-    return Truth(ptab[:, 0], lat, lon, h, v_n, rpy)
 
 
 def _initial_state(itab: np.ndarray, good_q: np.ndarray, imu: ImuData, gnss: GnssFixes, R_bi: np.ndarray,
@@ -327,8 +305,10 @@ def _initial_state(itab: np.ndarray, good_q: np.ndarray, imu: ImuData, gnss: Gns
 
 
 
-def inspect_bag(path, *, imu_topic=None, gnss_topic=None, truth_topic=None, fix_mappings=None) -> str:
-    """A text summary of a bag: topics, types, counts, rates, time span, and the topics gnssacc would use."""
+def inspect_bag(path, *, imu_topic=None, gnss_topic=None, truth_topic=None, odom_topic=None,
+                fix_mappings=None) -> str:
+    """A text summary of a bag: topics, types, counts, rates, time span, the topics gnssacc would
+    use and why (the truth and wheel-odometry candidates decoded and decided as when loading)."""
     path = Path(path)
     where = str(path)
     reader = open_reader(path)
@@ -347,11 +327,56 @@ def inspect_bag(path, *, imu_topic=None, gnss_topic=None, truth_topic=None, fix_
     for s in stats:
         lines.append(f"  {s.topic:<{w}}  {s.msgtype:<{wt}}  {s.count:>8}  {s.rate_hz:>9.2f}")
     lines.append("")
+    mappings = merge_fix_mappings(fix_mappings)
     try:
         sel = select_topics(stats, where, imu_topic=imu_topic, gnss_topic=gnss_topic, truth_topic=truth_topic,
-                            mappings=merge_fix_mappings(fix_mappings))
+                            mappings=mappings, odom_topic=odom_topic)
         lines.append("gnssacc would use:")
         lines += [f"  {r}" for r in sel.reasons]
     except InputError as err:
         lines.append(f"gnssacc cannot pick the topics: {err.problem}")
+        return "\n".join(lines)
+    try:
+        lines += [f"  {r}" for r in _decide_candidates(path, sel, mappings)]
+    except InputError as err:
+        lines.append(f"  cannot decide the truth and odometry candidates: {err.problem}")
     return "\n".join(lines)
+
+
+def _decide_candidates(path: Path, sel: Selection, mappings: dict) -> list[str]:
+    """The truth / odometry decision of a selection (default configuration), as reason lines."""
+    import warnings
+
+    from ..core.config import load_config
+
+    if sel.gnss is None or not (sel.truth_candidates or sel.odom_candidates or sel.odom or sel.truth):
+        return []
+    cfg = load_config(None)
+    where = str(path)
+    decoder = RowDecoder(mappings, "header", cfg.default_sigma_ned, where)
+    reader = open_reader(path)
+    try:
+        dec = decode_topics(reader, chosen_topics(sel, with_imu=False), decoder)
+    finally:
+        reader.close()
+    max_bad = float(cfg["data"]["max_bad_fraction"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # the decisions are listed as lines here
+        gnss = fixes_of(fix_table(dec.cols[sel.gnss.topic], where, "GNSS", max_bad, {}, "gnss"))
+        origin = LocalTangentFrame(gnss.lat[0], gnss.lon[0], gnss.h[0])
+        given = None
+        if sel.truth is not None:
+            col = dec.cols[sel.truth.topic]
+            if sel.truth_kind == "fix":
+                rows = fix_table(col, where, "truth", max_bad, {}, "truth")
+                given = Truth(rows[:, 0], rows[:, 1] * DEG, rows[:, 2] * DEG, rows[:, 3])
+            else:
+                given = pose_truth(col, origin, where, max_bad, {})
+        chosen = choose(sel, dec, Context(where, gnss, origin, None, 0.0, max_bad, {}), given)
+    out = list(chosen.reasons)
+    for topic, v in chosen.checks.items():
+        if sel.truth is not None and topic == sel.truth.topic and not v["ok"]:
+            out.append(f"truth {topic} (given) disagrees: {v['why']}")
+    if chosen.odometry is None and not any("wheel odometry" in r for r in out):
+        out.append("no wheel odometry topic")
+    return out

@@ -51,7 +51,7 @@ from ..core.earth import LocalTangentFrame
 from ..core.errors import InputError
 from ..core.memory import release_free_memory
 from ..core.recording import GnssFixes, ImuData, InitialState, RecordedRun, SimTruth
-from .gnss_noise import PROFILES, fixes_from_truth
+from .gnss_noise import PROFILE_QUALITY, PROFILES, fixes_from_truth
 from .sim_imu_errors import (  # noqa: F401 (re-exported)
     GRADE_KEYS,
     IMU_EXTRA_ERRORS,
@@ -81,6 +81,8 @@ from .sim_path import (  # noqa: F401 (re-exported)
     sample_times,
     sweep_imu,
 )
+from .sim_odometry import KINDS as ODOMETRY_KINDS
+from .sim_odometry import odometry_kind, simulate_odometry
 from .sim_scenarios import SCENARIOS, Kinematics, Pulse, R_nb_batch, Scenario, make_scenario, reversing_spans  # noqa: F401 (re-exported)
 from .sim_true_bias import TrueBias  # noqa: F401 (re-exported)
 from .sim_vibration import EngineVibration, band_limited_columns, engine_vibration, road_scale, road_vibration  # noqa: F401
@@ -245,7 +247,7 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
              imu_rate_hz: float = 100.0, gnss_rate_hz: float = 1.0, noise: str = "white", seed: int = 0,
              origin_llh_deg=(32.0, 34.8, 50.0), initial_yaw_deg: float = 30.0, lever_arm_b=(0.0, 0.0, 0.0),
              give_init: bool = False, imu_overrides: dict | None = None, truth_rate_hz: float | None = None,
-             t_start_s: float = 0.0) -> RecordedRun:
+             t_start_s: float = 0.0, odom_hz: float | None = None, odom_kind: str | None = None) -> RecordedRun:
     """Simulate a ground-vehicle run with known truth.
 
     Parameters
@@ -283,7 +285,14 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
     truth_rate_hz : float, optional
         Rate of ``run.truth`` [Hz]; by default the truth is at the GNSS epochs.
     t_start_s : float
-        Absolute time of the first IMU sample [s].
+        Absolute time of the first IMU sample [s] (e.g. a UNIX time, for fixes written with
+        absolute times: :mod:`gnssacc.sources.rtklib`, :mod:`gnssacc.sources.nmea`).
+    odom_hz : float, optional
+        Also simulate wheel odometry at this rate [Hz] (:mod:`gnssacc.sources.sim_odometry`:
+        scale-factor error, noise, slip), as ``run.odometry``; its draws in ``run.sim.odometry``.
+    odom_kind : {"car", "skid"}, optional
+        The odometry's vehicle: skid steer (large slip in turns) or car; default skid for the
+        UGV scenarios, car otherwise.
 
     Returns
     -------
@@ -300,6 +309,8 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
                 gnss_rate_hz=gnss_rate_hz, noise=noise, seed=seed, origin_llh_deg=list(origin_llh_deg),
                 initial_yaw_deg=initial_yaw_deg, lever_arm_b=list(lever_arm_b), give_init=give_init,
                 imu_overrides=dict(imu_overrides or {}), truth_rate_hz=truth_rate_hz, t_start_s=t_start_s)
+    if odom_hz is not None:
+        args.update(odom_hz=odom_hz, odom_kind=odom_kind)
     name = scenario if isinstance(scenario, str) else scenario.name
     args["scenario"] = name
     where = f"simulator({name}, seed={seed})"
@@ -309,6 +320,10 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
     if not 0 < gnss_rate_hz <= imu_rate_hz:
         raise InputError(where, f"gnss_rate_hz must be positive and at most the IMU rate, got {gnss_rate_hz}")
     lever_b = np.asarray(lever_arm_b, float).reshape(3)
+    if odom_hz is not None and not 0 < odom_hz <= imu_rate_hz:
+        raise InputError(where, f"odom_hz must be positive and at most the IMU rate, got {odom_hz}")
+    if odom_kind is not None and odom_kind not in ODOMETRY_KINDS:
+        raise InputError(where, f"unknown odometry kind {odom_kind!r} (known: {', '.join(ODOMETRY_KINDS)})")
 
     traj = build_trajectory(scenario, duration_s, imu_rate_hz, origin_llh_deg, initial_yaw_deg, t_start_s)
     t_gnss = sample_times(t_start_s, duration_s, gnss_rate_hz)
@@ -329,7 +344,15 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
                       truth=truth.to_truth(), init=_initial_state(truth) if give_init else None, sim=truths, meta=meta)
     p_antenna_n = truth_gnss.R_nb @ lever_b
     fixes = fixes_from_truth(run, truth_gnss.to_truth(), noise, gnss_seed, p_antenna_n)
-    return replace(run, gnss=fixes)
+    fixes.quality = np.full(len(fixes), PROFILE_QUALITY[noise])
+    run = replace(run, gnss=fixes)
+    if odom_hz is None:
+        return run
+    t_odo = sample_times(t_start_s, duration_s, odom_hz)
+    kin = traj.kinematics(t_odo)
+    odo, draws = simulate_odometry(t_odo, kin.speed, kin.accel, kin.omega_nb_b[:, 2],
+                                   odom_kind or odometry_kind(name), seed)
+    return replace(run, odometry=odo, sim=replace(run.sim, odometry=draws))
 
 
 def _sim_truth(traj: Trajectory, imu_info: dict, model: dict, duration_s: float, t_start_s: float) -> SimTruth:

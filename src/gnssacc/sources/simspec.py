@@ -17,6 +17,10 @@ Keys (each at most once):
 ``lever_arm``
     Antenna position from the IMU, body FRD [m], three numbers separated by ``:``
     (default ``0:0:0``).
+``odom_hz``
+    Also simulate wheel odometry at this rate [Hz] (default: none;
+    :mod:`gnssacc.sources.sim_odometry`: scale-factor error, noise, slip; skid steer for the UGV
+    scenarios).
 
 With ``--tune none`` such a run is estimated with the simulator's own filter-visible IMU
 parameters (:attr:`gnssacc.core.recording.SimTruth.imu_params`) for every ``[imu]`` key the
@@ -46,7 +50,8 @@ SIM_MAX_SAMPLES = 2_000_000
 PREFIX = "sim:"
 #: Defaults of the spec's keys (``simulate`` keyword, value).
 DEFAULTS = {"imu": ("imu_grade", "industrial"), "gnss_hz": ("gnss_rate_hz", 1.0), "imu_hz": ("imu_rate_hz", 100.0),
-            "duration": ("duration_s", 300.0), "lever_arm": ("lever_arm_b", (0.0, 0.0, 0.0))}
+            "duration": ("duration_s", 300.0), "lever_arm": ("lever_arm_b", (0.0, 0.0, 0.0)),
+            "odom_hz": ("odom_hz", None)}
 _LEVER_ARM_M = Bound(-100.0, 100.0)
 
 
@@ -95,7 +100,8 @@ def _value(spec: str, key: str, text: str, grades):
     if len(parts) != (3 if key == "lever_arm" else 1):
         raise InputError(spec, f"lever_arm={text}: expected three numbers X:Y:Z (body FRD) in metres, e.g. 0.5:0:-1")
     bound = {"gnss_hz": Bound(0.0, SIM_MAX_GNSS_RATE_HZ, lo_open=True), "imu_hz": SIM_IMU_RATE_HZ,
-             "duration": SIM_DURATION_S, "lever_arm": _LEVER_ARM_M}[key]
+             "duration": SIM_DURATION_S, "lever_arm": _LEVER_ARM_M,
+             "odom_hz": Bound(0.0, SIM_IMU_RATE_HZ.hi, lo_open=True)}[key]
     values = []
     for p in parts:
         try:
@@ -112,6 +118,8 @@ def _value(spec: str, key: str, text: str, grades):
 def _check_size(spec: str, kw: dict) -> None:
     if kw["gnss_rate_hz"] > kw["imu_rate_hz"]:
         raise InputError(spec, f"gnss_hz={kw['gnss_rate_hz']:g} is above imu_hz={kw['imu_rate_hz']:g}")
+    if kw["odom_hz"] is not None and kw["odom_hz"] > kw["imu_rate_hz"]:
+        raise InputError(spec, f"odom_hz={kw['odom_hz']:g} is above imu_hz={kw['imu_rate_hz']:g}")
     if kw["duration_s"] * kw["gnss_rate_hz"] < 1.0:
         raise InputError(spec, f"duration={kw['duration_s']:g} s at gnss_hz={kw['gnss_rate_hz']:g} gives fewer than "
                                f"two GNSS fixes")
