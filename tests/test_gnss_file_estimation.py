@@ -12,7 +12,7 @@ import gnssacc
 from gnssacc.core.config import load_config
 from gnssacc.core.errors import DataWarning, InputError
 from gnssacc.estimators.ekf import EkfObserver, run_ekf
-from gnssacc.prepare.identify import identify
+from gnssacc.pipeline import prepare as identify
 from gnssacc.sources.csvdir import load_csv_run, write_csv_run
 from gnssacc.sources.sim import simulate
 
