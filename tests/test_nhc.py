@@ -205,3 +205,34 @@ def test_smoother_attaches_one_epoch_per_node():
     # Epoch 1.0 -> node 4; 2.0 -> node 6; 3.0 has none within 0.5 s; 4.0 -> node 7; 5.0 -> node 8.
     assert nearest_nodes(times, np.array([1.0, 2.0, 3.0, 4.0, 5.0]), 1.0).tolist() == [4, 6, 7, 8]
     assert nearest_nodes(times, np.array([0.0]), 1.0).tolist() == []      # the start has no prediction
+
+
+def _misaligned(run, pitch_deg: float, yaw_deg: float):
+    """The run with its IMU turned by ``pitch_deg``, ``yaw_deg`` against the vehicle (the truth stays
+    the vehicle's): ``f_b = R_bv f_v``, ``R_bv = euler(0, pitch, yaw)``."""
+    from dataclasses import replace
+
+    from gnssacc.core.recording import ImuData
+
+    R_bv = euler_to_dcm(0.0, np.radians(pitch_deg), np.radians(yaw_deg))
+    imu = run.imu
+    return replace(run, imu=ImuData(imu.t, imu.f_b @ R_bv.T, imu.omega_ib_b @ R_bv.T))
+
+
+@pytest.mark.parametrize("pitch_deg, yaw_deg", [(0.8, -0.6), (0.0, 0.0)])
+def test_the_tuner_finds_the_vehicle_axes_and_only_when_they_are_there(pitch_deg, yaw_deg):
+    """A misalignment the mount check cannot resolve (well under its 3 deg) is found by the
+    likelihood of the constraint; an exact mounting keeps the axes at zero (likelihood-ratio test)."""
+    import gnssacc
+    from gnssacc.pipeline import prepare
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = _misaligned(gnssacc.simulate("car", 200.0, imu_grade="industrial", seed=4), pitch_deg, yaw_deg)
+        nhc_values = prepare(run, gnssacc.configure(run), "auto").tuning.values["nhc"]
+    found = np.array([nhc_values["pitch_offset_deg"], nhc_values["yaw_offset_deg"]])
+    if pitch_deg == yaw_deg == 0.0:
+        assert np.all(found == 0.0), found
+    else:
+        # Within a third of each applied angle: far closer than the model without them.
+        np.testing.assert_allclose(found, [pitch_deg, yaw_deg], atol=0.3 * min(abs(pitch_deg), abs(yaw_deg)))

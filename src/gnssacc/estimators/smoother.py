@@ -44,7 +44,7 @@ from collections import deque
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, G, V, X
+from gtsam.symbol_shorthand import B, G, K, V, X
 
 from ..checks.quality import QualityReport, inflation_segments, touches_segments
 from ..core.earth import earth_rate_n, normal_gravity
@@ -64,7 +64,7 @@ from .ekf import initial_state, run_ekf
 from .fixed_lag import FixedLagISAM2
 from .gnss_accel import acceleration_row, measured_specific_force, window_accelerations
 from .settings import SmootherSettings
-from .smoother_aids import NhcFactors
+from .smoother_aids import NhcFactors, OdometryFactors
 from .window_marginals import NotAChain, WindowMarginals
 from .zupt import StationaryEpochs, epochs_for
 
@@ -174,23 +174,28 @@ class _Record:
         self.g = np.zeros((n, 3))
         self.cov_g = np.zeros((n, 3, 3))
         self.cov_xg = np.zeros((n, 6, 3))
+        # The odometry scale factor (zeros when the run has no odometry): estimate and variance.
+        self.k = np.zeros(n)
+        self.var_k = np.zeros(n)
 
     def put(self, i: int, est, cov: np.ndarray) -> None:
-        """Node ``i``'s estimate and the blocks of its joint marginal ``cov`` (X, V, B[, G])."""
-        pose, v_n, bias, g = est
+        """Node ``i``'s estimate and the blocks of its joint marginal ``cov`` (X, V, B[, G][, K])."""
+        pose, v_n, bias, g, k = est
         self.p_n[i] = pose.translation()
         self.R[i] = pose.rotation().matrix()
         self.v_n[i] = v_n
         self.bias[i] = bias.vector()
-        self.g[i] = g
+        self.g[i], self.k[i] = g, k
         self.cov_pose[i], self.cov_vel[i], self.cov_bias[i] = cov[0:6, 0:6], cov[6:9, 6:9], cov[9:15, 9:15]
         if self.gm:
             self.cov_xg[i], self.cov_g[i] = cov[0:6, 15:18], cov[15:18, 15:18]
+        if cov.shape[0] in (16, 19):   # the scale factor is the last variable
+            self.var_k[i] = cov[-1, -1]
         self.done[i] = True
 
     def copy_from(self, other: "_Record", i: int) -> None:
         for name in ("p_n", "R", "v_n", "bias", "cov_pose", "cov_vel", "cov_bias", "done", "chi2", "g", "cov_g",
-                     "cov_xg"):
+                     "cov_xg", "k", "var_k"):
             getattr(self, name)[i] = getattr(other, name)[i]
 
     def sigmas(self) -> np.ndarray:
@@ -216,13 +221,15 @@ class _Record:
 class _Smoother:
     """The incremental fixed-lag smoother with bookkeeping and recovery."""
 
-    def __init__(self, settings: SmootherSettings, bandwidth: int = 1):
+    def __init__(self, settings: SmootherSettings, bandwidth: int = 1, scale: bool = False):
         """``bandwidth``: how many nodes apart a factor reaches (1: a chain of nodes; the
         window-consistent acceleration factors reach across their window of fixes). The
         window's marginals are kept by :class:`WindowMarginals` for that band; a wider factor
-        makes them come from iSAM2's queries while it is in the window."""
+        makes them come from iSAM2's queries while it is in the window. ``scale``: nodes carry
+        the odometry scale factor K."""
         self.lag = settings.lag_s
         self.gm = settings.gnss.gauss_markov
+        self.scale = scale
         self.params = gtsam.ISAM2Params()
         self.params.setFactorization(settings.factorization)
         self.threshold = settings.relinearize_threshold
@@ -231,7 +238,7 @@ class _Smoother:
         # Reuse the slots of marginalised factors so the factor list stays bounded on long runs.
         self.params.findUnusedFactorSlots = True
         self.isam = FixedLagISAM2(self.lag, self.params, self.threshold, guard=BIAS_SYMBOL)
-        self.marginals = WindowMarginals(self.gm, bandwidth)
+        self.marginals = WindowMarginals(self.gm, bandwidth, scale)
 
     def reset(self, robust: bool = False) -> None:
         """A new, empty smoother; ``robust`` switches to QR factorization (returns whether it did)."""
@@ -250,23 +257,25 @@ class _Smoother:
             self.marginals.clear()
 
     def estimate(self, i: int):
-        """Pose, velocity, bias and GNSS error (zeros when not modelled) of node ``i``."""
+        """Pose, velocity, bias, GNSS error and odometry scale factor (zeros when not modelled) of
+        node ``i``."""
         isam = self.isam
         g = isam.calculateEstimateVector(G(i)) if self.gm else np.zeros(3)
+        k = float(isam.calculateEstimateVector(K(i))[0]) if self.scale else 0.0
         return (isam.calculateEstimatePose3(X(i)), isam.calculateEstimateVector(V(i)),
-                isam.calculateEstimateConstantBias(B(i)), g)
+                isam.calculateEstimateConstantBias(B(i)), g, k)
 
     def has_node(self, i: int) -> bool:
         """Whether node ``i`` is in the window (not marginalised, not dropped by a restart)."""
         return self.isam.getISAM2().valueExists(X(i))
 
     def keys(self, i: int) -> list:
-        """Keys of node ``i``: pose, velocity, bias[, GNSS error]."""
-        return [X(i), V(i), B(i)] + ([G(i)] if self.gm else [])
+        """Keys of node ``i``: pose, velocity, bias[, GNSS error][, odometry scale factor]."""
+        return [X(i), V(i), B(i)] + ([G(i)] if self.gm else []) + ([K(i)] if self.scale else [])
 
     def covariances(self, nodes: list) -> np.ndarray:
         """Joint marginal covariance of each node's variables, for ``nodes`` (ascending): X_i
-        (Pose3 tangent), V_i, B_i[, G_i]; array (len(nodes), 15 or 18, 15 or 18).
+        (Pose3 tangent), V_i, B_i[, G_i][, K_i]; array (len(nodes), b, b), b = 15 to 19.
 
         From :class:`gnssacc.estimators.window_marginals.WindowMarginals` (the window's linear system, kept
         in step with iSAM2), all nodes in one query; iSAM2's own queries, per node, while that
@@ -285,8 +294,9 @@ class _Smoother:
         isam = self.isam.getISAM2()
         if not self.gm:
             # iSAM2's per-key marginals cost a third of its joint query (measured, smoother-accw).
-            full = np.zeros((15, 15))
-            for key, sl in ((X(i), slice(0, 6)), (V(i), slice(6, 9)), (B(i), slice(9, 15))):
+            full = np.zeros((15 + self.scale, 15 + self.scale))
+            blocks = ((X(i), slice(0, 6)), (V(i), slice(6, 9)), (B(i), slice(9, 15)))
+            for key, sl in blocks + (((K(i), slice(15, 16)),) if self.scale else ()):
                 full[sl, sl] = isam.marginalCovariance(key)
             return full
         keys = self.keys(i)
@@ -575,9 +585,11 @@ def run_smoother(run: RecordedRun, settings, method: str = "smoother", *,
              "init": init.how, "t_init": float(init.t), "lag_s": settings.lag_s}
     checked = np.array([vetted_by_fixes(stationary.spans[j], stationary.params) for j in st.span], bool)
     loop = _Loop(run, settings, METHODS[method], quality, init, times, _Factors(run, settings, st, stats, checked),
-                 _attach_stationary(times, st, z.interval_s), stats, NhcFactors(run, settings, times, stationary, stats))
+                 _attach_stationary(times, st, z.interval_s), stats, NhcFactors(run, settings, times, stationary, stats),
+                 OdometryFactors(run, settings, times, stats))
     loop.feed(method, show_progress)
     loop.score()
+    loop.odo.final_stats(loop.online)
     stats["final_window_variables"] = int(loop.smoother.isam.getLinearizationPoint().size())
     stats["final_factor_slots"] = int(loop.smoother.isam.getFactors().size())
     runtime = time.perf_counter() - wall0
@@ -600,20 +612,20 @@ def estimate(prep, settings: SmootherSettings, method: str = "smoother", **optio
 class _Loop:
     """Feeds iSAM2 node by node and records the online and fixed-lag estimates."""
 
-    def __init__(self, run, settings, use_acc, quality, init, times, factors, stationary_at, stats, nhc):
+    def __init__(self, run, settings, use_acc, quality, init, times, factors, stationary_at, stats, nhc, odo):
         self.run, self.settings, self.use_acc, self.times, self.f = run, settings, use_acc, times, factors
-        self.stationary_at, self.stats, self.nhc = stationary_at, stats, nhc
+        self.stationary_at, self.stats, self.nhc, self.odo = stationary_at, stats, nhc, odo
         self.segs = inflation_segments(run.imu, quality, settings.suspect)
         origin = run.origin
         self.model = _ImuModel(settings, float(factors.g_n[2]), earth_rate_n(origin.lat0))
         n = len(times)
         self.online, self.fixed = _Record(n, factors.gm), _Record(n, factors.gm)
-        self.smoother = _Smoother(settings, _bandwidth(settings) if use_acc == "window" else 1)
+        self.smoother = _Smoother(settings, _bandwidth(settings) if use_acc == "window" else 1, odo.active)
         self.fix_of = np.full(n, -1)
         self.window_start, self.oldest = 0, 0
         self._start(init)
 
-    def priors(self, i, pose, vel, bias, c_pose, c_vel, c_bias, g=None, c_g=None):
+    def priors(self, i, pose, vel, bias, c_pose, c_vel, c_bias, g=None, c_g=None, k=0.0, var_k=None):
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         graph.add(gtsam.PriorFactorPose3(X(i), pose, gtsam.noiseModel.Gaussian.Covariance(c_pose)))
         graph.add(gtsam.PriorFactorVector(V(i), vel, gtsam.noiseModel.Gaussian.Covariance(c_vel)))
@@ -624,6 +636,8 @@ class _Loop:
         if self.f.gm:
             graph.add(gtsam.PriorFactorVector(G(i), g, gtsam.noiseModel.Gaussian.Covariance(c_g)))
             values.insert(G(i), g)
+        if self.odo.active:
+            self.odo.prior(graph, values, i, k, var_k)
         return graph, values
 
     def _start(self, init):
@@ -632,7 +646,7 @@ class _Loop:
         self.pose = gtsam.Pose3(gtsam.Rot3(R0), self.run.origin.to_ned(init.lat, init.lon, init.h))
         self.vel = np.asarray(init.v_n, float)
         self.bias = gtsam.imuBias.ConstantBias(np.asarray(init.b_a, float), np.asarray(init.b_g, float))
-        self.g = np.zeros(3)
+        self.g, self.k = np.zeros(3), 0.0
         if self.use_acc:
             self.f.prepare_accel(self.times)
         cov, c_vel = _initial_prior(init, self.settings)
@@ -642,6 +656,8 @@ class _Loop:
         graph.add(gtsam.PriorFactorVector(V(0), self.vel, gtsam.noiseModel.Gaussian.Covariance(c_vel)))
         for key, value in ((X(0), self.pose), (V(0), self.vel), (B(0), self.bias)) + (((G(0), self.g),) if self.f.gm else ()):
             values.insert(key, value)
+        if self.odo.active:
+            self.odo.prior(graph, values, 0, 0.0, None)
         self._start_gate = (R0, self.vel, c_vel)
         self._node_factors(graph, 0, self.times[0])
         self.smoother.update(graph, values, [(key, self.times[0]) for key in self.smoother.keys(0)])
@@ -667,6 +683,9 @@ class _Loop:
         if nav is not None and i in self.nhc.nodes:
             self.nhc.add(graph, i, nav.pose().rotation().matrix(), nav.velocity(), self._predicted_velocity_cov(i, pim),
                          self.bias.gyroscope())
+        if nav is not None and i in self.odo.nodes:
+            self.odo.add(graph, i, nav.pose().rotation().matrix(), nav.velocity(), self._predicted_velocity_cov(i, pim),
+                         self.bias.gyroscope(), self.k)
 
     def _predicted_velocity_cov(self, i, pim) -> np.ndarray:
         """Covariance of node ``i``'s predicted NED velocity [m^2/s^2]: node ``i - 1``'s online
@@ -725,6 +744,8 @@ class _Loop:
             values.insert(B(i), self.bias)
             if self.f.gm:
                 self.f.gm_chain(graph, values, i, t - t_prev, self.g)
+            if self.odo.active:
+                self.odo.chain(graph, values, i, t - t_prev, self.k)
             self._node_factors(graph, i, t, nav, pim)
             try:
                 self.smoother.update(graph, values, [(key, t) for key in self.smoother.keys(i)])
@@ -733,7 +754,7 @@ class _Loop:
                     raise
                 self.stats["n_ill_posed_recovered"] += 1
                 self.window_start = _reinitialise(self, i, graph, values)
-            self.pose, self.vel, self.bias, self.g = self._record(i, times_l[i + 1])
+            self.pose, self.vel, self.bias, self.g, self.k = self._record(i, times_l[i + 1])
 
 
 def _bandwidth(settings: SmootherSettings) -> int:
@@ -765,7 +786,8 @@ def _reinitialise(loop: _Loop, i: int, graph, values) -> int:
     pose = gtsam.Pose3(gtsam.Rot3(online.R[p]), online.p_n[p])
     bias = gtsam.imuBias.ConstantBias(online.bias[p, 0:3], online.bias[p, 3:6])
     p_graph, p_values = loop.priors(p, pose, online.v_n[p], bias, online.cov_pose[p], online.cov_vel[p],
-                                    online.cov_bias[p], online.g[p], online.cov_g[p] + 1e-12 * np.eye(3))
+                                    online.cov_bias[p], online.g[p], online.cov_g[p] + 1e-12 * np.eye(3),
+                                    online.k[p], online.var_k[p])
     p_values.insert(values)
     for j in range(graph.size()):
         if all(p_values.exists(key) for key in graph.at(j).keys()):

@@ -130,8 +130,9 @@ def _inverse(A):
 
 
 @njit(cache=True)
-def _layout(key):
-    """Offset and dimension of a variable in its node's block, from the GTSAM symbol character."""
+def _layout(key, b):
+    """Offset and dimension of a variable in its node's block of ``b`` rows, from the GTSAM symbol
+    character (the odometry scale factor ``k``, when nodes carry one, is the block's last row)."""
     c = key >> 56
     if c == 120:                         # 'x': Pose3
         return 0, 6
@@ -141,6 +142,8 @@ def _layout(key):
         return 9, 6
     if c == 103:                         # 'g': GNSS error
         return 15, 3
+    if c == 107 and b in (16, 19):       # 'k': odometry scale factor
+        return b - 1, 1
     return -1, 0
 
 
@@ -162,7 +165,7 @@ def _scatter(D, O, Ox, info, keys, first, start):
     low = 1 << 62
     p0 = 0
     for p in range(nk):
-        offs[p], dims[p] = _layout(keys[p])
+        offs[p], dims[p] = _layout(keys[p], D.shape[1])
         if dims[p] == 0:
             return -1
         rows[p] = start + (keys[p] & _INDEX_MASK) - first
@@ -370,6 +373,8 @@ class WindowMarginals:
     ----------
     gm : bool
         Nodes carry a GNSS-error state (blocks of 18 instead of 15).
+    scale : bool
+        Nodes carry an odometry scale factor (one more row, the last).
     bandwidth : int
         How many nodes apart a factor may reach: 1 for a chain (block-tridiagonal ``H``, the
         kept forward sweep); more for factors on several nodes (``smoother-accw``'s window
@@ -377,8 +382,8 @@ class WindowMarginals:
         :class:`NotAChain`.
     """
 
-    def __init__(self, gm: bool, bandwidth: int = 1):
-        self.b = 18 if gm else 15
+    def __init__(self, gm: bool, bandwidth: int = 1, scale: bool = False):
+        self.b = (18 if gm else 15) + int(scale)
         self.w = int(bandwidth)
         self.clear()
 

@@ -68,7 +68,8 @@ without truth, in five steps:
    vehicle sways at least as much as a parked one). The aids' errors are correlated in time
    (slip through a turn, the suspension's pitch under acceleration), which the one-step
    likelihood fits as white noise too small for what the filter averages: each sigma is then
-   inflated by the factor of :func:`correlation_inflation`, and the vehicle's axes searched
+   inflated by the factor of :func:`correlation_inflation` (unless the search left it at its
+   lower limit, :func:`_inflate`), and the vehicle's axes searched
    again under it. An angle of the vehicle's axes is kept only when it raises the
    log-likelihood by more than :data:`OFFSET_MIN_GAIN` (on a simulated UGV, exact axes and
    fixes with 2.3 m of correlated error, a fitted 0.33 deg of yaw made the EKF's position NEES
@@ -593,7 +594,7 @@ def _aids_stage(run, tuned, cfg, aid_params, aid_kinds, stationary, quality, ini
     raw: dict = {}
     for sec, key in free:
         raw.setdefault(sec, {})[key] = best[sec][key]
-    inflated = _inflate(raw, obj.stats[tuple(np.round(theta, 12))])
+    inflated = _inflate(raw, obj, theta)
     offsets = [p for i, p in enumerate(free) if p in ADDITIVE and theta[i] != 0.0]
     n_again = _offsets_again(obj, tuned, raw, offsets, cfg) if inflated and offsets else 0
     return raw, n_eval + n_test + n_again
@@ -618,16 +619,27 @@ def _significant_offsets(obj: "_Objective", theta: np.ndarray) -> tuple[np.ndarr
     return theta, n
 
 
-def _inflate(raw: dict, stats: dict) -> bool:
-    """Each aid's sigma in ``raw`` times :func:`correlation_inflation` of its innovations (``stats``:
-    the EKF pass at the tuned point), in place; whether any grew."""
+def _inflate(raw: dict, obj: "_Objective", theta: np.ndarray) -> bool:
+    """Each aid's sigma in ``raw`` times :func:`correlation_inflation` of its innovations (at the
+    tuned point ``theta`` of ``obj``), in place; whether any grew.
+
+    Not a sigma the search left at its lower limit (the floor of the constraint's, or two decades
+    below its start): the data wanted it smaller, so the aid is better than its sigma says, and a
+    filter that under-weights a measurement leaves its innovations correlated too (an exact
+    simulated constraint gave a lag-1 autocorrelation of 0.7 at the floor)."""
+    stats = obj.stats[tuple(np.round(theta, 12))]
+    floor = float(obj.cfg["zupt"]["velocity_sigma_mps"])
     inflated = False
     for kind, sigmas in (("nhc", NHC_SIGMAS), ("odo", ODOMETRY_PARAMETERS)):
         factor = correlation_inflation(stats.get(f"acf1_{kind}"), int(stats.get(f"n_{kind}_updates", 0) or 0))
-        for sec, key in sigmas:
-            if key in raw.get(sec, {}) and factor > 1.0:
-                raw[sec][key] = float(raw[sec][key]) * factor
-                inflated = True
+        for p in sigmas:
+            if p not in obj.free or factor <= 1.0:
+                continue
+            value = float(raw[p[0]][p[1]])
+            if theta[obj.free.index(p)] <= -_BOUND_DECADES + 1e-9 or (p in NHC_SIGMAS and value <= floor * (1 + 1e-9)):
+                continue
+            raw[p[0]][p[1]] = value * factor
+            inflated = True
     return inflated
 
 
