@@ -175,9 +175,11 @@ def test_a_gauss_markov_time_constant_far_from_the_default_is_found(monkeypatch)
     # fixes whose correlated errors have tau 10 s it must move there (measured over 6 runs: 7-23 s).
     import gnssacc.sources.gnss_noise as gn
 
+    # The GNSS and IMU model alone: with these fast-wandering fix errors the non-holonomic
+    # constraint (at its 0.02 m/s floor) makes this EKF worse (PRMSE 4.1 -> 5.6 m, NEES 1.8 -> 6.6).
     monkeypatch.setitem(gn.PROFILES, "gm", dict(gn.PROFILES["gm"], tau_s=10.0))
     run = simulate("ugv-slow", 235.0, imu_grade="industrial", noise="gm", seed=1)
-    metrics, _, ident = compare(run, load_config(), ["ekf"])
+    metrics, _, ident = compare(run, load_config(overrides={"nhc": {"enabled": False}}), ["ekf"])
     g = ident.tuning.values["gnss"]
     assert 4.0 < g["gm_tau_s"] < 25.0, g["gm_tau_s"]
     assert np.mean(g["gm_sigma_m"][:2]) == pytest.approx(2.5, rel=0.5)

@@ -52,8 +52,10 @@ from .zupt import StationaryEpochs, epochs_for
 
 #: The acceleration update each method applies (``None``: none; see :func:`acceleration_model`).
 METHODS = {"ekf": None, "ekf-acc": "acc", "ekf-accw": "accw"}
-#: Event kinds of the loop, in the order they are handled at equal times.
-GNSS, STATIONARY, NHC, ODOMETRY, OUTPUT = 0, 1, 2, 3, 4
+#: Event kinds of the loop, in the order they are handled at equal times: the constraint and the
+#: odometry before a GNSS epoch at the same time, so that its prior covariance holds them (as
+#: :class:`gnssacc.analysis.observability.EpochCollector` sees it), and the output last.
+NHC, ODOMETRY, GNSS, STATIONARY, OUTPUT = 0, 1, 2, 3, 4
 #: Name of each update event kind, as the observer sees it.
 EVENT_NAMES = {GNSS: "gnss", STATIONARY: "stationary", NHC: "nhc", ODOMETRY: "odometry"}
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -374,7 +376,7 @@ def _start(run: RecordedRun, settings, init, quality, stationary):
 
 def _events(times: dict):
     """Event times, kinds and indices in time order, from ``{kind: times}``; at equal times in
-    the order of the kinds (GNSS, stationary, NHC, odometry, output)."""
+    the order of the kinds (NHC, odometry, GNSS, stationary, output)."""
     ev_t = np.concatenate(list(times.values()))
     ev_kind = np.concatenate([np.full(len(t), k) for k, t in times.items()])
     ev_idx = np.concatenate([np.arange(len(t)) for t in times.values()])
@@ -407,6 +409,9 @@ def _nhc_measurements(setup, s, j, stats):
     """The non-holonomic constraint at its epoch ``j``, unless :func:`gnssacc.estimators.nhc.decide`
     says not (counted in ``stats``)."""
     ep, nhc = setup.nhc, setup.nhc_settings
+    if ep.rest[j]:   # decided without the state (nhc.decide's first test)
+        stats[nhc_rules.SKIPPED[nhc_rules.REST]] += 1
+        return
     w_ie = earth_rate_n(s.pos[0])
     v_b, H = meas_models.vehicle_velocity(s, ep.omega_b[j], nhc.lever_arm_b, w_ie, nhc.R_vb)
     yaw_rate = float(ep.omega_b[j, 2] - s.b_g[2] - s.R_nb[:, 2] @ w_ie)   # relative to the earth
@@ -415,7 +420,7 @@ def _nhc_measurements(setup, s, j, stats):
     if why != nhc_rules.APPLY:
         stats[nhc_rules.SKIPPED[why]] += 1
         return
-    yield meas_models.non_holonomic(s, ep.omega_b[j], nhc.lever_arm_b, w_ie, nhc.sigma_mps, nhc.R_vb), True
+    yield meas_models.nhc_measurement(v_b, H, nhc.sigma_mps), True
 
 
 def _odometry_measurements(setup, s, j, stats):

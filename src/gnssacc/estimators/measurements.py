@@ -197,8 +197,13 @@ def non_holonomic(s, omega_meas_b: np.ndarray, lever_b: np.ndarray, w_ie_n: np.n
     in the vehicle's axes (``R_vb``, see :func:`vehicle_velocity`), 1-sigma ``sigma_mps`` [m/s]
     (lateral, vertical); ``omega_meas_b`` the raw gyro [rad/s] at the epoch, ``w_ie_n`` the earth
     rate [rad/s, NED]."""
-    v_b, H = vehicle_velocity(s, omega_meas_b, lever_b, w_ie_n, R_vb)
-    return Measurement("nhc", v_b[1:3], H[1:3], np.diag(np.asarray(sigma_mps, float) ** 2))
+    return nhc_measurement(*vehicle_velocity(s, omega_meas_b, lever_b, w_ie_n, R_vb), sigma_mps)
+
+
+def nhc_measurement(v_b: np.ndarray, H_v: np.ndarray, sigma_mps: np.ndarray) -> Measurement:
+    """:func:`non_holonomic` from the vehicle velocity ``v_b`` and its Jacobian ``H_v`` of
+    :func:`vehicle_velocity` (for a caller that looked at the forward speed first)."""
+    return Measurement("nhc", v_b[1:3], H_v[1:3], np.diag(np.asarray(sigma_mps, float) ** 2))
 
 
 def odometry(s, v_odo: float, sigma_mps: float, omega_meas_b: np.ndarray, lever_b: np.ndarray,

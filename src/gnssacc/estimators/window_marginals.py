@@ -130,7 +130,7 @@ def _inverse(A):
 
 
 @njit(cache=True)
-def _layout(key, b):
+def _layout(key, b=15):
     """Offset and dimension of a variable in its node's block of ``b`` rows, from the GTSAM symbol
     character (the odometry scale factor ``k``, when nodes carry one, is the block's last row)."""
     c = key >> 56
