@@ -37,8 +37,8 @@ def _state(err: np.ndarray) -> FilterState:
                        np.eye(16), np.array([K_TRUE + err[15]]), 0)
 
 
-def _v_true() -> np.ndarray:
-    return R_TRUE.T @ V_TRUE + np.cross(OMEGA - B_G - R_TRUE.T @ W_IE, LEVER)
+def _v_true(lever=LEVER) -> np.ndarray:
+    return R_TRUE.T @ V_TRUE + np.cross(OMEGA - B_G - R_TRUE.T @ W_IE, lever)
 
 
 def _check(dz, Hm, steps, atol):
@@ -52,21 +52,28 @@ def _check(dz, Hm, steps, atol):
 STEPS = {**{j: 1e-3 for j in range(3, 6)}, **{j: 1e-5 for j in range(6, 9)}, **{j: 1e-5 for j in range(12, 16)}}
 
 
-def test_nhc_jacobian_by_finite_differences():
-    z = _v_true()[1:3]
-    dz = lambda e: mm.non_holonomic(_state(e), OMEGA, LEVER, W_IE, np.ones(2)).dz - z  # noqa: E731
-    m = mm.non_holonomic(_state(np.zeros(16)), OMEGA, LEVER, W_IE, np.array([0.1, 0.2]))
+R_VB = euler_to_dcm(0.0, 0.012, -0.008)       # a small misalignment of the vehicle's axes
+
+
+@pytest.mark.parametrize("lever, R_vb", [(LEVER, None), (np.zeros(3), None), (LEVER, R_VB)])
+def test_nhc_jacobian_by_finite_differences(lever, R_vb):
+    z = (_v_true(lever) if R_vb is None else R_vb @ _v_true(lever))[1:3]
+    dz = lambda e: mm.non_holonomic(_state(e), OMEGA, lever, W_IE, np.ones(2), R_vb).dz - z  # noqa: E731
+    m = mm.non_holonomic(_state(np.zeros(16)), OMEGA, lever, W_IE, np.array([0.1, 0.2]), R_vb)
     _check(dz, m.H, STEPS, 1e-7)
     assert m.kind == "nhc" and np.allclose(m.R, np.diag([0.01, 0.04]))
     assert np.all(m.H[:, 0:3] == 0) and np.all(m.H[:, 9:12] == 0) and np.all(m.H[:, 15] == 0)
+    assert np.any(m.H[:, 12:15] != 0) == bool(np.any(lever))   # the gyro bias enters through the lever arm
 
 
-def test_odometry_jacobian_by_finite_differences():
-    v_odo = (1 + K_TRUE) * _v_true()[0]       # what a noise-free odometry reads
-    dz = lambda e: mm.odometry(_state(e), v_odo, 0.1, OMEGA, LEVER, W_IE).dz  # noqa: E731
-    m = mm.odometry(_state(np.zeros(16)), v_odo, 0.1, OMEGA, LEVER, W_IE)
+@pytest.mark.parametrize("lever, R_vb", [(LEVER, None), (np.zeros(3), None), (LEVER, R_VB)])
+def test_odometry_jacobian_by_finite_differences(lever, R_vb):
+    v_x = (_v_true(lever) if R_vb is None else R_vb @ _v_true(lever))[0]
+    v_odo = (1 + K_TRUE) * v_x       # what a noise-free odometry reads
+    dz = lambda e: mm.odometry(_state(e), v_odo, 0.1, OMEGA, lever, W_IE, R_vb).dz  # noqa: E731
+    m = mm.odometry(_state(np.zeros(16)), v_odo, 0.1, OMEGA, lever, W_IE, R_vb)
     _check(dz, m.H, STEPS, 1e-7)
-    assert m.H[0, 15] == pytest.approx(_v_true()[0])   # the scale column is the speed itself
+    assert m.H[0, 15] == pytest.approx(v_x)   # the scale column is the speed itself
 
 
 def _values(pose, v, bias, k=None):
@@ -97,16 +104,20 @@ def _perturbed(k: int, d: float):
     return POSE.retract(e[0:6]), V_TRUE + e[6:9], bias, K_TRUE + e[15]
 
 
-@pytest.mark.parametrize("lever", [np.zeros(3), LEVER])
-def test_factor_jacobians_by_finite_differences_on_the_manifold(lever):
+@pytest.mark.parametrize("lever, R_vb", [(np.zeros(3), None), (LEVER, None), (LEVER, R_VB)])
+def test_factor_jacobians_by_finite_differences_on_the_manifold(lever, R_vb):
+    def v_vehicle(var):
+        v = vehicle_velocity(var[0], var[1], var[2].gyroscope(), OMEGA, lever, W_IE)[0]
+        return v if R_vb is None else R_vb @ v
+
     def nhc_err(*var):
-        return vehicle_velocity(var[0], var[1], var[2].gyroscope(), OMEGA, lever, W_IE)[0][1:3]
+        return v_vehicle(var)[1:3]
 
     def odo_err(*var):
-        return (1 + var[3]) * vehicle_velocity(var[0], var[1], var[2].gyroscope(), OMEGA, lever, W_IE)[0][0] - 1.7
+        return (1 + var[3]) * v_vehicle(var)[0] - 1.7
 
-    nf = nhc_factor(X(0), V(0), B(0), OMEGA, lever, W_IE, np.array([0.1, 0.3]))
-    of = odometry_factor(X(0), V(0), B(0), K(0), 1.7, OMEGA, lever, W_IE, 0.2)
+    nf = nhc_factor(X(0), V(0), B(0), OMEGA, lever, W_IE, np.array([0.1, 0.3]), R_vb)
+    of = odometry_factor(X(0), V(0), B(0), K(0), 1.7, OMEGA, lever, W_IE, 0.2, R_vb)
     with_bias = bool(np.any(lever))
     cols = list(range(9)) + (list(range(9, 15)) if with_bias else [])
     for factor, err, extra in ((nf, nhc_err, []), (of, odo_err, [15])):

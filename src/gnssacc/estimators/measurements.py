@@ -177,18 +177,31 @@ def vehicle_velocity(s, omega_meas_b: np.ndarray, lever_b: np.ndarray, w_ie_n: n
     w_ie_n : ndarray (3,)
         Earth rate [rad/s, NED].
     R_vb : ndarray (3, 3), optional
+        ``None``: the body's axes.
     """
     Rt = s.R_nb.T
-    w_ie_b = Rt @ w_ie_n
-    L = skew(lever_b)
-    v_b = Rt @ s.v_n + np.cross(omega_meas_b - s.b_g - w_ie_b, lever_b)
+    u = Rt @ s.v_n
     H = _H(s, 3)
     H[:, 3:6] = Rt
-    H[:, 6:9] = Rt @ skew(s.v_n) + L @ Rt @ skew(w_ie_n)
-    H[:, 12:15] = -L
+    # R^T [v x] = [(R^T v) x] R^T; the lever-arm terms only with a lever arm (the filter's
+    # per-update cost is mostly these small products).
+    if lever_b.any():
+        w_ie_b = Rt @ w_ie_n
+        L = skew(lever_b)
+        v_b = u + _cross(omega_meas_b - s.b_g - w_ie_b, lever_b)
+        H[:, 6:9] = (skew(u) + L @ skew(w_ie_b)) @ Rt
+        H[:, 12:15] = -L
+    else:
+        v_b = u
+        H[:, 6:9] = skew(u) @ Rt
     if R_vb is None:
         return v_b, H
     return R_vb @ v_b, R_vb @ H
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a x b`` for 3-vectors (``np.cross`` costs ten times more at this size)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
 def non_holonomic(s, omega_meas_b: np.ndarray, lever_b: np.ndarray, w_ie_n: np.ndarray, sigma_mps: np.ndarray,

@@ -132,9 +132,10 @@ class NhcSettings:
         The reference point from the IMU, body FRD [m].
     pivot_offset_m : float
         How far along the vehicle a turn's centre on the spot may lie from the reference point [m].
-    R_vb : ndarray (3, 3)
+    R_vb : ndarray (3, 3) or None
         Body to vehicle axes (``[nhc] pitch_offset_deg``, ``yaw_offset_deg``: the vehicle's axes
-        are the body's turned by that yaw, then that pitch); the wheel odometry's too.
+        are the body's turned by that yaw, then that pitch); the wheel odometry's too. ``None``
+        when both are zero (the body's axes).
     """
 
     enabled: bool
@@ -147,10 +148,16 @@ class NhcSettings:
     @classmethod
     def from_config(cls, cfg: RunConfig) -> "NhcSettings":
         c = cfg["nhc"]
-        R_bv = euler_to_dcm(0.0, np.radians(float(c["pitch_offset_deg"])), np.radians(float(c["yaw_offset_deg"])))
+        pitch, yaw = float(c["pitch_offset_deg"]), float(c["yaw_offset_deg"])
+        R_vb = euler_to_dcm(0.0, np.radians(pitch), np.radians(yaw)).T if pitch or yaw else None
         return cls(bool(c["enabled"]), float(c["interval_s"]),
                    np.array([float(c["sigma_lateral_mps"]), float(c["sigma_vertical_mps"])]),
-                   vec3(c["lever_arm_b_m"], "[nhc] lever_arm_b_m", "config"), float(c["pivot_offset_m"]), R_bv.T)
+                   vec3(c["lever_arm_b_m"], "[nhc] lever_arm_b_m", "config"), float(c["pivot_offset_m"]), R_vb)
+
+    @property
+    def forward_b(self) -> np.ndarray:
+        """The vehicle's forward axis in body axes."""
+        return np.array([1.0, 0.0, 0.0]) if self.R_vb is None else self.R_vb[0]
 
 
 @dataclass(frozen=True, eq=False)

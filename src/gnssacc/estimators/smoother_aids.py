@@ -89,8 +89,9 @@ class NhcFactors:
             return
         cfg, omega = self.cfg, self.omega_b[i]
         w_b = omega - b_g - R_nb.T @ self.w_ie
-        v_b = cfg.R_vb @ (R_nb.T @ v_n + np.cross(w_b, cfg.lever_arm_b))
-        fwd = R_nb @ cfg.R_vb[0]     # the vehicle's forward axis, NED
+        v_b = R_nb.T @ v_n + np.cross(w_b, cfg.lever_arm_b)
+        v_b = v_b if cfg.R_vb is None else cfg.R_vb @ v_b
+        fwd = R_nb @ cfg.forward_b     # the vehicle's forward axis, NED
         why = nhc_rules.decide(self.rest[i], float(v_b[0]), math.sqrt(max(float(fwd @ c_vel @ fwd), 0.0)),
                                float(w_b[2]), float(cfg.sigma_mps[0]), cfg.pivot_offset_m)
         if why != nhc_rules.APPLY:
@@ -116,7 +117,8 @@ class OdometryFactors:
     """
 
     def __init__(self, run, settings: SmootherSettings, times: np.ndarray, stats: dict):
-        self.cfg, self.R_vb, self.stats = settings.odometry, settings.nhc.R_vb, stats
+        self.cfg, self.stats = settings.odometry, stats
+        self.R_vb, self.forward_b = settings.nhc.R_vb, settings.nhc.forward_b
         ep = odo_rules.epochs_for(run, self.cfg, float(times[0]))
         self.active = len(ep) > 0
         self.nodes: set = set()
@@ -153,8 +155,8 @@ class OdometryFactors:
         factor ``k`` it was predicted with)."""
         j, cfg, omega = self.sample[i], self.cfg, self.omega_b[i]
         w_b = omega - b_g - R_nb.T @ self.w_ie
-        v_x = float((self.R_vb @ (R_nb.T @ v_n + np.cross(w_b, cfg.lever_arm_b)))[0])
-        fwd = R_nb @ self.R_vb[0]
+        fwd = R_nb @ self.forward_b    # the vehicle's forward axis, NED
+        v_x = float(fwd @ v_n + self.forward_b @ np.cross(w_b, cfg.lever_arm_b))
         sigma_pred = (1.0 + k) * math.sqrt(max(float(fwd @ c_vel @ fwd), 0.0))
         why = odo_rules.decide(float(self.ep.v[j]), float(self.ep.sigma[j]), (1.0 + k) * v_x, sigma_pred)
         if why != odo_rules.APPLY:
