@@ -31,7 +31,7 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from gnssacc.core.rotations import skew
+from gnssacc.core.rotations import cross3, skew
 
 
 def vehicle_velocity(pose: gtsam.Pose3, v_n: np.ndarray, b_g: np.ndarray, omega_b: np.ndarray, lever_b: np.ndarray,
@@ -39,14 +39,16 @@ def vehicle_velocity(pose: gtsam.Pose3, v_n: np.ndarray, b_g: np.ndarray, omega_
     """``v_l`` [m/s, body] and its Jacobians w.r.t. the Pose3 tangent (3 x 6), the velocity (3 x 3)
     and the bias tangent (3 x 6, accelerometer first) (module docstring)."""
     Rt = pose.rotation().matrix().T
-    u, w = Rt @ v_n, Rt @ w_ie_n
+    u = Rt @ v_n
+    J_pose, J_bias = np.zeros((3, 6)), np.zeros((3, 6))
+    if not lever_b.any():       # no lever-arm terms (iSAM2 calls this a few times per factor)
+        J_pose[:, 0:3] = skew(u)
+        return u, J_pose, Rt, J_bias
+    w = Rt @ w_ie_n
     L = skew(lever_b)
-    v_l = u + np.cross(omega_b - b_g - w, lever_b)
-    J_pose = np.zeros((3, 6))
     J_pose[:, 0:3] = skew(u) + L @ skew(w)
-    J_bias = np.zeros((3, 6))
     J_bias[:, 3:6] = L
-    return v_l, J_pose, Rt, J_bias
+    return u + cross3(omega_b - b_g - w, lever_b), J_pose, Rt, J_bias
 
 
 def _keys_and_bias(pose_key, vel_key, bias_key, lever_b):
@@ -67,6 +69,9 @@ def nhc_factor(pose_key: int, vel_key: int, bias_key: int, omega_b: np.ndarray, 
     ``omega_b`` the raw gyro at the node [rad/s], ``w_ie_n`` the earth rate [rad/s, local NED]."""
     omega_b, lever_b, w_ie_n = (np.asarray(a, float).copy() for a in (omega_b, lever_b, w_ie_n))
     keys, with_bias = _keys_and_bias(pose_key, vel_key, bias_key, lever_b)
+    noise = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigma_mps, float))
+    if not with_bias and R_vb is None:
+        return gtsam.CustomFactor(noise, keys, _plain_nhc_error(keys))
     zero3 = np.zeros(3)
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
@@ -79,7 +84,25 @@ def nhc_factor(pose_key: int, vel_key: int, bias_key: int, omega_b: np.ndarray, 
                 H[2] = J_bias[1:3]
         return v_l[1:3]
 
-    return gtsam.CustomFactor(gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigma_mps, float)), keys, error)
+    return gtsam.CustomFactor(noise, keys, error)
+
+
+def _plain_nhc_error(keys: list):
+    """:func:`nhc_factor`'s error without a lever arm and in the body's axes: ``e = (R^T v)_{y,z}``,
+    ``de/dxi = [u x]_{y,z}``, ``de/dv = (R^T)_{y,z}`` (iSAM2 calls it a few times per factor: no
+    temporaries beyond the products, Jacobian buffers reused; GTSAM copies them out)."""
+    J_pose = np.zeros((2, 6))
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
+        Rt = values.atPose3(keys[0]).rotation().matrix().T
+        u = Rt @ values.atVector(keys[1])
+        if H is not None:
+            # Rows y, z of [u x]: [[u_z, 0, -u_x], [-u_y, u_x, 0]].
+            J_pose[0, 0], J_pose[0, 2], J_pose[1, 0], J_pose[1, 1] = u[2], -u[0], -u[1], u[0]
+            H[0], H[1] = J_pose, Rt[1:3]
+        return u[1:3]
+
+    return error
 
 
 def odometry_factor(pose_key: int, vel_key: int, bias_key: int, scale_key: int, v_odo: float, omega_b: np.ndarray,

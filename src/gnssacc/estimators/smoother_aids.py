@@ -31,6 +31,7 @@ import numpy as np
 from gtsam.symbol_shorthand import B, K, V, X
 
 from ..core.earth import earth_rate_n
+from ..core.rotations import cross3
 from ..factors import gauss_markov_factor, nhc_factor, odometry_factor
 from . import nhc as nhc_rules
 from . import odometry as odo_rules
@@ -89,7 +90,7 @@ class NhcFactors:
             return
         cfg, omega = self.cfg, self.omega_b[i]
         w_b = omega - b_g - R_nb.T @ self.w_ie
-        v_b = R_nb.T @ v_n + np.cross(w_b, cfg.lever_arm_b)
+        v_b = R_nb.T @ v_n + cross3(w_b, cfg.lever_arm_b)
         v_b = v_b if cfg.R_vb is None else cfg.R_vb @ v_b
         fwd = R_nb @ cfg.forward_b     # the vehicle's forward axis, NED
         why = nhc_rules.decide(self.rest[i], float(v_b[0]), math.sqrt(max(float(fwd @ c_vel @ fwd), 0.0)),
@@ -156,7 +157,7 @@ class OdometryFactors:
         j, cfg, omega = self.sample[i], self.cfg, self.omega_b[i]
         w_b = omega - b_g - R_nb.T @ self.w_ie
         fwd = R_nb @ self.forward_b    # the vehicle's forward axis, NED
-        v_x = float(fwd @ v_n + self.forward_b @ np.cross(w_b, cfg.lever_arm_b))
+        v_x = float(fwd @ v_n + self.forward_b @ cross3(w_b, cfg.lever_arm_b))
         sigma_pred = (1.0 + k) * math.sqrt(max(float(fwd @ c_vel @ fwd), 0.0))
         why = odo_rules.decide(float(self.ep.v[j]), float(self.ep.sigma[j]), (1.0 + k) * v_x, sigma_pred)
         if why != odo_rules.APPLY:
