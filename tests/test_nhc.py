@@ -247,3 +247,35 @@ def test_the_tuner_finds_the_vehicle_axes_and_only_when_they_are_there(pitch_deg
     else:
         # Within a third of each applied angle: far closer than the model without them.
         np.testing.assert_allclose(found, [pitch_deg, yaw_deg], atol=0.3 * min(abs(pitch_deg), abs(yaw_deg)))
+
+
+
+class _Quadratic:
+    """A negative log-likelihood ``sum gain_i (1 - (theta_i - 1)^2)``-like bowl over the parameters
+    ``free``: each parameter's optimum is at 1, worth ``gains[i]`` of log-likelihood over 0."""
+
+    def __init__(self, free, gains):
+        self.free, self.gains = free, np.asarray(gains, float)
+
+    def __call__(self, theta):
+        theta = np.asarray(theta, float)
+        return -float(np.sum(self.gains * (1.0 - (theta - 1.0) ** 2)))
+
+
+def test_an_axis_angle_is_kept_only_on_a_decisive_likelihood_gain():
+    from gnssacc.prepare import tuning
+
+    free = [("nhc", "sigma_lateral_mps"), ("nhc", "pitch_offset_deg"), ("nhc", "yaw_offset_deg")]
+    gain = tuning.OFFSET_MIN_GAIN
+    theta, n = tuning._significant_offsets(_Quadratic(free, [50.0, 2.0 * gain, 0.5 * gain]), np.ones(3))
+    # The sigma is not an angle: kept; the pitch brings twice the threshold: kept; the yaw half: dropped.
+    assert theta.tolist() == [1.0, 1.0, 0.0] and n == 3
+
+
+def test_correlation_inflation_is_the_ar1_variance_factor():
+    from gnssacc.prepare.tuning import correlation_inflation
+
+    assert correlation_inflation(0.5, 400) == pytest.approx(np.sqrt(3.0))      # (1 + 0.5) / (1 - 0.5)
+    assert correlation_inflation(0.1, 400) == 1.0            # within three standard errors (0.15) of zero
+    assert correlation_inflation(0.99, 400) == pytest.approx(np.sqrt(1.9 / 0.1))   # capped at 0.9
+    assert correlation_inflation(None, 400) == 1.0 and correlation_inflation(0.5, 5) == 1.0
