@@ -256,6 +256,7 @@ class _Quadratic:
 
     def __init__(self, free, gains):
         self.free, self.gains = free, np.asarray(gains, float)
+        self.start = {p: np.zeros(1) for p in free}
 
     def __call__(self, theta):
         theta = np.asarray(theta, float)
@@ -267,9 +268,9 @@ def test_an_axis_angle_is_kept_only_on_a_decisive_likelihood_gain():
 
     free = [("nhc", "sigma_lateral_mps"), ("nhc", "pitch_offset_deg"), ("nhc", "yaw_offset_deg")]
     gain = tuning.OFFSET_MIN_GAIN
-    theta, n = tuning._significant_offsets(_Quadratic(free, [50.0, 2.0 * gain, 0.5 * gain]), np.ones(3))
+    theta, n, dropped = tuning._significant_offsets(_Quadratic(free, [50.0, 2.0 * gain, 0.5 * gain]), np.ones(3))
     # The sigma is not an angle: kept; the pitch brings twice the threshold: kept; the yaw half: dropped.
-    assert theta.tolist() == [1.0, 1.0, 0.0] and n == 3
+    assert theta.tolist() == [1.0, 1.0, 0.0] and n == 3 and dropped == [2]
 
 
 def test_correlation_inflation_is_the_ar1_variance_factor():

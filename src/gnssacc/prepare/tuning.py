@@ -589,34 +589,35 @@ def _aids_stage(run, tuned, cfg, aid_params, aid_kinds, stationary, quality, ini
     theta, j_best, n_eval = ml_search(obj, len(free), AIDS_EVALUATIONS, _prior_widths(cfg, free, {}))
     if not np.isfinite(j_best):
         return {}, n_eval
-    theta, n_test = _significant_offsets(obj, theta)
     best = obj.config(theta)
     raw: dict = {}
     for sec, key in free:
         raw.setdefault(sec, {})[key] = best[sec][key]
     inflated = _inflate(raw, obj, theta)
-    offsets = [p for i, p in enumerate(free) if p in ADDITIVE and theta[i] != 0.0]
-    n_again = _offsets_again(obj, tuned, raw, offsets, cfg) if inflated and offsets else 0
-    return raw, n_eval + n_test + n_again
+    offsets = [p for p in free if p in ADDITIVE]
+    n_again = _settle_offsets(obj, tuned, raw, offsets, cfg, inflated) if offsets else 0
+    return raw, n_eval + n_again
 
 
-def _significant_offsets(obj: "_Objective", theta: np.ndarray) -> tuple[np.ndarray, int]:
-    """``theta`` with each additive parameter (the vehicle's axes) back at its start unless it raises
-    the log-likelihood by more than :data:`OFFSET_MIN_GAIN` (a likelihood-ratio test per angle);
-    and the passes made."""
+def _significant_offsets(obj: "_Objective", theta: np.ndarray) -> tuple[np.ndarray, int, list]:
+    """``theta`` with each additive parameter (the vehicle's axes) at zero unless it raises the
+    log-likelihood by more than :data:`OFFSET_MIN_GAIN` (a likelihood-ratio test per angle, in
+    turn); the passes made and the indices set to zero."""
     theta = np.array(theta, float)
     best = -float(obj(theta))
-    n = 1
+    n, dropped = 1, []
     for i, p in enumerate(obj.free):
-        if p not in ADDITIVE or theta[i] == 0.0:
+        if p not in ADDITIVE:
             continue
         trial = theta.copy()
-        trial[i] = 0.0
+        trial[i] = -float(obj.start[p][0]) / ADDITIVE[p]   # the angle at zero
+        if trial[i] == theta[i]:
+            continue
         n += 1
         if best - (-float(obj(trial))) <= OFFSET_MIN_GAIN:
-            theta = trial
+            theta, dropped = trial, dropped + [i]
             best = -float(obj(theta))
-    return theta, n
+    return theta, n, dropped
 
 
 def _inflate(raw: dict, obj: "_Objective", theta: np.ndarray) -> bool:
@@ -643,21 +644,25 @@ def _inflate(raw: dict, obj: "_Objective", theta: np.ndarray) -> bool:
     return inflated
 
 
-def _offsets_again(obj: "_Objective", tuned, raw: dict, offsets: list, cfg) -> int:
-    """The vehicle's axes ``offsets`` searched again from their values in ``raw`` (updated in place)
-    with the inflated sigmas held; returns the passes made."""
+def _settle_offsets(obj: "_Objective", tuned, raw: dict, offsets: list, cfg, search: bool) -> int:
+    """The vehicle's axes ``offsets`` under the final sigmas (in ``raw``, held): searched again
+    from their values in ``raw`` when the sigmas were inflated (``search``), then each kept only
+    on :func:`_significant_offsets`' test; ``raw`` updated in place; returns the passes made."""
     held = tuned.with_values({sec: {k: v for k, v in vals.items() if (sec, k) not in ADDITIVE}
                               for sec, vals in raw.items()}, "tuned")
     obj2 = _Objective(obj.run, held, offsets, {p: np.atleast_1d(float(raw[p[0]][p[1]])) for p in offsets},
                       obj.stationary, obj.quality, obj.init, obj.method, obj.kinds, obj.filter_pass)
     obj2.init_scale = obj.init_scale
-    theta, j, n = ml_search(obj2, len(offsets), OFFSET_EVALUATIONS, _prior_widths(cfg, offsets, {}),
-                            step_decades=0.2, probe_decades=None)
-    if np.isfinite(j):
-        again = obj2.config(theta)
-        for sec, key in offsets:
-            raw[sec][key] = again[sec][key]
-    return n
+    theta, n = np.zeros(len(offsets)), 0
+    if search:
+        found, j, n = ml_search(obj2, len(offsets), OFFSET_EVALUATIONS, _prior_widths(cfg, offsets, {}),
+                                step_decades=0.2, probe_decades=None)
+        theta = found if np.isfinite(j) else theta
+    theta, n_test, dropped = _significant_offsets(obj2, theta)
+    settled = obj2.config(theta)
+    for i, (sec, key) in enumerate(offsets):
+        raw[sec][key] = 0.0 if i in dropped else settled[sec][key]
+    return n + n_test
 
 
 def correlation_inflation(acf1: float | None, n: int) -> float:
