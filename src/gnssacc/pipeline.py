@@ -339,6 +339,7 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
              "coverage": {m: _coverage(run, s) for m, s in sols.items()},
              "consistency": {m: c.to_dict() for m, c in cons.items()},
              "init": prep.init.how, "stationary": prep.stationary.to_dict(),
+             "input_checks": [f.to_dict() for f in prep.checks],
              "model_check": models[""].to_dict(),
              "model_check_gm": models["gm"].to_dict() if "gm" in models else None,
              "tuning": prep.tuning.to_dict() if prep.tuning is not None else None}

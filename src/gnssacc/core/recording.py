@@ -15,7 +15,7 @@ import numpy as np
 
 from .earth import LocalTangentFrame
 from .errors import InputError, warn_data
-from .rotations import euler_to_dcm
+from .rotations import dcm_to_euler, euler_to_dcm
 
 
 @dataclass
@@ -368,6 +368,25 @@ class RecordedRun:
         imu = self.imu
         odo = None if self.odometry is None else self.odometry.shifted(delta_s)
         return replace(self, imu=ImuData(imu.t + delta_s, imu.f_b, imu.omega_ib_b), odometry=odo)
+
+    def with_mounting(self, R_bi: np.ndarray) -> "RecordedRun":
+        """A copy with the body axes turned by ``R_bi`` (``x_b = R_bi x``, from the axes the run
+        has): everything that lives in the IMU frame, in one place. The samples are rotated; a
+        given start's attitude becomes ``R_nb R_bi^T`` and its bias estimates ``R_bi b`` (their
+        variances rotated with them); its attitude sigmas are in n and stay."""
+        R = np.asarray(R_bi, float)
+        imu = ImuData(self.imu.t, self.imu.f_b @ R.T, self.imu.omega_ib_b @ R.T)
+        init = self.init
+        if init is not None:
+            R2 = R * R
+
+            def var_rot(sig):
+                return None if sig is None else np.sqrt(R2 @ np.asarray(sig, float) ** 2)
+
+            init = replace(init, rpy=np.array(dcm_to_euler(init.R_nb @ R.T)), b_a=R @ np.asarray(init.b_a, float),
+                           b_g=R @ np.asarray(init.b_g, float), sigma_b_a=var_rot(init.sigma_b_a),
+                           sigma_b_g=var_rot(init.sigma_b_g))
+        return replace(self, imu=imu, init=init)
 
     def with_gnss(self, gnss: GnssFixes, **meta) -> "RecordedRun":
         """A copy with other GNSS fixes (e.g. noisy or with outages) and extra metadata."""
