@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Callable
 
 from .analysis.consistency import assess
+from .analysis.errorstats import error_statistics
 from .analysis.metrics import gnss_score, score
 from .core import jit
 from .core.config import RunConfig
@@ -20,7 +21,7 @@ from .core.recording import RecordedRun
 from .core.solution import NavSolution
 from .estimators.ekf import run_ekf
 from .outputs.outdir import ResultDir
-from .outputs.report import format_table, metrics_dict, plot_errors, plot_trajectory, write_json, write_trajectory_csv
+from .outputs.report import format_table, group_warnings, metrics_dict, plot_errors, plot_trajectory, write_json, write_trajectory_csv
 from .prepare.identify import Identified, identify
 from .sources.gnss_noise import apply_outages, parse_outages
 from .sources.simspec import is_sim_spec, load_sim
@@ -239,16 +240,18 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
     for m, s in list(sols.items()):
         try:  # scoring one solution must not cost the others either
             scores[m] = score(run, s, window)
+            scores[m].errors = error_statistics(run, s, window)
+            fixes = scores[m].errors.get("at_fixes") or {}
             judged, model = _noise_model_of(ident, m, sols)
-            cons[m] = assess(judged.run, s, scores[m].prmse_m, raw.prmse_m, model, judged.cfg.gnss_gm_sigma)
+            cons[m] = assess(judged.run, s, fixes.get("prmse_m"), fixes.get("gnss_prmse_m"), model,
+                             judged.cfg.gnss_gm_sigma, errors=scores[m].errors, n_fixes=fixes.get("n"))
         except Exception as exc:
             raise_if_interrupted(exc)
             failed[m] = failure_reason(exc)
             del sols[m]
             scores.pop(m, None)
-            continue
-        for text in cons[m].warnings:
-            warn_data(m, text)
+    for who, text in group_warnings([(m, w) for m, c in cons.items() for w in c.warnings]):
+        warn_data(who, text)
     for m, reason in failed.items():
         warn_data(m, f"failed: {reason}; the other methods' results are kept")
     extra = {"jit_compile_s": jit_s, "identify_s": ident.seconds, "quality": ident.quality.to_dict(),

@@ -30,6 +30,9 @@ class Score:
         Roll, pitch, yaw RMSE [deg] when the truth has attitude.
     truth : dict
         :func:`truth_figures` (``None`` values where the truth lacks what a figure needs).
+    errors : dict
+        The evo-style statistics (:func:`gnssacc.analysis.errorstats.error_statistics` for a
+        solution, :func:`gnssacc.analysis.errorstats.fix_statistics` for the raw fixes).
     """
 
     prmse_m: float | None
@@ -38,6 +41,7 @@ class Score:
     n_epochs: int
     rpy_rmse_deg: list | None = None
     truth: dict = field(default_factory=dict)
+    errors: dict = field(default_factory=dict)
 
 
 def truth_at(run: RecordedRun, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -149,7 +153,9 @@ def gnss_score(run: RecordedRun, window: tuple | None = None) -> Score:
     err = (run.origin.to_ned(run.gnss.lat, run.gnss.lon, run.gnss.h) - p_true)[valid]
     if len(err) == 0:
         return Score(None, None, None, 0)
-    return Score(_rms(err), _rms(err[:, :2]), None, len(err))
+    from .errorstats import fix_statistics
+
+    return Score(_rms(err), _rms(err[:, :2]), None, len(err), errors=fix_statistics(err))
 
 
 def improvement_pct(baseline: float | None, aided: float | None) -> float | None:
