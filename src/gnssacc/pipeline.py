@@ -20,8 +20,9 @@ from .core.memory import release_free_memory
 from .core.recording import RecordedRun
 from .core.solution import NavSolution
 from .estimators.ekf import run_ekf
+from .outputs.figures import PLOT_SETS, write_figures
 from .outputs.outdir import ResultDir
-from .outputs.report import format_table, group_warnings, metrics_dict, plot_errors, plot_trajectory, write_json, write_trajectory_csv
+from .outputs.report import format_table, group_warnings, metrics_dict, write_json, write_trajectory_csv
 from .prepare.identify import Identified, identify
 from .sources.gnss_noise import apply_outages, parse_outages
 from .sources.simspec import is_sim_spec, load_sim
@@ -29,7 +30,8 @@ from .sources.simspec import is_sim_spec, load_sim
 
 def _ekf(ident: Identified, method: str, show_progress: bool, observer=None) -> dict[str, NavSolution]:
     return {method: run_ekf(ident.run, ident.cfg, method, quality=ident.quality, init=ident.init,
-                            stationary=ident.stationary, show_progress=show_progress, observer=observer)}
+                            stationary=ident.stationary, show_progress=show_progress, observer=observer,
+                            record_innovations=True)}   # the NIS over time of nis.png
 
 
 def _smoother(ident: Identified, method: str, show_progress: bool) -> dict[str, NavSolution]:
@@ -412,14 +414,26 @@ def write_outputs(out_dir: Path, run: RecordedRun, sols: dict[str, NavSolution],
                                                                 report=report, export=export, tuned_toml=tuned_toml))
 
 
+def plot_set(plots: bool | str | None, report: bool = False) -> str:
+    """The ``--plots`` choice (:data:`gnssacc.outputs.figures.PLOT_SETS`) from ``plots``: a name, or
+    ``True``/``None`` for the default (``basic``; ``all`` with the report), ``False`` for ``none``."""
+    if plots is False:
+        return "none"
+    if plots is True or plots is None:
+        return "all" if report else "basic"
+    if plots not in PLOT_SETS:
+        raise InputError("--plots", f"{plots!r}: expected one of {', '.join(PLOT_SETS)}")
+    return plots
+
+
 def write_result_files(folder: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict,
-                       cfg: RunConfig, plots: bool = True, report: bool = False, export: tuple = (),
+                       cfg: RunConfig, plots: bool | str = True, report: bool = False, export: tuple = (),
                        tuned_toml: str | None = None, replay=None) -> None:
     """Write every output file into ``folder`` (a fresh folder; see :func:`write_outputs`).
 
     ``trajectory_<id>.csv`` per solution, ``config.toml``, ``table.txt``, ``metrics.json`` (with
-    the failed methods too); ``plots`` adds ``errors.png`` (with truth) and ``trajectory.png``;
-    ``report`` adds ``report.html`` (with ``sigmas.png``); ``export`` may hold ``"tum"``
+    the failed methods too); ``plots`` (``"none"``, ``"basic"``, ``"all"``, or a bool: :func:`plot_set`)
+    the figures of :mod:`gnssacc.outputs.figures`; ``report`` adds ``report.html``; ``export`` may hold ``"tum"``
     (``trajectory_<id>.tum`` and the truth's, for ``evo``), ``"bag"`` (``trajectories/``, a ROS 2
     bag of ``nav_msgs/Odometry``) and ``"ros1bag"`` (``trajectories.bag``); ``tuned_toml`` is written as
     ``tuned.toml`` (the identified noise, reusable with ``--config``); ``replay`` is the
@@ -432,10 +446,7 @@ def write_result_files(folder: Path, run: RecordedRun, sols: dict[str, NavSoluti
     (folder / "config.toml").write_text(cfg.to_toml())
     if tuned_toml is not None:
         (folder / "tuned.toml").write_text(tuned_toml)
-    if plots:
-        if run.truth is not None:  # errors need a reference
-            plot_errors(run, sols, folder / "errors.png")
-        plot_trajectory(run, sols, folder / "trajectory.png")
+    drawn = write_figures(folder, run, sols, metrics, plot_set(plots, report))
     if "tum" in export:
         from .outputs.export import write_truth_tum, write_tum
         for mid, sol in sols.items():
@@ -447,6 +458,6 @@ def write_result_files(folder: Path, run: RecordedRun, sols: dict[str, NavSoluti
         write_odometry_bag(sols, run, folder / BAG_EXPORTS[kind])
     if report:
         from .outputs.htmlreport import write_html_report
-        write_html_report(folder, run, sols, metrics, cfg, replay=replay)
+        write_html_report(folder, run, sols, metrics, cfg, replay=replay, figures=drawn)
     (folder / "table.txt").write_text(format_table(metrics) + "\n")
     write_json(metrics, folder / "metrics.json")

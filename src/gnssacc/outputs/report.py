@@ -88,7 +88,7 @@ def metrics_dict(run: RecordedRun, sols: dict[str, NavSolution], scores: dict[st
             "improvement_pct": improvement_pct(scores[base].prmse_m, sc.prmse_m) if base in scores else None,
             "runtime_s": sol.runtime_s,
             "realtime_factor": run.duration_s / sol.runtime_s if sol.runtime_s > 0 else None,
-            "stats": sol.stats,
+            "stats": {k: v for k, v in sol.stats.items() if not isinstance(v, np.ndarray)},   # not per-update series
         }
     for mid, reason in (failed or {}).items():
         methods[mid] = {"status": "failed", "error": reason}
@@ -268,81 +268,3 @@ def group_warnings(items: list[tuple[str, str]]) -> list[tuple[str, str]]:
         text = "".join(p + (next(slots) if i < len(parts) - 1 else "") for i, p in enumerate(parts))
         out.append((", ".join(dict.fromkeys(m for m, _ in members)), text))
     return out
-
-
-def figure(figsize, nrows: int = 1, ncols: int = 1, **kw):
-    """A matplotlib figure and axes for a file (the Agg backend: never needs a display)."""
-    import matplotlib
-    matplotlib.use("Agg")  # files only; never needs a display
-    import matplotlib.pyplot as plt
-
-    return plt.subplots(nrows, ncols, figsize=figsize, **kw)
-
-
-def _finish(fig, ax, path: Path, xlabel: str, ylabel: str, title: str, legend: bool = True,
-            title_ax=None) -> None:
-    import matplotlib.pyplot as plt
-
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
-    (title_ax or ax).set_title(title)
-    ax.grid(alpha=0.3)
-    if legend:
-        ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
-#: Line styles cycled over the methods, so that two methods whose errors coincide stay distinct
-#: (the later one dashed or dotted on top of the earlier, thinner).
-_STYLES = (("-", 1.6), ("--", 1.2), (":", 1.4), ("-.", 1.0))
-
-
-def plot_errors(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> None:
-    """North, east and down position error per method against time, each with its +-3 sigma
-    band (the method's own 1-sigma, drawn as thin edges in its colour and line style); GNSS
-    outages shaded grey when there are any. Each axis spans the 98th percentile of the errors and
-    bands (the widest 2 % of a band, deep in an outage, is cut off)."""
-    fig, axes = figure((10, 7.5), nrows=3, sharex=True)
-    outages = run.outages
-    extent = np.zeros(3)   # per axis: the 98th percentile of |error| and 3 sigma over the methods
-    for k, (mid, sol) in enumerate(sols.items()):
-        p_true, valid = truth_at(run, sol.t)
-        err = run.origin.to_ned(sol.lat, sol.lon, sol.h)[valid] - p_true[valid]
-        t, sig = sol.t[valid] - run.t_start, sol.sigma[valid, 0:3]
-        style, lw = _STYLES[k % len(_STYLES)]
-        for i, ax in enumerate(axes):
-            line, = ax.plot(t, err[:, i], style, lw=lw, label=mid, zorder=3)
-            for sign in (-1, 1):   # the band as thin edges in the method's colour and style
-                ax.plot(t, sign * 3 * sig[:, i], style, lw=0.7, color=line.get_color(), alpha=0.6, zorder=2)
-        if len(t):
-            extent = np.maximum(extent, np.percentile(np.maximum(np.abs(err), 3 * sig), 98, axis=0))
-    for ax, axis, lim in zip(axes, ("north", "east", "down"), extent):
-        if lim > 0:   # a band that opens in a long outage must not flatten every error line
-            ax.set_ylim(-1.15 * lim, 1.15 * lim)
-        for a, b in outages:
-            ax.axvspan(a, b, color="0.85", zorder=0)
-        ax.set_ylabel(f"{axis} error [m]")
-        ax.grid(alpha=0.3)
-    axes[0].legend(ncol=min(len(sols), 4), fontsize="small", loc="upper right")
-    note = "; grey: GNSS outages" if outages else ""
-    _finish(fig, axes[-1], path, "time since start [s]", "down error [m]",
-            f"{run.name}: position error, estimate minus truth, with +-3 sigma bands{note}", legend=False,
-            title_ax=axes[0])
-
-
-def plot_trajectory(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> None:
-    """North/east track of each method with the truth and the GNSS fixes."""
-    fig, ax = figure((7.5, 7.5))
-    fx = run.origin.to_ned(run.gnss.lat, run.gnss.lon, run.gnss.h)
-    ax.plot(fx[:, 1], fx[:, 0], ".", ms=2.5, color="0.6", label="GNSS fixes")
-    if run.truth is not None:
-        tr = run.origin.to_ned(run.truth.lat, run.truth.lon, run.truth.h)
-        ax.plot(tr[:, 1], tr[:, 0], "k-", lw=1.5, label="truth")
-    for mid, sol in sols.items():
-        p = run.origin.to_ned(sol.lat, sol.lon, sol.h)
-        ax.plot(p[:, 1], p[:, 0], lw=1, label=mid)
-    ax.set_aspect("equal", adjustable="datalim")
-    _finish(fig, ax, path, "east [m]", "north [m]",
-            f"{run.name}: track (origin {np.degrees(run.origin.lat0):.5f}, {np.degrees(run.origin.lon0):.5f} deg)")
