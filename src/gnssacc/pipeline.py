@@ -22,7 +22,7 @@ from .core.solution import NavSolution
 from .estimators.ekf import run_ekf
 from .outputs.figures import PLOT_SETS, write_figures
 from .outputs.outdir import ResultDir
-from .outputs.report import format_table, group_warnings, metrics_dict, write_json, write_trajectory_csv
+from .outputs.report import format_table, group_warnings, metrics_dict, quality_line, write_json, write_trajectory_csv
 from .prepare.identify import Identified, identify
 from .sources.gnss_noise import apply_outages, parse_outages
 from .sources.simspec import is_sim_spec, load_sim
@@ -150,7 +150,8 @@ def with_outages(run: RecordedRun, outage: str | None, outage_every: str | None)
 
 def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
                 ident: Identified | None = None, show_progress: bool = False,
-                failures: dict[str, str] | None = None, observers: dict | None = None) -> dict[str, NavSolution]:
+                failures: dict[str, str] | None = None, observers: dict | None = None,
+                say: Callable[[str], None] | None = None) -> dict[str, NavSolution]:
     """Run each method on the same run, from the same identified start and noise.
 
     Parameters
@@ -171,6 +172,8 @@ def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: s
     observers : dict, optional
         ``{method: gnssacc.estimators.ekf.EkfObserver}`` watching an EKF method's own pass (e.g. the
         :class:`gnssacc.analysis.observability.EpochCollector` of the report's observability section).
+    say : callable, optional
+        ``say(line)`` is told each method's end as it happens (``ekf: 0.12 s``, or its failure).
 
     Returns
     -------
@@ -182,8 +185,12 @@ def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: s
     for m in methods:
         try:
             extra = {"observer": observers[m]} if observers and m in observers else {}
-            out.update(METHODS[m](ident, m, show_progress, **extra))
+            got = METHODS[m](ident, m, show_progress, **extra)
+            out.update(got)
             release_free_memory()   # one method's work arrays, before the next one's
+            if say:
+                say(f"{m}: done in {max(s.runtime_s for s in got.values()):.2f} s"
+                    + (f" ({', '.join(got)})" if len(got) > 1 else ""))
         except InputError:
             raise
         except Exception as exc:  # an estimator failure costs that method only
@@ -191,6 +198,8 @@ def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: s
             if failures is None:
                 raise
             failures[m] = failure_reason(exc)
+            if say:
+                say(f"{m}: failed ({failures[m]})")
     return out
 
 
@@ -211,13 +220,16 @@ def common_window(run: RecordedRun, sols: dict[str, NavSolution]) -> tuple[float
 
 
 def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
-            show_progress: bool = False, observers: dict | None = None) -> tuple[dict, dict, Identified]:
+            show_progress: bool = False, observers: dict | None = None,
+            say: Callable[[str], None] | None = None) -> tuple[dict, dict, Identified]:
     """Identify, run and score the methods over a common window, with consistency figures.
 
     A method whose estimator fails is reported (a ``gnssacc: warning:`` naming it, and
     ``status: "failed"`` with ``error`` in the metrics) without costing the others; it is up
     to the caller what to do when every method failed. ``observers`` (``{method: observer}``)
-    watch EKF methods' own passes (:func:`run_methods`).
+    watch EKF methods' own passes (:func:`run_methods`). ``say(line)``, when given, is told the
+    preparation's findings (IMU data quality, stationary spans, start, tuning) as soon as they are
+    known and each method's end (:func:`run_methods`), so a caller can print results as they come.
 
     Returns
     -------
@@ -229,13 +241,15 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
         The shared start, stationary spans and (tuned) configuration.
     """
     ident = identify(run, cfg, tune)   # its EKF passes wait for the kernels: the input checks do not
+    for line in preparation_lines(ident) if say else ():
+        say(line)
     jit_s = jit.warm_up()   # the kernels' compile (or load) time, in the background
     if any(m.startswith("smoother") or m.endswith("accw") for m in methods):   # not inside their wall time
         jit_s += jit.smoother_ready()
     run = ident.run   # as the input checks left it: repaired units, the measured clock offset applied
     failed: dict[str, str] = {}
     sols = run_methods(run, cfg, methods, ident=ident, show_progress=show_progress, failures=failed,
-                       observers=observers)
+                       observers=observers, say=say)
     window = scored_window(run, sols)
     raw = gnss_score(run, window)
     scores, cons = {}, {}
@@ -316,6 +330,13 @@ def _coverage(run: RecordedRun, sol: NavSolution) -> dict:
     return {"first_s": a, "last_s": b, "fraction": (b - a) / run.duration_s if run.duration_s > 0 else 1.0}
 
 
+def preparation_lines(ident: Identified) -> list[str]:
+    """What the preparation found, one line each: IMU data quality, stationary spans, the start and
+    (``--tune auto``) the identified noise."""
+    lines = [quality_line(ident.quality.to_dict()), ident.stationary.summary(), f"start: {ident.init.how}"]
+    return lines + ([ident.tuning.line()] if ident.tuning is not None else [])
+
+
 def compare_and_write(run: RecordedRun, cfg: RunConfig, methods: list[str], target: ResultDir, *,
                       tune: str | None = None, plots: bool = True, report: bool = False, export: tuple = (),
                       extra_files: Callable[[dict], dict[str, str]] | None = None,
@@ -336,7 +357,7 @@ def compare_and_write(run: RecordedRun, cfg: RunConfig, methods: list[str], targ
 
 
 def compare_observed(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
-                     show_progress: bool = False, observe: bool = True):
+                     show_progress: bool = False, observe: bool = True, say: Callable[[str], None] | None = None):
     """:func:`compare`, keeping (with ``observe``, when ``ekf-acc`` runs) that pass's matrices at
     every GNSS epoch for the report's observability section.
 
@@ -352,7 +373,7 @@ def compare_observed(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tu
 
         collector = EpochCollector(False)
     metrics, sols, ident = compare(run, cfg, methods, tune=tune, show_progress=show_progress,
-                                   observers={"ekf-acc": collector} if collector else None)
+                                   observers={"ekf-acc": collector} if collector else None, say=say)
     replay = collector.replay("ekf-acc", sols["ekf-acc"]) if collector and "ekf-acc" in sols else None
     return metrics, sols, ident, replay
 

@@ -69,7 +69,12 @@ def settings_from_args(args, stored: dict) -> dict:
         config=args.config or (stored.get("config") or {}).get("path"), imu_frame=given("imu_frame", "frd"),
         bag=bag, plots=not args.no_plots if args.no_plots is not None else out["plots"],
         report=args.report if args.report is not None else out["report"],
-        export=tuple(args.export) if args.export is not None else tuple(out["export"]))
+        export=_exports(args.export) if args.export is not None else tuple(out["export"]))
+
+
+def _exports(values) -> tuple:
+    """``--export``'s values (each a kind or a list of kinds, the option repeated) as kinds, once each."""
+    return tuple(dict.fromkeys(k for v in values for k in ([v] if isinstance(v, str) else v)))
 
 
 def _patterns(args) -> list[Pattern]:

@@ -268,3 +268,16 @@ def group_warnings(items: list[tuple[str, str]]) -> list[tuple[str, str]]:
         text = "".join(p + (next(slots) if i < len(parts) - 1 else "") for i, p in enumerate(parts))
         out.append((", ".join(dict.fromkeys(m for m, _ in members)), text))
     return out
+
+
+def quality_line(quality: dict) -> str:
+    """One line of the IMU data-quality findings (a :class:`gnssacc.checks.quality.QualityReport`
+    as a dict: its suspect ``spans`` by kind, with their total length)."""
+    spans = quality.get("spans", [])
+    if not spans:
+        return "IMU data quality: no suspect spans"
+    kinds: dict[str, list] = {}
+    for s in spans:
+        kinds.setdefault(s["kind"], []).append(s)
+    parts = [f"{len(v)} {k} ({sum(s['t_end'] - s['t_start'] for s in v):.1f} s)" for k, v in kinds.items()]
+    return "IMU data quality: " + ", ".join(parts) + " - process noise inflated over these spans"
