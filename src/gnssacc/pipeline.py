@@ -473,7 +473,7 @@ def write_result_files(folder: Path, run: RecordedRun, sols: dict[str, NavSoluti
         for mid, sol in sols.items():
             write_tum(sol, run, folder / f"trajectory_{mid}.tum")
         if run.truth is not None:
-            write_truth_tum(run, folder)
+            write_truth_tum(run, folder, sols, metrics.get("scored_window_s"))
     for kind in set(export) & {"bag", "ros1bag"}:
         from .outputs.odombag import BAG_EXPORTS, write_odometry_bag
         write_odometry_bag(sols, run, folder / BAG_EXPORTS[kind])

@@ -6,8 +6,9 @@ the run's local **ENU** tangent frame [m] (x east, y north, z up; origin in the 
 quaternion of the rotation from the body **FLU** axes (x forward, y left, z up) to ENU:
 ``R_enu_flu = C_enu_ned R_nb C_frd_flu``, the same convention as the odometry bag export
 (:mod:`gnssacc.outputs.odombag`). ``evo_ape tum truth.tum trajectory_ekf.tum`` then compares like with
-like; with ``--align`` off its APE is :func:`gnssacc.analysis.errorstats.error_statistics`'s position
-error at the epochs both files share.
+like: ``truth.tum`` holds the truth at the estimates' epochs too (:func:`write_truth_tum`), so with
+``--align`` off evo's APE statistics are those of the table and ``metrics.json``
+(:func:`gnssacc.analysis.errorstats.error_statistics`), to the file's micrometre.
 
 The truth is always ``truth.tum``. A truth with positions only (e.g. an RTK receiver's fixes, the
 KITTI sequence) gets placeholder identity quaternions, says ``POSITIONS ONLY`` in its header line, and
@@ -59,16 +60,45 @@ def write_tum(sol: NavSolution, run: RecordedRun, path: Path) -> None:
     _write(Path(path), sol.t, run.origin.to_ned(sol.lat, sol.lon, sol.h), sol.rpy, _origin_note(run))
 
 
-def write_truth_tum(run: RecordedRun, folder: Path) -> Path:
-    """Write the run's truth as ``truth.tum`` in ``folder``; return the file (see the module docstring
-    for a truth with positions only: marked in the header line, and warned about)."""
+def truth_epochs(run: RecordedRun, sols: dict[str, NavSolution], window=None) -> np.ndarray:
+    """The epochs of ``truth.tum`` [s]: the truth's own and every solution's, inside the truth's span
+    and the scored ``window`` (once each, to the microsecond the file keeps)."""
+    tr = run.truth
+    t = np.concatenate([tr.t] + [s.t for s in sols.values()])
+    lo, hi = float(tr.t[0]), float(tr.t[-1])
+    if window is not None:
+        lo, hi = max(lo, window[0]), min(hi, window[1])
+    t = t[(t >= lo) & (t <= hi)]
+    return np.unique(np.round(t, 6))
+
+
+def write_truth_tum(run: RecordedRun, folder: Path, sols: dict[str, NavSolution] | None = None,
+                    window=None) -> Path:
+    """Write the run's truth as ``truth.tum`` in ``folder``; return the file.
+
+    The truth is written at :func:`truth_epochs`: its own epochs and, interpolated linearly as gnssacc
+    scores (positions; roll, pitch, yaw unwrapped), at every solution's epochs, inside the scored
+    ``window`` [s] when given. ``evo_ape`` matches each estimate to the nearest reference time (within
+    0.01 s) without interpolating, so it then scores exactly the epochs and errors of the table's
+    PRMSE. A truth with positions only is marked in the header line and warned about (module docstring).
+    """
+    from ..analysis.metrics import truth_at
+
     tr = run.truth
     path = Path(folder) / "truth.tum"
-    note = _origin_note(run)
+    t = truth_epochs(run, sols or {}, window)
+    note = _origin_note(run) + ("; the truth at its own epochs and, interpolated linearly, at the estimates' "
+                                "epochs (as gnssacc scores them)")
+    if window is not None:
+        note += f", over the scored window t = {window[0]:.6f} .. {window[1]:.6f} s"
+    rpy = None
     if tr.rpy is None:
         note += "; POSITIONS ONLY: the truth has no attitude, the quaternions are placeholders"
         warn_data("truth.tum", "holds positions only (the truth has no attitude; its quaternions are placeholders, "
                                "and its header says so): compare positions only (evo_ape ... --pose_relation "
                                "trans_part); evo_rpe's figures would be meaningless")
-    _write(path, tr.t, run.origin.to_ned(tr.lat, tr.lon, tr.h), tr.rpy, note)
+    else:
+        unwrapped = np.unwrap(tr.rpy, axis=0)
+        rpy = np.column_stack([np.interp(t, tr.t, unwrapped[:, i]) for i in range(3)])
+    _write(path, t, truth_at(run, t)[0], rpy, note)
     return path
