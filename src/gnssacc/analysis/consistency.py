@@ -330,6 +330,6 @@ def nees_warnings(stats: dict) -> list[str]:
                  if n["outside"] else "no single axis outside its band")
         side = "larger" if n["value"] > hi else "smaller"
         out.append(f"{what} NEES per dof {n['value']:.1f} against the truth is outside its chi-square band "
-                   f"[{lo:.2f}, {hi:.2f}] (per axis {axes}; {which}): its {what} errors are {side} than its "
+                   f"[{lo:.1f}, {hi:.1f}] (per axis {axes}; {which}): its {what} errors are {side} than its "
                    f"stated sigma says")
     return out
