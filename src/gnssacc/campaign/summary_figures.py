@@ -3,7 +3,8 @@
 * ``summary_prmse.png``: a box plot of PRMSE per method over the campaign's tasks (one panel per
   outage pattern): the spread a single run hides.
 * ``summary_effects.png``: a forest plot of the paired effect of each aided method over its baseline
-  (``baseline PRMSE - aided PRMSE`` per task, positive = the aiding helped) with its 95 % confidence
+  (``100 (baseline PRMSE - aided PRMSE) / baseline PRMSE`` per task [%], the table's ``acc gain``;
+  positive = the aiding helped) with its 95 % confidence
   interval (Student t on the paired differences), per recording and over all recordings, per pattern,
   and the paired sign-flip p-value (:func:`gnssacc.analysis.montecarlo.paired_permutation_pvalue`).
 
@@ -46,7 +47,7 @@ def paired_effect(diff: np.ndarray) -> dict:
 
 
 def effects(data: dict) -> list[dict]:
-    """One row per (pattern, cell, aided method): :func:`paired_effect` of baseline minus aided [m]."""
+    """One row per (pattern, cell, aided method): :func:`paired_effect` of the relative gain [%]."""
     rows = []
     for pattern, by_source in data.items():
         cells = list(by_source.items()) + ([("all recordings", [t for ts in by_source.values() for t in ts])]
@@ -55,7 +56,7 @@ def effects(data: dict) -> list[dict]:
             for m in tasks[0]:
                 base = BASELINES.get(m)
                 if base in tasks[0] and not m.endswith("-online"):
-                    diff = np.array([t[base] - t[m] for t in tasks])
+                    diff = np.array([100.0 * (t[base] - t[m]) / t[base] for t in tasks])
                     rows.append({"pattern": pattern, "cell": cell, "method": m, "baseline": base,
                                  **paired_effect(diff)})
     return rows
@@ -88,7 +89,7 @@ def plot_prmse(data: dict, path: Path) -> None:
 
 def plot_effects(rows: list[dict], path: Path) -> None:
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(9, 1.2 + 0.38 * max(len(rows), 1)))
+    fig, ax = plt.subplots(figsize=(10, 1.4 + 0.38 * max(len(rows), 1)), layout="constrained")
     for k, r in enumerate(rows):
         sig = r["p"] < 0.05
         ax.plot([r["lo"], r["hi"]], [k, k], color="k" if sig else "0.55", lw=1.5)
@@ -98,10 +99,9 @@ def plot_effects(rows: list[dict], path: Path) -> None:
     ax.set_yticks(range(len(rows)), [f"{r['method']} vs {r['baseline']} | {r['cell']} | {r['pattern']} "
                                      f"(n={r['n']}, p={r['p']:.3f})" for r in rows], fontsize=8)
     ax.invert_yaxis()
-    ax.set_xlabel("PRMSE gain [m] = baseline - aided (> 0: the aiding helped); 95 % CI")
+    ax.set_xlabel("PRMSE gain [%] = 100 (baseline - aided) / baseline (> 0: the aiding helped), 95 % CI")
     ax.set_title("Paired effect of each aiding (filled: p < 0.05, sign-flip test)")
     ax.grid(alpha=0.3, axis="x")
-    fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
