@@ -177,12 +177,11 @@ def _consistency_panel(ax, sols: dict, metrics: dict, truth: bool) -> None:
     ax.set_yticks(range(len(ids)))
     ax.set_yticklabels(ids)
     ax.invert_yaxis()
-    ax.set_xlabel("per dof, log scale (1 = consistent; grey: consistent band)")
+    ax.set_xlabel("per dof, log scale (1 = consistent; grey: its band)")
     ax.set_title("How sure: stated uncertainty vs actual errors" if truth else "How sure: NIS (no truth)")
     ax.grid(alpha=0.3, axis="x", which="both")
-    handles = [h for h in ax.get_legend_handles_labels()[0]]
-    if handles:
-        ax.legend(fontsize=8, loc="lower right")
+    if ax.get_legend_handles_labels()[0]:   # below the axis: the dots may sit anywhere in it
+        ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=3, frameon=False)
 
 
 # --------------------------------------------------------------------------------------------

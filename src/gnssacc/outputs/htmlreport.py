@@ -92,7 +92,8 @@ def tuning_html(metrics: dict) -> str:
 
 #: The figures in the report, with the question each one answers.
 CAPTIONS = {
-    "trajectory": "Where: the track coloured by horizontal error (x east, y north), start, end and outages marked",
+    "trajectory": "Where: the track coloured by horizontal error (without truth: by the stated 1-sigma), x east, "
+                  "y north, start, end and outages marked",
     "errors": "How the position error evolves, per axis, against each method's +-3 sigma",
     "velocity_attitude": "Velocity and attitude errors against +-3 sigma",
     "nis": "Is each method consistent over time? NIS and distance to the fixes",

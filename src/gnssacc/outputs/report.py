@@ -222,7 +222,8 @@ def _window_lines(metrics: dict) -> list[str]:
     t0 = metrics.get("t_start", 0.0)
     frac = (w[1] - w[0]) / metrics["duration_s"] if metrics["duration_s"] > 0 else 1.0
     n = {m["n_epochs"] for m in ok_methods(metrics).values()}
-    return [f"scored over t = {w[0] - t0:.1f} .. {w[1] - t0:.1f} s from the start ({100 * frac:.0f} % of the run), "
+    what = "scored" if metrics.get("gnss_prmse_m") is not None else "compared (no truth)"
+    return [f"{what} over t = {w[0] - t0:.1f} .. {w[1] - t0:.1f} s from the start ({100 * frac:.0f} % of the run), "
             f"every row: {'/'.join(str(x) for x in sorted(n))} epochs per method, "
             f"{metrics.get('gnss_n_epochs', '-')} raw fixes"]
 
