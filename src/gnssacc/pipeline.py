@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Callable
 
 from .analysis.consistency import assess
-from .analysis.errorstats import error_statistics
+from .analysis.errorstats import error_statistics, fix_statistics
 from .analysis.metrics import gnss_score, score
 from .core import jit
 from .core.config import RunConfig
@@ -252,6 +252,7 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
                        observers=observers, say=say)
     window = scored_window(run, sols)
     raw = gnss_score(run, window)
+    raw.errors = fix_statistics(run, window)
     scores, cons = {}, {}
     for m, s in list(sols.items()):
         try:  # scoring one solution must not cost the others either

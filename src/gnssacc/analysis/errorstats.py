@@ -193,8 +193,19 @@ def error_statistics(run: RecordedRun, sol: NavSolution, window=None) -> dict:
 
 
 
-def fix_statistics(err: np.ndarray) -> dict:
-    """The raw fixes' errors against the truth (K, 3) [m, N/E/D]: ``position``, ``horizontal`` and
-    ``position_axes`` as in :func:`error_statistics`."""
+def fix_statistics(run: RecordedRun, window=None) -> dict:
+    """The raw fixes' errors against the truth at their epochs inside ``window`` (those
+    :func:`gnssacc.analysis.metrics.gnss_score` scores): ``position``, ``horizontal`` and
+    ``position_axes`` as in :func:`error_statistics` (empty without truth)."""
+    from .metrics import truth_at
+
+    if run.truth is None:
+        return {}
+    g = run.gnss
+    p_true, valid = truth_at(run, g.t)
+    valid &= _in_window(g.t, window)
+    err = (run.origin.to_ned(g.lat, g.lon, g.h) - p_true)[valid]
+    if not len(err):
+        return {}
     return {"position": summary(np.linalg.norm(err, axis=1)), "horizontal": horizontal(err[:, :2]),
             "position_axes": per_axis(err, AXES_NED)}

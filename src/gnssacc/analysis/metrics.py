@@ -153,9 +153,7 @@ def gnss_score(run: RecordedRun, window: tuple | None = None) -> Score:
     err = (run.origin.to_ned(run.gnss.lat, run.gnss.lon, run.gnss.h) - p_true)[valid]
     if len(err) == 0:
         return Score(None, None, None, 0)
-    from .errorstats import fix_statistics
-
-    return Score(_rms(err), _rms(err[:, :2]), None, len(err), errors=fix_statistics(err))
+    return Score(_rms(err), _rms(err[:, :2]), None, len(err))
 
 
 def improvement_pct(baseline: float | None, aided: float | None) -> float | None:

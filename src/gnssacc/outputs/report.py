@@ -150,8 +150,7 @@ def _cell(value, spec: str, warned: bool = False) -> str:
 def _columns(metrics: dict) -> list[tuple[str, object]]:
     """The table's columns: ``(header, cell(mid, m) -> str)``, those the run has figures for."""
     ok = ok_methods(metrics)
-    truth = any(_get(m, "errors", "position") for m in ok.values()) or (
-        metrics.get("gnss_prmse_m") is not None and any(m.get("prmse_m") is not None for m in ok.values()))
+    truth = any(m.get("prmse_m") is not None for m in ok.values())
     cons = lambda mid, k: _get(metrics, "consistency", mid, "nis", k)
     cols = [("method", None)]
     if truth:
@@ -229,6 +228,8 @@ def _window_lines(metrics: dict) -> list[str]:
 
 
 def _legend(metrics: dict) -> list[str]:
+    if not metrics.get("consistency"):   # a table made by hand, not by a run
+        return []
     head = table_rows(metrics)[0]
     out = []
     if "PRMSE at fixes [m]" in head:
@@ -240,9 +241,8 @@ def _legend(metrics: dict) -> list[str]:
     elif "fix residual [m]" in head:
         out.append("no truth: accuracy cannot be scored; fix residual = RMS distance to the raw fixes (agreement "
                    "with them, not accuracy), and the NIS")
-    if metrics.get("consistency"):
-        out.append("NIS: mean normalised innovation (EKF) or GNSS residual (smoother) squared per dof; "
-                   "1 = consistent; '!' = the figure a warning is about")
+    out.append("NIS: mean normalised innovation (EKF) or GNSS residual (smoother) squared per dof; "
+               "1 = consistent; '!' = the figure a warning is about")
     return out
 
 
