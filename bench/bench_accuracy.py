@@ -32,7 +32,7 @@ def _one(args):
     from gnssacc.analysis.metrics import gnss_score, score
     from gnssacc.core.config import load_config
     from gnssacc.pipeline import load_source, run_methods, with_outages
-    from gnssacc.prepare.identify import identify
+    from gnssacc.pipeline import prepare as identify
 
     cfg = load_config(preset)
     run = with_outages(load_source(source, cfg, noise=noise, seed=seed), None, outage)

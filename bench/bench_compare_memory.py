@@ -6,7 +6,7 @@ the identification's stages (input checks, IMU quality, stationary detection, st
 model-check EKF pass) and each method. Per stage it prints the wall time, the peak resident
 memory above the resident memory when the stage started (``VmHWM`` reset with
 ``/proc/self/clear_refs``) and the resident memory after it, both relative to the process after
-loading the run. Stages nest (a stage inside ``identify`` is also inside it); a single run, so
+loading the run. Stages nest (a stage inside ``prepare`` is also inside it); a single run, so
 the times are indicative only.
 
 Usage::
@@ -22,9 +22,9 @@ import time
 
 import gnssacc.estimators.smoother  # noqa: F401  (gtsam: part of the fixed cost, before the baseline)
 from gnssacc import pipeline
-from gnssacc.core import jit
 from gnssacc.core.config import load_config
-from gnssacc.prepare import identify as identify_module
+from gnssacc.estimators import kernels as jit
+from gnssacc.prepare import prepared as prepared_module
 from gnssacc.sources.sim import simulate
 
 
@@ -79,9 +79,10 @@ def main():
     base = _status("VmRSS:")
     print(f"run: {len(run.imu)} IMU samples; RSS after loading it {base:.0f} MiB (peak so far {_status('VmHWM:'):.0f}); "
           f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
-    for name in ("check_run", "check_imu", "detect_stationary", "_start", "tune", "run_ekf"):
-        setattr(identify_module, name, _watch(f"identify.{name}", getattr(identify_module, name)))
-    pipeline.identify = _watch("identify", pipeline.identify)
+    for name in ("checked", "check_imu", "detect_stationary", "_start", "tune"):
+        setattr(prepared_module, name, _watch(f"prepare.{name}", getattr(prepared_module, name)))
+    pipeline.prepare_recording = _watch("prepare", pipeline.prepare_recording)
+    pipeline.check_model = _watch("model check", pipeline.check_model)
     for m in list(pipeline.METHODS):
         pipeline.METHODS[m] = _watch(f"method {m}", pipeline.METHODS[m])
     for name in ("score", "assess", "gnss_score"):

@@ -1,7 +1,7 @@
 """EKF speed and memory on the KITTI default (and simulated long runs).
 
 Prints, for `ekf`, `ekf-acc` and `ekf-accw`: median wall time over interleaved repeats of the
-filter pass itself (from the start, noise and stationary spans that ``gnssacc.prepare.identify`` found
+filter pass itself (from the start, noise and stationary spans that ``gnssacc.pipeline.prepare`` found
 once, as the pipeline runs it), real-time factor (data duration / wall time, one core), the wall-time ratio to ``ekf``
 (median over rounds of the per-round ratio), the identification time, the
 one-off JIT compilation time (cold cache, measured in a fresh process) and peak traced memory
@@ -27,7 +27,7 @@ from gnssacc.core.config import load_config
 from gnssacc.estimators import mechanization
 from gnssacc.estimators.ekf import run_ekf
 from gnssacc.pipeline import load_source
-from gnssacc.prepare.identify import identify
+from gnssacc.pipeline import prepare as identify
 from gnssacc.sources.sim import grade_config, simulate
 
 

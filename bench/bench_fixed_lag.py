@@ -25,7 +25,7 @@ from gnssacc.analysis.metrics import score
 from gnssacc.core.config import load_config
 from gnssacc.estimators.fixed_lag import FixedLagISAM2, GtsamFixedLag
 from gnssacc.pipeline import load_source
-from gnssacc.prepare.identify import identify
+from gnssacc.pipeline import prepare as identify
 
 
 def _counting(cls, count: list):

@@ -38,9 +38,9 @@ from pathlib import Path
 import numpy as np
 
 from gnssacc import cli
-from gnssacc.checks.plausibility import check_run
 from gnssacc.core.config import load_config
 from gnssacc.core.recording import GnssFixes, ImuData
+from gnssacc.pipeline import check_input
 from gnssacc.sources.csvdir import write_csv_run
 from gnssacc.sources.sim import simulate
 
@@ -192,7 +192,7 @@ def real_recordings(cfg) -> None:
         runs += [(f"vn310-{log}", real.vn310(data / "vn310_static", log)) for log in ("lckf", "tckf")]
     for name, run in runs:
         try:
-            _, _, findings = check_run(run, cfg)
+            _, _, findings = check_input(run, cfg)
             print(f"{name:12s} {'ok' if not findings else 'FALSE ALARM ' + str(findings)}")
         except Exception as exc:  # noqa: BLE001 - a bench reports every outcome
             print(f"{name:12s} FALSE ALARM {exc}")
@@ -218,7 +218,7 @@ def offsets_rtk(grades) -> None:
             for grade in grades:
                 base = rtk(simulate(scenario, duration, imu_grade=grade, noise="none", seed=1))
                 for offset in (0.1, 1.0, 18.0):
-                    run, cfg_out, _ = check_run(_imu(base, t=base.imu.t - offset), cfg)
+                    run, cfg_out, _ = check_input(_imu(base, t=base.imu.t - offset), cfg)
                     got = float(cfg_out["mounting"]["imu_time_offset_s"])
                     worst = max(worst, abs(got - offset))
                     print(f"rtk {scenario:9s} {grade:11s} offset {offset:5.1f} s: measured {got:+.4f} s, "
@@ -245,8 +245,8 @@ def check_time(duration_s: float = 600.0, rounds: int = 3) -> None:
     auto = load_config(overrides={"mounting": {"imu_time_offset_s": "auto", "imu_to_body_rpy_deg": "auto"},
                                   "checks": {"repair": "auto"}})
     warnings.simplefilter("ignore")   # the "auto" offset's warning, printed once per round otherwise
-    check_run(run, auto)  # compile
-    figures = {name: _median_time(lambda c=cfg: check_run(run, c), rounds) for name, cfg in
+    check_input(run, auto)  # compile
+    figures = {name: _median_time(lambda c=cfg: check_input(run, c), rounds) for name, cfg in
                (("default", plain), ("auto", auto))}
     with tempfile.TemporaryDirectory() as tmp:
         folder = write_csv_run(run, Path(tmp) / "ten")

@@ -28,7 +28,7 @@ import numpy as np
 CHILD = r"""
 import json, resource, sys, time
 t0 = time.perf_counter()
-from gnssacc.core import jit
+from gnssacc.estimators import kernels as jit
 from gnssacc.core.config import load_config
 from gnssacc.pipeline import compare
 from gnssacc.sources.sim import grade_config, simulate

@@ -147,7 +147,7 @@ def main():
     from gnssacc.core.config import load_config
     from gnssacc.estimators.smoother import run_smoother
     from gnssacc.pipeline import load_source
-    from gnssacc.prepare.identify import identify
+    from gnssacc.pipeline import prepare as identify
 
     cfg = load_config("kitti")
     ident = identify(load_source("kitti", cfg, noise="white", seed=0), cfg)  # the start and noise `run` uses

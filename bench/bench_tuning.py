@@ -17,7 +17,7 @@ import numpy as np
 
 from gnssacc.core.config import load_config
 from gnssacc.estimators import mechanization
-from gnssacc.prepare.identify import identify
+from gnssacc.pipeline import prepare as identify
 from gnssacc.sources.sim import simulate
 
 

@@ -1,7 +1,7 @@
 """Shared test set-up."""
 import pytest
 
-import gnssacc.core.jit as jit
+import gnssacc.estimators.kernels as kernels
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -12,5 +12,5 @@ def compiled_kernels():
     kernels in the background, and its in-process fallback smooths a short warm-up drive in a
     thread. Tests that patch a method and count its calls would count that drive's calls too.
     """
-    jit.warm_up()
-    jit.smoother_ready()
+    kernels.warm_up()
+    kernels.smoother_ready()

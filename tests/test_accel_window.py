@@ -8,7 +8,7 @@ from scipy.integrate import quad
 from gnssacc.core.config import load_config
 from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm
 from gnssacc.estimators.ekf import FilterState, run_ekf
-from gnssacc.estimators.gnss_accel import acceleration_row, model_errors, peano_kernel, peano_weights, window_samples
+from gnssacc.estimators.gnss_accel import acceleration_row, model_errors, peano_kernel, window_samples
 from gnssacc.estimators.measurements import window_acceleration
 from gnssacc.estimators.mechanization import kernel_force_integrals
 from gnssacc.sources.sim import grade_config, simulate

@@ -512,11 +512,11 @@ def test_awkward_but_valid_bags(env, capsys):
 def test_a_bug_is_one_line_and_a_crash_file(env, capsys, monkeypatch):
     import tempfile
 
-    def broken(self):
+    def broken(cfg):
         raise ZeroDivisionError("float division by zero")
 
     monkeypatch.setattr(tempfile, "tempdir", str(env.tmp))
-    monkeypatch.setattr("gnssacc.core.config.RunConfig.to_toml", broken)
+    monkeypatch.setattr("gnssacc.core.config_docs.resolved_toml", broken)
     code, out, err = _cli(capsys, ["config"])
     assert code == 1 and "Traceback" not in err
     lines = err.strip().splitlines()

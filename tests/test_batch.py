@@ -315,7 +315,7 @@ def test_seeds_warning_only_where_the_seed_changes_nothing(source, warned):
     simulated run draws its IMU and fixes from the seed (and KITTI its fixes): no warning there."""
     import warnings
 
-    from gnssacc.campaign.campaign_args import _warn_if_seeds_do_nothing
+    from gnssacc.campaign_args import _warn_if_seeds_do_nothing
     from gnssacc.core.errors import DataWarning
 
     settings = {"sources": [("x", source)], "seeds": [0, 1, 2], "noise": None, "bag": {"gnss_from_truth_hz": None}}

@@ -7,6 +7,7 @@ import warnings
 import numpy as np
 import pytest
 
+from gnssacc.checks.plausibility import fix_imu_time_units
 from gnssacc.core.config import DEG, load_config
 from gnssacc.core.earth import LocalTangentFrame
 from gnssacc.core.errors import DataWarning, InputError
@@ -266,16 +267,17 @@ def test_gnss_not_overlapping_imu(tmp_path, cfg):
 @pytest.mark.parametrize("unit, scale, divisor", [("milliseconds", 1e3, "1000"), ("nanoseconds", 1e9, "1e9")])
 def test_imu_stamps_in_another_unit_named_or_rescaled(tmp_path, unit, scale, divisor):
     # Stamps since the Unix epoch: the IMU's in ms or ns, the fixes' in s. The loader names the
-    # unit (not "different clocks?") and, with repair = "auto", rescales before the time offset.
+    # unit (not "different clocks?") and, with repair = "auto", rescales before the time offset (the
+    # input checks' unit finding, which the pipeline hands to the loader).
     a = _arrays()
     a["t"], a["tg"] = (a["t"] + 1.7e9) * scale, a["tg"] + 1.7e9
     d = _make_dir(tmp_path, a)
     with pytest.raises(InputError) as exc:
-        load_csv_run(d, load_config())
+        load_csv_run(d, load_config(), time_units=fix_imu_time_units)
     assert exc.value.where == str(d / "imu.csv") and unit in exc.value.problem
     cfg = load_config(overrides={"checks": {"repair": "auto"}, "mounting": {"imu_time_offset_s": -0.1}})
     with pytest.warns(DataWarning, match=f"divided the IMU time stamps by {divisor} "):
-        run = load_csv_run(d, cfg)
+        run = load_csv_run(d, cfg, time_units=fix_imu_time_units)
     np.testing.assert_allclose(run.imu.t, a["t"] / scale - 0.1, rtol=0, atol=1e-6)
 
 

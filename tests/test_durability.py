@@ -97,7 +97,7 @@ def test_every_method_failing_exits_1_and_keeps_the_old_result(run_dir, tmp_path
 
     def boom(*args, **kwargs):
         raise FloatingPointError("covariance lost positive definiteness")
-    monkeypatch.setattr("gnssacc.pipeline.run_ekf", boom)
+    monkeypatch.setattr("gnssacc.pipeline.estimate_ekf", boom)
     monkeypatch.setattr("gnssacc.estimators.smoother.run_smoother", _failing_smoother)
     code, _, stderr = _cli(["run", run_dir, "--methods", "ekf,smoother", "--out", out] + FAST, capsys)
     assert code == 1

@@ -105,13 +105,13 @@ def test_biases_far_from_their_linearisation_point_are_relinearised_before_margi
     EKF holds 2.2 m (the biases' factors marginalised at their first linearisation point)."""
     from gnssacc.analysis.metrics import score
     from gnssacc.estimators.ekf import run_ekf
-    from gnssacc.prepare.identify import identify
+    from gnssacc.pipeline import prepare
 
     run = simulate("ugv", 180.0, imu_grade="consumer", noise="white", seed=2)
     cfg = load_config(overrides={"imu": {"gyro_arw_deg_rth": 0.65, "accel_vrw_mps_rth": 0.41,
                                          "gyro_bias_instability_deg_h": 10.0, "accel_bias_instability_mg": 1.3,
                                          "gyro_bias_sigma0_deg_h": 60.0, "accel_bias_sigma0_mg": 526.0}})
-    ident = identify(run, cfg, "none")
+    ident = prepare(run, cfg, "none")
     kw = dict(init=ident.init, stationary=ident.stationary, quality=ident.quality)
     ekf = score(run, run_ekf(ident.run, ident.cfg, "ekf", **kw)).prmse_m
     sm = S.run_smoother(ident.run, ident.cfg, "smoother", **kw)

@@ -16,7 +16,7 @@ import gnssacc
 
 PROBE = """
 import os, subprocess, sys
-from gnssacc.core import jit
+from gnssacc.estimators import kernels as jit
 from gnssacc.estimators import mechanization
 if os.environ.get("CHILDREN_FAIL"):   # the compiling processes die at once: this process compiles
     jit._spawn = lambda part: subprocess.Popen([sys.executable, "-c", "raise SystemExit(3)"])

@@ -19,12 +19,13 @@ import numpy as np
 import pytest
 
 from gnssacc import cli
-from gnssacc.checks.plausibility import CHECKS, check_run, fix_imu_time_units
+from gnssacc.checks.plausibility import CHECKS, fix_imu_time_units
 from gnssacc.core.config import load_config
 from gnssacc.core.earth import LocalTangentFrame
 from gnssacc.core.errors import DataWarning, InputError
 from gnssacc.core.recording import ImuData, InitialState
 from gnssacc.core.rotations import euler_to_dcm
+from gnssacc.pipeline import check_input
 from gnssacc.sources.common import apply_mounting
 from gnssacc.sources.csvdir import load_csv_run, write_csv_run
 from gnssacc.sources.sim import simulate
@@ -96,7 +97,7 @@ def _check(run, **overrides):
     cfg = load_config(overrides=overrides or None)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        out, cfg_out, findings = check_run(run, cfg)
+        out, cfg_out, findings = check_input(run, cfg)
     texts = [str(w.message) for w in caught if issubclass(w.category, DataWarning)]
     return out, cfg_out, findings, texts
 

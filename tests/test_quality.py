@@ -7,7 +7,7 @@ import os
 import numpy as np
 import pytest
 
-from gnssacc.checks.quality import KINDS, check_imu, inflation_psd
+from gnssacc.checks.quality import KINDS, SuspectNoise, check_imu, inflation_psd
 from gnssacc.core.config import DEG, load_config
 from gnssacc.core.recording import ImuData
 
@@ -130,7 +130,7 @@ def test_inflation_psd_integrates_to_sigma_T_squared(cfg, mode):
     cfg = load_config(overrides={"quality": {"suspect_sigma_mode": mode}})
     imu, _ = _with_defects()
     rep = check_imu(imu, cfg)
-    q_gyro, q_accel = inflation_psd(imu, rep, cfg)
+    q_gyro, q_accel = inflation_psd(imu, rep, SuspectNoise.from_config(cfg))
     assert q_gyro.shape == q_accel.shape == (len(imu), 3)
     dt = np.diff(imu.t, prepend=imu.t[0])          # sample k holds over (t[k-1], t[k]]
     cap_g = cfg["quality"]["suspect_gyro_sigma_dps"] * DEG

@@ -14,6 +14,7 @@ from rosbags.rosbag2 import Writer as Writer2  # noqa: E402
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore  # noqa: E402
 
 from gnssacc.core.config import load_config  # noqa: E402
+from gnssacc.core.config_docs import resolved_toml  # noqa: E402
 from gnssacc.core.earth import LocalTangentFrame  # noqa: E402
 from gnssacc.core.errors import DataWarning, InputError  # noqa: E402
 from gnssacc.core.rotations import euler_to_dcm  # noqa: E402
@@ -413,4 +414,4 @@ def test_fix_mapping_from_the_config_file(tmp_path):
     run, _ = _load(p, cfg_t)
     assert np.degrees(run.gnss.lat[3]) == pytest.approx(49.0000003, abs=1e-12)
     np.testing.assert_allclose(run.gnss.sigma_ned[0], [1.5, 1.5, 2.5])
-    assert '"acme/msg/Fix"' in cfg_t.to_toml()
+    assert '"acme/msg/Fix"' in resolved_toml(cfg_t)

@@ -7,11 +7,11 @@ import re
 import numpy as np
 import pytest
 
+from gnssacc.analysis.consistency import check_model
 from gnssacc.analysis.metrics import score, truth_at
 from gnssacc.core.config import load_config
 from gnssacc.estimators.ekf import run_ekf
-from gnssacc.pipeline import compare
-from gnssacc.prepare.identify import identify
+from gnssacc.pipeline import compare, prepare
 from gnssacc.prepare.tuning import SHRINK_TOLERANCE, draw_back, ml_search, tune
 from gnssacc.sources.gnss_noise import add_outliers
 from gnssacc.sources.sim import grade_config, simulate
@@ -101,7 +101,7 @@ def test_tuner_recovers_the_white_noise_of_a_model_exact_imu():
     # An IMU whose errors the filter models exactly (white noise, Gauss-Markov bias, turn-on
     # bias), 35 s parked at the start: the densities are read there and refined by the likelihood.
     run = simulate("car-city", 280.0, imu_grade="industrial-basic", noise="white", seed=3)
-    res = identify(run, load_config(), "auto").tuning
+    res = prepare(run, load_config(), "auto").tuning
     p = grade_config("industrial-basic")
     assert res.from_stationary["stationary_s"] > 30.0
     assert np.mean(res.values["imu"]["gyro_arw_deg_rth"]) == pytest.approx(p["gyro_arw_deg_rth"], rel=0.25)
@@ -115,8 +115,8 @@ def test_tuned_consumer_imu_is_as_accurate_as_its_true_noise_and_consistent(cons
     # model): the identified noise absorbs what is missing, so only accuracy and consistency are
     # checked against the datasheet configuration.
     run = consumer_car
-    auto = identify(run, load_config(), "auto")
-    true = identify(run, load_config(overrides={"imu": grade_config("consumer")}), "none")
+    auto = prepare(run, load_config(), "auto")
+    true = prepare(run, load_config(overrides={"imu": grade_config("consumer")}), "none")
     sol_a, sol_t = _ekf(run, auto), _ekf(run, true)
     assert score(run, sol_a).prmse_m < 1.15 * score(run, sol_t).prmse_m
     assert 0.8 < sol_a.stats["nis_pos_mean"] < 1.25
@@ -126,7 +126,7 @@ def test_tuned_consumer_imu_is_as_accurate_as_its_true_noise_and_consistent(cons
 
 def test_tuner_never_overrides_keys_the_user_set(consumer_car):
     cfg = load_config(overrides={"imu": {"gyro_arw_deg_rth": 0.123}, "gnss": {"sigma_scale": 1.0}})
-    tuned, res = tune(consumer_car, cfg, init=identify(consumer_car, cfg, "none").init)
+    tuned, res = tune(consumer_car, cfg, init=prepare(consumer_car, cfg, "none").init, filter_pass=run_ekf)
     assert tuned["imu"]["gyro_arw_deg_rth"] == 0.123 and tuned["gnss"]["sigma_scale"] == 1.0
     assert "gyro_arw_deg_rth" not in res.values.get("imu", {}) and "imu.gyro_arw_deg_rth" in res.fixed
 
@@ -141,13 +141,13 @@ def test_gauss_markov_gnss_errors_are_found_and_make_the_estimators_honest():
     # Fixes with 2.5/2.5/4 m Gauss-Markov errors (tau 60 s) plus 0.5/0.5/0.8 m white; each fix
     # states the total sigma (2.55/2.55/4.08 m).
     run = simulate("ugv-slow", 235.0, imu_grade="industrial", noise="gm", seed=1)
-    auto = identify(run, load_config(), "auto")
+    auto = prepare(run, load_config(), "auto")
     g = auto.tuning.values["gnss"]
     assert auto.tuning.from_stationary["innovation_acf1"] > 0.3
     assert np.mean(g["gm_sigma_m"][:2]) == pytest.approx(2.5, rel=0.5)
     assert 20.0 < g["gm_tau_s"] < 200.0
     assert g["sigma_scale"] * 2.55 == pytest.approx(0.5, rel=0.4)
-    white = identify(run, load_config(overrides={"imu": grade_config("industrial")}), "none")
+    white = prepare(run, load_config(overrides={"imu": grade_config("industrial")}), "none")
     ekf_a, ekf_w = _ekf(run, auto), _ekf(run, white)
     # The white-noise model is overconfident by an order of magnitude; the identified one is not.
     assert _nees_pos(run, ekf_w) > 8.0
@@ -204,7 +204,7 @@ def test_optimistic_noise_of_a_tactical_imu_is_caught_at_rest_where_innovations_
     # stretches of the run show it directly.
     run = simulate("ugv-slow", 150.0, imu_grade="tactical", noise="white", seed=6)
     true = grade_config("tactical")
-    assert identify(run, load_config(overrides={"imu": true}), "none").model.rest == []
+    assert check_model(prepare(run, load_config(overrides={"imu": true}), "none")).rest == []
     metrics, _, _ = compare(run, load_config(overrides={"imu": _optimistic(true)}), ["ekf", "smoother"], tune="none")
     for mid, c in metrics["consistency"].items():
         rest = [w for w in c["warnings"] if "at rest" in w]
@@ -218,7 +218,7 @@ def test_slow_ugv_starts_with_the_recording_and_never_flips_heading():
     # Parked 36 s, then at most 2.2 m/s with 3 m white fixes at 1 Hz; reverses for 30 s later on.
     for seed in (0, 1, 2):
         run = simulate("ugv-slow", 235.0, imu_grade="consumer", noise="white", seed=seed)
-        ident = identify(run, load_config(), "none")
+        ident = prepare(run, load_config(), "none")
         moving = 36.0 + run.t_start
         assert ident.bank.t_decided is not None and ident.bank.t_decided - moving < 30.0, ident.init.how
         sol = _ekf(run, ident)
@@ -236,7 +236,7 @@ def test_a_vehicle_that_starts_by_reversing_gets_the_right_heading():
     scen = Scenario("reverse-first").hold(10.0).speed_to(-1.5, 3.0).cruise(25.0).turn(-60.0, radius_m=8.0)
     scen.speed_to(0.0, 3.0).hold(5.0).speed_to(2.0, 3.0).cruise(20.0)
     run = simulate(scen, 90.0, imu_grade="industrial", noise="white", seed=4, initial_yaw_deg=75.0)
-    ident = identify(run, load_config(), "none")
+    ident = prepare(run, load_config(), "none")
     yaw0 = np.degrees(ident.init.rpy[2])
     d = (yaw0 - 75.0 + 180.0) % 360.0 - 180.0
     assert abs(d) <= 15.0, ident.init.how   # the nearest hypothesis, not 255 deg (the course)
@@ -250,7 +250,7 @@ def test_zero_velocity_updates_hold_a_parked_vehicle_through_a_gnss_gap():
     end = {}
     for enabled in (True, False):
         cfg = load_config(overrides={"imu": grade_config("consumer"), "zupt": {"enabled": enabled}})
-        ident = identify(run, cfg, "none")
+        ident = prepare(run, cfg, "none")
         sol = _ekf(run, ident)
         p_true, _ = truth_at(run, sol.t[-1:])
         end[enabled] = float(np.linalg.norm(run.origin.to_ned(sol.lat[-1], sol.lon[-1], sol.h[-1]) - p_true[0]))
@@ -271,10 +271,10 @@ def test_every_method_covers_the_whole_recording_and_the_table_states_the_window
 
 
 def test_tuned_toml_reproduces_the_tuned_run(tmp_path, consumer_car):
-    auto = identify(consumer_car, load_config(), "auto")
+    auto = prepare(consumer_car, load_config(), "auto")
     path = tmp_path / "tuned.toml"
     path.write_text(auto.tuning.to_toml(auto.cfg))
-    again = identify(consumer_car, load_config(path=path), "none")
+    again = prepare(consumer_car, load_config(path=path), "none")
     assert again.tuning is None
     a, b = _ekf(consumer_car, auto), _ekf(consumer_car, again)
     # The file keeps four significant digits.

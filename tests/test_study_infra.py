@@ -229,23 +229,27 @@ def test_study_rows_read_from_parts_and_gzip(tmp_path):
     assert eff["ekf-acc"].mean_pct == pytest.approx(eff["ekf-accw"].mean_pct)
 
 
-def test_gm_setup_is_made_once_per_identification(monkeypatch):
-    # ekf-gm and smoother-gm share one Gauss-Markov search of the tuned run; another
-    # identification (here a copy with another configuration) gets its own.
-    import gnssacc.estimators.gm_variant as gv
+def test_gm_setup_is_made_once_per_preparation(monkeypatch):
+    # ekf-gm and smoother-gm share one Gauss-Markov search of the tuned run, made by the
+    # preparation when a -gm method is asked for (and not otherwise); another preparation (here a
+    # copy with another configuration) gets its own.
+    import gnssacc.prepare.gauss_markov as gv
     from gnssacc.core.config import load_config
-    from gnssacc.prepare.identify import identify
+    from gnssacc.estimators.ekf import run_ekf
+    from gnssacc.pipeline import prepare
 
     calls = []
     real = gv.tune_gauss_markov
     monkeypatch.setattr(gv, "tune_gauss_markov", lambda *a, **k: calls.append(1) or real(*a, **k))
     run = gnssacc.load("sim:car,duration=60", noise="white", seed=1)
-    ident = identify(run, load_config(), "auto")
-    assert not np.any(ident.cfg.gnss_gm_sigma > 0)   # the tuner kept white fixes: gm_setup searches
-    first = gv.gm_setup(ident)
-    assert gv.gm_setup(ident) is first and len(calls) == 1
-    other = replace(ident, cfg=ident.cfg.with_values({"gnss": {"sigma_scale": 1.5}}, "test"))
-    assert gv.gm_setup(other) is not first and len(calls) == 2
+    plain = prepare(run, load_config(), "auto", methods=["ekf", "smoother"])
+    assert plain.gauss_markov is None and calls == []
+    prep = prepare(run, load_config(), "auto", methods=["ekf-gm", "smoother-gm"])
+    assert not np.any(prep.cfg.gnss_gm_sigma > 0)   # the tuner kept white fixes: gm_setup searches
+    gm, how = prep.gauss_markov
+    assert len(calls) == 1 and how["source"] == "tuner" and np.all(gm.cfg.gnss_gm_sigma > 0)
+    other = replace(prep, cfg=prep.cfg.with_values({"gnss": {"sigma_scale": 1.5}}, "test"), gauss_markov=None)
+    assert gv.gm_setup(other, filter_pass=run_ekf)[0] is not gm and len(calls) == 2
 
 
 def test_gm_methods_are_judged_by_their_own_noise_model():
@@ -260,18 +264,19 @@ def test_gm_methods_are_judged_by_their_own_noise_model():
 
 
 def test_gm_model_check_reuses_the_ekf_gm_pass_unchanged(monkeypatch):
-    # With ekf-gm in the run, its own pass is the -gm model check: no second EKF pass, and the
-    # same figures as a separate pass without outputs.
-    import gnssacc.estimators.gm_variant as gv
+    # With ekf-gm in the run, its own pass is the -gm model check: no second EKF pass (the only
+    # model-check pass is the baselines'), and the same figures as a separate pass without outputs.
+    import gnssacc.analysis.consistency as cons
     from gnssacc.analysis.consistency import ModelCheck
 
     calls = []
-    real = gv.run_ekf
-    monkeypatch.setattr(gv, "run_ekf", lambda *a, **k: calls.append(1) or real(*a, **k))
+    real = cons.run_ekf
+    monkeypatch.setattr(cons, "run_ekf", lambda *a, **k: calls.append(1) or real(*a, **k))
     res = gnssacc.process("sim:car,imu=industrial,duration=120", methods=["ekf-gm", "smoother-gm"], tune="none",
                           noise="gm", seed=0)
-    assert calls == []
-    gi, used = res.ident.derived["gm_model"]
+    assert len(calls) == 1
+    gi = res.prepared.gauss_markov[0]
     own = real(gi.run, gi.cfg, "ekf", init=gi.init, stationary=gi.stationary, quality=gi.quality,
                output_times=np.zeros(0))
-    assert used == ModelCheck.from_stats(own.stats, res.ident.model.rest)
+    rest = res.metrics["model_check"]["at_rest"]
+    assert res.metrics["model_check_gm"] == ModelCheck.from_stats(own.stats, rest).to_dict()

@@ -19,50 +19,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from .core.config import RunConfig, load_config
+from .core.config import RunConfig
 from .core.recording import RecordedRun
 from .core.solution import NavSolution
 from .outputs.report import TRAJECTORY_COLUMNS, format_table, ok_methods, trajectory_table
-from .pipeline import compare_observed, load_source, parse_methods, resolve_preset, with_outages, write_result
-from .prepare.identify import Identified
+from .pipeline import compare_observed, configure, load, load_configured, parse_methods, write_result
+from .prepare.prepared import Prepared
 from .sources.simspec import known_noise_config
 
-
-def configure(source=None, *, preset: str | None = None, config=None) -> RunConfig:
-    """The configuration a source runs with.
-
-    Parameters
-    ----------
-    source : str, Path, RecordedRun or None
-        ``None`` or ``"kitti"`` selects the ``kitti`` preset unless ``preset`` says otherwise.
-    preset : str, optional
-        A packaged preset, or ``"none"`` for the defaults alone.
-    config : str, Path, dict or RunConfig, optional
-        A TOML file, or ``{section: {key: value}}`` overrides, applied over the preset; a
-        :class:`RunConfig` is used as it is.
-    """
-    if isinstance(config, RunConfig):
-        return config
-    name = source if source is None or isinstance(source, str) else "run"
-    path, overrides = (None, config) if isinstance(config, dict) else (config, None)
-    return load_config(resolve_preset(preset, name), path, overrides=overrides)
-
-
-def load(source=None, *, config=None, preset: str | None = None, noise: str | None = None, seed: int = 0,
-         outage: str | None = None, outage_every: str | None = None, imu_frame: str = "frd",
-         **bag_options) -> RecordedRun:
-    """A recorded run, as ``gnssacc run`` loads it (see :func:`process` for the parameters)."""
-    return _load(source, configure(source, preset=preset, config=config), noise, seed, outage, outage_every,
-                 imu_frame, bag_options)
-
-
-def _load(source, cfg, noise, seed, outage, outage_every, imu_frame, bag_options) -> RecordedRun:
-    if isinstance(source, RecordedRun):
-        run = source
-    else:
-        run = load_source(None if source is None else str(source), cfg, noise=noise, seed=seed,
-                          imu_frame=imu_frame, **bag_options)
-    return with_outages(run, outage, outage_every)
+#: The public face (``configure`` and ``load`` are :mod:`gnssacc.pipeline`'s, shared with the campaigns).
+__all__ = ["process", "run", "load", "simulate", "configure", "evaluate", "Result"]
 
 
 def simulate(scenario: str = "car", duration_s: float = 300.0, **options) -> RecordedRun:
@@ -115,22 +81,22 @@ def process(source=None, *, methods=None, config=None, preset: str | None = None
     """
     ids = parse_methods(methods if methods is None or isinstance(methods, str) else ",".join(methods))
     cfg = configure(source, preset=preset, config=config)
-    run = _load(source, cfg, noise, seed, outage, outage_every, imu_frame, bag_options)
+    run = load_configured(source, cfg, noise, seed, outage, outage_every, imu_frame, bag_options)
     return evaluate(run, cfg, ids, tune=tune, show_progress=show_progress)
 
 
 def evaluate(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
              show_progress: bool = False, observe: bool = True, say=None) -> "Result":
-    """Check, identify, run and score ``methods`` on a loaded run (:func:`gnssacc.pipeline.compare`).
+    """Check, prepare, run and score ``methods`` on a loaded run (:func:`gnssacc.pipeline.compare`).
 
     ``observe``: keep the ``ekf-acc`` pass's matrices for the report's observability section
     (:attr:`Result.replay`), so that ``save(report=True)`` does not run the filter again.
     ``say(line)``: told the preparation's findings and each method's end as they happen.
     """
     cfg = known_noise_config(cfg, run, tune)   # a sim: source with --tune none: the simulator's IMU noise
-    metrics, sols, ident, replay = compare_observed(run, cfg, methods, tune=tune, show_progress=show_progress,
+    metrics, sols, prep, replay = compare_observed(run, cfg, methods, tune=tune, show_progress=show_progress,
                                                    observe=observe, say=say)
-    return Result(ident.run, cfg, metrics, sols, ident, replay)
+    return Result(prep.run, cfg, metrics, sols, prep, replay)
 
 
 #: ``gnssacc.run(...)``, named like the command: the same as :func:`process`.
@@ -146,13 +112,14 @@ class Result:
     run : RecordedRun
         The run as the input checks left it (repaired units, a measured clock offset applied).
     config : RunConfig
-        The configuration given (the tuned one is ``ident.cfg``).
+        The configuration given (the tuned one is ``prepared.cfg``).
     metrics : dict
         The content of ``metrics.json`` (scores, consistency, tuning, failures).
     solutions : dict of NavSolution
         Per method that succeeded (``<id>-online`` too for the smoothers).
-    ident : Identified
-        The shared start, stationary spans, input findings and tuned configuration.
+    prepared : gnssacc.prepare.prepared.Prepared
+        The prepared recording: the shared start, stationary spans, input findings and tuned
+        configuration (also as ``ident``, its earlier name).
     replay : gnssacc.analysis.observability.EkfReplay or None
         The ``ekf-acc`` pass's matrices at every GNSS epoch (for the report's observability
         section and :func:`gnssacc.analysis.observability.aiding_information`).
@@ -162,8 +129,13 @@ class Result:
     config: RunConfig
     metrics: dict
     solutions: dict[str, NavSolution]
-    ident: Identified
+    prepared: Prepared
     replay: object = None
+
+    @property
+    def ident(self) -> Prepared:
+        """The prepared recording under its earlier name."""
+        return self.prepared
 
     def table(self) -> str:
         """The comparison table ``gnssacc run`` prints."""
@@ -204,5 +176,5 @@ class Result:
               extra_files=None) -> Path | None:
         """Write into a locked :class:`gnssacc.outputs.outdir.ResultDir` (``None`` when every method failed:
         nothing is written)."""
-        return write_result(target, self.run, self.solutions, self.metrics, self.ident, plots=plots, report=report,
+        return write_result(target, self.run, self.solutions, self.metrics, self.prepared, plots=plots, report=report,
                             export=tuple(export), extra_files=extra_files, replay=self.replay)

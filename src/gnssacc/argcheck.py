@@ -12,20 +12,14 @@ import re
 import tempfile
 from pathlib import Path
 
-from .core.config_check import Bound, number_problem
+from .core.config_check import MAX_SEED, Bound, number_problem
 from .core.errors import InputError
+from .sources.simspec import SIM_DURATION_S, SIM_IMU_RATE_HZ, SIM_MAX_GNSS_RATE_HZ, SIM_MAX_SAMPLES
 
-#: Largest seed (numpy takes more, but a 32-bit seed is plenty and portable).
-MAX_SEED = 2**32 - 1
 #: Ranges of the numeric options.
 SEED = Bound(0, MAX_SEED)
 JOBS = Bound(1, 256)
 RATE_FROM_TRUTH_HZ = Bound(0.0, 1000.0, lo_open=True)
-SIM_DURATION_S = Bound(1.0, 86_400.0)
-SIM_IMU_RATE_HZ = Bound(1.0, 4000.0)
-SIM_MAX_GNSS_RATE_HZ = 100.0
-#: Most IMU samples ``gnssacc sim`` makes (about 0.75 kB of memory each while simulating).
-SIM_MAX_SAMPLES = 2_000_000
 
 
 def check_option(value, flag: str, bound: Bound, integer: bool = False) -> None:

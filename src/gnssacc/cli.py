@@ -11,10 +11,10 @@ import sys
 import warnings
 from pathlib import Path
 
-from . import __version__
 from .core.config import PRESETS, load_config
 from .core.errors import DataWarning, InputError
 from .core.interrupts import Terminated, raise_if_interrupted
+from .core.version import __version__
 from .sources.gnss_noise import PROFILES
 from .sources.sim_scenarios import SCENARIOS
 
@@ -273,7 +273,7 @@ def _say(line: str) -> None:
 
 def _print_summary(metrics: dict, out, replaced: bool) -> None:
     """The table at the end, the compile time when something was compiled, and where it all went."""
-    from .core.jit import start_background
+    from .estimators.kernels import start_background
     from .outputs.report import format_table
 
     print()
@@ -313,7 +313,7 @@ def _cmd_batch(args) -> int:
     """``gnssacc batch``: exit 0 when every task succeeded, 1 when some failed (all recorded),
     130/143 when interrupted (the finished tasks stay; ``--resume`` runs the rest)."""
     from .campaign.batch import open_executor, run_campaign
-    from .campaign.campaign_args import campaign_from_args
+    from .campaign_args import campaign_from_args
     from .core.interrupts import signals_raise
 
     camp = campaign_from_args(args)
@@ -334,13 +334,13 @@ def _cmd_batch(args) -> int:
 
 
 def _cmd_config(args) -> int:
+    from .core.config_docs import resolved_toml, template_toml
+
     cfg = load_config(args.preset, args.config)
     if args.template:
-        from .core.config_docs import template_toml
-
         print(template_toml(cfg), end="")
     else:
-        print(cfg.to_toml(), end="")
+        print(resolved_toml(cfg), end="")
     return 0
 
 
@@ -374,7 +374,7 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     warnings.showwarning = _show_warning
     if args.command == "run" or (args.command == "bench" and args.jobs <= 1):
-        from .core.jit import start_background
+        from .estimators.kernels import start_background
         # At once: the kernels compile (first run, with a one-line notice) or load in the
         # background while the arguments are checked, the modules imported and the data loaded.
         start_background()

@@ -5,47 +5,71 @@ compute the same numbers the same way.
 """
 from __future__ import annotations
 
+import time
 from datetime import datetime
 from pathlib import Path
 from typing import Callable
 
-from .analysis.consistency import assess
+from .analysis.consistency import assess, check_gm_model, check_model
 from .analysis.errorstats import error_statistics, fix_statistics
 from .analysis.metrics import gnss_score, score
-from .core import jit
-from .core.config import RunConfig
+from .core.config import RunConfig, load_config
+from .core.config_docs import resolved_toml
 from .core.errors import InputError, warn_data
 from .core.interrupts import raise_if_interrupted
 from .core.memory import release_free_memory
 from .core.recording import RecordedRun
 from .core.solution import NavSolution
+from .estimators import kernels
+from .estimators.ekf import estimate as estimate_ekf
 from .estimators.ekf import run_ekf
+from .estimators.settings import EkfSettings
 from .outputs.figures import PLOT_SETS, write_figures
 from .outputs.outdir import ResultDir
 from .outputs.report import format_table, group_warnings, metrics_dict, quality_line, write_json, write_trajectory_csv
-from .prepare.identify import Identified, identify
+from .prepare.prepared import Prepared, checked
+from .prepare.prepared import prepare as prepare_recording
 from .sources.gnss_noise import apply_outages, parse_outages
 from .sources.simspec import is_sim_spec, load_sim
 
 
-def _ekf(ident: Identified, method: str, show_progress: bool, observer=None) -> dict[str, NavSolution]:
-    return {method: run_ekf(ident.run, ident.cfg, method, quality=ident.quality, init=ident.init,
-                            stationary=ident.stationary, show_progress=show_progress, observer=observer,
-                            record_innovations=True)}   # the NIS over time of nis.png
+def _ekf(prep: Prepared, method: str, show_progress: bool, observer=None) -> dict[str, NavSolution]:
+    return {method: estimate_ekf(prep, EkfSettings.from_config(prep.cfg), method, show_progress=show_progress,
+                                 observer=observer, record_innovations=True)}   # the NIS over time of nis.png
 
 
-def _smoother(ident: Identified, method: str, show_progress: bool) -> dict[str, NavSolution]:
-    from .estimators.smoother import run_smoother  # gtsam import only when a smoother method is asked for
-    return run_smoother(ident.run, ident.cfg, method, quality=ident.quality, init=ident.init,
-                        stationary=ident.stationary, show_progress=show_progress)
+def _smoother(prep: Prepared, method: str, show_progress: bool) -> dict[str, NavSolution]:
+    from .estimators.settings import SmootherSettings
+    from .estimators.smoother import estimate  # gtsam import only when a smoother method is asked for
+    return estimate(prep, SmootherSettings.from_config(prep.cfg), method, show_progress=show_progress)
 
 
-def _gm(ident: Identified, method: str, show_progress: bool) -> dict[str, NavSolution]:
+def _gm(prep: Prepared, method: str, show_progress: bool) -> dict[str, NavSolution]:
     from .estimators.gm_variant import BASE_OF, run_gm
-    return run_gm(ident, method, show_progress, METHODS[BASE_OF[method]])
+    return run_gm(prep, method, show_progress, METHODS[BASE_OF[method]])
 
 
-#: Estimators by method id: ``(identified, method, show_progress) -> {id: NavSolution}``.
+def _filter_pass(*args, **kwargs) -> NavSolution:
+    """The EKF pass the preparation stage decides with, once the kernels are ready (compiled or
+    loaded in the background: a first run waits here, the input checks before it do not)."""
+    kernels.warm_up()
+    return run_ekf(*args, **kwargs)
+
+
+def check_input(run: RecordedRun, cfg: RunConfig) -> tuple[RecordedRun, RunConfig, list]:
+    """The input checks (:func:`gnssacc.checks.plausibility.check_run`) with the EKF as the clock
+    offset's likelihood stage, as :func:`prepare` runs them first."""
+    return checked(run, cfg, _filter_pass)
+
+
+def prepare(run: RecordedRun, cfg: RunConfig, tune: str | None = None, methods=()) -> Prepared:
+    """The prepared recording (:func:`gnssacc.prepare.prepared.prepare`) with the EKF as its filter
+    pass, and the ``-gm`` methods' setup when ``methods`` has one."""
+    return prepare_recording(run, cfg, tune, filter_pass=_filter_pass,
+                             gauss_markov=any(METHODS.get(m) is _gm for m in methods))
+
+
+#: Estimators by method id: ``(prepared, method, show_progress) -> {id: NavSolution}``.
 #: A smoother method also returns its online estimate as ``<id>-online``.
 METHODS = {"ekf": _ekf, "ekf-acc": _ekf, "ekf-accw": _ekf, "smoother": _smoother, "smoother-acc": _smoother,
            "smoother-accw": _smoother, "ekf-gm": _gm, "smoother-gm": _gm}
@@ -126,6 +150,7 @@ def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None,
                             time_source=time_source, gnss_from_truth_hz=gnss_from_truth_hz,
                             noise=noise, seed=seed)
     if path.is_dir():
+        from .checks.plausibility import fix_imu_time_units
         from .sources.common import with_noisy_fixes
         from .sources.csvdir import load_csv_run
         if not (path / "imu.csv").exists() and not (path / "gnss.csv").exists():
@@ -133,7 +158,7 @@ def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None,
             held = f"it holds {', '.join(names[:5])}{', ...' if len(names) > 5 else ''}" if names else "it is empty"
             raise InputError(source, f"not a run directory: no imu.csv and gnss.csv (a CSV run) and no metadata.yaml "
                                      f"(a ROS 2 bag); {held}")
-        run = load_csv_run(path, cfg, imu_frame=imu_frame)
+        run = load_csv_run(path, cfg, imu_frame=imu_frame, time_units=fix_imu_time_units)
         if noise is not None:
             if run.truth is None:
                 raise InputError(str(path), "--noise makes fixes from the truth, but the run has no truth.csv")
@@ -148,8 +173,45 @@ def with_outages(run: RecordedRun, outage: str | None, outage_every: str | None)
     return apply_outages(run, parse_outages(outage, outage_every, run.duration_s))
 
 
+def configure(source=None, *, preset: str | None = None, config=None) -> RunConfig:
+    """The configuration a source runs with.
+
+    Parameters
+    ----------
+    source : str, Path, RecordedRun or None
+        ``None`` or ``"kitti"`` selects the ``kitti`` preset unless ``preset`` says otherwise.
+    preset : str, optional
+        A packaged preset, or ``"none"`` for the defaults alone.
+    config : str, Path, dict or RunConfig, optional
+        A TOML file, or ``{section: {key: value}}`` overrides, applied over the preset; a
+        :class:`RunConfig` is used as it is.
+    """
+    if isinstance(config, RunConfig):
+        return config
+    name = source if source is None or isinstance(source, str) else "run"
+    path, overrides = (None, config) if isinstance(config, dict) else (config, None)
+    return load_config(resolve_preset(preset, name), path, overrides=overrides)
+
+
+def load(source=None, *, config=None, preset: str | None = None, noise: str | None = None, seed: int = 0,
+         outage: str | None = None, outage_every: str | None = None, imu_frame: str = "frd",
+         **bag_options) -> RecordedRun:
+    """A recorded run, as ``gnssacc run`` loads it (see :func:`process` for the parameters)."""
+    return load_configured(source, configure(source, preset=preset, config=config), noise, seed, outage, outage_every,
+                 imu_frame, bag_options)
+
+
+def load_configured(source, cfg, noise, seed, outage, outage_every, imu_frame, bag_options) -> RecordedRun:
+    if isinstance(source, RecordedRun):
+        run = source
+    else:
+        run = load_source(None if source is None else str(source), cfg, noise=noise, seed=seed,
+                          imu_frame=imu_frame, **bag_options)
+    return with_outages(run, outage, outage_every)
+
+
 def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
-                ident: Identified | None = None, show_progress: bool = False,
+                prep: Prepared | None = None, show_progress: bool = False,
                 failures: dict[str, str] | None = None, observers: dict | None = None,
                 say: Callable[[str], None] | None = None) -> dict[str, NavSolution]:
     """Run each method on the same run, from the same identified start and noise.
@@ -162,9 +224,9 @@ def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: s
         Method ids (:data:`METHODS`).
     tune : {"auto", "none"}, optional
         Noise identification (default: the configuration's ``[tune] mode``).
-    ident : Identified, optional
-        A result of :func:`gnssacc.prepare.identify.identify` to reuse (then ``run``/``cfg``/``tune`` are
-        not looked at again).
+    prep : Prepared, optional
+        A prepared recording (:func:`prepare`) to reuse (then ``run``/``cfg``/``tune`` are not looked
+        at again).
     failures : dict, optional
         When given, a method whose estimator raises (any ``Exception`` but
         :class:`gnssacc.core.errors.InputError`) is recorded here as ``{method: one-line reason}``
@@ -173,19 +235,19 @@ def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: s
         ``{method: gnssacc.estimators.ekf.EkfObserver}`` watching an EKF method's own pass (e.g. the
         :class:`gnssacc.analysis.observability.EpochCollector` of the report's observability section).
     say : callable, optional
-        ``say(line)`` is told each method's end as it happens (``ekf: 0.12 s``, or its failure).
+        ``say(line)`` is told each method's end as it happens (``ekf: done in 0.12 s``, or its failure).
 
     Returns
     -------
     dict of NavSolution
         By solution id (a smoother method adds ``<id>-online``); failed methods are absent.
     """
-    ident = ident or identify(run, cfg, tune)
+    prep = prep or prepare(run, cfg, tune, methods)
     out: dict[str, NavSolution] = {}
     for m in methods:
         try:
             extra = {"observer": observers[m]} if observers and m in observers else {}
-            got = METHODS[m](ident, m, show_progress, **extra)
+            got = METHODS[m](prep, m, show_progress, **extra)
             out.update(got)
             release_free_memory()   # one method's work arrays, before the next one's
             if say:
@@ -221,8 +283,8 @@ def common_window(run: RecordedRun, sols: dict[str, NavSolution]) -> tuple[float
 
 def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
             show_progress: bool = False, observers: dict | None = None,
-            say: Callable[[str], None] | None = None) -> tuple[dict, dict, Identified]:
-    """Identify, run and score the methods over a common window, with consistency figures.
+            say: Callable[[str], None] | None = None) -> tuple[dict, dict, Prepared]:
+    """Prepare the recording, run and score the methods over a common window, with consistency figures.
 
     A method whose estimator fails is reported (a ``gnssacc: warning:`` naming it, and
     ``status: "failed"`` with ``error`` in the metrics) without costing the others; it is up
@@ -237,18 +299,21 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
         The content of ``metrics.json``; each method has ``status`` ``"ok"`` or ``"failed"``.
     solutions : dict of NavSolution
         Of the methods that succeeded.
-    ident : Identified
+    prep : Prepared
         The shared start, stationary spans and (tuned) configuration.
     """
-    ident = identify(run, cfg, tune)   # its EKF passes wait for the kernels: the input checks do not
-    for line in preparation_lines(ident) if say else ():
+    prep = prepare(run, cfg, tune, methods)
+    for line in preparation_lines(prep) if say else ():
         say(line)
-    jit_s = jit.warm_up()   # the kernels' compile (or load) time, in the background
+    t = time.perf_counter()
+    models = {"": check_model(prep)}   # the final noise model against the recording
+    seconds = {**prep.seconds, "model_check_s": time.perf_counter() - t}
+    jit_s = kernels.warm_up()   # the kernels' compile (or load) time, in the background
     if any(m.startswith("smoother") or m.endswith("accw") for m in methods):   # not inside their wall time
-        jit_s += jit.smoother_ready()
-    run = ident.run   # as the input checks left it: repaired units, the measured clock offset applied
+        jit_s += kernels.smoother_ready()
+    run = prep.run   # as the input checks left it: repaired units, the measured clock offset applied
     failed: dict[str, str] = {}
-    sols = run_methods(run, cfg, methods, ident=ident, show_progress=show_progress, failures=failed,
+    sols = run_methods(run, cfg, methods, prep=prep, show_progress=show_progress, failures=failed,
                        observers=observers, say=say)
     window = scored_window(run, sols)
     raw = gnss_score(run, window)
@@ -259,7 +324,7 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
             scores[m] = score(run, s, window)
             scores[m].errors = error_statistics(run, s, window)
             fixes = scores[m].errors.get("at_fixes") or {}
-            judged, model = _noise_model_of(ident, m, sols)
+            judged, model = _noise_model_of(prep, m, sols, models)
             cons[m] = assess(judged.run, s, fixes.get("prmse_m"), fixes.get("gnss_prmse_m"), model,
                              judged.cfg.gnss_gm_sigma, errors=scores[m].errors, n_fixes=fixes.get("n"))
         except Exception as exc:
@@ -271,25 +336,27 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
         warn_data(who, text)
     for m, reason in failed.items():
         warn_data(m, f"failed: {reason}; the other methods' results are kept")
-    extra = {"jit_compile_s": jit_s, "identify_s": ident.seconds, "quality": ident.quality.to_dict(),
-             "config_sources": ident.cfg.sources, "scored_window_s": [window[0], window[1]],
+    extra = {"jit_compile_s": jit_s, "identify_s": seconds, "quality": prep.quality.to_dict(),
+             "config_sources": prep.cfg.sources, "scored_window_s": [window[0], window[1]],
              "truth_coverage": truth_coverage(run),
              "coverage": {m: _coverage(run, s) for m, s in sols.items()},
              "consistency": {m: c.to_dict() for m, c in cons.items()},
-             "init": ident.init.how, "stationary": ident.stationary.to_dict(),
-             "model_check": ident.model.to_dict() if ident.model is not None else None,
-             "tuning": ident.tuning.to_dict() if ident.tuning is not None else None}
-    return metrics_dict(run, sols, scores, raw, extra, failed), sols, ident
+             "init": prep.init.how, "stationary": prep.stationary.to_dict(),
+             "model_check": models[""].to_dict(),
+             "model_check_gm": models["gm"].to_dict() if "gm" in models else None,
+             "tuning": prep.tuning.to_dict() if prep.tuning is not None else None}
+    return metrics_dict(run, sols, scores, raw, extra, failed), sols, prep
 
 
-def _noise_model_of(ident: Identified, sid: str, sols: dict):
-    """The identification whose run (fix sigmas) and configuration (Gauss-Markov sigmas) a solution
-    used, and the check of its noise model: the ``-gm`` methods' own (from ``ekf-gm``'s pass when
-    ``sols`` has it), else the run's."""
+def _noise_model_of(prep: Prepared, sid: str, sols: dict, models: dict):
+    """The prepared recording whose run (fix sigmas) and configuration (Gauss-Markov sigmas) a
+    solution used, and the check of its noise model: the ``-gm`` methods' own (from ``ekf-gm``'s
+    pass when ``sols`` has it; made once, kept in ``models``), else the run's."""
     if METHODS.get(sid.removesuffix("-online")) is _gm:
-        from .estimators.gm_variant import gm_model
-        return gm_model(ident, sols.get("ekf-gm"))
-    return ident, ident.model
+        if "gm" not in models:
+            models["gm"] = check_gm_model(prep, models[""], sols.get("ekf-gm"))
+        return prep.gauss_markov[0], models["gm"]
+    return prep, models[""]
 
 
 #: Truth may miss this much of the recording before :func:`scored_window` warns [s].
@@ -331,29 +398,29 @@ def _coverage(run: RecordedRun, sol: NavSolution) -> dict:
     return {"first_s": a, "last_s": b, "fraction": (b - a) / run.duration_s if run.duration_s > 0 else 1.0}
 
 
-def preparation_lines(ident: Identified) -> list[str]:
+def preparation_lines(prep: Prepared) -> list[str]:
     """What the preparation found, one line each: IMU data quality, stationary spans, the start and
     (``--tune auto``) the identified noise."""
-    lines = [quality_line(ident.quality.to_dict()), ident.stationary.summary(), f"start: {ident.init.how}"]
-    return lines + ([ident.tuning.line()] if ident.tuning is not None else [])
+    lines = [quality_line(prep.quality.to_dict()), prep.stationary.summary(), f"start: {prep.init.how}"]
+    return lines + ([prep.tuning.line()] if prep.tuning is not None else [])
 
 
 def compare_and_write(run: RecordedRun, cfg: RunConfig, methods: list[str], target: ResultDir, *,
                       tune: str | None = None, plots: bool = True, report: bool = False, export: tuple = (),
                       extra_files: Callable[[dict], dict[str, str]] | None = None,
-                      show_progress: bool = False) -> tuple[dict, dict, Identified, Path | None]:
+                      show_progress: bool = False) -> tuple[dict, dict, Prepared, Path | None]:
     """:func:`compare`, then :func:`write_result` (what each ``gnssacc batch`` task does).
 
     Returns
     -------
-    metrics, solutions, ident
+    metrics, solutions, prep
         As from :func:`compare`.
     out : Path or None
         As from :func:`write_result`.
     """
-    metrics, sols, ident, replay = compare_observed(run, cfg, methods, tune=tune, show_progress=show_progress,
+    metrics, sols, prep, replay = compare_observed(run, cfg, methods, tune=tune, show_progress=show_progress,
                                                    observe=report)
-    return metrics, sols, ident, write_result(target, ident.run, sols, metrics, ident, plots=plots, report=report,
+    return metrics, sols, prep, write_result(target, prep.run, sols, metrics, prep, plots=plots, report=report,
                                               export=export, extra_files=extra_files, replay=replay)
 
 
@@ -364,7 +431,7 @@ def compare_observed(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tu
 
     Returns
     -------
-    metrics, solutions, ident
+    metrics, solutions, prep
         As from :func:`compare`.
     replay : gnssacc.analysis.observability.EkfReplay or None
     """
@@ -373,14 +440,14 @@ def compare_observed(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tu
         from .analysis.observability import EpochCollector
 
         collector = EpochCollector(False)
-    metrics, sols, ident = compare(run, cfg, methods, tune=tune, show_progress=show_progress,
+    metrics, sols, prep = compare(run, cfg, methods, tune=tune, show_progress=show_progress,
                                    observers={"ekf-acc": collector} if collector else None, say=say)
     replay = collector.replay("ekf-acc", sols["ekf-acc"]) if collector and "ekf-acc" in sols else None
-    return metrics, sols, ident, replay
+    return metrics, sols, prep, replay
 
 
 def write_result(target: ResultDir, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict,
-                 ident: Identified, *, plots: bool = True, report: bool = False, export: tuple = (),
+                 prep: Prepared, *, plots: bool = True, report: bool = False, export: tuple = (),
                  extra_files: Callable[[dict], dict[str, str]] | None = None, replay=None) -> Path | None:
     """Write a complete result through ``target`` (all or nothing).
 
@@ -388,8 +455,8 @@ def write_result(target: ResultDir, run: RecordedRun, sols: dict[str, NavSolutio
     ----------
     target : ResultDir
         The locked output folder (inside its ``with`` block).
-    run, sols, metrics, ident
-        As :func:`compare` returned them (``run``: ``ident.run``).
+    run, sols, metrics, prep
+        As :func:`compare` returned them (``run``: ``prep.run``).
     plots, report, export
         As for :func:`write_result_files`.
     extra_files : callable, optional
@@ -406,10 +473,10 @@ def write_result(target: ResultDir, run: RecordedRun, sols: dict[str, NavSolutio
     """
     if not sols:
         return None
-    tuned = ident.tuning.to_toml(ident.cfg) if ident.tuning is not None else None
+    tuned = prep.tuning.to_toml(prep.cfg) if prep.tuning is not None else None
 
     def fill(folder: Path) -> None:
-        write_result_files(folder, run, sols, metrics, ident.cfg, plots=plots, report=report, export=export,
+        write_result_files(folder, run, sols, metrics, prep.cfg, plots=plots, report=report, export=export,
                            tuned_toml=tuned, replay=replay)
         for name, text in (extra_files(metrics) if extra_files else {}).items():
             (folder / name).write_text(text)
@@ -465,7 +532,7 @@ def write_result_files(folder: Path, run: RecordedRun, sols: dict[str, NavSoluti
     folder = Path(folder)
     for mid, sol in sols.items():
         write_trajectory_csv(sol, folder / f"trajectory_{mid}.csv")
-    (folder / "config.toml").write_text(cfg.to_toml())
+    (folder / "config.toml").write_text(resolved_toml(cfg))
     if tuned_toml is not None:
         (folder / "tuned.toml").write_text(tuned_toml)
     drawn = write_figures(folder, run, sols, metrics, plot_set(plots, report))

@@ -43,7 +43,7 @@ a NIS above the band is reported for them (the vehicle moved, or the filter is o
 The smoother's residuals cannot show a noise model that trusts the IMU too much (a smoothed
 estimate fits the fixes either way). Every method of a run shares one noise model, so the model is
 checked once, by the innovations of one EKF pass (:class:`ModelCheck`, made by
-:func:`gnssacc.prepare.identify.identify`), and a failed check is reported for the smoothers too.
+:func:`gnssacc.prepare.prepared.prepare`), and a failed check is reported for the smoothers too.
 """
 from __future__ import annotations
 
@@ -53,6 +53,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.solution import NavSolution
+from ..estimators.ekf import run_ekf
 from ..estimators.measurements import TAIL_P, tail_bound
 
 #: Consistent band of a mean NIS per degree of freedom: the stated sigmas right within sqrt(2).
@@ -260,6 +261,37 @@ def fix_residual_ratio(run, sol: NavSolution, gm_sigma: np.ndarray | None = None
     sigma = np.hypot(g.sigma_ned[inside], 0.0 if gm_sigma is None else gm_sigma)
     r = (p_at - run.origin.to_ned(g.lat[inside], g.lon[inside], g.h[inside])) / sigma
     return float(np.sqrt(np.mean(np.sum(r**2, axis=1)) / 3.0))
+
+
+def check_model(prep) -> ModelCheck:
+    """The prepared recording's final noise model against the recording: one EKF pass's
+    innovations with it (the covariance propagated every ``[tune] cov_every`` samples, as the
+    tuner's passes), and the at-rest findings (:func:`rest_noise_findings`).
+
+    Parameters
+    ----------
+    prep : gnssacc.prepare.prepared.Prepared
+    """
+    cfg = prep.cfg
+    check = run_ekf(prep.run, cfg, "ekf", init=prep.init, stationary=prep.stationary, quality=prep.quality,
+                    output_times=np.zeros(0), cov_every=int(cfg["tune"]["cov_every"]))
+    noise = prep.rest_noise
+    rest = (rest_noise_findings(noise.white_density, np.sqrt(np.r_[cfg.accel_psd, cfg.gyro_psd]), noise.total_s)
+            if noise is not None else [])
+    return ModelCheck.from_stats(check.stats, rest)
+
+
+def check_gm_model(prep, baseline: ModelCheck | None, ekf_gm: NavSolution | None = None) -> ModelCheck:
+    """The ``-gm`` methods' noise-model check (:attr:`gnssacc.prepare.prepared.Prepared.gauss_markov`):
+    one EKF pass with the Gauss-Markov states, as :func:`check_model` checks the baselines' model;
+    what the ``-gm`` methods' consistency is judged with (a smoother's own figures cannot show the
+    model; the baselines' check is of the white model). ``ekf_gm``: the ``ekf-gm`` solution when
+    the run has one, which is that pass (its outputs change nothing in the filter); the at-rest
+    findings are the baseline's."""
+    gm = prep.gauss_markov[0]
+    check = ekf_gm or run_ekf(gm.run, gm.cfg, "ekf", init=gm.init, stationary=gm.stationary, quality=gm.quality,
+                              output_times=np.zeros(0))
+    return ModelCheck.from_stats(check.stats, baseline.rest if baseline is not None else [])
 
 
 def assess(run, sol: NavSolution, prmse_m: float | None = None, gnss_prmse_m: float | None = None,

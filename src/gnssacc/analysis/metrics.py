@@ -11,6 +11,12 @@ from ..core.rotations import wrap_angle
 from ..core.solution import NavSolution
 from ..sources.gnss_noise import in_spans
 
+#: Baseline of each aided method, for the improvement column.
+BASELINES = {"ekf-acc": "ekf", "ekf-accw": "ekf", "smoother-acc": "smoother", "smoother-acc-online": "smoother-online",
+             "smoother-accw": "smoother", "smoother-accw-online": "smoother-online",
+             "ekf-gm": "ekf", "smoother-gm": "smoother", "smoother-gm-online": "smoother-online"}
+
+
 
 @dataclass
 class Score:
@@ -51,6 +57,42 @@ def truth_at(run: RecordedRun, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     valid = (t >= tr.t[0]) & (t <= tr.t[-1])
     out = np.column_stack([np.interp(t, tr.t, p_n[:, i]) for i in range(3)])
     return out, valid
+
+
+def interp_columns(t: np.ndarray, tt: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Each column of ``y`` (sampled at ``tt``) linearly interpolated at ``t``."""
+    return np.column_stack([np.interp(t, tt, y[:, i]) for i in range(y.shape[1])])
+
+
+def state_errors(run: RecordedRun, sol: NavSolution) -> np.ndarray:
+    """Actual errors (estimate minus truth) per state at the solution epochs, NaN where unknown.
+
+    Position needs ``run.truth``; velocity ``run.truth.v_n``; attitude ``run.truth.rpy`` (an
+    attitude reference; yaw wrapped to [-pi, pi)); biases the simulator's
+    ``run.sim.bias`` (per IMU sample, interpolated over ``run.imu.t``; IMU axes = body axes for
+    simulated runs). Epochs outside the truth's span are NaN.
+
+    Returns
+    -------
+    ndarray, shape (K, 15)
+    """
+    t = np.asarray(sol.t, float)
+    err = np.full((len(t), 15), np.nan)
+    tr = run.truth
+    if tr is not None:
+        p_true, inside = truth_at(run, t)
+        err[:, 0:3] = run.origin.to_ned(sol.lat, sol.lon, sol.h) - p_true
+        if tr.v_n is not None:
+            err[:, 3:6] = sol.v_n - interp_columns(t, tr.t, tr.v_n)
+        if tr.rpy is not None:
+            ref = interp_columns(t, tr.t, np.unwrap(tr.rpy, axis=0))
+            err[:, 6:9] = wrap_angle(sol.rpy - ref)
+        err[~inside, :9] = np.nan
+    bias = run.sim.bias if run.sim is not None else None
+    if bias is not None and len(bias) == len(run.imu.t):
+        b_a, b_g = bias.at(t, run.imu.t)   # drawn again, at these epochs only
+        err[:, 9:12], err[:, 12:15] = sol.b_a - b_a, sol.b_g - b_g
+    return err
 
 
 def position_errors(run: RecordedRun, sol: NavSolution) -> tuple[np.ndarray, np.ndarray]:
@@ -105,7 +147,7 @@ _DEG_H = np.pi / 180.0 / 3600.0      # rad/s per deg/h
 def truth_figures(run: RecordedRun, sol: NavSolution, window: tuple | None = None) -> dict:
     """Attitude, bias and consistency figures against the truth, over the epochs in ``window`` [s].
 
-    Errors are estimate minus truth (:func:`gnssacc.analysis.observability.state_errors`; the filter's
+    Errors are estimate minus truth (:func:`state_errors`; the filter's
     biases are the sensor's own, ``measured = true + bias``, as the simulator draws them).
 
     Returns
@@ -119,7 +161,6 @@ def truth_figures(run: RecordedRun, sol: NavSolution, window: tuple | None = Non
         equals the full NEES per dof when the covariance is diagonal in those axes and leaves out
         the cross-correlations otherwise. Each ``None`` when the truth lacks what it needs.
     """
-    from .observability import state_errors  # it scores with this module's truth_at
 
     keep = _in_window(sol.t, window)
     err = state_errors(run, sol)[keep] if run.truth is not None else np.full((0, 15), np.nan)

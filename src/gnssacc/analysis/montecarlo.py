@@ -18,9 +18,9 @@ from collections import Counter
 
 import numpy as np
 
-from ..argcheck import MAX_SEED
+from ..core.config_check import MAX_SEED
 from ..core.display import text_table
-from ..outputs.report import BASELINES
+from .metrics import BASELINES
 
 #: Most sign patterns evaluated at once by :func:`paired_permutation_pvalue` (bounds its memory:
 #: a block holds this many patterns times the number of pairs, as 8-byte integers).

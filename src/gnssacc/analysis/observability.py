@@ -60,11 +60,11 @@ from ..checks.quality import QualityReport
 from ..core.config import RunConfig
 from ..core.display import DISPLAY_SCALE, DISPLAY_UNITS, STATE_NAMES  # noqa: F401 (part of this module's API)
 from ..core.recording import RecordedRun
-from ..core.rotations import dcm_to_euler, euler_error_jacobian, wrap_angle
+from ..core.rotations import dcm_to_euler, euler_error_jacobian
 from ..core.solution import NavSolution
 from ..estimators.ekf import EkfObserver, run_ekf
 from ..estimators.kalman import joseph_update
-from .metrics import truth_at
+from .metrics import state_errors, truth_at  # noqa: F401 (state_errors: part of this module's API)
 
 #: SI units per state (the display names and units are :mod:`gnssacc.core.display`'s).
 STATE_UNITS = ("m",) * 3 + ("m/s",) * 3 + ("rad",) * 3 + ("m/s^2",) * 3 + ("rad/s",) * 3
@@ -118,41 +118,6 @@ def sigma_history(sol: NavSolution) -> SigmaHistory:
 def sigma_histories(sols: dict[str, NavSolution]) -> dict[str, SigmaHistory]:
     """:func:`sigma_history` for each solution of a ``{method: NavSolution}`` dict."""
     return {m: sigma_history(s) for m, s in sols.items()}
-
-
-def _interp_cols(t: np.ndarray, tt: np.ndarray, y: np.ndarray) -> np.ndarray:
-    return np.column_stack([np.interp(t, tt, y[:, i]) for i in range(y.shape[1])])
-
-
-def state_errors(run: RecordedRun, sol: NavSolution) -> np.ndarray:
-    """Actual errors (estimate minus truth) per state at the solution epochs, NaN where unknown.
-
-    Position needs ``run.truth``; velocity ``run.truth.v_n``; attitude ``run.truth.rpy`` (an
-    attitude reference; yaw wrapped to [-pi, pi)); biases the simulator's
-    ``run.sim.bias`` (per IMU sample, interpolated over ``run.imu.t``; IMU axes = body axes for
-    simulated runs). Epochs outside the truth's span are NaN.
-
-    Returns
-    -------
-    ndarray, shape (K, 15)
-    """
-    t = np.asarray(sol.t, float)
-    err = np.full((len(t), 15), np.nan)
-    tr = run.truth
-    if tr is not None:
-        p_true, inside = truth_at(run, t)
-        err[:, 0:3] = run.origin.to_ned(sol.lat, sol.lon, sol.h) - p_true
-        if tr.v_n is not None:
-            err[:, 3:6] = sol.v_n - _interp_cols(t, tr.t, tr.v_n)
-        if tr.rpy is not None:
-            ref = _interp_cols(t, tr.t, np.unwrap(tr.rpy, axis=0))
-            err[:, 6:9] = wrap_angle(sol.rpy - ref)
-        err[~inside, :9] = np.nan
-    bias = run.sim.bias if run.sim is not None else None
-    if bias is not None and len(bias) == len(run.imu.t):
-        b_a, b_g = bias.at(t, run.imu.t)   # drawn again, at these epochs only
-        err[:, 9:12], err[:, 12:15] = sol.b_a - b_a, sol.b_g - b_g
-    return err
 
 
 @dataclass

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import false_discovery_control
 
-from ..outputs.report import BASELINES
+from .metrics import BASELINES
 from .montecarlo import paired_permutation_pvalue
 
 #: The settings that make a cell of the grid.
@@ -41,7 +41,7 @@ ERRORS = FIGURES[:6]
 
 
 def baseline_of(method: str) -> str | None:
-    """The baseline a method is compared with: :data:`gnssacc.outputs.report.BASELINES`, else ``ekf`` for
+    """The baseline a method is compared with: :data:`gnssacc.analysis.metrics.BASELINES`, else ``ekf`` for
     ``ekf-*``, ``smoother-online`` for ``smoother-*-online``, ``smoother`` for ``smoother-*``;
     ``None`` for a baseline itself (and the raw fixes)."""
     if method in BASELINES:

@@ -25,12 +25,11 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..api import configure, load
 from ..core.errors import DataWarning, InputError, warn_data
 from ..core.interrupts import raise_if_interrupted
 from ..core.progress import CampaignProgress
 from ..outputs.outdir import ResultDir
-from ..pipeline import compare, compare_and_write, failure_reason
+from ..pipeline import compare, compare_and_write, configure, failure_reason, load
 from ..sources.simspec import is_sim_spec, known_noise_config
 from .campaign import TASK_FILE, Campaign, TaskSpec, config_identity, write_atomic, write_record
 from .campaign_summary import SummaryMarkdown, csv_text, task_rows
@@ -197,7 +196,7 @@ def open_executor(jobs: int | None, scheduler: str | None):
         from .cluster import DaskExecutor
     except ImportError:
         raise InputError("batch", NEEDS_DASK) from None
-    return DaskExecutor(scheduler=scheduler, workers=None if scheduler else jobs)
+    return DaskExecutor(run_task, failed_record, scheduler=scheduler, workers=None if scheduler else jobs)
 
 
 class Ledger:

@@ -35,8 +35,8 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 
-from .. import __version__
 from ..core.errors import InputError
+from ..core.version import __version__
 from ..outputs.outdir import MARKER, FolderLock, clean_stale
 
 #: The campaign's settings file, in its folder.

@@ -29,7 +29,6 @@ from tqdm import tqdm
 
 from ..core.errors import InputError
 from ..pipeline import failure_reason
-from .batch import failed_record, run_task
 from .campaign import TaskSpec
 
 #: Seconds to wait for a scheduler given with ``--scheduler``.
@@ -73,11 +72,8 @@ class WarmUp(WorkerPlugin):
 
 def _warm_up() -> None:
     """Import what a task needs (gtsam included) and load the numba kernels."""
-    from .. import (
-        pipeline,
-        smoother,  # noqa: F401
-    )
-    from ..estimators import mechanization
+    from .. import pipeline  # noqa: F401
+    from ..estimators import mechanization, smoother  # noqa: F401
 
     mechanization.warm_up()
     mechanization.warm_up_window()   # ekf-accw's kernel
@@ -107,13 +103,18 @@ class DaskExecutor:
 
     Parameters
     ----------
+    run_task : callable
+        ``run_task(spec) -> record``, submitted once per task (:func:`gnssacc.campaign.batch.run_task`).
+    failed_record : callable
+        ``failed_record(spec, error, kind) -> record`` for a task that never returned.
     scheduler : str, optional
         Address of a running scheduler (``tcp://host:8786``).
     workers : int, optional
         Without ``scheduler``: worker processes of the local cluster (one thread each).
     """
 
-    def __init__(self, scheduler: str | None = None, workers: int | None = None):
+    def __init__(self, run_task, failed_record, scheduler: str | None = None, workers: int | None = None):
+        self.run_task, self.failed_record = run_task, failed_record
         self.scheduler = scheduler
         self.workers = workers
         self.cluster = None
@@ -151,7 +152,7 @@ class DaskExecutor:
         """Submit every task, then yield each one's record as it finishes; a task whose workers
         kept dying gets a failed record. Leaving early cancels the tasks not yet finished."""
         token = uuid.uuid4().hex[:8]
-        futures = {self.client.submit(run_task, t, key=f"gnssacc-{t.key}-{token}", pure=False, retries=RETRIES): t
+        futures = {self.client.submit(self.run_task, t, key=f"gnssacc-{t.key}-{token}", pure=False, retries=RETRIES): t
                    for t in tasks}
         try:
             for fut in as_completed(list(futures)):
@@ -167,10 +168,10 @@ class DaskExecutor:
         try:
             return fut.result()
         except KilledWorker as exc:
-            return failed_record(spec, f"its workers died while running it (killed, or out of memory): "
+            return self.failed_record(spec, f"its workers died while running it (killed, or out of memory): "
                                        f"{failure_reason(exc)}")
         except Exception as exc:
             if fut.cancelled():
                 raise InputError(self.description, f"the cluster cancelled task {spec.key} (scheduler lost or "
                                                    f"restarted?); resume the campaign with --resume") from None
-            return failed_record(spec, failure_reason(exc), kind="error")
+            return self.failed_record(spec, failure_reason(exc), kind="error")

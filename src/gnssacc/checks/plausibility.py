@@ -3,7 +3,7 @@ r"""Input checks: a recording checked against itself before estimation.
 Input in the wrong units or layout often still runs and gives confident nonsense (an
 accelerometer in g, a gyro in deg/s, IMU stamps in ms, GNSS on GPS time beside an IMU on UTC,
 latitude and longitude swapped or in radians, an IMU upside down). :func:`check_run` looks for
-each of these in the data themselves, once, at the top of :func:`gnssacc.prepare.identify.identify`, so
+each of these in the data themselves, once, at the top of :func:`gnssacc.prepare.prepared.prepare`, so
 the command line, the benchmarks and the Python API all get it. In order:
 
 1. ``time_units``: IMU and GNSS time stamps in seconds (:mod:`gnssacc.checks.unitcheck`,
@@ -71,7 +71,7 @@ from .motionmatch import (
 )
 from .mountcheck import estimate_mounting
 from .mountcheck import rotation_angle_deg as rotation_angle
-from .timeoffset import OffsetEstimate, coarse_offset, refine_offset, shifted
+from .timeoffset import OffsetEstimate, coarse_offset, shifted
 
 CHECKS = ("time_units", "fix_count", "heights", "accel_units", "gyro_units", "latlon", "init_position",
           "time_offset", "mounting")
@@ -258,19 +258,19 @@ def _offset_error(off: OffsetEstimate, configured: float, where: str) -> Finding
                    details={"offset_s": off.offset_s, "sigma_s": off.sigma_s, "configured_s": configured})
 
 
-def _confirmed_offset(run: RecordedRun, cfg: RunConfig, off: OffsetEstimate) -> OffsetEstimate | None:
+def _confirmed_offset(run: RecordedRun, cfg: RunConfig, off: OffsetEstimate, refine) -> OffsetEstimate | None:
     """The offset to report against a configured one: stage 1 when it is suspect, confirmed by the
     EKF likelihood (or, should that find no maximum near it, stage 1 alone when overwhelming)."""
     if not off.determined or abs(off.offset_s) <= max(MIN_OFFSET_S, SUSPECT_SIGMAS * off.sigma_s):
         return None
-    est = refine_offset(shifted(run, off.offset_s), cfg, off)
+    est = refine(shifted(run, off.offset_s), cfg, off)
     if est is None:
         return off if abs(off.offset_s) >= max(0.5, 10.0 * off.sigma_s) else None
     return est if abs(est.offset_s) > max(MIN_OFFSET_S, ERROR_SIGMAS * est.sigma_s) else None
 
 
 def offset_step(run: RecordedRun, cfg: RunConfig, policy: Policy, m: Motion, findings: list,
-                where: str) -> tuple[RecordedRun, RunConfig, float]:
+                where: str, refine) -> tuple[RecordedRun, RunConfig, float]:
     """Step 3 of the module notes. Returns the run and configuration (with a measured ``"auto"``
     offset applied) and the best offset between the IMU stamps as ``m`` saw them and the GNSS
     clock [s] (for the mounting's comparisons)."""
@@ -279,11 +279,11 @@ def offset_step(run: RecordedRun, cfg: RunConfig, policy: Policy, m: Motion, fin
     if "time_offset" in policy.skip:
         return run, cfg, left
     if not policy.offset_auto:
-        est = _confirmed_offset(run, cfg, off)
+        est = _confirmed_offset(run, cfg, off, refine)
         if est is not None:
             settle(run, _offset_error(est, float(cfg["mounting"]["imu_time_offset_s"]), where), policy, findings)
         return run, cfg, left
-    est, apply, text = _auto_offset(run, cfg, off)
+    est, apply, text = _auto_offset(run, cfg, off, refine)
     applied = est.offset_s if apply else 0.0
     findings.append(Finding("time_offset", where, f"IMU-to-GNSS clock offset: {text}", action="applied",
                             details={"offset_s": applied, "measured_s": est.offset_s if est else None,
@@ -293,14 +293,14 @@ def offset_step(run: RecordedRun, cfg: RunConfig, policy: Policy, m: Motion, fin
     return (shifted(run, applied), cfg, float(applied)) if apply else (run, cfg, left)
 
 
-def _auto_offset(run: RecordedRun, cfg: RunConfig, off: OffsetEstimate) -> tuple[OffsetEstimate | None, bool, str]:
+def _auto_offset(run: RecordedRun, cfg: RunConfig, off: OffsetEstimate, refine) -> tuple[OffsetEstimate | None, bool, str]:
     """The measured offset (``None`` without enough motion), whether ``"auto"`` applies it, and
     what to say: applied when the data tell it from zero (:data:`ERROR_SIGMAS` sigma, the evidence
     an error needs), else 0 s kept, so that a synchronised recording with noisy fixes is not
     shifted by the estimate's own noise."""
     if not off.determined:
         return None, False, "the recording has too little motion to measure it; 0 s assumed"
-    est = refine_offset(shifted(run, off.offset_s), cfg, off) or off
+    est = refine(shifted(run, off.offset_s), cfg, off) or off
     if abs(est.offset_s) > ERROR_SIGMAS * est.sigma_s:
         return est, True, f"measured {est.text()}, added to the IMU time stamps"
     return est, False, (f"measured {est.text()}, not distinguishable from 0 s (that needs {ERROR_SIGMAS:g} sigma); "
@@ -356,7 +356,7 @@ def mount_step(run: RecordedRun, cfg: RunConfig, policy: Policy, m: Motion, tau:
     return run, cfg.with_values({"mounting": {"imu_to_body_rpy_deg": rpy}}, "input checks")
 
 
-def check_run(run: RecordedRun, cfg: RunConfig) -> tuple[RecordedRun, RunConfig, list]:
+def check_run(run: RecordedRun, cfg: RunConfig, refine_offset) -> tuple[RecordedRun, RunConfig, list]:
     """Check a run against itself before estimation (module notes).
 
     Parameters
@@ -365,6 +365,11 @@ def check_run(run: RecordedRun, cfg: RunConfig) -> tuple[RecordedRun, RunConfig,
         As loaded (validated).
     cfg : RunConfig
         ``[checks]`` and ``[mounting]``.
+    refine_offset : callable
+        ``refine_offset(run, cfg, stage1) -> OffsetEstimate or None``: stage 2 of the clock offset,
+        the EKF's innovation likelihood around stage 1 on ``run`` shifted by it
+        (:func:`gnssacc.prepare.clock.refine_offset` with a filter pass; handed in because the
+        checks precede the estimators).
 
     Returns
     -------
@@ -390,7 +395,7 @@ def check_run(run: RecordedRun, cfg: RunConfig) -> tuple[RecordedRun, RunConfig,
                   lambda r: unitcheck.accel_units(r.imu, local_gravity(r), imu_w)):
         run = settle(run, check(run), policy, findings)
     run, m = motion_checks(run, policy, findings, imu_w, gnss_w)
-    run, cfg, tau = offset_step(run, cfg, policy, m, findings, imu_w)
+    run, cfg, tau = offset_step(run, cfg, policy, m, findings, imu_w, refine_offset)
     run, cfg = mount_step(run, cfg, policy, m, tau, findings, imu_w)
     run = settle(run, gnsscheck.init_position(run, init_w), policy, findings)
     return run, cfg, findings

@@ -33,7 +33,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..core.config import DEG, RunConfig
-from ..core.recording import ImuData
+from ..core.recording import ImuData, gap_indices
 
 #: Channel names, in the column order of the stacked ``[f_b, omega_ib_b]`` array (as in imu.csv).
 CHANNELS = ("ax", "ay", "az", "gx", "gy", "gz")
@@ -216,26 +216,6 @@ def _interpolated(t: np.ndarray, x: tuple[np.ndarray, np.ndarray], tol: float, m
     return spans
 
 
-def gap_indices(t: np.ndarray, factor: float) -> tuple[np.ndarray, np.ndarray, float]:
-    """The one gap rule (IMU checks, bag summaries): intervals ``t[k+1] - t[k]`` longer than
-    ``factor`` (``[quality] gap_factor``) times the median interval.
-
-    Returns
-    -------
-    idx : ndarray of int
-        The ``k`` of each gap.
-    dt : ndarray
-        Every interval [s].
-    dt_med : float
-        The median interval [s] (NaN with fewer than two samples).
-    """
-    if len(t) < 2:
-        return np.zeros(0, int), np.zeros(0), float("nan")
-    dt = np.diff(t)
-    dt_med = float(np.median(dt))
-    return np.flatnonzero(dt > factor * dt_med), dt, dt_med
-
-
 def _gaps(t: np.ndarray, factor: float) -> tuple[list[Span], float, float]:
     idx, dt, dt_med = gap_indices(t, factor)
     if not len(dt):
@@ -312,7 +292,7 @@ def check_imu(imu: ImuData, cfg: RunConfig) -> QualityReport:
     return QualityReport(spans, len(t), dt_med, dt_max)
 
 
-def inflation_psd(imu: ImuData, report: QualityReport, cfg: RunConfig) -> tuple[np.ndarray, np.ndarray]:
+def inflation_psd(imu: ImuData, report: QualityReport, suspect: SuspectNoise) -> tuple[np.ndarray, np.ndarray]:
     """Extra white-noise PSD per IMU sample and channel, to de-weight suspect samples.
 
     Over a flagged span of duration ``T`` each channel's reading is treated as wrong by an
@@ -337,7 +317,7 @@ def inflation_psd(imu: ImuData, report: QualityReport, cfg: RunConfig) -> tuple[
     q_accel_extra : ndarray, shape (N, 3)
         Additive accelerometer white-noise PSD per body axis [(m/s^2)^2/s].
     """
-    i0, i1, seg_g, seg_a = inflation_segments(imu, report, cfg)
+    i0, i1, seg_g, seg_a = inflation_segments(imu, report, suspect)
     q_gyro = np.zeros((len(imu), 3))
     q_accel = np.zeros((len(imu), 3))
     for a, b, qg, qa in zip(i0, i1, seg_g, seg_a):
@@ -346,13 +326,31 @@ def inflation_psd(imu: ImuData, report: QualityReport, cfg: RunConfig) -> tuple[
     return q_gyro, q_accel
 
 
-def _span_sigmas(imu: ImuData, span: Span, clean: np.ndarray, cfg: RunConfig) -> tuple[np.ndarray, np.ndarray]:
+@dataclass(frozen=True)
+class SuspectNoise:
+    """The error assumed over a suspect span (``[quality]``): per channel either ``"local"``, its
+    standard deviation over the clean samples within ``local_window_s`` [s] on both sides, capped
+    by ``gyro_sigma_dps`` [deg/s] / ``accel_sigma_mps2`` [m/s^2], or ``"fixed"``, those caps."""
+
+    mode: str
+    local_window_s: float
+    gyro_sigma_dps: float
+    accel_sigma_mps2: float
+
+    @classmethod
+    def from_config(cls, cfg: RunConfig) -> "SuspectNoise":
+        q = cfg["quality"]
+        return cls(str(q["suspect_sigma_mode"]), float(q["suspect_local_window_s"]),
+                   float(q["suspect_gyro_sigma_dps"]), float(q["suspect_accel_sigma_mps2"]))
+
+
+def _span_sigmas(imu: ImuData, span: Span, clean: np.ndarray, suspect: SuspectNoise) -> tuple[np.ndarray, np.ndarray]:
     """Per-channel 1-sigma (gyro [rad/s], accel [m/s^2]) of the error assumed over a span."""
-    cap_g = float(cfg["quality"]["suspect_gyro_sigma_dps"]) * DEG
-    cap_a = float(cfg["quality"]["suspect_accel_sigma_mps2"])
-    if cfg["quality"]["suspect_sigma_mode"] == "fixed":
+    cap_g = suspect.gyro_sigma_dps * DEG
+    cap_a = suspect.accel_sigma_mps2
+    if suspect.mode == "fixed":
         return np.full(3, cap_g), np.full(3, cap_a)
-    w = float(cfg["quality"]["suspect_local_window_s"])
+    w = suspect.local_window_s
     lo = int(np.searchsorted(imu.t, span.t_start - w))
     hi = int(np.searchsorted(imu.t, span.t_end + w, side="right"))
     around = np.arange(lo, hi)
@@ -363,7 +361,7 @@ def _span_sigmas(imu: ImuData, span: Span, clean: np.ndarray, cfg: RunConfig) ->
             np.minimum(imu.f_b[around].std(axis=0), cap_a))
 
 
-def inflation_segments(imu: ImuData, report: QualityReport, cfg: RunConfig):
+def inflation_segments(imu: ImuData, report: QualityReport, suspect: SuspectNoise):
     """The inflation of :func:`inflation_psd` as non-overlapping sample segments.
 
     Memory is proportional to the number of suspect spans, not to the run length; this is
@@ -384,7 +382,7 @@ def inflation_segments(imu: ImuData, report: QualityReport, cfg: RunConfig):
         if b <= a:
             continue
         T = max(s.duration_s, 0.0)
-        sg, sa = _span_sigmas(imu, s, clean, cfg)
+        sg, sa = _span_sigmas(imu, s, clean, suspect)
         gyro = s.kind != "saturated" or s.channels.startswith("g")
         accel = s.kind != "saturated" or s.channels.startswith("a")
         spans.append((a, b, sg**2 * T if gyro else np.zeros(3), sa**2 * T if accel else np.zeros(3)))

@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..prepare.stationary import StationaryParams
 from .config_check import check_value, show
 from .errors import InputError
 from .rotations import euler_to_dcm
+from .stationary_params import StationaryParams
 
 G0 = 9.80665  # standard gravity, for milli-g [m/s^2]
 DEG = np.pi / 180.0
@@ -399,13 +399,6 @@ class RunConfig:
         _merge(values, updates, source)
         origin = {**self.origin, **dict.fromkeys(_keys(updates), source)}
         return RunConfig(values, self.sources + [source], self.explicit, origin)
-
-    def to_toml(self) -> str:
-        """The resolved configuration as TOML text (for ``gnssacc config --show`` and outputs):
-        each key with its documentation and, when not at its default, what set it."""
-        from .config_docs import commented_toml
-
-        return commented_toml(self.values, [f"resolved from: {', '.join(self.sources)}"], self.origin)
 
 
 def toml_value(value) -> str:

@@ -262,3 +262,7 @@ def show(value) -> str:
     else:
         text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
+
+
+#: Largest seed (numpy takes more, but a 32-bit seed is plenty and portable).
+MAX_SEED = 2**32 - 1

@@ -13,6 +13,7 @@ import re
 import tokenize
 
 from . import config
+from .stationary_params import StationaryParams
 
 _SECTION = re.compile(r'^ {4}"(\w+)": \{\s*$')   # a section opens its own block
 _KEY = re.compile(r'^\s*"(\w+)":')
@@ -21,8 +22,6 @@ _KEY = re.compile(r'^\s*"(\w+)":')
 def key_comments() -> dict[tuple[str, str], list[str]]:
     """``{(section, key): comment lines}`` for the keys that start a comment group; the
     ``[stationary]`` keys from the ``Attributes`` of :class:`gnssacc.prepare.stationary.StationaryParams`."""
-    from ..prepare.stationary import StationaryParams
-
     return {**_defaults_comments(), **attribute_docs(StationaryParams, "stationary")}
 
 
@@ -96,3 +95,9 @@ TEMPLATE_HEADER = [
 def template_toml(cfg: "config.RunConfig") -> str:
     """A commented starting file: every key of ``cfg`` documented and commented out."""
     return commented_toml(cfg.values, TEMPLATE_HEADER + [f"values from: {', '.join(cfg.sources)}"], keys_off=True)
+
+
+def resolved_toml(cfg: "config.RunConfig") -> str:
+    """The resolved configuration as TOML text (for ``gnssacc config --show`` and outputs): each
+    key with its documentation and, when not at its default, what set it."""
+    return commented_toml(cfg.values, [f"resolved from: {', '.join(cfg.sources)}"], cfg.origin)

@@ -9,16 +9,12 @@ times are seconds on one clock, angles radians, positions geodetic (lat, lon [ra
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .earth import LocalTangentFrame
 from .errors import InputError, warn_data
 from .rotations import euler_to_dcm
-
-if TYPE_CHECKING:
-    from ..sources.sim_true_bias import TrueBias
 
 
 @dataclass
@@ -178,7 +174,7 @@ class SimTruth:
         The full error description it was drawn from.
     """
 
-    bias: "TrueBias"
+    bias: object   # gnssacc.sources.sim_true_bias.TrueBias (a source type: the model does not import it)
     segments: list
     imu_error_draws: dict
     imu_params: dict
@@ -310,3 +306,23 @@ def drop_nonfinite(table: np.ndarray, where: str, what: str, max_fraction: float
         warn_data(where, f"dropped {n_bad} of {len(table)} {what} rows with NaN/inf values")
         return table[good]
     return table   # no copy when every row is good: the common case, and a long run's largest array
+
+
+def gap_indices(t: np.ndarray, factor: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """The one gap rule (IMU checks, bag summaries): intervals ``t[k+1] - t[k]`` longer than
+    ``factor`` (``[quality] gap_factor``) times the median interval.
+
+    Returns
+    -------
+    idx : ndarray of int
+        The ``k`` of each gap.
+    dt : ndarray
+        Every interval [s].
+    dt_med : float
+        The median interval [s] (NaN with fewer than two samples).
+    """
+    if len(t) < 2:
+        return np.zeros(0, int), np.zeros(0), float("nan")
+    dt = np.diff(t)
+    dt_med = float(np.median(dt))
+    return np.flatnonzero(dt > factor * dt_med), dt, dt_med

@@ -24,18 +24,18 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..checks.quality import QualityReport, inflation_segments, touches_segments
-from ..core import jit
-from ..core.config import RunConfig
 from ..core.earth import earth_rate_n, gravity_n
 from ..core.progress import progress
 from ..core.recording import InitialState, RecordedRun
 from ..core.rotations import dcm_to_euler, euler_error_jacobian
 from ..core.solution import NavSolution
 from ..prepare.initialise import initial_sigmas
+from ..prepare.yawbank import start_and_quality
 from . import measurements as meas_models
 from .gnss_accel import AccelWindow, measured_specific_force, window_samples
 from .kalman import joseph_update
 from .mechanization import Propagator, apply_correction, kernel_force_integrals
+from .settings import EkfSettings
 from .zupt import StationaryEpochs, epochs_for
 
 #: The acceleration update each method applies (``None``: none; see :func:`acceleration_model`).
@@ -73,12 +73,13 @@ class FilterState:
     gm: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
-def initial_state(init: InitialState, cfg: RunConfig) -> FilterState:
-    """The filter state at ``init.t``: the initial state, its sigmas and the bias priors."""
-    sig_p, sig_v, sig_att = initial_sigmas(init, cfg)
-    sig_ba = cfg.accel_bias_sigma0 if init.sigma_b_a is None else np.asarray(init.sigma_b_a, float)
-    sig_bg = cfg.gyro_bias_sigma0 if init.sigma_b_g is None else np.asarray(init.sigma_b_g, float)
-    gm = cfg.gnss_gm_sigma
+def initial_state(init: InitialState, settings) -> FilterState:
+    """The filter state at ``init.t``: the initial state, its sigmas and the bias priors
+    (``settings``: either estimator's settings, :mod:`gnssacc.estimators.settings`)."""
+    sig_p, sig_v, sig_att = initial_sigmas(init, settings.start_sigmas)
+    sig_ba = settings.imu.accel_bias_sigma0 if init.sigma_b_a is None else np.asarray(init.sigma_b_a, float)
+    sig_bg = settings.imu.gyro_bias_sigma0 if init.sigma_b_g is None else np.asarray(init.sigma_b_g, float)
+    gm = settings.gnss.gm_sigma
     P = np.diag(np.concatenate([sig_p, sig_v, sig_att, sig_ba, sig_bg] + ([gm] if np.any(gm > 0) else [])) ** 2)
     if init.levelled:
         _tie_tilt_to_accel_bias(P, init)
@@ -251,26 +252,23 @@ class EkfSetup:
         return float(self.init.t)
 
 
-def prepare(run: RecordedRun, cfg: RunConfig, init: InitialState | None = None,
-            quality: QualityReport | None = None, stationary=None, cov_every: int = 1) -> EkfSetup:
+def prepare(run: RecordedRun, settings: EkfSettings, init: InitialState, quality: QualityReport, stationary=None,
+            cov_every: int = 1) -> EkfSetup:
     """Initial state and covariance, IMU propagator with noise and inflation, acceleration window,
     stationary epochs (``stationary``: a :class:`gnssacc.prepare.stationary.StationaryReport` or ``None``)."""
-    from ..prepare.yawbank import start_and_quality  # the bank runs this filter: imported here to avoid a cycle
-
-    init, quality = start_and_quality(run, cfg, init, quality, stationary)
-    segments = inflation_segments(run.imu, quality, cfg)
-    prop = Propagator(run.imu.t, run.imu.f_b, run.imu.omega_ib_b, cfg.accel_psd, cfg.gyro_psd, cfg.accel_bias_rw_psd,
-                      cfg.gyro_bias_rw_psd, segments, int(cfg["ekf"]["phi_order"]), cov_every,
-                      gm_tau_s=cfg.gnss_gm_tau, gm_sigma_m=cfg.gnss_gm_sigma)
-    z = cfg["zupt"]
-    epochs = epochs_for(run, cfg, stationary)
+    segments = inflation_segments(run.imu, quality, settings.suspect)
+    imu, gnss_model, acc, z = settings.imu, settings.gnss, settings.accel, settings.zupt
+    prop = Propagator(run.imu.t, run.imu.f_b, run.imu.omega_ib_b, imu.accel_psd, imu.gyro_psd, imu.accel_bias_rw_psd,
+                      imu.gyro_bias_rw_psd, segments, settings.phi_order, cov_every,
+                      gm_tau_s=gnss_model.gm_tau, gm_sigma_m=gnss_model.gm_sigma)
+    epochs = epochs_for(run, z, imu.gyro_psd, stationary)
     gnss = run.gnss
-    return EkfSetup(init, initial_state(init, cfg), prop, segments[0], segments[1],
-                    float(cfg["ekf"]["position_gate_nis"]), cfg.lever_arm_b, float(cfg["accel"]["specific_force_avg_s"]),
+    return EkfSetup(init, initial_state(init, settings), prop, segments[0], segments[1],
+                    settings.position_gate_nis, gnss_model.lever_arm_b, acc.specific_force_avg_s,
                     run.origin.to_ned(gnss.lat, gnss.lon, gnss.h),
-                    AccelWindow(int(cfg["accel"]["window"]), float(cfg["accel"]["max_gap_s"]), cfg.accel_sigma_override),
+                    AccelWindow(acc.window, acc.max_gap_s, acc.sigma_override),
                     int(np.searchsorted(prop.t, float(init.t), side="right")), epochs,
-                    float(z["velocity_sigma_mps"]), float(z["gate_nis"]))
+                    z.velocity_sigma_mps, z.gate_nis)
 
 
 def acceleration_model(run: RecordedRun, setup: EkfSetup, s: FilterState, t: float, acc, model: str = "acc"):
@@ -313,6 +311,17 @@ def default_output_times(run: RecordedRun) -> np.ndarray:
     return np.union1d(base, np.concatenate(fill) if fill else np.zeros(0))
 
 
+def _start(run: RecordedRun, settings, init, quality, stationary):
+    """The start and quality report of a pass: as given, else found by the preparation stage for
+    this run alone (a run configuration is needed for that; settings alone cannot self-start)."""
+    if not isinstance(settings, EkfSettings):
+        return start_and_quality(run, settings, init, quality, stationary, filter_pass=run_ekf)
+    init = init if init is not None else run.init
+    if init is None or quality is None:
+        raise ValueError("run_ekf with EkfSettings needs init= and quality= (gnssacc.pipeline.prepare gives both)")
+    return init, quality
+
+
 def _events(gnss_t: np.ndarray, stat_t: np.ndarray, out_t: np.ndarray):
     """Event times, kinds and indices in time order (GNSS, then stationary, then output at equal times)."""
     ev_t = np.concatenate([gnss_t, stat_t, out_t])
@@ -343,7 +352,7 @@ def _stationary_measurements(setup, s, j):
     yield meas_models.zero_rate(s, st.omega_mean_b[j], st.omega_var_b[j], w_ie, setup.zupt_gate), True
 
 
-def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_times: np.ndarray | None = None,
+def run_ekf(run: RecordedRun, settings, method: str = "ekf", *, output_times: np.ndarray | None = None,
             quality: QualityReport | None = None, init: InitialState | None = None, stationary=None,
             store_P: bool = False, record_innovations: bool = False, observer: EkfObserver | None = None,
             t_stop: float | None = None, cov_every: int = 1, show_progress: bool = False) -> NavSolution:
@@ -352,7 +361,9 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
     Parameters
     ----------
     run : RecordedRun
-    cfg : RunConfig
+    settings : EkfSettings or gnssacc.core.config.RunConfig
+        The filter's settings (:class:`gnssacc.estimators.settings.EkfSettings`; a run
+        configuration is reduced to them first).
     method : {"ekf", "ekf-acc", "ekf-accw"}
         ``ekf``: position updates (the paper's baseline); ``ekf-acc``: position and GNSS-derived
         acceleration updates (the paper's method); ``ekf-accw``: the same with the
@@ -365,7 +376,10 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
         Data-quality findings (:func:`gnssacc.checks.quality.check_imu` when omitted); suspect IMU
         spans get inflated process noise.
     init : InitialState, optional
-        Overrides ``run.init`` and self-initialisation.
+        The start (what :func:`gnssacc.prepare.prepared.prepare` found, ``Prepared.init``); when
+        omitted, the run's own (``run.init``), else the start the preparation stage finds for
+        this run alone (:func:`gnssacc.prepare.yawbank.start_and_quality`, with this filter as
+        its filter pass).
     stationary : gnssacc.prepare.stationary.StationaryReport, optional
         Where the vehicle stands still (zero-velocity and zero-rate updates there).
     store_P : bool
@@ -392,11 +406,9 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
     if method not in METHODS:
         raise ValueError(f"unknown EKF method {method!r}; known: {', '.join(METHODS)}")
     use_acc = METHODS[method]
-    jit.warm_up()   # the kernels, compiled or loaded in the background: a first run waits here
-    if use_acc == "accw":
-        jit.smoother_ready()   # its kernel is compiled with the smoother's
     wall0 = time.perf_counter()
-    setup = prepare(run, cfg, init, quality, stationary, cov_every)
+    init, quality = _start(run, settings, init, quality, stationary)
+    setup = prepare(run, EkfSettings.of(settings), init, quality, stationary, cov_every)
     s, prop, t0, k = setup.state, setup.prop, setup.t0, setup.k
     t_end = prop.t[-1] if t_stop is None else min(float(t_stop), prop.t[-1])
     out_t = default_output_times(run) if output_times is None else np.asarray(output_times, float)
@@ -425,6 +437,14 @@ def run_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, output_tim
         else:
             updates.at(t_e, kind, i, acc)
     return rec.solution(method, time.perf_counter() - wall0, updates.final_stats())
+
+
+def estimate(prep, settings: EkfSettings, method: str = "ekf", **options) -> NavSolution:
+    """The EKF over a prepared recording (:class:`gnssacc.prepare.prepared.Prepared`): its run,
+    start, quality report and stationary spans, with the filter's own ``settings``;
+    ``options`` as for :func:`run_ekf`."""
+    return run_ekf(prep.run, settings, method, init=prep.init, quality=prep.quality, stationary=prep.stationary,
+                   **options)
 
 
 @dataclass

@@ -629,7 +629,7 @@ class Propagator:
 def warm_up(propagation: bool = True, update: bool = True) -> float:
     """Compile (or load from cache) the numba kernels of an EKF run: ``propagation``, and
     ``update`` (the update and the correction); return the seconds it took. See
-    :mod:`gnssacc.core.jit` for the background version."""
+    :mod:`gnssacc.estimators.kernels` for the background version."""
     import time
     from types import SimpleNamespace
 

@@ -45,7 +45,6 @@ import numpy as np
 from gtsam.symbol_shorthand import B, G, V, X
 
 from ..checks.quality import QualityReport, inflation_segments, touches_segments
-from ..core.config import RunConfig
 from ..core.earth import earth_rate_n, normal_gravity
 from ..core.progress import progress
 from ..core.recording import InitialState, RecordedRun
@@ -59,9 +58,10 @@ from ..factors import (
     window_accel_factor,
 )
 from ..prepare.yawbank import start_and_quality
-from .ekf import initial_state
+from .ekf import initial_state, run_ekf
 from .fixed_lag import FixedLagISAM2
 from .gnss_accel import acceleration_row, measured_specific_force, window_accelerations
+from .settings import SmootherSettings
 from .window_marginals import NotAChain, WindowMarginals
 from .zupt import StationaryEpochs, epochs_for
 
@@ -100,8 +100,8 @@ def node_times(t0: float, t_end: float, gnss_t: np.ndarray, max_spacing: float) 
 class _ImuModel:
     """Preintegration parameters, with cached copies inflated for suspect IMU data."""
 
-    def __init__(self, cfg: RunConfig, g: float, omega_ie_n: np.ndarray):
-        self.cfg, self.g, self.omega = cfg, g, omega_ie_n
+    def __init__(self, settings: SmootherSettings, g: float, omega_ie_n: np.ndarray):
+        self.settings, self.g, self.omega = settings, g, omega_ie_n
         self._cache: dict = {}
         self.base = self.params(np.zeros(3), np.zeros(3))  # first call fills the cache
 
@@ -112,19 +112,19 @@ class _ImuModel:
         qg_extra = np.zeros(3) if qg_extra is None else qg_extra
         key = (tuple(np.round(qa_extra, 15)), tuple(np.round(qg_extra, 15)))
         if key not in self._cache:
-            cfg = self.cfg
+            imu = self.settings.imu
             p = gtsam.PreintegrationCombinedParams.MakeSharedD(self.g)
-            p.setAccelerometerCovariance(np.diag(cfg.accel_psd + qa_extra))
-            p.setGyroscopeCovariance(np.diag(cfg.gyro_psd + qg_extra))
-            p.setBiasAccCovariance(np.diag(np.maximum(cfg.accel_bias_rw_psd, ACCEL_BIAS_RW_FLOOR**2)))
-            p.setBiasOmegaCovariance(np.diag(np.maximum(cfg.gyro_bias_rw_psd, GYRO_BIAS_RW_FLOOR**2)))
-            p.setIntegrationCovariance(np.eye(3) * float(cfg["smoother"]["integration_sigma"]) ** 2)
+            p.setAccelerometerCovariance(np.diag(imu.accel_psd + qa_extra))
+            p.setGyroscopeCovariance(np.diag(imu.gyro_psd + qg_extra))
+            p.setBiasAccCovariance(np.diag(np.maximum(imu.accel_bias_rw_psd, ACCEL_BIAS_RW_FLOOR**2)))
+            p.setBiasOmegaCovariance(np.diag(np.maximum(imu.gyro_bias_rw_psd, GYRO_BIAS_RW_FLOOR**2)))
+            p.setIntegrationCovariance(np.eye(3) * self.settings.integration_sigma ** 2)
             p.setOmegaCoriolis(self.omega)
             self._cache[key] = p
         return self._cache[key]
 
 
-def _initial_prior(init: InitialState, cfg: RunConfig) -> tuple[np.ndarray, np.ndarray]:
+def _initial_prior(init: InitialState, settings: SmootherSettings) -> tuple[np.ndarray, np.ndarray]:
     """The EKF's initial covariance (:func:`gnssacc.estimators.ekf.initial_state`) in the smoother's variables.
 
     EKF errors are estimate minus truth with ``R_est = (I + [phi x]) R``; the prior factor's error is
@@ -138,7 +138,7 @@ def _initial_prior(init: InitialState, cfg: RunConfig) -> tuple[np.ndarray, np.n
     c_vel : ndarray (3, 3)
         Velocity covariance (uncorrelated with the rest at the start).
     """
-    P = initial_state(init, cfg).P
+    P = initial_state(init, settings).P
     n = P.shape[0]
     R = init.R_nb
     T = np.zeros((n - 3, n))            # smoother offsets <- EKF error state (velocity dropped)
@@ -213,19 +213,18 @@ class _Record:
 class _Smoother:
     """The incremental fixed-lag smoother with bookkeeping and recovery."""
 
-    def __init__(self, cfg: RunConfig, bandwidth: int = 1):
+    def __init__(self, settings: SmootherSettings, bandwidth: int = 1):
         """``bandwidth``: how many nodes apart a factor reaches (1: a chain of nodes; the
         window-consistent acceleration factors reach across their window of fixes). The
         window's marginals are kept by :class:`WindowMarginals` for that band; a wider factor
         makes them come from iSAM2's queries while it is in the window."""
-        sm = cfg["smoother"]
-        self.lag = float(sm["lag_s"])
-        self.gm = bool(np.any(cfg.gnss_gm_sigma > 0))
+        self.lag = settings.lag_s
+        self.gm = settings.gnss.gauss_markov
         self.params = gtsam.ISAM2Params()
-        self.params.setFactorization(str(sm["factorization"]).upper())
-        self.threshold = float(sm["relinearize_threshold"])
+        self.params.setFactorization(settings.factorization)
+        self.threshold = settings.relinearize_threshold
         self.params.setRelinearizeThreshold(self.threshold)
-        self.params.relinearizeSkip = int(sm["relinearize_skip"])
+        self.params.relinearizeSkip = settings.relinearize_skip
         # Reuse the slots of marginalised factors so the factor list stays bounded on long runs.
         self.params.findUnusedFactorSlots = True
         self.isam = FixedLagISAM2(self.lag, self.params, self.threshold, guard=BIAS_SYMBOL)
@@ -336,27 +335,28 @@ def residual_chi2(rec: "_Record", idx: np.ndarray, p_fix: np.ndarray, sigma_ned:
 class _Factors:
     """Builds each kind of factor for a node: GNSS position, GNSS acceleration, stationary."""
 
-    def __init__(self, run: RecordedRun, cfg: RunConfig, stationary: StationaryEpochs, stats: dict,
+    def __init__(self, run: RecordedRun, settings: SmootherSettings, stationary: StationaryEpochs, stats: dict,
                  gnss_checked: np.ndarray):
         self.run, self.stats, self.st = run, stats, stationary
         self.gnss_checked = gnss_checked   # per stationary epoch: its span was checked by the fixes
         gnss, origin = run.gnss, run.origin
         self.p_fix = origin.to_ned(gnss.lat, gnss.lon, gnss.h)
         self.fix_at = {float(t): i for i, t in enumerate(gnss.t)}
-        self.lever = cfg.lever_arm_b
+        self.lever = settings.gnss.lever_arm_b
         self.has_lever = bool(np.any(self.lever != 0))
         self.g_n = np.array([0.0, 0.0, float(normal_gravity(origin.lat0, origin.h0))])
         self.w_ie = earth_rate_n(origin.lat0)
-        self.f_avg = float(cfg["accel"]["specific_force_avg_s"])
-        self.acc_window = (int(cfg["accel"]["window"]), float(cfg["accel"]["max_gap_s"]), cfg.accel_sigma_override)
+        acc = settings.accel
+        self.f_avg = acc.specific_force_avg_s
+        self.acc_window = (acc.window, acc.max_gap_s, acc.sigma_override)
         self.acc = None
         self.acc_fixes: dict = {}   # fix index -> the window's fix indices, oldest first
         self.node_of: dict = {}     # fix index -> its node
-        self.zupt_noise = gtsam.noiseModel.Isotropic.Sigma(3, float(cfg["zupt"]["velocity_sigma_mps"]))
-        self.zupt_var = float(cfg["zupt"]["velocity_sigma_mps"]) ** 2
-        self.zupt_gate = float(cfg["zupt"]["gate_nis"])
+        self.zupt_noise = gtsam.noiseModel.Isotropic.Sigma(3, settings.zupt.velocity_sigma_mps)
+        self.zupt_var = settings.zupt.velocity_sigma_mps ** 2
+        self.zupt_gate = settings.zupt.gate_nis
         self._noise: dict = {}
-        self.gm_sigma, self.gm_tau = cfg.gnss_gm_sigma, cfg.gnss_gm_tau
+        self.gm_sigma, self.gm_tau = settings.gnss.gm_sigma, settings.gnss.gm_tau
         self.gm = bool(np.any(self.gm_sigma > 0))
 
     def gps(self, graph, i: int, t: float) -> int | None:
@@ -501,7 +501,7 @@ def _touches(first: np.ndarray, last: np.ndarray, seg_i0: np.ndarray, seg_i1: np
     return out
 
 
-def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
+def run_smoother(run: RecordedRun, settings, method: str = "smoother", *,
                  quality: QualityReport | None = None, init: InitialState | None = None, stationary=None,
                  show_progress: bool = False) -> dict[str, NavSolution]:
     """Run the fixed-lag smoother.
@@ -509,7 +509,9 @@ def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
     Parameters
     ----------
     run : RecordedRun
-    cfg : RunConfig
+    settings : SmootherSettings or gnssacc.core.config.RunConfig
+        The smoother's settings (:class:`gnssacc.estimators.settings.SmootherSettings`; a run
+        configuration is reduced to them first).
     method : {"smoother", "smoother-acc", "smoother-accw"}
         Without the GNSS-acceleration factor, with the paper's, or with the window-consistent one
         (:data:`METHODS`).
@@ -531,17 +533,24 @@ def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
     if method not in METHODS:
         raise ValueError(f"unknown smoother method {method!r}; known: {', '.join(METHODS)}")
     wall0 = time.perf_counter()
-    init, quality = start_and_quality(run, cfg, init, quality, stationary)
-    z = cfg["zupt"]
-    st = epochs_for(run, cfg, stationary)
-    times = node_times(float(init.t), float(run.imu.t[-1]), _node_epochs(run.gnss.t, st.t, float(z["interval_s"])),
-                       float(cfg["smoother"]["max_node_spacing_s"]))
+    if isinstance(settings, SmootherSettings):   # a prepared start (settings alone cannot self-start)
+        init = init if init is not None else run.init
+        if init is None or quality is None:
+            raise ValueError("run_smoother with SmootherSettings needs init= and quality= "
+                             "(gnssacc.pipeline.prepare gives both)")
+    else:
+        init, quality = start_and_quality(run, settings, init, quality, stationary, filter_pass=run_ekf)
+    settings = SmootherSettings.of(settings)
+    z = settings.zupt
+    st = epochs_for(run, z, settings.imu.gyro_psd, stationary)
+    times = node_times(float(init.t), float(run.imu.t[-1]), _node_epochs(run.gnss.t, st.t, z.interval_s),
+                       settings.max_node_spacing_s)
     stats = {"n_nodes": len(times), "n_gps_factors": 0, "n_acc_factors": 0, "n_acc_skipped_suspect_imu": 0,
              "n_zupt_factors": 0, "n_zupt_gated": 0, "n_ill_posed_recovered": 0, "factorization_switched_to_qr": False,
-             "init": init.how, "t_init": float(init.t), "lag_s": float(cfg["smoother"]["lag_s"])}
+             "init": init.how, "t_init": float(init.t), "lag_s": settings.lag_s}
     checked = np.array([stationary.spans[j].gnss_checked for j in st.span], bool)
-    loop = _Loop(run, cfg, METHODS[method], quality, init, times, _Factors(run, cfg, st, stats, checked),
-                 _attach_stationary(times, st, float(z["interval_s"])), stats)
+    loop = _Loop(run, settings, METHODS[method], quality, init, times, _Factors(run, settings, st, stats, checked),
+                 _attach_stationary(times, st, z.interval_s), stats)
     loop.feed(method, show_progress)
     loop.score()
     stats["final_window_variables"] = int(loop.smoother.isam.getLinearizationPoint().size())
@@ -555,18 +564,26 @@ def run_smoother(run: RecordedRun, cfg: RunConfig, method: str = "smoother", *,
     return out
 
 
+def estimate(prep, settings: SmootherSettings, method: str = "smoother", **options) -> dict[str, NavSolution]:
+    """The smoother over a prepared recording (:class:`gnssacc.prepare.prepared.Prepared`): its run,
+    start, quality report and stationary spans, with the smoother's own ``settings``; ``options``
+    as for :func:`run_smoother`."""
+    return run_smoother(prep.run, settings, method, init=prep.init, quality=prep.quality,
+                        stationary=prep.stationary, **options)
+
+
 class _Loop:
     """Feeds iSAM2 node by node and records the online and fixed-lag estimates."""
 
-    def __init__(self, run, cfg, use_acc, quality, init, times, factors, stationary_at, stats):
-        self.run, self.cfg, self.use_acc, self.times, self.f = run, cfg, use_acc, times, factors
+    def __init__(self, run, settings, use_acc, quality, init, times, factors, stationary_at, stats):
+        self.run, self.settings, self.use_acc, self.times, self.f = run, settings, use_acc, times, factors
         self.stationary_at, self.stats = stationary_at, stats
-        self.segs = inflation_segments(run.imu, quality, cfg)
+        self.segs = inflation_segments(run.imu, quality, settings.suspect)
         origin = run.origin
-        self.model = _ImuModel(cfg, float(factors.g_n[2]), earth_rate_n(origin.lat0))
+        self.model = _ImuModel(settings, float(factors.g_n[2]), earth_rate_n(origin.lat0))
         n = len(times)
         self.online, self.fixed = _Record(n, factors.gm), _Record(n, factors.gm)
-        self.smoother = _Smoother(cfg, _bandwidth(cfg) if use_acc == "window" else 1)
+        self.smoother = _Smoother(settings, _bandwidth(settings) if use_acc == "window" else 1)
         self.fix_of = np.full(n, -1)
         self.window_start, self.oldest = 0, 0
         self._start(init)
@@ -593,7 +610,7 @@ class _Loop:
         self.g = np.zeros(3)
         if self.use_acc:
             self.f.prepare_accel(self.times)
-        cov, c_vel = _initial_prior(init, self.cfg)
+        cov, c_vel = _initial_prior(init, self.settings)
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         graph.add(joint_prior_factor(X(0), B(0), G(0) if self.f.gm else None, self.pose, self.bias.vector(),
                                      self.g if self.f.gm else None, cov))
@@ -691,13 +708,13 @@ class _Loop:
             self.pose, self.vel, self.bias, self.g = self._record(i, times_l[i + 1])
 
 
-def _bandwidth(cfg: RunConfig) -> int:
+def _bandwidth(settings: SmootherSettings) -> int:
     """How many nodes apart a window-consistent acceleration factor may reach: its window's m
     fixes are at most ``[accel] max_gap_s`` apart, with fill nodes at most ``[smoother]
     max_node_spacing_s`` apart between them (stationary nodes may add more: such a factor makes
     the marginals come from iSAM2 while it is in the window)."""
-    per_gap = int(np.ceil(float(cfg["accel"]["max_gap_s"]) / float(cfg["smoother"]["max_node_spacing_s"]) - 1e-9))
-    return (int(cfg["accel"]["window"]) - 1) * max(per_gap, 1)
+    per_gap = int(np.ceil(settings.accel.max_gap_s / settings.max_node_spacing_s - 1e-9))
+    return (settings.accel.window - 1) * max(per_gap, 1)
 
 
 def _reinitialise(loop: _Loop, i: int, graph, values) -> int:

@@ -102,10 +102,11 @@ def stationary_epochs(imu: ImuData, spans, interval_s: float, gyro_psd: np.ndarr
     return StationaryEpochs(np.concatenate(ts), np.vstack(means), np.vstack(var), np.concatenate(which))
 
 
-def epochs_for(run, cfg, stationary) -> StationaryEpochs:
+def epochs_for(run, zupt, gyro_psd: np.ndarray, stationary) -> StationaryEpochs:
     """The stationary epochs of an estimator run: of ``stationary``'s spans (a
-    :class:`gnssacc.prepare.stationary.StationaryReport`) when given and ``[zupt] enabled``, else none."""
-    z = cfg["zupt"]
-    if stationary is None or not z["enabled"]:
+    :class:`gnssacc.prepare.stationary.StationaryReport`) when given and ``zupt.enabled``
+    (:class:`gnssacc.estimators.settings.ZuptSettings`), else none; ``gyro_psd`` [rad^2/s] floors
+    the zero-rate variance."""
+    if stationary is None or not zupt.enabled:
         return StationaryEpochs.empty()
-    return stationary_epochs(run.imu, stationary.spans, float(z["interval_s"]), cfg.gyro_psd)
+    return stationary_epochs(run.imu, stationary.spans, zupt.interval_s, gyro_psd)

@@ -37,8 +37,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable
 
-from .. import __version__
 from ..core.errors import InputError
+from ..core.version import __version__
 
 #: Marker file of a complete result (JSON: gnssacc version, time written, files).
 MARKER = ".gnssacc-result"

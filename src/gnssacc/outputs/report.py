@@ -7,15 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.metrics import Score, improvement_pct, truth_at
+from ..analysis.metrics import BASELINES, Score, improvement_pct, truth_at
 from ..core.display import DISPLAY_SCALE, TRAJECTORY_COLUMNS, text_table
 from ..core.recording import RecordedRun
 from ..core.solution import NavSolution
-
-#: Baseline of each aided method, for the improvement column.
-BASELINES = {"ekf-acc": "ekf", "ekf-accw": "ekf", "smoother-acc": "smoother", "smoother-acc-online": "smoother-online",
-             "smoother-accw": "smoother", "smoother-accw-online": "smoother-online",
-             "ekf-gm": "ekf", "smoother-gm": "smoother", "smoother-gm-online": "smoother-online"}
 
 #: Columns of ``trajectory_<id>.csv`` (display units, :mod:`gnssacc.core.display`).
 TRAJECTORY_COLUMNS = list(TRAJECTORY_COLUMNS)

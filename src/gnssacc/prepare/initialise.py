@@ -24,9 +24,9 @@ import numpy as np
 from ..core.config import DEG, RunConfig
 from ..core.earth import earth_rate_n, gravity_n
 from ..core.errors import InputError
+from ..core.gnss_fit import acceleration_row
 from ..core.recording import InitialState, RecordedRun
 from ..core.rotations import euler_to_dcm
-from ..estimators.gnss_accel import acceleration_row
 
 #: Prior 1-sigma of a ground vehicle's mean acceleration over a fit window [m/s^2], used to
 #: shrink the (noisy) GNSS-fitted acceleration towards zero and to budget a line fit's model error.
@@ -37,13 +37,13 @@ _STATIC_START_TOL_S = 1.0
 _STATIC_VEL_SIGMA = 0.05
 
 
-def initial_sigmas(init: InitialState, cfg: RunConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def initial_sigmas(init: InitialState, over: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Initial 1-sigma of position [m], velocity [m/s] and attitude error (n frame) [rad].
 
-    The initial state's own sigmas, replaced by any ``[init]`` overrides of the configuration;
-    both estimators start from these.
+    The initial state's own sigmas, replaced by any ``[init]`` overrides of the configuration
+    (``over``: :meth:`gnssacc.core.config.RunConfig.initial_sigma_overrides`); both estimators start
+    from these.
     """
-    over = cfg.initial_sigma_overrides()
     att = np.array(init.sigma_att_rad, float)
     if "roll_pitch" in over:
         att[:2] = over["roll_pitch"]

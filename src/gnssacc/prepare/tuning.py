@@ -63,6 +63,7 @@ import numpy as np
 
 from ..core.config import RunConfig, toml_value
 from ..core.errors import InputError
+from .filter_pass import FilterPass
 
 #: The identified parameters: (section, key), in the order of the search vector.
 PARAMETERS = (("imu", "gyro_arw_deg_rth"), ("imu", "accel_vrw_mps_rth"), ("imu", "gyro_bias_instability_deg_h"),
@@ -201,8 +202,8 @@ def _start_values(cfg: RunConfig, free: list, noise) -> tuple[dict, dict]:
 class _Objective:
     """Negative innovation log-likelihood of one EKF pass at log10 scale factors ``theta``."""
 
-    def __init__(self, run, cfg, free, start, stationary, quality, init, method, kinds):
-        self.run, self.cfg, self.free, self.start = run, cfg, free, start
+    def __init__(self, run, cfg, free, start, stationary, quality, init, method, kinds, filter_pass: FilterPass):
+        self.run, self.cfg, self.free, self.start, self.filter_pass = run, cfg, free, start, filter_pass
         self.stationary, self.quality, self.init, self.method, self.kinds = stationary, quality, init, method, kinds
         self.cov_every = int(cfg["tune"]["cov_every"])
         self.init_scale = float(cfg["gnss"]["sigma_scale"])   # the scale the start was made with
@@ -218,14 +219,12 @@ class _Objective:
         return self.cfg.with_values(upd, "tuned")
 
     def __call__(self, theta) -> float:
-        from ..estimators.ekf import run_ekf  # tuning runs the EKF; the pipeline imports this module first
-
         cfg = self.config(theta)
         scale = float(cfg["gnss"]["sigma_scale"])
         run = scaled_gnss(self.run, scale)
         # The start's position sigma is that of the fixes it came from: it scales with them.
         init = replace(self.init, sigma_pos_m=self.init.sigma_pos_m * scale / self.init_scale)
-        sol = run_ekf(run, ungated(cfg), self.method, init=init, stationary=self.stationary, quality=self.quality,
+        sol = self.filter_pass(run, ungated(cfg), self.method, init=init, stationary=self.stationary, quality=self.quality,
                       output_times=np.zeros(0), cov_every=self.cov_every)
         self.stats[tuple(np.round(theta, 12))] = sol.stats
         return -_loglik(sol.stats, self.kinds)
@@ -354,7 +353,7 @@ def draw_back(negloglik, theta, prior_decades, eligible=None,
     return theta, n, moved
 
 
-def _gauss_markov_stage(run, cfg, free, start, stats, stationary, quality, init, method, kinds, info):
+def _gauss_markov_stage(run, cfg, free, start, stats, stationary, quality, init, method, kinds, info, filter_pass):
     """Step 3 of the module docstring; returns the configuration, its EKF stats, the passes made and
     whether the Gauss-Markov model was kept."""
     acf, n = stats.get("acf1_pos"), stats.get("n_pos_updates", 0)
@@ -370,7 +369,7 @@ def _gauss_markov_stage(run, cfg, free, start, stats, stationary, quality, init,
     start[("gnss", "gm_sigma_m")] = np.median(run.gnss.sigma_ned, axis=0) * scale
     start[("gnss", "gm_tau_s")] = np.atleast_1d(cfg.gnss_gm_tau.mean())
     params = list(free) + gm_free
-    obj = _Objective(run, cfg, params, start, stationary, quality, init, method, kinds)
+    obj = _Objective(run, cfg, params, start, stationary, quality, init, method, kinds, filter_pass)
     theta, j_best, n_eval = ml_search(obj, len(params), int(cfg["tune"]["max_evaluations"]),
                                       _prior_widths(cfg, params, info), lower=_lower_bounds(params, info))
     gm_stats = obj.stats[tuple(np.round(theta, 12))]
@@ -418,7 +417,8 @@ def scaled_gnss(run, scale: float):
     return run.with_gnss(replace(run.gnss, sigma_ned=run.gnss.sigma_ned * scale))
 
 
-def tune(run, cfg: RunConfig, stationary=None, quality=None, init=None, noise=None) -> tuple[RunConfig, TuneResult]:
+def tune(run, cfg: RunConfig, stationary=None, quality=None, init=None, noise=None, *,
+         filter_pass: FilterPass) -> tuple[RunConfig, TuneResult]:
     """Identify the free noise parameters (see the module docstring).
 
     Parameters
@@ -432,6 +432,8 @@ def tune(run, cfg: RunConfig, stationary=None, quality=None, init=None, noise=No
         Where the EKF passes start (e.g. from :func:`gnssacc.prepare.yawbank.select_yaw`).
     noise : gnssacc.prepare.stationary.StationaryNoise, optional
         White-noise densities from stationary stretches (starting values of ARW / VRW).
+    filter_pass : gnssacc.prepare.filter_pass.FilterPass
+        The EKF pass whose innovation likelihood is maximised.
 
     Returns
     -------
@@ -447,7 +449,7 @@ def tune(run, cfg: RunConfig, stationary=None, quality=None, init=None, noise=No
         return cfg, TuneResult({}, {}, fixed, info, seconds=time.perf_counter() - t0)
     kinds = ("pos", "zaru") + (("acc",) if cfg["tune"]["likelihood"] == "position+accel" else ())
     method = "ekf-acc" if "acc" in kinds else "ekf"
-    obj = _Objective(run, cfg, free, start, stationary, quality, init, method, kinds)
+    obj = _Objective(run, cfg, free, start, stationary, quality, init, method, kinds, filter_pass)
     budget, prior = int(cfg["tune"]["max_evaluations"]), _prior_widths(cfg, free, info)
     lower = _lower_bounds(free, info)
     theta, j_best, n_eval = ml_search(obj, len(free), min(CHECK_AFTER, budget), prior, lower=lower)
@@ -456,7 +458,7 @@ def tune(run, cfg: RunConfig, stationary=None, quality=None, init=None, noise=No
                                     "set the IMU noise in a config file and use --tune none")
     before, after = obj.stats[tuple(np.zeros(len(free)))], obj.stats[tuple(np.round(theta, 12))]
     tuned, after_gm, n_gm, gm_kept = _gauss_markov_stage(run, cfg, free, start, after, stationary, quality, init,
-                                                         method, kinds, info)
+                                                         method, kinds, info, filter_pass)
     if gm_kept:
         tuned, after = tuned, after_gm
     else:   # white fixes: finish the white-noise search where it stood
@@ -477,7 +479,8 @@ def tune(run, cfg: RunConfig, stationary=None, quality=None, init=None, noise=No
     return tuned, result
 
 
-def tune_gauss_markov(run, cfg: RunConfig, stationary=None, quality=None, init=None) -> tuple[RunConfig, dict]:
+def tune_gauss_markov(run, cfg: RunConfig, stationary=None, quality=None, init=None, *,
+                      filter_pass: FilterPass) -> tuple[RunConfig, dict]:
     """Fit the Gauss-Markov fix-error model alone, the IMU noise of ``cfg`` held (the ``-gm`` methods
     on a run where :func:`tune` kept white fixes).
 
@@ -490,7 +493,7 @@ def tune_gauss_markov(run, cfg: RunConfig, stationary=None, quality=None, init=N
     run : RecordedRun
         As the estimators see it (fix sigmas already times ``cfg``'s ``gnss.sigma_scale``).
     cfg : RunConfig
-    stationary, quality, init
+    stationary, quality, init, filter_pass
         As for :func:`tune`.
 
     Returns
@@ -518,10 +521,10 @@ def tune_gauss_markov(run, cfg: RunConfig, stationary=None, quality=None, init=N
              ("gnss", "gm_tau_s"): np.atleast_1d(cfg.gnss_gm_tau.mean())}
     start = {p: start[p] for p in params}
     kinds = ("pos", "zaru")
-    obj = _Objective(run, base, params, start, stationary, quality, init, "ekf", kinds)
+    obj = _Objective(run, base, params, start, stationary, quality, init, "ekf", kinds, filter_pass)
     theta, _, n_eval = ml_search(obj, len(params), int(cfg["tune"]["max_evaluations"]),
                                  _prior_widths(cfg, params, {}), lower=_lower_bounds(params, {}))
-    white_stats = run_white_stats(run, cfg, stationary, quality, init)
+    white_stats = run_white_stats(run, cfg, stationary, quality, init, filter_pass=filter_pass)
     gain = _loglik(obj.stats[tuple(np.round(theta, 12))], kinds) - _loglik(white_stats, kinds)
     fitted = obj.config(theta)
     rel = float(fitted["gnss"]["sigma_scale"]) if free_scale else 1.0
@@ -531,9 +534,7 @@ def tune_gauss_markov(run, cfg: RunConfig, stationary=None, quality=None, init=N
                  "seconds": time.perf_counter() - t0}
 
 
-def run_white_stats(run, cfg: RunConfig, stationary=None, quality=None, init=None) -> dict:
+def run_white_stats(run, cfg: RunConfig, stationary=None, quality=None, init=None, *, filter_pass: FilterPass) -> dict:
     """The innovation statistics of one EKF pass with ``cfg`` as it is on ``run`` (already scaled)."""
-    from ..estimators.ekf import run_ekf
-
-    return run_ekf(run, ungated(cfg), "ekf", init=init, stationary=stationary, quality=quality,
+    return filter_pass(run, ungated(cfg), "ekf", init=init, stationary=stationary, quality=quality,
                    output_times=np.zeros(0), cov_every=int(cfg["tune"]["cov_every"])).stats

@@ -32,6 +32,7 @@ from ..checks.quality import check_imu
 from ..core.config import RunConfig
 from ..core.recording import InitialState, RecordedRun
 from ..core.rotations import wrap_angle
+from .filter_pass import FilterPass
 from .initialise import StartState, hypothesis, start_state
 
 #: Update kinds whose likelihood scores a hypothesis.
@@ -66,16 +67,12 @@ class BankResult:
     t_horizon: float
 
 
-def _score(run, cfg, hyps, stationary, quality, t_h):
+def _score(run, cfg, hyps, stationary, quality, t_h, filter_pass: FilterPass):
     """Cumulative log-likelihood of each hypothesis on a common time grid up to ``t_h``."""
-    from ..estimators.ekf import (
-        run_ekf,  # the bank runs the EKF; imported here because the EKF initialises through the bank
-    )
-
     grid = run.gnss.t[(run.gnss.t > hyps[0].t) & (run.gnss.t <= t_h)]
     L = np.zeros((len(hyps), len(grid)))
     for k, h in enumerate(hyps):
-        sol = run_ekf(run, cfg, "ekf", init=h, stationary=stationary, quality=quality, output_times=np.zeros(0),
+        sol = filter_pass(run, cfg, "ekf", init=h, stationary=stationary, quality=quality, output_times=np.zeros(0),
                       record_innovations=True, t_stop=t_h, cov_every=int(cfg["tune"]["cov_every"]))
         st = sol.stats
         t = np.concatenate([st[f"nis_{kind}_t"] for kind in _SCORED])
@@ -100,13 +97,13 @@ def _decide(L, yaws, level):
     return best, mass, first_ok, (P[:, -1] if L.shape[1] else np.full(len(L), 1.0 / len(L)))
 
 
-def _refine(run, cfg, start, stationary, quality, yaw, spacing, t_h):
+def _refine(run, cfg, start, stationary, quality, yaw, spacing, t_h, filter_pass):
     """Seven hypotheses a quarter spacing apart around ``yaw``; the best one, with a yaw sigma
     covering the posterior spread (at least an eighth of the coarse spacing)."""
     step = spacing / 4.0
     yaws = yaw + step * np.arange(-3, 4)
     hyps = [hypothesis(run, cfg, start, y, step / 2.0) for y in yaws]
-    _, L = _score(run, cfg, hyps, stationary, quality, t_h)
+    _, L = _score(run, cfg, hyps, stationary, quality, t_h, filter_pass)
     P = np.exp(L[:, -1] - L[:, -1].max()) if L.shape[1] else np.ones(len(hyps))
     P /= P.sum()
     best = int(np.argmax(P))
@@ -117,7 +114,7 @@ def _refine(run, cfg, start, stationary, quality, yaw, spacing, t_h):
 
 
 def select_yaw(run: RecordedRun, cfg: RunConfig, stationary=None, quality=None,
-               start: StartState | None = None) -> BankResult:
+               start: StartState | None = None, *, filter_pass: FilterPass) -> BankResult:
     """Run the bank (see the module docstring) and return the chosen start.
 
     Parameters
@@ -129,6 +126,8 @@ def select_yaw(run: RecordedRun, cfg: RunConfig, stationary=None, quality=None,
     quality : gnssacc.checks.quality.QualityReport, optional
     start : StartState, optional
         Computed with :func:`gnssacc.prepare.initialise.start_state` when omitted.
+    filter_pass : FilterPass
+        The EKF pass that scores the hypotheses (handed in: this stage precedes the estimators).
     """
     c = cfg["init"]
     start = start or start_state(run, cfg, stationary)
@@ -146,7 +145,7 @@ def select_yaw(run: RecordedRun, cfg: RunConfig, stationary=None, quality=None,
     horizon, level = float(c["yaw_horizon_s"]), float(c["yaw_confidence"])
     while True:
         t_h = min(t_move + horizon, run.t_end)
-        grid, L = _score(run, ungated, hyps, stationary, quality, t_h)
+        grid, L = _score(run, ungated, hyps, stationary, quality, t_h, filter_pass)
         best, mass, first_ok, post = _decide(L, yaws, level)
         found = len(mass) > 0 and mass[-1] >= level
         if found or t_h >= run.t_end:
@@ -156,7 +155,7 @@ def select_yaw(run: RecordedRun, cfg: RunConfig, stationary=None, quality=None,
         # A vehicle that never moves shows its yaw only through the earth rate (gyrocompassing),
         # which takes a navigation-grade gyro and minutes of data: not attempted here.
         return _undetermined(start, hyps, yaws, best, mass, post, t_h)
-    init, p_fine = _refine(run, ungated, start, stationary, quality, yaws[best], 2.0 * np.pi / n, t_h)
+    init, p_fine = _refine(run, ungated, start, stationary, quality, yaws[best], 2.0 * np.pi / n, t_h, filter_pass)
     t_dec = float(grid[min(first_ok, len(grid) - 1)])
     how = (f"{start.how}; yaw from a bank of {n} hypotheses scored by innovation likelihood, sector found "
            f"{max(t_dec - t_move, 0.0):.0f} s after the vehicle started to move (posterior {mass[-1]:.3f}), then "
@@ -179,14 +178,10 @@ def _undetermined(start, hyps, yaws, best, mass, post, t_h) -> BankResult:
     return BankResult(replace(chosen, sigma_att_rad=att, how=how), np.degrees(yaws), post, conf, None, t_h)
 
 
-def self_initialise(run: RecordedRun, cfg: RunConfig, stationary=None, quality=None) -> InitialState:
-    """The start of the recording with its yaw from the bank (see the module docstring)."""
-    return select_yaw(run, cfg, stationary, quality).init
-
-
-def start_and_quality(run: RecordedRun, cfg: RunConfig, init=None, quality=None, stationary=None):
+def start_and_quality(run: RecordedRun, cfg: RunConfig, init=None, quality=None, stationary=None, *,
+                      filter_pass: FilterPass):
     """What every estimator starts from: the IMU data-quality findings (checked here when not
-    given) and the initial state (``init``, else the run's, else :func:`self_initialise`).
+    given) and the initial state (``init``, else the run's, else the bank's, :func:`select_yaw`).
 
     Returns
     -------
@@ -195,5 +190,5 @@ def start_and_quality(run: RecordedRun, cfg: RunConfig, init=None, quality=None,
     """
     quality = quality if quality is not None else check_imu(run.imu, cfg)
     if init is None and run.init is None:
-        init = self_initialise(run, cfg, stationary, quality)
+        init = select_yaw(run, cfg, stationary, quality, filter_pass=filter_pass).init
     return init or run.init, quality

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..checks.quality import gap_indices
 from ..core.errors import warn_data
+from ..core.recording import gap_indices
 
 
 def sorted_unique(tab: np.ndarray, where: str, what: str, meta: dict, key: str) -> np.ndarray:
@@ -62,7 +62,7 @@ def sorted_unique(tab: np.ndarray, where: str, what: str, meta: dict, key: str) 
 
 def find_gaps(t: np.ndarray, factor: float) -> dict:
     """Pauses longer than ``factor`` times the median sample interval (the rule of
-    :func:`gnssacc.checks.quality.gap_indices`, with ``[quality] gap_factor`` as the IMU checks use it).
+    :func:`gnssacc.core.recording.gap_indices`, with ``[quality] gap_factor`` as the IMU checks use it).
 
     Parameters
     ----------

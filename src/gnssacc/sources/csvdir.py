@@ -34,7 +34,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..checks.plausibility import fix_imu_time_units
 from ..core.config import DEG, RunConfig
 from ..core.earth import LocalTangentFrame
 from ..core.errors import InputError
@@ -61,7 +60,7 @@ INIT_BEFORE_START_TOLERANCE_S = 1.0
 
 # --- reading ------------------------------------------------------------------------------------------
 
-def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd") -> RecordedRun:
+def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) -> RecordedRun:
     """Load a CSV run directory (format in the module docstring).
 
     Parameters
@@ -73,6 +72,12 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd") -> RecordedRun:
     imu_frame : {"frd", "flu"}
         Axes convention of ``imu.csv``; FLU samples are converted to FRD (y -> -y, z -> -z)
         before the mounting rotation is applied.
+    time_units : callable, optional
+        ``time_units(imu, t_gnss, where, cfg) -> ImuData``: IMU stamps in other units than
+        seconds found (and rescaled, or named in an error) before the configured time offset is
+        added and before the IMU and the fixes are compared (the input checks'
+        :func:`gnssacc.checks.plausibility.fix_imu_time_units`, handed in by the pipeline: a
+        source only reads). Omitted: the stamps are taken as seconds.
 
     Returns
     -------
@@ -105,7 +110,9 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd") -> RecordedRun:
     imu = _read_imu(root / "imu.csv", frame, max_bad)
     # Stamps in ms/us/ns would never meet the fixes: found (and rescaled, or named) before the
     # overlap check, which could only say "different clocks?".
-    imu = apply_mounting(fix_imu_time_units(imu, gnss.t, str(root / "imu.csv"), cfg), cfg)
+    if time_units is not None:
+        imu = time_units(imu, gnss.t, str(root / "imu.csv"), cfg)
+    imu = apply_mounting(imu, cfg)
     truth = _read_truth(root / "truth.csv", max_bad) if (root / "truth.csv").exists() else None
     init = _read_init(root / "init.json", gnss.sigma_ned[0]) if (root / "init.json").exists() else None
     if init is not None:

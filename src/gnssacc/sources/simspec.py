@@ -25,10 +25,22 @@ not guessed from the defaults. With ``--tune auto`` the tuner identifies them as
 """
 from __future__ import annotations
 
-from ..argcheck import SIM_DURATION_S, SIM_IMU_RATE_HZ, SIM_MAX_GNSS_RATE_HZ, SIM_MAX_SAMPLES
 from ..core.config import RunConfig
 from ..core.config_check import Bound, number_problem
 from ..core.errors import InputError
+
+#: Limits of a simulated run (``sim:`` specs and ``gnssacc sim``).
+SIM_DURATION_S = Bound(1.0, 86_400.0)
+
+
+SIM_IMU_RATE_HZ = Bound(1.0, 4000.0)
+
+
+SIM_MAX_GNSS_RATE_HZ = 100.0
+
+
+#: Most IMU samples ``gnssacc sim`` makes (about 0.75 kB of memory each while simulating).
+SIM_MAX_SAMPLES = 2_000_000
 
 #: What starts a simulated source spec.
 PREFIX = "sim:"

@@ -10,12 +10,13 @@ from __future__ import annotations
 import json
 from datetime import datetime
 
-from ..argcheck import check_source
-from ..argcheck import seeds as parse_seeds
-from ..core.errors import InputError, warn_data
-from ..pipeline import parse_methods
-from ..sources.simspec import is_sim_spec
-from .campaign import GROWABLE, OPTION_OF, Campaign, Pattern, differing_setting, full_bag, grown, make_settings
+from .argcheck import check_source
+from .argcheck import seeds as parse_seeds
+from .campaign.campaign import (GROWABLE, OPTION_OF, Campaign, Pattern, differing_setting, full_bag, grown,
+                                make_settings)
+from .core.errors import InputError, warn_data
+from .pipeline import parse_methods
+from .sources.simspec import is_sim_spec
 
 #: ``gnssacc batch``'s bag options: setting -> argument (defaults: :data:`gnssacc.campaign.campaign.BAG_DEFAULTS`).
 BAG_ARGUMENTS = {"imu_topic": "imu_topic", "gnss_topic": "gnss_topic", "truth_topic": "truth_topic",

@@ -1,0 +1,211 @@
+"""What each estimator needs to know of the configuration, in SI units: its own small settings.
+
+The run configuration (:class:`gnssacc.core.config.RunConfig`) is the user's file with its
+documentation, presets and provenance; an estimator reads none of that. It reads one frozen
+settings object, made from the configuration in one place here (:meth:`EkfSettings.from_config`,
+:meth:`SmootherSettings.from_config`): the IMU noise model, the GNSS model (lever arm, Gauss-Markov
+error), the acceleration window, the stationary updates, the start's sigma overrides, the
+inflation of suspect IMU spans, and the estimator's own keys. The self-tuning changes the
+configuration; the estimators see the result through a new settings object.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..checks.quality import SuspectNoise
+from ..core.config import RunConfig
+
+
+@dataclass(frozen=True, eq=False)
+class ImuNoise:
+    """The IMU noise model per body axis.
+
+    Attributes
+    ----------
+    accel_psd, gyro_psd : ndarray (3,)
+        White noise PSD [(m/s^2)^2/s], [rad^2/s].
+    accel_bias_rw_psd, gyro_bias_rw_psd : ndarray (3,)
+        Bias random-walk PSD [(m/s^2)^2/s^3 s], [(rad/s)^2/s].
+    accel_bias_sigma0, gyro_bias_sigma0 : ndarray (3,)
+        Turn-on bias 1-sigma [m/s^2], [rad/s].
+    """
+
+    accel_psd: np.ndarray
+    gyro_psd: np.ndarray
+    accel_bias_rw_psd: np.ndarray
+    gyro_bias_rw_psd: np.ndarray
+    accel_bias_sigma0: np.ndarray
+    gyro_bias_sigma0: np.ndarray
+
+    @classmethod
+    def from_config(cls, cfg: RunConfig) -> "ImuNoise":
+        return cls(cfg.accel_psd, cfg.gyro_psd, cfg.accel_bias_rw_psd, cfg.gyro_bias_rw_psd, cfg.accel_bias_sigma0,
+                   cfg.gyro_bias_sigma0)
+
+
+@dataclass(frozen=True, eq=False)
+class GnssModel:
+    """The fixes' model beyond their stated sigmas.
+
+    Attributes
+    ----------
+    lever_arm_b : ndarray (3,)
+        Antenna position relative to the IMU, body FRD [m].
+    gm_sigma, gm_tau : ndarray (3,)
+        First-order Gauss-Markov fix error per N, E, D: 1-sigma [m] (zeros: not modelled) and
+        correlation time [s].
+    """
+
+    lever_arm_b: np.ndarray
+    gm_sigma: np.ndarray
+    gm_tau: np.ndarray
+
+    @property
+    def gauss_markov(self) -> bool:
+        """Whether the Gauss-Markov error states are on."""
+        return bool(np.any(self.gm_sigma > 0))
+
+    @classmethod
+    def from_config(cls, cfg: RunConfig) -> "GnssModel":
+        return cls(cfg.lever_arm_b, cfg.gnss_gm_sigma, cfg.gnss_gm_tau)
+
+
+@dataclass(frozen=True, eq=False)
+class AccelSettings:
+    """The GNSS-derived acceleration (``[accel]``).
+
+    Attributes
+    ----------
+    window : int
+        Fixes per least-squares window.
+    max_gap_s : float
+        A longer interval between fixes restarts the window [s].
+    specific_force_avg_s : float
+        Averaging of the measured specific force the paper's prediction uses [s].
+    sigma_override : ndarray (3,) or None
+        Fixed 1-sigma N, E, D [m/s^2] instead of the propagated covariance.
+    """
+
+    window: int
+    max_gap_s: float
+    specific_force_avg_s: float
+    sigma_override: np.ndarray | None
+
+    @classmethod
+    def from_config(cls, cfg: RunConfig) -> "AccelSettings":
+        a = cfg["accel"]
+        return cls(int(a["window"]), float(a["max_gap_s"]), float(a["specific_force_avg_s"]), cfg.accel_sigma_override)
+
+
+@dataclass(frozen=True)
+class ZuptSettings:
+    """The stationary updates (``[zupt]``): on or off, one every ``interval_s`` [s] inside a
+    stationary span, zero-velocity 1-sigma [m/s], and the NIS gate (0: none)."""
+
+    enabled: bool
+    interval_s: float
+    velocity_sigma_mps: float
+    gate_nis: float
+
+    @classmethod
+    def from_config(cls, cfg: RunConfig) -> "ZuptSettings":
+        z = cfg["zupt"]
+        return cls(bool(z["enabled"]), float(z["interval_s"]), float(z["velocity_sigma_mps"]), float(z["gate_nis"]))
+
+
+@dataclass(frozen=True, eq=False)
+class _Common:
+    """Settings both estimators share (see the subclasses).
+
+    Attributes
+    ----------
+    imu : ImuNoise
+    gnss : GnssModel
+    accel : AccelSettings
+    zupt : ZuptSettings
+    suspect : gnssacc.checks.quality.SuspectNoise
+        The noise assumed over suspect IMU spans.
+    start_sigmas : dict
+        ``[init]`` overrides of the start's sigmas (SI: ``pos``, ``vel`` (3,), ``roll_pitch``,
+        ``yaw`` [rad]); empty when none.
+    """
+
+    imu: ImuNoise
+    gnss: GnssModel
+    accel: AccelSettings
+    zupt: ZuptSettings
+    suspect: SuspectNoise
+    start_sigmas: dict
+
+    @staticmethod
+    def common(cfg: RunConfig) -> dict:
+        return dict(imu=ImuNoise.from_config(cfg), gnss=GnssModel.from_config(cfg),
+                    accel=AccelSettings.from_config(cfg), zupt=ZuptSettings.from_config(cfg),
+                    suspect=SuspectNoise.from_config(cfg), start_sigmas=cfg.initial_sigma_overrides())
+
+
+@dataclass(frozen=True, eq=False)
+class EkfSettings(_Common):
+    """The EKF's settings: the shared ones and ``[ekf]``.
+
+    Attributes
+    ----------
+    phi_order : int
+        Order of the transition matrix's series.
+    position_gate_nis : float
+        Reject a position update whose NIS exceeds this (0: never).
+    """
+
+    phi_order: int = 2
+    position_gate_nis: float = 0.0
+
+    @classmethod
+    def from_config(cls, cfg: RunConfig) -> "EkfSettings":
+        e = cfg["ekf"]
+        return cls(**cls.common(cfg), phi_order=int(e["phi_order"]), position_gate_nis=float(e["position_gate_nis"]))
+
+    @classmethod
+    def of(cls, settings) -> "EkfSettings":
+        """``settings`` as they are, or made from a :class:`RunConfig`."""
+        return settings if isinstance(settings, cls) else cls.from_config(settings)
+
+
+@dataclass(frozen=True, eq=False)
+class SmootherSettings(_Common):
+    """The smoother's settings: the shared ones and ``[smoother]``.
+
+    Attributes
+    ----------
+    lag_s : float
+        Fixed lag [s].
+    max_node_spacing_s : float
+        Longest interval between nodes [s] (nodes are added in long gaps between fixes).
+    factorization : str
+        iSAM2's ``"QR"`` or ``"CHOLESKY"``.
+    relinearize_threshold : float
+    relinearize_skip : int
+    integration_sigma : float
+        Preintegration's integration 1-sigma.
+    """
+
+    lag_s: float = 10.0
+    max_node_spacing_s: float = 1.0
+    factorization: str = "QR"
+    relinearize_threshold: float = 0.1
+    relinearize_skip: int = 10
+    integration_sigma: float = 1e-4
+
+    @classmethod
+    def from_config(cls, cfg: RunConfig) -> "SmootherSettings":
+        s = cfg["smoother"]
+        return cls(**cls.common(cfg), lag_s=float(s["lag_s"]), max_node_spacing_s=float(s["max_node_spacing_s"]),
+                   factorization=str(s["factorization"]).upper(),
+                   relinearize_threshold=float(s["relinearize_threshold"]),
+                   relinearize_skip=int(s["relinearize_skip"]), integration_sigma=float(s["integration_sigma"]))
+
+    @classmethod
+    def of(cls, settings) -> "SmootherSettings":
+        """``settings`` as they are, or made from a :class:`RunConfig`."""
+        return settings if isinstance(settings, cls) else cls.from_config(settings)

@@ -1,0 +1,162 @@
+"""The prepared recording: what a recording says about itself, found once before estimation.
+
+:func:`prepare` runs, in order,
+
+0. the input checks (:mod:`gnssacc.checks.plausibility`): units, clocks, coordinates and mounting
+   checked against the data themselves; repairs and measured ``"auto"`` offsets and mountings are
+   applied here, so every later step and estimator sees the corrected run (the clock offset's
+   likelihood stage is :mod:`gnssacc.prepare.clock`);
+1. the IMU data-quality check (:mod:`gnssacc.checks.quality`);
+2. stationary detection from windowed IMU statistics and GNSS agreement
+   (:mod:`gnssacc.prepare.stationary`), and the noise the IMU shows at rest;
+3. the start state and the yaw bank (:mod:`gnssacc.prepare.initialise`,
+   :mod:`gnssacc.prepare.yawbank`), unless the source gives an initial state;
+4. with ``tune_mode="auto"``, noise identification (:mod:`gnssacc.prepare.tuning`), after which the
+   bank runs again with the tuned noise (the initial sigmas and the hypotheses' filters depend on
+   it); should its choice of yaw change, the noise is identified once more from the new start;
+5. when asked, the ``-gm`` methods' own Gauss-Markov setup (:mod:`gnssacc.prepare.gauss_markov`).
+
+The result is one immutable :class:`Prepared`; every estimator starts from its start with its
+configuration and stationary spans, and the report reads it. The decisions that need an
+innovation likelihood run through the filter pass the caller hands in
+(:class:`~gnssacc.prepare.filter_pass.FilterPass`).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+from functools import partial
+
+import numpy as np
+
+from ..checks.plausibility import check_run
+from ..checks.quality import QualityReport, check_imu
+from ..core.config import RunConfig
+from ..core.memory import release_free_memory
+from ..core.recording import InitialState, RecordedRun
+from .clock import refine_offset
+from .filter_pass import FilterPass
+from .stationary import StationaryNoise, StationaryReport, detect_stationary, noise_from_stationary, params_from_config
+from .tuning import TuneResult, scaled_gnss, tune
+from .yawbank import BankResult, select_yaw
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """Everything the estimators share for one run, made once (:func:`prepare`).
+
+    Attributes
+    ----------
+    run : RecordedRun
+        The run as the estimators see it: the input checks' repairs and measured offsets applied,
+        fix sigmas times ``gnss.sigma_scale``.
+    cfg : RunConfig
+        The configuration they use (tuned where allowed); estimators read their own settings
+        from it (:mod:`gnssacc.estimators.settings`).
+    quality : QualityReport
+    stationary : StationaryReport
+    init : InitialState
+    rest_noise : gnssacc.prepare.stationary.StationaryNoise
+        What the IMU shows at rest (white-noise densities per channel, the seconds used).
+    tuning : TuneResult or None
+    bank : BankResult or None
+        ``None`` when the source gave the initial state.
+    checks : tuple of gnssacc.checks.findings.Finding
+        What the input checks repaired or applied, with their evidence (they raise on anything else).
+    seconds : dict
+        Time spent per step [s].
+    gauss_markov : tuple or None
+        ``(Prepared, how)`` for the ``-gm`` methods (:func:`gnssacc.prepare.gauss_markov.gm_setup`)
+        when asked for.
+    """
+
+    run: RecordedRun
+    cfg: RunConfig
+    quality: QualityReport
+    stationary: StationaryReport
+    init: InitialState
+    rest_noise: StationaryNoise | None = None
+    tuning: TuneResult | None = None
+    bank: BankResult | None = None
+    checks: tuple = ()
+    seconds: dict = field(default_factory=dict)
+    gauss_markov: tuple | None = None
+
+
+def _start(run, cfg, stationary, quality, filter_pass) -> tuple[InitialState, BankResult | None]:
+    if run.init is not None:
+        return run.init, None
+    bank = select_yaw(run, cfg, stationary, quality, filter_pass=filter_pass)
+    return bank.init, bank
+
+
+def _other_heading(a: InitialState, b: InitialState) -> bool:
+    """Whether two starts differ in yaw by more than 3 sigma (neighbouring hypotheses converge to the
+    same heading; a different heading means the noise the tuner saw came from another trajectory)."""
+    d = abs((a.rpy[2] - b.rpy[2] + np.pi) % (2 * np.pi) - np.pi)
+    return d > 3.0 * max(a.sigma_att_rad[2], b.sigma_att_rad[2])
+
+
+def _tuned(run, cfg, stationary, quality, init, bank, noise, filter_pass):
+    """Step 4 of the module notes: the tuned configuration and result, the start and bank under it,
+    and the estimators' run (fix sigmas scaled)."""
+    cfg_t, result = tune(run, cfg, stationary, quality, init, noise, filter_pass=filter_pass)
+    est_run = scaled_gnss(run, float(cfg_t["gnss"]["sigma_scale"]))
+    init2, bank2 = _start(est_run, cfg_t, stationary, quality, filter_pass)
+    if bank is not None and _other_heading(init, bank2.init):
+        cfg_t, result = tune(run, cfg, stationary, quality, init2, noise, filter_pass=filter_pass)
+        est_run = scaled_gnss(run, float(cfg_t["gnss"]["sigma_scale"]))
+        init2, bank2 = _start(est_run, cfg_t, stationary, quality, filter_pass)
+    return est_run, cfg_t, result, init2, bank2
+
+
+def checked(run: RecordedRun, cfg: RunConfig, filter_pass: FilterPass) -> tuple[RecordedRun, RunConfig, list]:
+    """Step 0 of the module notes: the input checks (:func:`gnssacc.checks.plausibility.check_run`)
+    with ``filter_pass`` as the clock offset's likelihood stage (:func:`gnssacc.prepare.clock.refine_offset`)."""
+    return check_run(run, cfg, partial(refine_offset, filter_pass=filter_pass))
+
+
+def prepare(run: RecordedRun, cfg: RunConfig, tune_mode: str | None = None, *, filter_pass: FilterPass,
+            gauss_markov: bool = False) -> Prepared:
+    """Checks, quality, stationary spans, start state and (``tune_mode="auto"``) noise, in that order.
+
+    Parameters
+    ----------
+    run : RecordedRun
+        As a source loaded it.
+    cfg : RunConfig
+    tune_mode : {"auto", "none"}, optional
+        Default: ``[tune] mode`` of the configuration.
+    filter_pass : FilterPass
+        The EKF pass the likelihood-based decisions use (:func:`gnssacc.estimators.ekf.run_ekf`).
+    gauss_markov : bool
+        Also set up the ``-gm`` methods' Gauss-Markov model (:attr:`Prepared.gauss_markov`).
+    """
+    tune_mode = tune_mode or cfg["tune"]["mode"]
+    secs = {}
+    t = time.perf_counter()
+    run, cfg, checks = checked(run, cfg, filter_pass)
+    release_free_memory()   # the checks' temporaries, before the next stage's
+    secs["input_checks_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    quality = check_imu(run.imu, cfg)
+    release_free_memory()
+    stationary = detect_stationary(run.imu, run.gnss, run.origin, params_from_config(cfg))
+    release_free_memory()   # before the estimators build on the heap
+    secs["quality_and_stationary_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    est_run = scaled_gnss(run, float(cfg["gnss"]["sigma_scale"]))
+    init, bank = _start(est_run, cfg, stationary, quality, filter_pass)
+    secs["initialisation_s"] = time.perf_counter() - t
+    result = None
+    noise = noise_from_stationary(run.imu, stationary)
+    if tune_mode == "auto":
+        t = time.perf_counter()
+        est_run, cfg, result, init, bank = _tuned(run, cfg, stationary, quality, init, bank, noise, filter_pass)
+        secs["tuning_s"] = time.perf_counter() - t
+    prep = Prepared(est_run, cfg, quality, stationary, init, noise, result, bank, tuple(checks), secs)
+    if gauss_markov:
+        from .gauss_markov import gm_setup
+
+        prep = replace(prep, gauss_markov=gm_setup(prep, filter_pass=filter_pass))
+    return prep
