@@ -128,7 +128,11 @@ def test_nees_inside_its_band_when_the_sigma_is_right_and_named_per_axis_when_no
     bad = errorstats.nees(e, s, errorstats.AXES_NED)
     assert bad["per_axis"]["D"]["value"] == pytest.approx(25, rel=0.1) and bad["outside"] == ["D"]
     (text,) = nees_warnings({"nees_position": bad})
-    assert text.startswith("position NEES per dof") and "D outside its band" in text and "larger" in text
+    assert text.startswith("position NEES per dof") and "D: errors larger than the stated sigma" in text
+    assert "N:" not in text and "E:" not in text
+    e[:, 0] *= 0.1   # north errors a tenth of their sigma: too cautious there
+    (text,) = nees_warnings({"nees_position": errorstats.nees(e, s, errorstats.AXES_NED)})
+    assert "D: errors larger" in text and "N: stated sigma larger than the errors" in text
 
 
 def _solution_from_truth(run, offset_ned):

@@ -350,7 +350,7 @@ def assess(run, sol: NavSolution, prmse_m: float | None = None, gnss_prmse_m: fl
 
 def nees_warnings(stats: dict) -> list[str]:
     """One warning per NEES (position, attitude) of :func:`gnssacc.analysis.errorstats.error_statistics`
-    outside its band, naming the axes outside theirs."""
+    outside its band, naming the axes outside theirs and which way each is off."""
     out = []
     for key, what in (("nees_position", "position"), ("nees_attitude", "attitude")):
         n = stats.get(key)
@@ -358,10 +358,12 @@ def nees_warnings(stats: dict) -> list[str]:
             continue
         lo, hi = n["band"]
         axes = ", ".join(f"{a} {v['value']:.1f}" for a, v in n["per_axis"].items())
-        which = (", ".join(n["outside"]) + (" outside their bands" if len(n["outside"]) > 1 else " outside its band")
-                 if n["outside"] else "no single axis outside its band")
-        side = "larger" if n["value"] > hi else "smaller"
+        above = [a for a in n["outside"] if n["per_axis"][a]["value"] > n["per_axis"][a]["band"][1]]
+        below = [a for a in n["outside"] if a not in above]
+        if not above and not below:
+            above, below = (["pooled"], []) if n["value"] > hi else ([], ["pooled"])
+        says = ([f"{', '.join(above)}: errors larger than the stated sigma says"] if above else []) + \
+               ([f"{', '.join(below)}: stated sigma larger than the errors (too cautious)"] if below else [])
         out.append(f"{what} NEES per dof {n['value']:.1f} against the truth is outside its chi-square band "
-                   f"[{lo:.1f}, {hi:.1f}] (per axis {axes}; {which}): its {what} errors are {side} than its "
-                   f"stated sigma says")
+                   f"[{lo:.1f}, {hi:.1f}] (per axis {axes}); {'; '.join(says)}")
     return out
