@@ -200,6 +200,28 @@ def test_evo_ape_on_the_tum_export_is_the_tables_position_error(run_dir, tmp_pat
             assert ape[k] == pytest.approx(ours["errors"]["position"][k], abs=1e-3), (mid, k)
 
 
+def test_evo_ape_agrees_where_the_truth_is_sparser_than_the_estimate(tmp_path, capsys):
+    """KITTI's truth is at its 1 Hz fix epochs, the smoother's nodes are not all there: evo (no
+    interpolation) sees the table's errors only because truth.tum holds the truth at every estimate
+    epoch too."""
+    out = tmp_path / "k"
+    assert _cli(["run", "kitti", "--methods", "smoother", "--tune", "none", "--plots", "none", "--export", "tum",
+                 "--out", out], capsys)[0] == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    import gnssacc
+
+    own = gnssacc.load("kitti").truth.t   # the truth as the source has it
+    est_t = np.loadtxt(out / "trajectory_smoother.tum")[:, 0]
+    inside = (est_t >= own[0]) & (est_t <= own[-1])
+    gap = np.min(np.abs(est_t[inside, None] - own[None, :]), axis=1)
+    assert np.sum(gap > 0.01) >= 5   # epochs evo would drop against the source's truth alone
+    assert np.all(np.isin(np.round(own, 6), np.round(np.loadtxt(out / "truth.tum")[:, 0], 6)))   # own epochs kept
+    for mid in ("smoother", "smoother-online"):
+        ape = evo_like_ape(out / "truth.tum", out / f"trajectory_{mid}.tum")
+        assert ape["n"] == metrics["methods"][mid]["n_epochs"]
+        assert ape["rmse"] == pytest.approx(metrics["methods"][mid]["prmse_m"], abs=1e-3)
+
+
 # --- warnings, options ---------------------------------------------------------------------------
 
 def test_warnings_that_differ_in_numbers_only_are_one_line():
