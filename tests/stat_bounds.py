@@ -29,7 +29,7 @@ def chi2_mean_band(dof: float, alpha: float = ALPHA) -> tuple[float, float]:
 def effective_count(n: int, acf1: float | None) -> float:
     """Independent samples worth of ``n`` samples with lag-1 autocorrelation ``acf1`` (an AR(1)
     sequence: the variance of its mean is that of ``n (1 - r) / (1 + r)`` independent ones).
-    Negative or missing ``acf1`` counts every sample (no credit for anticorrelation)."""
+    Negative or missing ``acf1`` counts every sample."""
     r = 0.0 if acf1 is None or not np.isfinite(acf1) else max(float(acf1), 0.0)
     return n * (1.0 - r) / (1.0 + r)
 
@@ -37,8 +37,15 @@ def effective_count(n: int, acf1: float | None) -> float:
 def nis_band(n_updates: int, dof: int = 3, acf1: float | None = None, calibration: float = 1.0,
              alpha: float = ALPHA) -> tuple[float, float]:
     """Band of a run's mean NIS per dof over ``n_updates`` updates of ``dof`` each: chi-square with
-    the effective number of updates (:func:`effective_count`), widened by ``calibration``."""
-    lo, hi = chi2_mean_band(dof * effective_count(n_updates, acf1), alpha)
+    the effective number of updates, widened by ``calibration``.
+
+    ``acf1`` is the lag-1 autocorrelation of the innovations (as the EKF reports it). Squares of
+    jointly Gaussian variables with correlation ``r`` have correlation ``r^2``, so the NIS series
+    has lag-1 autocorrelation ``acf1^2`` (:func:`effective_count`; an AR(1) model, conservative for
+    the short moving-average correlation of overlapping acceleration windows, whose lag-2 term is
+    smaller than AR(1)'s)."""
+    r2 = None if acf1 is None or not np.isfinite(acf1) else float(acf1) ** 2
+    lo, hi = chi2_mean_band(dof * effective_count(n_updates, r2), alpha)
     return lo / calibration, hi * calibration
 
 
@@ -67,3 +74,14 @@ def gnss_prmse_band(sigma_ned: np.ndarray, n: int, alpha: float = ALPHA) -> tupl
     c, nu = np.sum(w**2) / np.sum(w), np.sum(w) ** 2 / np.sum(w**2)
     lo, hi = c * chi2.ppf([alpha / 2, 1 - alpha / 2], nu)
     return float(np.sqrt(lo / n)), float(np.sqrt(hi / n))
+
+
+def nees_band(n_epochs: int, dof: int, rho: float, calibration: float = 1.0,
+              alpha: float = ALPHA) -> tuple[float, float]:
+    """Band of a run's time-averaged NEES per dof over ``n_epochs`` epochs whose normalised errors
+    have lag-1 autocorrelation ``rho`` (``exp(-dt / tau)`` for errors that follow a Gauss-Markov
+    process of correlation time ``tau``): the squared errors then correlate by ``rho^2``, and the
+    mean is chi-square with ``dof`` times the effective number of epochs, widened by ``calibration``.
+    A single run with errors correlated over a minute bounds the NEES only loosely."""
+    lo, hi = chi2_mean_band(dof * effective_count(n_epochs, rho**2), alpha)
+    return lo / calibration, hi * calibration
