@@ -177,9 +177,9 @@ def _failed(v: dict) -> dict:
 @pytest.mark.parametrize("scenario, method", [("ugv-slow", "ekf"), ("car-city", "ekf-accw"),
                                               ("car-city", "ekf")])   # car-city last: its runs are replayed below
 def test_ekf_is_consistent_when_its_model_is_the_truth(scenario, method):
-    """``ekf-accw``'s acceleration update (window-consistent) is consistent here too; the paper's
-    ``ekf-acc`` is not claimed to be (its acceleration model is overconfident in theory,
-    test_aiding_theory.py)."""
+    """``ekf-accw``'s acceleration update (window-consistent) is held to the same bands. The
+    paper's ``ekf-acc`` is not: its acceleration model ignores the correlation with the fixes and is
+    overconfident in theory (test_aiding_theory.py), by an amount that depends on the motion."""
     v = verdict(monte_carlo(scenario, method=method))
     assert not _failed(v), _failed(v)
 
