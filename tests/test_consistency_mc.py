@@ -204,14 +204,15 @@ SM_SCENARIO, SM_DURATION_S, SM_EPOCHS, SM_SEED0 = "turns", 40.0, (20.0, 30.0), 1
 SM_AXES = ("p_N", "p_E", "p_D", "v_N", "v_E", "v_D")
 
 
-def smoother_z2(runs: int = RUNS) -> dict[str, np.ndarray]:
+def smoother_z2(runs: int = RUNS) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Squared position and velocity errors over the smoother's marginal sigmas, per method
-    (``smoother`` fixed-lag, ``smoother-online``): arrays (runs, epochs, 6)."""
+    (``smoother`` fixed-lag, ``smoother-online``): arrays (runs, epochs, 6); and each run's GNSS
+    residual ratio (``nis_pos_mean``: the fixes' whitened squared residuals over their expectation)."""
     from gnssacc.estimators.smoother import run_smoother
 
     grade = grade_config(GRADE)
     cfg, grade_si = load_config(overrides={"imu": grade}), imu_sigmas_si(grade)
-    out = {"smoother": [], "smoother-online": []}
+    out, ratio = {"smoother": [], "smoother-online": []}, {"smoother": [], "smoother-online": []}
     for seed in range(SM_SEED0, SM_SEED0 + runs):
         run = simulate(SM_SCENARIO, SM_DURATION_S, imu_grade=GRADE, noise="rtk", seed=seed,
                        imu_overrides={k: 0.0 for k in UNMODELLED_KEYS})
@@ -224,18 +225,27 @@ def smoother_z2(runs: int = RUNS) -> dict[str, np.ndarray]:
             assert np.allclose(sol.t[i], SM_EPOCHS)
             e = np.hstack([run.origin.to_ned(sol.lat[i], sol.lon[i], sol.h[i]) - p_true, sol.v_n[i] - tr.v_n[j]])
             out[method].append((e / sol.sigma[i, 0:6]) ** 2)
-    return {m: np.array(v) for m, v in out.items()}
+            ratio[method].append(sol.stats["nis_pos_mean"])
+    return {m: np.array(v) for m, v in out.items()}, {m: np.array(v) for m, v in ratio.items()}
 
 
 @pytest.mark.slow
 def test_smoother_marginals_are_consistent_when_its_model_is_the_truth():
     """Per axis, method and epoch the squared normalised error of one run is chi-square(1) for
     consistent marginals (the smoother reports sigmas, not the joint covariance, so axes are not
-    pooled), independent across runs: the mean over N runs is chi-square(N) / N. 24 checks at
-    1e-3 / 24 each."""
-    z2 = smoother_z2()
-    n_checks = len(z2) * len(SM_EPOCHS) * len(SM_AXES)
-    lo, hi = chi2.ppf([1e-3 / n_checks / 2, 1 - 1e-3 / n_checks / 2], RUNS) / RUNS
+    pooled), independent across runs: the mean over N runs is chi-square(N) / N. These bands are
+    too wide to see a 1.5x error in R; the GNSS residual ratio sees it: each run's ratio has
+    expectation 1 (to O(1/fixes), ~1 %), and the mean of the N independent ratios lies within
+    Student's t band of its own scatter. 26 checks at 1e-3 / 26 each."""
+    from scipy.stats import t as student
+
+    z2, ratio = smoother_z2()
+    n_checks = len(z2) * len(SM_EPOCHS) * len(SM_AXES) + len(ratio)
+    alpha = 1e-3 / n_checks
+    lo, hi = chi2.ppf([alpha / 2, 1 - alpha / 2], RUNS) / RUNS
     bad = {(m, t, ax): round(float(v[:, k, a].mean()), 3) for m, v in z2.items() for k, t in enumerate(SM_EPOCHS)
            for a, ax in enumerate(SM_AXES) if not lo <= v[:, k, a].mean() <= hi}
     assert not bad, (lo, hi, bad)
+    for m, r in ratio.items():
+        half = student.ppf(1 - alpha / 2, RUNS - 1) * r.std(ddof=1) / np.sqrt(RUNS)
+        assert abs(r.mean() - 1.0) < half, (m, r.mean(), half)
