@@ -130,7 +130,7 @@ def test_initial_prior_covariance_matches_the_sampled_nonlinear_transform(with_g
     C = np.zeros((m + 3, m + 3))
     C[:m, :m], C[m:, m:] = cov, c_vel                   # velocity: uncorrelated with the rest
     rng = np.random.default_rng(11)
-    n = 20000
+    n = 10000
     dx = rng.standard_normal((n, P.shape[0])) @ np.linalg.cholesky(P).T
     e = np.array([_smoother_error(init, origin, pose0, d) for d in dx])
     stat, dof = _lr_statistic(e, C)
