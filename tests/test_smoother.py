@@ -73,11 +73,12 @@ def test_preintegration_reproduces_a_perfect_imu_in_turns():
     state, the predicted velocity is now right to the terms the smoother's tangent-plane model
     leaves out (earth curvature v^2 / R ~ 2e-5 m/s^2)."""
     from gnssacc.core.earth import earth_rate_n, normal_gravity
+    from gnssacc.estimators.settings import SmootherSettings
     from gnssacc.estimators.smoother import _ImuModel, _preintegrate
 
     run = simulate("turns", 40.0, imu_grade="perfect", noise="none", seed=0, truth_rate_hz=100.0)
     tr, imu, o = run.truth, run.imu, run.origin
-    model = _ImuModel(load_config(), normal_gravity(o.lat0, o.h0), earth_rate_n(o.lat0))
+    model = _ImuModel(SmootherSettings.from_config(load_config()), normal_gravity(o.lat0, o.h0), earth_rate_n(o.lat0))
     bias = gtsam.imuBias.ConstantBias()
     dt_all = np.diff(imu.t, prepend=imu.t[0])
     for t0 in (15.0, 31.0):               # the left circle, the right circle

@@ -10,6 +10,8 @@ from datetime import datetime
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
 from .analysis.consistency import assess, check_gm_model, check_model
 from .analysis.errorstats import error_statistics, fix_statistics
 from .analysis.metrics import gnss_score, score
@@ -357,12 +359,21 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
              "truth_coverage": truth_coverage(run),
              "coverage": {m: _coverage(run, s) for m, s in sols.items()},
              "consistency": {m: c.to_dict() for m, c in cons.items()},
-             "init": prep.init.how, "stationary": prep.stationary.to_dict(),
+             "init": prep.init.how, "start": start_dict(prep.init), "stationary": prep.stationary.to_dict(),
              "input_checks": [f.to_dict() for f in prep.checks],
              "model_check": models[""].to_dict(),
              "model_check_gm": models["gm"].to_dict() if "gm" in models else None,
              "tuning": prep.tuning.to_dict() if prep.tuning is not None else None}
     return metrics_dict(run, sols, scores, raw, extra, failed), sols, prep
+
+
+def start_dict(init) -> dict:
+    """The start's yaw and what it rests on (``metrics.json`` ``start``; the table says when it is
+    undetermined)."""
+    why = ("the vehicle never turned or accelerated enough to tell it" if init.yaw_evidence == "undetermined"
+           else "")
+    return {"yaw_deg": float(np.degrees(init.rpy[2])), "yaw_sigma_deg": float(np.degrees(init.sigma_att_rad[2])),
+            "yaw_evidence": init.yaw_evidence, "yaw_determined": bool(init.yaw_determined), "why": why}
 
 
 def _noise_model_of(prep: Prepared, sid: str, sols: dict, models: dict):

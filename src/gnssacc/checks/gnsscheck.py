@@ -78,6 +78,10 @@ def fix_count(t_gnss: np.ndarray, t0: float, t1: float, where: str) -> Finding |
 
 #: Height units a median outside the road range may be in: (metres per unit, name).
 HEIGHT_UNITS = ((1e-3, "millimetres"), (1e-2, "centimetres"), (0.3048, "feet"))
+#: Where a reinterpreted median height must land [m]: on a road (the Dead Sea's -430 m to the
+#: 5.8 km of the highest pass, the geoid within 110 m of the ellipsoid), stricter than the range
+#: that leaves heights as given alone (a geocentric radius in millimetres would be 6.4 km).
+ROAD_HEIGHT_M = (-600.0, 6000.0)
 
 
 def heights(h: np.ndarray, where: str, declined=frozenset()) -> Finding | None:
@@ -91,7 +95,7 @@ def heights(h: np.ndarray, where: str, declined=frozenset()) -> Finding | None:
     head = (f"the fixes' heights are around {med:.6g} m, outside the {HEIGHT_RANGE_M[0]:g} .. {HEIGHT_RANGE_M[1]:g} m "
             f"of any road")
     for k, name in HEIGHT_UNITS:
-        if HEIGHT_RANGE_M[0] <= med * k <= HEIGHT_RANGE_M[1]:
+        if ROAD_HEIGHT_M[0] <= med * k <= ROAD_HEIGHT_M[1]:
             f = Finding("heights", where, f"{head}: the h_m column is in {name}", "convert the h_m column to metres",
                         _scaled_heights(k), f"multiplied the heights by {k:g}",
                         details={"median_height_m": med, "log_jacobian_per_fix": float(np.log(k))})

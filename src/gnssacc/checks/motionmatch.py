@@ -456,13 +456,14 @@ def _largest_gap(t, idx, valid, lo, hi, centres, half) -> np.ndarray:
 
 def fix_scatter(t: np.ndarray, p: np.ndarray, w: np.ndarray) -> float:
     """1-sigma white scatter of the fixes [m] about quadratics over ~7 fixes (a median, robust to
-    the short moments where a vehicle's jerk bends the track; floored at 5 mm)."""
+    the short moments where a vehicle's jerk bends the track; floored at 5 mm), per coordinate of
+    ``p`` (shape (n, d): the horizontal track, or one axis)."""
     dt = float(np.median(np.diff(t)))
     centres = t[:: max(len(t) // 2000, 1)]
     _, _, ok, resid, dof = local_fits(t, p, w, centres, 6.5 * dt)
     if not np.any(ok):
         return 0.005
-    k = 2.0 * dof[ok]
+    k = p.shape[1] * dof[ok]
     per_window = (resid[ok] ** 2).sum(axis=(1, 2)) / k
     # Median of chi-square(k)/k is about (1 - 2/(9k))^3 (Wilson-Hilferty).
     sigma2 = np.median(per_window) / np.median((1.0 - 2.0 / (9.0 * k)) ** 3)

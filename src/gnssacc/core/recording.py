@@ -79,6 +79,10 @@ class GnssFixes:
         as correlations rather than covariances so that every operation on ``sigma_ned`` (the
         tuner's ``gnss.sigma_scale``, a quality's inflation) scales the whole covariance
         (:meth:`cov_ned`).
+    sigma_stated : bool
+        Whether the source states the sigmas (False: a configured default stands in for them,
+        which the preparation replaces by what the fixes' own scatter shows,
+        :mod:`gnssacc.prepare.fix_noise`).
     """
 
     t: np.ndarray
@@ -88,6 +92,7 @@ class GnssFixes:
     sigma_ned: np.ndarray
     quality: np.ndarray | None = None
     corr_ned: np.ndarray | None = None
+    sigma_stated: bool = True
 
     def __len__(self) -> int:
         return len(self.t)
@@ -95,7 +100,7 @@ class GnssFixes:
     def select(self, mask) -> "GnssFixes":
         return GnssFixes(self.t[mask], self.lat[mask], self.lon[mask], self.h[mask], self.sigma_ned[mask],
                          None if self.quality is None else self.quality[mask],
-                         None if self.corr_ned is None else self.corr_ned[mask])
+                         None if self.corr_ned is None else self.corr_ned[mask], self.sigma_stated)
 
     def cov_ned(self, k) -> np.ndarray:
         """The NED covariance [m^2] of fix ``k`` (shape (3, 3)) or of fixes ``k`` (an index array:
@@ -208,6 +213,11 @@ class InitialState:
     levelled : bool
         Roll and pitch come from accelerometer levelling: their error is then tied to the
         accelerometer bias (the estimators start with that correlation).
+    yaw_evidence : str
+        What the yaw rests on: ``"given"`` (the source states the start, e.g. ``init.json``),
+        ``"orientation"`` (an IMU's own orientation field: magnetometer-grade until the motion
+        confirms it, :mod:`gnssacc.prepare.start`), ``"bank"`` (the motion decided it) or
+        ``"undetermined"`` (the motion never did: the yaw sigma says how little is known).
     """
 
     t: float
@@ -226,6 +236,12 @@ class InitialState:
     sigma_b_g: np.ndarray | None = None
     fit_window: tuple | None = None
     levelled: bool = False
+    yaw_evidence: str = "given"
+
+    @property
+    def yaw_determined(self) -> bool:
+        """Whether the yaw is known from the data or the source (not a guess of the start)."""
+        return self.yaw_evidence in ("given", "bank")
 
     @property
     def R_nb(self) -> np.ndarray:

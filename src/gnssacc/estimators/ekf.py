@@ -30,7 +30,7 @@ from ..core.recording import InitialState, RecordedRun
 from ..core.rotations import dcm_to_euler, euler_error_jacobian
 from ..core.solution import NavSolution
 from ..prepare.initialise import initial_sigmas
-from ..prepare.yawbank import start_and_quality
+from ..prepare.start import start_and_quality
 from . import measurements as meas_models
 from .gnss_accel import AccelWindow, measured_specific_force, window_samples
 from .kalman import joseph_update

@@ -58,7 +58,7 @@ from ..factors import (
     joint_prior_factor,
     window_accel_factor,
 )
-from ..prepare.yawbank import start_and_quality
+from ..prepare.start import start_and_quality
 from .ekf import initial_state, run_ekf
 from .fixed_lag import FixedLagISAM2
 from .gnss_accel import acceleration_row, measured_specific_force, window_accelerations

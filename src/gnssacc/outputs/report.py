@@ -216,7 +216,16 @@ def format_table(metrics: dict) -> str:
     first = len(lines[1].split("  ")[0])
     # A failed row is not cut into columns: its reason runs on after the method id.
     failed_rows = [f"{mid.ljust(first)}  failed: {reason}" for mid, reason in failed.items()]
-    return "\n".join(_window_lines(metrics) + lines + failed_rows + _legend(metrics))
+    return "\n".join(_window_lines(metrics) + lines + failed_rows + _start_lines(metrics) + _legend(metrics))
+
+
+def _start_lines(metrics: dict) -> list[str]:
+    """What the estimates' yaw rests on, when nothing does: said in the table, not only in a log."""
+    start = metrics.get("start") or {}
+    if start.get("yaw_determined", True):
+        return []
+    return [f"yaw undetermined (sigma {start['yaw_sigma_deg']:.0f} deg): {start.get('why', 'the motion never told it')};"
+            " heading and attitude figures of every method rest on that guess"]
 
 
 def _window_lines(metrics: dict) -> list[str]:

@@ -2,10 +2,10 @@
 
 :func:`prepare` runs, in order,
 
-0. the input checks (:mod:`gnssacc.checks.plausibility`): units, clocks, coordinates and mounting
-   checked against the data themselves; repairs and measured ``"auto"`` offsets and mountings are
-   applied here, so every later step and estimator sees the corrected run (the clock offset's
-   likelihood stage is :mod:`gnssacc.prepare.clock`);
+0. fix sigmas the recording does not state, from the fixes' scatter (:mod:`gnssacc.prepare.fix_noise`);
+   then the input checks (:mod:`gnssacc.checks.plausibility`): units, clocks, coordinates and
+   mounting checked against the data themselves, their proposals settled by the estimator
+   (:mod:`gnssacc.prepare.settle`), so every later step and estimator sees the corrected run;
 1. the IMU data-quality check (:mod:`gnssacc.checks.quality`);
 2. stationary detection from windowed IMU statistics and GNSS agreement
    (:mod:`gnssacc.prepare.stationary`), and the noise the IMU shows at rest;
@@ -33,6 +33,7 @@ from ..core.config import RunConfig
 from ..core.memory import release_free_memory
 from ..core.recording import InitialState, RecordedRun
 from .filter_pass import FilterPass
+from .fix_noise import with_measured_sigmas
 from .settle import settled
 from .start import start_of, start_pieces
 from .stationary import StationaryNoise, StationaryReport, noise_from_stationary
@@ -128,7 +129,9 @@ def prepare(run: RecordedRun, cfg: RunConfig, tune_mode: str | None = None, *, f
     tune_mode = tune_mode or cfg["tune"]["mode"]
     secs = {}
     t = time.perf_counter()
+    run, sigma_note = with_measured_sigmas(run)   # before any decision uses the fixes' noise
     run, cfg, checks, pieces = settled(run, cfg, filter_pass)
+    checks = ([sigma_note] if sigma_note else []) + checks
     release_free_memory()   # the checks' temporaries, before the next stage's
     secs["input_checks_s"] = time.perf_counter() - t
     t = time.perf_counter()

@@ -254,7 +254,7 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
     ----------
     scenario : str or Scenario
         A name in :data:`SCENARIOS` ("static", "ugv", "car", "straight", "turns", "ugv-slow",
-        "car-city") or a custom :class:`Scenario`.
+        "car-city", "rover") or a custom :class:`Scenario`.
     duration_s : float
         Run length [s]; the IMU covers ``[t_start_s, t_start_s + duration_s]``.
     imu_grade : str
