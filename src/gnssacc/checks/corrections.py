@@ -8,7 +8,7 @@ clock offset it also refines the offset by the likelihood (:mod:`gnssacc.prepare
 * **Clock offset**: stage 1 (the accelerations) must put the offset :data:`SUSPECT_SIGMAS` of
   its sigma and :data:`MIN_OFFSET_S` from the configured one, and the turn view must not
   contradict it (:attr:`gnssacc.checks.views.Motion.turns_contradict`; a contradicted offset is
-  one noisy view: a warning, never a refusal). With ``imu_time_offset_s = "auto"`` every
+  one view against another: recorded as refuted, never a refusal, and nothing a user need read). With ``imu_time_offset_s = "auto"`` every
   determined stage-1 offset is proposed (the estimator decides whether it is told from 0 s).
 * **Mounting**: the IMU's down axis from the mean specific force and its forward axis from the
   turns (:mod:`gnssacc.checks.mountcheck`) against ``imu_to_body_rpy_deg``; implausible when a
@@ -49,12 +49,11 @@ def offset_proposal(run: RecordedRun, cfg: RunConfig, m: Motion, auto: bool, whe
         return None
     details = {"stage1_s": off.offset_s, "stage1_sigma_s": off.sigma_s, "configured_s": configured,
                "turn_rho": {f"{k:+.3f}": v for k, v in (m.turn_rho or {}).items()}, "auto": auto}
-    if m.turns_contradict:
+    if m.turns_contradict:   # one view against another: recorded, nothing to tell the user
         rho = m.turn_rho
         return Finding("time_offset", where, f"the accelerations put the IMU time stamps {off.text()} off the GNSS "
                        f"clock, but the turns match the stamps as given (correlation {rho[0.0]:.2f} against "
-                       f"{rho[off.offset_s]:.2f} at that offset): one view alone", "nothing to do if the clocks are "
-                       "synchronised", details=details)
+                       f"{rho[off.offset_s]:.2f} at that offset)", action="refuted", details=details)
     return Finding("time_offset", where, offset_problem(off, configured, auto),
                    f'set [mounting] imu_time_offset_s = {configured + off.offset_s:.3f} (or "auto")',
                    lambda r: shifted(r, off.offset_s), "added to the IMU time stamps", details=details)

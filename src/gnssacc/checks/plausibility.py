@@ -150,7 +150,7 @@ def consider(finding: Finding | None, policy: Policy, findings: list, declined=f
         raise _Proposed(finding)
     if finding.impossible:
         raise InputError(finding.where, f"{finding.problem}; {finding.fix}")
-    finding.action = "noted"   # the caller warns (once, however often the checks run)
+    finding.action = finding.action or "noted"   # the caller warns of notes (once, however often the checks run)
     findings.append(finding)
 
 
