@@ -12,10 +12,9 @@ import sys
 from pathlib import Path
 
 import pytest
+from clean_cases import cases
 
 from gnssacc.core.config import load_config
-
-from clean_cases import cases
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 from bench_false_alarms import real_runs, verdicts  # noqa: E402

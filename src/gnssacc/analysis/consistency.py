@@ -30,7 +30,8 @@ Warnings (``gnssacc: warning: <method>: ...``) are raised when
   averages over them;
 * the fix residual ratio exceeds :data:`FIX_RATIO_MAX`, or, with truth, the method's PRMSE at the
   raw fixes' epochs exceeds that of the fixes at the same epochs by more than :data:`WORSE_MARGIN`
-  (like for like: fixes exist outside GNSS outages only, so a method's outage errors never count);
+  (like for like: fixes exist outside GNSS outages only, so a method's outage errors never count),
+  or, within that margin, is no lower (the estimate adds nothing over the fixes);
 * with truth, the position or attitude NEES per dof leaves its chi-square band
   (:func:`gnssacc.analysis.errorstats.nees_band`; the warning names the axes outside theirs);
 * the configured white IMU noise is below what the IMU shows at rest by more than
@@ -343,6 +344,10 @@ def assess(run, sol: NavSolution, prmse_m: float | None = None, gnss_prmse_m: fl
     if prmse_m is not None and gnss_prmse_m is not None and prmse_m > (1.0 + WORSE_MARGIN) * gnss_prmse_m:
         c.add(f"PRMSE {prmse_m:.2f} m at the {n_fixes} raw fix epochs is worse than the raw fixes' "
               f"{gnss_prmse_m:.2f} m at the same epochs (against the truth)", "fixes")
+    elif prmse_m is not None and gnss_prmse_m is not None and prmse_m >= gnss_prmse_m:
+        c.add(f"PRMSE {prmse_m:.2f} m at the {n_fixes} raw fix epochs is no better than the raw fixes' "
+              f"{gnss_prmse_m:.2f} m at the same epochs (within {100 * WORSE_MARGIN:.0f} %): it adds nothing over "
+              f"the fixes on this recording", "fixes")
     for text in nees_warnings(errors or {}):
         c.add(text, "nees")
     return c
