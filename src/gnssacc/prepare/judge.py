@@ -131,6 +131,9 @@ class Verdict:
         Mean position NIS per dof of the corrected pass over them.
     nis_given : float or None
         The same of the pass on the data as given.
+    loglik_given : float or None
+        The log-likelihood of the data as given over the scored fixes (the corrected's is it plus
+        ``gain``).
     """
 
     gain: float
@@ -139,6 +142,7 @@ class Verdict:
     nis: float | None
     vehicle: bool = False
     nis_given: float | None = None
+    loglik_given: float | None = None
 
     @property
     def needed(self) -> float:
@@ -167,14 +171,16 @@ class Verdict:
         rate = self.gain / self.minutes if self.minutes > 0 else float("nan")
         nis = f", NIS {self.nis:.2f} as corrected" if self.nis is not None else ""
         what = "position and ground-vehicle-model" if self.vehicle else "position"
-        return (f"EKF {what} log-likelihood {self.gain:+.0f} as corrected over {self.n_fixes} fixes "
+        both = (f"{self.loglik_given:.0f} as given, {self.loglik_given + self.gain:.0f} as corrected: "
+                if self.loglik_given is not None else "")
+        return (f"EKF {what} log-likelihood {both}{self.gain:+.0f} over {self.n_fixes} fixes "
                 f"({rate:+.1f} per minute{nis}; decisive needs {self.needed:+.0f})")
 
     def to_dict(self) -> dict:
         return {"loglik_gain": self.gain if math.isfinite(self.gain) else str(self.gain), "n_fixes": self.n_fixes,
                 "minutes": round(self.minutes, 3), "nis_corrected": self.nis, "nis_given": self.nis_given,
                 "decisive": self.decisive,
-                "refuted": self.refuted, "needed": self.needed}
+                "refuted": self.refuted, "needed": self.needed, "loglik_given": self.loglik_given}
 
 
 def compare(given: Innovations | None, corrected: Innovations | None, log_jacobian: float = 0.0,
@@ -197,9 +203,10 @@ def compare(given: Innovations | None, corrected: Innovations | None, log_jacobi
         n = len(scored_c) if len(scored_g) == 0 else 0
         return Verdict(math.inf if n else 0.0, n, 0.0, None, vehicle)
     ig, ic = np.isin(given.t, common), np.isin(corrected.t, common)
-    gain = float(corrected.loglik[ic].sum() - given.loglik[ig].sum()) + float(log_jacobian) * len(common)
+    ll_given = float(given.loglik[ig].sum())
+    gain = float(corrected.loglik[ic].sum()) - ll_given + float(log_jacobian) * len(common)
     return Verdict(gain, len(common), float(common[-1] - common[0]) / 60.0, float(np.mean(corrected.nis[ic])), vehicle,
-                   float(np.mean(given.nis[ig])))
+                   float(np.mean(given.nis[ig])), ll_given)
 
 
 def judge(given: RecordedRun, corrected: RecordedRun, cfg: RunConfig, given_pieces: StartPieces,
