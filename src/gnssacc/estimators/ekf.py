@@ -30,7 +30,7 @@ from ..core.recording import InitialState, RecordedRun
 from ..core.rotations import dcm_to_euler, euler_error_jacobian
 from ..core.solution import NavSolution
 from ..prepare.initialise import initial_sigmas
-from ..prepare.start import start_and_quality
+from ..prepare.start import start_for
 from . import measurements as meas_models
 from .gnss_accel import AccelWindow, measured_specific_force, window_samples
 from .kalman import joseph_update
@@ -311,17 +311,6 @@ def default_output_times(run: RecordedRun) -> np.ndarray:
     return np.union1d(base, np.concatenate(fill) if fill else np.zeros(0))
 
 
-def _start(run: RecordedRun, settings, init, quality, stationary):
-    """The start and quality report of a pass: as given, else found by the preparation stage for
-    this run alone (a run configuration is needed for that; settings alone cannot self-start)."""
-    if not isinstance(settings, EkfSettings):
-        return start_and_quality(run, settings, init, quality, stationary, filter_pass=run_ekf)
-    init = init if init is not None else run.init
-    if init is None or quality is None:
-        raise ValueError("run_ekf with EkfSettings needs init= and quality= (gnssacc.pipeline.prepare gives both)")
-    return init, quality
-
-
 def _events(gnss_t: np.ndarray, stat_t: np.ndarray, out_t: np.ndarray):
     """Event times, kinds and indices in time order (GNSS, then stationary, then output at equal times)."""
     ev_t = np.concatenate([gnss_t, stat_t, out_t])
@@ -409,7 +398,7 @@ def run_ekf(run: RecordedRun, settings, method: str = "ekf", *, output_times: np
         raise ValueError(f"unknown EKF method {method!r}; known: {', '.join(METHODS)}")
     use_acc = METHODS[method]
     wall0 = time.perf_counter()
-    init, quality = _start(run, settings, init, quality, stationary)
+    init, quality = start_for(run, settings, init, quality, stationary, filter_pass=run_ekf)
     setup = prepare(run, EkfSettings.of(settings), init, quality, stationary, cov_every)
     s, prop, t0, k = setup.state, setup.prop, setup.t0, setup.k
     t_end = prop.t[-1] if t_stop is None else min(float(t_stop), prop.t[-1])

@@ -58,7 +58,7 @@ from ..factors import (
     joint_prior_factor,
     window_accel_factor,
 )
-from ..prepare.start import start_and_quality
+from ..prepare.start import start_for
 from .ekf import initial_state, run_ekf
 from .fixed_lag import FixedLagISAM2
 from .gnss_accel import acceleration_row, measured_specific_force, window_accelerations
@@ -554,13 +554,7 @@ def run_smoother(run: RecordedRun, settings, method: str = "smoother", *,
     if method not in METHODS:
         raise ValueError(f"unknown smoother method {method!r}; known: {', '.join(METHODS)}")
     wall0 = time.perf_counter()
-    if isinstance(settings, SmootherSettings):   # a prepared start (settings alone cannot self-start)
-        init = init if init is not None else run.init
-        if init is None or quality is None:
-            raise ValueError("run_smoother with SmootherSettings needs init= and quality= "
-                             "(gnssacc.pipeline.prepare gives both)")
-    else:
-        init, quality = start_and_quality(run, settings, init, quality, stationary, filter_pass=run_ekf)
+    init, quality = start_for(run, settings, init, quality, stationary, filter_pass=run_ekf)
     settings = SmootherSettings.of(settings)
     z = settings.zupt
     st = epochs_for(run, z, settings.imu.gyro_psd, stationary)

@@ -105,3 +105,22 @@ def start_and_quality(run: RecordedRun, cfg: RunConfig, init=None, quality=None,
     if init is None:
         init = start_of(run, cfg, stationary, quality, filter_pass)[0]
     return init, quality
+
+
+def start_for(run: RecordedRun, settings, init=None, quality=None, stationary=None, *, filter_pass: FilterPass):
+    """The start and quality report of an estimator's pass: as given, else found here for this run
+    alone (:func:`start_and_quality`), which needs a run configuration: an estimator's own settings
+    cannot self-start.
+
+    Raises
+    ------
+    ValueError
+        Settings without ``init`` (or a run's own) and ``quality``.
+    """
+    if isinstance(settings, RunConfig):
+        return start_and_quality(run, settings, init, quality, stationary, filter_pass=filter_pass)
+    init = init if init is not None else run.init
+    if init is None or quality is None:
+        raise ValueError("an estimator given its settings needs init= and quality= (gnssacc.pipeline.prepare gives "
+                         "both)")
+    return init, quality
