@@ -114,7 +114,7 @@ def _run(folder: Path, out: Path, config: Path | None) -> tuple[int, str, dict |
 def _applied(err: str) -> tuple[float | None, float | None, bool]:
     """The offset the checks applied and its 1-sigma [s] (from the warning), and whether a mounting
     was applied."""
-    m = re.search(r'imu_time_offset_s = "auto": measured ([-+0-9.]+) s \+- ([0-9.]+) s \([^)]*\), added', err)
+    m = re.search(r'imu_time_offset_s = "auto": measured ([-+0-9.]+) s \+- ([0-9.]+) s \([^)]*\)[,;] added', err)
     off, sig = (float(m.group(1)), float(m.group(2))) if m else (None, None)
     return off, sig, "applied imu_to_body_rpy_deg" in err
 
