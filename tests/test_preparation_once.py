@@ -47,3 +47,27 @@ def test_an_estimator_reads_the_prepared_recording(counted):
     before = dict(counted)
     ekf.estimate(prep, EkfSettings.from_config(prep.cfg), "ekf-acc")
     assert counted == before
+
+
+def test_the_estimator_is_asked_only_when_the_data_propose_something(monkeypatch):
+    """A clean drive whose views agree with the stamps and axes as given costs no verdict pass:
+    the clock-offset search and the judge's passes run only for a proposal."""
+    import gnssacc.prepare.judge as judge
+    import gnssacc.prepare.settle as settle
+
+    calls = {"evaluate": 0, "innovations": 0}
+    real_eval, real_inn = settle._evaluate, judge.innovations
+
+    def evaluate(*a, **k):
+        calls["evaluate"] += 1
+        return real_eval(*a, **k)
+
+    def innovations(*a, **k):
+        calls["innovations"] += 1
+        return real_inn(*a, **k)
+
+    monkeypatch.setattr(settle, "_evaluate", evaluate)
+    monkeypatch.setattr(judge, "innovations", innovations)
+    res = gnssacc.process("sim:car,duration=120", methods=["ekf"], tune="none", seed=4)
+    assert [f.check for f in res.prepared.checks] == []
+    assert calls == {"evaluate": 0, "innovations": 0}
