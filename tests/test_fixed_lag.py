@@ -12,6 +12,7 @@ import gtsam
 import numpy as np
 import pytest
 from gtsam.symbol_shorthand import X
+from stat_bounds import CALIBRATION, nis_band
 
 import gnssacc.estimators.smoother as S
 from gnssacc.core.config import load_config
@@ -119,4 +120,8 @@ def test_biases_far_from_their_linearisation_point_are_relinearised_before_margi
     ekf = score(run, run_ekf(ident.run, ident.cfg, "ekf", **kw)).prmse_m
     sm = S.run_smoother(ident.run, ident.cfg, "smoother", **kw)
     assert score(run, sm["smoother"]).prmse_m < ekf
-    assert 0.7 < sm["smoother"].stats["nis_pos_mean"] < 1.4
+    # The fixes' residual chi-square (fewer than 3 dof per fix: 1 dof gives a wider band than the
+    # true one at 1e-3), widened by the stated calibration: this configuration is hand-set.
+    st = sm["smoother"].stats
+    lo, hi = nis_band(st["n_pos_updates"], 1, None, CALIBRATION)
+    assert lo < st["nis_pos_mean"] < hi, (lo, st["nis_pos_mean"], hi)

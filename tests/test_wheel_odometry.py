@@ -20,7 +20,6 @@ pytest.importorskip("rosbags")
 from gnssacc.sources.bagwrite import write_bag  # noqa: E402
 from gnssacc.sources.rosbag import inspect_bag, load_bag_run  # noqa: E402
 
-
 # --- the simulator's model ----------------------------------------------------------------------------
 
 def test_odometry_model_against_its_truth():

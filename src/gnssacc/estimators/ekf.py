@@ -36,7 +36,7 @@ from ..core.recording import InitialState, RecordedRun
 from ..core.rotations import dcm_to_euler, euler_error_jacobian
 from ..core.solution import NavSolution
 from ..prepare.initialise import initial_sigmas
-from ..prepare.yawbank import start_and_quality
+from ..prepare.start import start_for
 from . import measurements as meas_models
 from . import nhc as nhc_rules
 from . import odometry as odo_rules
@@ -363,17 +363,6 @@ def default_output_times(run: RecordedRun) -> np.ndarray:
     return np.union1d(base, np.concatenate(fill) if fill else np.zeros(0))
 
 
-def _start(run: RecordedRun, settings, init, quality, stationary):
-    """The start and quality report of a pass: as given, else found by the preparation stage for
-    this run alone (a run configuration is needed for that; settings alone cannot self-start)."""
-    if not isinstance(settings, EkfSettings):
-        return start_and_quality(run, settings, init, quality, stationary, filter_pass=run_ekf)
-    init = init if init is not None else run.init
-    if init is None or quality is None:
-        raise ValueError("run_ekf with EkfSettings needs init= and quality= (gnssacc.pipeline.prepare gives both)")
-    return init, quality
-
-
 def _events(times: dict):
     """Event times, kinds and indices in time order, from ``{kind: times}``; at equal times in
     the order of the kinds (NHC, odometry, GNSS, stationary, output)."""
@@ -499,7 +488,7 @@ def run_ekf(run: RecordedRun, settings, method: str = "ekf", *, output_times: np
         raise ValueError(f"unknown EKF method {method!r}; known: {', '.join(METHODS)}")
     use_acc = METHODS[method]
     wall0 = time.perf_counter()
-    init, quality = _start(run, settings, init, quality, stationary)
+    init, quality = start_for(run, settings, init, quality, stationary, filter_pass=run_ekf)
     setup = prepare(run, EkfSettings.of(settings), init, quality, stationary, cov_every)
     s, prop, t0, k = setup.state, setup.prop, setup.t0, setup.k
     t_end = prop.t[-1] if t_stop is None else min(float(t_stop), prop.t[-1])
