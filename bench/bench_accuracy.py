@@ -37,9 +37,9 @@ def _one(args):
     cfg = load_config(preset)
     run = with_outages(load_source(source, cfg, noise=noise, seed=seed), None, outage)
     ident = identify(run, cfg)   # noise identified once; every method and variant shares it
-    sols = run_methods(run, cfg, ["ekf", "ekf-acc", "smoother", "smoother-acc"], ident=ident)
+    sols = run_methods(run, cfg, ["ekf", "ekf-acc", "smoother", "smoother-acc"], prep=ident)
     avg = replace(ident, cfg=ident.cfg.with_values({"accel": {"specific_force_avg_s": 2.0}}, "avg2"))
-    sols["ekf-acc avg2"] = run_methods(run, cfg, ["ekf-acc"], ident=avg)["ekf-acc"]
+    sols["ekf-acc avg2"] = run_methods(run, cfg, ["ekf-acc"], prep=avg)["ekf-acc"]
     out = {"gnss": gnss_score(run).prmse_m}
     for m, s in sols.items():
         sc = score(run, s)

@@ -1,7 +1,9 @@
 """The shared real recordings (``../shared/data``) through ``gnssacc run DIR`` with default settings.
 
 Each recording is written once as a CSV run directory (the documented user format) and then run
-exactly as a new user would, with no configuration: ``gnssacc run DIR --out OUT --no-plots``.
+exactly as a new user would, with no configuration: ``gnssacc run DIR --out OUT --plots none``; a
+closing table gives each method's PRMSE against the raw fixes', the warnings and what the input
+checks applied.
 Run it with the ``gnssacc`` of any installation (``--gnssacc PATH``), e.g. an older checkout, to
 compare before and after. Prints each run's table and warnings, or its error.
 
@@ -15,6 +17,7 @@ compare before and after. Prints each run's table and warnings, or its error.
 from __future__ import annotations
 
 import argparse
+import json
 import subprocess
 import tempfile
 from pathlib import Path
@@ -71,6 +74,22 @@ def vn310(root: Path, log: str) -> RecordedRun:
                        LocalTangentFrame(fixes.lat[0], fixes.lon[0], fixes.h[0]))
 
 
+def _summary_row(name: str, code: int, out: Path) -> str:
+    """One line of the closing table: each method's PRMSE against the raw fixes', or the refusal."""
+    if code != 0:
+        return f"{name:16s} exit {code} (refused or failed)"
+    m = json.loads((out / "metrics.json").read_text())
+    raw = m.get("gnss_prmse_m")
+    cells = []
+    for mid in ("ekf", "smoother"):
+        v = m["methods"].get(mid, {}).get("prmse_m")
+        cells.append("-" if v is None else f"{v:.2f}" + (f" ({v / raw:.2f}x)" if raw else ""))
+    warned = sum(len(c["warnings"]) for c in m.get("consistency", {}).values())
+    applied = [f["check"] for f in m.get("input_checks", []) if f["action"] in ("repaired", "applied")]
+    raw_s = f"{raw:.2f}" if raw else "no truth"
+    return f"{name:16s} {cells[0]:>16s} {cells[1]:>16s} {raw_s:>9s} {warned:8d}  {', '.join(applied) or '-'}"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=str(DATA))
@@ -80,14 +99,19 @@ def main() -> None:
     if not data.is_dir():
         raise SystemExit(f"{data}: no real recordings here (see ../shared/data/README.md)")
     runs = [comma(data / "comma2k19_example1"), vn310(data / "vn310_static", "lckf"), vn310(data / "vn310_static", "tckf")]
+    rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for run in runs:
             folder = write_csv_run(run, Path(tmp) / run.name)
-            cmd = [a.gnssacc, "run", str(folder), "--out", str(Path(tmp) / f"{run.name}-out"), "--no-plots"]
+            out = Path(tmp) / f"{run.name}-out"
+            cmd = [a.gnssacc, "run", str(folder), "--out", str(out), "--plots", "none"]
             res = subprocess.run(cmd, capture_output=True, text=True)
             print(f"==== {run.name}: {' '.join(cmd[:3])} (exit {res.returncode})")
             print(res.stdout.strip())
             print("\n".join(line for line in res.stderr.splitlines() if line.startswith("gnssacc:")))
+            rows.append(_summary_row(run.name, res.returncode, out))
+    print(f"\n{'recording':16s} {'ekf PRMSE [m]':>16s} {'smoother [m]':>16s} {'raw [m]':>9s} {'warnings':>8s}  applied")
+    print("\n".join(rows))
 
 
 if __name__ == "__main__":

@@ -4,7 +4,8 @@ from .accel_window_factor import window_accel_error, window_accel_factor
 from .gnss_error_factors import gauss_markov_factor, gnss_position_gm_factor
 from .preintegrated_position_factor import preintegrated_position_factor
 from .prior_factor import joint_prior_factor
+from .vehicle_factors import nhc_factor, odometry_factor, vehicle_velocity
 
 __all__ = ["accel_error", "gauss_markov_factor", "gnss_accel_factor", "gnss_position_gm_factor",
-           "joint_prior_factor", "preintegrated_position_factor", "smoother_jacobians_from_H_a", "window_accel_error",
-           "window_accel_factor"]
+           "joint_prior_factor", "nhc_factor", "odometry_factor", "preintegrated_position_factor",
+           "smoother_jacobians_from_H_a", "vehicle_velocity", "window_accel_error", "window_accel_factor"]

@@ -41,23 +41,22 @@ def gnss_position_gm_factor(pose_key: int, gm_key: int, p_fix: np.ndarray, lever
     return gtsam.CustomFactor(noise, list(keys), error)
 
 
-#: The linearisation point of :func:`gauss_markov_factor`'s linear factor: zero GNSS errors.
-_ZERO3 = np.zeros(3)
-
-
 def gauss_markov_factor(prev_key: int, key: int, dt: float, tau_s: np.ndarray,
                         sigma_m: np.ndarray) -> gtsam.LinearContainerFactor:
     """The Gauss-Markov transition over ``dt`` [s] (correlation time ``tau_s`` [s], stationary
-    1-sigma ``sigma_m`` [m], per N, E, D axis).
+    1-sigma ``sigma_m`` [m], per N, E, D axis; or per entry of any vector variable with one entry
+    each, e.g. the odometry scale factor's).
 
     The error is linear in the two Vector3 variables, so it is GTSAM's own linear factor
     (a ``JacobianFactor`` held by a ``LinearContainerFactor`` linearised at zero: the error at any
     values is exactly ``g_k - a g_{k-1}``), with no Python callback in iSAM2's updates.
     """
-    a = np.exp(-dt / np.asarray(tau_s, float))
+    a = np.atleast_1d(np.exp(-dt / np.asarray(tau_s, float)))
     sig = np.maximum(np.asarray(sigma_m, float) * np.sqrt(1.0 - a * a), 1e-9)
-    linear = gtsam.JacobianFactor(prev_key, -np.diag(a), key, np.eye(3), _ZERO3, gtsam.noiseModel.Diagonal.Sigmas(sig))
+    zero = np.zeros(len(a))   # the linearisation point: zero errors
+    linear = gtsam.JacobianFactor(prev_key, -np.diag(a), key, np.eye(len(a)), zero,
+                                  gtsam.noiseModel.Diagonal.Sigmas(np.atleast_1d(sig)))
     at = gtsam.Values()
-    at.insert(prev_key, _ZERO3)
-    at.insert(key, _ZERO3)
+    at.insert(prev_key, zero)
+    at.insert(key, zero)
     return gtsam.LinearContainerFactor(linear, at)

@@ -4,6 +4,7 @@ error on noise-free simulated data, and the filter end to end."""
 import numpy as np
 import pytest
 from scipy.integrate import quad
+from stat_bounds import CALIBRATION, nis_band
 
 from gnssacc.core.config import load_config
 from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm
@@ -144,7 +145,12 @@ def test_ekf_accw_runs_end_to_end_with_finite_nis(sigma):
     st = sol.stats
     assert st["n_acc_updates"] >= st["n_pos_updates"] - 5
     assert np.all(np.isfinite(st["nis_acc"])) and np.isfinite(st["nis_pos_mean"])
-    assert 0.3 < st["nis_acc_mean"] < 3.0 and 0.3 < st["nis_pos_mean"] < 3.0
+    # Chi-square bands of the updates (their autocorrelation counted: overlapping windows make the
+    # acceleration innovations' lag-1 autocorrelation about -2/3), widened by the stated calibration
+    # of a datasheet model on an IMU with unmodelled errors; seed 2 chose nothing.
+    for kind in ("acc", "pos"):
+        lo, hi = nis_band(st[f"n_{kind}_updates"], 3, st[f"acf1_{kind}"], CALIBRATION)
+        assert lo < st[f"nis_{kind}_mean"] < hi, (kind, lo, st[f"nis_{kind}_mean"], hi)
     from gnssacc.analysis.metrics import gnss_score, score
     assert score(run, sol).prmse_m < gnss_score(run).prmse_m
 

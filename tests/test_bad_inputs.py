@@ -504,7 +504,9 @@ def test_awkward_but_valid_bags(env, capsys):
     code, out, err = _cli(capsys, ["inspect", _storage(env.bags["sqlite"])])
     assert code == 0 and "/imu/data" in out and "gnssacc would use" in out
     code, out, err = _cli(capsys, ["inspect", env.bags["sqlite"], "--truth-topic", "/gt"])
-    assert code == 0 and "cannot pick the topics" in out and "/gt" in out
+    # It cannot pick them: the listing to choose from on stdout, one line on stderr, exit 2 (issue 22).
+    assert code == 2 and "/imu/data" in out and "cannot pick the topics" in err and "/gt" in err
+    assert err.count("\n") == 1
 
 
 # --- the safety net ---------------------------------------------------------------------------------

@@ -194,6 +194,25 @@ def test_resume_runs_only_the_missing_tasks(recordings, tmp_path, capsys, monkey
     assert _cli(["batch", "--resume", out, "--seeds", "0-2"], capsys)[0] == 0 and ran == []
 
 
+def test_a_campaign_grows_by_seeds_and_sources(recordings, tmp_path, capsys, monkeypatch):
+    """``--resume C --seeds 0-3`` on a 0-1 campaign runs seeds 2 and 3 only; a new source adds its
+    tasks; the finished tasks are never run again and the summary holds them all."""
+    out = tmp_path / "c"
+    assert _cli(["batch", recordings[0], "--seeds", "0-1", *FAST, "--jobs", "1", "--out", out], capsys)[0] == 0
+    stamps = {k: os.stat(out / k / MARKER).st_mtime_ns for k in _records(out)}
+    ran = _count_tasks(monkeypatch)
+    code, stdout, err = _cli(["batch", "--resume", out, "--seeds", "0-3", "--jobs", "1"], capsys)
+    assert code == 0, err
+    assert sorted(ran) == ["car1/none/2", "car1/none/3"]
+    assert stamps == {k: os.stat(out / k / MARKER).st_mtime_ns for k in stamps}
+    assert json.loads((out / CAMPAIGN_FILE).read_text())["settings"]["seeds"] == [0, 1, 2, 3]
+    ran.clear()
+    assert _cli(["batch", *recordings[:2], "--resume", out, "--jobs", "1"], capsys)[0] == 0
+    assert sorted(ran) == [f"car2/none/{k}" for k in range(4)]
+    assert len({(r["source"], r["seed"]) for r in _rows(out)}) == 8
+    assert (out / "summary.html").is_file() and (out / "summary_prmse.png").is_file()
+
+
 def _expect_error(capsys, args, *words):
     code, _, err = _cli(args, capsys)
     lines = [ln for ln in err.splitlines() if ln.startswith("gnssacc: error:")]
@@ -208,10 +227,10 @@ def test_resume_with_other_settings_is_refused(recordings, tmp_path, capsys):
     out = tmp_path / "c"
     assert _cli(["batch", recordings[0], "--seeds", "0-1", *FAST, "--config", config, "--jobs", "1", "--out", out],
                 capsys)[0] == 0
-    _expect_error(capsys, ["batch", "--resume", out, "--seeds", "0-5"], "--resume", "--seeds", "[0, 1]")
     _expect_error(capsys, ["batch", "--resume", out, "--methods", "ekf"], "--methods")
-    _expect_error(capsys, ["batch", "--resume", out, "--outage-every", "20:5"], "--outage")
-    _expect_error(capsys, ["batch", *recordings[:2], "--resume", out], "SOURCE")
+    _expect_error(capsys, ["batch", "--resume", out, "--seeds", "0-5", "--methods", "ekf"], "--methods")
+    _expect_error(capsys, ["batch", "--resume", out, "--outage-every", "20:5"], "--outage", "one pattern")
+    _expect_error(capsys, ["batch", "--resume", out, "--noise", "gm"], "--noise")
     _expect_error(capsys, ["batch", recordings[0], "--seeds", "0-1", *FAST, "--out", out], "--out",
                   "already holds a campaign", "--resume")
     config.write_text("[zupt]\nenabled = true\n")

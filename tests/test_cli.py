@@ -117,7 +117,7 @@ def test_a_reader_gone_before_the_table_still_gets_the_files(run_dir, tmp_path):
     proc.stdout.close()
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=300) == 141, err
-    assert "error" not in err and json.loads((out / "metrics.json").read_text())["methods"]["ekf"]["status"] == "ok"
+    assert "gnssacc: error" not in err and json.loads((out / "metrics.json").read_text())["methods"]["ekf"]["status"] == "ok"
 
 
 def test_missing_source(tmp_path, capsys):

@@ -314,7 +314,9 @@ def test_a_signal_swallowed_while_plotting_interrupts_the_run(run_dir, tmp_path,
         if then == "raise":
             raise ValueError("Invalid bounding box")
 
-    monkeypatch.setattr("gnssacc.pipeline.plot_errors", plot)
+    from gnssacc.outputs import figures
+
+    monkeypatch.setitem(figures.FIGURES, "errors", plot)
     code, _, stderr = _cli(["run", run_dir, "--methods", "ekf,ekf-acc", "--tune", "none", "--out", out], capsys)
     assert code == (143 if sig == signal.SIGTERM else 130), stderr
     assert "internal error" not in stderr and _leftovers(tmp_path) == []

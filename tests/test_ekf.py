@@ -3,11 +3,12 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from stat_bounds import CALIBRATION, gnss_prmse_band, nis_band
 
 from gnssacc.analysis.metrics import gnss_score, score
 from gnssacc.core import earth
 from gnssacc.core.config import load_config
-from gnssacc.core.rotations import dcm_to_rotvec, euler_to_dcm
+from gnssacc.core.rotations import euler_to_dcm
 from gnssacc.estimators import mechanization as mech
 from gnssacc.estimators.ekf import run_ekf
 from gnssacc.sources.sim import grade_config, simulate
@@ -58,39 +59,24 @@ def test_moving_perfect_imu_follows_truth():
     assert np.linalg.norm(_free_inertial(run, 120.0)) < 0.05
 
 
-def _nees(run, sol):
-    """Normalised estimation error squared per dof over position, velocity and attitude."""
-    tr = run.truth
-    idx = np.searchsorted(tr.t, sol.t)
-    p_true = run.origin.to_ned(tr.lat[idx], tr.lon[idx], tr.h[idx])
-    p_est = run.origin.to_ned(sol.lat, sol.lon, sol.h)
-    out = []
-    for i in range(len(sol)):
-        e = np.empty(9)
-        e[0:3] = p_est[i] - p_true[i]
-        e[3:6] = sol.v_n[i] - tr.v_n[idx[i]]
-        e[6:9] = dcm_to_rotvec(euler_to_dcm(*sol.rpy[i]) @ euler_to_dcm(*tr.rpy[idx[i]]).T)
-        out.append(e @ np.linalg.solve(sol.P[i][:9, :9], e) / 9.0)
-    return np.array(out)
-
-
 @pytest.mark.parametrize("method", ["ekf", "ekf-acc", "ekf-accw"])
-def test_ekf_on_simulated_car_beats_gnss_and_is_consistent(method):
+def test_ekf_on_simulated_car_beats_gnss(method):
+    """A realistic industrial IMU (vibration, scale-factor and cross-axis errors the filter does not
+    model), self-initialised: the filter halves the raw fixes' error. Over seeds 0-2 and 10-15 the
+    PRMSE ratio was 0.34-0.43 (sd 0.025), so the bound 0.7 is ten standard deviations away: it
+    fails on a broken filter, not on a new random stream. Consistency is asserted where it can be
+    bounded, with the filter's model equal to the truth, in test_consistency_mc.py (a time-averaged
+    NEES of a few runs with unmodelled errors has no distribution to draw a band from)."""
     cfg = load_config(overrides={"imu": grade_config("industrial")})
-    nees, gains = [], []
-    for seed in range(3):
+    gains = []
+    for seed in (10, 11, 12):
         run = simulate("car", duration_s=300.0, imu_grade="industrial", noise="white", seed=seed)
-        sol = run_ekf(run, cfg, method, store_P=True)
-        sc, raw = score(run, sol), gnss_score(run)
-        gains.append(sc.prmse_m / raw.prmse_m)
-        # Skip the first 60 s of convergence from the self-initialised state.
-        nees.append(_nees(run, sol)[sol.t - sol.t[0] > 60.0].mean())
+        sol = run_ekf(run, cfg, method)
+        gains.append(score(run, sol).prmse_m / gnss_score(run).prmse_m)
         assert sol.stats["n_pos_updates"] > 250
         if method != "ekf":
             assert sol.stats["n_acc_updates"] > 250
     assert max(gains) < 0.7, gains
-    # The mean NEES per dof over three runs of ~240 correlated epochs: consistent within a factor 2.
-    assert 0.5 < np.mean(nees) < 2.0, nees
 
 
 def test_ekf_estimates_the_heading_and_biases_of_a_simulated_ugv():
@@ -124,18 +110,28 @@ def test_suspect_spans_get_inflated_noise():
 
 
 def test_kitti_integration():
+    """KITTI with the kitti preset, on a GNSS noise seed the preset was not tuned on (it was tuned
+    on seeds 0-2, bench/tune_kitti_nis.py)."""
     from gnssacc.pipeline import load_source
 
     cfg = load_config("kitti")
-    run = load_source("kitti", cfg, noise="white", seed=0)
-    raw = gnss_score(run).prmse_m
-    assert 6.0 < raw < 7.2
+    run = load_source("kitti", cfg, noise="white", seed=7)
+    raw = gnss_score(run)
+    # The raw fixes' error is what the white profile (3/3/5 m) says, within its sampling band at a
+    # false-failure rate of 1e-3 (a test of the noise generator, not a pinned draw).
+    lo, hi = gnss_prmse_band(np.array([3.0, 3.0, 5.0]), raw.n_epochs)
+    assert lo < raw.prmse_m < hi, (lo, raw.prmse_m, hi)
     for method in ("ekf", "ekf-acc"):
         sol = run_ekf(run, cfg, method)
         sc = score(run, sol)
-        assert sc.prmse_m < 0.7 * raw, (method, sc.prmse_m)
+        # Seeds 0-9: 0.46-0.52 of the raw error; 0.7 is far outside that scatter.
+        assert sc.prmse_m < 0.7 * raw.prmse_m, (method, sc.prmse_m)
         assert sc.n_epochs > 460
-        assert 0.5 < sol.stats["nis_pos_mean"] < 1.5
+        # NIS: the chi-square band of its updates (lag-1 autocorrelation counted), widened by the
+        # preset's claimed calibration (stat_bounds.CALIBRATION).
+        st = sol.stats
+        lo, hi = nis_band(st["n_pos_updates"], 3, st["acf1_pos"], CALIBRATION)
+        assert lo < st["nis_pos_mean"] < hi, (lo, st["nis_pos_mean"], hi)
 
 
 def test_self_initialisation_of_a_slow_ugv_with_correlated_gnss_noise():

@@ -12,6 +12,7 @@ import gtsam
 import numpy as np
 import pytest
 from gtsam.symbol_shorthand import X
+from stat_bounds import CALIBRATION, nis_band
 
 import gnssacc.estimators.smoother as S
 from gnssacc.core.config import load_config
@@ -81,7 +82,10 @@ def _run(monkeypatch, cls, run, cfg, method):
 
 @pytest.mark.parametrize("method,overrides,rate", [
     ("smoother", {}, 1.0),
-    ("smoother-acc", {"gnss": {"gm_sigma_m": 1.5, "gm_tau_s": 40.0}}, 5.0),   # GNSS-error states
+    # GNSS-error states; the non-holonomic factors off: with them the two smoothers' estimates
+    # part by 2.8 mm here (iSAM2 updates its solution only where a change exceeds its wildfire
+    # threshold, and where it looks depends on the tree), beyond this test's 1e-6 m.
+    ("smoother-acc", {"gnss": {"gm_sigma_m": 1.5, "gm_tau_s": 40.0}, "nhc": {"enabled": False}}, 5.0),
     ("smoother-accw", {"smoother": {"max_node_spacing_s": 0.5}}, 1.0)],          # factors on 3-5 nodes
     ids=["white", "gauss-markov-5hz", "window-factors"])
 def test_same_estimates_as_gtsams_fixed_lag_smoother_with_fewer_eliminations(monkeypatch, method, overrides, rate):
@@ -116,4 +120,32 @@ def test_biases_far_from_their_linearisation_point_are_relinearised_before_margi
     ekf = score(run, run_ekf(ident.run, ident.cfg, "ekf", **kw)).prmse_m
     sm = S.run_smoother(ident.run, ident.cfg, "smoother", **kw)
     assert score(run, sm["smoother"]).prmse_m < ekf
-    assert 0.7 < sm["smoother"].stats["nis_pos_mean"] < 1.4
+    # The fixes' residual chi-square (fewer than 3 dof per fix: 1 dof gives a wider band than the
+    # true one at 1e-3), widened by the stated calibration: this configuration is hand-set.
+    st = sm["smoother"].stats
+    lo, hi = nis_band(st["n_pos_updates"], 1, None, CALIBRATION)
+    assert lo < st["nis_pos_mean"] < hi, (lo, st["nis_pos_mean"], hi)
+
+
+@pytest.mark.parametrize("per_node", [3, 4, 5], ids=["nav", "gnss-error", "gnss-error+odometry-scale"])
+def test_ordering_groups_never_outnumber_the_variables_isam2_must_reeliminate(per_node):
+    """CCOLAMD takes no group number at or above the number of variables it orders (it corrupted
+    memory: folded fixes, Gauss-Markov and odometry-scale states, window acceleration factors).
+    In the time-ordered path iSAM2 must re-eliminate the touched variables of the oldest node
+    touched (those of its variables eliminated before them may lie below), every variable of the
+    later nodes and the new ones: the groups of an update stay below that count, and use it all
+    (as many nodes in time order as allowed) when there are enough older nodes."""
+    from gnssacc.estimators import fixed_lag as FL
+
+    chars = "xvbgk"[:per_node]
+    node = lambda i: (float(i), [gtsam.symbol(c, i) for c in chars])   # noqa: E731
+    nodes, new = [node(i) for i in range(30)], [node(30)]
+    for first in range(len(nodes)):
+        for n_touched in range(1, per_node + 1):
+            touched = set(nodes[first][1][:n_touched]) | set(new[0][1])
+            lo = max(first - FL._older_groups(nodes, first, new, touched), 0)
+            must = n_touched + per_node * (len(nodes) - first - 1 + len(new))
+            n_groups = len(nodes) + len(new) - lo          # numbered 0 .. n_groups - 1
+            assert lo <= first and n_groups <= must
+            if must - (len(nodes) - first + len(new)) <= first:   # enough older nodes to fill
+                assert n_groups == must

@@ -7,12 +7,12 @@ import warnings
 
 import numpy as np
 import pytest
-from gnssacc.prepare.identify import identify
 
 import gnssacc
 from gnssacc.core.config import load_config
 from gnssacc.core.errors import DataWarning, InputError
 from gnssacc.estimators.ekf import EkfObserver, run_ekf
+from gnssacc.pipeline import prepare
 from gnssacc.sources.csvdir import load_csv_run, write_csv_run
 from gnssacc.sources.sim import simulate
 
@@ -62,7 +62,7 @@ def test_pos_covariance_with_correlations_is_the_ekf_r(sim_run, tmp_path):
     write_csv_run(run, tmp_path, gnss_format="pos")
     cfg = load_config(None, overrides=CONFIG)
     loaded = load_csv_run(tmp_path, cfg)
-    ident = identify(loaded, cfg, "none")
+    ident = prepare(loaded, cfg, "none")
     obs = _Rs()
     run_ekf(ident.run, ident.cfg, "ekf", init=ident.init, quality=ident.quality, stationary=ident.stationary,
             observer=obs)
@@ -118,7 +118,7 @@ def test_smoother_gnss_factors_use_the_full_covariance(tmp_path):
     run.gnss.corr_ned = np.tile([0.4, -0.2, 0.1], (len(run.gnss), 1))
     write_csv_run(run, tmp_path, gnss_format="pos")
     cfg = load_config(None, overrides=CONFIG)
-    ident = identify(load_csv_run(tmp_path, cfg), cfg, "none")
+    ident = prepare(load_csv_run(tmp_path, cfg), cfg, "none")
     sols = run_smoother(ident.run, ident.cfg, "smoother", init=ident.init, quality=ident.quality,
                         stationary=ident.stationary)
     assert sols["smoother"].stats["n_gps_factors"] > 40

@@ -6,7 +6,6 @@ from __future__ import annotations
 import calendar
 import re
 import shutil
-import warnings
 from functools import reduce
 from pathlib import Path
 
@@ -224,7 +223,6 @@ def test_bad_pos_files(tmp_path, capsys, case, lines, expect):
     assert main(["run", str(root), "--out", str(tmp_path / "out")]) == 2, case
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("gnssacc: error: ")
-    import re
     assert re.search(expect, err[0]), err[0]
 
 

@@ -167,6 +167,12 @@ warmed = signatures()
 run = simulate("car", 40.0, seed=3)
 pipeline.compare(run, load_config(None, overrides={"gnss": {"gm_sigma_m": 0.5, "gm_tau_s": 60.0}}), ["ekf", "ekf-acc", "ekf-accw", "smoother", "smoother-acc",
                  "smoother-accw", "ekf-gm", "smoother-gm"], tune="none")
+# Wheel odometry (the scale-factor state after the GNSS error's, in the EKF and on the nodes)
+# and 5 Hz fixes (folded into the nodes before them).
+run = simulate("car", 30.0, seed=3, odom_hz=10.0, gnss_rate_hz=5.0)
+_, sols, _ = pipeline.compare(run, load_config(None, overrides={"gnss": {"gm_sigma_m": 0.5, "gm_tau_s": 60.0}}),
+                              ["ekf", "smoother", "smoother-accw", "ekf-gm", "smoother-gm"], tune="none")
+assert sols["smoother-gm"].stats["n_odo_factors"] > 0 and sols["smoother"].stats["n_gps_folded"] > 0
 new = {k: v - warmed.get(k, set()) for k, v in signatures().items() if v - warmed.get(k, set())}
 print(sorted(k[1] for k in new))
 """
@@ -175,7 +181,8 @@ print(sorted(k[1] for k in new))
 def test_the_group_warm_ups_compile_every_kernel_a_run_calls():
     """The warm-ups (also the install's) call each kernel with the types a real run gives it (a
     kernel compiled with other types, or not at all, is compiled again inside an estimator); a
-    run of every method then compiles nothing new."""
+    run of every method then compiles nothing new, nor does one with wheel odometry (its scale
+    state) and folded fast fixes."""
     out = subprocess.run([sys.executable, "-c", RUN_TYPES], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
 

@@ -27,7 +27,7 @@ def _state(err: np.ndarray, n: int = 15, gm_true=np.zeros(3)):
     pos = np.array([LAT + err[0] / (R_M + H), LON + err[1] / ((R_N + H) * np.cos(LAT)), H - err[2]])
     gm = gm_true + (err[15:18] if n > 15 else 0.0)
     return SimpleNamespace(pos=pos, v_n=err[3:6].copy(), R_nb=rotvec_to_dcm(err[6:9]) @ R_TRUE, b_a=np.zeros(3),
-                           b_g=B_TRUE - err[12:15], gm=gm, P=np.eye(n))
+                           b_g=B_TRUE - err[12:15], gm=gm, P=np.eye(n), n_gm=3 if n > 15 else 0)
 
 
 def _check(dz, H, n, steps, atol):
@@ -70,6 +70,17 @@ def test_position_jacobian_with_gauss_markov_states():
     np.testing.assert_allclose(H_[:, 15:18], np.eye(3))
 
 
+@pytest.mark.parametrize("n", [15, 18])
+def test_position_jacobian_has_no_velocity_or_bias_columns(n):
+    """A fix sees position, attitude (through the lever arm) and the GNSS error only: H_p's
+    velocity and bias columns are exactly zero (finite differences cannot show an exact zero)."""
+    lever = np.array([0.8, -0.3, -1.1])
+    H_ = mm.position(_state(np.zeros(n), n), LAT, LON, H, np.ones(3), lever).H
+    assert H_.shape == (3, n)
+    assert np.all(H_[:, 3:6] == 0.0) and np.all(H_[:, 9:15] == 0.0)
+    assert np.all(np.any(H_[:, 0:3] != 0.0, axis=0)) and np.all(np.any(H_[:, 6:9] != 0.0, axis=0))
+
+
 POSE = gtsam.Pose3(gtsam.Rot3(euler_to_dcm(0.1, -0.05, 0.9)), np.array([10.0, -4.0, 2.0]))
 
 
@@ -94,6 +105,22 @@ def test_gnss_gauss_markov_factor_jacobians_on_the_manifold():
         num = (err(POSE.retract(d), g) - err(POSE.retract(-d), g)) / 2e-6
         np.testing.assert_allclose(A[:, cols[0][k]], num, atol=1e-6)
     np.testing.assert_allclose(A[:, cols[1]], np.eye(3), atol=1e-12)
+
+
+def test_gnss_gauss_markov_factor_residual_by_hand():
+    """Yaw 90 deg (body x points east): R l_b = (-l_y, l_x, l_z) = (-0.5, 1.0, -0.2); the predicted fix
+    is t + R l_b + g = (10 - 0.5 + 0.3, 20 + 1.0 - 0.4, -3 - 0.2 + 0.5) = (9.8, 20.6, -2.7)."""
+    pose = gtsam.Pose3(gtsam.Rot3.Yaw(np.pi / 2), np.array([10.0, 20.0, -3.0]))
+    lever, g, p_fix, sigma = np.array([1.0, 0.5, -0.2]), np.array([0.3, -0.4, 0.5]), np.array([9.0, 21.0, -2.0]), \
+        np.array([0.5, 0.4, 1.0])
+    f = gnss_position_gm_factor(X(0), G(0), p_fix, lever, sigma)
+    values = gtsam.Values()
+    values.insert(X(0), pose)
+    values.insert(G(0), g)
+    e = np.array([0.8, -0.4, -0.7])
+    np.testing.assert_allclose(f.unwhitenedError(values), e, atol=1e-12)
+    np.testing.assert_allclose(f.whitenedError(values), e / sigma, atol=1e-12)
+    assert f.error(values) == pytest.approx(0.5 * np.sum((e / sigma) ** 2), rel=1e-12)
 
 
 def test_gauss_markov_transition_factor_is_the_exact_discretisation():

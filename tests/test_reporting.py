@@ -85,7 +85,9 @@ def test_run_with_report_and_tum_export(run_dir, tmp_path, capsys):
                 self.cell = None
 
     parser = Rows()
-    parser.feed(page.split("<h2>Comparison</h2>")[1].split("</table>")[0])
+    # The answer comes first: the comparison is the page's first table.
+    assert page.index("Answer: which method") < page.index("<table") < page.index("Statistics</h2>")
+    parser.feed(page.split("Answer: which method, how good, how sure</h2>")[1].split("</table>")[0])
     head, *body = parser.rows
     metrics = json.loads((out / "metrics.json").read_text())
     col = head.index("PRMSE [m]")
@@ -97,10 +99,23 @@ def test_run_with_report_and_tum_export(run_dir, tmp_path, capsys):
     assert tum.shape == (len(csv), 8)
     np.testing.assert_allclose(tum[:, 0], csv["t"], atol=1e-6)
     truth = np.loadtxt(out / "truth.tum")
-    # The TUM attitude is the CSV's roll/pitch/yaw.
+    # The TUM attitude is the CSV's roll/pitch/yaw (FRD body in NED), written as FLU body in ENU:
+    # the body's forward axis keeps its direction, its right axis becomes minus the left one.
+    enu_ned = np.array([[0, 1, 0], [1, 0, 0], [0, 0, -1]])
     for k in (0, len(csv) // 2, len(csv) - 1):
-        R = euler_to_dcm(*np.radians([csv["roll_deg"][k], csv["pitch_deg"][k], csv["yaw_deg"][k]]))
-        np.testing.assert_allclose(_quat_to_dcm(tum[k, 4:8]), R, atol=1e-5)
+        R_nb = euler_to_dcm(*np.radians([csv["roll_deg"][k], csv["pitch_deg"][k], csv["yaw_deg"][k]]))
+        R = _quat_to_dcm(tum[k, 4:8])
+        np.testing.assert_allclose(R[:, 0], enu_ned @ R_nb[:, 0], atol=1e-5)
+        np.testing.assert_allclose(R[:, 1], -(enu_ned @ R_nb[:, 1]), atol=1e-5)
+        np.testing.assert_allclose(R[:, 2], -(enu_ned @ R_nb[:, 2]), atol=1e-5)
+    # Positions are ENU: x east, y north, z up, from the CSV's latitude, longitude and height.
+    from gnssacc.core.earth import LocalTangentFrame
+
+    head = (out / "trajectory_ekf.tum").read_text().splitlines()[0]
+    lat0, lon0, h0 = (float(x) for x in re.search(r"origin lat (\S+) deg, lon (\S+) deg, h (\S+) m", head).groups())
+    p_n = LocalTangentFrame(np.radians(lat0), np.radians(lon0), h0).to_ned(
+        np.radians(csv["lat_deg"]), np.radians(csv["lon_deg"]), csv["h_m"])
+    np.testing.assert_allclose(tum[:, 1:4], np.column_stack([p_n[:, 1], p_n[:, 0], -p_n[:, 2]]), atol=2e-3)
     # Estimates and truth share the frame: the EKF is within metres of the truth at common epochs.
     common, ia, ib = np.intersect1d(np.round(tum[:, 0], 3), np.round(truth[:, 0], 3), return_indices=True)
     assert len(common) > 50
@@ -190,10 +205,12 @@ def test_truth_without_attitude_is_exported_as_positions_only_and_says_so(tmp_pa
     run = replace(run, truth=replace(run.truth, rpy=None))
     with pytest.warns(DataWarning, match="trans_part"):
         path = write_truth_tum(run, tmp_path)
-    assert path.name == "truth_positions.tum" and not (tmp_path / "truth.tum").exists()
+    assert path.name == "truth.tum"   # one name whatever the truth holds
     assert "POSITIONS ONLY" in path.read_text().splitlines()[0]
     data = np.loadtxt(path)
-    np.testing.assert_allclose(data[:, 1:4], run.origin.to_ned(run.truth.lat, run.truth.lon, run.truth.h), atol=1e-5)
+    p_n = run.origin.to_ned(run.truth.lat, run.truth.lon, run.truth.h)
+    np.testing.assert_allclose(data[:, 1:4], np.column_stack([p_n[:, 1], p_n[:, 0], -p_n[:, 2]]), atol=1e-5)
+    np.testing.assert_allclose(data[:, 4:8], np.tile([0, 0, 0, 1.0], (len(data), 1)))
 
 
 def test_report_reads_the_filters_own_pass(run_dir, tmp_path, monkeypatch):

@@ -9,7 +9,6 @@
 from __future__ import annotations
 
 import json
-import time
 
 import numpy as np
 import pytest
@@ -75,6 +74,10 @@ def _perfect(scenario, duration, **kw):
 
 @pytest.mark.parametrize("grade", list(ORIGINAL_GRADES))
 def test_basic_grades_reproduce_original_outputs(grade):
+    """A guard, not a correctness test: the ``-basic`` grades keep the original simulator's draws,
+    so runs and figures recorded with them stay reproducible by seed. Correctness of those draws is
+    :func:`test_basic_grades_follow_the_original_code_path` (the documented sum of the error
+    model's own streams) and the statistical tests of the grades below."""
     run = sim.simulate("ugv", 20.0, imu_grade=f"{grade}-basic", seed=3)
     f_b, w_b, bias_g = ORIGINAL_VALUES[grade]
     np.testing.assert_allclose(run.imu.f_b[[0, 777, -1]], f_b, rtol=1e-12, atol=0)
@@ -257,8 +260,8 @@ def test_realistic_runs_are_deterministic():
     np.testing.assert_array_equal(a.truth.lat, c.truth.lat)
 
 
-def test_thirty_minutes_at_100_hz_is_fast():
-    t0 = time.perf_counter()
+def test_thirty_minutes_at_100_hz_are_complete_and_finite():
+    """How fast: ``python bench/bench_sim_memory.py --durations 1800 --grade consumer --scenario
+    car-city`` (medians of fresh processes; no timing asserts in the tests)."""
     run = sim.simulate("car-city", 1800.0, imu_grade="consumer", imu_rate_hz=100.0)
-    assert time.perf_counter() - t0 < 6.0
-    assert len(run.imu) == 180_001 and np.all(np.isfinite(run.imu.f_b))
+    assert len(run.imu) == 180_001 and np.all(np.isfinite(run.imu.f_b)) and np.all(np.isfinite(run.imu.omega_ib_b))

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 from gnssacc.factors import accel_error, gnss_accel_factor, smoother_jacobians_from_H_a
 from gtsam.symbol_shorthand import B, X
+from stat_bounds import CALIBRATION, nis_band, paired_not_worse
 
-from gnssacc.analysis.metrics import gnss_score, score, truth_at
+from gnssacc.analysis.metrics import gnss_score, score
 from gnssacc.core.config import load_config
 from gnssacc.core.rotations import euler_to_dcm
 from gnssacc.estimators.ekf import run_ekf
@@ -63,6 +64,35 @@ def test_factor_jacobians_equal_the_ekf_H_a_under_the_convention_mapping():
     np.testing.assert_allclose(smoother_jacobians_from_H_a(R, f)[0], J_pose, atol=1e-12)
 
 
+def test_preintegration_reproduces_a_perfect_imu_in_turns():
+    """Each IMU sample is the interval's mean specific force in the body frame at the interval's
+    middle (the simulator's and the EKF mechanization's convention). GTSAM rotates a sample with the
+    attitude at the interval's start, which on a 30 m circle at 10 m/s (100 Hz) made a spurious
+    along-track acceleration v omega^2 dt / 2 = 5.5 mm/s^2: 5.5 mm/s of velocity error per second
+    between nodes, a bias the smoother's marginals did not cover. Over one second from the true
+    state, the predicted velocity is now right to the terms the smoother's tangent-plane model
+    leaves out (earth curvature v^2 / R ~ 2e-5 m/s^2)."""
+    from gnssacc.core.earth import earth_rate_n, normal_gravity
+    from gnssacc.estimators.settings import SmootherSettings
+    from gnssacc.estimators.smoother import _ImuModel, _preintegrate
+
+    run = simulate("turns", 40.0, imu_grade="perfect", noise="none", seed=0, truth_rate_hz=100.0)
+    tr, imu, o = run.truth, run.imu, run.origin
+    model = _ImuModel(SmootherSettings.from_config(load_config()), normal_gravity(o.lat0, o.h0), earth_rate_n(o.lat0))
+    bias = gtsam.imuBias.ConstantBias()
+    dt_all = np.diff(imu.t, prepend=imu.t[0])
+    for t0 in (15.0, 31.0):               # the left circle, the right circle
+        i0, i1 = (int(np.argmin(np.abs(tr.t - t))) for t in (t0, t0 + 1.0))
+        j0 = int(np.searchsorted(imu.t, t0, side="right"))
+        k1 = int(np.searchsorted(imu.t, t0 + 1.0, side="left")) + 1
+        pim = _preintegrate(imu, model, bias, t0, t0 + 1.0, j0, k1, (None, None), dt_all)
+        start = gtsam.NavState(gtsam.Pose3(gtsam.Rot3(euler_to_dcm(*tr.rpy[i0])), o.to_ned(tr.lat[i0], tr.lon[i0], tr.h[i0])),
+                               tr.v_n[i0])
+        nav = pim.predict(start, bias)
+        assert np.linalg.norm(nav.velocity() - tr.v_n[i1]) < 1e-4, nav.velocity() - tr.v_n[i1]
+        assert np.linalg.norm(nav.position() - o.to_ned(tr.lat[i1], tr.lon[i1], tr.h[i1])) < 5e-4
+
+
 def test_node_times_merge_duplicates_and_fill_gaps():
     gnss_t = np.array([1.0, 2.0, 2.0 + MIN_NODE_DT / 2, 3.0, 10.0, 10.0, 11.0])
     t = node_times(0.5, 14.0, gnss_t, max_spacing=1.0)
@@ -71,12 +101,6 @@ def test_node_times_merge_duplicates_and_fill_gaps():
     for tg in (1.0, 2.0, 3.0, 10.0, 11.0):
         assert np.min(np.abs(t - tg)) < 1e-12
     assert t[0] == 0.5 and t[-1] == 14.0
-
-
-def _errors_over_sigma(run, sol):
-    p_true, valid = truth_at(run, sol.t)
-    e = run.origin.to_ned(sol.lat, sol.lon, sol.h)[valid] - p_true[valid]
-    return e / sol.sigma[valid, 0:3]
 
 
 @pytest.fixture(scope="module")
@@ -103,13 +127,10 @@ def test_smoother_beats_ekf_on_simulated_runs(sim_results):
         assert sols["smoother-acc"].stats["n_acc_factors"] > 200
 
 
-def test_smoother_marginal_sigmas_are_consistent(sim_results):
-    # Normalised position errors of the fixed-lag estimate (after 30 s of convergence): their
-    # mean square per axis is ~1 for consistent marginals.
-    z = np.concatenate([_errors_over_sigma(run, sols["smoother"])[30:] for run, sols in sim_results])
-    msq = np.mean(z**2, axis=0)
-    assert np.all(msq > 0.3) and np.all(msq < 3.0), msq
-    # Smoothing must not claim more than the online estimate knew.
+def test_smoothing_claims_less_uncertainty_than_the_online_estimate(sim_results):
+    """Whether the marginals are right is tested where a band can be derived, with the smoother's
+    model equal to the truth over 100 runs (test_consistency_mc.py); here only that the fixed-lag
+    estimate, which has seen 10 s more fixes, states a smaller sigma than the online one."""
     for _, sols in sim_results:
         assert np.median(sols["smoother"].sigma[:-20, 0]) < np.median(sols["smoother-online"].sigma[:-20, 0])
 
@@ -178,7 +199,10 @@ def test_kitti_integration():
     from gnssacc.pipeline import load_source
 
     cfg = load_config("kitti")
-    run = load_source("kitti", cfg, noise="white", seed=1)
+    # Seed 7: the kitti preset was tuned on seeds 0-2. Over seeds 0, 3-6, 8, 9 the fixed-lag PRMSE
+    # was 0.47-0.59 of the EKF's (sd 0.04) and the online one 0.99-1.02: the bounds 0.75 and 1.15
+    # are four standard deviations or more away, not just inside what was measured.
+    run = load_source("kitti", cfg, noise="white", seed=7)
     ekf = score(run, run_ekf(run, cfg, "ekf")).prmse_m
     sols = run_smoother(run, cfg, "smoother-acc")
     fixed, online = score(run, sols["smoother-acc"]).prmse_m, score(run, sols["smoother-acc-online"]).prmse_m
@@ -194,13 +218,18 @@ def test_imu_still_cruise_in_an_outage_gets_no_zero_velocity_factor():
     the node rejects it, as the EKF's gate does."""
     import gnssacc
 
-    res = gnssacc.process("kitti", methods=["ekf", "smoother"], tune="none", outage="90:10", seed=1)
+    res = gnssacc.process("kitti", methods=["ekf", "smoother"], tune="none", outage="90:10", seed=7)
     stats = res.solutions["smoother"].stats
     assert stats["n_zupt_gated"] >= 1
     prmse = res.prmse()
     assert prmse["smoother"] < 0.75 * prmse["ekf"] and prmse["smoother-online"] < 1.15 * prmse["ekf"], prmse
     for m in ("smoother", "smoother-online"):
-        assert 0.5 < res.metrics["methods"][m]["stats"]["nis_pos_mean"] < 2.0
+        # The residual chi-square of a fix the estimate has used has fewer than 3 dof (here about
+        # 3 (1 - (sigma_est / sigma_fix)^2) ~ 2.4); 1 dof per fix gives a band wider than the true
+        # one at 1e-3, then widened by the preset's claimed calibration.
+        st = res.metrics["methods"][m]["stats"]
+        lo, hi = nis_band(res.solutions[m].stats["n_pos_updates"], 1, None, CALIBRATION)
+        assert lo < st["nis_pos_mean"] < hi, (m, lo, st["nis_pos_mean"], hi)
 
 
 def test_true_stops_keep_their_zero_velocity_factors():
@@ -240,13 +269,19 @@ def test_fixed_lag_smoother_is_no_worse_than_the_ekf_under_gauss_markov_fixes():
     """Same models and tuning: the fixed-lag estimate uses 10 s more fixes than the filter, so on
     average it is at least as good, and the online estimate is the filter's. Under fixes whose
     error is correlated for 60 s the gain in position is small (the window's fixes share most of
-    their error): over these 12 seeds -5.4 %, better on 10 (20 seeds: -5.5 %, 18 better), velocity
-    -50 %, online +0.3 %. A smoother whose Gauss-Markov factor had twice or half the sigma, or four
-    times the correlation time, fails (measured: +1.7 %, +4.9 %, -2.8 %; online +6.3 %, +10.5 %,
-    +3.2 %; better on 4, 5, 11 seeds)."""
-    rows = _gm_exact_model_errors()
+    their error; seeds 12-35: -6.9 %, better on all 24), in velocity large (ratio 0.33-0.59).
+
+    Bounds at a false-failure rate of 1e-3 each, on seeds 40-51 (used for nothing else), from the
+    paired per-seed differences (one-sided Student t with 11 dof): position not significantly
+    worse than the EKF's; velocity error at most 0.7 of the EKF's at the upper confidence bound;
+    online within 2 % of the EKF (a stated equivalence margin: the two differ only in
+    linearisation) at the confidence bound."""
+    rows = _gm_exact_model_errors(range(40, 52))
     fixed, online, ekf = (np.array([r[m][0] for r in rows]) for m in ("smoother-gm", "smoother-gm-online", "ekf-gm"))
-    assert fixed.mean() < 0.97 * ekf.mean(), (fixed, ekf)
-    assert np.sum(fixed < ekf) >= 9, (fixed, ekf)
-    assert abs(online.mean() / ekf.mean() - 1.0) < 0.02, (online, ekf)
-    assert all(r["smoother-gm"][1] < 0.7 * r["ekf-gm"][1] for r in rows), rows
+    mean, bound = paired_not_worse(fixed, ekf)
+    assert mean < bound, (fixed, ekf)
+    v_ratio = np.array([r["smoother-gm"][1] / r["ekf-gm"][1] for r in rows])
+    mean, bound = paired_not_worse(v_ratio, np.full_like(v_ratio, 0.7))
+    assert mean + bound < 0.0, v_ratio
+    mean, bound = paired_not_worse(online, ekf)
+    assert abs(mean) + bound < 0.02, (online, ekf)

@@ -5,6 +5,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from stat_bounds import ALPHA, CALIBRATION, nis_band, paired_not_worse
 
 import gnssacc
 from gnssacc.analysis.metrics import TRUTH_FIGURES, truth_figures
@@ -86,20 +87,26 @@ def test_sim_source_uses_the_simulator_imu_noise_only_without_tuning():
 
 
 def test_gm_methods_beat_the_white_model_on_gauss_markov_fixes():
-    """Known noise (--tune none, noise gm): the -gm methods run the profile's own Gauss-Markov model."""
-    prmse, nis = {"ekf": [], "ekf-gm": []}, []
-    for seed in range(4):
+    """Known noise (--tune none, noise gm): the -gm methods run the profile's own Gauss-Markov model.
+
+    Seeds 8-11 (seeds 0-7 were looked at: PRMSE ratio ekf-gm / ekf 0.69-0.98, NIS 0.89-1.04).
+    Bounds at 1e-3 per test: each seed's NIS in the chi-square band of its updates (1e-3 / 4 each),
+    widened by the stated calibration (the IMU has errors the filter does not model); the PRMSE
+    not significantly worse than the white model's (paired one-sided t). Four seeds cannot show
+    the gain itself at 1e-3 (per-seed scatter ~9 %)."""
+    prmse = {"ekf": [], "ekf-gm": []}
+    for seed in range(8, 12):
         res = gnssacc.process("sim:car,imu=industrial,duration=240", methods=["ekf", "ekf-gm"], tune="none",
                               noise="gm", seed=seed)
         for m in prmse:
             prmse[m].append(res.metrics["methods"][m]["prmse_m"])
-        nis.append(res.metrics["consistency"]["ekf-gm"]["nis"]["pos"])
+        c = res.metrics["consistency"]["ekf-gm"]
+        lo, hi = nis_band(c["n"]["pos"], 3, c["innovation_acf1"], CALIBRATION, ALPHA / 4)
+        assert lo < c["nis"]["pos"] < hi, (seed, lo, c["nis"]["pos"], hi)
         how = res.solutions["ekf-gm"].stats["gauss_markov"]
         assert how["source"] == "noise profile" and how["gm_sigma_m"] == [2.5, 2.5, 4.0]
-    # measured (seeds 0-3): ekf-gm NIS 0.95-1.01, ekf 0.27-0.33 (the white model's total sigma
-    # is too large for the one-step innovations); PRMSE lower on every seed
-    assert all(0.7 <= v <= 1.5 for v in nis)
-    assert np.mean(prmse["ekf-gm"]) < 0.9 * np.mean(prmse["ekf"])
+    mean, bound = paired_not_worse(prmse["ekf-gm"], prmse["ekf"])
+    assert mean < bound, prmse
 
 
 def test_gm_methods_without_parameters_is_a_clear_error():
@@ -171,18 +178,24 @@ def test_study_statistics_find_a_known_effect_and_no_effect():
 
 
 def test_verdict_controls_false_discoveries_over_many_null_cells():
-    # 60 cells without any effect: at p < 0.05 about three would "help or hurt" by chance; at a
-    # false-discovery rate of 0.05 none does, while one real -10 % cell among them is still found.
+    """240 cells without any effect, in four studies of 60. Uncorrected, the count of p < 0.05 is
+    binomial(240, 0.05): at least binom.ppf(5e-4) of them "help or hurt" by chance. At a
+    false-discovery rate of 0.05 a study of null cells claims anything with probability at most
+    0.05, so at most binom.ppf(1 - 5e-4, 4, 0.05) of the four studies do. One real -10 % cell among
+    60 null ones is still found (12 negative pairs: exact p = 2 / 4096, below 0.05 / 61)."""
     from dataclasses import replace
+
+    from scipy.stats import binom
 
     from gnssacc.analysis import study
 
-    null = [replace(e, cell=(str(k),) * 5) for k in range(60)
-            for e in study.effects(_synthetic_rows(0.0, seed=100 + k), figures=("prmse_m",))]
-    assert sum(e.p < 0.05 for e in null) >= 1     # chance "effects" uncorrected (these draws: see below)
-    assert "helps in 0, hurts in 0" in study.verdict(null)
+    null = [replace(e, cell=(str(k),) * 5) for k in range(240)
+            for e in study.effects(_synthetic_rows(0.0, seed=100 + k), figures=("prmse_m",), n_boot=200)]
+    assert sum(e.p < 0.05 for e in null) >= binom.ppf(5e-4, 240, 0.05)
+    claims = sum("helps in 0, hurts in 0" not in study.verdict(null[i:i + 60]) for i in range(0, 240, 60))
+    assert claims <= binom.ppf(1 - 5e-4, 4, 0.05), claims
     (real,) = study.effects(_synthetic_rows(-10.0), figures=("prmse_m",))
-    assert "helps in 1, hurts in 0" in study.verdict(null + [real])
+    assert "helps in 1, hurts in 0" in study.verdict(null[:60] + [real])
 
 
 def test_study_baselines():

@@ -91,15 +91,16 @@ def process(source=None, *, methods=None, config=None, preset: str | None = None
 
 
 def evaluate(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
-             show_progress: bool = False, observe: bool = True) -> "Result":
+             show_progress: bool = False, observe: bool = True, say=None) -> "Result":
     """Check, prepare, run and score ``methods`` on a loaded run (:func:`gnssacc.pipeline.compare`).
 
     ``observe``: keep the ``ekf-acc`` pass's matrices for the report's observability section
     (:attr:`Result.replay`), so that ``save(report=True)`` does not run the filter again.
+    ``say(line)``: told the preparation's findings and each method's end as they happen.
     """
     cfg = known_noise_config(cfg, run, tune)   # a sim: source with --tune none: the simulator's IMU noise
     metrics, sols, prep, replay = compare_observed(run, cfg, methods, tune=tune, show_progress=show_progress,
-                                                   observe=observe)
+                                                   observe=observe, say=say)
     return Result(prep.run, cfg, metrics, sols, prep, replay)
 
 

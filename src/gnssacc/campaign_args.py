@@ -1,5 +1,6 @@
 """From ``gnssacc batch``'s command line to a :class:`gnssacc.campaign.campaign.Campaign`: a new one, or
-the one ``--resume`` names, whose stored settings the options given must not change.
+the one ``--resume`` names, whose stored settings the options given must not change, except to add
+seeds, sources or outage patterns (:func:`gnssacc.campaign.campaign.grown`).
 
 Every ``batch`` option defaults to ``None`` (not given), so that a resume can tell the options
 given (compared with the campaign's settings) from those left out (taken from them).
@@ -11,7 +12,7 @@ from datetime import datetime
 
 from .argcheck import check_source
 from .argcheck import seeds as parse_seeds
-from .campaign.campaign import OPTION_OF, Campaign, Pattern, differing_setting, full_bag, make_settings
+from .campaign.campaign import GROWABLE, OPTION_OF, Campaign, Pattern, differing_setting, full_bag, grown, make_settings
 from .core.errors import InputError, warn_data
 from .pipeline import parse_methods
 from .sources.simspec import is_sim_spec
@@ -41,8 +42,11 @@ def campaign_from_args(args) -> Campaign:
     camp = Campaign.open(args.resume)
     for _, path in camp.settings["sources"]:
         check_source(path)
-    wanted = settings_from_args(args, camp.settings)
-    key = differing_setting(camp.settings, wanted)
+    wanted = grown(camp.settings, settings_from_args(args, camp.settings))
+    fixed = lambda d: {k: v for k, v in d.items() if k not in GROWABLE}
+    key = differing_setting(fixed(camp.settings), fixed(wanted))
+    if key is None and differing_setting(camp.settings, wanted) is not None:
+        camp.grow(wanted)   # more seeds, sources or patterns: the campaign grows, its finished tasks stay
     if key is not None:
         raise InputError("--resume", f"{camp.root} was started with other settings ({OPTION_OF[key]}: "
                                      f"{_short(camp.settings[key])} there, {_short(wanted[key])} now); resume "
@@ -70,7 +74,12 @@ def settings_from_args(args, stored: dict) -> dict:
         config=args.config or (stored.get("config") or {}).get("path"), imu_frame=given("imu_frame", "frd"),
         bag=bag, plots=not args.no_plots if args.no_plots is not None else out["plots"],
         report=args.report if args.report is not None else out["report"],
-        export=tuple(args.export) if args.export is not None else tuple(out["export"]))
+        export=_exports(args.export) if args.export is not None else tuple(out["export"]))
+
+
+def _exports(values) -> tuple:
+    """``--export``'s values (each a kind or a list of kinds, the option repeated) as kinds, once each."""
+    return tuple(dict.fromkeys(k for v in values for k in ([v] if isinstance(v, str) else v)))
 
 
 def _patterns(args) -> list[Pattern]:

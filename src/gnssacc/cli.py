@@ -16,6 +16,7 @@ from .core.errors import DataWarning, InputError
 from .core.interrupts import Terminated, raise_if_interrupted
 from .core.version import __version__
 from .sources.gnss_noise import PROFILES
+from .sources.sim_scenarios import SCENARIOS
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -56,6 +57,9 @@ def _run_parser(sub) -> None:
                    help="auto (default): identify every IMU noise key the config does not set (and the GNSS sigma "
                         "scale) from the recording itself, write tuned.toml; none: use the configuration as given")
     r.add_argument("--imu-frame", choices=["frd", "flu"], default="frd", help="axes of a CSV run's imu.csv")
+    r.add_argument("--nhc", choices=["on", "off"], default=None,
+                   help="the non-holonomic constraint in every method (default: [nhc] enabled, on); off: IMU-only "
+                        "bridging of GNSS outages, for comparison")
     _gnss_argument(r)
     _bag_arguments(r)
     r.add_argument("--time-source", choices=["header", "receive"], default="header",
@@ -67,13 +71,17 @@ def _run_parser(sub) -> None:
     r.add_argument("--overwrite", action="store_true",
                    help="let --out replace a file or a non-empty folder that is not a gnssacc result (and everything "
                         "in it); a previous gnssacc result is always replaced as a whole")
-    r.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    r.add_argument("--plots", choices=["all", "basic", "none"], default=None,
+                   help="PNG figures: basic (default: summary, trajectory, errors), all (also velocity/attitude, "
+                        "NIS, biases, sigmas; the default with --report), none")
+    r.add_argument("--no-plots", action="store_const", const="none", dest="plots", help="the same as --plots none")
     r.add_argument("--report", action="store_true",
-                   help="also write report.html (table, figures, per-state sigmas, data-quality findings)")
-    r.add_argument("--export", choices=["tum", "bag", "ros1bag"], action="append", default=[],
-                   help="also export trajectories (repeatable): 'tum' writes trajectory_<id>.tum and truth.tum for "
-                        "evo; 'bag' a ROS 2 bag (trajectories/) and 'ros1bag' a ROS 1 bag (trajectories.bag) of "
-                        "nav_msgs/Odometry with covariance, one topic per method")
+                   help="also write report.html (table, figures, statistics, consistency, data-quality findings)")
+    r.add_argument("--export", type=_export_list, action="append", default=[], metavar="tum,bag,ros1bag",
+                   help="also export trajectories (a comma list, or the option repeated): 'tum' writes "
+                        "trajectory_<id>.tum and truth.tum for evo (x east, y north, z up); 'bag' a ROS 2 bag "
+                        "(trajectories/) and 'ros1bag' a ROS 1 bag (trajectories.bag) of nav_msgs/Odometry with "
+                        "covariance, one topic per method")
 
 
 def _bench_parser(sub) -> None:
@@ -114,8 +122,7 @@ def _tool_parsers(sub) -> None:
 
     s = sub.add_parser("sim", help="write a simulated run (with truth) as a CSV run directory")
     s.add_argument("out", help="output directory")
-    s.add_argument("--scenario", default="car",
-                   help="static, straight, turns, ugv, car, ugv-slow or car-city (default car)")
+    s.add_argument("--scenario", default="car", help=f"{', '.join(SCENARIOS)} (default car)")
     s.add_argument("--duration", type=float, default=300.0, help="seconds (default 300)")
     s.add_argument("--grade", default="industrial", help="IMU grade: perfect, consumer, industrial, tactical")
     s.add_argument("--imu-rate", type=float, default=100.0, help="Hz (default 100)")
@@ -139,7 +146,9 @@ def _batch_parser(sub) -> None:
                                    "and OUT/summary.md are rewritten as results arrive. Runs on a local Dask "
                                    "cluster (all cores), --jobs N processes, or an existing cluster (--scheduler). "
                                    "Resumable: 'gnssacc batch --resume OUT' runs what is missing.")
-    b.add_argument("sources", nargs="*", metavar="SOURCE", help="'kitti', bags, CSV run directories")
+    b.add_argument("sources", nargs="*", metavar="SOURCE",
+                   help="'kitti', simulated runs 'sim:SCENARIO[,key=value...]' (e.g. sim:ugv,duration=300), "
+                        "bags, CSV run directories")
     b.add_argument("--methods", default=None, help="comma-separated method ids (default: all four)")
     b.add_argument("--seeds", default=None, help="GNSS noise seeds, e.g. 0-9 or 1,4,7 (default 0)")
     b.add_argument("--noise", choices=list(PROFILES), default=None,
@@ -159,7 +168,8 @@ def _batch_parser(sub) -> None:
     b.add_argument("--gnss-from-truth", type=float, default=None, metavar="RATE_HZ")
     b.add_argument("--no-plots", action="store_true", default=None, help="skip the PNG figures")
     b.add_argument("--report", action="store_true", default=None, help="also write report.html per task")
-    b.add_argument("--export", choices=["tum", "bag", "ros1bag"], action="append", default=None)
+    b.add_argument("--export", type=_export_list, action="append", default=None, metavar="tum,bag,ros1bag",
+                   help="trajectory exports per task, as for 'run' (a comma list, or repeated)")
     b.add_argument("--out", default=None, help="campaign folder (default ./gnssacc-out/campaign-<timestamp>/)")
     b.add_argument("--resume", default=None, metavar="CAMPAIGN",
                    help="finish a campaign: run the tasks without a result (its settings are stored in it; "
@@ -169,6 +179,24 @@ def _batch_parser(sub) -> None:
                    help="local worker processes (default: every core; 1: in this process, without Dask)")
     b.add_argument("--scheduler", default=None, metavar="tcp://HOST:8786",
                    help="run on this Dask cluster (it must see the recordings and the campaign folder)")
+
+
+EXPORTS = ("tum", "bag", "ros1bag")
+
+
+def _export_list(text: str) -> list[str]:
+    """``--export``'s value: one kind or a comma list of them (argparse's error names a bad one)."""
+    kinds = [k.strip() for k in text.split(",") if k.strip()]
+    bad = [k for k in kinds if k not in EXPORTS]
+    if bad or not kinds:
+        raise argparse.ArgumentTypeError(f"{', '.join(bad) or repr(text)}: expected {', '.join(EXPORTS)} "
+                                         f"(a comma list, or the option repeated)")
+    return kinds
+
+
+def flat_exports(values) -> list[str]:
+    """The kinds of ``--export``'s values (each a list from :func:`_export_list`), once each, in order."""
+    return list(dict.fromkeys(k for v in values or () for k in ([v] if isinstance(v, str) else v)))
 
 
 def _bag_arguments(p: argparse.ArgumentParser) -> None:
@@ -196,8 +224,12 @@ def _cmd_inspect(args) -> int:
     if not path.exists():
         raise InputError(args.bag, "no such file or directory")
     cfg = load_config(None, args.config)
-    print(inspect_bag(path, imu_topic=args.imu_topic, gnss_topic=args.gnss_topic, truth_topic=args.truth_topic,
-                      odom_topic=args.odom_topic, fix_mappings=cfg["bag"]["fix_mappings"]))
+    text = inspect_bag(path, imu_topic=args.imu_topic, gnss_topic=args.gnss_topic, truth_topic=args.truth_topic,
+                       odom_topic=args.odom_topic, fix_mappings=cfg["bag"]["fix_mappings"])
+    listing, _, problem = text.partition("\ngnssacc cannot pick the topics: ")
+    print(listing)
+    if problem:   # the listing helps choose; the run would be refused: say so and exit 2
+        raise InputError(args.bag, f"cannot pick the topics: {problem}")
     return 0
 
 
@@ -241,55 +273,66 @@ def _run_locked(args, stack, held) -> int:
     target = _lock_out(args.out, args, stack, held) if args.out else None
     methods = parse_methods(args.methods)
     cfg = configure(args.source, preset=args.preset, config=args.config)
+    if args.nhc is not None:
+        cfg = cfg.with_values({"nhc": {"enabled": args.nhc == "on"}}, f"--nhc {args.nhc}")
     run = load(args.source, config=cfg, noise=args.noise, seed=args.seed, outage=args.outage,
                outage_every=args.outage_every, imu_frame=args.imu_frame, gnss=args.gnss, imu_topic=args.imu_topic,
                gnss_topic=args.gnss_topic, truth_topic=args.truth_topic, time_source=args.time_source,
                gnss_from_truth_hz=args.gnss_from_truth, odom_topic=args.odom_topic)
     target = target or _lock_out(default_out_dir(run), args, stack, held)
-    res = evaluate(run, cfg, methods, tune=args.tune, show_progress=True, observe=args.report)
+    console = _Console()
+    console.say(f"{run.name}: {run.duration_s:.1f} s, {len(run.imu)} IMU samples, {len(run.gnss)} GNSS fixes"
+                + (f", noise {run.meta['noise']} seed {run.meta['seed']}" if "noise" in run.meta else "")
+                + f"; config: {', '.join(cfg.sources)}")
+    res = evaluate(run, cfg, methods, tune=args.tune, show_progress=True, observe=args.report, say=console.say)
     raise_if_arrived()   # a signal that compiled code swallowed interrupts all the same
     if not res.solutions:   # nothing to show or write
         reasons = "; ".join(f"{m}: {r}" for m, r in failed_methods(res.metrics).items())
         print(f"gnssacc: error: every method failed ({reasons}); {target.kept()}", file=sys.stderr)
         return 1
-    gone = 0
-    try:   # the table first; then the files and figures
-        _print_summary(res.run, cfg, res.metrics, res.prepared)
-    except BrokenPipeError:   # the reader went away (``| head``): the results are still written
-        gone = _stdout_gone()
-    out = res.write(target, plots=not args.no_plots, report=args.report, export=args.export)
+    console.show(_print_summary, res.metrics, res.prepared.cfg)   # the table first; then the files and figures
+    out = res.write(target, plots=args.plots or True, report=args.report, export=flat_exports(args.export))
     raise_if_arrived()
-    if not gone:
-        print(f"results: {out}", flush=True)
-    return gone
+    console.say(f"results: {out}" + (" (replaced the earlier result there)" if target.had_result else ""))
+    return console.gone
 
 
-def _print_summary(run, cfg, metrics: dict, prep) -> None:
+class _Console:
+    """The run's lines on stdout, each printed at once (results as they come). A reader that went
+    away (``| head``) ends the printing, not the run: its results are still written, and
+    :attr:`gone` is the exit code to report then (141, as a shell reports SIGPIPE; else 0)."""
+
+    def __init__(self):
+        self.gone = 0
+
+    def show(self, printer, *args) -> None:
+        """``printer(*args)``, which prints, unless the reader went away (before or now)."""
+        if self.gone:
+            return
+        try:
+            printer(*args)
+            sys.stdout.flush()
+        except BrokenPipeError:
+            self.gone = _stdout_gone()
+
+    def say(self, line: str) -> None:
+        """One line."""
+        self.show(print, line)
+
+
+def _print_summary(metrics: dict, cfg) -> None:
+    """The ground-vehicle aids' line (``cfg``: the tuned configuration), the table, and the
+    compile time when something was compiled (before the files are written: where they went is
+    printed after them)."""
+    from .estimators.kernels import start_background
+    from .outputs.aids import aids_line
     from .outputs.report import format_table
 
-    print(f"{run.name}: {run.duration_s:.1f} s, {len(run.imu)} IMU samples, {len(run.gnss)} GNSS fixes"
-          + (f", noise {run.meta['noise']} seed {run.meta['seed']}" if "noise" in run.meta else "")
-          + f"; config: {', '.join(cfg.sources)}")
-    for line in _quality_lines(metrics):
-        print(line)
-    print(prep.stationary.summary())
-    print(f"start: {prep.init.how}")
-    if prep.tuning is not None:
-        print(prep.tuning.line())
+    print(aids_line(metrics, cfg))
     print()
     print(format_table(metrics))
-    print(f"\n(one-off JIT compilation {metrics['jit_compile_s']:.2f} s, not included in wall times)", flush=True)
-
-
-def _quality_lines(metrics: dict) -> list[str]:
-    spans = metrics["quality"].get("spans", [])
-    if not spans:
-        return ["IMU data quality: no suspect spans"]
-    kinds: dict[str, list] = {}
-    for s in spans:
-        kinds.setdefault(s["kind"], []).append(s)
-    parts = [f"{len(v)} {k} ({sum(s['t_end'] - s['t_start'] for s in v):.1f} s)" for k, v in kinds.items()]
-    return ["IMU data quality: " + ", ".join(parts) + " - process noise inflated over these spans"]
+    if start_background(notice=None).compiling:   # a first run: the kernels were compiled, not loaded
+        print(f"\n(one-off JIT compilation {metrics['jit_compile_s']:.2f} s, not included in wall times)")
 
 
 def _cmd_bench(args) -> int:

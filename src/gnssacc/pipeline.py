@@ -10,7 +10,10 @@ from datetime import datetime
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
 from .analysis.consistency import assess, check_gm_model, check_model
+from .analysis.errorstats import error_statistics, fix_statistics
 from .analysis.metrics import gnss_score, score
 from .core.config import RunConfig, load_config
 from .core.config_docs import resolved_toml
@@ -23,8 +26,9 @@ from .estimators import kernels
 from .estimators.ekf import estimate as estimate_ekf
 from .estimators.ekf import run_ekf
 from .estimators.settings import EkfSettings
+from .outputs.figures import PLOT_SETS, write_figures
 from .outputs.outdir import ResultDir
-from .outputs.report import format_table, metrics_dict, plot_errors, plot_trajectory, write_json, write_trajectory_csv
+from .outputs.report import format_table, group_warnings, metrics_dict, quality_line, write_json, write_trajectory_csv
 from .prepare.prepared import Prepared, checked
 from .prepare.prepared import prepare as prepare_recording
 from .sources.gnss_noise import apply_outages, parse_outages
@@ -33,7 +37,7 @@ from .sources.simspec import is_sim_spec, load_sim
 
 def _ekf(prep: Prepared, method: str, show_progress: bool, observer=None) -> dict[str, NavSolution]:
     return {method: estimate_ekf(prep, EkfSettings.from_config(prep.cfg), method, show_progress=show_progress,
-                                 observer=observer)}
+                                 observer=observer, record_innovations=True)}   # the NIS over time of nis.png
 
 
 def _smoother(prep: Prepared, method: str, show_progress: bool) -> dict[str, NavSolution]:
@@ -226,7 +230,8 @@ def load_configured(source, cfg, noise, seed, outage, outage_every, imu_frame, g
 
 def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
                 prep: Prepared | None = None, show_progress: bool = False,
-                failures: dict[str, str] | None = None, observers: dict | None = None) -> dict[str, NavSolution]:
+                failures: dict[str, str] | None = None, observers: dict | None = None,
+                say: Callable[[str], None] | None = None) -> dict[str, NavSolution]:
     """Run each method on the same run, from the same identified start and noise.
 
     Parameters
@@ -247,6 +252,8 @@ def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: s
     observers : dict, optional
         ``{method: gnssacc.estimators.ekf.EkfObserver}`` watching an EKF method's own pass (e.g. the
         :class:`gnssacc.analysis.observability.EpochCollector` of the report's observability section).
+    say : callable, optional
+        ``say(line)`` is told each method's end as it happens (``ekf: done in 0.12 s``, or its failure).
 
     Returns
     -------
@@ -258,8 +265,12 @@ def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: s
     for m in methods:
         try:
             extra = {"observer": observers[m]} if observers and m in observers else {}
-            out.update(METHODS[m](prep, m, show_progress, **extra))
+            got = METHODS[m](prep, m, show_progress, **extra)
+            out.update(got)
             release_free_memory()   # one method's work arrays, before the next one's
+            if say:
+                say(f"{m}: done in {max(s.runtime_s for s in got.values()):.2f} s"
+                    + (f" ({', '.join(got)})" if len(got) > 1 else ""))
         except InputError:
             raise
         except Exception as exc:  # an estimator failure costs that method only
@@ -267,6 +278,8 @@ def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: s
             if failures is None:
                 raise
             failures[m] = failure_reason(exc)
+            if say:
+                say(f"{m}: failed ({failures[m]})")
     return out
 
 
@@ -287,13 +300,16 @@ def common_window(run: RecordedRun, sols: dict[str, NavSolution]) -> tuple[float
 
 
 def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
-            show_progress: bool = False, observers: dict | None = None) -> tuple[dict, dict, Prepared]:
+            show_progress: bool = False, observers: dict | None = None,
+            say: Callable[[str], None] | None = None) -> tuple[dict, dict, Prepared]:
     """Prepare the recording, run and score the methods over a common window, with consistency figures.
 
     A method whose estimator fails is reported (a ``gnssacc: warning:`` naming it, and
     ``status: "failed"`` with ``error`` in the metrics) without costing the others; it is up
     to the caller what to do when every method failed. ``observers`` (``{method: observer}``)
-    watch EKF methods' own passes (:func:`run_methods`).
+    watch EKF methods' own passes (:func:`run_methods`). ``say(line)``, when given, is told the
+    preparation's findings (IMU data quality, stationary spans, start, tuning) as soon as they are
+    known and each method's end (:func:`run_methods`), so a caller can print results as they come.
 
     Returns
     -------
@@ -305,6 +321,8 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
         The shared start, stationary spans and (tuned) configuration.
     """
     prep = prepare(run, cfg, tune, methods)
+    for line in preparation_lines(prep) if say else ():
+        say(line)
     t = time.perf_counter()
     models = {"": check_model(prep)}   # the final noise model against the recording
     seconds = {**prep.seconds, "model_check_s": time.perf_counter() - t}
@@ -314,23 +332,26 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
     run = prep.run   # as the input checks left it: repaired units, the measured clock offset applied
     failed: dict[str, str] = {}
     sols = run_methods(run, cfg, methods, prep=prep, show_progress=show_progress, failures=failed,
-                       observers=observers)
+                       observers=observers, say=say)
     window = scored_window(run, sols)
     raw = gnss_score(run, window)
+    raw.errors = fix_statistics(run, window)
     scores, cons = {}, {}
     for m, s in list(sols.items()):
         try:  # scoring one solution must not cost the others either
             scores[m] = score(run, s, window)
+            scores[m].errors = error_statistics(run, s, window)
+            fixes = scores[m].errors.get("at_fixes") or {}
             judged, model = _noise_model_of(prep, m, sols, models)
-            cons[m] = assess(judged.run, s, scores[m].prmse_m, raw.prmse_m, model, judged.cfg.gnss_gm_sigma)
+            cons[m] = assess(judged.run, s, fixes.get("prmse_m"), fixes.get("gnss_prmse_m"), model,
+                             judged.cfg.gnss_gm_sigma, errors=scores[m].errors, n_fixes=fixes.get("n"))
         except Exception as exc:
             raise_if_interrupted(exc)
             failed[m] = failure_reason(exc)
             del sols[m]
             scores.pop(m, None)
-            continue
-        for text in cons[m].warnings:
-            warn_data(m, text)
+    for who, text in group_warnings([(m, w) for m, c in cons.items() for w in c.warnings]):
+        warn_data(who, text)
     for m, reason in failed.items():
         warn_data(m, f"failed: {reason}; the other methods' results are kept")
     extra = {"jit_compile_s": jit_s, "identify_s": seconds, "quality": prep.quality.to_dict(),
@@ -338,11 +359,21 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
              "truth_coverage": truth_coverage(run),
              "coverage": {m: _coverage(run, s) for m, s in sols.items()},
              "consistency": {m: c.to_dict() for m, c in cons.items()},
-             "init": prep.init.how, "stationary": prep.stationary.to_dict(),
+             "init": prep.init.how, "start": start_dict(prep.init), "stationary": prep.stationary.to_dict(),
+             "input_checks": [f.to_dict() for f in prep.checks],
              "model_check": models[""].to_dict(),
              "model_check_gm": models["gm"].to_dict() if "gm" in models else None,
              "tuning": prep.tuning.to_dict() if prep.tuning is not None else None}
     return metrics_dict(run, sols, scores, raw, extra, failed), sols, prep
+
+
+def start_dict(init) -> dict:
+    """The start's yaw and what it rests on (``metrics.json`` ``start``; the table says when it is
+    undetermined)."""
+    why = ("the vehicle never turned or accelerated enough to tell it" if init.yaw_evidence == "undetermined"
+           else "")
+    return {"yaw_deg": float(np.degrees(init.rpy[2])), "yaw_sigma_deg": float(np.degrees(init.sigma_att_rad[2])),
+            "yaw_evidence": init.yaw_evidence, "yaw_determined": bool(init.yaw_determined), "why": why}
 
 
 def _noise_model_of(prep: Prepared, sid: str, sols: dict, models: dict):
@@ -395,6 +426,13 @@ def _coverage(run: RecordedRun, sol: NavSolution) -> dict:
     return {"first_s": a, "last_s": b, "fraction": (b - a) / run.duration_s if run.duration_s > 0 else 1.0}
 
 
+def preparation_lines(prep: Prepared) -> list[str]:
+    """What the preparation found, one line each: IMU data quality, stationary spans, the start and
+    (``--tune auto``) the identified noise."""
+    lines = [quality_line(prep.quality.to_dict()), prep.stationary.summary(), f"start: {prep.init.how}"]
+    return lines + ([prep.tuning.line()] if prep.tuning is not None else [])
+
+
 def compare_and_write(run: RecordedRun, cfg: RunConfig, methods: list[str], target: ResultDir, *,
                       tune: str | None = None, plots: bool = True, report: bool = False, export: tuple = (),
                       extra_files: Callable[[dict], dict[str, str]] | None = None,
@@ -415,7 +453,7 @@ def compare_and_write(run: RecordedRun, cfg: RunConfig, methods: list[str], targ
 
 
 def compare_observed(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
-                     show_progress: bool = False, observe: bool = True):
+                     show_progress: bool = False, observe: bool = True, say: Callable[[str], None] | None = None):
     """:func:`compare`, keeping (with ``observe``, when ``ekf-acc`` runs) that pass's matrices at
     every GNSS epoch for the report's observability section.
 
@@ -431,7 +469,7 @@ def compare_observed(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tu
 
         collector = EpochCollector(False)
     metrics, sols, prep = compare(run, cfg, methods, tune=tune, show_progress=show_progress,
-                                   observers={"ekf-acc": collector} if collector else None)
+                                   observers={"ekf-acc": collector} if collector else None, say=say)
     replay = collector.replay("ekf-acc", sols["ekf-acc"]) if collector and "ekf-acc" in sols else None
     return metrics, sols, prep, replay
 
@@ -493,14 +531,26 @@ def write_outputs(out_dir: Path, run: RecordedRun, sols: dict[str, NavSolution],
                                                                 report=report, export=export, tuned_toml=tuned_toml))
 
 
+def plot_set(plots: bool | str | None, report: bool = False) -> str:
+    """The ``--plots`` choice (:data:`gnssacc.outputs.figures.PLOT_SETS`) from ``plots``: a name, or
+    ``True``/``None`` for the default (``basic``; ``all`` with the report), ``False`` for ``none``."""
+    if plots is False:
+        return "none"
+    if plots is True or plots is None:
+        return "all" if report else "basic"
+    if plots not in PLOT_SETS:
+        raise InputError("--plots", f"{plots!r}: expected one of {', '.join(PLOT_SETS)}")
+    return plots
+
+
 def write_result_files(folder: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict,
-                       cfg: RunConfig, plots: bool = True, report: bool = False, export: tuple = (),
+                       cfg: RunConfig, plots: bool | str = True, report: bool = False, export: tuple = (),
                        tuned_toml: str | None = None, replay=None) -> None:
     """Write every output file into ``folder`` (a fresh folder; see :func:`write_outputs`).
 
     ``trajectory_<id>.csv`` per solution, ``config.toml``, ``table.txt``, ``metrics.json`` (with
-    the failed methods too); ``plots`` adds ``errors.png`` (with truth) and ``trajectory.png``;
-    ``report`` adds ``report.html`` (with ``sigmas.png``); ``export`` may hold ``"tum"``
+    the failed methods too); ``plots`` (``"none"``, ``"basic"``, ``"all"``, or a bool: :func:`plot_set`)
+    the figures of :mod:`gnssacc.outputs.figures`; ``report`` adds ``report.html``; ``export`` may hold ``"tum"``
     (``trajectory_<id>.tum`` and the truth's, for ``evo``), ``"bag"`` (``trajectories/``, a ROS 2
     bag of ``nav_msgs/Odometry``) and ``"ros1bag"`` (``trajectories.bag``); ``tuned_toml`` is written as
     ``tuned.toml`` (the identified noise, reusable with ``--config``); ``replay`` is the
@@ -513,21 +563,18 @@ def write_result_files(folder: Path, run: RecordedRun, sols: dict[str, NavSoluti
     (folder / "config.toml").write_text(resolved_toml(cfg))
     if tuned_toml is not None:
         (folder / "tuned.toml").write_text(tuned_toml)
-    if plots:
-        if run.truth is not None:  # errors need a reference
-            plot_errors(run, sols, folder / "errors.png")
-        plot_trajectory(run, sols, folder / "trajectory.png")
+    drawn = write_figures(folder, run, sols, metrics, plot_set(plots, report))
     if "tum" in export:
         from .outputs.export import write_truth_tum, write_tum
         for mid, sol in sols.items():
             write_tum(sol, run, folder / f"trajectory_{mid}.tum")
         if run.truth is not None:
-            write_truth_tum(run, folder)
+            write_truth_tum(run, folder, sols, metrics.get("scored_window_s"))
     for kind in set(export) & {"bag", "ros1bag"}:
         from .outputs.odombag import BAG_EXPORTS, write_odometry_bag
         write_odometry_bag(sols, run, folder / BAG_EXPORTS[kind])
     if report:
         from .outputs.htmlreport import write_html_report
-        write_html_report(folder, run, sols, metrics, cfg, replay=replay)
+        write_html_report(folder, run, sols, metrics, cfg, replay=replay, figures=drawn)
     (folder / "table.txt").write_text(format_table(metrics) + "\n")
     write_json(metrics, folder / "metrics.json")

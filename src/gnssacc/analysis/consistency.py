@@ -28,8 +28,12 @@ Warnings (``gnssacc: warning: <method>: ...``) are raised when
   (binomial tail probability below :data:`TAIL_ALARM`; white innovations only): the fixes carry
   outliers (multipath, jumps) that the noise model does not cover, and the stated uncertainty
   averages over them;
-* the fix residual ratio exceeds :data:`FIX_RATIO_MAX`, or, with truth, the method's PRMSE
-  exceeds that of the raw fixes by more than :data:`WORSE_MARGIN`;
+* the fix residual ratio exceeds :data:`FIX_RATIO_MAX`, or, with truth, the method's PRMSE at the
+  raw fixes' epochs exceeds that of the fixes at the same epochs by more than :data:`WORSE_MARGIN`
+  (like for like: fixes exist outside GNSS outages only, so a method's outage errors never count),
+  or, within that margin, is no lower (the estimate adds nothing over the fixes);
+* with truth, the position or attitude NEES per dof leaves its chi-square band
+  (:func:`gnssacc.analysis.errorstats.nees_band`; the warning names the axes outside theirs);
 * the configured white IMU noise is below what the IMU shows at rest by more than
   :data:`REST_FACTOR` (:func:`rest_noise_findings`). This needs no innovations, so it also catches
   an optimistic model whose innovations cannot show it (a tactical IMU beside 3 m fixes).
@@ -72,9 +76,12 @@ REST_FACTOR = 2.0
 #: Heavy tails are reported when the count beyond the bound has a binomial tail probability
 #: below this under Gaussian errors (and at least 3 are beyond): a false alarm once in 10,000 runs.
 TAIL_ALARM = 1e-4
+#: Table columns a warning can be about: the NIS, the comparison with the raw fixes, the NEES.
+COLUMNS = ("nis", "fixes", "nees")
 #: Update kinds and their names in messages.
-KIND_NAMES = {"pos": "position", "acc": "acceleration", "zupt": "zero-velocity", "zaru": "zero-rate"}
-_DOF = {"pos": 3, "acc": 3, "zupt": 3, "zaru": 3}
+KIND_NAMES = {"pos": "position", "acc": "acceleration", "zupt": "zero-velocity", "zaru": "zero-rate",
+              "nhc": "non-holonomic", "odo": "wheel-odometry"}
+_DOF = {"pos": 3, "acc": 3, "zupt": 3, "zaru": 3, "nhc": 2, "odo": 1}
 
 
 def correlated(acf1: float | None, n: int) -> bool:
@@ -124,10 +131,16 @@ class Consistency:
     fix_ratio: float | None
     acf1: float | None = None
     warnings: list = field(default_factory=list)
+    flags: list = field(default_factory=list)
+
+    def add(self, text: str, column: str) -> None:
+        """Add a warning about the figure in table column ``column`` (:data:`COLUMNS`)."""
+        self.warnings.append(text)
+        self.flags.append(column)
 
     def to_dict(self) -> dict:
         return {"nis": self.nis, "n": self.n, "fix_residual_ratio": self.fix_ratio, "innovation_acf1": self.acf1,
-                "warnings": self.warnings}
+                "warnings": self.warnings, "flags": self.flags}
 
 
 @dataclass
@@ -284,10 +297,17 @@ def check_gm_model(prep, baseline: ModelCheck | None, ekf_gm: NavSolution | None
 
 
 def assess(run, sol: NavSolution, prmse_m: float | None = None, gnss_prmse_m: float | None = None,
-           model: ModelCheck | None = None, gm_sigma: np.ndarray | None = None) -> Consistency:
-    """Consistency figures and warnings of one solution (``prmse_m`` / ``gnss_prmse_m``: with truth;
-    ``model``: the run's noise-model check, reported for methods whose own figures cannot show it;
-    ``gm_sigma``: the modelled Gauss-Markov part of the fix errors [m])."""
+           model: ModelCheck | None = None, gm_sigma: np.ndarray | None = None, errors: dict | None = None,
+           n_fixes: int | None = None) -> Consistency:
+    """Consistency figures and warnings of one solution.
+
+    ``prmse_m`` / ``gnss_prmse_m``: with truth, the solution's and the raw fixes' PRMSE at the same
+    ``n_fixes`` epochs (the fix epochs: :func:`gnssacc.analysis.errorstats.at_fixes`; never a method's
+    score over its outages against the fixes', which exist outside them only); ``model``: the run's
+    noise-model check, reported for methods whose own figures cannot show it; ``gm_sigma``: the
+    modelled Gauss-Markov part of the fix errors [m]; ``errors``: the solution's
+    :func:`gnssacc.analysis.errorstats.error_statistics`, for the NEES warnings. Each warning is
+    flagged with the table column it is about (:attr:`Consistency.flags`)."""
     st = sol.stats
     nis = {k: st.get(f"nis_{k}_mean") for k in _DOF}
     n = {k: int(st.get(f"n_{k}_updates", 0) or 0) for k in _DOF}
@@ -296,29 +316,60 @@ def assess(run, sol: NavSolution, prmse_m: float | None = None, gnss_prmse_m: fl
         if value is None or n[kind] == 0:
             continue
         lo, hi = band(n[kind], _DOF[kind])
-        if kind in ("zupt", "zaru"):
-            lo = 0.0   # pseudo-measurements: a chosen, conservative noise
+        if kind in ("zupt", "zaru", "nhc"):
+            lo = 0.0   # pseudo-measurements: a conservative noise (the constraint's default) loses no trust
         if not lo <= value <= hi:
             what = ("its stated uncertainty is too small: its errors are larger than it thinks" if value > hi else
                     "its stated uncertainty is too large: it discards information")
-            c.warnings.append(f"{KIND_NAMES[kind]} NIS per dof {value:.2f} outside the consistent band "
+            c.add(f"{KIND_NAMES[kind]} NIS per dof {value:.2f} outside the consistent band "
                               f"[{lo:.2f}, {hi:.2f}] ({n[kind]} updates): {what}; check the noise configuration "
-                              f"(--tune auto identifies it from the recording)")
+                              f"(--tune auto identifies it from the recording)", "nis")
     if correlated(c.acf1, n["pos"]):
-        c.warnings.append(f"its position innovations are correlated in time (lag-1 autocorrelation {c.acf1:.2f} > "
+        c.add(f"its position innovations are correlated in time (lag-1 autocorrelation {c.acf1:.2f} > "
                           f"{ACF_MAX}): the model misses a slowly varying error (IMU noise set too low, or "
-                          f"time-correlated GNSS errors not modelled), so its stated uncertainty is not to be trusted")
-    tails = heavy_tails(int(st.get("n_pos_beyond", 0) or 0), n["pos"], "its", c.acf1) if c.acf1 is not None else None
+                          f"time-correlated GNSS errors not modelled), so its stated uncertainty is not to be trusted",
+              "nis")
+    tails = heavy_tails(int(st.get("n_pos_beyond", 0) or 0), n["pos"], "the EKF's", c.acf1) if c.acf1 is not None else None
     if tails:
-        c.warnings.append(tails)
+        c.add(tails, "nis")
     if model is not None and c.acf1 is None:   # not an EKF: its own figures cannot see the model
-        c.warnings.extend(model.warnings())
+        for text in model.warnings():
+            c.add(text, "nis")
     if model is not None:   # no method's own figures can see it
-        c.warnings.extend(model.rest)
+        for text in model.rest:
+            c.add(text, "nis")
     if c.fix_ratio is not None and c.fix_ratio > FIX_RATIO_MAX:
-        c.warnings.append(f"its positions are as far from the GNSS fixes as an independent estimate no better "
+        c.add(f"its positions are as far from the GNSS fixes as an independent estimate no better "
                           f"than them would be (RMS normalised residual {c.fix_ratio:.2f} > {FIX_RATIO_MAX:.2f}): it "
-                          f"does no better than the raw fixes it is fed")
+                          f"does no better than the raw fixes it is fed", "fixes")
     if prmse_m is not None and gnss_prmse_m is not None and prmse_m > (1.0 + WORSE_MARGIN) * gnss_prmse_m:
-        c.warnings.append(f"PRMSE {prmse_m:.2f} m is worse than the raw fixes' {gnss_prmse_m:.2f} m against the truth")
+        c.add(f"PRMSE {prmse_m:.2f} m at the {n_fixes} raw fix epochs is worse than the raw fixes' "
+              f"{gnss_prmse_m:.2f} m at the same epochs (against the truth)", "fixes")
+    elif prmse_m is not None and gnss_prmse_m is not None and prmse_m >= gnss_prmse_m:
+        c.add(f"PRMSE {prmse_m:.2f} m at the {n_fixes} raw fix epochs is no better than the raw fixes' "
+              f"{gnss_prmse_m:.2f} m at the same epochs (within {100 * WORSE_MARGIN:.0f} %): it adds nothing over "
+              f"the fixes on this recording", "fixes")
+    for text in nees_warnings(errors or {}):
+        c.add(text, "nees")
     return c
+
+
+def nees_warnings(stats: dict) -> list[str]:
+    """One warning per NEES (position, attitude) of :func:`gnssacc.analysis.errorstats.error_statistics`
+    outside its band, naming the axes outside theirs and which way each is off."""
+    out = []
+    for key, what in (("nees_position", "position"), ("nees_attitude", "attitude")):
+        n = stats.get(key)
+        if not n or not (n["pooled_outside"] or n["outside"]):
+            continue
+        lo, hi = n["band"]
+        axes = ", ".join(f"{a} {v['value']:.1f}" for a, v in n["per_axis"].items())
+        above = [a for a in n["outside"] if n["per_axis"][a]["value"] > n["per_axis"][a]["band"][1]]
+        below = [a for a in n["outside"] if a not in above]
+        if not above and not below:
+            above, below = (["pooled"], []) if n["value"] > hi else ([], ["pooled"])
+        says = ([f"{', '.join(above)}: errors larger than the stated sigma says"] if above else []) + \
+               ([f"{', '.join(below)}: stated sigma larger than the errors (too cautious)"] if below else [])
+        out.append(f"{what} NEES per dof {n['value']:.1f} against the truth is outside its chi-square band "
+                   f"[{lo:.1f}, {hi:.1f}] (per axis {axes}); {'; '.join(says)}")
+    return out

@@ -36,6 +36,9 @@ class Score:
         Roll, pitch, yaw RMSE [deg] when the truth has attitude.
     truth : dict
         :func:`truth_figures` (``None`` values where the truth lacks what a figure needs).
+    errors : dict
+        The evo-style statistics (:func:`gnssacc.analysis.errorstats.error_statistics` for a
+        solution, :func:`gnssacc.analysis.errorstats.fix_statistics` for the raw fixes).
     """
 
     prmse_m: float | None
@@ -44,6 +47,7 @@ class Score:
     n_epochs: int
     rpy_rmse_deg: list | None = None
     truth: dict = field(default_factory=dict)
+    errors: dict = field(default_factory=dict)
 
 
 def truth_at(run: RecordedRun, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

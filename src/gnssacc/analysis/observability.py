@@ -272,8 +272,9 @@ def _euler_T(J: np.ndarray) -> np.ndarray:
 
 
 def _euler_var(P: np.ndarray, J: np.ndarray) -> np.ndarray:
-    """Diagonal of P with the attitude block mapped to Euler-angle errors."""
-    d = np.diag(P).copy()
+    """Diagonal of P's 15 reported states (a filter with the three Gauss-Markov GNSS error states
+    has 18; those come after them and are left out), the attitude block mapped to Euler-angle errors."""
+    d = np.diag(P)[:15].copy()
     d[ATT] = np.diag(J @ P[ATT, ATT] @ J.T)
     return np.maximum(d, 0.0)
 

@@ -25,7 +25,7 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..core.errors import DataWarning, InputError
+from ..core.errors import DataWarning, InputError, warn_data
 from ..core.interrupts import raise_if_interrupted
 from ..core.progress import CampaignProgress
 from ..outputs.outdir import ResultDir
@@ -33,6 +33,7 @@ from ..pipeline import compare, compare_and_write, configure, failure_reason, lo
 from ..sources.simspec import is_sim_spec, known_noise_config
 from .campaign import TASK_FILE, Campaign, TaskSpec, config_identity, write_atomic, write_record
 from .campaign_summary import SummaryMarkdown, csv_text, task_rows
+from .summary_figures import html_page, write_figures
 
 #: The error line when Dask is needed and missing.
 NEEDS_DASK = 'needs dask.distributed: pip install "gnssacc[cluster]" (or --jobs 1 to run in this process)'
@@ -232,16 +233,31 @@ class Ledger:
         :data:`SUMMARY_CSV_EVERY_S`) or ``final``."""
         if self.root is None:
             return
+        figures = self._figures() if final else []
         for name, every, text in (("summary.csv", SUMMARY_CSV_EVERY_S, lambda: csv_text(self.ordered())),
-                                  ("summary.md", SUMMARY_MD_EVERY_S, self.markdown)):
+                                  ("summary.md", SUMMARY_MD_EVERY_S, lambda: self.markdown(figures))):
             t0 = time.monotonic()
             if final or t0 >= self._due[name]:
                 write_atomic(self.root / name, text())
                 self._due[name] = t0 + max(every, SUMMARY_BUSY_RATIO * (time.monotonic() - t0))
+        if final:
+            write_atomic(self.root / "summary.html", html_page(self.markdown(), figures))
 
-    def markdown(self) -> str:
-        """``summary.md``'s text from the records so far."""
-        return self._md.text(self.ordered(), len(self.order), self.header)
+    def _figures(self) -> list[str]:
+        """The campaign's figures (:mod:`gnssacc.campaign.summary_figures`), drawn once at the end; a
+        failure costs the figures only, and is said."""
+        try:
+            return write_figures(self.root, self.ordered())
+        except Exception as exc:
+            raise_if_interrupted(exc)
+            warn_data("summary figures", f"not drawn: {type(exc).__name__}: {exc}")
+            return []
+
+    def markdown(self, figures: list[str] = ()) -> str:
+        """``summary.md``'s text from the records so far (with links to ``figures``)."""
+        text = self._md.text(self.ordered(), len(self.order), self.header)
+        links = "".join(f"![{f}]({f})\n\n" for f in figures)
+        return text.replace("\n## ", "\n" + links + "## ", 1) if links else text
 
 
 def run_tasks(tasks: list[TaskSpec], executor, ledger: Ledger, show: CampaignProgress) -> None:

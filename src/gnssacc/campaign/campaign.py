@@ -11,8 +11,14 @@ A campaign runs every method on every (recording, seed, outage pattern); each su
 Every task folder is written all or nothing (:class:`gnssacc.outputs.outdir.ResultDir`) and holds
 :data:`TASK_FILE`: the task, its status (``ok`` or ``failed`` with the one-line error), its rows of
 ``summary.csv`` and the settings hash. A task whose folder holds a complete result with the
-campaign's hash is finished; ``--resume`` runs the others. A folder with another hash is never
+campaign's task hash is finished; ``--resume`` runs the others. A folder with another hash is never
 mixed in: the resume is refused.
+
+A campaign grows: ``--resume C`` with more seeds, sources or outage patterns (:data:`GROWABLE`) adds
+their tasks and keeps the finished ones, whose numbers do not depend on which other tasks exist
+(their records carry :func:`task_hash`, the hash of every other setting). A setting that would
+change a finished task (methods, noise, configuration, outputs, ...) is refused. Adding an outage
+pattern to a campaign of one is refused too: its task folders would move under a pattern folder.
 
 The settings are everything that changes a task's numbers or files: sources, methods, seeds,
 outage patterns, noise, preset, tune mode, configuration file content (its SHA-256), IMU frame,
@@ -38,7 +44,7 @@ CAMPAIGN_FILE = "campaign.json"
 #: A task's record, in its folder.
 TASK_FILE = "batch.json"
 #: Names in the campaign folder that are not recordings.
-RESERVED = {CAMPAIGN_FILE, "summary.csv", "summary.md"}
+RESERVED = {CAMPAIGN_FILE, "summary.csv", "summary.md", "summary.html", "summary_prmse.png", "summary_effects.png"}
 #: Settings that name what ``gnssacc batch`` options set them (for the refusal message).
 OPTION_OF = {"sources": "SOURCE", "methods": "--methods", "seeds": "--seeds", "outages": "--outage/--outage-every",
              "noise": "--noise", "preset": "--preset", "tune": "--tune", "config": "--config",
@@ -185,6 +191,37 @@ def settings_hash(settings: dict) -> str:
     return hashlib.sha256(json.dumps(settings, sort_keys=True).encode()).hexdigest()[:16]
 
 
+#: Settings that say which tasks a campaign has, not what a task computes: a campaign may grow in them.
+GROWABLE = ("sources", "seeds", "outages")
+
+
+def task_hash(settings: dict) -> str:
+    """:func:`settings_hash` of the settings that change a task's numbers or files (all but :data:`GROWABLE`)."""
+    return settings_hash({k: v for k, v in settings.items() if k not in GROWABLE})
+
+
+def grown(stored: dict, wanted: dict) -> dict:
+    """``wanted`` with the seeds, sources and outage patterns of ``stored`` and then those of ``wanted``
+    it lacks (``stored``'s order kept, the new ones after); every other setting as ``wanted`` has it
+    (compared with ``stored`` by the caller).
+
+    Raises
+    ------
+    InputError
+        A new outage pattern for a campaign of one pattern (its task folders would move).
+    """
+    out = dict(wanted)
+    out["seeds"] = stored["seeds"] + [s for s in wanted["seeds"] if s not in stored["seeds"]]
+    out["outages"] = stored["outages"] + [p for p in wanted["outages"] if p not in stored["outages"]]
+    if len(stored["outages"]) == 1 and len(out["outages"]) > 1:
+        raise InputError("--outage", "cannot add an outage pattern to a campaign of one pattern (its task folders "
+                                     "would move under a pattern folder); start a new campaign with --out")
+    paths = [p for _, p in stored["sources"]]
+    paths += [p for _, p in wanted["sources"] if p not in paths]
+    out["sources"] = [[n, p] for n, p in zip(recording_names(paths), paths)]   # the stored ones keep their names
+    return out
+
+
 def recording_names(sources: list[str]) -> list[str]:
     """A distinct folder name per source: its last path component (``kitti`` for KITTI, the spec with
     ``:,=`` replaced for a ``sim:`` spec, :func:`gnssacc.sources.simspec.folder_name`; ``_``
@@ -211,7 +248,7 @@ def plan(settings: dict, root: Path | None) -> list[TaskSpec]:
     patterns = [Pattern(*p) for p in settings["outages"]]
     options = {k: settings[k] for k in ("methods", "noise", "preset", "tune", "config", "imu_frame", "bag",
                                         "outputs")}
-    digest = settings_hash(settings)
+    digest = task_hash(settings)
     tasks = []
     for name, source in settings["sources"]:
         for pattern in patterns:
@@ -256,6 +293,14 @@ class Campaign:
         self.hash = settings_hash(settings)
         self.new = new
         self.lock = FolderLock(self.root)
+        self.added = 0   # tasks added by :meth:`grow`
+
+    def grow(self, settings: dict) -> None:
+        """Take ``settings`` (:func:`grown`: more seeds, sources or patterns) as the campaign's; written
+        to :data:`CAMPAIGN_FILE` when the campaign is entered (locked)."""
+        before = len(self.tasks())
+        self.settings, self.hash = settings, settings_hash(settings)
+        self.added = len(self.tasks()) - before
 
     @classmethod
     def create(cls, root, settings: dict) -> "Campaign":
@@ -283,6 +328,8 @@ class Campaign:
         try:
             if self.new:
                 self._start()
+            elif self.added:
+                self._write_settings()
         except BaseException:
             self.lock.release()
             raise
@@ -297,9 +344,12 @@ class Campaign:
         if os.path.lexists(p) and (not p.is_dir() or any(p.iterdir())):
             raise InputError("--out", f"{p} exists and is not an empty folder; choose another output folder")
         p.mkdir(exist_ok=True)
+        self._write_settings()
+
+    def _write_settings(self) -> None:
         doc = {"gnssacc": __version__, "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
                "settings_hash": self.hash, "settings": self.settings}
-        write_atomic(p / CAMPAIGN_FILE, json.dumps(doc, indent=2) + "\n")
+        write_atomic(self.root / CAMPAIGN_FILE, json.dumps(doc, indent=2) + "\n")
 
     def __exit__(self, *exc) -> None:
         self.lock.release()
@@ -324,9 +374,9 @@ class Campaign:
             record = read_record(Path(t.folder))
             if record is None:
                 continue
-            if record.get("settings_hash") != self.hash:
+            if record.get("settings_hash") not in (t.settings_hash, self.hash):   # the latter: before task hashes
                 raise InputError(t.folder, f"written with other settings (hash {record.get('settings_hash')}, "
-                                           f"campaign {self.hash}); move it away to resume")
+                                           f"campaign {t.settings_hash}); move it away to resume")
             done[t.key] = record
         return done
 

@@ -21,15 +21,23 @@ class Finding:
     fix : str
         What the user can do about it (edit the file, a configuration line).
     repair : callable or None
-        ``RecordedRun -> RecordedRun``: the repair the evidence allows, ``None`` when it is not
-        unambiguous (then the finding is always an error).
+        ``RecordedRun -> RecordedRun``: the correction the views propose. It is a *proposal*: the
+        preparation stage runs the EKF on the data as given and as corrected and acts only when
+        the corrected data are decisively more likely (:mod:`gnssacc.prepare.judge`). ``None``:
+        nothing to propose (then the finding is a warning, or a refusal when ``impossible``).
     repaired : str
         What the repair does, for the warning (e.g. "multiplied ax, ay, az by 9.80665").
     action : str
-        Filled in by :func:`gnssacc.checks.plausibility.check_run`: ``"repaired"``, ``"applied"`` (a
-        measured ``"auto"`` mounting or offset) or ``"noted"``.
+        Filled in as the finding is settled: ``"repaired"``, ``"applied"`` (a measured ``"auto"``
+        mounting or offset), ``"refused"``, ``"not confirmed"`` or ``"noted"``.
     details : dict
         Numbers behind the verdict (JSON-friendly), for reports and tests.
+    repairable : bool
+        Whether ``[checks] repair = "auto"`` may apply the correction once confirmed (swapped or
+        sign-lost coordinates look alike: confirmed, they are refused, never repaired).
+    impossible : bool
+        The data as given cannot be estimated at all (no fixes in the IMU's span, fix stamps no
+        receiver writes): refused without asking the estimator.
     """
 
     check: str
@@ -40,6 +48,13 @@ class Finding:
     repaired: str = ""
     action: str = ""
     details: dict = field(default_factory=dict)
+    repairable: bool = True
+    impossible: bool = False
+
+    @property
+    def key(self) -> str:
+        """Identifies the proposal, so that one the estimator did not confirm is not made again."""
+        return f"{self.check}:{self.repaired or self.problem}"
 
     def to_dict(self) -> dict:
         return {"check": self.check, "where": self.where, "problem": self.problem, "fix": self.fix,

@@ -62,7 +62,7 @@ def gnss_time_units(t: np.ndarray, where: str) -> Finding | None:
     hint = " (milliseconds?)" if dt > FIX_INTERVAL_S[1] else ""
     return Finding("time_units", where, f"GNSS fixes are {dt:.6g} s apart (median): no receiver gives fixes "
                    f"{'that rarely' if dt > 1 else 'that often'}; the t column is not in seconds{hint}",
-                   "write the t column in seconds", details={"median_interval": dt})
+                   "write the t column in seconds", details={"median_interval": dt}, impossible=True)
 
 
 def fix_count(t_gnss: np.ndarray, t0: float, t1: float, where: str) -> Finding | None:
@@ -73,18 +73,44 @@ def fix_count(t_gnss: np.ndarray, t0: float, t1: float, where: str) -> Finding |
     return Finding("fix_count", where, f"{n} GNSS fix(es) within the IMU data's time span ({t0:.3f} .. {t1:.3f} s; "
                    f"{len(t_gnss)} in the file): at least {MIN_FIXES} are needed to start (a position, a velocity "
                    f"and an acceleration), and checking the units, clocks and mounting needs a minute of fixes",
-                   "record or export more fixes", details={"n_fixes": n})
+                   "record or export more fixes", details={"n_fixes": n}, impossible=True)
 
 
-def heights(h: np.ndarray, where: str) -> Finding | None:
-    """A median height outside :data:`HEIGHT_RANGE_M` (module notes)."""
+#: Height units a median outside the road range may be in: (metres per unit, name).
+HEIGHT_UNITS = ((1e-3, "millimetres"), (1e-2, "centimetres"), (0.3048, "feet"))
+#: Where a reinterpreted median height must land [m]: on a road (the Dead Sea's -430 m to the
+#: 5.8 km of the highest pass, the geoid within 110 m of the ellipsoid), stricter than the range
+#: that leaves heights as given alone (a geocentric radius in millimetres would be 6.4 km).
+ROAD_HEIGHT_M = (-600.0, 6000.0)
+
+
+def heights(h: np.ndarray, where: str, declined=frozenset()) -> Finding | None:
+    """A median height outside :data:`HEIGHT_RANGE_M` (module notes): a proposal for the first unit
+    of :data:`HEIGHT_UNITS` that brings it into the range and was not judged before
+    (``declined``: the keys of the proposals settled); none left: no ground vehicle drives there,
+    the data cannot be estimated as they are."""
     med = float(np.median(h))
     if HEIGHT_RANGE_M[0] <= med <= HEIGHT_RANGE_M[1]:
         return None
-    return Finding("heights", where, f"the fixes' heights are around {med:.6g} m, outside the "
-                   f"{HEIGHT_RANGE_M[0]:g} .. {HEIGHT_RANGE_M[1]:g} m of any road: the h_m column is in other "
-                   f"units (mm? feet?) or is not an ellipsoidal height", "write ellipsoidal heights in metres",
-                   details={"median_height_m": med})
+    head = (f"the fixes' heights are around {med:.6g} m, outside the {HEIGHT_RANGE_M[0]:g} .. {HEIGHT_RANGE_M[1]:g} m "
+            f"of any road")
+    for k, name in HEIGHT_UNITS:
+        if ROAD_HEIGHT_M[0] <= med * k <= ROAD_HEIGHT_M[1]:
+            f = Finding("heights", where, f"{head}: the h_m column is in {name}", "convert the h_m column to metres",
+                        _scaled_heights(k), f"multiplied the heights by {k:g}",
+                        details={"median_height_m": med, "log_jacobian_per_fix": float(np.log(k))})
+            if f.key not in declined:
+                return f
+    return Finding("heights", where, f"{head}: the h_m column is in other units or is not an ellipsoidal height",
+                   "write ellipsoidal heights in metres", details={"median_height_m": med}, impossible=True)
+
+
+def _scaled_heights(k: float):
+    """The proposal: heights times ``k`` (metres per unit)."""
+    def repair(run: RecordedRun) -> RecordedRun:
+        g = replace(run.gnss, h=run.gnss.h * k)
+        return replace(run, gnss=g, origin=LocalTangentFrame(g.lat[0], g.lon[0], g.h[0]))
+    return repair
 
 
 def in_radian_box(lat: np.ndarray, lon: np.ndarray) -> bool:
@@ -116,12 +142,13 @@ def latlon_radians(run: RecordedRun, fit: HorizontalFit | None, where: str) -> F
     if decided and SCALE_RANGE[0] <= fit.scale <= SCALE_RANGE[1]:
         return None                        # the IMU agrees with the track as it is: a real place
     fix = "multiply the lat_deg and lon_deg columns by 180/pi"
-    if decided and SCALE_RANGE[0] <= fit.scale * RAD_PER_DEG <= SCALE_RANGE[1]:
-        return Finding("latlon", where, f"{head} and the IMU measures {fit.scale:.3g} times the track's accelerations: "
-                       f"the lat_deg and lon_deg columns are in radians", fix, _radians_to_degrees,
-                       "multiplied latitude and longitude by 180/pi", details={"accel_ratio": fit.scale})
-    return Finding("latlon", where, f"{head}: the lat_deg and lon_deg columns look like radians",
-                   fix + ' (if the recording really is from there, set [checks] skip = "latlon")')
+    # Positions read as radians are 180/pi times further apart: the log-Jacobian of reading
+    # latitude and longitude so, per fix (the estimator compares likelihoods of metres).
+    details = {"accel_ratio": fit.scale if fit is not None else None, "log_jacobian_per_fix": 2.0 * np.log(1.0 / RAD_PER_DEG)}
+    why = (f" and the IMU measures {fit.scale:.3g} times the track's accelerations" if decided else "")
+    return Finding("latlon", where, f"{head}{why}: the lat_deg and lon_deg columns look like radians",
+                   fix + ' (if the recording really is from there, set [checks] skip = "latlon")', _radians_to_degrees,
+                   "multiplied latitude and longitude by 180/pi", details=details)
 
 
 def _slope_side(tf: TurnFit | None) -> int:
@@ -141,23 +168,36 @@ def _fit_side(fit: HorizontalFit | None) -> int:
     return 1 if d >= MIRROR_MARGIN else (-1 if d <= -MIRROR_MARGIN else 0)
 
 
+def _swapped(run: RecordedRun) -> RecordedRun:
+    """The proposal for a mirrored track: latitude and longitude swapped back."""
+    g = replace(run.gnss, lat=run.gnss.lon, lon=run.gnss.lat)
+    return replace(run, gnss=g, origin=LocalTangentFrame(g.lat[0], g.lon[0], g.h[0]))
+
+
 def mirror_image(fit: HorizontalFit | None, tf: TurnFit | None, lf: LateralFit | None, gnss_where: str,
-                 imu_where: str) -> Finding | None:
-    """The track mirrored against both IMU sensors, or the IMU's sensors against each other."""
+                 imu_where: str, lat: np.ndarray | None = None, lon: np.ndarray | None = None) -> Finding | None:
+    """The track mirrored against both IMU sensors (a proposal: latitude and longitude swapped back,
+    which the estimator judges; swapped and sign-lost coordinates look alike, so a confirmed one is
+    refused, never repaired), or the IMU's sensors against each other (a note). ``lat``, ``lon``:
+    the fixes' [rad], for the log-Jacobian of swapping them (east is ``cos(lat)`` per degree)."""
     acc, gyr = _fit_side(fit), _slope_side(tf)
     if acc == -1 and gyr == -1:
+        jac = (float(np.mean(np.log(np.abs(np.cos(lon)) / np.maximum(np.abs(np.cos(lat)), 1e-12))))
+               if lat is not None and lon is not None else 0.0)
         return Finding("latlon", gnss_where,
                        "the fixes' track is the mirror image of the motion the IMU measured (it turns left where the "
                        "gyro turns right, and its accelerations match the accelerometer's only mirrored): latitude "
                        "and longitude are swapped, or one of them has lost its sign (hemisphere)",
-                       "check the lat_deg and lon_deg columns", details={"slope": tf.k, "rho_direct": fit.rho_direct,
-                                                                         "rho_mirror": fit.rho_mirror})
+                       "check the lat_deg and lon_deg columns", _swapped, "swapped latitude and longitude",
+                       details={"slope": tf.k, "rho_direct": fit.rho_direct, "rho_mirror": fit.rho_mirror,
+                                "log_jacobian_per_fix": jac}, repairable=False)
     if acc * gyr == -1:
         return Finding("mounting", imu_where,
                        "the gyro and the accelerometer disagree on the direction of the turns (one of them turns with "
                        "the fixes, the other against them): one IMU axis has the wrong sign in one of the two sensors",
                        "check the signs of the ax, ay, az and gx, gy, gz columns (both must be right-handed, the same axes)",
-                       details={"slope": tf.k, "rho_direct": fit.rho_direct, "rho_mirror": fit.rho_mirror})
+                       details={"slope": tf.k, "rho_direct": fit.rho_direct, "rho_mirror": fit.rho_mirror},
+                       impossible=True)   # no frame makes both sensors right: nothing to estimate
     return None
 
 
@@ -189,4 +229,5 @@ def init_position(run: RecordedRun, where: str) -> Finding | None:
     return Finding("init_position", where, f"the initial position is {d / 1000:.4g} km from the GNSS fix {dt:.2f} s "
                    f"from it (at most {tol:.0f} m is plausible): the two disagree in their coordinates",
                    "check lat_deg, lon_deg, h_m and t of the initial state against the fixes",
+                   lambda r: replace(r, init=None), "started from the fixes instead of the given initial state",
                    details={"distance_m": d})

@@ -456,13 +456,14 @@ def _largest_gap(t, idx, valid, lo, hi, centres, half) -> np.ndarray:
 
 def fix_scatter(t: np.ndarray, p: np.ndarray, w: np.ndarray) -> float:
     """1-sigma white scatter of the fixes [m] about quadratics over ~7 fixes (a median, robust to
-    the short moments where a vehicle's jerk bends the track; floored at 5 mm)."""
+    the short moments where a vehicle's jerk bends the track; floored at 5 mm), per coordinate of
+    ``p`` (shape (n, d): the horizontal track, or one axis)."""
     dt = float(np.median(np.diff(t)))
     centres = t[:: max(len(t) // 2000, 1)]
     _, _, ok, resid, dof = local_fits(t, p, w, centres, 6.5 * dt)
     if not np.any(ok):
         return 0.005
-    k = 2.0 * dof[ok]
+    k = p.shape[1] * dof[ok]
     per_window = (resid[ok] ** 2).sum(axis=(1, 2)) / k
     # Median of chi-square(k)/k is about (1 - 2/(9k))^3 (Wilson-Hilferty).
     sigma2 = np.median(per_window) / np.median((1.0 - 2.0 / (9.0 * k)) ** 3)
@@ -624,11 +625,15 @@ class TurnFit:
         1-sigma of ``k`` (the overlap of neighbouring windows accounted for).
     turned_deg : float
         Total heading change the IMU saw over the compared epochs [deg, in IMU units].
+    rho : float
+        Weighted correlation of the two rates (1: the turns match in time, whatever the units;
+        a view of the clock offset independent of the accelerations, :mod:`gnssacc.checks.timeoffset`).
     """
 
     k: float
     sigma_k: float
     turned_deg: float
+    rho: float = float("nan")
 
 
 def turn_rate_fit(lev: LevelledImu, kin: GnssKinematics, offset_s: float) -> TurnFit | None:
@@ -642,13 +647,14 @@ def turn_rate_fit(lev: LevelledImu, kin: GnssKinematics, offset_s: float) -> Tur
     x = at_times(lev.t0, lev.step, smooth(lev.omega_v, lev.step, kin.window_s), kin.t[m] - offset_s)
     y = z_g[m].imag / speed[m]
     w = (speed[m] / kin.sigma_a[m]) ** 2
-    sxx = float(np.sum(w * x * x))
+    sxx, syy = float(np.sum(w * x * x)), float(np.sum(w * y * y))
     if not sxx > 0:
         return None
     overlap = len(x) / _n_eff(kin, int(m.sum()))
     step = float(np.median(np.diff(kin.t))) if len(kin) > 1 else kin.window_s
-    return TurnFit(float(np.sum(w * x * y) / sxx), float(np.sqrt(overlap / sxx)),
-                   float(np.degrees(np.sum(np.abs(x)) * step)))
+    sxy = float(np.sum(w * x * y))
+    return TurnFit(sxy / sxx, float(np.sqrt(overlap / sxx)), float(np.degrees(np.sum(np.abs(x)) * step)),
+                   sxy / np.sqrt(sxx * syy) if syy > 0 else float("nan"))
 
 
 @dataclass

@@ -32,7 +32,7 @@ stage 1 alone is good to a few tenths of a second with 3 m fixes.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 

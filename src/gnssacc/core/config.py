@@ -153,6 +153,49 @@ DEFAULTS: dict[str, dict] = {
         # a safety net against a wrong detection (chi-square, 3 dof: 30 has p ~ 1e-6).
         "gate_nis": 30.0,
     },
+    "nhc": {
+        # Non-holonomic constraint: while the vehicle rolls, its velocity at the reference point
+        # below has no lateral and no vertical component in the body frame (EKF updates, smoother
+        # factors; gnssacc.estimators.nhc says when it is applied). false: IMU-only bridging of outages.
+        "enabled": True,
+        # One constraint every this many seconds while rolling [s] (EKF update, smoother factor
+        # on the node nearest each epoch).
+        "interval_s": 1.0,
+        # 1-sigma of the lateral and the vertical velocity at the reference point [m/s] (tyre
+        # slip, suspension, a residual mounting yaw or pitch times the speed); identified by
+        # the noise tuner unless set here.
+        "sigma_lateral_mps": 0.1,
+        "sigma_vertical_mps": 0.1,
+        # The point of the vehicle that does not slip sideways (rear axle centre of a car,
+        # centre of a skid-steer vehicle) from the IMU, body frame FRD [m].
+        "lever_arm_b_m": [0.0, 0.0, 0.0],
+        # The vehicle's forward axis relative to the body's (the IMU after [mounting]): pitch and
+        # yaw [deg] of a residual misalignment, a fraction of a degree that the mounting check
+        # cannot resolve but that makes the constraint see speed x angle of side or vertical
+        # velocity; identified by the noise tuner unless set here.
+        "pitch_offset_deg": 0.0,
+        "yaw_offset_deg": 0.0,
+        # How far along the vehicle the centre of a turn on the spot may lie from that point [m]:
+        # a turn whose yaw rate times this exceeds the forward speed is not rolling, and gets
+        # no constraint (see gnssacc.estimators.nhc).
+        "pivot_offset_m": 0.5,
+    },
+    "odometry": {
+        # Wheel odometry (forward speed) when the recording has it: EKF updates with a
+        # scale-factor state, smoother factors with a scale variable. false: ignore it.
+        "enabled": True,
+        # At most one odometry sample every this many seconds is used [s].
+        "interval_s": 0.2,
+        # 1-sigma of the forward speed [m/s] (wheel slip, quantisation; a sample's own stated
+        # sigma is used when larger); identified by the noise tuner unless set here.
+        "speed_sigma_mps": 0.1,
+        # The odometry's reference point (the rear axle centre of a car) from the IMU, body FRD [m].
+        "lever_arm_b_m": [0.0, 0.0, 0.0],
+        # The wheel-radius scale factor error: 1-sigma at the start and its correlation time [s]
+        # (a first-order Gauss-Markov state: tyre pressure and load change slowly).
+        "scale_sigma": 0.03,
+        "scale_tau_s": 3600.0,
+    },
     # Stationary detection thresholds: the fields of gnssacc.prepare.stationary.StationaryParams, whose
     # docstring gives each one's unit and physical reason (windowed IMU statistics + GNSS agreement).
     "stationary": {f.name: f.default for f in dataclass_fields(StationaryParams)},

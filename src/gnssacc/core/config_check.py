@@ -87,6 +87,16 @@ BOUNDS: dict[tuple[str, str], Bound] = {
     ("ekf", "position_gate_nis"): NON_NEGATIVE,
     **_all("zupt", "interval_s velocity_sigma_mps", POSITIVE),
     ("zupt", "gate_nis"): NON_NEGATIVE,
+    **_all("nhc", "interval_s", Bound(0.0, 3600.0, lo_open=True)),
+    **_all("nhc", "sigma_lateral_mps sigma_vertical_mps", Bound(0.0, 100.0, lo_open=True)),
+    ("nhc", "lever_arm_b_m"): Bound(-1e3, 1e3),
+    ("nhc", "pivot_offset_m"): Bound(0.0, 100.0),
+    **_all("nhc", "pitch_offset_deg yaw_offset_deg", Bound(-10.0, 10.0)),
+    ("odometry", "interval_s"): Bound(0.0, 3600.0),
+    ("odometry", "speed_sigma_mps"): Bound(0.0, 100.0, lo_open=True),
+    ("odometry", "lever_arm_b_m"): Bound(-1e3, 1e3),
+    ("odometry", "scale_sigma"): Bound(0.0, 1.0, lo_open=True),
+    ("odometry", "scale_tau_s"): Bound(0.0, 1e9, lo_open=True),
     **_all("stationary", "cell_s block_s omega_max_dps z noise_window_s gnss_k_sigma gnss_excursion_k", POSITIVE),
     **_all("stationary", "floor_accel_mps2 floor_gyro_dps min_duration_s edge_trim_s gnss_speed_floor_mps "
                          "gnss_corr_s gnss_margin_s excursion_floor_mps2 chain_max_gap_s chain_floor_mps "

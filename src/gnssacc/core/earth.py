@@ -164,3 +164,14 @@ class LocalTangentFrame:
     def __repr__(self) -> str:
         return (f"LocalTangentFrame(lat0={np.degrees(self.lat0):.8f} deg, "
                 f"lon0={np.degrees(self.lon0):.8f} deg, h0={self.h0:.3f} m)")
+
+
+def R_en_batch(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
+    """ECEF -> NED rotations at arrays of latitudes and longitudes [rad], shape (M, 3, 3)
+    (:func:`R_en` for many points)."""
+    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+    R = np.empty((len(sl), 3, 3))
+    R[:, 0, 0], R[:, 0, 1], R[:, 0, 2] = -sl * co, -sl * so, cl
+    R[:, 1, 0], R[:, 1, 1], R[:, 1, 2] = -so, co, 0.0
+    R[:, 2, 0], R[:, 2, 1], R[:, 2, 2] = -cl * co, -cl * so, -sl
+    return R

@@ -15,7 +15,7 @@ import numpy as np
 
 from .earth import LocalTangentFrame
 from .errors import InputError, warn_data
-from .rotations import euler_to_dcm
+from .rotations import dcm_to_euler, euler_to_dcm
 
 
 @dataclass
@@ -79,6 +79,10 @@ class GnssFixes:
         as correlations rather than covariances so that every operation on ``sigma_ned`` (the
         tuner's ``gnss.sigma_scale``, a quality's inflation) scales the whole covariance
         (:meth:`cov_ned`).
+    sigma_stated : bool
+        Whether the source states the sigmas (False: a configured default stands in for them,
+        which the preparation replaces by what the fixes' own scatter shows,
+        :mod:`gnssacc.prepare.fix_noise`).
     """
 
     t: np.ndarray
@@ -88,6 +92,7 @@ class GnssFixes:
     sigma_ned: np.ndarray
     quality: np.ndarray | None = None
     corr_ned: np.ndarray | None = None
+    sigma_stated: bool = True
 
     def __len__(self) -> int:
         return len(self.t)
@@ -95,7 +100,7 @@ class GnssFixes:
     def select(self, mask) -> "GnssFixes":
         return GnssFixes(self.t[mask], self.lat[mask], self.lon[mask], self.h[mask], self.sigma_ned[mask],
                          None if self.quality is None else self.quality[mask],
-                         None if self.corr_ned is None else self.corr_ned[mask])
+                         None if self.corr_ned is None else self.corr_ned[mask], self.sigma_stated)
 
     def cov_ned(self, k) -> np.ndarray:
         """The NED covariance [m^2] of fix ``k`` (shape (3, 3)) or of fixes ``k`` (an index array:
@@ -208,6 +213,11 @@ class InitialState:
     levelled : bool
         Roll and pitch come from accelerometer levelling: their error is then tied to the
         accelerometer bias (the estimators start with that correlation).
+    yaw_evidence : str
+        What the yaw rests on: ``"given"`` (the source states the start, e.g. ``init.json``),
+        ``"orientation"`` (an IMU's own orientation field: magnetometer-grade until the motion
+        confirms it, :mod:`gnssacc.prepare.start`), ``"bank"`` (the motion decided it) or
+        ``"undetermined"`` (the motion never did: the yaw sigma says how little is known).
     """
 
     t: float
@@ -226,6 +236,12 @@ class InitialState:
     sigma_b_g: np.ndarray | None = None
     fit_window: tuple | None = None
     levelled: bool = False
+    yaw_evidence: str = "given"
+
+    @property
+    def yaw_determined(self) -> bool:
+        """Whether the yaw is known from the data or the source (not a guess of the start)."""
+        return self.yaw_evidence in ("given", "bank")
 
     @property
     def R_nb(self) -> np.ndarray:
@@ -368,6 +384,25 @@ class RecordedRun:
         imu = self.imu
         odo = None if self.odometry is None else self.odometry.shifted(delta_s)
         return replace(self, imu=ImuData(imu.t + delta_s, imu.f_b, imu.omega_ib_b), odometry=odo)
+
+    def with_mounting(self, R_bi: np.ndarray) -> "RecordedRun":
+        """A copy with the body axes turned by ``R_bi`` (``x_b = R_bi x``, from the axes the run
+        has): everything that lives in the IMU frame, in one place. The samples are rotated; a
+        given start's attitude becomes ``R_nb R_bi^T`` and its bias estimates ``R_bi b`` (their
+        variances rotated with them); its attitude sigmas are in n and stay."""
+        R = np.asarray(R_bi, float)
+        imu = ImuData(self.imu.t, self.imu.f_b @ R.T, self.imu.omega_ib_b @ R.T)
+        init = self.init
+        if init is not None:
+            R2 = R * R
+
+            def var_rot(sig):
+                return None if sig is None else np.sqrt(R2 @ np.asarray(sig, float) ** 2)
+
+            init = replace(init, rpy=np.array(dcm_to_euler(init.R_nb @ R.T)), b_a=R @ np.asarray(init.b_a, float),
+                           b_g=R @ np.asarray(init.b_g, float), sigma_b_a=var_rot(init.sigma_b_a),
+                           sigma_b_g=var_rot(init.sigma_b_g))
+        return replace(self, imu=imu, init=init)
 
     def with_gnss(self, gnss: GnssFixes, **meta) -> "RecordedRun":
         """A copy with other GNSS fixes (e.g. noisy or with outages) and extra metadata."""

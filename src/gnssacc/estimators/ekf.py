@@ -1,5 +1,6 @@
 """The paper's 15-state error-state EKF with GNSS position and GNSS-derived acceleration updates,
-plus zero-velocity / zero-angular-rate updates while the vehicle stands still.
+plus zero-velocity / zero-angular-rate updates while the vehicle stands still, and the ground
+vehicle's own aids: the non-holonomic constraint and wheel odometry.
 
 Prediction runs through the numba kernel in :mod:`gnssacc.estimators.mechanization` at every IMU sample.
 Updates come from one event loop over GNSS epochs, stationary epochs and output epochs; every
@@ -7,6 +8,11 @@ update is a :class:`gnssacc.estimators.measurements.Measurement` ``(dz, H, R)`` 
 Joseph-form Kalman update (algebraically the paper's ``(I - K H) P`` for the optimal gain).
 Innovations are predicted minus measured and the error state is estimate minus truth, so the
 closed-loop feedback subtracts the estimated errors (paper: ``dx+ = K dz``, closed loop).
+
+While the vehicle rolls, the non-holonomic constraint is applied every ``[nhc] interval_s``
+(:mod:`gnssacc.estimators.nhc`), and, when the recording has wheel odometry, its forward speed
+with a scale-factor state (:mod:`gnssacc.estimators.odometry`; the state vector then has 16 or,
+with the GNSS error states, 19 entries: :class:`FilterState`).
 
 At a GNSS epoch the position update comes first; ``ekf-acc`` then applies the acceleration update
 with ``H_a`` from :mod:`gnssacc.estimators.gnss_accel`, evaluated at the state after the position update;
@@ -30,24 +36,39 @@ from ..core.recording import InitialState, RecordedRun
 from ..core.rotations import dcm_to_euler, euler_error_jacobian
 from ..core.solution import NavSolution
 from ..prepare.initialise import initial_sigmas
-from ..prepare.yawbank import start_and_quality
+from ..prepare.start import start_for
 from . import measurements as meas_models
+from . import nhc as nhc_rules
+from . import odometry as odo_rules
 from .gnss_accel import AccelWindow, measured_specific_force, window_samples
 from .kalman import joseph_update
 from .mechanization import Propagator, apply_correction, kernel_force_integrals
-from .settings import EkfSettings
+from .nhc import NhcEpochs
+from .nhc import epochs_for as nhc_epochs_for
+from .odometry import OdometryEpochs
+from .odometry import epochs_for as odometry_epochs_for
+from .settings import EkfSettings, NhcSettings, OdometrySettings
 from .zupt import StationaryEpochs, epochs_for
 
 #: The acceleration update each method applies (``None``: none; see :func:`acceleration_model`).
 METHODS = {"ekf": None, "ekf-acc": "acc", "ekf-accw": "accw"}
-#: Event kinds of the loop, in the order they are handled at equal times.
-GNSS, STATIONARY, OUTPUT = 0, 1, 2
+#: Event kinds of the loop, in the order they are handled at equal times: the constraint and the
+#: odometry before a GNSS epoch at the same time, so that its prior covariance holds them (as
+#: :class:`gnssacc.analysis.observability.EpochCollector` sees it), and the output last.
+NHC, ODOMETRY, GNSS, STATIONARY, OUTPUT = 0, 1, 2, 3, 4
+#: Name of each update event kind, as the observer sees it.
+EVENT_NAMES = {GNSS: "gnss", STATIONARY: "stationary", NHC: "nhc", ODOMETRY: "odometry"}
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
 @dataclass
 class FilterState:
     """Nominal state and error covariance (updated in place by the loop).
+
+    The state vector has the paper's 15 states, then, when modelled, the GNSS fix error's three
+    Gauss-Markov states (``gnss.gm_sigma_m > 0``), then, when the recording has wheel odometry,
+    its scale factor: 15 to 19 states. Without either it is the paper's 15-state filter, with
+    the same arithmetic.
 
     Attributes
     ----------
@@ -58,10 +79,13 @@ class FilterState:
     R_nb : ndarray (3, 3)
     b_a, b_g : ndarray (3,)
         Accumulated bias estimates, body [m/s^2], [rad/s].
-    P : ndarray (15, 15) or (18, 18)
-        Error covariance, order ``[dp, dv, phi, b_a, b_g (, x_g)]``.
-    gm : ndarray (3,)
-        Estimated Gauss-Markov part of the GNSS fix error [m, NED] (zero without that model).
+    P : ndarray (n, n)
+        Error covariance, order ``[dp, dv, phi, b_a, b_g (, x_g) (, dk)]``.
+    x_e : ndarray (n - 15,)
+        Nominal values of the states after the fifteenth, in that order: the Gauss-Markov part
+        of the GNSS fix error [m, NED] (:attr:`gm`), the odometry scale factor [-] (:attr:`scale`).
+    n_gm : int
+        3 with the GNSS error states, else 0.
     """
 
     pos: np.ndarray
@@ -70,17 +94,36 @@ class FilterState:
     b_a: np.ndarray
     b_g: np.ndarray
     P: np.ndarray
-    gm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    x_e: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    n_gm: int = 0
+
+    @property
+    def gm(self) -> np.ndarray:
+        """Estimated GNSS fix error [m, NED] (a view into :attr:`x_e`; zeros without that model)."""
+        return self.x_e[:3] if self.n_gm else np.zeros(3)
+
+    @property
+    def i_scale(self) -> int:
+        """Index of the odometry scale-factor state, -1 without it."""
+        return 15 + self.n_gm if len(self.x_e) > self.n_gm else -1
+
+    @property
+    def scale(self) -> float:
+        """Estimated odometry scale-factor error ``k`` (the odometry reads ``(1 + k)`` times the speed)."""
+        return float(self.x_e[self.n_gm]) if len(self.x_e) > self.n_gm else 0.0
 
 
-def initial_state(init: InitialState, settings) -> FilterState:
+def initial_state(init: InitialState, settings, odometry: bool = False) -> FilterState:
     """The filter state at ``init.t``: the initial state, its sigmas and the bias priors
-    (``settings``: either estimator's settings, :mod:`gnssacc.estimators.settings`)."""
+    (``settings``: either estimator's settings, :mod:`gnssacc.estimators.settings`); with
+    ``odometry`` the scale-factor state too (``[odometry] scale_sigma``, zero at the start)."""
     sig_p, sig_v, sig_att = initial_sigmas(init, settings.start_sigmas)
     sig_ba = settings.imu.accel_bias_sigma0 if init.sigma_b_a is None else np.asarray(init.sigma_b_a, float)
     sig_bg = settings.imu.gyro_bias_sigma0 if init.sigma_b_g is None else np.asarray(init.sigma_b_g, float)
     gm = settings.gnss.gm_sigma
-    P = np.diag(np.concatenate([sig_p, sig_v, sig_att, sig_ba, sig_bg] + ([gm] if np.any(gm > 0) else [])) ** 2)
+    n_gm = 3 if np.any(gm > 0) else 0
+    sig_k = [[settings.odometry.scale_sigma]] if odometry else []
+    P = np.diag(np.concatenate([sig_p, sig_v, sig_att, sig_ba, sig_bg] + ([gm] if n_gm else []) + sig_k) ** 2)
     if init.levelled:
         _tie_tilt_to_accel_bias(P, init)
     if np.any(gm > 0) and init.fit_window is not None:
@@ -89,7 +132,8 @@ def initial_state(init: InitialState, settings) -> FilterState:
         P[0:3, 0:3] += np.diag(gm**2)
         P[0:3, 15:18] = P[15:18, 0:3] = -np.diag(gm**2)
     return FilterState(np.array([init.lat, init.lon, init.h]), np.array(init.v_n, float).copy(), init.R_nb.copy(),
-                       np.array(init.b_a, float).copy(), np.array(init.b_g, float).copy(), P)
+                       np.array(init.b_a, float).copy(), np.array(init.b_g, float).copy(), P,
+                       np.zeros(n_gm + len(sig_k)), n_gm)
 
 
 def _tie_tilt_to_accel_bias(P: np.ndarray, init: InitialState) -> None:
@@ -107,7 +151,7 @@ def _tie_tilt_to_accel_bias(P: np.ndarray, init: InitialState) -> None:
 
 def correct(s: FilterState, dx: np.ndarray) -> None:
     """Closed-loop feedback of an estimated error (estimate minus truth) into the nominal state."""
-    apply_correction(s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, s.gm, dx)
+    apply_correction(s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, s.x_e, dx)
 
 
 def kalman_update(s: FilterState, m: meas_models.Measurement) -> tuple[float, float, bool, np.ndarray]:
@@ -246,6 +290,10 @@ class EkfSetup:
     stationary: StationaryEpochs = field(default_factory=StationaryEpochs.empty)
     zupt_sigma: float = 0.02
     zupt_gate: float = 0.0
+    nhc: NhcEpochs = field(default_factory=NhcEpochs.empty)
+    nhc_settings: NhcSettings | None = None
+    odometry: OdometryEpochs = field(default_factory=OdometryEpochs.empty)
+    odometry_settings: OdometrySettings | None = None
 
     @property
     def t0(self) -> float:
@@ -257,18 +305,22 @@ def prepare(run: RecordedRun, settings: EkfSettings, init: InitialState, quality
     """Initial state and covariance, IMU propagator with noise and inflation, acceleration window,
     stationary epochs (``stationary``: a :class:`gnssacc.prepare.stationary.StationaryReport` or ``None``)."""
     segments = inflation_segments(run.imu, quality, settings.suspect)
-    imu, gnss_model, acc, z = settings.imu, settings.gnss, settings.accel, settings.zupt
+    imu, gnss_model, acc, z, odo = settings.imu, settings.gnss, settings.accel, settings.zupt, settings.odometry
+    odo_epochs = odometry_epochs_for(run, odo, float(init.t))
+    with_odo = len(odo_epochs) > 0
     prop = Propagator(run.imu.t, run.imu.f_b, run.imu.omega_ib_b, imu.accel_psd, imu.gyro_psd, imu.accel_bias_rw_psd,
                       imu.gyro_bias_rw_psd, segments, settings.phi_order, cov_every,
-                      gm_tau_s=gnss_model.gm_tau, gm_sigma_m=gnss_model.gm_sigma)
+                      gm_tau_s=gnss_model.gm_tau, gm_sigma_m=gnss_model.gm_sigma,
+                      scale_tau_s=odo.scale_tau_s if with_odo else None, scale_sigma=odo.scale_sigma if with_odo else None)
     epochs = epochs_for(run, z, imu.gyro_psd, stationary)
     gnss = run.gnss
-    return EkfSetup(init, initial_state(init, settings), prop, segments[0], segments[1],
+    return EkfSetup(init, initial_state(init, settings, with_odo), prop, segments[0], segments[1],
                     settings.position_gate_nis, gnss_model.lever_arm_b, acc.specific_force_avg_s,
                     run.origin.to_ned(gnss.lat, gnss.lon, gnss.h),
                     AccelWindow(acc.window, acc.max_gap_s, acc.sigma_override),
                     int(np.searchsorted(prop.t, float(init.t), side="right")), epochs,
-                    z.velocity_sigma_mps, z.gate_nis)
+                    z.velocity_sigma_mps, z.gate_nis, nhc_epochs_for(run, settings.nhc, float(init.t), stationary),
+                    settings.nhc, odo_epochs, odo)
 
 
 def acceleration_model(run: RecordedRun, setup: EkfSetup, s: FilterState, t: float, acc, model: str = "acc"):
@@ -311,22 +363,12 @@ def default_output_times(run: RecordedRun) -> np.ndarray:
     return np.union1d(base, np.concatenate(fill) if fill else np.zeros(0))
 
 
-def _start(run: RecordedRun, settings, init, quality, stationary):
-    """The start and quality report of a pass: as given, else found by the preparation stage for
-    this run alone (a run configuration is needed for that; settings alone cannot self-start)."""
-    if not isinstance(settings, EkfSettings):
-        return start_and_quality(run, settings, init, quality, stationary, filter_pass=run_ekf)
-    init = init if init is not None else run.init
-    if init is None or quality is None:
-        raise ValueError("run_ekf with EkfSettings needs init= and quality= (gnssacc.pipeline.prepare gives both)")
-    return init, quality
-
-
-def _events(gnss_t: np.ndarray, stat_t: np.ndarray, out_t: np.ndarray):
-    """Event times, kinds and indices in time order (GNSS, then stationary, then output at equal times)."""
-    ev_t = np.concatenate([gnss_t, stat_t, out_t])
-    ev_kind = np.concatenate([np.full(len(gnss_t), GNSS), np.full(len(stat_t), STATIONARY), np.full(len(out_t), OUTPUT)])
-    ev_idx = np.concatenate([np.arange(len(gnss_t)), np.arange(len(stat_t)), np.arange(len(out_t))])
+def _events(times: dict):
+    """Event times, kinds and indices in time order, from ``{kind: times}``; at equal times in
+    the order of the kinds (NHC, odometry, GNSS, stationary, output)."""
+    ev_t = np.concatenate(list(times.values()))
+    ev_kind = np.concatenate([np.full(len(t), k) for k, t in times.items()])
+    ev_idx = np.concatenate([np.arange(len(t)) for t in times.values()])
     order = np.lexsort((ev_kind, ev_t))
     return ev_t[order], ev_kind[order], ev_idx[order]
 
@@ -345,6 +387,42 @@ def _gnss_measurements(run, setup, s, t, i, acc, use_acc, evaluate_acc, stats):
             stats["n_acc_skipped_suspect_imu"] += 1 if use_acc else 0
         else:
             yield m, bool(use_acc)
+
+
+def _row_sigma(P: np.ndarray, h: np.ndarray) -> float:
+    """1-sigma of ``h dx`` for the error covariance ``P``."""
+    return math.sqrt(max(float(h @ P @ h), 0.0))
+
+
+def _nhc_measurements(setup, s, j, stats):
+    """The non-holonomic constraint at its epoch ``j``, unless :func:`gnssacc.estimators.nhc.decide`
+    says not (counted in ``stats``)."""
+    ep, nhc = setup.nhc, setup.nhc_settings
+    if ep.rest[j]:   # decided without the state (nhc.decide's first test)
+        stats[nhc_rules.SKIPPED[nhc_rules.REST]] += 1
+        return
+    w_ie = earth_rate_n(s.pos[0])
+    v_b, H = meas_models.vehicle_velocity(s, ep.omega_b[j], nhc.lever_arm_b, w_ie, nhc.R_vb)
+    yaw_rate = float(ep.omega_b[j, 2] - s.b_g[2] - s.R_nb[:, 2] @ w_ie)   # relative to the earth
+    why = nhc_rules.decide(bool(ep.rest[j]), float(v_b[0]), _row_sigma(s.P, H[0]), yaw_rate, float(nhc.sigma_mps[0]),
+                           nhc.pivot_offset_m)
+    if why != nhc_rules.APPLY:
+        stats[nhc_rules.SKIPPED[why]] += 1
+        return
+    yield meas_models.nhc_measurement(v_b, H, nhc.sigma_mps), True
+
+
+def _odometry_measurements(setup, s, j, stats):
+    """The wheel odometry's sample ``j``, unless its sign contradicts the filter's
+    (:func:`gnssacc.estimators.odometry.decide`, counted in ``stats``)."""
+    ep, odo = setup.odometry, setup.odometry_settings
+    m = meas_models.odometry(s, ep.v[j], ep.sigma[j], ep.omega_b[j], odo.lever_arm_b, earth_rate_n(s.pos[0]),
+                             setup.nhc_settings.R_vb)
+    why = odo_rules.decide(float(ep.v[j]), float(ep.sigma[j]), float(m.dz[0] + ep.v[j]), _row_sigma(s.P, m.H[0]))
+    if why != odo_rules.APPLY:
+        stats[odo_rules.SKIPPED[why]] += 1
+        return
+    yield m, True
 
 
 def _stationary_measurements(setup, s, j):
@@ -388,7 +466,8 @@ def run_ekf(run: RecordedRun, settings, method: str = "ekf", *, output_times: np
         Keep the full covariance at every output epoch.
     record_innovations : bool
         Keep every update's time, NIS per dof and log-likelihood in ``stats`` (``nis_<kind>_t``,
-        ``nis_<kind>``, ``loglik_<kind>_series`` for kind in pos, acc, zupt, zaru).
+        ``nis_<kind>``, ``loglik_<kind>_series`` for kind in
+        :data:`gnssacc.estimators.measurements.KINDS`).
     observer : EkfObserver, optional
         Called at every update epoch; with an observer ``ekf`` also evaluates (without applying)
         the acceleration update, for counterfactual analysis.
@@ -409,16 +488,18 @@ def run_ekf(run: RecordedRun, settings, method: str = "ekf", *, output_times: np
         raise ValueError(f"unknown EKF method {method!r}; known: {', '.join(METHODS)}")
     use_acc = METHODS[method]
     wall0 = time.perf_counter()
-    init, quality = _start(run, settings, init, quality, stationary)
+    init, quality = start_for(run, settings, init, quality, stationary, filter_pass=run_ekf)
     setup = prepare(run, EkfSettings.of(settings), init, quality, stationary, cov_every)
     s, prop, t0, k = setup.state, setup.prop, setup.t0, setup.k
     t_end = prop.t[-1] if t_stop is None else min(float(t_stop), prop.t[-1])
     out_t = default_output_times(run) if output_times is None else np.asarray(output_times, float)
     out_t = out_t[(out_t >= t0) & (out_t <= t_end)]
-    ev_t, ev_kind, ev_idx = _events(run.gnss.t, setup.stationary.t, out_t)
+    ev_t, ev_kind, ev_idx = _events({GNSS: run.gnss.t, STATIONARY: setup.stationary.t, NHC: setup.nhc.t,
+                                     ODOMETRY: setup.odometry.t, OUTPUT: out_t})
     rec = _Recorder(len(out_t), store_P)
     updates = _Updates(run, setup, use_acc, observer, _Tally(record_innovations),
-                       {"n_acc_skipped_suspect_imu": 0, "init": setup.init.how, "t_init": t0})
+                       {"n_acc_skipped_suspect_imu": 0, "init": setup.init.how, "t_init": t0,
+                        **nhc_rules.counts(), **odo_rules.counts()})
     if observer is not None:
         observer.start(setup)
     t_cur = t0
@@ -433,7 +514,8 @@ def run_ekf(run: RecordedRun, settings, method: str = "ekf", *, output_times: np
         if t_e > t_cur:
             t_prev = t_cur
             k, t_cur = prop.advance(s, k, t_cur, t_e)
-            s.gm *= np.exp(-(t_cur - t_prev) / prop.gm_tau)   # the estimated GNSS error decays
+            if len(s.x_e):   # the estimated Gauss-Markov states decay
+                s.x_e *= np.exp(-(t_cur - t_prev) / prop.extra_tau)
         if kind == OUTPUT:
             rec.add(t_e, s)
         else:
@@ -461,14 +543,21 @@ class _Updates:
     stats: dict
 
     def at(self, t_e: float, kind: int, i: int, acc) -> None:
-        """The updates of GNSS epoch or stationary epoch ``i`` at ``t_e`` (``acc``: the window's
-        GNSS acceleration, if any), each shown to the observer."""
+        """The updates of event ``i`` of ``kind`` (GNSS epoch, stationary epoch, NHC epoch,
+        odometry sample) at ``t_e`` (``acc``: the window's GNSS acceleration, if any), each shown
+        to the observer."""
         setup, s, obs = self.setup, self.setup.state, self.observer
-        name = "gnss" if kind == GNSS else "stationary"
+        name = EVENT_NAMES[kind]
         if obs is not None:
             obs.before(t_e, name, s, setup.prop)
-        models = (_gnss_measurements(self.run, setup, s, t_e, i, acc, self.use_acc, obs is not None, self.stats)
-                  if kind == GNSS else _stationary_measurements(setup, s, i))
+        if kind == GNSS:
+            models = _gnss_measurements(self.run, setup, s, t_e, i, acc, self.use_acc, obs is not None, self.stats)
+        elif kind == STATIONARY:
+            models = _stationary_measurements(setup, s, i)
+        elif kind == NHC:
+            models = _nhc_measurements(setup, s, i, self.stats)
+        else:
+            models = _odometry_measurements(setup, s, i, self.stats)
         for m, apply in models:
             if apply:
                 nis, loglik, used, wz = kalman_update(s, m)
@@ -487,5 +576,9 @@ class _Updates:
         stats["n_pos_updates"], stats["n_acc_updates"] = tally.n["pos"], tally.n["acc"]
         stats["n_pos_rejected"] = tally.rejected["pos"]
         stats["accel_window_resets"] = self.setup.window.resets
+        s = self.setup.state
+        if s.i_scale >= 0:   # the odometry scale factor at the end, and its 1-sigma
+            stats["odometry_scale"] = s.scale
+            stats["odometry_scale_sigma"] = math.sqrt(s.P[s.i_scale, s.i_scale])
         stats["loglik"] = float(sum(tally.loglik.values()))
         return stats

@@ -79,7 +79,7 @@ class FixedLagISAM2:
         up, lo = gtsam.ISAM2UpdateParams(), 0   # lo: the oldest node with a group of its own
         if nodes:                               # (the first update: iSAM2 puts new variables last)
             first = _oldest_touched(nodes, touched)
-            lo = max(first - _older_groups(nodes, first, new), 0)
+            lo = max(first - _older_groups(nodes, first, new, touched), 0)
             relinearize = self._relinearizes() or self._stale_leaving((new or nodes)[-1][0] - self.lag)
             up.force_relinearize = relinearize
             if self._unordered or relinearize:
@@ -212,9 +212,15 @@ def _key_list(nodes: list) -> gtsam.KeyList:
     return out
 
 
-def _older_groups(nodes: list, first: int, new: list) -> int:
-    """How many nodes older than node ``first`` (the oldest an update's factors touch) can have
-    groups of their own: iSAM2 re-eliminates at least the variables of nodes ``first`` on and the
-    new ones, and CCOLAMD takes no group number above the number of variables it orders."""
-    n_vars = sum(len(keys) for _, keys in nodes[first:] + new)
+def _older_groups(nodes: list, first: int, new: list, touched: set) -> int:
+    """How many nodes older than node ``first`` (the oldest an update's factors touch; its keys
+    among ``touched``) can have groups of their own: CCOLAMD takes no group number above the
+    number of variables it orders (a larger one corrupts memory), and iSAM2 re-eliminates at
+    least the touched variables of node ``first``, every variable of the later nodes (above them
+    in the time-ordered path) and the new ones. Not all of node ``first``'s: those eliminated
+    before its touched ones may sit in cliques below them (a window-consistent acceleration
+    factor touches only the poses of its oldest node)."""
+    n_vars = sum(len(keys) for _, keys in nodes[first + 1:] + new)
+    if first < len(nodes):
+        n_vars += len(touched.intersection(nodes[first][1]))
     return max(n_vars - (len(nodes) - first + len(new)), 0)

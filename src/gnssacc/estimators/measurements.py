@@ -6,7 +6,9 @@ Error state (estimate minus truth), order as in the paper::
 
 with ``R_nb_est = (I + [phi x]) R_nb``, ``f_est = f + b_a``, ``omega_est = omega + b_g``; with
 time-correlated GNSS errors modelled (``gnss.gm_sigma_m > 0``) three more states follow, the
-estimated Gauss-Markov part of the fix error ``x_g`` [m, NED] (estimate minus truth).
+estimated Gauss-Markov part of the fix error ``x_g`` [m, NED] (estimate minus truth); with wheel
+odometry, one more after them, the odometry's scale-factor error ``dk`` (estimate minus truth;
+the state's place is :attr:`gnssacc.estimators.ekf.FilterState.i_scale`).
 Every innovation is *predicted minus measured*, ``dz = H dx - noise``, so the closed-loop
 correction subtracts ``K dz`` (:func:`gnssacc.estimators.ekf.correct`).
 
@@ -26,6 +28,22 @@ Models
     Zero angular rate while it stands still: the gyro then reads the bias plus the earth rate,
     ``dz = (omega_mean - b_g_hat) - R_est^T omega_ie^n``. To first order
     ``dz = b_g - R^T [omega_ie x] phi + noise``, so ``H = [0, 0, -R^T [omega_ie x], 0, I]``.
+``nhc``
+    Non-holonomic constraint (:mod:`gnssacc.estimators.nhc`): the lateral and vertical
+    components of the velocity of the vehicle's reference point in the body frame are zero,
+    ``dz = [v_y, v_z]`` of :func:`vehicle_velocity`, ``H`` its rows 2 and 3.
+``odo``
+    Wheel odometry (:mod:`gnssacc.estimators.odometry`): the forward speed of the odometry's
+    reference point read with a scale-factor error ``k``, ``v~ = (1 + k) v_x``;
+    ``dz = (1 + k_est) v_x - v~``, ``H = [(1 + k_est) H_x, ..., v_x]`` (``H_x`` the first row of
+    :func:`vehicle_velocity`'s Jacobian, ``v_x`` in the scale state's column).
+
+The velocity of a point ``l_b`` (body) from the IMU, in the body frame, is
+``v_l = R_nb^T v_n + omega_eb x l_b`` with ``omega_eb = (omega_meas - b_g_est) - R_nb^T omega_ie``.
+Under the error convention above, ``R_est^T v_est = R^T v + R^T dv + R^T [v x] phi``, the
+bias-corrected rate is ``omega + db_g`` and ``R_est^T omega_ie = R^T omega_ie + R^T [omega_ie x] phi``, so
+
+    H_v = [0, R^T, R^T [v x] + [l x] R^T [omega_ie x], 0, -[l x]]   (blocks dp, dv, phi, b_a, b_g)
 """
 from __future__ import annotations
 
@@ -34,11 +52,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.earth import radii
-from ..core.rotations import skew
+from ..core.rotations import cross3, skew
 from .gnss_accel import H_a_blocks, H_w_blocks, predicted_acceleration
 
 #: Update kinds, in the order they are reported.
-KINDS = ("pos", "acc", "zupt", "zaru")
+KINDS = ("pos", "acc", "zupt", "zaru", "nhc", "odo")
 #: Tail probability of the chi-square bound an innovation's NIS is counted beyond (one in 1000).
 TAIL_P = 1e-3
 _TAIL_BOUNDS: dict = {}
@@ -88,7 +106,7 @@ def position(s, lat: float, lon: float, h: float, sigma_ned: np.ndarray, lever_a
     H = _H(s, 3)
     H[:, 0:3] = np.eye(3)
     H[:, 6:9] = -skew(l_n)
-    if H.shape[1] > 15:
+    if s.n_gm:
         dz += s.gm
         H[:, 15:18] = np.eye(3)
     R = np.diag(np.asarray(sigma_ned, float) ** 2) if cov_ned is None else np.asarray(cov_ned, float)
@@ -142,3 +160,68 @@ def zero_rate(s, omega_mean_b: np.ndarray, var_b: np.ndarray, w_ie_n: np.ndarray
     H[:, 6:9] = -s.R_nb.T @ skew(w_ie_n)
     H[:, 12:15] = np.eye(3)
     return Measurement("zaru", dz, H, np.diag(var_b), gate)
+
+
+def vehicle_velocity(s, omega_meas_b: np.ndarray, lever_b: np.ndarray, w_ie_n: np.ndarray,
+                     R_vb: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Velocity of the point ``lever_b`` [m, body] from the IMU, relative to the earth, in the body
+    frame [m/s], and its Jacobian ``H_v`` (3 x states) w.r.t. the error state (module docstring);
+    with ``R_vb`` (body to vehicle axes, a constant), in the vehicle's axes: ``R_vb v``, ``R_vb H_v``.
+
+    Parameters
+    ----------
+    s : FilterState
+    omega_meas_b : ndarray (3,)
+        Raw gyro reading [rad/s, body] (the state's bias is removed here).
+    lever_b : ndarray (3,)
+    w_ie_n : ndarray (3,)
+        Earth rate [rad/s, NED].
+    R_vb : ndarray (3, 3), optional
+        ``None``: the body's axes.
+    """
+    Rt = s.R_nb.T
+    u = Rt @ s.v_n
+    H = _H(s, 3)
+    H[:, 3:6] = Rt
+    # R^T [v x] = [(R^T v) x] R^T; the lever-arm terms only with a lever arm (the filter's
+    # per-update cost is mostly these small products).
+    if lever_b.any():
+        w_ie_b = Rt @ w_ie_n
+        L = skew(lever_b)
+        v_b = u + cross3(omega_meas_b - s.b_g - w_ie_b, lever_b)
+        H[:, 6:9] = (skew(u) + L @ skew(w_ie_b)) @ Rt
+        H[:, 12:15] = -L
+    else:
+        v_b = u
+        H[:, 6:9] = skew(u) @ Rt
+    if R_vb is None:
+        return v_b, H
+    return R_vb @ v_b, R_vb @ H
+
+
+
+def non_holonomic(s, omega_meas_b: np.ndarray, lever_b: np.ndarray, w_ie_n: np.ndarray, sigma_mps: np.ndarray,
+                  R_vb: np.ndarray | None = None) -> Measurement:
+    """Zero lateral and vertical velocity at the vehicle's reference point ``lever_b`` [m, body],
+    in the vehicle's axes (``R_vb``, see :func:`vehicle_velocity`), 1-sigma ``sigma_mps`` [m/s]
+    (lateral, vertical); ``omega_meas_b`` the raw gyro [rad/s] at the epoch, ``w_ie_n`` the earth
+    rate [rad/s, NED]."""
+    return nhc_measurement(*vehicle_velocity(s, omega_meas_b, lever_b, w_ie_n, R_vb), sigma_mps)
+
+
+def nhc_measurement(v_b: np.ndarray, H_v: np.ndarray, sigma_mps: np.ndarray) -> Measurement:
+    """:func:`non_holonomic` from the vehicle velocity ``v_b`` and its Jacobian ``H_v`` of
+    :func:`vehicle_velocity` (for a caller that looked at the forward speed first)."""
+    return Measurement("nhc", v_b[1:3], H_v[1:3], np.diag(np.asarray(sigma_mps, float) ** 2))
+
+
+def odometry(s, v_odo: float, sigma_mps: float, omega_meas_b: np.ndarray, lever_b: np.ndarray,
+             w_ie_n: np.ndarray, R_vb: np.ndarray | None = None) -> Measurement:
+    """Wheel odometry's forward speed ``v_odo`` [m/s] (1-sigma ``sigma_mps``) of the point
+    ``lever_b`` [m, body] along the vehicle's x axis (``R_vb``, see :func:`vehicle_velocity`), read
+    with the scale factor of state ``s.i_scale`` (module docstring)."""
+    v_b, H = vehicle_velocity(s, omega_meas_b, lever_b, w_ie_n, R_vb)
+    k = 1.0 + s.scale
+    H_x = H[0:1] * k
+    H_x[0, s.i_scale] = v_b[0]
+    return Measurement("odo", np.array([k * v_b[0] - v_odo]), H_x, np.array([[sigma_mps**2]]))

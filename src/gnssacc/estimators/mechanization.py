@@ -191,12 +191,14 @@ def kernel_force_integrals(f_b, omega_b, h, w, b_a, b_g):
 
 
 @njit(cache=True)
-def apply_correction(pos, v_n, R_nb, b_a, b_g, gm, dx):
+def apply_correction(pos, v_n, R_nb, b_a, b_g, extra, dx):
     """Closed-loop feedback of an estimated error ``dx`` (estimate minus truth, order
-    ``[dp, dv, phi, b_a, b_g (, x_g)]``) into the nominal state, in place.
+    ``[dp, dv, phi, b_a, b_g (, x_e)]``) into the nominal state, in place.
 
     ``R_nb <- Exp(-phi) R_nb``; the biases are added because ``f_est = f_raw - b_a_hat`` carries
-    the residual ``b_a``.
+    the residual ``b_a``. ``extra`` holds the nominal values of the states after the fifteenth
+    (:class:`gnssacc.estimators.ekf.FilterState`: the GNSS Gauss-Markov error, the odometry scale
+    factor), corrected as ``x_e <- x_e - dx_e``.
     """
     R_M, R_N = _radii(pos[0])
     pos[0] -= dx[0] / (R_M + pos[2])
@@ -212,9 +214,8 @@ def apply_correction(pos, v_n, R_nb, b_a, b_g, gm, dx):
         b_g[i] += dx[12 + i]
         for j in range(3):
             R_nb[i, j] = T[i, j]
-    if dx.shape[0] > 15:
-        for i in range(3):
-            gm[i] -= dx[15 + i]
+    for i in range(dx.shape[0] - 15):
+        extra[i] -= dx[15 + i]
 
 
 @njit(cache=True)
@@ -391,9 +392,11 @@ def _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order):
 
 @njit(cache=True)
 def _propagate_gm(P, F, dt, gm_tau, gm_var):
-    """The GNSS Gauss-Markov error states (rows/columns 15.. of P): ``x_g' = a x_g + w``,
-    ``a = exp(-dt / tau)``, stationary variance ``gm_var``. Their cross-covariance with the
-    navigation states follows ``P_xg' = (I + F dt) P_xg a``; nothing couples them in F."""
+    """The first-order Gauss-Markov states after the fifteenth (rows/columns 15.. of P: the GNSS
+    fix error, the odometry scale factor), ``x' = a x + w``, ``a = exp(-dt / tau)``, stationary
+    variance ``gm_var`` (``gm_tau``, ``gm_var``: one entry per such state). Their
+    cross-covariance with the navigation states follows ``P_xg' = (I + F dt) P_xg a``; nothing
+    couples them in F."""
     n = P.shape[0]
     for c in range(15, n):
         a = np.exp(-dt / gm_tau[c - 15])
@@ -417,7 +420,7 @@ def _propagate_gm(P, F, dt, gm_tau, gm_var):
 
 @njit(cache=True)
 def _propagate_all(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order, gm_tau, gm_var):
-    """The 15 navigation states, then the GNSS error states when P has them."""
+    """The 15 navigation states, then the Gauss-Markov states when P has them."""
     if P.shape[0] > 15:
         _propagate_gm(P, F, dt, gm_tau, gm_var)  # needs only P_xg and F: order-independent
     _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order)
@@ -501,9 +504,10 @@ def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
     with_phi : bool
     w_ie_sign : float
         +1, or -1 to integrate a time-reversed recording (the earth then turns the other way).
-    gm_tau, gm_var : ndarray (3,)
-        Correlation time [s] and stationary variance [m^2] of the GNSS Gauss-Markov error states,
-        used when P has them (18 x 18).
+    gm_tau, gm_var : ndarray (n - 15,)
+        Correlation time [s] and stationary variance of the first-order Gauss-Markov states
+        after the fifteenth, when P has them (n x n): the GNSS error [m^2], the odometry scale
+        factor [-].
 
     Returns
     -------
@@ -595,11 +599,15 @@ class Propagator:
     w_ie_sign : float
         +1, or -1 for a time-reversed recording.
     gm_tau_s, gm_sigma_m : ndarray (3,), optional
-        GNSS Gauss-Markov error model (correlation time [s], 1-sigma [m]), for an 18-state P.
+        GNSS Gauss-Markov error model (correlation time [s], 1-sigma [m], zeros: not modelled).
+    scale_tau_s, scale_sigma : float, optional
+        The odometry scale factor's Gauss-Markov model (correlation time [s], 1-sigma [-]),
+        when the filter has that state (after the GNSS error states).
     """
 
     def __init__(self, t, f_b, omega_ib_b, q_a, q_g, q_ba, q_bg, segments, phi_order: int = 1,
-                 cov_every: int = 1, w_ie_sign: float = 1.0, gm_tau_s=None, gm_sigma_m=None):
+                 cov_every: int = 1, w_ie_sign: float = 1.0, gm_tau_s=None, gm_sigma_m=None,
+                 scale_tau_s: float | None = None, scale_sigma: float | None = None):
         self.t, self.f, self.w = (kernel_array(x, float) for x in (t, f_b, omega_ib_b))
         self.q = tuple(np.array(q, float) for q in (q_a, q_g, q_ba, q_bg))
         seg_i0, seg_i1, seg_qg, seg_qa = segments
@@ -608,6 +616,12 @@ class Propagator:
         self.phi_order, self.cov_every, self.w_ie_sign = int(phi_order), max(int(cov_every), 1), float(w_ie_sign)
         self.gm_tau = np.array(np.broadcast_to(60.0 if gm_tau_s is None else gm_tau_s, (3,)), float)
         self.gm_var = np.array(np.broadcast_to(0.0 if gm_sigma_m is None else gm_sigma_m, (3,)), float) ** 2
+        #: Correlation times and variances of the states after the fifteenth, in their order.
+        gm_on = bool(np.any(self.gm_var > 0))
+        self.extra_tau = np.array(([*self.gm_tau] if gm_on else []) + ([] if scale_tau_s is None else [scale_tau_s]),
+                                  float)
+        self.extra_var = np.array(([*self.gm_var] if gm_on else [])
+                                  + ([] if scale_sigma is None else [float(scale_sigma) ** 2]), float)
         #: Transition-matrix accumulator (used when ``with_phi``); reset it with :meth:`reset_phi`.
         self.Phi = np.eye(15)
         self.with_phi = False
@@ -623,7 +637,7 @@ class Propagator:
         seg_i0, seg_i1, seg_qa, seg_qg = self.segments
         return propagate(self.t, self.f, self.w, k, t_cur, t_to, s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, s.P,
                          *self.q, seg_i0, seg_i1, seg_qa, seg_qg, self.phi_order, with_cov, self.cov_every,
-                         self.Phi, self.with_phi, self.w_ie_sign, self.gm_tau, self.gm_var)
+                         self.Phi, self.with_phi, self.w_ie_sign, self.extra_tau, self.extra_var)
 
 
 def warm_up(propagation: bool = True, update: bool = True) -> float:
@@ -648,7 +662,7 @@ def warm_up(propagation: bool = True, update: bool = True) -> float:
         H = np.zeros((3, 15))
         H[:, :3] = np.eye(3)
         dx = joseph_update(s.P, H, np.eye(3), np.ones(3), 0.0)[0]
-        apply_correction(s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, z3.copy(), dx)
+        apply_correction(s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, np.zeros(0), dx)
     return time.perf_counter() - t0
 
 

@@ -4,7 +4,8 @@ The run configuration (:class:`gnssacc.core.config.RunConfig`) is the user's fil
 documentation, presets and provenance; an estimator reads none of that. It reads one frozen
 settings object, made from the configuration in one place here (:meth:`EkfSettings.from_config`,
 :meth:`SmootherSettings.from_config`): the IMU noise model, the GNSS model (lever arm, Gauss-Markov
-error), the acceleration window, the stationary updates, the start's sigma overrides, the
+error), the acceleration window, the stationary updates, the non-holonomic constraint, the wheel
+odometry, the start's sigma overrides, the
 inflation of suspect IMU spans, and the estimator's own keys. The self-tuning changes the
 configuration; the estimators see the result through a new settings object.
 """
@@ -15,7 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..checks.quality import SuspectNoise
-from ..core.config import RunConfig
+from ..core.config import RunConfig, vec3
+from ..core.rotations import euler_to_dcm
 
 
 @dataclass(frozen=True, eq=False)
@@ -116,6 +118,84 @@ class ZuptSettings:
 
 
 @dataclass(frozen=True, eq=False)
+class NhcSettings:
+    """The non-holonomic constraint (``[nhc]``; :mod:`gnssacc.estimators.nhc`).
+
+    Attributes
+    ----------
+    enabled : bool
+    interval_s : float
+        Spacing of the constraint's epochs [s].
+    sigma_mps : ndarray (2,)
+        1-sigma of the lateral and the vertical velocity at the reference point [m/s].
+    lever_arm_b : ndarray (3,)
+        The reference point from the IMU, body FRD [m].
+    pivot_offset_m : float
+        How far along the vehicle a turn's centre on the spot may lie from the reference point [m].
+    R_vb : ndarray (3, 3) or None
+        Body to vehicle axes (``[nhc] pitch_offset_deg``, ``yaw_offset_deg``: the vehicle's axes
+        are the body's turned by that yaw, then that pitch); the wheel odometry's too. ``None``
+        when both are zero (the body's axes).
+    """
+
+    enabled: bool
+    interval_s: float
+    sigma_mps: np.ndarray
+    lever_arm_b: np.ndarray
+    pivot_offset_m: float
+    R_vb: np.ndarray
+
+    @classmethod
+    def from_config(cls, cfg: RunConfig) -> "NhcSettings":
+        c = cfg["nhc"]
+        pitch, yaw = float(c["pitch_offset_deg"]), float(c["yaw_offset_deg"])
+        R_vb = euler_to_dcm(0.0, np.radians(pitch), np.radians(yaw)).T if pitch or yaw else None
+        return cls(bool(c["enabled"]), float(c["interval_s"]),
+                   np.array([float(c["sigma_lateral_mps"]), float(c["sigma_vertical_mps"])]),
+                   vec3(c["lever_arm_b_m"], "[nhc] lever_arm_b_m", "config"), float(c["pivot_offset_m"]), R_vb)
+
+    @property
+    def forward_b(self) -> np.ndarray:
+        """The vehicle's forward axis in body axes."""
+        return np.array([1.0, 0.0, 0.0]) if self.R_vb is None else self.R_vb[0]
+
+
+@dataclass(frozen=True, eq=False)
+class OdometrySettings:
+    """The wheel odometry (``[odometry]``; :mod:`gnssacc.estimators.odometry`).
+
+    Attributes
+    ----------
+    enabled : bool
+        Use the recording's odometry when it has some.
+    interval_s : float
+        At most one sample every this many seconds [s].
+    speed_sigma_mps : float
+        1-sigma of the forward speed [m/s] (a sample's own larger sigma wins).
+    lever_arm_b : ndarray (3,)
+        The odometry's reference point from the IMU, body FRD [m].
+    scale_sigma : float
+        1-sigma of the scale-factor error (a first-order Gauss-Markov state) [-].
+    scale_tau_s : float
+        Its correlation time [s].
+    """
+
+    enabled: bool
+    interval_s: float
+    speed_sigma_mps: float
+    lever_arm_b: np.ndarray
+    scale_sigma: float
+    scale_tau_s: float
+
+    @classmethod
+    def from_config(cls, cfg: RunConfig) -> "OdometrySettings":
+        c = cfg["odometry"]
+        return cls(bool(c["enabled"]), float(c["interval_s"]), float(c["speed_sigma_mps"]),
+                   vec3(c["lever_arm_b_m"], "[odometry] lever_arm_b_m", "config"), float(c["scale_sigma"]),
+                   float(c["scale_tau_s"]))
+
+
+@dataclass(frozen=True, eq=False)
 class _Common:
     """Settings both estimators share (see the subclasses).
 
@@ -125,6 +205,8 @@ class _Common:
     gnss : GnssModel
     accel : AccelSettings
     zupt : ZuptSettings
+    nhc : NhcSettings
+    odometry : OdometrySettings
     suspect : gnssacc.checks.quality.SuspectNoise
         The noise assumed over suspect IMU spans.
     start_sigmas : dict
@@ -136,6 +218,8 @@ class _Common:
     gnss: GnssModel
     accel: AccelSettings
     zupt: ZuptSettings
+    nhc: NhcSettings
+    odometry: OdometrySettings
     suspect: SuspectNoise
     start_sigmas: dict
 
@@ -143,6 +227,7 @@ class _Common:
     def common(cfg: RunConfig) -> dict:
         return dict(imu=ImuNoise.from_config(cfg), gnss=GnssModel.from_config(cfg),
                     accel=AccelSettings.from_config(cfg), zupt=ZuptSettings.from_config(cfg),
+                    nhc=NhcSettings.from_config(cfg), odometry=OdometrySettings.from_config(cfg),
                     suspect=SuspectNoise.from_config(cfg), start_sigmas=cfg.initial_sigma_overrides())
 
 

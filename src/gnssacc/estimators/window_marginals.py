@@ -144,8 +144,9 @@ def _inverse(A):
 
 
 @njit(cache=True)
-def _layout(key):
-    """Offset and dimension of a variable in its node's block, from the GTSAM symbol character."""
+def _layout(key, b=15):
+    """Offset and dimension of a variable in its node's block of ``b`` rows, from the GTSAM symbol
+    character (the odometry scale factor ``k``, when nodes carry one, is the block's last row)."""
     c = key >> 56
     if c == 120:                         # 'x': Pose3
         return 0, 6
@@ -155,6 +156,8 @@ def _layout(key):
         return 9, 6
     if c == 103:                         # 'g': GNSS error
         return 15, 3
+    if c == 107 and b in (16, 19):       # 'k': odometry scale factor
+        return b - 1, 1
     return -1, 0
 
 
@@ -176,7 +179,7 @@ def _scatter(D, O, Ox, info, keys, first, start):
     low = 1 << 62
     p0 = 0
     for p in range(nk):
-        offs[p], dims[p] = _layout(keys[p])
+        offs[p], dims[p] = _layout(keys[p], D.shape[1])
         if dims[p] == 0:
             return -1
         rows[p] = start + (keys[p] & _INDEX_MASK) - first
@@ -384,6 +387,8 @@ class WindowMarginals:
     ----------
     gm : bool
         Nodes carry a GNSS-error state (blocks of 18 instead of 15).
+    scale : bool
+        Nodes carry an odometry scale factor (one more row, the last).
     bandwidth : int
         How many nodes apart a factor may reach: 1 for a chain (block-tridiagonal ``H``, the
         kept forward sweep); more for factors on several nodes (``smoother-accw``'s window
@@ -391,8 +396,8 @@ class WindowMarginals:
         :class:`NotAChain`.
     """
 
-    def __init__(self, gm: bool, bandwidth: int = 1):
-        self.b = 18 if gm else 15
+    def __init__(self, gm: bool, bandwidth: int = 1, scale: bool = False):
+        self.b = (18 if gm else 15) + int(scale)
         self.w = int(bandwidth)
         self.clear()
 
@@ -537,14 +542,18 @@ class WindowMarginals:
 def warm_up(band: bool = False) -> float:
     """Compile (or load) the kernels of a chain of nodes' window (or of a band, ``band``: the
     window-consistent acceleration factors') by running them on a window of three nodes with the
-    array types a smoother gives them; the seconds it took. No gtsam (the install compiles them)."""
+    array types a smoother gives them; the seconds it took. No gtsam (the install compiles them).
+    The nodes carry an odometry scale factor, whose one-dimensional factors' information (a 1 x 1
+    array, C- and Fortran-contiguous at once) numba types as C-contiguous: a second version of
+    :func:`_scatter`, which a run with wheel odometry calls too."""
     t0 = time.perf_counter()
-    window = WindowMarginals(gm=False, bandwidth=2 if band else 1)
+    window = WindowMarginals(gm=False, bandwidth=2 if band else 1, scale=True)
     window.first = 0
     window._grow(2)
     for i in range(3):
         keys = np.array([symbol_key(c, i) for c in "xvb"], np.int64)
-        window._scatter(np.asfortranarray(np.eye(window.b)), keys)
+        window._scatter(np.asfortranarray(np.eye(window.b - 1)), keys)
+        window._scatter(np.eye(1), np.array([symbol_key("k", i)], np.int64))
     window.covariances([0, 1, 2])
     window.marginalize_first()
     return time.perf_counter() - t0

@@ -1,37 +1,20 @@
-"""``gnssacc run --report``: an HTML page beside ``metrics.json`` with the comparison table, the
-figures, per-state 1-sigma histories and the data-quality findings. Figures are separate PNG
-files referenced by relative paths, so the folder can be moved or zipped as a whole."""
+"""``gnssacc run --report``: an HTML page beside ``metrics.json``.
+
+The answer comes first (the comparison table, the warnings and ``summary.png``: which method, how
+good, how sure), then the figures, one question each (:mod:`gnssacc.outputs.figures`), then the
+details: the evo-style statistics, consistency, noise identification, start, IMU data quality and
+observability. Each section is made on its own: one that fails is one line in its place, never the
+end of the run. Figures are separate PNG files and every path is relative (the source's too), so the
+folder can be moved or zipped as a whole."""
 from __future__ import annotations
 
 import html
+import os
 from pathlib import Path
 
-from ..core.display import DISPLAY_SCALE, STATE_GROUPS
 from ..core.recording import RecordedRun
 from ..core.solution import NavSolution
-from .report import failed_methods, figure, table_notes, table_rows
-
-
-def plot_sigmas(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> None:
-    """1-sigma of every error state vs time, one panel per state, one line per method."""
-    import matplotlib.pyplot as plt
-
-    fig, axes = figure((14, 14), 5, 3, sharex=True)
-    for row, (name, cols, unit, labels) in enumerate(STATE_GROUPS):
-        for c, label in enumerate(labels):
-            ax = axes[row, c]
-            k = cols.start + c
-            for mid, sol in sols.items():
-                ax.semilogy(sol.t - run.t_start, sol.sigma[:, k] * DISPLAY_SCALE[k], lw=1, label=mid)
-            ax.set_title(f"{name} {label} [{unit}]", fontsize=9)
-            ax.grid(alpha=0.3, which="both")
-    for ax in axes[-1]:
-        ax.set_xlabel("time since start [s]")
-    axes[0, 0].legend(fontsize=7)
-    fig.suptitle(f"{run.name}: predicted 1-sigma per error state")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+from .report import failed_methods, group_warnings, table_notes, table_rows
 
 
 def observability_html(run: RecordedRun, sols: dict[str, NavSolution], cfg, replay=None) -> str:
@@ -106,41 +89,172 @@ def tuning_html(metrics: dict) -> str:
             f"<table><tr><th>key</th><th>start</th><th>identified</th></tr>{rows}</table>")
 
 
-def write_html_report(folder: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict, cfg=None,
-                      replay=None) -> Path:
-    """Write ``report.html`` (and ``sigmas.png``) into ``folder``; returns the page's path.
+#: The figures in the report, with the question each one answers.
+CAPTIONS = {
+    "trajectory": "Where: the track coloured by horizontal error (without truth: by the stated 1-sigma), x east, "
+                  "y north, start, end and outages marked",
+    "errors": "How the position error evolves, per axis, against each method's +-3 sigma",
+    "velocity_attitude": "Velocity and attitude errors against +-3 sigma",
+    "nis": "Is each method consistent over time? NIS and distance to the fixes",
+    "biases": "What the filters learnt about the IMU: bias estimates with +-3 sigma",
+    "sigmas": "How uncertain each state is over time (predicted 1-sigma)",
+}
 
-    With ``cfg`` the page also gets the observability section (:func:`observability_html`).
-    """
-    folder = Path(folder)
-    plot_sigmas(run, sols, folder / "sigmas.png")
+
+def shown_path(where: str, folder: Path) -> str:
+    """A source path as the report shows it: inside an installed package, from the package on
+    (``gtsam/Data/...``, never an absolute venv path); otherwise relative to the report's folder."""
+    text = str(where)
+    head, sep, tail = text.partition(" (")
+    parts = Path(head).parts
+    if "site-packages" in parts:
+        rest = Path(*parts[parts.index("site-packages") + 1:])
+        return f"{rest} (in the installed package){' (' + tail if sep else ''}"
+    if os.path.isabs(head):
+        try:
+            return os.path.relpath(head, folder) + (f" ({tail}" if sep else "")
+        except ValueError:   # another drive
+            return Path(head).name + (f" ({tail}" if sep else "")
+    return text
+
+
+def _section(title: str, make, anchor: str) -> str:
+    """``<h2 id=anchor>title</h2>`` and ``make()``'s HTML; a failure is one line in its place."""
+    from ..core.interrupts import raise_if_interrupted
+
+    try:
+        body = make()
+    except Exception as exc:
+        raise_if_interrupted(exc)
+        body = (f'<p class="failed">This section could not be made ({html.escape(type(exc).__name__)}: '
+                f"{html.escape(' '.join(str(exc).split())[:200])}); the rest of the report is complete.</p>")
+    return f'<h2 id="{anchor}">{html.escape(title)}</h2>\n{body}\n' if body else ""
+
+
+def warnings_html(metrics: dict) -> str:
+    """The warnings about the methods, grouped as ``gnssacc run`` prints them."""
+    cons = metrics.get("consistency") or {}
+    items = group_warnings([(m, w) for m, c in cons.items() for w in c.get("warnings", [])])
+    failed = [(m, f"failed: {r}") for m, r in failed_methods(metrics).items()]
+    if not items and not failed:
+        return "<p>No warnings: every figure is within its band.</p>"
+    return "<ul class=\"warnings\">" + "".join(f"<li><b>{html.escape(who)}</b>: {html.escape(text)}</li>"
+                                             for who, text in items + failed) + "</ul>"
+
+
+def _img(name: str, caption: str) -> str:
+    return (f'<figure><img src="{name}.png" alt="{html.escape(caption)}">'
+            f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+
+
+def answer_html(metrics: dict, figures: dict) -> str:
+    """The comparison, the warnings and ``summary.png``."""
+    out = comparison_html(metrics) + "<h3>Warnings</h3>" + warnings_html(metrics)
+    if figures.get("summary", "not drawn") is None:
+        out += _img("summary", "Which method, how good, how sure: horizontal error CDF and consistency per method")
+    return out
+
+
+def figures_html(figures: dict) -> str:
+    """Every other figure with its question, and a line for each one not drawn."""
+    parts = []
+    for name, caption in CAPTIONS.items():
+        if name not in figures:
+            continue
+        if figures[name] is None:
+            parts.append(_img(name, caption))
+        else:
+            parts.append(f"<p class=\"note\">{html.escape(name)}.png not drawn: {html.escape(figures[name])}</p>")
+    return "".join(parts) or "<p>No figures (<code>--plots none</code>).</p>"
+
+
+def _stat(x, spec=".2f") -> str:
+    return "-" if x is None else format(x, spec)
+
+
+def statistics_html(metrics: dict) -> str:
+    """Per method, evo's statistics of the position error and the per-axis, velocity, attitude and
+    NEES figures (:mod:`gnssacc.analysis.errorstats`); without truth the distance to the fixes."""
+    from .report import ok_methods
+
+    ok = ok_methods(metrics)
+    truth = any((m.get("errors") or {}).get("position") for m in ok.values())
+    if not truth:
+        rows = "".join(f"<tr><td>{html.escape(mid)}</td>" + "".join(
+            f'<td class="num">{_stat(((m.get("errors") or {}).get("fix_residual") or {}).get(k))}</td>'
+            for k in ("rmse", "mean", "median", "std", "max")) + "</tr>" for mid, m in ok.items())
+        return ("<p>No truth: accuracy cannot be scored. Distance from each method to the raw fixes [m] "
+                "(agreement with them, not accuracy):</p><table><tr><th>method</th><th>RMS</th><th>mean</th>"
+                f"<th>median</th><th>std</th><th>max</th></tr>{rows}</table>")
+    head = ["method", "RMSE", "mean", "median", "std", "max", "CEP50", "CEP95", "N RMSE", "E RMSE", "D RMSE",
+            "vel RMSE [m/s]", "roll [deg]", "pitch [deg]", "yaw [deg]", "NEES pos", "NEES att"]
+    rows = []
+    for mid, m in list(ok.items()) + [("gnss (raw fixes)", {"errors": metrics.get("gnss_errors") or {}})]:
+        e = m.get("errors") or {}
+        p, h, ax = e.get("position") or {}, e.get("horizontal") or {}, e.get("position_axes") or {}
+        att = e.get("attitude_axes") or {}
+        cells = [p.get("rmse"), p.get("mean"), p.get("median"), p.get("std"), p.get("max"), h.get("cep50"),
+                 h.get("cep95")] + [(ax.get(a) or {}).get("rmse") for a in "NED"] + [
+                 (e.get("velocity") or {}).get("rmse")] + [(att.get(a) or {}).get("rmse") for a in ("roll", "pitch", "yaw")] + [
+                 (e.get("nees_position") or {}).get("value"), (e.get("nees_attitude") or {}).get("value")]
+        rows.append(f"<tr><td>{html.escape(mid)}</td>" + "".join(f'<td class="num">{_stat(c)}</td>' for c in cells) + "</tr>")
+    return ("<p>Position error norm [m] over the scored epochs with evo's statistics (<code>evo_ape "
+            "--pose_relation trans_part</code>, no alignment), horizontal CEP50/CEP95 [m], per-axis RMSE [m], velocity "
+            "and attitude RMSE, NEES per dof (1 = consistent). The raw fixes are scored at their own epochs.</p>"
+            "<table><tr>" + "".join(f"<th>{html.escape(c)}</th>" for c in head) + "</tr>" + "".join(rows) + "</table>")
+
+
+def _quality_html(metrics: dict, run: RecordedRun) -> str:
     spans = metrics.get("quality", {}).get("spans", [])
     rows = "".join(f"<tr><td>{html.escape(s['kind'])}</td><td>{s['t_start'] - run.t_start:.2f}</td>"
                    f"<td>{s['t_end'] - s['t_start']:.2f}</td><td>{html.escape(str(s['channels']))}</td>"
                    f"<td>{html.escape(str(s['note']))}</td></tr>" for s in spans)
-    quality = (f"<table><tr><th>kind</th><th>start [s]</th><th>length [s]</th><th>channels</th><th>note</th></tr>"
-               f"{rows}</table>" if spans else "<p>No suspect IMU spans.</p>")
-    inits = html.escape(str(metrics.get("init") or next(iter(metrics["methods"].values()))["stats"].get("init", "")))
-    figures = "".join(f'<h2>{title}</h2><img src="{name}" alt="{title}">' for name, title in
-                      (("errors.png", "Position error"), ("trajectory.png", "Track"),
-                       ("sigmas.png", "Per-state 1-sigma")) if (folder / name).exists())
+    return (f"<table><tr><th>kind</th><th>start [s]</th><th>length [s]</th><th>channels</th><th>note</th></tr>"
+            f"{rows}</table>" if spans else "<p>No suspect IMU spans.</p>")
+
+
+def _init_html(metrics: dict) -> str:
+    first = next(iter(metrics["methods"].values()), {})
+    inits = metrics.get("init") or (first.get("stats") or {}).get("init", "")
+    return f"<p>All methods start from the same state: {html.escape(str(inits))}</p>"
+
+
+_STYLE = """body{font-family:sans-serif;max-width:1200px;margin:1.5em auto;padding:0 1em} img{max-width:100%}
+table{border-collapse:collapse;margin:0.5em 0} td,th{border:1px solid #ccc;padding:2px 6px;font-size:90%}
+th{background:#f0f0f0} td:first-child{white-space:nowrap} td.num{text-align:right;font-variant-numeric:tabular-nums}
+td.warn{background:#fff3cd} p.note,figcaption{font-size:85%;color:#555} p.failed{color:#a00}
+ul.warnings li{margin-bottom:0.3em;font-size:92%} figure{margin:1em 0} nav a{margin-right:1em}"""
+
+
+def write_html_report(folder: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict, cfg=None,
+                      replay=None, figures: dict | None = None) -> Path:
+    """Write ``report.html`` into ``folder``; returns the page's path.
+
+    ``figures``: what :func:`gnssacc.outputs.figures.write_figures` drew (``{name: None or reason}``).
+    With ``cfg`` the page also gets the observability section (:func:`observability_html`).
+    """
+    folder = Path(folder)
+    figures = figures or {}
+    where = shown_path(run.where, folder)
+    sections = [("Answer: which method, how good, how sure", lambda: answer_html(metrics, figures)),
+                ("Figures", lambda: figures_html(figures)),
+                ("Statistics", lambda: statistics_html(metrics)),
+                ("Consistency", lambda: consistency_html(metrics)),
+                ("Noise identification", lambda: tuning_html(metrics)),
+                ("Initialisation", lambda: _init_html(metrics)),
+                ("IMU data quality", lambda: _quality_html(metrics, run))]
+    if cfg is not None:
+        sections.append(("Observability", lambda: observability_html(run, sols, cfg, replay)))
+    body = "".join(_section(t, f, f"s{i}") for i, (t, f) in enumerate(sections))
+    nav = "".join(f'<a href="#s{i}">{html.escape(t.split(":")[0])}</a>' for i, (t, _) in enumerate(sections))
     page = f"""<!doctype html>
 <html><head><meta charset="utf-8"><title>gnssacc report: {html.escape(run.name)}</title>
-<style>body{{font-family:sans-serif;max-width:1100px;margin:2em auto}} img{{max-width:100%}}
-table{{border-collapse:collapse}} td,th{{border:1px solid #ccc;padding:2px 6px;font-size:90%}}
-pre{{background:#f6f6f6;padding:1em}} th{{background:#f0f0f0}}
-td:first-child{{white-space:nowrap}} td.num{{text-align:right;font-variant-numeric:tabular-nums}} td.warn{{background:#fff3cd}} p.note{{font-size:85%;color:#555}}</style></head><body>
+<style>{_STYLE}</style></head><body>
 <h1>gnssacc report: {html.escape(run.name)}</h1>
-<p>Source: {html.escape(run.where)}<br>Duration {run.duration_s:.1f} s, {len(run.imu)} IMU samples,
-{len(run.gnss)} GNSS fixes. Configuration: {html.escape(', '.join(metrics.get('config_sources', [])))}.</p>
-<h2>Comparison</h2>{comparison_html(metrics)}
-<h2>Consistency</h2>{consistency_html(metrics)}
-<h2>Noise identification</h2>{tuning_html(metrics)}
-<h2>Initialisation</h2><p>All methods start from the same state: {inits}</p>
-<h2>IMU data quality</h2>{quality}
-{observability_html(run, sols, cfg, replay) if cfg is not None else ""}
-{figures}
-</body></html>
+<p>Source: {html.escape(where)}; {run.duration_s:.1f} s, {len(run.imu)} IMU samples, {len(run.gnss)} GNSS fixes;
+configuration: {html.escape(', '.join(metrics.get('config_sources', [])))}.</p>
+<nav>{nav}</nav>
+{body}</body></html>
 """
     path = folder / "report.html"
     path.write_text(page)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.metrics import BASELINES, Score, improvement_pct, truth_at
+from ..analysis.metrics import BASELINES, Score, improvement_pct
 from ..core.display import DISPLAY_SCALE, TRAJECTORY_COLUMNS, text_table
 from ..core.recording import RecordedRun
 from ..core.solution import NavSolution
@@ -89,16 +89,17 @@ def metrics_dict(run: RecordedRun, sols: dict[str, NavSolution], scores: dict[st
         methods[mid] = {
             "status": "ok",
             "prmse_m": sc.prmse_m, "hrmse_m": sc.hrmse_m, "prmse_outage_m": sc.prmse_outage_m,
-            "rpy_rmse_deg": sc.rpy_rmse_deg, "n_epochs": sc.n_epochs, **sc.truth,
+            "rpy_rmse_deg": sc.rpy_rmse_deg, "n_epochs": sc.n_epochs, **sc.truth, "errors": sc.errors,
             "improvement_pct": improvement_pct(scores[base].prmse_m, sc.prmse_m) if base in scores else None,
             "runtime_s": sol.runtime_s,
             "realtime_factor": run.duration_s / sol.runtime_s if sol.runtime_s > 0 else None,
-            "stats": sol.stats,
+            "stats": {k: v for k, v in sol.stats.items() if not isinstance(v, np.ndarray)},   # not per-update series
         }
     for mid, reason in (failed or {}).items():
         methods[mid] = {"status": "failed", "error": reason}
     return {"source": run.name, "where": run.where, "duration_s": run.duration_s, "t_start": run.t_start,
             "gnss_prmse_m": gnss.prmse_m, "gnss_hrmse_m": gnss.hrmse_m, "gnss_n_epochs": gnss.n_epochs,
+            "gnss_errors": gnss.errors,
             "n_fixes": len(run.gnss),
             "run": run_facts(run), "methods": methods, **extra}
 
@@ -129,36 +130,80 @@ def _fmt(x, spec: str) -> str:
     return "-" if x is None else format(x, spec)
 
 
-def _nis_cell(metrics: dict, mid: str) -> str:
-    """Position NIS per dof (EKF) or normalised GNSS residual (smoother), '!' when warned about."""
-    c = metrics.get("consistency", {}).get(mid)
-    if not c:
-        return "-"
-    value = c["nis"].get("pos")
-    return _fmt(value, ".2f") + (" !" if c["warnings"] else "")
+def _get(d: dict | None, *keys):
+    """``d[k0][k1]...`` or ``None`` where a level is missing."""
+    for k in keys:
+        if not isinstance(d, dict) or d.get(k) is None:
+            return None
+        d = d[k]
+    return d
+
+
+def _flagged(metrics: dict, mid: str, column: str) -> bool:
+    """Whether a warning about ``mid`` concerns table column ``column`` (``nis``, ``fixes``, ``nees``)."""
+    c = metrics.get("consistency", {}).get(mid) or {}
+    flags = c.get("flags")
+    if flags is None:   # metrics.json of an older version: every warning was shown on the NIS
+        return column == "nis" and bool(c.get("warnings"))
+    return column in flags
+
+
+def _cell(value, spec: str, warned: bool = False) -> str:
+    return _fmt(value, spec) + (" !" if warned and value is not None else "")
+
+
+def _columns(metrics: dict) -> list[tuple[str, object]]:
+    """The table's columns: ``(header, cell(mid, m) -> str)``, those the run has figures for."""
+    ok = ok_methods(metrics)
+    truth = any(m.get("prmse_m") is not None for m in ok.values())
+    cons = lambda mid, k: _get(metrics, "consistency", mid, "nis", k)
+    cols = [("method", None)]
+    if truth:
+        cols += [("PRMSE [m]", lambda mid, m: _fmt(m.get("prmse_m"), ".2f")),
+                 ("HRMSE [m]", lambda mid, m: _fmt(m.get("hrmse_m"), ".2f")),
+                 ("CEP95 [m]", lambda mid, m: _fmt(_get(m, "errors", "horizontal", "cep95"), ".2f")),
+                 ("PRMSE at fixes [m]", lambda mid, m: _cell(_get(m, "errors", "at_fixes", "prmse_m"), ".2f",
+                                                             _flagged(metrics, mid, "fixes")))]
+        if any(m.get("prmse_outage_m") is not None for m in ok.values()):
+            cols.append(("outage PRMSE [m]", lambda mid, m: _fmt(m.get("prmse_outage_m"), ".2f")))
+        if any(_get(m, "errors", "attitude_axes") for m in ok.values()):
+            cols.append(("yaw RMSE [deg]", lambda mid, m: _fmt(_get(m, "errors", "attitude_axes", "yaw", "rmse"), ".2f")))
+        cols.append(("NEES pos", lambda mid, m: _cell(_get(m, "errors", "nees_position", "value"), ".2f",
+                                                      _flagged(metrics, mid, "nees"))))
+    else:
+        cols.append(("fix residual [m]", lambda mid, m: _cell(_get(m, "errors", "fix_residual", "rmse"), ".2f",
+                                                             _flagged(metrics, mid, "fixes"))))
+    cols += [("NIS", lambda mid, m: _cell(cons(mid, "pos"), ".2f", _flagged(metrics, mid, "nis"))),
+             ("acc gain [%]", lambda mid, m: _fmt(m.get("improvement_pct"), "+.1f")),
+             ("wall [s]", lambda mid, m: f"{m['runtime_s']:.3f}"),
+             ("real-time x", lambda mid, m: _fmt(m.get("realtime_factor"), ".0f"))]
+    return cols
+
+
+def _fix_cells(metrics: dict, head: list[str]) -> list[str]:
+    """The raw fixes' row: their own figures at their epochs (the like-for-like reference)."""
+    g = metrics.get("gnss_errors") or {}
+    own = {"PRMSE [m]": _fmt(metrics.get("gnss_prmse_m"), ".2f"), "HRMSE [m]": _fmt(metrics.get("gnss_hrmse_m"), ".2f"),
+           "CEP95 [m]": _fmt(_get(g, "horizontal", "cep95"), ".2f"),
+           "PRMSE at fixes [m]": _fmt(metrics.get("gnss_prmse_m"), ".2f")}
+    return ["gnss (raw fixes)"] + [own.get(h, "-") for h in head[1:]]
 
 
 def table_rows(metrics: dict) -> tuple[list[str], list[list[str]]]:
     """The comparison table's header and rows (text cells), the raw fixes last; the failed
-    methods are :func:`failed_methods`."""
-    ok = ok_methods(metrics)
-    outage = any(m["prmse_outage_m"] is not None for m in ok.values())
-    head = ["method", "PRMSE [m]", "HRMSE [m]"] + (["outage PRMSE [m]"] if outage else []) + \
-        ["NIS", "acc gain [%]", "wall [s]", "real-time x"]
-    rows = []
-    for mid, m in ok.items():
-        rows.append([mid, _fmt(m["prmse_m"], ".2f"), _fmt(m["hrmse_m"], ".2f")] +
-                    ([_fmt(m["prmse_outage_m"], ".2f")] if outage else []) +
-                    [_nis_cell(metrics, mid), _fmt(m["improvement_pct"], "+.1f"), f"{m['runtime_s']:.3f}",
-                     _fmt(m["realtime_factor"], ".0f")])
+    methods are :func:`failed_methods`. A warned figure carries ``!`` in its own column: the NIS
+    (innovations, noise model), ``PRMSE at fixes`` / ``fix residual`` (no better than the fixes),
+    ``NEES pos`` (errors against the truth beyond the stated sigma)."""
+    cols = _columns(metrics)
+    head = [h for h, _ in cols]
+    rows = [[mid] + [f(mid, m) for _, f in cols[1:]] for mid, m in ok_methods(metrics).items()]
     if metrics.get("gnss_prmse_m") is not None:
-        rows.append(["gnss (raw fixes)", _fmt(metrics["gnss_prmse_m"], ".2f"), _fmt(metrics["gnss_hrmse_m"], ".2f")] +
-                    (["-"] if outage else []) + ["-", "-", "-", "-"])
+        rows.append(_fix_cells(metrics, head))
     return head, rows
 
 
 def table_notes(metrics: dict) -> tuple[list[str], list[str]]:
-    """The lines above the comparison table (the scored window) and below it (the NIS legend)."""
+    """The lines above the comparison table (the scored window) and below it (the legend)."""
     return _window_lines(metrics), _legend(metrics)
 
 
@@ -171,7 +216,16 @@ def format_table(metrics: dict) -> str:
     first = len(lines[1].split("  ")[0])
     # A failed row is not cut into columns: its reason runs on after the method id.
     failed_rows = [f"{mid.ljust(first)}  failed: {reason}" for mid, reason in failed.items()]
-    return "\n".join(_window_lines(metrics) + lines + failed_rows + _legend(metrics))
+    return "\n".join(_window_lines(metrics) + lines + failed_rows + _start_lines(metrics) + _legend(metrics))
+
+
+def _start_lines(metrics: dict) -> list[str]:
+    """What the estimates' yaw rests on, when nothing does: said in the table, not only in a log."""
+    start = metrics.get("start") or {}
+    if start.get("yaw_determined", True):
+        return []
+    return [f"yaw undetermined (sigma {start['yaw_sigma_deg']:.0f} deg): {start.get('why', 'the motion never told it')};"
+            " heading and attitude figures of every method rest on that guess"]
 
 
 def _window_lines(metrics: dict) -> list[str]:
@@ -181,91 +235,64 @@ def _window_lines(metrics: dict) -> list[str]:
     t0 = metrics.get("t_start", 0.0)
     frac = (w[1] - w[0]) / metrics["duration_s"] if metrics["duration_s"] > 0 else 1.0
     n = {m["n_epochs"] for m in ok_methods(metrics).values()}
-    return [f"scored over t = {w[0] - t0:.1f} .. {w[1] - t0:.1f} s from the start ({100 * frac:.0f} % of the run), "
+    what = "scored" if metrics.get("gnss_prmse_m") is not None else "compared (no truth)"
+    return [f"{what} over t = {w[0] - t0:.1f} .. {w[1] - t0:.1f} s from the start ({100 * frac:.0f} % of the run), "
             f"every row: {'/'.join(str(x) for x in sorted(n))} epochs per method, "
             f"{metrics.get('gnss_n_epochs', '-')} raw fixes"]
 
 
 def _legend(metrics: dict) -> list[str]:
-    if not metrics.get("consistency"):
+    if not metrics.get("consistency"):   # a table made by hand, not by a run
         return []
-    return ["NIS: mean normalised innovation (EKF) or GNSS residual (smoother) squared per dof; "
-            "1 = consistent, '!' = see the warnings"]
+    head = table_rows(metrics)[0]
+    out = []
+    if "PRMSE at fixes [m]" in head:
+        out.append("PRMSE at fixes: each method at the raw fixes' epochs, like for like with the fixes' own row"
+                   + (" (fixes exist outside outages only: this is the no-outage figure)"
+                      if "outage PRMSE [m]" in head else "")
+                   + "; CEP95: 95 % of the horizontal errors are below it")
+        out.append("NEES pos: mean (error / stated sigma)^2 per axis against the truth; 1 = consistent")
+    elif "fix residual [m]" in head:
+        out.append("no truth: accuracy cannot be scored; fix residual = RMS distance to the raw fixes (agreement "
+                   "with them, not accuracy), and the NIS")
+    out.append("NIS: mean normalised innovation (EKF) or GNSS residual (smoother) squared per dof; "
+               "1 = consistent; '!' = the figure a warning is about")
+    return out
 
 
-def figure(figsize, nrows: int = 1, ncols: int = 1, **kw):
-    """A matplotlib figure and axes for a file (the Agg backend: never needs a display)."""
-    import matplotlib
-    matplotlib.use("Agg")  # files only; never needs a display
-    import matplotlib.pyplot as plt
+def group_warnings(items: list[tuple[str, str]]) -> list[tuple[str, str]]:
+    """``(method, text)`` warnings folded into fewer lines: warnings that differ only in their
+    numbers become one ``("m1, m2", text)`` whose differing numbers read ``a/b`` in method order.
 
-    return plt.subplots(nrows, ncols, figsize=figsize, **kw)
+    Returns
+    -------
+    list of (str, str)
+        ``(methods, text)`` in the order each group first appeared.
+    """
+    import re
 
-
-def _finish(fig, ax, path: Path, xlabel: str, ylabel: str, title: str, legend: bool = True,
-            title_ax=None) -> None:
-    import matplotlib.pyplot as plt
-
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
-    (title_ax or ax).set_title(title)
-    ax.grid(alpha=0.3)
-    if legend:
-        ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
-#: Line styles cycled over the methods, so that two methods whose errors coincide stay distinct
-#: (the later one dashed or dotted on top of the earlier, thinner).
-_STYLES = (("-", 1.6), ("--", 1.2), (":", 1.4), ("-.", 1.0))
+    num = re.compile(r"-?\d+(?:\.\d+)?")
+    groups: dict[str, list[tuple[str, str]]] = {}
+    for mid, text in items:
+        groups.setdefault(num.sub("#", text), []).append((mid, text))
+    out = []
+    for key, members in groups.items():
+        values = [num.findall(text) for _, text in members]
+        slots = iter(["/".join(dict.fromkeys(v[i] for v in values)) for i in range(len(values[0]))])
+        parts = key.split("#")
+        text = "".join(p + (next(slots) if i < len(parts) - 1 else "") for i, p in enumerate(parts))
+        out.append((", ".join(dict.fromkeys(m for m, _ in members)), text))
+    return out
 
 
-def plot_errors(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> None:
-    """North, east and down position error per method against time, each with its +-3 sigma
-    band (the method's own 1-sigma, drawn as thin edges in its colour and line style); GNSS
-    outages shaded grey when there are any. Each axis spans the 98th percentile of the errors and
-    bands (the widest 2 % of a band, deep in an outage, is cut off)."""
-    fig, axes = figure((10, 7.5), nrows=3, sharex=True)
-    outages = run.outages
-    extent = np.zeros(3)   # per axis: the 98th percentile of |error| and 3 sigma over the methods
-    for k, (mid, sol) in enumerate(sols.items()):
-        p_true, valid = truth_at(run, sol.t)
-        err = run.origin.to_ned(sol.lat, sol.lon, sol.h)[valid] - p_true[valid]
-        t, sig = sol.t[valid] - run.t_start, sol.sigma[valid, 0:3]
-        style, lw = _STYLES[k % len(_STYLES)]
-        for i, ax in enumerate(axes):
-            line, = ax.plot(t, err[:, i], style, lw=lw, label=mid, zorder=3)
-            for sign in (-1, 1):   # the band as thin edges in the method's colour and style
-                ax.plot(t, sign * 3 * sig[:, i], style, lw=0.7, color=line.get_color(), alpha=0.6, zorder=2)
-        if len(t):
-            extent = np.maximum(extent, np.percentile(np.maximum(np.abs(err), 3 * sig), 98, axis=0))
-    for ax, axis, lim in zip(axes, ("north", "east", "down"), extent):
-        if lim > 0:   # a band that opens in a long outage must not flatten every error line
-            ax.set_ylim(-1.15 * lim, 1.15 * lim)
-        for a, b in outages:
-            ax.axvspan(a, b, color="0.85", zorder=0)
-        ax.set_ylabel(f"{axis} error [m]")
-        ax.grid(alpha=0.3)
-    axes[0].legend(ncol=min(len(sols), 4), fontsize="small", loc="upper right")
-    note = "; grey: GNSS outages" if outages else ""
-    _finish(fig, axes[-1], path, "time since start [s]", "down error [m]",
-            f"{run.name}: position error, estimate minus truth, with +-3 sigma bands{note}", legend=False,
-            title_ax=axes[0])
-
-
-def plot_trajectory(run: RecordedRun, sols: dict[str, NavSolution], path: Path) -> None:
-    """North/east track of each method with the truth and the GNSS fixes."""
-    fig, ax = figure((7.5, 7.5))
-    fx = run.origin.to_ned(run.gnss.lat, run.gnss.lon, run.gnss.h)
-    ax.plot(fx[:, 1], fx[:, 0], ".", ms=2.5, color="0.6", label="GNSS fixes")
-    if run.truth is not None:
-        tr = run.origin.to_ned(run.truth.lat, run.truth.lon, run.truth.h)
-        ax.plot(tr[:, 1], tr[:, 0], "k-", lw=1.5, label="truth")
-    for mid, sol in sols.items():
-        p = run.origin.to_ned(sol.lat, sol.lon, sol.h)
-        ax.plot(p[:, 1], p[:, 0], lw=1, label=mid)
-    ax.set_aspect("equal", adjustable="datalim")
-    _finish(fig, ax, path, "east [m]", "north [m]",
-            f"{run.name}: track (origin {np.degrees(run.origin.lat0):.5f}, {np.degrees(run.origin.lon0):.5f} deg)")
+def quality_line(quality: dict) -> str:
+    """One line of the IMU data-quality findings (a :class:`gnssacc.checks.quality.QualityReport`
+    as a dict: its suspect ``spans`` by kind, with their total length)."""
+    spans = quality.get("spans", [])
+    if not spans:
+        return "IMU data quality: no suspect spans"
+    kinds: dict[str, list] = {}
+    for s in spans:
+        kinds.setdefault(s["kind"], []).append(s)
+    parts = [f"{len(v)} {k} ({sum(s['t_end'] - s['t_start'] for s in v):.1f} s)" for k, v in kinds.items()]
+    return "IMU data quality: " + ", ".join(parts) + " - process noise inflated over these spans"

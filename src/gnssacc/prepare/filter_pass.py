@@ -39,6 +39,8 @@ class FilterPass(Protocol):
         Stop after this time [s].
     cov_every : int
         Propagate the covariance every this many IMU samples.
+    store_P : bool
+        Keep the full covariance at every output epoch.
 
     Returns
     -------
@@ -50,4 +52,4 @@ class FilterPass(Protocol):
     def __call__(self, run: RecordedRun, cfg, method: str = "ekf", *, init: InitialState | None = None,
                  quality=None, stationary=None, output_times: np.ndarray | None = None,
                  record_innovations: bool = False, t_stop: float | None = None,
-                 cov_every: int = 1) -> NavSolution: ...
+                 cov_every: int = 1, store_P: bool = False) -> NavSolution: ...

@@ -2,10 +2,10 @@
 
 :func:`prepare` runs, in order,
 
-0. the input checks (:mod:`gnssacc.checks.plausibility`): units, clocks, coordinates and mounting
-   checked against the data themselves; repairs and measured ``"auto"`` offsets and mountings are
-   applied here, so every later step and estimator sees the corrected run (the clock offset's
-   likelihood stage is :mod:`gnssacc.prepare.clock`);
+0. fix sigmas the recording does not state, from the fixes' scatter (:mod:`gnssacc.prepare.fix_noise`);
+   then the input checks (:mod:`gnssacc.checks.plausibility`): units, clocks, coordinates and
+   mounting checked against the data themselves, their proposals settled by the estimator
+   (:mod:`gnssacc.prepare.settle`), so every later step and estimator sees the corrected run;
 1. the IMU data-quality check (:mod:`gnssacc.checks.quality`);
 2. stationary detection from windowed IMU statistics and GNSS agreement
    (:mod:`gnssacc.prepare.stationary`), and the noise the IMU shows at rest;
@@ -25,20 +25,20 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
-from functools import partial
 
 import numpy as np
 
-from ..checks.plausibility import check_run
-from ..checks.quality import QualityReport, check_imu
+from ..checks.quality import QualityReport
 from ..core.config import RunConfig
 from ..core.memory import release_free_memory
 from ..core.recording import InitialState, RecordedRun
-from .clock import refine_offset
 from .filter_pass import FilterPass
-from .stationary import StationaryNoise, StationaryReport, detect_stationary, noise_from_stationary, params_from_config
+from .fix_noise import with_measured_sigmas
+from .settle import settled
+from .start import start_of, start_pieces
+from .stationary import StationaryNoise, StationaryReport, noise_from_stationary
 from .tuning import TuneResult, scaled_gnss, tune
-from .yawbank import BankResult, select_yaw
+from .yawbank import BankResult
 
 
 @dataclass(frozen=True)
@@ -83,13 +83,6 @@ class Prepared:
     gauss_markov: tuple | None = None
 
 
-def _start(run, cfg, stationary, quality, filter_pass) -> tuple[InitialState, BankResult | None]:
-    if run.init is not None:
-        return run.init, None
-    bank = select_yaw(run, cfg, stationary, quality, filter_pass=filter_pass)
-    return bank.init, bank
-
-
 def _other_heading(a: InitialState, b: InitialState) -> bool:
     """Whether two starts differ in yaw by more than 3 sigma (neighbouring hypotheses converge to the
     same heading; a different heading means the noise the tuner saw came from another trajectory)."""
@@ -102,18 +95,19 @@ def _tuned(run, cfg, stationary, quality, init, bank, noise, filter_pass):
     and the estimators' run (fix sigmas scaled)."""
     cfg_t, result = tune(run, cfg, stationary, quality, init, noise, filter_pass=filter_pass)
     est_run = scaled_gnss(run, float(cfg_t["gnss"]["sigma_scale"]))
-    init2, bank2 = _start(est_run, cfg_t, stationary, quality, filter_pass)
+    init2, bank2 = start_of(est_run, cfg_t, stationary, quality, filter_pass)
     if bank is not None and _other_heading(init, bank2.init):
         cfg_t, result = tune(run, cfg, stationary, quality, init2, noise, filter_pass=filter_pass)
         est_run = scaled_gnss(run, float(cfg_t["gnss"]["sigma_scale"]))
-        init2, bank2 = _start(est_run, cfg_t, stationary, quality, filter_pass)
+        init2, bank2 = start_of(est_run, cfg_t, stationary, quality, filter_pass)
     return est_run, cfg_t, result, init2, bank2
 
 
 def checked(run: RecordedRun, cfg: RunConfig, filter_pass: FilterPass) -> tuple[RecordedRun, RunConfig, list]:
-    """Step 0 of the module notes: the input checks (:func:`gnssacc.checks.plausibility.check_run`)
-    with ``filter_pass`` as the clock offset's likelihood stage (:func:`gnssacc.prepare.clock.refine_offset`)."""
-    return check_run(run, cfg, partial(refine_offset, filter_pass=filter_pass))
+    """Step 0 of the module notes: the input checks, their proposals settled by ``filter_pass``
+    (:func:`gnssacc.prepare.settle.settled`)."""
+    run, cfg, findings, _ = settled(run, cfg, filter_pass)
+    return run, cfg, findings
 
 
 def prepare(run: RecordedRun, cfg: RunConfig, tune_mode: str | None = None, *, filter_pass: FilterPass,
@@ -135,19 +129,17 @@ def prepare(run: RecordedRun, cfg: RunConfig, tune_mode: str | None = None, *, f
     tune_mode = tune_mode or cfg["tune"]["mode"]
     secs = {}
     t = time.perf_counter()
-    run, cfg, checks = checked(run, cfg, filter_pass)
+    run, sigma_note = with_measured_sigmas(run)   # before any decision uses the fixes' noise
+    run, cfg, checks, pieces = settled(run, cfg, filter_pass)
+    checks = ([sigma_note] if sigma_note else []) + checks
     release_free_memory()   # the checks' temporaries, before the next stage's
     secs["input_checks_s"] = time.perf_counter() - t
     t = time.perf_counter()
-    quality = check_imu(run.imu, cfg)
-    release_free_memory()
-    stationary = detect_stationary(run.imu, run.gnss, run.origin, params_from_config(cfg))
+    pieces = pieces or start_pieces(run, cfg, filter_pass)   # made once: by a verdict, or here
+    quality, stationary, init, bank = pieces.quality, pieces.stationary, pieces.init, pieces.bank
     release_free_memory()   # before the estimators build on the heap
-    secs["quality_and_stationary_s"] = time.perf_counter() - t
-    t = time.perf_counter()
+    secs["start_s"] = time.perf_counter() - t
     est_run = scaled_gnss(run, float(cfg["gnss"]["sigma_scale"]))
-    init, bank = _start(est_run, cfg, stationary, quality, filter_pass)
-    secs["initialisation_s"] = time.perf_counter() - t
     result = None
     noise = noise_from_stationary(run.imu, stationary)
     if tune_mode == "auto":

@@ -112,12 +112,14 @@ def imu_messages(ty: MessageTypes, run: RecordedRun, opts, key: str = "imu"):
     Imu = ty.T[IMU_TYPE]
     zero9 = np.zeros(9)
     noq = np.r_[-1.0, np.zeros(8)]
+    R_mag = euler_to_dcm(0.0, 0.0, np.radians(opts.orientation_yaw_error_deg))   # heading error, about down
+    stated = np.diag(np.radians(opts.orientation_sigma_deg or ORIENTATION_SIGMA_DEG) ** 2).ravel()
     for k in range(len(t)):
         if opts.with_orientation and tr is not None and tr.rpy is not None:
             j = min(int(np.searchsorted(tr.t, imu.t[k])), len(tr.t) - 1)
-            R_n_imu = euler_to_dcm(*tr.rpy[j]) @ R_ib.T
+            R_n_imu = R_mag @ euler_to_dcm(*tr.rpy[j]) @ R_ib.T
             q = ty.quat(dcm_to_quaternion(R_nb_to_ros(R_n_imu)))
-            qcov = np.diag(np.radians(ORIENTATION_SIGMA_DEG) ** 2).ravel()
+            qcov = stated
         else:
             q, qcov = ty.quat((0.0, 0.0, 0.0, 1.0)), noq
         msg = Imu(header=ty.header(stamps[k], opts.imu_frame_id), orientation=q, orientation_covariance=qcov,

@@ -70,8 +70,17 @@ class BagOptions:
     with_orientation : bool
         Fill the Imu orientation from ``run.truth.rpy`` (the truth epoch at or after each sample), else mark it
         absent (``orientation_covariance[0] = -1``).
+    orientation_yaw_error_deg : float
+        Heading error of that orientation [deg], as a magnetometer near a vehicle's steel gives
+        it: the orientation is turned by this about the vertical (roll and pitch stay right).
+    orientation_sigma_deg : (roll, pitch, yaw), optional
+        The 1-sigmas its covariance states [deg] (default
+        :data:`gnssacc.sources.bag_streams.ORIENTATION_SIGMA_DEG`), whatever its real error.
     imu_mount_rpy_deg : (roll, pitch, yaw), optional
         IMU mounting [deg]; IMU data written in the IMU axes and a ``/tf_static`` transform added.
+    write_tf : bool
+        Whether the mounting is also written as ``/tf_static`` (many bags lack it: then only the
+        data say how the IMU sits).
     extra_image_topic_bytes : int
         If > 0, add ``sensor_msgs/Image`` messages of this size on ``image_topic`` at ``image_rate_hz`` [Hz].
     time_offset_s : float
@@ -98,6 +107,9 @@ class BagOptions:
     imu_frame: str = "flu"
     imu_frame_id: str = "imu_link"
     with_orientation: bool = False
+    orientation_yaw_error_deg: float = 0.0
+    orientation_sigma_deg: tuple | None = None
+    write_tf: bool = True
     imu_mount_rpy_deg: tuple | None = None
     extra_image_topic_bytes: int = 0
     image_rate_hz: float = 10.0
@@ -205,7 +217,7 @@ def _topics(ty: MessageTypes, run: RecordedRun, opts: BagOptions):
                                                                 sig, opts)
     if opts.odom_topic:
         yield "odom", opts.odom_topic, ODOMETRY_TYPE, wheel_odometry_messages(ty, run, opts)
-    if opts.imu_mount_rpy_deg is not None:
+    if opts.imu_mount_rpy_deg is not None and opts.write_tf:
         yield "tf", "/tf_static", TF_TYPE, tf_static_messages(ty, run, opts)
     if opts.extra_image_topic_bytes > 0:
         yield "image", opts.image_topic, IMAGE_TYPE, image_messages(ty, run, opts)

@@ -10,6 +10,10 @@ Profiles (1-sigma, metres, N/E/D):
     iid Gaussian, 0.5 / 0.5 / 0.8 (a dual-frequency or SBAS-corrected receiver).
 ``rtk``
     iid Gaussian, 0.02 / 0.02 / 0.04 (fixed-ambiguity RTK).
+``filtered``
+    first-order Gauss-Markov, tau = 30 s, 0.6 / 0.6 / 1.0, plus white 0.02 / 0.02 / 0.03: a
+    receiver whose own filter smooths its high-rate fixes (their scatter from one fix to the next
+    says little about their error).
 ``none``
     the truth itself (for tests).
 
@@ -31,11 +35,14 @@ PROFILES = {
     "gm": {"gm_sigma": np.array([2.5, 2.5, 4.0]), "tau_s": 60.0, "white_sigma": np.array([0.5, 0.5, 0.8])},
     "precise": {"gm_sigma": np.zeros(3), "tau_s": 60.0, "white_sigma": np.array([0.5, 0.5, 0.8])},
     "rtk": {"gm_sigma": np.zeros(3), "tau_s": 60.0, "white_sigma": np.array([0.02, 0.02, 0.04])},
+    # A receiver whose own filter smooths its high-rate fixes: errors that wander (SBAS/DGPS-grade,
+    # tens of seconds) with almost no scatter from one fix to the next; such logs rarely state sigmas.
+    "filtered": {"gm_sigma": np.array([0.6, 0.6, 1.0]), "tau_s": 30.0, "white_sigma": np.array([0.02, 0.02, 0.03])},
     "none": {"gm_sigma": np.zeros(3), "tau_s": 60.0, "white_sigma": np.zeros(3)},
 }
 
 #: The fix quality a receiver of each profile would state (:data:`gnssacc.core.recording.FIX_QUALITY`).
-PROFILE_QUALITY = {"white": 5, "gm": 5, "precise": 4, "rtk": 1, "none": 1}
+PROFILE_QUALITY = {"white": 5, "gm": 5, "precise": 4, "rtk": 1, "filtered": 3, "none": 1}
 
 
 def noise_ned(t: np.ndarray, profile: str, seed: int) -> tuple[np.ndarray, np.ndarray]:

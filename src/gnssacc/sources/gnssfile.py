@@ -86,7 +86,7 @@ def load_gnss_file(path, cfg: RunConfig, imu_t: np.ndarray) -> tuple[GnssFixes, 
         gnss, times = _absolute_fixes(path, kind, cfg, meta)
         t, clock = place_on_clock(times, imu_t, where)
         meta.update(gnss_time_system=times.system, gnss_clock=clock)
-        gnss = GnssFixes(t, gnss.lat, gnss.lon, gnss.h, gnss.sigma_ned, gnss.quality, gnss.corr_ned)
+        gnss = GnssFixes(t, gnss.lat, gnss.lon, gnss.h, gnss.sigma_ned, gnss.quality, gnss.corr_ned, gnss.sigma_stated)
         check_increasing(gnss.t, where, "GNSS")
     gnss, counts = apply_quality_policy(gnss, cfg["gnss"]["quality"], where)
     meta.update(counts)
@@ -200,7 +200,7 @@ def apply_quality_policy(gnss: GnssFixes, policy: dict, where: str) -> tuple[Gns
     if not keep.all():
         warn_data(where, f"[gnss] quality dropped {int((~keep).sum())} of {len(gnss)} fixes ("
                          + ", ".join(f"{k} {v}" for k, v in out["gnss_quality_dropped"].items()) + ")")
-    fixes = GnssFixes(gnss.t, gnss.lat, gnss.lon, gnss.h, sigma, gnss.quality, gnss.corr_ned)
+    fixes = GnssFixes(gnss.t, gnss.lat, gnss.lon, gnss.h, sigma, gnss.quality, gnss.corr_ned, gnss.sigma_stated)
     return (fixes if keep.all() else fixes.select(keep)), out
 
 
@@ -287,4 +287,5 @@ def read_gnss_csv(path: Path, default_sigma_ned: np.ndarray, max_bad: float) -> 
                                     f"({', '.join(f'{v} {k}' for k, v in FIX_QUALITY.items())})")
         quality = q.astype(int)
     return GnssFixes(tab["t"].copy(), tab["lat_deg"] * np.pi / 180.0, tab["lon_deg"] * np.pi / 180.0,
-                     tab["h_m"].copy(), sigma_ned, quality, None if corr is None else corr.copy())
+                     tab["h_m"].copy(), sigma_ned, quality, None if corr is None else corr.copy(),
+                     sigma_stated="sn" in tab)

@@ -301,7 +301,8 @@ def _initial_state(itab: np.ndarray, good_q: np.ndarray, imu: ImuData, gnss: Gns
         how_v = "velocity unknown (one fix): 0 +- 5 m/s"
     return InitialState(t=t0, lat=float(gnss.lat[k0]), lon=float(gnss.lon[k0]), h=float(gnss.h[k0]), v_n=v_n,
                         rpy=rpy, sigma_pos_m=sig_p, sigma_vel_mps=sig_v, sigma_att_rad=sig_att,
-                        how=f"attitude from the orientation on {topic}, position from the first fix, {how_v}")
+                        how=f"attitude from the orientation on {topic}, position from the first fix, {how_v}",
+                        yaw_evidence="orientation")
 
 
 

@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.earth import ecef_to_llh, llh_to_ecef
+from ..core.earth import R_en_batch, ecef_to_llh, llh_to_ecef
 from ..core.errors import InputError, warn_data
 from .common import text_file_lines
 from .gnss_time import (
@@ -349,17 +349,6 @@ def _to_ned(cov: np.ndarray, head: _Header, lat: np.ndarray, lon: np.ndarray) ->
     R_b = R_en_batch(np.array([head.ref_llh[0]]), np.array([head.ref_llh[1]]))[0]
     C = R_f @ R_b.T                                            # NED at the base -> NED at the fix
     return C @ ned @ C.transpose(0, 2, 1)
-
-
-def R_en_batch(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
-    """ECEF -> NED rotations at arrays of latitudes and longitudes [rad], shape (M, 3, 3)
-    (:func:`gnssacc.core.earth.R_en` for many points)."""
-    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
-    R = np.empty((len(sl), 3, 3))
-    R[:, 0, 0], R[:, 0, 1], R[:, 0, 2] = -sl * co, -sl * so, cl
-    R[:, 1, 0], R[:, 1, 1], R[:, 1, 2] = -so, co, 0.0
-    R[:, 2, 0], R[:, 2, 1], R[:, 2, 2] = -cl * co, -cl * so, -sl
-    return R
 
 
 # --- writing -------------------------------------------------------------------------------------------

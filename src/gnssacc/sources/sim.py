@@ -70,6 +70,8 @@ from .sim_imu_errors import (  # noqa: F401 (re-exported)
     per_axis,
     sensor_matrices,
 )
+from .sim_odometry import KINDS as ODOMETRY_KINDS
+from .sim_odometry import odometry_kind, simulate_odometry
 from .sim_path import (  # noqa: F401 (re-exported)
     IMU_BLOCK,
     GridBlock,
@@ -81,8 +83,6 @@ from .sim_path import (  # noqa: F401 (re-exported)
     sample_times,
     sweep_imu,
 )
-from .sim_odometry import KINDS as ODOMETRY_KINDS
-from .sim_odometry import odometry_kind, simulate_odometry
 from .sim_scenarios import SCENARIOS, Kinematics, Pulse, R_nb_batch, Scenario, make_scenario, reversing_spans  # noqa: F401 (re-exported)
 from .sim_true_bias import TrueBias  # noqa: F401 (re-exported)
 from .sim_vibration import EngineVibration, band_limited_columns, engine_vibration, road_scale, road_vibration  # noqa: F401
@@ -254,7 +254,7 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
     ----------
     scenario : str or Scenario
         A name in :data:`SCENARIOS` ("static", "ugv", "car", "straight", "turns", "ugv-slow",
-        "car-city") or a custom :class:`Scenario`.
+        "car-city", "rover") or a custom :class:`Scenario`.
     duration_s : float
         Run length [s]; the IMU covers ``[t_start_s, t_start_s + duration_s]``.
     imu_grade : str

@@ -13,7 +13,7 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from ..core.earth import OMEGA_IE, normal_gravity, radii
+from ..core.earth import OMEGA_IE, R_en_batch, normal_gravity, radii
 from ..core.errors import InputError
 from ..core.recording import Truth
 from ..core.rotations import wrap_angle
@@ -24,16 +24,6 @@ WHERE = "simulator"
 
 #: IMU samples per block of the sweep (twice as many grid nodes; memory ~1 kB per sample in a block).
 IMU_BLOCK = 8192
-
-
-def _R_en_batch(lat, lon) -> np.ndarray:
-    """ECEF-to-NED rotations (``gnssacc.core.earth.R_en``) for arrays, shape (K, 3, 3)."""
-    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
-    R = np.empty((len(sl), 3, 3))
-    R[:, 0, 0], R[:, 0, 1], R[:, 0, 2] = -sl * co, -sl * so, cl
-    R[:, 1, 0], R[:, 1, 1], R[:, 1, 2] = -so, co, 0.0
-    R[:, 2, 0], R[:, 2, 1], R[:, 2, 2] = -cl * co, -cl * so, -sl
-    return R
 
 
 def _rotvec_batch(R) -> np.ndarray:
@@ -391,7 +381,7 @@ def _perfect_imu_block(block: GridBlock, m: int, dt: float) -> tuple[np.ndarray,
     # Attitude: C_{b(k-1)}^{b(k)} = R_nb(k-1)^T C_{n(k-1)}^{n(k)} R_nb(k), with the navigation-
     # frame increment C_{n(k-1)}^{n(k)} = R_en(k-1) Rz(Omega dt) R_en(k)^T (earth turns by
     # Omega dt about ECEF z while the vehicle moves over it).
-    R_en = _R_en_batch(lat, lon)
+    R_en = R_en_batch(lat, lon)
     c, s = np.cos(OMEGA_IE * dt), np.sin(OMEGA_IE * dt)
     Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     C_nn = R_en[a] @ Rz @ np.swapaxes(R_en[b], 1, 2)

@@ -381,6 +381,19 @@ def _cycle_ugv_slow(s: Scenario) -> None:
     s.hold(75.0)
 
 
+def _cycle_rover(s: Scenario) -> None:
+    """Slow rover, 367 s per cycle, 0.40-0.45 m/s: long straights with gentle turns (8-20 m radius),
+    two short stops (6 s and 10 s) and a pivot on the spot. Starts and ends at rest (4 s)."""
+    c0 = s.t_end
+    s.hold(4.0).speed_to(0.42, 2.0).cruise(40.0).turn(60.0, radius_m=12.0).cruise(30.0)
+    s.speed_to(0.45, 2.0).turn(-90.0, radius_m=8.0).cruise(45.0)
+    s.speed_to(0.0, 2.0).hold(6.0).speed_to(0.40, 2.0).cruise(35.0).turn(45.0, radius_m=20.0)
+    s.cruise(30.0).speed_to(0.0, 2.0).hold(10.0).turn(-120.0, rate_dps=15.0).hold(2.0)
+    s.speed_to(0.43, 2.0).cruise(40.0).turn(80.0, radius_m=10.0)
+    s.cruise(c0 + 361.0 - s.t_end).speed_to(0.0, 2.0)
+    s.hold(c0 + 367.0 - s.t_end)
+
+
 def _cycle_car_city(s: Scenario) -> None:
     """City car, 280 s per cycle, at most 15 m/s.
 
@@ -429,6 +442,7 @@ SCENARIOS = {
     "turns": (10.0, _cycle_turns),
     "ugv-slow": (0.0, _cycle_ugv_slow),
     "car-city": (0.0, _cycle_car_city),
+    "rover": (0.0, _cycle_rover),
 }
 
 
@@ -437,7 +451,7 @@ def make_scenario(name: str, duration_s: float) -> Scenario:
 
     Parameters
     ----------
-    name : {"static", "ugv", "car", "straight", "turns", "ugv-slow", "car-city"}
+    name : {"static", "ugv", "car", "straight", "turns", "ugv-slow", "car-city", "rover"}
     duration_s : float
 
     Returns
