@@ -19,11 +19,16 @@ methods the profile's Gauss-Markov model): the study asks about the aiding, not 
 ``--tune none`` the ``-gm`` methods run only where the noise profile has a Gauss-Markov part
 (``gm``): on white profiles they have no parameters to use.
 
+The paper's setting by default (``--aids off``: no non-holonomic constraint, no wheel odometry;
+the stored study was measured so): the question is what the acceleration adds to the IMU and
+the fixes. ``--aids on`` runs the study with the ground-vehicle aids every method applies by
+default.
+
 Usage::
 
     python bench/bench_acceleration_aiding.py --out study [--seeds 0-9] [--duration 300]
         [--methods ekf,ekf-acc,...] [--imu consumer,industrial,tactical] [--scenario ugv-slow,car]
-        [--noise white,gm,precise,rtk] [--gnss-hz 1,5] [--outages none,60:20] [--jobs N] [--tune none]
+        [--noise white,gm,precise,rtk] [--gnss-hz 1,5] [--outages none,60:20] [--jobs N] [--tune none] [--aids off|on]
 """
 from __future__ import annotations
 
@@ -62,7 +67,19 @@ def parse_args(argv=None):
     p.add_argument("--outages", default="none,60:20", help="'none' and/or PERIOD:LEN (--outage-every)")
     p.add_argument("--jobs", type=int, default=1, help="1: this process; N: a local Dask cluster of N workers")
     p.add_argument("--tune", default="none", choices=["none", "auto"])
+    p.add_argument("--aids", default="off", choices=["off", "on"],
+                   help="off: the paper's setting (no non-holonomic constraint, no odometry)")
     return p.parse_args(argv)
+
+
+def aids_config(args) -> str | None:
+    """A configuration file turning the ground-vehicle aids off (``--aids off``), else None."""
+    if args.aids == "on":
+        return None
+    path = Path(args.out) / "aids-off.toml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("[nhc]\nenabled = false\n\n[odometry]\nenabled = false\n")
+    return str(path)
 
 
 def specs(args) -> dict[str, dict]:
@@ -85,7 +102,7 @@ def run_noise(args, noise: str, grid: dict) -> Path:
     patterns = [Pattern() if o == "none" else Pattern(None, o) for o in args.outages.split(",")]
     methods = methods_for(noise, args.methods.split(","), args.tune)
     settings = make_settings(list(grid), methods, parse_seeds(args.seeds), patterns, noise=noise, tune=args.tune,
-                             plots=False)
+                             plots=False, config=aids_config(args))
     root = Path(args.out) / f"noise-{noise}"
     if (root / CAMPAIGN_FILE).exists():
         camp = Campaign.open(root)
