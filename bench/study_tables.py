@@ -1,4 +1,4 @@
-"""The README's tables of the acceleration-aiding study, from its stored rows.
+"""The tables (docs/science.md) of the acceleration-aiding study, from its stored rows.
 
 Per GNSS quality and fix rate, for each variant against its baseline: the mean over the cells of
 the paired change [%] of a figure, and in how many cells it is significantly better / worse

@@ -7,7 +7,7 @@ Vector keys take a scalar (same for all axes) or a list of three numbers (x, y, 
 body frame, or N, E, D for navigation-frame quantities).
 
 An example with every key at its default is printed by ``gnssacc config --show`` and listed in
-the README.
+docs/configuration.md.
 """
 from __future__ import annotations
 
