@@ -148,6 +148,17 @@ def plot_summary(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> Non
     _save(fig, path)
 
 
+def _plain_log_ticks(axis, lo: float, hi: float) -> None:
+    """Label a log axis at 1-3-10 steps in plain numbers, minor ticks unlabelled (over less than
+    a decade matplotlib labels every minor tick, and the labels run into each other)."""
+    from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
+
+    steps = [m * 10.0 ** e for e in range(-4, 5) for m in (1.0, 3.0)]
+    axis.set_major_locator(FixedLocator([v for v in steps if lo <= v <= hi] or [1.0]))
+    axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    axis.set_minor_formatter(NullFormatter())
+
+
 def _consistency_panel(ax, sols: dict, metrics: dict, truth: bool) -> None:
     """Each method's NEES (position, attitude) or NIS as dots on a log axis over its shaded band."""
     from ..analysis.consistency import band
@@ -173,6 +184,7 @@ def _consistency_panel(ax, sols: dict, metrics: dict, truth: bool) -> None:
             ax.plot(fig_["value"], y, marker, color=style(mid)["color"], ms=7, zorder=3,
                     label=label if k == 0 else None, mfc="white" if label == "NIS" else None)
     ax.set_xscale("log")
+    _plain_log_ticks(ax.xaxis, *ax.get_xlim())
     ax.axvline(1.0, color="k", lw=0.8)
     ax.set_yticks(range(len(ids)))
     ax.set_yticklabels(ids)
