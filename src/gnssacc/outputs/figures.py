@@ -149,12 +149,16 @@ def plot_summary(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> Non
 
 
 def _plain_log_ticks(axis, lo: float, hi: float) -> None:
-    """Label a log axis at 1-3-10 steps in plain numbers, minor ticks unlabelled (over less than
-    a decade matplotlib labels every minor tick, and the labels run into each other)."""
+    """Label a log axis at 1-2-5 steps in plain numbers (or, over a narrow range, at two rounded
+    values inside it), minor ticks unlabelled: over less than a decade matplotlib labels every
+    minor tick in powers of ten, and the labels run into each other."""
     from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
 
-    steps = [m * 10.0 ** e for e in range(-4, 5) for m in (1.0, 3.0)]
-    axis.set_major_locator(FixedLocator([v for v in steps if lo <= v <= hi] or [1.0]))
+    steps = [m * 10.0 ** e for e in range(-4, 5) for m in (1.0, 2.0, 5.0)]
+    ticks = [v for v in steps if lo <= v <= hi]
+    if len(ticks) < 2:
+        ticks = sorted({float(f"{v:.2g}") for v in np.geomspace(lo, hi, 4)[1:-1]})
+    axis.set_major_locator(FixedLocator(ticks))
     axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     axis.set_minor_formatter(NullFormatter())
 
@@ -408,6 +412,7 @@ def plot_nis(run: RecordedRun, sols: dict, metrics: dict, path: Path, window: in
     if not drawn:
         ax.text(0.5, 0.5, "no EKF innovations in this run", transform=ax.transAxes, ha="center", color="0.5")
     ax.set_yscale("log")
+    _plain_log_ticks(ax.yaxis, *ax.get_ylim())
     ax.axhline(1.0, color="k", lw=0.8)
     ax.set_ylabel("position NIS per dof")
     ax.set_title(f"EKF innovations: moving mean of {window} updates (1 = consistent)")
@@ -419,6 +424,7 @@ def plot_nis(run: RecordedRun, sols: dict, metrics: dict, path: Path, window: in
     sig3 = float(np.median(np.linalg.norm(run.gnss.sigma_ned, axis=1)))
     bx.axhline(sig3, color="0.3", lw=1.0, ls="--", label=f"the fixes' stated 3-D sigma (median {sig3:.2f} m)")
     bx.set_yscale("log")
+    _plain_log_ticks(bx.yaxis, *bx.get_ylim())
     bx.set_ylabel("RMS distance to the fixes [m]")
     bx.set_title(f"Distance to the raw fixes (moving RMS of {window} fixes): an estimate that uses them lies "
                  "within their noise")
