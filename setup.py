@@ -13,6 +13,7 @@ time) numba ignores them and the first run compiles, with its notice. Nothing he
 build: without numba 0.68, with ``GNSSACC_BUILD_KERNELS=0`` (e.g. when building a wheel to
 distribute), or for an editable install it only skips the step.
 """
+
 from __future__ import annotations
 
 import os
@@ -33,7 +34,7 @@ def _numba_version() -> tuple[int, ...] | None:
         from importlib.metadata import version
 
         return tuple(int(p) for p in version("numba").split(".")[:2])
-    except Exception:   # not installed, or a version string of another form
+    except Exception:  # not installed, or a version string of another form
         return None
 
 
@@ -43,23 +44,37 @@ class BuildPyWithKernels(build_py):
     def run(self) -> None:
         super().run()
         cache = Path(self.build_lib) / "gnssacc" / "estimators" / "__pycache__"
-        for old in [*cache.glob("*.nbi"), *cache.glob("*.nbc")]:   # a previous build's, maybe stale
+        for old in [*cache.glob("*.nbi"), *cache.glob("*.nbc")]:  # a previous build's, maybe stale
             old.unlink()
-        if getattr(self, "editable_mode", False) or os.environ.get("GNSSACC_BUILD_KERNELS", "1") == "0":
+        if (
+            getattr(self, "editable_mode", False)
+            or os.environ.get("GNSSACC_BUILD_KERNELS", "1") == "0"
+        ):
             return
         found = _numba_version()
         if found is None or found < NUMBA_CONTENT_STAMPS:
-            self.announce("gnssacc: numba >= 0.68 not in the build environment: the first run compiles the "
-                          "kernels", level=3)
+            self.announce(
+                "gnssacc: numba >= 0.68 not in the build environment: the first run compiles the "
+                "kernels",
+                level=3,
+            )
             return
-        env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}   # the in-tree cache
+        env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}  # the in-tree cache
         # The build folder first; pip's isolated build environment may itself be on PYTHONPATH.
-        env["PYTHONPATH"] = os.pathsep.join(filter(None, [os.path.abspath(self.build_lib), env.get("PYTHONPATH")]))
+        env["PYTHONPATH"] = os.pathsep.join(
+            filter(None, [os.path.abspath(self.build_lib), env.get("PYTHONPATH")])
+        )
         code = "from gnssacc.estimators.kernels import compile_groups; compile_groups({})"
-        procs = [subprocess.Popen([sys.executable, "-c", code.format(groups)], env=env, cwd=self.build_lib)
-                 for groups in (["propagation"], ["update", "window", "chain", "band"])]
+        procs = [
+            subprocess.Popen(
+                [sys.executable, "-c", code.format(groups)], env=env, cwd=self.build_lib
+            )
+            for groups in (["propagation"], ["update", "window", "chain", "band"])
+        ]
         if any(p.wait() != 0 for p in procs):
-            self.announce("gnssacc: compiling the numba kernels failed: the first run compiles them", level=3)
+            self.announce(
+                "gnssacc: compiling the numba kernels failed: the first run compiles them", level=3
+            )
 
 
 setup(cmdclass={"build_py": BuildPyWithKernels})

@@ -10,6 +10,7 @@ Usage::
 
     python bench/bench_accel_models.py [--duration 300]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -28,15 +29,26 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--duration", type=float, default=300.0)
     args = ap.parse_args()
-    print(f"{'scenario':10s} {'fix [Hz]':>8s} {'IMU':>10s} {'windows':>8s} {'paper [m/s^2]':>14s} "
-          f"{'window [m/s^2]':>15s} {'window/paper':>13s}")
+    print(
+        f"{'scenario':10s} {'fix [Hz]':>8s} {'IMU':>10s} {'windows':>8s} {'paper [m/s^2]':>14s} "
+        f"{'window [m/s^2]':>15s} {'window/paper':>13s}"
+    )
     for scenario in ("car", "car-city", "ugv-slow"):
         for rate in (1.0, 5.0):
             for grade in ("perfect", "industrial"):
-                run = simulate(scenario, args.duration, imu_grade=grade, gnss_rate_hz=rate, noise="none", seed=0)
+                run = simulate(
+                    scenario,
+                    args.duration,
+                    imu_grade=grade,
+                    gnss_rate_hz=rate,
+                    noise="none",
+                    seed=0,
+                )
                 _, paper, window = model_errors(run)
-                print(f"{scenario:10s} {rate:8.0f} {grade:>10s} {len(paper):8d} {rms(paper):14.4f} "
-                      f"{rms(window):15.4f} {rms(window) / rms(paper):13.4f}")
+                print(
+                    f"{scenario:10s} {rate:8.0f} {grade:>10s} {len(paper):8d} {rms(paper):14.4f} "
+                    f"{rms(window):15.4f} {rms(window) / rms(paper):13.4f}"
+                )
 
 
 if __name__ == "__main__":

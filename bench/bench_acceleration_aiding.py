@@ -30,6 +30,7 @@ Usage::
         [--methods ekf,ekf-acc,...] [--imu consumer,industrial,tactical] [--scenario ugv-slow,car]
         [--noise white,gm,precise,rtk] [--gnss-hz 1,5] [--outages none,60:20] [--jobs N] [--tune none] [--aids off|on]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -48,10 +49,30 @@ from gnssacc.campaign.batch import open_executor, run_campaign
 from gnssacc.campaign.campaign import CAMPAIGN_FILE, Campaign, Pattern, make_settings
 from gnssacc.sources.gnss_noise import PROFILES
 
-CANDIDATES = ("ekf", "ekf-acc", "ekf-accw", "ekf-gm", "smoother", "smoother-acc", "smoother-accw", "smoother-gm")
+CANDIDATES = (
+    "ekf",
+    "ekf-acc",
+    "ekf-accw",
+    "ekf-gm",
+    "smoother",
+    "smoother-acc",
+    "smoother-accw",
+    "smoother-gm",
+)
 GM_METHODS = ("ekf-gm", "smoother-gm")
-STUDY_COLUMNS = [*study.CELL_KEYS, "method", "seed", "status", "error", "prmse_m", "hrmse_m", *study.FIGURES[1:],
-                 "nis", "runtime_s", "task_s"]
+STUDY_COLUMNS = [
+    *study.CELL_KEYS,
+    "method",
+    "seed",
+    "status",
+    "error",
+    "prmse_m",
+    "hrmse_m",
+    *study.FIGURES[1:],
+    "nis",
+    "runtime_s",
+    "task_s",
+]
 
 
 def parse_args(argv=None):
@@ -64,11 +85,19 @@ def parse_args(argv=None):
     p.add_argument("--scenario", default="ugv-slow,car")
     p.add_argument("--noise", default="white,gm,precise,rtk")
     p.add_argument("--gnss-hz", default="1,5")
-    p.add_argument("--outages", default="none,60:20", help="'none' and/or PERIOD:LEN (--outage-every)")
-    p.add_argument("--jobs", type=int, default=1, help="1: this process; N: a local Dask cluster of N workers")
+    p.add_argument(
+        "--outages", default="none,60:20", help="'none' and/or PERIOD:LEN (--outage-every)"
+    )
+    p.add_argument(
+        "--jobs", type=int, default=1, help="1: this process; N: a local Dask cluster of N workers"
+    )
     p.add_argument("--tune", default="none", choices=["none", "auto"])
-    p.add_argument("--aids", default="off", choices=["off", "on"],
-                   help="off: the paper's setting (no non-holonomic constraint, no odometry)")
+    p.add_argument(
+        "--aids",
+        default="off",
+        choices=["off", "on"],
+        help="off: the paper's setting (no non-holonomic constraint, no odometry)",
+    )
     return p.parse_args(argv)
 
 
@@ -85,7 +114,9 @@ def aids_config(args) -> str | None:
 def specs(args) -> dict[str, dict]:
     """``{sim: spec: its cell settings}`` of the grid (without noise and outages)."""
     out = {}
-    for imu, scen, hz in itertools.product(args.imu.split(","), args.scenario.split(","), args.gnss_hz.split(",")):
+    for imu, scen, hz in itertools.product(
+        args.imu.split(","), args.scenario.split(","), args.gnss_hz.split(",")
+    ):
         spec = f"sim:{scen},imu={imu},gnss_hz={hz},duration={args.duration:g}"
         out[spec] = {"imu": imu, "scenario": scen, "gnss_hz": hz}
     return out
@@ -101,8 +132,16 @@ def run_noise(args, noise: str, grid: dict) -> Path:
     """Run (or resume) the campaign of one noise profile; return its folder."""
     patterns = [Pattern() if o == "none" else Pattern(None, o) for o in args.outages.split(",")]
     methods = methods_for(noise, args.methods.split(","), args.tune)
-    settings = make_settings(list(grid), methods, parse_seeds(args.seeds), patterns, noise=noise, tune=args.tune,
-                             plots=False, config=aids_config(args))
+    settings = make_settings(
+        list(grid),
+        methods,
+        parse_seeds(args.seeds),
+        patterns,
+        noise=noise,
+        tune=args.tune,
+        plots=False,
+        config=aids_config(args),
+    )
     root = Path(args.out) / f"noise-{noise}"
     if (root / CAMPAIGN_FILE).exists():
         camp = Campaign.open(root)
@@ -117,7 +156,10 @@ def run_noise(args, noise: str, grid: dict) -> Path:
 
 def study_rows(root: Path, noise: str, grid: dict) -> list[dict]:
     """The campaign's ``summary.csv`` rows as study rows (cell settings instead of the folder name)."""
-    names = {name: spec for name, spec in json.loads((root / CAMPAIGN_FILE).read_text())["settings"]["sources"]}
+    names = {
+        name: spec
+        for name, spec in json.loads((root / CAMPAIGN_FILE).read_text())["settings"]["sources"]
+    }
     with open(root / "summary.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     out = []
@@ -134,27 +176,39 @@ def print_timing(rows: list[dict]) -> None:
     tasks: dict = {}
     for r in rows:
         key = (r["scenario"], r["imu"], r["gnss_hz"])
-        tasks.setdefault(key, {}).setdefault((r["noise"], r["outages"], r["seed"]), float(r["task_s"] or "nan"))
-    print(f"\ntime per task (all methods, median over tasks), load average now {os.getloadavg()[0]:.2f} "
-          f"on {os.cpu_count()} cores:")
+        tasks.setdefault(key, {}).setdefault(
+            (r["noise"], r["outages"], r["seed"]), float(r["task_s"] or "nan")
+        )
+    print(
+        f"\ntime per task (all methods, median over tasks), load average now {os.getloadavg()[0]:.2f} "
+        f"on {os.cpu_count()} cores:"
+    )
     runtimes: dict = {}
     for r in rows:
         if r["runtime_s"]:
-            runtimes.setdefault((r["scenario"], r["imu"], r["gnss_hz"]), {}).setdefault(r["method"], []).append(
-                float(r["runtime_s"]))
+            runtimes.setdefault((r["scenario"], r["imu"], r["gnss_hz"]), {}).setdefault(
+                r["method"], []
+            ).append(float(r["runtime_s"]))
     for key, times in sorted(tasks.items()):
-        per = ", ".join(f"{m} {statistics.median(v):.1f}" for m, v in runtimes.get(key, {}).items()
-                        if not m.endswith("-online"))
-        print(f"  {key[0]:9s} {key[1]:11s} {key[2]:>3s} Hz: {statistics.median(times.values()):6.1f} s "
-              f"({len(times)} tasks; method wall times [s]: {per})")
+        per = ", ".join(
+            f"{m} {statistics.median(v):.1f}"
+            for m, v in runtimes.get(key, {}).items()
+            if not m.endswith("-online")
+        )
+        print(
+            f"  {key[0]:9s} {key[1]:11s} {key[2]:>3s} Hz: {statistics.median(times.values()):6.1f} s "
+            f"({len(times)} tasks; method wall times [s]: {per})"
+        )
 
 
 def main(argv=None) -> None:
     args = parse_args(argv)
     grid = specs(args)
     Path(args.out).mkdir(parents=True, exist_ok=True)
-    print(f"grid: {len(grid)} runs x {len(args.outages.split(','))} outage patterns x "
-          f"{len(parse_seeds(args.seeds))} seeds per noise profile; load average {os.getloadavg()[0]:.2f}")
+    print(
+        f"grid: {len(grid)} runs x {len(args.outages.split(','))} outage patterns x "
+        f"{len(parse_seeds(args.seeds))} seeds per noise profile; load average {os.getloadavg()[0]:.2f}"
+    )
     rows = []
     for noise in args.noise.split(","):
         t0 = time.perf_counter()

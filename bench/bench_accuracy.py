@@ -13,6 +13,7 @@ Usage::
 
     python bench/bench_accuracy.py [--seeds 0-9] [--jobs 2] [--preset kitti] [SOURCE]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -20,9 +21,21 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-METHODS = ("ekf", "ekf-acc", "ekf-acc avg2", "smoother", "smoother-acc", "smoother-online", "smoother-acc-online")
-BASELINE = {"ekf-acc": "ekf", "ekf-acc avg2": "ekf", "smoother-acc": "smoother",
-            "smoother-acc-online": "smoother-online"}
+METHODS = (
+    "ekf",
+    "ekf-acc",
+    "ekf-acc avg2",
+    "smoother",
+    "smoother-acc",
+    "smoother-online",
+    "smoother-acc-online",
+)
+BASELINE = {
+    "ekf-acc": "ekf",
+    "ekf-acc avg2": "ekf",
+    "smoother-acc": "smoother",
+    "smoother-acc-online": "smoother-online",
+}
 
 
 def _one(args):
@@ -36,9 +49,11 @@ def _one(args):
 
     cfg = load_config(preset)
     run = with_outages(load_source(source, cfg, noise=noise, seed=seed), None, outage)
-    ident = identify(run, cfg)   # noise identified once; every method and variant shares it
+    ident = identify(run, cfg)  # noise identified once; every method and variant shares it
     sols = run_methods(run, cfg, ["ekf", "ekf-acc", "smoother", "smoother-acc"], prep=ident)
-    avg = replace(ident, cfg=ident.cfg.with_values({"accel": {"specific_force_avg_s": 2.0}}, "avg2"))
+    avg = replace(
+        ident, cfg=ident.cfg.with_values({"accel": {"specific_force_avg_s": 2.0}}, "avg2")
+    )
     sols["ekf-acc avg2"] = run_methods(run, cfg, ["ekf-acc"], prep=avg)["ekf-acc"]
     out = {"gnss": gnss_score(run).prmse_m}
     for m, s in sols.items():
@@ -61,12 +76,19 @@ def main():
     args = ap.parse_args()
     lo, hi = (int(x) for x in args.seeds.split("-"))
     seeds = range(lo, hi + 1)
-    cases = [(args.source, args.preset, n, o, s) for n in ("white", "gm") for o in (None, "60:20") for s in seeds]
+    cases = [
+        (args.source, args.preset, n, o, s)
+        for n in ("white", "gm")
+        for o in (None, "60:20")
+        for s in seeds
+    ]
     with ProcessPoolExecutor(args.jobs) as ex:
         results = dict(ex.map(_one, cases))
     print(f"{args.source}, preset {args.preset}, seeds {args.seeds}: PRMSE [m] mean/min/max")
-    print(f"{'noise':6s} {'outages':8s} {'method':20s} {'PRMSE mean/min/max':>20s} {'outage-only PRMSE':>20s} "
-          f"{'acc gain [%] mean (helped)':>27s}")
+    print(
+        f"{'noise':6s} {'outages':8s} {'method':20s} {'PRMSE mean/min/max':>20s} {'outage-only PRMSE':>20s} "
+        f"{'acc gain [%] mean (helped)':>27s}"
+    )
     for noise in ("white", "gm"):
         for outage in (None, "60:20"):
             rows = [results[(noise, outage, s)] for s in seeds]
@@ -76,9 +98,13 @@ def main():
                     b = BASELINE[m]
                     g = [100 * (r[b][0] - r[m][0]) / r[b][0] for r in rows]
                     gain = f"{np.mean(g):+.2f} ({sum(x > 0 for x in g)}/{len(g)})"
-                print(f"{noise:6s} {outage or '-':8s} {m:20s} {_stats([r[m][0] for r in rows]):>20s} "
-                      f"{_stats([r[m][1] for r in rows]):>20s} {gain:>27s}")
-            print(f"{noise:6s} {outage or '-':8s} {'gnss':20s} {_stats([r['gnss'] for r in rows]):>20s}")
+                print(
+                    f"{noise:6s} {outage or '-':8s} {m:20s} {_stats([r[m][0] for r in rows]):>20s} "
+                    f"{_stats([r[m][1] for r in rows]):>20s} {gain:>27s}"
+                )
+            print(
+                f"{noise:6s} {outage or '-':8s} {'gnss':20s} {_stats([r['gnss'] for r in rows]):>20s}"
+            )
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ Usage::
     python bench/bench_bag_read.py [--sizes-gb 0.25,2] [--kinds ros1-rooad,ros2-mcap,ros2-sqlite3]
                                    [--duration 600] [--repeats 3]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -50,14 +51,20 @@ print(json.dumps({"s": dt, "n_imu": len(run.imu), "n_gnss": len(run.gnss), "rss_
 
 
 def bag_bytes(p: Path) -> int:
-    return p.stat().st_size if p.is_file() else sum(f.stat().st_size for f in p.rglob("*") if f.is_file())
+    return (
+        p.stat().st_size
+        if p.is_file()
+        else sum(f.stat().st_size for f in p.rglob("*") if f.is_file())
+    )
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes-gb", default="0.25,2")
     ap.add_argument("--kinds", default="ros1-rooad,ros2-mcap,ros2-sqlite3")
-    ap.add_argument("--duration", type=float, default=600.0, help="simulated run length [s] (100 Hz IMU)")
+    ap.add_argument(
+        "--duration", type=float, default=600.0, help="simulated run length [s] (100 Hz IMU)"
+    )
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--image-rate", type=float, default=10.0)
     args = ap.parse_args()
@@ -70,14 +77,16 @@ def main() -> None:
     sizes = [float(s) for s in args.sizes_gb.split(",")]
     kinds = [k.strip() for k in args.kinds.split(",")]
     free_gb = shutil.disk_usage("/tmp").free / 1e9
-    need = max(sizes) * 1.3 + 0.5                      # one bag at a time, plus slack
+    need = max(sizes) * 1.3 + 0.5  # one bag at a time, plus slack
     if need > free_gb:
         scale = (free_gb - 0.5) / (max(sizes) * 1.3)
         sizes = [max(0.01, s * scale) for s in sizes]
         print(f"only {free_gb:.1f} GB free on /tmp: scaled the bag sizes down to {sizes} GB")
-    print(f"/tmp free: {free_gb:.1f} GB; bag sizes {sizes} GB; kinds {kinds}; run {args.duration:.0f} s, "
-          f"100 Hz IMU, 1 Hz GNSS, {args.image_rate:g} Hz images; median of {args.repeats} loads, "
-          f"each in a fresh process; warm page cache")
+    print(
+        f"/tmp free: {free_gb:.1f} GB; bag sizes {sizes} GB; kinds {kinds}; run {args.duration:.0f} s, "
+        f"100 Hz IMU, 1 Hz GNSS, {args.image_rate:g} Hz images; median of {args.repeats} loads, "
+        f"each in a fresh process; warm page cache"
+    )
     run = simulate("car", duration_s=args.duration, imu_grade="industrial", noise="white", seed=0)
     n_img = int(np.ceil(args.duration * args.image_rate))
     rows = []
@@ -88,26 +97,45 @@ def main() -> None:
                 name = {"ros1-rooad": "b.bag", "mcap": "b.mcap"}.get(kind, "b")
                 path = Path(scratch) / name
                 t0 = time.perf_counter()
-                write_bag(run, path, kind, extra_image_topic_bytes=img_bytes, image_rate_hz=args.image_rate)
+                write_bag(
+                    run,
+                    path,
+                    kind,
+                    extra_image_topic_bytes=img_bytes,
+                    image_rate_hz=args.image_rate,
+                )
                 t_write = time.perf_counter() - t0
                 nbytes = bag_bytes(path)
                 res = []
-                cmd = [sys.executable, "-c", CHILD, str(path)] + (["/UBX/hpposllh"] if kind == "ros1-rooad" else [])
+                cmd = [sys.executable, "-c", CHILD, str(path)] + (
+                    ["/UBX/hpposllh"] if kind == "ros1-rooad" else []
+                )
                 for _ in range(args.repeats):
                     out = subprocess.run(cmd, capture_output=True, text=True, check=True)
                     res.append(json.loads(out.stdout.strip().splitlines()[-1]))
                 s = float(np.median([r["s"] for r in res]))
                 n_msgs = res[0]["n_imu"] + res[0]["n_gnss"]
-                row = {"kind": kind, "bag_MB": nbytes / 1e6, "write_s": t_write, "load_s": s,
-                       "msgs_per_s": n_msgs / s, "bag_MB_per_s": nbytes / 1e6 / s,
-                       "rss_peak_MB": float(np.median([r["rss_peak_kb"] for r in res])) / 1024,
-                       "rss_import_MB": float(np.median([r["rss_after_import_kb"] for r in res])) / 1024,
-                       "n_imu": res[0]["n_imu"], "n_gnss": res[0]["n_gnss"]}
+                row = {
+                    "kind": kind,
+                    "bag_MB": nbytes / 1e6,
+                    "write_s": t_write,
+                    "load_s": s,
+                    "msgs_per_s": n_msgs / s,
+                    "bag_MB_per_s": nbytes / 1e6 / s,
+                    "rss_peak_MB": float(np.median([r["rss_peak_kb"] for r in res])) / 1024,
+                    "rss_import_MB": float(np.median([r["rss_after_import_kb"] for r in res]))
+                    / 1024,
+                    "n_imu": res[0]["n_imu"],
+                    "n_gnss": res[0]["n_gnss"],
+                }
                 rows.append(row)
-                print(f"{kind:13s} bag {row['bag_MB']:8.0f} MB  load {s:6.2f} s  "
-                      f"{row['msgs_per_s']:9.0f} IMU+GNSS msg/s  {row['bag_MB_per_s']:8.0f} MB/s of bag  "
-                      f"peak RSS {row['rss_peak_MB']:6.0f} MB (after imports {row['rss_import_MB']:.0f} MB)  "
-                      f"[write {t_write:.1f} s]", flush=True)
+                print(
+                    f"{kind:13s} bag {row['bag_MB']:8.0f} MB  load {s:6.2f} s  "
+                    f"{row['msgs_per_s']:9.0f} IMU+GNSS msg/s  {row['bag_MB_per_s']:8.0f} MB/s of bag  "
+                    f"peak RSS {row['rss_peak_MB']:6.0f} MB (after imports {row['rss_import_MB']:.0f} MB)  "
+                    f"[write {t_write:.1f} s]",
+                    flush=True,
+                )
                 if path.is_dir():
                     shutil.rmtree(path)
                 else:

@@ -18,6 +18,7 @@ Usage::
 
     python bench/bench_batch.py [--repeats 3] [--runs 4] [--seeds 4] [--memory-tasks 50] [--parts memory]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -39,14 +40,28 @@ from gnssacc.sources.sim import simulate
 
 def recordings(folder: Path, n: int, duration_s: float) -> list[str]:
     """``n`` simulated car runs of ``duration_s`` seconds, as CSV run directories."""
-    return [str(write_csv_run(simulate("car", duration_s=duration_s, imu_grade="industrial", noise="white", seed=k),
-                              folder / f"car{k}")) for k in range(n)]
+    return [
+        str(
+            write_csv_run(
+                simulate(
+                    "car", duration_s=duration_s, imu_grade="industrial", noise="white", seed=k
+                ),
+                folder / f"car{k}",
+            )
+        )
+        for k in range(n)
+    ]
 
 
 def campaign(sources: list[str], seeds: int, root: Path | None) -> list:
     """The tasks of a campaign of ``sources`` x ``seeds`` (all methods, noise white)."""
-    settings = make_settings(sources, ["ekf", "ekf-acc", "smoother", "smoother-acc"], list(range(seeds)), [Pattern()],
-                             noise="white")
+    settings = make_settings(
+        sources,
+        ["ekf", "ekf-acc", "smoother", "smoother-acc"],
+        list(range(seeds)),
+        [Pattern()],
+        noise="white",
+    )
     return plan(settings, root)
 
 
@@ -69,27 +84,46 @@ def run_once(tasks: list, executor) -> dict:
     t0, cpu0, own0 = time.perf_counter(), busy_cpu_s(), time.process_time()
     run_tasks(tasks, executor, ledger, CampaignProgress(len(tasks), lines=False))
     wall = time.perf_counter() - t0
-    assert ledger.count("ok") == len(tasks), [r["error"] for r in ledger.ordered() if r["status"] != "ok"]
+    assert ledger.count("ok") == len(tasks), [
+        r["error"] for r in ledger.ordered() if r["status"] != "ok"
+    ]
     busy = sum(r["task"]["task_s"] for r in ledger.records.values())
     cpu = sum(r["task"]["cpu_s"] for r in ledger.records.values())
     own = cpu if isinstance(executor, SerialExecutor) else cpu + time.process_time() - own0
-    return {"wall": wall, "busy": busy, "share": cpu / busy, "others": (busy_cpu_s() - cpu0 - own) / wall}
+    return {
+        "wall": wall,
+        "busy": busy,
+        "share": cpu / busy,
+        "others": (busy_cpu_s() - cpu0 - own) / wall,
+    }
 
 
-def throughput(sources: list[str], seeds: int, duration_s: float, repeats: int, scratch: Path) -> None:
+def throughput(
+    sources: list[str], seeds: int, duration_s: float, repeats: int, scratch: Path
+) -> None:
     n = len(sources) * seeds
-    print(f"\nthroughput: {n} tasks ({len(sources)} runs of {duration_s:.0f} s x {seeds} seeds, all four methods, "
-          f"tuning and plots), median of {repeats}")
-    print(f"{'executor':<26} {'wall [s]':>8} {'tasks/min':>9} {'rec-h/h':>7} {'overhead/task [s]':>17} "
-          f"{'CPU/wall of a task':>18} {'other load [cores]':>18}")
-    for label, make, workers in (("this process (--jobs 1)", SerialExecutor, 1),
-                                 ("Dask, 1 worker process", lambda: dask_executor(1), 1),
-                                 ("Dask, 2 worker processes", lambda: dask_executor(2), 2)):
-        runs = [run_once(campaign(sources, seeds, scratch / f"{label[:4]}-{workers}-{k}"), make())
-                for k in range(repeats)]
+    print(
+        f"\nthroughput: {n} tasks ({len(sources)} runs of {duration_s:.0f} s x {seeds} seeds, all four methods, "
+        f"tuning and plots), median of {repeats}"
+    )
+    print(
+        f"{'executor':<26} {'wall [s]':>8} {'tasks/min':>9} {'rec-h/h':>7} {'overhead/task [s]':>17} "
+        f"{'CPU/wall of a task':>18} {'other load [cores]':>18}"
+    )
+    for label, make, workers in (
+        ("this process (--jobs 1)", SerialExecutor, 1),
+        ("Dask, 1 worker process", lambda: dask_executor(1), 1),
+        ("Dask, 2 worker processes", lambda: dask_executor(2), 2),
+    ):
+        runs = [
+            run_once(campaign(sources, seeds, scratch / f"{label[:4]}-{workers}-{k}"), make())
+            for k in range(repeats)
+        ]
         med = {key: statistics.median(r[key] for r in runs) for key in runs[0]}
-        print(f"{label:<26} {med['wall']:8.1f} {60 * n / med['wall']:9.1f} {n * duration_s / med['wall']:7.0f} "
-              f"{(med['wall'] * workers - med['busy']) / n:17.2f} {med['share']:18.2f} {med['others']:18.2f}")
+        print(
+            f"{label:<26} {med['wall']:8.1f} {60 * n / med['wall']:9.1f} {n * duration_s / med['wall']:7.0f} "
+            f"{(med['wall'] * workers - med['busy']) / n:17.2f} {med['share']:18.2f} {med['others']:18.2f}"
+        )
 
 
 def noop(x):
@@ -107,8 +141,10 @@ def overhead(executor: DaskExecutor, n: int = 200) -> None:
     t0 = time.perf_counter()
     client.gather(client.map(noop, range(n), pure=False))
     bulk = (time.perf_counter() - t0) / n
-    print(f"\nscheduler overhead (2 workers): one no-op task's round trip {1e3 * statistics.median(lat):.1f} ms "
-          f"(median of 50); {1e3 * bulk:.2f} ms per no-op task when {n} are submitted at once")
+    print(
+        f"\nscheduler overhead (2 workers): one no-op task's round trip {1e3 * statistics.median(lat):.1f} ms "
+        f"(median of 50); {1e3 * bulk:.2f} ms per no-op task when {n} are submitted at once"
+    )
 
 
 def rss_mib() -> float:
@@ -125,25 +161,38 @@ def memory(sources: list[str], n_tasks: int, scratch: Path) -> None:
     tail = rss[10:]
     slope = np.polyfit(np.arange(len(tail)), tail, 1)[0] if len(tail) > 2 else float("nan")
     marks = ", ".join(f"after {k}: {rss[k - 1]:.0f}" for k in (1, 10, 25, n_tasks) if k <= len(rss))
-    print(f"\nworker memory across {len(rss)} tasks (one worker, RSS MiB): {marks}; min {rss.min():.0f}, "
-          f"max {rss.max():.0f}; growth over tasks 11-{len(rss)}: {1024 * slope:+.0f} KiB per task")
+    print(
+        f"\nworker memory across {len(rss)} tasks (one worker, RSS MiB): {marks}; min {rss.min():.0f}, "
+        f"max {rss.max():.0f}; growth over tasks 11-{len(rss)}: {1024 * slope:+.0f} KiB per task"
+    )
 
 
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--runs", type=int, default=4, help="simulated recordings in the throughput campaign")
-    ap.add_argument("--seeds", type=int, default=4, help="seeds per recording in the throughput campaign")
+    ap.add_argument(
+        "--runs", type=int, default=4, help="simulated recordings in the throughput campaign"
+    )
+    ap.add_argument(
+        "--seeds", type=int, default=4, help="seeds per recording in the throughput campaign"
+    )
     ap.add_argument("--duration", type=float, default=300.0, help="recording length [s]")
     ap.add_argument("--memory-tasks", type=int, default=50)
-    ap.add_argument("--parts", default="throughput,overhead,memory", help="which figures (default: all three)")
+    ap.add_argument(
+        "--parts", default="throughput,overhead,memory", help="which figures (default: all three)"
+    )
     args = ap.parse_args()
     parts = args.parts.split(",")
     with tempfile.TemporaryDirectory(prefix="gnssacc-batchbench-") as tmp:
         scratch = Path(tmp)
         if "throughput" in parts:
-            throughput(recordings(scratch / "runs", args.runs, args.duration), args.seeds, args.duration,
-                       args.repeats, scratch)
+            throughput(
+                recordings(scratch / "runs", args.runs, args.duration),
+                args.seeds,
+                args.duration,
+                args.repeats,
+                scratch,
+            )
         if "overhead" in parts:
             with dask_executor(2) as ex:
                 overhead(ex)

@@ -22,6 +22,7 @@ Usage::
     python bench/bench_cold_start.py --fresh-venv [--repeats 3] [--plots]
     python bench/bench_cold_start.py --fresh-venv --install-only [--repeats 2]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -43,7 +44,9 @@ RUN = ["-m", "gnssacc.cli", "run", "--no-plots", "--overwrite"]
 def timed(args: list[str], env: dict, python: str = sys.executable) -> dict:
     """Seconds from the start to the first line, the table header and the exit of one process."""
     t0 = time.perf_counter()
-    p = subprocess.Popen([python, *args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    p = subprocess.Popen(
+        [python, *args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env
+    )
     out = {"first_line": None, "first_result": None, "jit": None}
     for line in p.stdout:
         now = time.perf_counter() - t0
@@ -71,7 +74,11 @@ def fresh_venv(tmp: str, env: dict | None = None) -> tuple[str, float]:
     import shutil
 
     src = os.path.join(tmp, "src")
-    shutil.copytree(REPO, src, ignore=shutil.ignore_patterns(".git", "build", "*.egg-info", "__pycache__", "*.pyc"))
+    shutil.copytree(
+        REPO,
+        src,
+        ignore=shutil.ignore_patterns(".git", "build", "*.egg-info", "__pycache__", "*.pyc"),
+    )
     t0 = time.perf_counter()
     venv = os.path.join(tmp, "venv")
     subprocess.run([sys.executable, "-m", "venv", venv], check=True)
@@ -82,8 +89,13 @@ def fresh_venv(tmp: str, env: dict | None = None) -> tuple[str, float]:
 
 def kernel_files(python: str, env: dict) -> list[Path]:
     """The installed package's cached kernels (numba's index and data files)."""
-    out = subprocess.run([python, "-c", "from gnssacc.core import jit; print(jit.cache_folder())"], env=env,
-                         capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [python, "-c", "from gnssacc.core import jit; print(jit.cache_folder())"],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     folder = Path(out.stdout.strip())
     return [f for pattern in ("**/*.nbi", "**/*.nbc") for f in folder.glob(pattern)]
 
@@ -97,8 +109,10 @@ def restore_kernels(python: str, env: dict, installed: dict[Path, bytes]) -> Non
 
 
 def median_row(vals: list[dict]) -> dict:
-    return {k: float(np.median([v[k] if v[k] is not None else np.nan for v in vals]))
-            for k in ("first_line", "first_result", "end", "jit")}
+    return {
+        k: float(np.median([v[k] if v[k] is not None else np.nan for v in vals]))
+        for k in ("first_line", "first_result", "end", "jit")
+    }
 
 
 def main_fresh_venv(repeats: int, plots: bool) -> None:
@@ -118,16 +132,24 @@ def main_fresh_venv(repeats: int, plots: bool) -> None:
             rows.setdefault("no-kernels", []).append(timed(run + ["--out", out_dir], env, python))
             print(f"round {r + 1}/{repeats} done", file=sys.stderr)
     load = os.getloadavg()
-    print(f"fresh virtual environment: pip install {REPO} took {install_s:.1f} s ({len(installed)} kernel cache "
-          f"files installed); then gnssacc run (KITTI default{', with plots' if plots else ', --no-plots'}), "
-          f"median of {repeats}; load average {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} on {os.cpu_count()} cores")
-    print(f"{'case':11s} {'first line [s]':>15s} {'first result [s]':>17s} {'exit [s]':>9s} {'JIT [s]':>8s}")
+    print(
+        f"fresh virtual environment: pip install {REPO} took {install_s:.1f} s ({len(installed)} kernel cache "
+        f"files installed); then gnssacc run (KITTI default{', with plots' if plots else ', --no-plots'}), "
+        f"median of {repeats}; load average {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} on {os.cpu_count()} cores"
+    )
+    print(
+        f"{'case':11s} {'first line [s]':>15s} {'first result [s]':>17s} {'exit [s]':>9s} {'JIT [s]':>8s}"
+    )
     med = {case: median_row(vals) for case, vals in rows.items()}
     for case, m in med.items():
-        print(f"{case:11s} {m['first_line']:15.2f} {m['first_result']:17.2f} {m['end']:9.2f} {m['jit']:8.2f}")
+        print(
+            f"{case:11s} {m['first_line']:15.2f} {m['first_result']:17.2f} {m['end']:9.2f} {m['jit']:8.2f}"
+        )
     for case in ("first", "no-kernels"):
-        print(f"{case} / warm: exit {med[case]['end'] / med['warm']['end']:.2f}x, "
-              f"first result {med[case]['first_result'] / med['warm']['first_result']:.2f}x")
+        print(
+            f"{case} / warm: exit {med[case]['end'] / med['warm']['end']:.2f}x, "
+            f"first result {med[case]['first_result'] / med['warm']['first_result']:.2f}x"
+        )
 
 
 def main_install_only(repeats: int) -> None:
@@ -140,8 +162,10 @@ def main_install_only(repeats: int) -> None:
                 times.setdefault(case, []).append(fresh_venv(tmp, {**base, **extra})[1])
         print(f"round {r + 1}/{repeats} done", file=sys.stderr)
     load = os.getloadavg()
-    print(f"python -m venv + pip install {REPO}, median of {repeats}; load average {load[0]:.1f} {load[1]:.1f} "
-          f"{load[2]:.1f} on {os.cpu_count()} cores")
+    print(
+        f"python -m venv + pip install {REPO}, median of {repeats}; load average {load[0]:.1f} {load[1]:.1f} "
+        f"{load[2]:.1f} on {os.cpu_count()} cores"
+    )
     for case, vals in times.items():
         print(f"{case:13s} {np.median(vals):6.1f} s  ({', '.join(f'{v:.1f}' for v in vals)})")
 
@@ -149,9 +173,15 @@ def main_install_only(repeats: int) -> None:
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--ref-src", default=None, help="another source tree to compare with (put on PYTHONPATH)")
-    ap.add_argument("--fresh-venv", action="store_true", help="install into a new virtual environment first")
-    ap.add_argument("--install-only", action="store_true", help="with --fresh-venv: time pip install alone")
+    ap.add_argument(
+        "--ref-src", default=None, help="another source tree to compare with (put on PYTHONPATH)"
+    )
+    ap.add_argument(
+        "--fresh-venv", action="store_true", help="install into a new virtual environment first"
+    )
+    ap.add_argument(
+        "--install-only", action="store_true", help="with --fresh-venv: time pip install alone"
+    )
     ap.add_argument("--plots", action="store_true", help="with --fresh-venv: draw the figures too")
     args = ap.parse_args()
     if args.fresh_venv and args.install_only:
@@ -163,27 +193,45 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         for r in range(args.repeats):
             for name, src in trees.items():
-                cache = tempfile.mkdtemp(dir=tmp)   # empty: as after pip install
+                cache = tempfile.mkdtemp(dir=tmp)  # empty: as after pip install
                 out_dir = os.path.join(tmp, f"out-{name}")
                 for case in ("cold", "warm"):
-                    rows.setdefault((name, case), []).append(timed(RUN + ["--out", out_dir], env_for(src, cache)))
-                rows.setdefault((name, "--help"), []).append(timed(["-m", "gnssacc.cli", "--help"], env_for(src, cache)))
+                    rows.setdefault((name, case), []).append(
+                        timed(RUN + ["--out", out_dir], env_for(src, cache))
+                    )
+                rows.setdefault((name, "--help"), []).append(
+                    timed(["-m", "gnssacc.cli", "--help"], env_for(src, cache))
+                )
             print(f"round {r + 1}/{args.repeats} done", file=sys.stderr)
     load = os.getloadavg()
-    print(f"gnssacc run (KITTI default) and --help, fresh process each, median of {args.repeats} interleaved rounds; "
-          f"load average {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} on {os.cpu_count()} cores")
-    print(f"{'tree':5s} {'case':7s} {'first line [s]':>15s} {'first result [s]':>17s} {'exit [s]':>9s} {'JIT [s]':>8s}")
+    print(
+        f"gnssacc run (KITTI default) and --help, fresh process each, median of {args.repeats} interleaved rounds; "
+        f"load average {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} on {os.cpu_count()} cores"
+    )
+    print(
+        f"{'tree':5s} {'case':7s} {'first line [s]':>15s} {'first result [s]':>17s} {'exit [s]':>9s} {'JIT [s]':>8s}"
+    )
     med = {}
     for (name, case), vals in rows.items():
-        m = {k: (float(np.median([v[k] for v in vals])) if all(v[k] is not None for v in vals) else float("nan"))
-             for k in ("first_line", "first_result", "end", "jit")}
+        m = {
+            k: (
+                float(np.median([v[k] for v in vals]))
+                if all(v[k] is not None for v in vals)
+                else float("nan")
+            )
+            for k in ("first_line", "first_result", "end", "jit")
+        }
         med[(name, case)] = m
-        print(f"{name:5s} {case:7s} {m['first_line']:15.2f} {m['first_result']:17.2f} {m['end']:9.2f} {m['jit']:8.2f}")
+        print(
+            f"{name:5s} {case:7s} {m['first_line']:15.2f} {m['first_result']:17.2f} {m['end']:9.2f} {m['jit']:8.2f}"
+        )
     if args.ref_src:
         for case in ("cold", "warm"):
             a, b = med[("ref", case)], med[("this", case)]
-            print(f"{case}: first result ref/this {a['first_result'] / b['first_result']:.2f}x, "
-                  f"first line ref/this {a['first_line'] / b['first_line']:.2f}x")
+            print(
+                f"{case}: first result ref/this {a['first_result'] / b['first_result']:.2f}x, "
+                f"first line ref/this {a['first_line'] / b['first_line']:.2f}x"
+            )
 
 
 if __name__ == "__main__":

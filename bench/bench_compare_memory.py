@@ -13,6 +13,7 @@ Usage::
 
     python bench/bench_compare_memory.py [--duration 6000] [--csv DIR]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -34,8 +35,8 @@ def _status(key: str) -> float:
 
 
 ROWS: list[list] = []
-OPEN: list[list] = []   # the stages running, outermost first
-PEAK = [0.0]            # the highest resident memory seen at the end of any stage [MiB]
+OPEN: list[list] = []  # the stages running, outermost first
+PEAK = [0.0]  # the highest resident memory seen at the end of any stage [MiB]
 
 
 def _watch(name: str, fn):
@@ -43,9 +44,10 @@ def _watch(name: str, fn):
 
     A stage resets the peak counter, so each stage passes its own absolute peak to the stage
     around it."""
+
     @functools.wraps(fn)
     def wrapped(*args, **kwargs):
-        row = [name, len(OPEN), 0.0, 0.0, 0.0, _status("VmRSS:"), 0.0]   # ..., start, inner peak
+        row = [name, len(OPEN), 0.0, 0.0, 0.0, _status("VmRSS:"), 0.0]  # ..., start, inner peak
         ROWS.append(row)
         OPEN.append(row)
         with open("/proc/self/clear_refs", "w") as f:
@@ -60,6 +62,7 @@ def _watch(name: str, fn):
             PEAK[0] = max(PEAK[0], peak)
             if OPEN:
                 OPEN[-1][6] = max(OPEN[-1][6], peak)
+
     return wrapped
 
 
@@ -77,8 +80,10 @@ def main():
     else:
         run = simulate("car", duration_s=args.duration, imu_grade="industrial", seed=0)
     base = _status("VmRSS:")
-    print(f"run: {len(run.imu)} IMU samples; RSS after loading it {base:.0f} MiB (peak so far {_status('VmHWM:'):.0f}); "
-          f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    print(
+        f"run: {len(run.imu)} IMU samples; RSS after loading it {base:.0f} MiB (peak so far {_status('VmHWM:'):.0f}); "
+        f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores"
+    )
     for name in ("checked", "check_imu", "detect_stationary", "_start", "tune"):
         setattr(prepared_module, name, _watch(f"prepare.{name}", getattr(prepared_module, name)))
     pipeline.prepare_recording = _watch("prepare", pipeline.prepare_recording)
@@ -93,13 +98,20 @@ def main():
     methods = ["ekf", "ekf-acc", "smoother", "smoother-acc"]
     _metrics, sols, _ident = pipeline.compare(run, cfg, methods)
     total, peak = time.perf_counter() - t, max(PEAK[0], _status("VmHWM:"))
-    print(f"{'stage':34s} {'wall [s]':>9s} {'peak above its start [MiB]':>27s} {'RSS after, above loaded [MiB]':>30s}")
+    print(
+        f"{'stage':34s} {'wall [s]':>9s} {'peak above its start [MiB]':>27s} {'RSS after, above loaded [MiB]':>30s}"
+    )
     for name, depth, wall, rise, after, _, _ in ROWS:
         if wall > 0.05 or rise > 2.0:
             print(f"{'  ' * depth + name:34s} {wall:9.2f} {rise:27.0f} {after - base:30.0f}")
-    stored = sum(a.nbytes for s in sols.values() for a in vars(s).values() if hasattr(a, "nbytes")) / 2**20
-    print(f"compare: {total:.1f} s, peak RSS {peak:.0f} MiB ({peak - base:.0f} above the loaded run); "
-          f"solutions' arrays {stored:.1f} MiB")
+    stored = (
+        sum(a.nbytes for s in sols.values() for a in vars(s).values() if hasattr(a, "nbytes"))
+        / 2**20
+    )
+    print(
+        f"compare: {total:.1f} s, peak RSS {peak:.0f} MiB ({peak - base:.0f} above the loaded run); "
+        f"solutions' arrays {stored:.1f} MiB"
+    )
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ Usage::
 
     python bench/bench_ekf_speed.py [--repeats 7]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -37,7 +38,9 @@ def cold_jit_seconds() -> float:
         code = "from gnssacc.estimators import mechanization; print(mechanization.warm_up())"
         env = {**os.environ, "NUMBA_CACHE_DIR": cache}
         # The package cache (if any) would hide the compile: point numba at an empty one.
-        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
+        out = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
+        )
         return float(out.stdout.strip())
 
 
@@ -61,25 +64,33 @@ def main():
     run = load_source("kitti", cfg, noise="white", seed=0)
     t0 = time.perf_counter()
     ident = identify(run, cfg)
-    print(f"identification (quality, stationary spans, yaw bank, tuning, model check): "
-          f"{time.perf_counter() - t0:.2f} s")
+    print(
+        f"identification (quality, stationary spans, yaw bank, tuning, model check): "
+        f"{time.perf_counter() - t0:.2f} s"
+    )
     kw = dict(quality=ident.quality, init=ident.init, stationary=ident.stationary)
-    print(f"\nKITTI: {run.duration_s:.1f} s of data, {len(run.imu)} IMU samples (covariance propagated at each), "
-          f"{len(run.gnss)} fixes; median of {args.repeats} runs, one process")
+    print(
+        f"\nKITTI: {run.duration_s:.1f} s of data, {len(run.imu)} IMU samples (covariance propagated at each), "
+        f"{len(run.gnss)} fixes; median of {args.repeats} runs, one process"
+    )
     methods = ("ekf", "ekf-acc", "ekf-accw")
     for method in methods:  # first call per method outside the timing (a lazily compiled kernel)
         run_ekf(ident.run, ident.cfg, method, **kw)
     walls = {m: [] for m in methods}
-    for _ in range(args.repeats):      # interleaved: the machine's load hits every method alike
+    for _ in range(args.repeats):  # interleaved: the machine's load hits every method alike
         for method in methods:
             t0 = time.perf_counter()
             run_ekf(ident.run, ident.cfg, method, **kw)
             walls[method].append(time.perf_counter() - t0)
-    print(f"{'method':10s} {'wall [s]':>9s} {'min [s]':>8s} {'real-time factor':>17s} {'x ekf (median of ratios)':>25s}")
+    print(
+        f"{'method':10s} {'wall [s]':>9s} {'min [s]':>8s} {'real-time factor':>17s} {'x ekf (median of ratios)':>25s}"
+    )
     for method in methods:
         med = float(np.median(walls[method]))
         ratio = float(np.median(np.array(walls[method]) / np.array(walls["ekf"])))
-        print(f"{method:10s} {med:9.3f} {min(walls[method]):8.3f} {run.duration_s / med:17.0f} {ratio:25.2f}")
+        print(
+            f"{method:10s} {med:9.3f} {min(walls[method]):8.3f} {run.duration_s / med:17.0f} {ratio:25.2f}"
+        )
 
     print("\nMemory (peak traced by tracemalloc during run_ekf, inputs excluded):")
     sim_cfg = load_config(overrides={"imu": grade_config("industrial")})
@@ -90,7 +101,11 @@ def main():
         sid = identify(srun, sim_cfg, "none")
         skw = dict(quality=sid.quality, init=sid.init, stationary=sid.stationary)
         for n_out in (10, "1 Hz"):
-            t_out = srun.truth.t[:: max(len(srun.truth.t) // 10, 1)][:10] if n_out == 10 else srun.truth.t
+            t_out = (
+                srun.truth.t[:: max(len(srun.truth.t) // 10, 1)][:10]
+                if n_out == 10
+                else srun.truth.t
+            )
             mib = peak_mib(lambda: run_ekf(srun, sim_cfg, "ekf-acc", output_times=t_out, **skw))
             peaks[(duration, len(t_out))] = mib
             print(f"{duration:15.0f} {len(t_out):8d} {mib:11.2f}")

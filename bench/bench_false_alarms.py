@@ -11,6 +11,7 @@ refusal, a correction applied, or a warning. Proposals the estimator refuted are
 
     python bench/bench_false_alarms.py [--seeds 6]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -40,9 +41,17 @@ def verdicts(run, cfg=None) -> tuple[list[str], list[str]]:
             _, _, findings = check_input(run, cfg or load_config())
         except InputError as exc:
             return [f"refused:{exc.problem[:90]}"], []
-    alarms = [f"{f.check}:{f.action}" for f in findings if f.action in ("repaired", "applied", "not confirmed", "noted")]
-    alarms += [f"warning:{str(w.message)[:90]}" for w in caught if issubclass(w.category, DataWarning)
-               and not any(str(w.message).find(f.problem[:40]) >= 0 for f in findings)]
+    alarms = [
+        f"{f.check}:{f.action}"
+        for f in findings
+        if f.action in ("repaired", "applied", "not confirmed", "noted")
+    ]
+    alarms += [
+        f"warning:{str(w.message)[:90]}"
+        for w in caught
+        if issubclass(w.category, DataWarning)
+        and not any(str(w.message).find(f.problem[:40]) >= 0 for f in findings)
+    ]
     return alarms, [f"{f.check}:refuted" for f in findings if f.action == "refuted"]
 
 
@@ -69,9 +78,13 @@ def main() -> None:
             print(f"FALSE ALARM {name}: {alarms}", flush=True)
     print(f"\n{n} clean cases in {time.perf_counter() - t0:.0f} s")
     print(f"{'check':16s} {'false alarms':>12s} {'rate':>6s} {'refuted proposals':>18s}")
-    for check in sorted(set(counts) | set(refuted) | {"time_offset", "mounting", "gyro_units", "latlon"}):
+    for check in sorted(
+        set(counts) | set(refuted) | {"time_offset", "mounting", "gyro_units", "latlon"}
+    ):
         print(f"{check:16s} {counts[check]:12d} {counts[check] / n:6.1%} {refuted[check]:18d}")
-    print(f"{'all':16s} {sum(counts.values()):12d} {sum(counts.values()) / n:6.1%} {sum(refuted.values()):18d}")
+    print(
+        f"{'all':16s} {sum(counts.values()):12d} {sum(counts.values()) / n:6.1%} {sum(refuted.values()):18d}"
+    )
     print("0 of n false alarms bounds the rate below 3/n at 95 % confidence (rule of three)")
 
 

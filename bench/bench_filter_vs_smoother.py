@@ -16,6 +16,7 @@ Usage::
 Defaults: the cases ugv/car x industrial/consumer x white/gm, 180 s, seeds 0-9, ``--tune auto``.
 One process, one run at a time (the figures are accuracies, not timings).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -26,7 +27,12 @@ import numpy as np
 from scipy import stats
 
 #: Smoother estimate -> the filter it is compared with.
-PAIRS = {"smoother": "ekf", "smoother-online": "ekf", "smoother-acc": "ekf-acc", "smoother-acc-online": "ekf-acc"}
+PAIRS = {
+    "smoother": "ekf",
+    "smoother-online": "ekf",
+    "smoother-acc": "ekf-acc",
+    "smoother-acc-online": "ekf-acc",
+}
 FIGURES = ("pos", "vel", "tilt", "yaw")
 
 
@@ -35,21 +41,28 @@ def _rms(e: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(e[ok] ** 2, axis=1))))
 
 
-def errors_of_run(scenario: str, grade: str, noise: str, duration: float, seed: int, methods: list,
-                  tune: str) -> dict:
+def errors_of_run(
+    scenario: str, grade: str, noise: str, duration: float, seed: int, methods: list, tune: str
+) -> dict:
     """Per method: position [m], velocity [m/s], tilt and yaw [deg] RMS errors (after 10 s)."""
     import gnssacc
     from gnssacc.analysis.observability import state_errors
 
     run = gnssacc.simulate(scenario, duration, imu_grade=grade, noise=noise, seed=seed)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")   # data warnings are per run; the figures are what counts here
+        warnings.simplefilter(
+            "ignore"
+        )  # data warnings are per run; the figures are what counts here
         res = gnssacc.process(run, methods=methods, tune=tune)
     out = {}
     for m, sol in res.solutions.items():
         e = state_errors(res.run, sol)[sol.t >= sol.t[0] + 10.0]
-        out[m] = {"pos": _rms(e[:, 0:3]), "vel": _rms(e[:, 3:6]), "tilt": float(np.degrees(_rms(e[:, 6:8]))),
-                  "yaw": float(np.degrees(_rms(e[:, 8:9])))}
+        out[m] = {
+            "pos": _rms(e[:, 0:3]),
+            "vel": _rms(e[:, 3:6]),
+            "tilt": float(np.degrees(_rms(e[:, 6:8]))),
+            "yaw": float(np.degrees(_rms(e[:, 8:9]))),
+        }
     return out
 
 
@@ -66,9 +79,11 @@ def paired_lines(rows: list) -> list:
             n_better = int(np.sum(d < 0))
             sign_p = stats.binomtest(n_better, len(d)).pvalue if np.any(d != 0) else 1.0
             t_p = stats.ttest_rel(xa, xb).pvalue if len(d) > 1 and np.any(d != 0) else float("nan")
-            lines.append(f"  {a:20s} {b:8s} {fig:4s} {xa.mean():8.3f} {xb.mean():8.3f} {d.mean():+8.3f} "
-                         f"{np.median(d):+8.3f} {100 * d.mean() / xb.mean():+7.1f} {n_better:3d}/{len(d):<3d} "
-                         f"{sign_p:7.3g} {t_p:7.3g}")
+            lines.append(
+                f"  {a:20s} {b:8s} {fig:4s} {xa.mean():8.3f} {xb.mean():8.3f} {d.mean():+8.3f} "
+                f"{np.median(d):+8.3f} {100 * d.mean() / xb.mean():+7.1f} {n_better:3d}/{len(d):<3d} "
+                f"{sign_p:7.3g} {t_p:7.3g}"
+            )
     return lines
 
 
@@ -86,15 +101,26 @@ def main() -> None:
     ap.add_argument("--acc", action="store_true", help="also ekf-acc against smoother-acc")
     ap.add_argument("--case", action="append", help="scenario,grade,noise,duration_s (repeatable)")
     args = ap.parse_args()
-    cases = ([c.split(",") for c in args.case] if args.case else
-             [[s, g, n, "180"] for s, g, n in itertools.product(("ugv", "car"), ("industrial", "consumer"),
-                                                                 ("white", "gm"))])
+    cases = (
+        [c.split(",") for c in args.case]
+        if args.case
+        else [
+            [s, g, n, "180"]
+            for s, g, n in itertools.product(
+                ("ugv", "car"), ("industrial", "consumer"), ("white", "gm")
+            )
+        ]
+    )
     methods = ["ekf", "smoother"] + (["ekf-acc", "smoother-acc"] if args.acc else [])
-    print("columns: smoother, filter, figure, mean of each [m, m/s, deg], mean and median paired difference,"
-          " mean change [%], seeds where the smoother is better, sign-test p, paired t-test p")
+    print(
+        "columns: smoother, filter, figure, mean of each [m, m/s, deg], mean and median paired difference,"
+        " mean change [%], seeds where the smoother is better, sign-test p, paired t-test p"
+    )
     for scenario, grade, noise, duration in cases:
-        rows = [errors_of_run(scenario, grade, noise, float(duration), s, methods, args.tune)
-                for s in _seeds(args.seeds)]
+        rows = [
+            errors_of_run(scenario, grade, noise, float(duration), s, methods, args.tune)
+            for s in _seeds(args.seeds)
+        ]
         print(f"{scenario} {grade} {noise} {duration} s, tune {args.tune}, {len(rows)} seeds")
         print("\n".join(paired_lines(rows)), flush=True)
 

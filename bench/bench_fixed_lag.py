@@ -12,6 +12,7 @@ sigmas relative, PRMSE where the run has truth).
 SOURCE is anything ``gnssacc run`` takes (default: the embedded KITTI sequence); a recording
 without a configuration is self-tuned first, as ``gnssacc run`` does.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -34,6 +35,7 @@ def _counting(cls, count: list):
             super().update(graph, values, stamps)
             count[0] += self.getISAM2Result().getVariablesReeliminated()
             count[1] += 1
+
     return Counted
 
 
@@ -43,15 +45,23 @@ def _pass(ident, method: str, cls):
     S.FixedLagISAM2 = _counting(cls, count)
     try:
         t0 = time.process_time()
-        sols = S.run_smoother(ident.run, ident.cfg, method, quality=ident.quality, init=ident.init,
-                              stationary=ident.stationary)
+        sols = S.run_smoother(
+            ident.run,
+            ident.cfg,
+            method,
+            quality=ident.quality,
+            init=ident.init,
+            stationary=ident.stationary,
+        )
         return sols, time.process_time() - t0, count[0] / max(count[1], 1)
     finally:
         S.FixedLagISAM2 = FixedLagISAM2
 
 
 def _apart(run, a, b) -> str:
-    d_m = float(np.max(np.hypot((a.lat - b.lat) * 6.378e6, (a.lon - b.lon) * 6.378e6 * np.cos(a.lat))))
+    d_m = float(
+        np.max(np.hypot((a.lat - b.lat) * 6.378e6, (a.lon - b.lon) * 6.378e6 * np.cos(a.lat)))
+    )
     d_s = float(np.max(np.abs(a.sigma - b.sigma) / np.maximum(np.abs(a.sigma), 1e-300)))
     text = f"apart {d_m:.1e} m, sigma {d_s:.1e} rel"
     if run.truth is not None:
@@ -66,11 +76,19 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args()
     cfg = load_config("kitti") if args.source == "kitti" else load_config()
-    ident = identify(load_source(args.source, cfg, noise="white", seed=0) if args.source == "kitti"
-                     else load_source(args.source, cfg), cfg)
-    print(f"{args.source}: {ident.run.duration_s:.1f} s, {len(ident.run.gnss)} fixes; median of {args.repeats} "
-          f"interleaved passes, CPU time; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
-    print(f"{'method':15s} {'GTSAM [s]':>10s} {'ours [s]':>9s} {'ratio':>6s} {'re-elim/update GTSAM -> ours':>29s}")
+    ident = identify(
+        load_source(args.source, cfg, noise="white", seed=0)
+        if args.source == "kitti"
+        else load_source(args.source, cfg),
+        cfg,
+    )
+    print(
+        f"{args.source}: {ident.run.duration_s:.1f} s, {len(ident.run.gnss)} fixes; median of {args.repeats} "
+        f"interleaved passes, CPU time; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores"
+    )
+    print(
+        f"{'method':15s} {'GTSAM [s]':>10s} {'ours [s]':>9s} {'ratio':>6s} {'re-elim/update GTSAM -> ours':>29s}"
+    )
     for method in args.methods.split(","):
         cpu = {"gtsam": [], "ours": []}
         for _ in range(args.repeats):

@@ -15,6 +15,7 @@ time constant is not the 60 s the tuner starts from (and the simulator uses by d
 
 Accuracies, not timings: one process, one run at a time.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -40,10 +41,12 @@ def _compare(run, cfg, tune="auto"):
 def _figures(metrics) -> str:
     m, c = metrics["methods"], metrics["consistency"]
     warned = sum(any("carry outliers" in w for w in c[k]["warnings"]) for k in c)
-    return (f"gnss {metrics['gnss_prmse_m']:5.2f}  ekf {m['ekf']['prmse_m']:5.2f}  smoother {m['smoother']['prmse_m']:5.2f}"
-            f"  online {m['smoother-online']['prmse_m']:5.2f} m | NIS ekf {c['ekf']['nis']['pos']:.2f} smoother "
-            f"{c['smoother']['nis']['pos']:.2f} | NEES ekf {m['ekf']['nees_pos']:.2f} smoother "
-            f"{m['smoother']['nees_pos']:.2f} | outlier warning {warned}/{len(c)}")
+    return (
+        f"gnss {metrics['gnss_prmse_m']:5.2f}  ekf {m['ekf']['prmse_m']:5.2f}  smoother {m['smoother']['prmse_m']:5.2f}"
+        f"  online {m['smoother-online']['prmse_m']:5.2f} m | NIS ekf {c['ekf']['nis']['pos']:.2f} smoother "
+        f"{c['smoother']['nis']['pos']:.2f} | NEES ekf {m['ekf']['nees_pos']:.2f} smoother "
+        f"{m['smoother']['nees_pos']:.2f} | outlier warning {warned}/{len(c)}"
+    )
 
 
 def outliers(a) -> None:
@@ -51,7 +54,9 @@ def outliers(a) -> None:
     for (scen, dur), seed in ((r, s) for r in RUNS for s in a.seeds):
         clean = simulate(scen, dur, imu_grade="industrial", noise="white", seed=seed)
         run, moved = gn.add_outliers(clean, a.fraction, a.sigma, seed=seed + 100)
-        print(f"{scen} seed {seed}: {moved.sum()} of {len(moved)} fixes moved by N(0, {a.sigma:g} m)")
+        print(
+            f"{scen} seed {seed}: {moved.sum()} of {len(moved)} fixes moved by N(0, {a.sigma:g} m)"
+        )
         print(f"  clean            {_figures(_compare(clean, load_config())[0])}")
         print(f"  outliers         {_figures(_compare(run, load_config())[0])}")
         print(f"  outliers, gate   {_figures(_compare(run, gated)[0])}", flush=True)
@@ -59,26 +64,37 @@ def outliers(a) -> None:
 
 def gm_tau(a) -> None:
     base = dict(gn.PROFILES["gm"])
-    white = float(np.mean(base["white_sigma"][:2])) / float(np.hypot(base["gm_sigma"][0], base["white_sigma"][0]))
+    white = float(np.mean(base["white_sigma"][:2])) / float(
+        np.hypot(base["gm_sigma"][0], base["white_sigma"][0])
+    )
     try:
         for tau in a.tau:
             gn.PROFILES["gm"] = dict(base, tau_s=tau)
-            true = load_config(overrides={"imu": grade_config("industrial"),
-                                          "gnss": {"gm_sigma_m": base["gm_sigma"].tolist(), "gm_tau_s": tau,
-                                                   "sigma_scale": white}})
+            true = load_config(
+                overrides={
+                    "imu": grade_config("industrial"),
+                    "gnss": {
+                        "gm_sigma_m": base["gm_sigma"].tolist(),
+                        "gm_tau_s": tau,
+                        "sigma_scale": white,
+                    },
+                }
+            )
             for (scen, dur), seed in ((r, s) for r in RUNS for s in a.seeds):
                 run = simulate(scen, dur, imu_grade="industrial", noise="gm", seed=seed)
                 m, _, ident = _compare(run, load_config())
                 mt, _, _ = _compare(run, true, tune="none")
                 g = ident.tuning.values.get("gnss", {})
                 sig = run.gnss.sigma_ned[0, 0]
-                print(f"tau {tau:5.0f} s {scen:8s} seed {seed}: tuned tau {np.mean(g.get('gm_tau_s', np.nan)):6.1f} s, "
-                      f"GM sigma {np.round(g.get('gm_sigma_m', [np.nan]), 2)}, white {g.get('sigma_scale', np.nan) * sig:.2f} m"
-                      f" | ekf {m['methods']['ekf']['prmse_m']:.2f} (true model {mt['methods']['ekf']['prmse_m']:.2f}),"
-                      f" smoother {m['methods']['smoother']['prmse_m']:.2f} ({mt['methods']['smoother']['prmse_m']:.2f}) m"
-                      f" | NEES {m['methods']['ekf']['nees_pos']:.2f}/{m['methods']['smoother']['nees_pos']:.2f}"
-                      f" NIS {m['consistency']['ekf']['nis']['pos']:.2f}/{m['consistency']['smoother']['nis']['pos']:.2f}",
-                      flush=True)
+                print(
+                    f"tau {tau:5.0f} s {scen:8s} seed {seed}: tuned tau {np.mean(g.get('gm_tau_s', np.nan)):6.1f} s, "
+                    f"GM sigma {np.round(g.get('gm_sigma_m', [np.nan]), 2)}, white {g.get('sigma_scale', np.nan) * sig:.2f} m"
+                    f" | ekf {m['methods']['ekf']['prmse_m']:.2f} (true model {mt['methods']['ekf']['prmse_m']:.2f}),"
+                    f" smoother {m['methods']['smoother']['prmse_m']:.2f} ({mt['methods']['smoother']['prmse_m']:.2f}) m"
+                    f" | NEES {m['methods']['ekf']['nees_pos']:.2f}/{m['methods']['smoother']['nees_pos']:.2f}"
+                    f" NIS {m['consistency']['ekf']['nis']['pos']:.2f}/{m['consistency']['smoother']['nis']['pos']:.2f}",
+                    flush=True,
+                )
     finally:
         gn.PROFILES["gm"] = base
 
@@ -89,7 +105,9 @@ def main() -> None:
     o = sub.add_parser("outliers")
     o.add_argument("--fraction", type=float, default=0.03)
     o.add_argument("--sigma", type=float, default=20.0, help="spread of an outlier per axis [m]")
-    o.add_argument("--gate", type=float, default=16.27, help="[ekf] position_gate_nis of the gated row")
+    o.add_argument(
+        "--gate", type=float, default=16.27, help="[ekf] position_gate_nis of the gated row"
+    )
     o.add_argument("--seeds", default="0,1")
     t = sub.add_parser("gm-tau")
     t.add_argument("--tau", default="10,300", help="true Gauss-Markov time constants [s]")

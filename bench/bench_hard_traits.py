@@ -18,6 +18,7 @@ Usage::
 
     python bench/bench_hard_traits.py [--cases ugv-slow,sideways,rover]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -43,10 +44,12 @@ def _row(name: str, res, seconds: float) -> str:
     applied = [f.check for f in res.prepared.checks if f.action == "applied"] or ["-"]
     n_warn = sum(len(cons[k]["warnings"]) for k in cons)
     sm = m["smoother"]
-    return (f"{name:<26} {'no':>7}  {','.join(applied):<14} {m['ekf']['prmse_m']:>6.2f} {sm['prmse_m']:>9.2f} "
-            f"{res.metrics['gnss_prmse_m']:>6.2f}  {m['ekf']['nees_pos'] or float('nan'):>5.1f} / "
-            f"{sm['nees_pos'] or float('nan'):<5.1f} {n_warn:>5}  {sm['runtime_s']:>6.1f} s ({sm['realtime_factor']:>4.0f}x)"
-            f"  {seconds:>5.0f} s")
+    return (
+        f"{name:<26} {'no':>7}  {','.join(applied):<14} {m['ekf']['prmse_m']:>6.2f} {sm['prmse_m']:>9.2f} "
+        f"{res.metrics['gnss_prmse_m']:>6.2f}  {m['ekf']['nees_pos'] or float('nan'):>5.1f} / "
+        f"{sm['nees_pos'] or float('nan'):<5.1f} {n_warn:>5}  {sm['runtime_s']:>6.1f} s ({sm['realtime_factor']:>4.0f}x)"
+        f"  {seconds:>5.0f} s"
+    )
 
 
 def ugv_slow(seed: int) -> str:
@@ -56,19 +59,37 @@ def ugv_slow(seed: int) -> str:
 
 
 def sideways(folder: Path) -> list[str]:
-    run = simulate("ugv", 240.0, imu_grade="consumer", imu_rate_hz=30.0, gnss_rate_hz=2.5, noise="white", seed=0,
-                   odom_hz=10.0)
+    run = simulate(
+        "ugv",
+        240.0,
+        imu_grade="consumer",
+        imu_rate_hz=30.0,
+        gnss_rate_hz=2.5,
+        noise="white",
+        seed=0,
+        odom_hz=10.0,
+    )
     bag = folder / "sideways.bag"
-    write_bag(run, bag, "ros1-rooad", imu_mount_rpy_deg=(90.0, 0.0, 90.0), with_orientation=True,
-              orientation_yaw_error_deg=110.0, orientation_sigma_deg=(1.0, 1.0, 2.0), odom_topic="/odom",
-              write_tf=False)
+    write_bag(
+        run,
+        bag,
+        "ros1-rooad",
+        imu_mount_rpy_deg=(90.0, 0.0, 90.0),
+        with_orientation=True,
+        orientation_yaw_error_deg=110.0,
+        orientation_sigma_deg=(1.0, 1.0, 2.0),
+        odom_topic="/odom",
+        write_tf=False,
+    )
     rows = []
     t = time.perf_counter()
     try:
         gnssacc.process(str(bag), methods=METHODS)
         rows.append(f"{'sideways bag, defaults':<26} {'no':>7}  (ran without the mounting)")
     except InputError as exc:
-        rows.append(f"{'sideways bag, defaults':<26} {'refused':>7}  {time.perf_counter() - t:.0f} s: {str(exc)[-170:]}")
+        rows.append(
+            f"{'sideways bag, defaults':<26} {'refused':>7}  {time.perf_counter() - t:.0f} s: {str(exc)[-170:]}"
+        )
     auto = {"mounting": {"imu_to_body_rpy_deg": "auto"}}
     loaded = gnssacc.load(str(bag), config=auto)
     assert loaded.truth is None, "the bag's /odom must not be taken as truth"
@@ -79,9 +100,14 @@ def sideways(folder: Path) -> list[str]:
 
 
 def rover() -> str:
-    run = simulate("rover", 367.0, imu_grade="consumer", gnss_rate_hz=20.0, noise="filtered", seed=0)
-    run = run.with_gnss(replace(run.gnss, sigma_ned=np.tile([3.0, 3.0, 5.0], (len(run.gnss), 1)),
-                                sigma_stated=False))
+    run = simulate(
+        "rover", 367.0, imu_grade="consumer", gnss_rate_hz=20.0, noise="filtered", seed=0
+    )
+    run = run.with_gnss(
+        replace(
+            run.gnss, sigma_ned=np.tile([3.0, 3.0, 5.0], (len(run.gnss), 1)), sigma_stated=False
+        )
+    )
     t = time.perf_counter()
     res = gnssacc.process(run, methods=METHODS)
     return _row("rover 20 Hz, no sigmas", res, time.perf_counter() - t)
@@ -91,9 +117,11 @@ def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--cases", default="ugv-slow,sideways,rover")
     cases = p.parse_args(argv).cases.split(",")
-    warnings.simplefilter("ignore")   # the table carries the count; the runs' own lines are long
-    print(f"{'case':<26} {'refused':>7}  {'applied':<14} {'ekf':>6} {'smoother':>9} {'raw':>6}  NEES pos"
-          f"     warn  smoother wall        whole")
+    warnings.simplefilter("ignore")  # the table carries the count; the runs' own lines are long
+    print(
+        f"{'case':<26} {'refused':>7}  {'applied':<14} {'ekf':>6} {'smoother':>9} {'raw':>6}  NEES pos"
+        f"     warn  smoother wall        whole"
+    )
     if "ugv-slow" in cases:
         for seed in (3, 4):
             print(ugv_slow(seed), flush=True)

@@ -20,6 +20,7 @@ checks alone (no false alarm), and the time the checks add to a 10-minute run (m
 
     python bench/bench_input_checks.py [--seeds 0] [--all-grades] [--quick]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -54,7 +55,12 @@ PRMSE_TOL = 0.10
 
 def _imu(run, t=None, f=None, w=None):
     i = run.imu
-    return replace(run, imu=ImuData(i.t if t is None else t, i.f_b if f is None else f, i.omega_ib_b if w is None else w))
+    return replace(
+        run,
+        imu=ImuData(
+            i.t if t is None else t, i.f_b if f is None else f, i.omega_ib_b if w is None else w
+        ),
+    )
 
 
 def _gnss(run, lat, lon):
@@ -81,19 +87,45 @@ class Case:
 
 
 CASES = (
-    Case("gps-vs-utc-18s", lambda r: _imu(r, t=r.imu.t - 18.0), ("imu.csv", "imu_time_offset_s"), 18.0),
+    Case(
+        "gps-vs-utc-18s",
+        lambda r: _imu(r, t=r.imu.t - 18.0),
+        ("imu.csv", "imu_time_offset_s"),
+        18.0,
+    ),
     Case("offset-1s", lambda r: _imu(r, t=r.imu.t + 1.0), ("imu.csv", "imu_time_offset_s"), -1.0),
     Case("offset-0.1s", lambda r: _imu(r, t=r.imu.t - 0.1), (), 0.1, default_must_fail=False),
     # Swapped and sign-lost coordinates look alike (a mirror image): never repaired, always an error.
-    Case("latlon-swapped", lambda r: _gnss(r, r.gnss.lon, r.gnss.lat), ("gnss.csv", "swapped"), repairable=False),
-    Case("latlon-radians", lambda r: _gnss(r, np.radians(r.gnss.lat), np.radians(r.gnss.lon)),
-         ("gnss.csv", "radians"), needs_init=True),
+    Case(
+        "latlon-swapped",
+        lambda r: _gnss(r, r.gnss.lon, r.gnss.lat),
+        ("gnss.csv", "swapped"),
+        repairable=False,
+    ),
+    Case(
+        "latlon-radians",
+        lambda r: _gnss(r, np.radians(r.gnss.lat), np.radians(r.gnss.lon)),
+        ("gnss.csv", "radians"),
+        needs_init=True,
+    ),
     Case("gyro-deg-s", lambda r: _imu(r, w=np.degrees(r.imu.omega_ib_b)), ("imu.csv", "deg/s")),
     Case("accel-g", lambda r: _imu(r, f=r.imu.f_b / 9.80665), ("imu.csv", "in g")),
-    Case("imu-ms", lambda r: _imu(r, t=r.imu.t * 1000.0), ("imu.csv", "milliseconds"), needs_init=True),
-    Case("upside-down", lambda r: _rotated(r, np.diag([1.0, -1.0, -1.0])), ("imu.csv", "imu_to_body_rpy_deg")),
-    Case("yawed-90", lambda r: _rotated(r, np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])),
-         ("imu.csv", "imu_to_body_rpy_deg")),
+    Case(
+        "imu-ms",
+        lambda r: _imu(r, t=r.imu.t * 1000.0),
+        ("imu.csv", "milliseconds"),
+        needs_init=True,
+    ),
+    Case(
+        "upside-down",
+        lambda r: _rotated(r, np.diag([1.0, -1.0, -1.0])),
+        ("imu.csv", "imu_to_body_rpy_deg"),
+    ),
+    Case(
+        "yawed-90",
+        lambda r: _rotated(r, np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])),
+        ("imu.csv", "imu_to_body_rpy_deg"),
+    ),
 )
 
 
@@ -105,7 +137,18 @@ def _cli(args: list) -> tuple[int, str]:
 
 
 def _run(folder: Path, out: Path, config: Path | None) -> tuple[int, str, dict | None]:
-    args = ["run", folder, "--out", out, "--methods", "ekf", "--tune", "none", "--no-plots", "--overwrite"]
+    args = [
+        "run",
+        folder,
+        "--out",
+        out,
+        "--methods",
+        "ekf",
+        "--tune",
+        "none",
+        "--no-plots",
+        "--overwrite",
+    ]
     code, err = _cli(args + (["--config", config] if config else []))
     metrics = json.loads((out / "metrics.json").read_text()) if code == 0 else None
     return code, err, metrics
@@ -114,7 +157,10 @@ def _run(folder: Path, out: Path, config: Path | None) -> tuple[int, str, dict |
 def _applied(err: str) -> tuple[float | None, float | None, bool]:
     """The offset the checks applied and its 1-sigma [s] (from the warning), and whether a mounting
     was applied."""
-    m = re.search(r'imu_time_offset_s = "auto": measured ([-+0-9.]+) s \+- ([0-9.]+) s \([^)]*\)[,;] added', err)
+    m = re.search(
+        r'imu_time_offset_s = "auto": measured ([-+0-9.]+) s \+- ([0-9.]+) s \([^)]*\)[,;] added',
+        err,
+    )
     off, sig = (float(m.group(1)), float(m.group(2))) if m else (None, None)
     return off, sig, "applied imu_to_body_rpy_deg" in err
 
@@ -144,7 +190,9 @@ def _judge_auto(case: Case | None, code: int, err: str, metrics, clean_prmse: fl
         return f"FAILED exit {code}: {[ln for ln in err.splitlines() if 'error' in ln][:1]}"
     off, sig, mounted = _applied(err)
     ratio = metrics["methods"]["ekf"]["prmse_m"] / clean_prmse
-    text = f"PRMSE x{ratio:.3f}" + (f", offset {off:+.3f} s +- {sig:.3f}" if off is not None else "")
+    text = f"PRMSE x{ratio:.3f}" + (
+        f", offset {off:+.3f} s +- {sig:.3f}" if off is not None else ""
+    )
     if case is None:
         bad = mounted or (off is not None and not _offset_ok(off, sig, 0.0)) or "repair" in err
         return ("FALSE ALARM " if bad else "ok ") + text
@@ -155,7 +203,9 @@ def _judge_auto(case: Case | None, code: int, err: str, metrics, clean_prmse: fl
 def sweep(scenario: str, grade: str, seed: int, tmp: Path, auto: Path, tally: dict) -> None:
     """Every case on one simulated run, default and repair configurations."""
     base = simulate(scenario, SCENARIOS[scenario], imu_grade=grade, noise="white", seed=seed)
-    with_init = simulate(scenario, SCENARIOS[scenario], imu_grade=grade, noise="white", seed=seed, give_init=True)
+    with_init = simulate(
+        scenario, SCENARIOS[scenario], imu_grade=grade, noise="white", seed=seed, give_init=True
+    )
     tag = f"{scenario}/{grade}/{seed}"
     code, err, metrics = _run(write_csv_run(base, tmp / "clean"), tmp / "out", None)
     clean = metrics["methods"]["ekf"]["prmse_m"] if metrics else float("nan")
@@ -163,9 +213,13 @@ def sweep(scenario: str, grade: str, seed: int, tmp: Path, auto: Path, tally: di
     code, err, metrics = _run(tmp / "clean", tmp / "out", auto)
     _report(tally, tag, "clean+auto", _judge_auto(None, code, err, metrics, clean), "")
     _, _, m_init = _run(write_csv_run(with_init, tmp / "clean-init"), tmp / "out", None)
-    clean_init = m_init["methods"]["ekf"]["prmse_m"] if m_init else float("nan")   # the same run started from init.json
+    clean_init = (
+        m_init["methods"]["ekf"]["prmse_m"] if m_init else float("nan")
+    )  # the same run started from init.json
     for case in CASES:
-        folder = write_csv_run(case.corrupt(with_init if case.needs_init else base), tmp / case.name)
+        folder = write_csv_run(
+            case.corrupt(with_init if case.needs_init else base), tmp / case.name
+        )
         code, err, _ = _run(folder, tmp / "out", None)
         _report(tally, tag, case.name, _judge_default(case, code, err), "")
         code, err, metrics = _run(folder, tmp / "out", auto)
@@ -183,18 +237,26 @@ def _report(tally: dict, tag: str, case: str, verdict: str, extra: str) -> None:
 def real_recordings(cfg) -> None:
     """KITTI and the shared recordings through the checks alone: findings or errors are false alarms."""
     from gnssacc.pipeline import load_source
+
     runs = [("kitti", load_source("kitti", load_config("kitti"), noise="white", seed=0))]
     data = Path(__file__).resolve().parents[2] / "shared" / "data"
     if data.is_dir():
         sys.path.insert(0, str(Path(__file__).parent))
         import bench_real_recordings as real
+
         runs += [("comma2k19", real.comma(data / "comma2k19_example1"))]
-        runs += [(f"vn310-{log}", real.vn310(data / "vn310_static", log)) for log in ("lckf", "tckf")]
+        runs += [
+            (f"vn310-{log}", real.vn310(data / "vn310_static", log)) for log in ("lckf", "tckf")
+        ]
     for name, run in runs:
         try:
             _, _, findings = check_input(run, cfg)
-            seen = [f for f in findings if f.action != "refuted"]    # refuted proposals are only recorded
-            print(f"{name:12s} {'ok' if not seen else 'FALSE ALARM ' + str([(f.check, f.action) for f in seen])}")
+            seen = [
+                f for f in findings if f.action != "refuted"
+            ]  # refuted proposals are only recorded
+            print(
+                f"{name:12s} {'ok' if not seen else 'FALSE ALARM ' + str([(f.check, f.action) for f in seen])}"
+            )
         except Exception as exc:  # noqa: BLE001 - a bench reports every outcome
             print(f"{name:12s} FALSE ALARM {exc}")
 
@@ -205,7 +267,9 @@ def rtk(run, sigma_m: float = 0.03, seed: int = 0):
     n = rng.normal(0.0, sigma_m, (len(g.t), 3))
     r_e = 6378137.0
     lat, lon = g.lat + n[:, 0] / r_e, g.lon + n[:, 1] / (r_e * np.cos(g.lat))
-    return replace(run, gnss=GnssFixes(g.t, lat, lon, g.h - n[:, 2], np.full((len(g.t), 3), sigma_m)))
+    return replace(
+        run, gnss=GnssFixes(g.t, lat, lon, g.h - n[:, 2], np.full((len(g.t), 3), sigma_m))
+    )
 
 
 def offsets_rtk(grades) -> None:
@@ -222,10 +286,15 @@ def offsets_rtk(grades) -> None:
                     run, cfg_out, _ = check_input(_imu(base, t=base.imu.t - offset), cfg)
                     got = float(cfg_out["mounting"]["imu_time_offset_s"])
                     worst = max(worst, abs(got - offset))
-                    print(f"rtk {scenario:9s} {grade:11s} offset {offset:5.1f} s: measured {got:+.4f} s, "
-                          f"error {1000 * (got - offset):+.1f} ms", flush=True)
-    print(f"worst offset error with 3 cm fixes: {1000 * worst:.1f} ms ({'within' if worst <= OFFSET_TOL_S else 'OVER'} "
-          f"{1000 * OFFSET_TOL_S:.0f} ms)")
+                    print(
+                        f"rtk {scenario:9s} {grade:11s} offset {offset:5.1f} s: measured {got:+.4f} s, "
+                        f"error {1000 * (got - offset):+.1f} ms",
+                        flush=True,
+                    )
+    print(
+        f"worst offset error with 3 cm fixes: {1000 * worst:.1f} ms ({'within' if worst <= OFFSET_TOL_S else 'OVER'} "
+        f"{1000 * OFFSET_TOL_S:.0f} ms)"
+    )
 
 
 def _median_time(fn, rounds: int) -> tuple[float, float, float]:
@@ -243,21 +312,31 @@ def check_time(duration_s: float = 600.0, rounds: int = 3) -> None:
     a whole default run."""
     run = simulate("car-city", duration_s, imu_grade="consumer", noise="white", seed=0)
     plain = load_config()
-    auto = load_config(overrides={"mounting": {"imu_time_offset_s": "auto", "imu_to_body_rpy_deg": "auto"},
-                                  "checks": {"repair": "auto"}})
-    warnings.simplefilter("ignore")   # the "auto" offset's warning, printed once per round otherwise
+    auto = load_config(
+        overrides={
+            "mounting": {"imu_time_offset_s": "auto", "imu_to_body_rpy_deg": "auto"},
+            "checks": {"repair": "auto"},
+        }
+    )
+    warnings.simplefilter("ignore")  # the "auto" offset's warning, printed once per round otherwise
     check_input(run, auto)  # compile
-    figures = {name: _median_time(lambda c=cfg: check_input(run, c), rounds) for name, cfg in
-               (("default", plain), ("auto", auto))}
+    figures = {
+        name: _median_time(lambda c=cfg: check_input(run, c), rounds)
+        for name, cfg in (("default", plain), ("auto", auto))
+    }
     with tempfile.TemporaryDirectory() as tmp:
         folder = write_csv_run(run, Path(tmp) / "ten")
         t0 = time.perf_counter()
         code, _ = _cli(["run", folder, "--out", Path(tmp) / "o", "--no-plots"])
         whole = time.perf_counter() - t0
-    print(f"a whole default gnssacc run of a {duration_s:.0f} s car-city run (consumer IMU; all methods, tuning): "
-          f"{whole:.1f} s (exit {code}); the checks, median of {rounds}:")
+    print(
+        f"a whole default gnssacc run of a {duration_s:.0f} s car-city run (consumer IMU; all methods, tuning): "
+        f"{whole:.1f} s (exit {code}); the checks, median of {rounds}:"
+    )
     for name, (med, lo, hi) in figures.items():
-        print(f"  {name:8s} config: {med:.2f} s (min {lo:.2f}, max {hi:.2f}) = {100 * med / whole:.1f} % of the run")
+        print(
+            f"  {name:8s} config: {med:.2f} s (min {lo:.2f}, max {hi:.2f}) = {100 * med / whole:.1f} % of the run"
+        )
 
 
 def main() -> None:
@@ -276,7 +355,9 @@ def main() -> None:
             for scenario in SCENARIOS:
                 for grade in grades:
                     sweep(scenario, grade, seed, Path(tmp), auto, tally)
-    print(f"\n{sum(sum(v.values()) for v in tally.values())} runs in {time.perf_counter() - t0:.0f} s; outcomes:")
+    print(
+        f"\n{sum(sum(v.values()) for v in tally.values())} runs in {time.perf_counter() - t0:.0f} s; outcomes:"
+    )
     for case, words in tally.items():
         print(f"  {case:22s} " + ", ".join(f"{w} {n}" for w, n in sorted(words.items())))
     print()

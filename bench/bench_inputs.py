@@ -8,6 +8,7 @@ Usage::
 
     python bench/bench_inputs.py [--repeats 5]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -55,21 +56,41 @@ def main():
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         n = 100_000
-        table = np.column_stack([np.arange(n) * 0.01, np.random.default_rng(3).standard_normal((n, 6))])
+        table = np.column_stack(
+            [np.arange(n) * 0.01, np.random.default_rng(3).standard_normal((n, 6))]
+        )
         p = Path(tmp) / "imu.csv"
         np.savetxt(p, table, fmt="%.10g", delimiter=",", header="t,ax,ay,az,gx,gy,gz", comments="")
         cols = ["t", "ax", "ay", "az", "gx", "gy", "gz"]
-        print(f"read_table, {n} rows x 7: {1e3 * timed(lambda: read_table(p, cols), args.repeats):.0f} ms")
+        print(
+            f"read_table, {n} rows x 7: {1e3 * timed(lambda: read_table(p, cols), args.repeats):.0f} ms"
+        )
         cfg = load_config("kitti")
         imu = load_source("kitti", cfg).imu
-        print(f"check_imu, KITTI ({len(imu)} samples): {1e3 * timed(lambda: check_imu(imu, cfg), args.repeats):.1f} ms")
-        print(f"simulate car 300 s at 100 Hz: {timed(lambda: simulate('car', 300.0), args.repeats):.2f} s")
+        print(
+            f"check_imu, KITTI ({len(imu)} samples): {1e3 * timed(lambda: check_imu(imu, cfg), args.repeats):.1f} ms"
+        )
+        print(
+            f"simulate car 300 s at 100 Hz: {timed(lambda: simulate('car', 300.0), args.repeats):.2f} s"
+        )
         for d in (600.0, 6000.0):
-            folder = write_csv_run(simulate("car", d, imu_grade="industrial", seed=0), Path(tmp) / f"car{d:.0f}")
-            r = json.loads(subprocess.run([sys.executable, "-c", CHILD, str(folder)], capture_output=True, text=True,
-                                          check=True).stdout.strip().splitlines()[-1])
-            print(f"load CSV run of {d:.0f} s: peak {r['peak_mib']:.0f} MiB, {r['peak_mib'] - r['base_mib']:.0f} MiB "
-                  f"above the imports; the IMU arrays kept: {r['arrays_mib']:.0f} MiB")
+            folder = write_csv_run(
+                simulate("car", d, imu_grade="industrial", seed=0), Path(tmp) / f"car{d:.0f}"
+            )
+            r = json.loads(
+                subprocess.run(
+                    [sys.executable, "-c", CHILD, str(folder)],
+                    capture_output=True,
+                    text=True,
+                    check=True,
+                )
+                .stdout.strip()
+                .splitlines()[-1]
+            )
+            print(
+                f"load CSV run of {d:.0f} s: peak {r['peak_mib']:.0f} MiB, {r['peak_mib'] - r['base_mib']:.0f} MiB "
+                f"above the imports; the IMU arrays kept: {r['arrays_mib']:.0f} MiB"
+            )
 
 
 if __name__ == "__main__":

@@ -30,6 +30,7 @@ Sim figures are the median over the seeds (each seed draws the IMU errors, the G
 odometry errors); KITTI always uses seed 13. One process, one run at a time (the figures are
 accuracies, not timings).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -61,8 +62,12 @@ def _process(source: str, seed: int, variant: str, methods: list, outages: str |
     import gnssacc
 
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")   # data warnings are per run; the figures are what counts here
-        return gnssacc.process(source, methods=methods, config=VARIANTS[variant], seed=seed, outage_every=outages)
+        warnings.simplefilter(
+            "ignore"
+        )  # data warnings are per run; the figures are what counts here
+        return gnssacc.process(
+            source, methods=methods, config=VARIANTS[variant], seed=seed, outage_every=outages
+        )
 
 
 def _prmse(res, m: str, key: str) -> float:
@@ -80,9 +85,19 @@ def one(source: str, seed: int, variant: str, methods: list) -> dict:
     up = _process(source, seed, variant, methods, None)
     out = {}
     for m in methods:
-        out[m] = (_prmse(res, m, "prmse_m"), _prmse(res, m, "prmse_outage_m"), _prmse(up, m, "prmse_m"))
+        out[m] = (
+            _prmse(res, m, "prmse_m"),
+            _prmse(res, m, "prmse_outage_m"),
+            _prmse(up, m, "prmse_m"),
+        )
         stats = res.metrics["methods"].get(m, {}).get("stats", {})
-        for key in ("n_nhc_updates", "n_nhc_factors", "n_odo_updates", "n_odo_factors", "odometry_scale"):
+        for key in (
+            "n_nhc_updates",
+            "n_nhc_factors",
+            "n_odo_updates",
+            "n_odo_factors",
+            "odometry_scale",
+        ):
             if key in stats:
                 out[f"{m}:{key}"] = stats[key]
     out["gnss"] = (res.metrics["gnss_prmse_m"], np.nan, np.nan)
@@ -107,9 +122,15 @@ def main() -> None:
     methods = a.methods.split(",")
     variants = a.variants.split(",")
     results: dict = {}
-    print(f"outages every {OUTAGES} (period:length s); PRMSE [m] overall / in outages, and without outages; "
-          f"sim cases: median over seeds {a.seeds}")
-    head = f"{'case':16s} {'variant':7s} " + " ".join(f"{m + ' all/out/none':>21s}" for m in methods) + "   fixes"
+    print(
+        f"outages every {OUTAGES} (period:length s); PRMSE [m] overall / in outages, and without outages; "
+        f"sim cases: median over seeds {a.seeds}"
+    )
+    head = (
+        f"{'case':16s} {'variant':7s} "
+        + " ".join(f"{m + ' all/out/none':>21s}" for m in methods)
+        + "   fixes"
+    )
     print(head)
     print("-" * len(head))
     for case in a.cases.split(","):
@@ -121,13 +142,25 @@ def main() -> None:
                 continue
             results.setdefault(case, {})[variant] = rows
             with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)   # all-NaN columns (the fixes in outages)
-                med = {m: np.nanmedian(np.array([r[m] for r in rows], float), axis=0) for m in methods + ["gnss"]}
-            cells = " ".join(f"{_cell(med[m][0])} {_cell(med[m][1])} {_cell(med[m][2])}   " for m in methods)
+                warnings.simplefilter(
+                    "ignore", RuntimeWarning
+                )  # all-NaN columns (the fixes in outages)
+                med = {
+                    m: np.nanmedian(np.array([r[m] for r in rows], float), axis=0)
+                    for m in methods + ["gnss"]
+                }
+            cells = " ".join(
+                f"{_cell(med[m][0])} {_cell(med[m][1])} {_cell(med[m][2])}   " for m in methods
+            )
             print(f"{case:16s} {variant:7s} {cells} {_cell(med['gnss'][0])}", flush=True)
     if a.json:
         with open(a.json, "w") as fh:
-            json.dump(results, fh, indent=1, default=lambda o: None if isinstance(o, float) and np.isnan(o) else o)
+            json.dump(
+                results,
+                fh,
+                indent=1,
+                default=lambda o: None if isinstance(o, float) and np.isnan(o) else o,
+            )
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ Usage::
 
     python bench/bench_scaling.py [--repeats 3] [--long] [--csv]   # --long adds the 10-hour run (36000 s)
 """
+
 from __future__ import annotations
 
 import argparse
@@ -57,8 +58,12 @@ print(json.dumps({"imports_s": t1 - t0, "simulate_s": t2 - t1, "compare_s": t3 -
 
 def one(duration: float, csv_dir: str | None = None) -> dict:
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    out = subprocess.run([sys.executable, "-c", CHILD, str(duration)] + ([csv_dir] if csv_dir else []),
-                         capture_output=True, text=True, env=env)
+    out = subprocess.run(
+        [sys.executable, "-c", CHILD, str(duration)] + ([csv_dir] if csv_dir else []),
+        capture_output=True,
+        text=True,
+        env=env,
+    )
     if out.returncode:
         raise SystemExit(f"{duration} s run failed:\n{out.stderr[-3000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -77,32 +82,44 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--long", action="store_true", help="also the 10-hour run (36000 s), once")
-    ap.add_argument("--csv", action="store_true", help="read the runs from CSV run directories instead of simulating")
+    ap.add_argument(
+        "--csv",
+        action="store_true",
+        help="read the runs from CSV run directories instead of simulating",
+    )
     args = ap.parse_args()
     durations = [600.0, 6000.0] + ([36000.0] if args.long else [])
     with tempfile.TemporaryDirectory() as tmp:
         dirs = {d: _write_csv(d, tmp) if args.csv else None for d in durations}
         res: dict[float, list] = {d: [] for d in durations}
-        for _ in range(args.repeats):   # interleaved
+        for _ in range(args.repeats):  # interleaved
             for d in durations[:2]:
                 res[d].append(one(d, dirs[d]))
         if args.long:
             res[36000.0] = [one(36000.0, dirs[36000.0])]
     load = os.getloadavg()
     what = "CSV run directories of simulated car runs" if args.csv else "simulated car"
-    print(f"{what}, industrial IMU 100 Hz, GNSS 1 Hz, all four methods, fresh process per run; median of "
-          f"{args.repeats} (36000 s: 1); load average {load[0]:.1f} {load[1]:.1f} on {os.cpu_count()} cores")
+    print(
+        f"{what}, industrial IMU 100 Hz, GNSS 1 Hz, all four methods, fresh process per run; median of "
+        f"{args.repeats} (36000 s: 1); load average {load[0]:.1f} {load[1]:.1f} on {os.cpu_count()} cores"
+    )
     keys = ("simulate_s", "compare_s", "base_mib", "sim_peak_mib", "peak_mib", "stored_mib")
-    print(f"{'run [s]':>8s} {'load/sim [s]':>13s} {'compare [s]':>12s} {'after imports [MiB]':>20s} "
-          f"{'after load [MiB]':>16s} {'peak [MiB]':>11s} {'stored outputs [MiB]':>21s} {'peak ratio':>11s}")
+    print(
+        f"{'run [s]':>8s} {'load/sim [s]':>13s} {'compare [s]':>12s} {'after imports [MiB]':>20s} "
+        f"{'after load [MiB]':>16s} {'peak [MiB]':>11s} {'stored outputs [MiB]':>21s} {'peak ratio':>11s}"
+    )
     med = {d: {k: float(np.median([r[k] for r in v])) for k in keys} for d, v in res.items()}
     for d, m in med.items():
-        print(f"{d:8.0f} {m['simulate_s']:13.2f} {m['compare_s']:12.2f} {m['base_mib']:20.0f} {m['sim_peak_mib']:16.0f} "
-              f"{m['peak_mib']:11.0f} {m['stored_mib']:21.1f} {m['peak_mib'] / med[600.0]['peak_mib']:11.2f}")
+        print(
+            f"{d:8.0f} {m['simulate_s']:13.2f} {m['compare_s']:12.2f} {m['base_mib']:20.0f} {m['sim_peak_mib']:16.0f} "
+            f"{m['peak_mib']:11.0f} {m['stored_mib']:21.1f} {m['peak_mib'] / med[600.0]['peak_mib']:11.2f}"
+        )
     for d, m in med.items():
         if d > 600.0:
             goal = 1.3 * med[600.0]["peak_mib"] + m["stored_mib"] - med[600.0]["stored_mib"]
-            print(f"{d:.0f} s: peak {m['peak_mib']:.0f} MiB vs goal {goal:.0f} MiB (1.3 x 600 s peak + extra outputs)")
+            print(
+                f"{d:.0f} s: peak {m['peak_mib']:.0f} MiB vs goal {goal:.0f} MiB (1.3 x 600 s peak + extra outputs)"
+            )
     print("PRMSE [m]:", {d: res[d][0]["prmse"] for d in res})
 
 

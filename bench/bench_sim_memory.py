@@ -14,6 +14,7 @@ Usage::
 Thirty minutes of a city car with a consumer IMU (the simulator's speed figure formerly asserted
 in the tests, under 6 s): ``--durations 1800 --grade consumer --scenario car-city``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -45,8 +46,12 @@ print(json.dumps({"wall_s": wall, "peak_mib": peak, "after_mib": after, "held_mi
 
 
 def one(duration: float, grade: str, scenario: str = "car") -> dict:
-    out = subprocess.run([sys.executable, "-c", CHILD, str(duration), grade, scenario], capture_output=True, text=True,
-                         env={**os.environ, "OMP_NUM_THREADS": "1"})
+    out = subprocess.run(
+        [sys.executable, "-c", CHILD, str(duration), grade, scenario],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+    )
     if out.returncode:
         raise SystemExit(f"{duration} s run failed:\n{out.stderr[-3000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -61,18 +66,27 @@ def main():
     args = ap.parse_args()
     durations = [float(d) for d in args.durations.split(",")]
     res: dict[float, list] = {d: [] for d in durations}
-    for _ in range(args.repeats):   # interleaved
+    for _ in range(args.repeats):  # interleaved
         for d in durations:
             res[d].append(one(d, args.grade, args.scenario))
     load = os.getloadavg()
-    print(f"simulate({args.scenario!r}, D, imu_grade={args.grade!r}), 100 Hz IMU, 1 Hz GNSS, fresh process per run; median of "
-          f"{args.repeats}; load average {load[0]:.1f} {load[1]:.1f} on {os.cpu_count()} cores")
-    print(f"{'run [s]':>8s} {'wall [s]':>9s} {'peak above start [MiB]':>23s} {'held after [MiB]':>17s} "
-          f"{'run arrays [MiB]':>17s} {'peak [B/sample]':>16s}")
+    print(
+        f"simulate({args.scenario!r}, D, imu_grade={args.grade!r}), 100 Hz IMU, 1 Hz GNSS, fresh process per run; median of "
+        f"{args.repeats}; load average {load[0]:.1f} {load[1]:.1f} on {os.cpu_count()} cores"
+    )
+    print(
+        f"{'run [s]':>8s} {'wall [s]':>9s} {'peak above start [MiB]':>23s} {'held after [MiB]':>17s} "
+        f"{'run arrays [MiB]':>17s} {'peak [B/sample]':>16s}"
+    )
     for d, rows in res.items():
-        m = {k: float(np.median([r[k] for r in rows])) for k in ("wall_s", "peak_mib", "after_mib", "held_mib")}
-        print(f"{d:8.0f} {m['wall_s']:9.2f} {m['peak_mib']:23.0f} {m['after_mib']:17.0f} {m['held_mib']:17.1f} "
-              f"{m['peak_mib'] * 2**20 / rows[0]['n']:16.0f}")
+        m = {
+            k: float(np.median([r[k] for r in rows]))
+            for k in ("wall_s", "peak_mib", "after_mib", "held_mib")
+        }
+        print(
+            f"{d:8.0f} {m['wall_s']:9.2f} {m['peak_mib']:23.0f} {m['after_mib']:17.0f} {m['held_mib']:17.1f} "
+            f"{m['peak_mib'] * 2**20 / rows[0]['n']:16.0f}"
+        )
 
 
 if __name__ == "__main__":

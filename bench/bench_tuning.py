@@ -7,6 +7,7 @@ the whole identification (stationary detection, yaw bank, tuning, model check).
 
     python bench/bench_tuning.py [--repeat 3] [--long 3600]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -28,7 +29,9 @@ def main() -> None:
     a = ap.parse_args()
     warnings.simplefilter("ignore")
     mechanization.warm_up()
-    print(f"{'run':28s} {'tuning [s]':>10s} {'passes':>6s} {'s/pass':>7s} {'pass RTF':>8s} {'identify [s]':>12s}")
+    print(
+        f"{'run':28s} {'tuning [s]':>10s} {'passes':>6s} {'s/pass':>7s} {'pass RTF':>8s} {'identify [s]':>12s}"
+    )
     for duration in (600.0, a.long):
         for noise in ("white", "gm"):
             run = simulate("car-city", duration, imu_grade="consumer", noise=noise, seed=0)
@@ -40,8 +43,10 @@ def main() -> None:
                 tune_s.append(ident.tuning.seconds)
                 passes = ident.tuning.n_evaluations
             t = float(np.median(tune_s))
-            print(f"car-city {duration / 60:4.0f} min, {noise:5s} fixes  {t:10.1f} {passes:6d} {t / passes:7.3f} "
-                  f"{duration * passes / t:8.0f} {np.median(total_s):12.1f}")
+            print(
+                f"car-city {duration / 60:4.0f} min, {noise:5s} fixes  {t:10.1f} {passes:6d} {t / passes:7.3f} "
+                f"{duration * passes / t:8.0f} {np.median(total_s):12.1f}"
+            )
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ Usage::
 
     python bench/bench_whole_run.py [--repeats 5] [--breakdown]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -30,17 +31,29 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-RUNS = {"default run": ["run", "--overwrite"],
-        "ekf,smoother,smoother-acc --no-plots": ["run", "--overwrite", "--methods", "ekf,smoother,smoother-acc",
-                                                 "--no-plots"]}
+RUNS = {
+    "default run": ["run", "--overwrite"],
+    "ekf,smoother,smoother-acc --no-plots": [
+        "run",
+        "--overwrite",
+        "--methods",
+        "ekf,smoother,smoother-acc",
+        "--no-plots",
+    ],
+}
 PLAIN = {"plain gtsam script": [], "plain gtsam script + sigmas": ["--sigmas"]}
 
 
 def timed(cmd: list[str]) -> dict:
     """Seconds to the table's header line (gnssacc) and to the exit of one process."""
     t0 = time.perf_counter()
-    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                         env={**os.environ, "OMP_NUM_THREADS": "1"})
+    p = subprocess.Popen(
+        cmd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+    )
     table = None
     for line in p.stdout:
         if table is None and re.match(r"method\s+PRMSE", line):
@@ -87,8 +100,12 @@ os._exit(code)
 
 def breakdown(name: str, args: list[str], out_dir: str) -> None:
     t0 = time.perf_counter()
-    p = subprocess.run([sys.executable, "-c", BREAKDOWN_CHILD, *args, "--out", out_dir], capture_output=True,
-                       text=True, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    p = subprocess.run(
+        [sys.executable, "-c", BREAKDOWN_CHILD, *args, "--out", out_dir],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+    )
     end = time.perf_counter() - t0
     marks = dict(json.loads(p.stderr.strip().splitlines()[-1]))
     metrics = json.loads((Path(out_dir) / "metrics.json").read_text())
@@ -96,7 +113,13 @@ def breakdown(name: str, args: list[str], out_dir: str) -> None:
     rows = [("interpreter, imports, arguments", marks["data start"])]
     rows.append(("data (KITTI files)", marks["data end"] - marks["data start"]))
     rows.append(("imports until the preparation", marks["preparation start"] - marks["data end"]))
-    for key in ("input_checks_s", "quality_and_stationary_s", "initialisation_s", "tuning_s", "model_check_s"):
+    for key in (
+        "input_checks_s",
+        "quality_and_stationary_s",
+        "initialisation_s",
+        "tuning_s",
+        "model_check_s",
+    ):
         if key in prep:
             rows.append((f"  preparation: {key.removesuffix('_s').replace('_', ' ')}", prep[key]))
     rows.append(("preparation (all)", marks["preparation end"] - marks["preparation start"]))
@@ -111,8 +134,10 @@ def breakdown(name: str, args: list[str], out_dir: str) -> None:
     rows.append(("files (without figures)", marks["files end"] - marks["files start"] - figures))
     rows.append(("figures", figures))
     rows.append(("exit", end - marks["main returned"]))
-    print(f"\n{name}: where the time goes (one instrumented run, whole process {end:.2f} s; "
-          f"the table at {marks['table end']:.2f} s)")
+    print(
+        f"\n{name}: where the time goes (one instrumented run, whole process {end:.2f} s; "
+        f"the table at {marks['table end']:.2f} s)"
+    )
     for label, sec in rows:
         print(f"  {label:40s} {sec:6.2f} s")
 
@@ -126,23 +151,39 @@ def main() -> None:
     load0 = os.getloadavg()
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "out")
-        timed([sys.executable, "-m", "gnssacc.cli", *RUNS["default run"], "--out", out])   # a warm cache
+        timed(
+            [sys.executable, "-m", "gnssacc.cli", *RUNS["default run"], "--out", out]
+        )  # a warm cache
         for r in range(args.repeats):
             for name, extra in PLAIN.items():
-                rows.setdefault(name, []).append(timed([sys.executable, str(HERE / "plain_gtsam_kitti.py"), *extra]))
+                rows.setdefault(name, []).append(
+                    timed([sys.executable, str(HERE / "plain_gtsam_kitti.py"), *extra])
+                )
             for name, extra in RUNS.items():
-                rows.setdefault(name, []).append(timed([sys.executable, "-m", "gnssacc.cli", *extra, "--out", out]))
+                rows.setdefault(name, []).append(
+                    timed([sys.executable, "-m", "gnssacc.cli", *extra, "--out", out])
+                )
             print(f"round {r + 1}/{args.repeats} done", file=sys.stderr)
         load1 = os.getloadavg()
-        print(f"KITTI, fresh process each, median of {args.repeats} interleaved rounds; load average "
-              f"{load0[0]:.1f} at the start, {load1[0]:.1f} at the end, on {os.cpu_count()} cores")
+        print(
+            f"KITTI, fresh process each, median of {args.repeats} interleaved rounds; load average "
+            f"{load0[0]:.1f} at the start, {load1[0]:.1f} at the end, on {os.cpu_count()} cores"
+        )
         plain = {n: float(np.median([v["end"] for v in rows[n]])) for n in PLAIN}
-        print(f"{'case':40s} {'exit [s]':>9s} {'table [s]':>10s} {'x plain':>8s} {'x plain+sigmas':>15s}")
+        print(
+            f"{'case':40s} {'exit [s]':>9s} {'table [s]':>10s} {'x plain':>8s} {'x plain+sigmas':>15s}"
+        )
         for name, vals in rows.items():
             end = float(np.median([v["end"] for v in vals]))
-            table = np.median([v["table"] for v in vals]) if vals[0]["table"] is not None else float("nan")
-            print(f"{name:40s} {end:9.2f} {table:10.2f} {end / plain['plain gtsam script']:8.2f} "
-                  f"{end / plain['plain gtsam script + sigmas']:15.2f}")
+            table = (
+                np.median([v["table"] for v in vals])
+                if vals[0]["table"] is not None
+                else float("nan")
+            )
+            print(
+                f"{name:40s} {end:9.2f} {table:10.2f} {end / plain['plain gtsam script']:8.2f} "
+                f"{end / plain['plain gtsam script + sigmas']:15.2f}"
+            )
         if args.breakdown:
             for name, extra in RUNS.items():
                 breakdown(name, extra, out)

@@ -14,6 +14,7 @@ Usage::
 
     python bench/plain_gtsam_kitti.py [--sigmas]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -26,7 +27,9 @@ from gtsam.symbol_shorthand import B, V, X
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--sigmas", action="store_true", help="query each node's pose and velocity covariance")
+    ap.add_argument(
+        "--sigmas", action="store_true", help="query each node's pose and velocity covariance"
+    )
     args = ap.parse_args()
     data = Path(gtsam.__file__).parent / "Data"
     imu = np.loadtxt(data / "KittiEquivBiasedImu.txt", skiprows=1)
@@ -36,7 +39,7 @@ def main() -> None:
     sigma = np.array([3.0, 3.0, 5.0])
     p_fix = p_true + np.random.default_rng(0).normal(size=p_true.shape) * sigma
 
-    p = gtsam.PreintegrationCombinedParams.MakeSharedU(9.81)   # ENU: gravity along -z
+    p = gtsam.PreintegrationCombinedParams.MakeSharedU(9.81)  # ENU: gravity along -z
     # The kitti preset's noise (0.1 m/s/sqrt(h); 2 mg and 30 deg/h over 300 s), but 10 deg/sqrt(h)
     # of gyro noise: without gnssacc's inflation over the file's interpolated stretches a filter
     # needs it (the preset's notes), and 1 deg/sqrt(h) drifts 10 m RMSE off.
@@ -55,12 +58,24 @@ def main() -> None:
     d = p_fix[k] - p_fix[0]
     pose = gtsam.Pose3(gtsam.Rot3.Yaw(np.arctan2(d[1], d[0])), p_fix[0])
     vel, bias = d / (t_fix[k] - t_fix[0]), gtsam.imuBias.ConstantBias()
-    graph, values, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), gtsam.FixedLagSmootherKeyTimestampMap()
-    graph.add(gtsam.PriorFactorPose3(X(0), pose, gtsam.noiseModel.Diagonal.Sigmas(
-        np.array([0.05, 0.05, 0.5, 5.0, 5.0, 5.0]))))
+    graph, values, stamps = (
+        gtsam.NonlinearFactorGraph(),
+        gtsam.Values(),
+        gtsam.FixedLagSmootherKeyTimestampMap(),
+    )
+    graph.add(
+        gtsam.PriorFactorPose3(
+            X(0), pose, gtsam.noiseModel.Diagonal.Sigmas(np.array([0.05, 0.05, 0.5, 5.0, 5.0, 5.0]))
+        )
+    )
     graph.add(gtsam.PriorFactorVector(V(0), vel, gtsam.noiseModel.Isotropic.Sigma(3, 2.0)))
-    graph.add(gtsam.PriorFactorConstantBias(B(0), bias, gtsam.noiseModel.Diagonal.Sigmas(
-        np.array([0.1, 0.1, 0.1, 0.01, 0.01, 0.01]))))
+    graph.add(
+        gtsam.PriorFactorConstantBias(
+            B(0),
+            bias,
+            gtsam.noiseModel.Diagonal.Sigmas(np.array([0.1, 0.1, 0.1, 0.01, 0.01, 0.01])),
+        )
+    )
     for key, value in ((X(0), pose), (V(0), vel), (B(0), bias)):
         values.insert(key, value)
         stamps.insert((key, t_fix[0]))
@@ -75,7 +90,11 @@ def main() -> None:
             pim.integrateMeasurement(f_b[j], w_b[j], t_imu[j] - t_imu[j - 1])
             j += 1
         nav = pim.predict(gtsam.NavState(pose, vel), bias)
-        graph, values, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), gtsam.FixedLagSmootherKeyTimestampMap()
+        graph, values, stamps = (
+            gtsam.NonlinearFactorGraph(),
+            gtsam.Values(),
+            gtsam.FixedLagSmootherKeyTimestampMap(),
+        )
         graph.add(gtsam.CombinedImuFactor(X(n - 1), V(n - 1), X(n), V(n), B(n - 1), B(n), pim))
         graph.add(gtsam.GPSFactor(X(n), p_fix[n], gps_noise))
         for key, value in ((X(n), nav.pose()), (V(n), nav.velocity()), (B(n), bias)):
@@ -85,15 +104,17 @@ def main() -> None:
         pose, vel = sm.calculateEstimatePose3(X(n)), sm.calculateEstimateVector(V(n))
         bias = sm.calculateEstimateConstantBias(B(n))
         est[n] = pose.translation()
-        if args.sigmas:   # a node about to leave the window (1 Hz nodes, 10 s lag)
+        if args.sigmas:  # a node about to leave the window (1 Hz nodes, 10 s lag)
             old = n - 8
             if old >= 0:
                 isam = sm.getISAM2()
                 isam.marginalCovariance(X(old))
                 isam.marginalCovariance(V(old))
     err = np.linalg.norm(est - p_true, axis=1)
-    print(f"KITTI {t_fix[-1] - t_fix[0]:.0f} s, {len(t_fix)} nodes: position RMSE {np.sqrt(np.mean(err**2)):.2f} m "
-          f"(fixes {np.sqrt(np.mean(np.sum((p_fix - p_true)**2, axis=1))):.2f} m)")
+    print(
+        f"KITTI {t_fix[-1] - t_fix[0]:.0f} s, {len(t_fix)} nodes: position RMSE {np.sqrt(np.mean(err**2)):.2f} m "
+        f"(fixes {np.sqrt(np.mean(np.sum((p_fix - p_true) ** 2, axis=1))):.2f} m)"
+    )
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ Usage::
 
 Prints the ranked candidates; the winner's values go into ``src/gnssacc/presets/kitti.toml``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -24,11 +25,11 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 GRID = {
-    "gyro_arw_xy": [0.3, 1.0, 3.0, 10.0],        # deg/sqrt(h), roll/pitch-rate channels
-    "gyro_arw_z": [0.1, 0.3, 1.0, 3.0],           # deg/sqrt(h), yaw-rate channel
-    "accel_vrw": [0.03, 0.1, 0.3],                # m/s/sqrt(h)
-    "gyro_bi": [3.0, 10.0, 30.0],                 # deg/h
-    "accel_bi": [0.1, 0.5, 2.0],                  # mg
+    "gyro_arw_xy": [0.3, 1.0, 3.0, 10.0],  # deg/sqrt(h), roll/pitch-rate channels
+    "gyro_arw_z": [0.1, 0.3, 1.0, 3.0],  # deg/sqrt(h), yaw-rate channel
+    "accel_vrw": [0.03, 0.1, 0.3],  # m/s/sqrt(h)
+    "gyro_bi": [3.0, 10.0, 30.0],  # deg/h
+    "accel_bi": [0.1, 0.5, 2.0],  # mg
 }
 #: GNSS gaps used for the predictive test: 15 s without fixes every 45 s, long enough for the
 #: free-inertial drift to be comparable to the GNSS noise.
@@ -36,9 +37,14 @@ GAPS = "45:15"
 
 
 def _overrides(c):
-    return {"imu": {"gyro_arw_deg_rth": [c["gyro_arw_xy"], c["gyro_arw_xy"], c["gyro_arw_z"]],
-                    "accel_vrw_mps_rth": c["accel_vrw"], "gyro_bias_instability_deg_h": c["gyro_bi"],
-                    "accel_bias_instability_mg": c["accel_bi"]}}
+    return {
+        "imu": {
+            "gyro_arw_deg_rth": [c["gyro_arw_xy"], c["gyro_arw_xy"], c["gyro_arw_z"]],
+            "accel_vrw_mps_rth": c["accel_vrw"],
+            "gyro_bias_instability_deg_h": c["gyro_bi"],
+            "accel_bias_instability_mg": c["accel_bi"],
+        }
+    }
 
 
 def _evaluate(args):
@@ -73,10 +79,14 @@ def main():
         results = list(ex.map(_evaluate, [(c, seeds) for c in cands]))
     results.sort(key=lambda r: r[3])
     print(f"{len(cands)} candidates x {len(seeds)} seeds in {time.perf_counter() - t0:.0f} s")
-    print("gyro_xy gyro_z [deg/rt h]  accel_vrw [m/s/rt h]  gyro_bi [deg/h]  accel_bi [mg]  NIS_all  NIS_gap  score")
+    print(
+        "gyro_xy gyro_z [deg/rt h]  accel_vrw [m/s/rt h]  gyro_bi [deg/h]  accel_bi [mg]  NIS_all  NIS_gap  score"
+    )
     for c, a, g, s in results[:15]:
-        print(f"{c['gyro_arw_xy']:7.1f} {c['gyro_arw_z']:6.1f}  {c['accel_vrw']:20.2f}  {c['gyro_bi']:15.0f}  "
-              f"{c['accel_bi']:13.1f}  {a:7.3f}  {g:7.3f}  {s:.4f}")
+        print(
+            f"{c['gyro_arw_xy']:7.1f} {c['gyro_arw_z']:6.1f}  {c['accel_vrw']:20.2f}  {c['gyro_bi']:15.0f}  "
+            f"{c['accel_bi']:13.1f}  {a:7.3f}  {g:7.3f}  {s:.4f}"
+        )
 
 
 if __name__ == "__main__":

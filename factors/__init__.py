@@ -1,4 +1,5 @@
 """GTSAM factors of gnssacc (installed as ``gnssacc.factors``)."""
+
 from .accel_factor import accel_error, gnss_accel_factor, smoother_jacobians_from_H_a
 from .accel_window_factor import window_accel_error, window_accel_factor
 from .gnss_error_factors import gauss_markov_factor, gnss_position_gm_factor
@@ -6,6 +7,17 @@ from .preintegrated_position_factor import preintegrated_position_factor
 from .prior_factor import joint_prior_factor
 from .vehicle_factors import nhc_factor, odometry_factor, vehicle_velocity
 
-__all__ = ["accel_error", "gauss_markov_factor", "gnss_accel_factor", "gnss_position_gm_factor",
-           "joint_prior_factor", "nhc_factor", "odometry_factor", "preintegrated_position_factor",
-           "smoother_jacobians_from_H_a", "vehicle_velocity", "window_accel_error", "window_accel_factor"]
+__all__ = [
+    "accel_error",
+    "gauss_markov_factor",
+    "gnss_accel_factor",
+    "gnss_position_gm_factor",
+    "joint_prior_factor",
+    "nhc_factor",
+    "odometry_factor",
+    "preintegrated_position_factor",
+    "smoother_jacobians_from_H_a",
+    "vehicle_velocity",
+    "window_accel_error",
+    "window_accel_factor",
+]

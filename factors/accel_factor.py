@@ -21,6 +21,7 @@ where ``(H_phi, H_ba) = H_a_blocks(R_hat, f)``; the translation and gyro-bias co
 Equivalently ``H_phi = (de/dxi) R_hat^T`` and ``H_ba = -(de/db_a)``: the EKF's H_a, mapped
 through the two attitude-error conventions (tests check both directions and finite differences).
 """
+
 from __future__ import annotations
 
 import gtsam
@@ -47,15 +48,21 @@ def smoother_jacobians_from_H_a(R_nb: np.ndarray, f_b: np.ndarray) -> tuple[np.n
     return J_pose, J_bias
 
 
-def accel_error(pose: gtsam.Pose3, bias: gtsam.imuBias.ConstantBias, f_b: np.ndarray, a_n: np.ndarray,
-                g_n: np.ndarray) -> np.ndarray:
+def accel_error(
+    pose: gtsam.Pose3,
+    bias: gtsam.imuBias.ConstantBias,
+    f_b: np.ndarray,
+    a_n: np.ndarray,
+    g_n: np.ndarray,
+) -> np.ndarray:
     """Factor error ``R (f_b - b_a) + g_n - a_n`` [m/s^2]."""
     R_nb = pose.rotation().matrix()
     return predicted_acceleration(R_nb, f_b - bias.accelerometer(), g_n) - a_n
 
 
-def gnss_accel_factor(pose_key: int, bias_key: int, f_b: np.ndarray, a_n: np.ndarray, g_n: np.ndarray,
-                      cov: np.ndarray) -> gtsam.CustomFactor:
+def gnss_accel_factor(
+    pose_key: int, bias_key: int, f_b: np.ndarray, a_n: np.ndarray, g_n: np.ndarray, cov: np.ndarray
+) -> gtsam.CustomFactor:
     """Build the factor.
 
     Parameters
@@ -84,15 +91,18 @@ def gnss_accel_factor(pose_key: int, bias_key: int, f_b: np.ndarray, a_n: np.nda
         R_nb = values.atPose3(pose_key).rotation().matrix()
         f_corr = f_b - values.atConstantBias(bias_key).accelerometer()
         if H is not None:
-            H_phi, H_ba = H_a_blocks(R_nb, f_corr)    # smoother_jacobians_from_H_a, same numbers
+            H_phi, H_ba = H_a_blocks(R_nb, f_corr)  # smoother_jacobians_from_H_a, same numbers
             np.matmul(H_phi, R_nb, out=J_pose[:, 0:3])
             np.negative(H_ba, out=J_bias[:, 0:3])
             H[0], H[1] = J_pose, J_bias
-        return R_nb @ f_corr + g_minus_a   # predicted_acceleration(R_nb, f_corr, g_n) - a_n
+        return R_nb @ f_corr + g_minus_a  # predicted_acceleration(R_nb, f_corr, g_n) - a_n
 
     # The LS window's acceleration errors are uncorrelated across axes (diagonal covariance): a
     # Diagonal model whitens with three divisions instead of a 3x3 triangular solve.
     cov = np.asarray(cov, float)
-    noise = (gtsam.noiseModel.Diagonal.Variances(np.diag(cov)) if np.count_nonzero(cov - np.diag(np.diag(cov))) == 0
-             else gtsam.noiseModel.Gaussian.Covariance(cov))
+    noise = (
+        gtsam.noiseModel.Diagonal.Variances(np.diag(cov))
+        if np.count_nonzero(cov - np.diag(np.diag(cov))) == 0
+        else gtsam.noiseModel.Gaussian.Covariance(cov)
+    )
     return gtsam.CustomFactor(noise, [pose_key, bias_key], error)

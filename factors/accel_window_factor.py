@@ -24,6 +24,7 @@ paper's factor it counts their information twice (:mod:`gnssacc.analysis.aiding_
 Gauss-Markov GNSS-error states the factor still compares with the antenna positions alone (the
 second difference of a slow error is small, but it is not modelled here).
 """
+
 from __future__ import annotations
 
 import gtsam
@@ -32,14 +33,17 @@ import numpy as np
 from gnssacc.core.rotations import skew
 
 
-def window_accel_error(poses: list, B_row: np.ndarray, lever_b: np.ndarray, a_n: np.ndarray) -> np.ndarray:
+def window_accel_error(
+    poses: list, B_row: np.ndarray, lever_b: np.ndarray, a_n: np.ndarray
+) -> np.ndarray:
     """``sum_j B_j (t_j + R_j l_b) - a_n`` [m/s^2] for ``gtsam.Pose3`` ``poses`` (body in local NED)."""
     ant = [p.translation() + p.rotation().matrix() @ lever_b for p in poses]
     return np.asarray(B_row, float) @ np.asarray(ant) - a_n
 
 
-def window_accel_factor(pose_keys: list, B_row: np.ndarray, a_n: np.ndarray, lever_b: np.ndarray,
-                        cov: np.ndarray) -> gtsam.CustomFactor:
+def window_accel_factor(
+    pose_keys: list, B_row: np.ndarray, a_n: np.ndarray, lever_b: np.ndarray, cov: np.ndarray
+) -> gtsam.CustomFactor:
     """Build the factor.
 
     Parameters
@@ -78,6 +82,9 @@ def window_accel_factor(pose_keys: list, B_row: np.ndarray, a_n: np.ndarray, lev
         return e
 
     cov = np.asarray(cov, float)
-    noise = (gtsam.noiseModel.Diagonal.Variances(np.diag(cov)) if np.count_nonzero(cov - np.diag(np.diag(cov))) == 0
-             else gtsam.noiseModel.Gaussian.Covariance(cov))
+    noise = (
+        gtsam.noiseModel.Diagonal.Variances(np.diag(cov))
+        if np.count_nonzero(cov - np.diag(np.diag(cov))) == 0
+        else gtsam.noiseModel.Gaussian.Covariance(cov)
+    )
     return gtsam.CustomFactor(noise, keys, error)

@@ -8,6 +8,7 @@ per fix, as in the EKF's three extra states (:mod:`gnssacc.estimators.measuremen
 * :func:`gauss_markov_factor` on (G_{k-1}, G_k): ``e = g_k - a g_{k-1}``, ``a = exp(-dt/tau)``,
   with 1-sigma ``sigma sqrt(1 - a^2)`` per axis (the exact discretisation of the process).
 """
+
 from __future__ import annotations
 
 import gtsam
@@ -16,8 +17,14 @@ import numpy as np
 from gnssacc.core.rotations import skew
 
 
-def gnss_position_gm_factor(pose_key: int, gm_key: int, p_fix: np.ndarray, lever_b: np.ndarray,
-                            sigma_ned: np.ndarray, cov_ned: np.ndarray | None = None) -> gtsam.CustomFactor:
+def gnss_position_gm_factor(
+    pose_key: int,
+    gm_key: int,
+    p_fix: np.ndarray,
+    lever_b: np.ndarray,
+    sigma_ned: np.ndarray,
+    cov_ned: np.ndarray | None = None,
+) -> gtsam.CustomFactor:
     """A fix ``p_fix`` [m, local NED] of the antenna at ``lever_b`` [m, body] with white 1-sigma
     ``sigma_ned`` [m] (or the full white covariance ``cov_ned`` [m^2] when given) and the
     Gauss-Markov error held by ``gm_key`` (a Vector3)."""
@@ -36,13 +43,17 @@ def gnss_position_gm_factor(pose_key: int, gm_key: int, p_fix: np.ndarray, lever
             H[0], H[1] = J_pose, J_g
         return pose.translation() + R @ lever_b + values.atVector(keys[1]) - p_fix
 
-    noise = (gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigma_ned, float)) if cov_ned is None
-             else gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov_ned, float)))
+    noise = (
+        gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigma_ned, float))
+        if cov_ned is None
+        else gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov_ned, float))
+    )
     return gtsam.CustomFactor(noise, list(keys), error)
 
 
-def gauss_markov_factor(prev_key: int, key: int, dt: float, tau_s: np.ndarray,
-                        sigma_m: np.ndarray) -> gtsam.LinearContainerFactor:
+def gauss_markov_factor(
+    prev_key: int, key: int, dt: float, tau_s: np.ndarray, sigma_m: np.ndarray
+) -> gtsam.LinearContainerFactor:
     """The Gauss-Markov transition over ``dt`` [s] (correlation time ``tau_s`` [s], stationary
     1-sigma ``sigma_m`` [m], per N, E, D axis; or per entry of any vector variable with one entry
     each, e.g. the odometry scale factor's).
@@ -53,9 +64,15 @@ def gauss_markov_factor(prev_key: int, key: int, dt: float, tau_s: np.ndarray,
     """
     a = np.atleast_1d(np.exp(-dt / np.asarray(tau_s, float)))
     sig = np.maximum(np.asarray(sigma_m, float) * np.sqrt(1.0 - a * a), 1e-9)
-    zero = np.zeros(len(a))   # the linearisation point: zero errors
-    linear = gtsam.JacobianFactor(prev_key, -np.diag(a), key, np.eye(len(a)), zero,
-                                  gtsam.noiseModel.Diagonal.Sigmas(np.atleast_1d(sig)))
+    zero = np.zeros(len(a))  # the linearisation point: zero errors
+    linear = gtsam.JacobianFactor(
+        prev_key,
+        -np.diag(a),
+        key,
+        np.eye(len(a)),
+        zero,
+        gtsam.noiseModel.Diagonal.Sigmas(np.atleast_1d(sig)),
+    )
     at = gtsam.Values()
     at.insert(prev_key, zero)
     at.insert(key, zero)

@@ -35,6 +35,7 @@ bridges' deviations) over their common span, and the IMU factor to the next node
 noise too: the correlation is left out (over a fraction of a second it is a small part of a
 fix's variance, which the configuration's ``min_node_spacing_s`` keeps small).
 """
+
 from __future__ import annotations
 
 import gtsam
@@ -43,9 +44,15 @@ import numpy as np
 from gnssacc.core.rotations import skew
 
 
-def preintegrated_position_factor(keys: tuple, pim: gtsam.PreintegratedCombinedMeasurements, p_fix: np.ndarray,
-                                  lever_b: np.ndarray, cov_fix: np.ndarray, R_f: np.ndarray,
-                                  gm: tuple | None = None) -> gtsam.CustomFactor:
+def preintegrated_position_factor(
+    keys: tuple,
+    pim: gtsam.PreintegratedCombinedMeasurements,
+    p_fix: np.ndarray,
+    lever_b: np.ndarray,
+    cov_fix: np.ndarray,
+    R_f: np.ndarray,
+    gm: tuple | None = None,
+) -> gtsam.CustomFactor:
     """Build the factor.
 
     Parameters

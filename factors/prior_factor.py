@@ -9,14 +9,22 @@ from the fixes carries their time-correlated error. The factor's error is
 with the full covariance, and Jacobians ``LogmapDerivative(X0_prior^-1 X)`` on the pose (right
 perturbation) and identities on the bias and the GNSS error.
 """
+
 from __future__ import annotations
 
 import gtsam
 import numpy as np
 
 
-def joint_prior_factor(pose_key: int, bias_key: int, gm_key: int | None, pose0: gtsam.Pose3, bias0: np.ndarray,
-                       g0: np.ndarray | None, cov: np.ndarray) -> gtsam.CustomFactor:
+def joint_prior_factor(
+    pose_key: int,
+    bias_key: int,
+    gm_key: int | None,
+    pose0: gtsam.Pose3,
+    bias0: np.ndarray,
+    g0: np.ndarray | None,
+    cov: np.ndarray,
+) -> gtsam.CustomFactor:
     """The prior (see the module docstring).
 
     Parameters
@@ -54,4 +62,6 @@ def joint_prior_factor(pose_key: int, bias_key: int, gm_key: int | None, pose0: 
                 H[2][12:15] = np.eye(3)
         return e
 
-    return gtsam.CustomFactor(gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, float)), keys, error)
+    return gtsam.CustomFactor(
+        gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, float)), keys, error
+    )

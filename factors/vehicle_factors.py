@@ -26,6 +26,7 @@ Without a lever arm the bias does not enter: the factors are then on (X, V) (and
 ``R_vb`` (body to the vehicle's axes, a constant small misalignment) the velocity and its
 Jacobians are taken in the vehicle's axes, ``R_vb v_l``.
 """
+
 from __future__ import annotations
 
 import gtsam
@@ -34,14 +35,20 @@ import numpy as np
 from gnssacc.core.rotations import cross3, skew
 
 
-def vehicle_velocity(pose: gtsam.Pose3, v_n: np.ndarray, b_g: np.ndarray, omega_b: np.ndarray, lever_b: np.ndarray,
-                     w_ie_n: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def vehicle_velocity(
+    pose: gtsam.Pose3,
+    v_n: np.ndarray,
+    b_g: np.ndarray,
+    omega_b: np.ndarray,
+    lever_b: np.ndarray,
+    w_ie_n: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``v_l`` [m/s, body] and its Jacobians w.r.t. the Pose3 tangent (3 x 6), the velocity (3 x 3)
     and the bias tangent (3 x 6, accelerometer first) (module docstring)."""
     Rt = pose.rotation().matrix().T
     u = Rt @ v_n
     J_pose, J_bias = np.zeros((3, 6)), np.zeros((3, 6))
-    if not lever_b.any():       # no lever-arm terms (iSAM2 calls this a few times per factor)
+    if not lever_b.any():  # no lever-arm terms (iSAM2 calls this a few times per factor)
         J_pose[:, 0:3] = skew(u)
         return u, J_pose, Rt, J_bias
     w = Rt @ w_ie_n
@@ -62,8 +69,16 @@ def _in_vehicle_axes(R_vb, v_l, J_pose, J_vel, J_bias):
     return R_vb @ v_l, R_vb @ J_pose, R_vb @ J_vel, R_vb @ J_bias
 
 
-def nhc_factor(pose_key: int, vel_key: int, bias_key: int, omega_b: np.ndarray, lever_b: np.ndarray,
-               w_ie_n: np.ndarray, sigma_mps: np.ndarray, R_vb: np.ndarray | None = None) -> gtsam.CustomFactor:
+def nhc_factor(
+    pose_key: int,
+    vel_key: int,
+    bias_key: int,
+    omega_b: np.ndarray,
+    lever_b: np.ndarray,
+    w_ie_n: np.ndarray,
+    sigma_mps: np.ndarray,
+    R_vb: np.ndarray | None = None,
+) -> gtsam.CustomFactor:
     """Zero lateral and vertical velocity at ``lever_b`` [m, body] in the vehicle's axes (``R_vb``,
     body to vehicle; ``None``: the body's), 1-sigma ``sigma_mps`` [m/s] (lateral, vertical);
     ``omega_b`` the raw gyro at the node [rad/s], ``w_ie_n`` the earth rate [rad/s, local NED]."""
@@ -76,8 +91,12 @@ def nhc_factor(pose_key: int, vel_key: int, bias_key: int, omega_b: np.ndarray, 
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
         b_g = values.atConstantBias(keys[2]).gyroscope() if with_bias else zero3
-        v_l, J_pose, J_vel, J_bias = _in_vehicle_axes(R_vb, *vehicle_velocity(
-            values.atPose3(keys[0]), values.atVector(keys[1]), b_g, omega_b, lever_b, w_ie_n))
+        v_l, J_pose, J_vel, J_bias = _in_vehicle_axes(
+            R_vb,
+            *vehicle_velocity(
+                values.atPose3(keys[0]), values.atVector(keys[1]), b_g, omega_b, lever_b, w_ie_n
+            ),
+        )
         if H is not None:
             H[0], H[1] = J_pose[1:3], J_vel[1:3]
             if with_bias:
@@ -105,9 +124,18 @@ def _plain_nhc_error(keys: list):
     return error
 
 
-def odometry_factor(pose_key: int, vel_key: int, bias_key: int, scale_key: int, v_odo: float, omega_b: np.ndarray,
-                    lever_b: np.ndarray, w_ie_n: np.ndarray, sigma_mps: float,
-                    R_vb: np.ndarray | None = None) -> gtsam.CustomFactor:
+def odometry_factor(
+    pose_key: int,
+    vel_key: int,
+    bias_key: int,
+    scale_key: int,
+    v_odo: float,
+    omega_b: np.ndarray,
+    lever_b: np.ndarray,
+    w_ie_n: np.ndarray,
+    sigma_mps: float,
+    R_vb: np.ndarray | None = None,
+) -> gtsam.CustomFactor:
     """Wheel odometry's forward speed ``v_odo`` [m/s] (1-sigma ``sigma_mps``) of the point ``lever_b``
     [m, body] along the vehicle's x axis, read with the scale-factor error held by ``scale_key`` (a
     1-vector); ``omega_b``, ``w_ie_n``, ``R_vb`` as for :func:`nhc_factor`."""
@@ -119,8 +147,12 @@ def odometry_factor(pose_key: int, vel_key: int, bias_key: int, scale_key: int, 
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
         b_g = values.atConstantBias(keys[2]).gyroscope() if with_bias else zero3
-        v_l, J_pose, J_vel, J_bias = _in_vehicle_axes(R_vb, *vehicle_velocity(
-            values.atPose3(keys[0]), values.atVector(keys[1]), b_g, omega_b, lever_b, w_ie_n))
+        v_l, J_pose, J_vel, J_bias = _in_vehicle_axes(
+            R_vb,
+            *vehicle_velocity(
+                values.atPose3(keys[0]), values.atVector(keys[1]), b_g, omega_b, lever_b, w_ie_n
+            ),
+        )
         k = 1.0 + float(values.atVector(keys[-1])[0])
         if H is not None:
             H[0], H[1] = k * J_pose[0:1], k * J_vel[0:1]

@@ -5,6 +5,7 @@
 Needs the ``test`` extra (nbclient, nbformat, ipykernel). The tests execute the notebooks again
 from a copy without outputs and check their printed answers (tests/test_notebooks.py).
 """
+
 from __future__ import annotations
 
 import sys
@@ -24,7 +25,9 @@ def execute(path: Path) -> float:
         if cell.cell_type == "code":
             cell.outputs, cell.execution_count = [], None
     t0 = time.perf_counter()
-    nbclient.NotebookClient(nb, timeout=1200, kernel_name="python3", resources={"metadata": {"path": str(HERE)}}).execute()
+    nbclient.NotebookClient(
+        nb, timeout=1200, kernel_name="python3", resources={"metadata": {"path": str(HERE)}}
+    ).execute()
     nbformat.write(nb, path)
     return time.perf_counter() - t0
 

@@ -4,6 +4,7 @@ vehicles, skid-steer pivots, high-rate fixes with correlated errors and no sigma
 fix errors, consumer-grade vibration and turn-on biases). Shared by
 ``tests/test_false_alarms.py`` and ``bench/bench_false_alarms.py``.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -12,22 +13,33 @@ from dataclasses import replace
 from gnssacc.sources.sim import simulate
 
 #: (scenario, duration [s], GNSS rate [Hz], noise profiles): short enough for a CI run.
-SCENARIOS = (("car", 90.0, 1.0, ("white", "gm", "precise")),
-             ("car-city", 120.0, 1.0, ("white", "gm")),
-             ("ugv", 120.0, 1.0, ("white", "precise")),
-             ("ugv-slow", 240.0, 1.0, ("white", "gm")),
-             ("rover", 120.0, 10.0, ("filtered",)),
-             ("turns", 60.0, 5.0, ("white",)),
-             ("straight", 60.0, 1.0, ("white",)),
-             ("static", 60.0, 1.0, ("white",)))
+SCENARIOS = (
+    ("car", 90.0, 1.0, ("white", "gm", "precise")),
+    ("car-city", 120.0, 1.0, ("white", "gm")),
+    ("ugv", 120.0, 1.0, ("white", "precise")),
+    ("ugv-slow", 240.0, 1.0, ("white", "gm")),
+    ("rover", 120.0, 10.0, ("filtered",)),
+    ("turns", 60.0, 5.0, ("white",)),
+    ("straight", 60.0, 1.0, ("white",)),
+    ("static", 60.0, 1.0, ("white",)),
+)
 GRADES = ("consumer", "industrial", "tactical")
 
 
 def cases(n_seeds: int = 4):
     """``(name, run)`` for every scenario, noise, grade and seed; the rover's fixes state no sigmas."""
-    for (scenario, duration, rate, noises), grade, seed in itertools.product(SCENARIOS, GRADES, range(n_seeds)):
+    for (scenario, duration, rate, noises), grade, seed in itertools.product(
+        SCENARIOS, GRADES, range(n_seeds)
+    ):
         for noise in noises:
-            run = simulate(scenario, duration, imu_grade=grade, gnss_rate_hz=rate, noise=noise, seed=1000 + seed)
+            run = simulate(
+                scenario,
+                duration,
+                imu_grade=grade,
+                gnss_rate_hz=rate,
+                noise=noise,
+                seed=1000 + seed,
+            )
             if noise == "filtered":
                 run = run.with_gnss(replace(run.gnss, sigma_stated=False))
             yield f"{scenario}/{grade}/{noise}/{1000 + seed}", run

@@ -4,6 +4,7 @@ Every bound is chosen for a stated false-failure rate: the probability that the 
 when the product is right. :data:`ALPHA` is that rate for one test; a test that makes several
 checks splits it among them (Bonferroni).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -34,8 +35,13 @@ def effective_count(n: int, acf1: float | None) -> float:
     return n * (1.0 - r) / (1.0 + r)
 
 
-def nis_band(n_updates: int, dof: int = 3, acf1: float | None = None, calibration: float = 1.0,
-             alpha: float = ALPHA) -> tuple[float, float]:
+def nis_band(
+    n_updates: int,
+    dof: int = 3,
+    acf1: float | None = None,
+    calibration: float = 1.0,
+    alpha: float = ALPHA,
+) -> tuple[float, float]:
     """Band of a run's mean NIS per dof over ``n_updates`` updates of ``dof`` each: chi-square with
     the effective number of updates, widened by ``calibration``.
 
@@ -76,8 +82,9 @@ def gnss_prmse_band(sigma_ned: np.ndarray, n: int, alpha: float = ALPHA) -> tupl
     return float(np.sqrt(lo / n)), float(np.sqrt(hi / n))
 
 
-def nees_band(n_epochs: int, dof: int, rho: float, calibration: float = 1.0,
-              alpha: float = ALPHA) -> tuple[float, float]:
+def nees_band(
+    n_epochs: int, dof: int, rho: float, calibration: float = 1.0, alpha: float = ALPHA
+) -> tuple[float, float]:
     """Band of a run's time-averaged NEES per dof over ``n_epochs`` epochs whose normalised errors
     have lag-1 autocorrelation ``rho`` (``exp(-dt / tau)`` for errors that follow a Gauss-Markov
     process of correlation time ``tau``): the squared errors then correlate by ``rho^2``, and the

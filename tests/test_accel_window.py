@@ -1,6 +1,7 @@
 """The window-consistent acceleration prediction (``ekf-accw``): Peano kernel against closed forms
 and quadrature, kernel integrals against an exact rotation, H_w by finite differences, the model
 error on noise-free simulated data, and the filter end to end."""
+
 import numpy as np
 import pytest
 from scipy.integrate import quad
@@ -9,13 +10,22 @@ from stat_bounds import CALIBRATION, nis_band
 from gnssacc.core.config import load_config
 from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm
 from gnssacc.estimators.ekf import FilterState, run_ekf
-from gnssacc.estimators.gnss_accel import acceleration_row, model_errors, peano_kernel, window_samples
+from gnssacc.estimators.gnss_accel import (
+    acceleration_row,
+    model_errors,
+    peano_kernel,
+    window_samples,
+)
 from gnssacc.estimators.measurements import window_acceleration
 from gnssacc.estimators.mechanization import kernel_force_integrals
 from gnssacc.sources.sim import grade_config, simulate
 
-WINDOWS = [100.0 + np.arange(3.0), 5.0 + 0.2 * np.arange(3.0), np.array([10.0, 10.7, 12.1]),
-           np.array([0.0, 0.9, 2.2, 2.9, 4.3])]
+WINDOWS = [
+    100.0 + np.arange(3.0),
+    5.0 + 0.2 * np.arange(3.0),
+    np.array([10.0, 10.7, 12.1]),
+    np.array([0.0, 0.9, 2.2, 2.9, 4.3]),
+]
 
 
 @pytest.mark.parametrize("dt", [1.0, 0.2])
@@ -30,11 +40,15 @@ def test_kernel_of_three_uniform_fixes_is_the_triangle(dt):
 def test_kernel_integrates_to_one_and_reproduces_B(t):
     """int K = 1, and B p = int K p'' for a cubic and a sinusoid (quadrature, kinks at the fixes)."""
     K = lambda s: float(peano_kernel(t, s))
-    pieces = lambda f: sum(quad(f, a, b, epsabs=1e-13, epsrel=1e-13)[0] for a, b in zip(t[:-1], t[1:]))
+    pieces = lambda f: sum(
+        quad(f, a, b, epsabs=1e-13, epsrel=1e-13)[0] for a, b in zip(t[:-1], t[1:])
+    )
     assert pieces(K) == pytest.approx(1.0, abs=1e-12)
     B = acceleration_row(t)
-    for p, pdd in [(lambda x: 0.3 * x**3 - 2.0 * x**2 + x, lambda x: 1.8 * x - 4.0),
-                   (lambda x: 5.0 * np.sin(1.3 * x + 0.4), lambda x: -5.0 * 1.69 * np.sin(1.3 * x + 0.4))]:
+    for p, pdd in [
+        (lambda x: 0.3 * x**3 - 2.0 * x**2 + x, lambda x: 1.8 * x - 4.0),
+        (lambda x: 5.0 * np.sin(1.3 * x + 0.4), lambda x: -5.0 * 1.69 * np.sin(1.3 * x + 0.4)),
+    ]:
         assert B @ p(t) == pytest.approx(pieces(lambda s: K(s) * pdd(s)), abs=1e-9)
 
 
@@ -43,8 +57,10 @@ def test_sample_weights_are_exact_for_piecewise_constant_acceleration(t):
     """Samples holding over (t[i-1], t[i]] with constant acceleration a_i: B p = sum_i w_i a_i exactly,
     p integrated in closed form; the weights tile the window (sum 1) and cover it (nothing outside)."""
     rng = np.random.default_rng(1)
-    t_imu = np.sort(np.concatenate([[t[0] - 0.35], rng.uniform(t[0] - 0.3, t[-1] + 0.3, 57), [t[-1] + 0.5]]))
-    a = rng.normal(0.0, 2.0, len(t_imu))          # a[i] holds over (t_imu[i-1], t_imu[i]]
+    t_imu = np.sort(
+        np.concatenate([[t[0] - 0.35], rng.uniform(t[0] - 0.3, t[-1] + 0.3, 57), [t[-1] + 0.5]])
+    )
+    a = rng.normal(0.0, 2.0, len(t_imu))  # a[i] holds over (t_imu[i-1], t_imu[i]]
     k0, k1, h, w = window_samples(t_imu, t)
     assert w.sum() == pytest.approx(1.0, abs=1e-12)
     assert h.sum() == pytest.approx(t[-1] - t[0], abs=1e-12)
@@ -60,9 +76,11 @@ def test_sample_weights_are_exact_for_piecewise_constant_acceleration(t):
             vel += a[i] * dt
         return total
 
-    assert acceleration_row(t) @ np.array([p(x) for x in t]) == pytest.approx(w @ a[k0:k1], abs=1e-10)
-    assert window_samples(t_imu[t_imu > t[0]], t) is None          # the IMU starts inside the window
-    assert window_samples(t_imu[t_imu < t[-1]], t) is None         # or ends inside it
+    assert acceleration_row(t) @ np.array([p(x) for x in t]) == pytest.approx(
+        w @ a[k0:k1], abs=1e-10
+    )
+    assert window_samples(t_imu[t_imu > t[0]], t) is None  # the IMU starts inside the window
+    assert window_samples(t_imu[t_imu < t[-1]], t) is None  # or ends inside it
 
 
 def test_kernel_integrals_against_a_constant_rotation():
@@ -74,7 +92,9 @@ def test_kernel_integrals_against_a_constant_rotation():
     f = np.array([1.5, -0.5, -9.8])
     k0, k1, h, w = window_samples(t_imu, t)
     n = k1 - k0
-    F, M, _ = kernel_force_integrals(np.tile(f, (n, 1)), np.tile(omega, (n, 1)), h, w, np.zeros(3), np.zeros(3))
+    F, M, _ = kernel_force_integrals(
+        np.tile(f, (n, 1)), np.tile(omega, (n, 1)), h, w, np.zeros(3), np.zeros(3)
+    )
     M_ref = np.zeros((3, 3))
     for r in range(3):
         for c in range(3):
@@ -110,7 +130,10 @@ def test_H_w_by_finite_differences():
     for j in range(6, 15):
         e = np.zeros(15)
         e[j] = eps
-        dz = [_window_dz(rotvec_to_dcm(x[6:9]) @ R, b_a - x[9:12], b_g - x[12:15], *args).dz for x in (e, -e)]
+        dz = [
+            _window_dz(rotvec_to_dcm(x[6:9]) @ R, b_a - x[9:12], b_g - x[12:15], *args).dz
+            for x in (e, -e)
+        ]
         num = (dz[0] - dz[1]) / (2 * eps)
         # phi and b_a blocks are exact; the b_g block integrates Gamma by the midpoint rule per
         # sample and drops J_r(omega h): relative error O((omega h)^2), 1e-5 at 100 Hz here.
@@ -126,7 +149,9 @@ def test_window_model_error_is_far_below_the_paper_model_on_noise_free_data():
     rms = lambda e: float(np.sqrt(np.mean(np.sum(e * e, axis=1))))
     paper, window = rms(e_paper), rms(e_window)
     assert len(e_paper) > 290
-    print(f"model error RMS on noise-free fixes, perfect IMU: paper {paper:.4f} m/s^2, window {window:.4f} m/s^2")
+    print(
+        f"model error RMS on noise-free fixes, perfect IMU: paper {paper:.4f} m/s^2, window {window:.4f} m/s^2"
+    )
     assert window < 0.2 * paper
     assert window < 0.01
 
@@ -152,6 +177,7 @@ def test_ekf_accw_runs_end_to_end_with_finite_nis(sigma):
         lo, hi = nis_band(st[f"n_{kind}_updates"], 3, st[f"acf1_{kind}"], CALIBRATION)
         assert lo < st[f"nis_{kind}_mean"] < hi, (kind, lo, st[f"nis_{kind}_mean"], hi)
     from gnssacc.analysis.metrics import gnss_score, score
+
     assert score(run, sol).prmse_m < gnss_score(run).prmse_m
 
 
@@ -162,13 +188,20 @@ def test_windows_touching_a_suspect_imu_span_are_skipped():
     cfg = load_config(overrides={"imu": grade_config("industrial")})
     run = simulate("car", duration_s=120.0, imu_grade="industrial", noise="white", seed=1)
     i0, i1 = 5000, 5150
-    flagged = QualityReport([Span("interpolated", run.imu.t[i0], run.imu.t[i1 - 1], i0, i1, "all", "test")],
-                            len(run.imu), 0.01, 0.01)
+    flagged = QualityReport(
+        [Span("interpolated", run.imu.t[i0], run.imu.t[i1 - 1], i0, i1, "all", "test")],
+        len(run.imu),
+        0.01,
+        0.01,
+    )
     sol = run_ekf(run, cfg, "ekf-accw", quality=flagged)
     t = run.gnss.t
     seg0, seg1 = np.array([i0]), np.array([i1])
-    expected = sum(touches_segments(*window_samples(run.imu.t, t[j - 2:j + 1])[:2], seg0, seg1)
-                   for j in range(2, len(t)) if t[j] >= sol.stats["t_init"])
+    expected = sum(
+        touches_segments(*window_samples(run.imu.t, t[j - 2 : j + 1])[:2], seg0, seg1)
+        for j in range(2, len(t))
+        if t[j] >= sol.stats["t_init"]
+    )
     assert expected >= 2
     assert sol.stats["n_acc_skipped_suspect_imu"] == expected
 

@@ -1,5 +1,6 @@
 """The window-consistent GNSS-acceleration factor (smoother-accw) and the factor-graph identity
 of gnssacc.analysis.aiding_theory."""
+
 import gtsam
 import numpy as np
 import pytest
@@ -14,8 +15,12 @@ from gnssacc.estimators.gnss_accel import acceleration_row
 from gnssacc.estimators.smoother import run_smoother
 from gnssacc.sources.sim import grade_config, simulate
 
-POSES = [gtsam.Pose3(gtsam.Rot3(euler_to_dcm(0.1 * j, -0.2, 2.5 - 0.3 * j)), np.array([10.0 + 8 * j, -4.0, 1.0]))
-         for j in range(3)]
+POSES = [
+    gtsam.Pose3(
+        gtsam.Rot3(euler_to_dcm(0.1 * j, -0.2, 2.5 - 0.3 * j)), np.array([10.0 + 8 * j, -4.0, 1.0])
+    )
+    for j in range(3)
+]
 B_ROW = acceleration_row(np.array([0.0, 1.0, 2.2]))
 A_N = np.array([0.3, -0.1, 0.05])
 
@@ -42,10 +47,15 @@ def test_window_factor_jacobians_by_finite_differences_on_the_manifold(lever):
             d[k] = eps
             plus, minus = list(POSES), list(POSES)
             plus[j], minus[j] = POSES[j].retract(d), POSES[j].retract(-d)
-            num = (window_accel_error(plus, B_ROW, lever, A_N) - window_accel_error(minus, B_ROW, lever, A_N)) / (2 * eps)
+            num = (
+                window_accel_error(plus, B_ROW, lever, A_N)
+                - window_accel_error(minus, B_ROW, lever, A_N)
+            ) / (2 * eps)
             np.testing.assert_allclose(A[:, 6 * j + k], num, atol=1e-6)
     if not np.any(lever):
-        assert np.all(A[:, [0, 1, 2, 6, 7, 8, 12, 13, 14]] == 0)   # no rotation dependence without a lever arm
+        assert np.all(
+            A[:, [0, 1, 2, 6, 7, 8, 12, 13, 14]] == 0
+        )  # no rotation dependence without a lever arm
 
 
 def test_window_factor_is_zero_on_noise_free_fixes_of_any_motion():
@@ -56,8 +66,12 @@ def test_window_factor_is_zero_on_noise_free_fixes_of_any_motion():
 
 def test_smoother_accw_runs_end_to_end_on_a_simulated_run():
     lever = (0.5, 0.2, -1.0)
-    cfg = load_config(overrides={"imu": grade_config("industrial"), "gnss": {"lever_arm_b_m": list(lever)}})
-    run = simulate("car", duration_s=120.0, imu_grade="industrial", noise="white", seed=0, lever_arm_b=lever)
+    cfg = load_config(
+        overrides={"imu": grade_config("industrial"), "gnss": {"lever_arm_b_m": list(lever)}}
+    )
+    run = simulate(
+        "car", duration_s=120.0, imu_grade="industrial", noise="white", seed=0, lever_arm_b=lever
+    )
     sols = run_smoother(run, cfg, "smoother-accw")
     ref = run_smoother(run, cfg, "smoother")["smoother"]
     sol = sols["smoother-accw"]
@@ -84,7 +98,7 @@ def test_smoother_accw_recorded_covariances_equal_isam2_joint_marginals(monkeypa
         for i, cov in zip(nodes, covs):
             keys = self.keys(i)
             ref = self.isam.getISAM2().jointMarginalCovariance(keys).fullMatrix()
-            for sl in (slice(0, 6), slice(6, 9), slice(9, 15)):     # the blocks it records
+            for sl in (slice(0, 6), slice(6, 9), slice(9, 15)):  # the blocks it records
                 C = cov[sl, sl]
                 d = np.sqrt(np.diag(ref[sl, sl]))
                 worst[0] = max(worst[0], float(np.max(np.abs(C - ref[sl, sl]) / np.outer(d, d))))

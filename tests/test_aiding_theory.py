@@ -1,10 +1,17 @@
 """The linear-Gaussian filter reference of GNSS-acceleration aiding (aiding_theory.kf_*): the exact
 correlation-aware filter reproduces position-only; the uncorrelated one is overconfident."""
+
 import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from gnssacc.analysis.aiding_theory import kf_departure, kf_filter, kf_model, kf_monte_carlo, kf_simulate
+from gnssacc.analysis.aiding_theory import (
+    kf_departure,
+    kf_filter,
+    kf_model,
+    kf_monte_carlo,
+    kf_simulate,
+)
 
 
 @pytest.mark.parametrize("dt, q", [(1.0, 1.0), (0.2, 30.0)])

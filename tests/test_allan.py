@@ -6,6 +6,7 @@ process the closed form of IEEE Std 952 (Annex C); flicker noise with the two-si
 ``B^2 / (2 pi f)`` the floor ``0.664 B``. Vibration is an exact interval mean of sinusoids, as an
 integrating IMU samples it.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -64,7 +65,7 @@ def test_white_noise_matches_n_over_sqrt_tau_within_error_bars():
     for ch, dens in enumerate((N, 3 * N)):
         z = (ad.adev[:, ch] / (dens / np.sqrt(ad.taus)) - 1.0) / ad.rel_err
         assert np.all(np.abs(z) < 3.5), z
-        assert np.mean(np.abs(z) < 1.0) > 0.5      # the error bar is an honest 1-sigma
+        assert np.mean(np.abs(z) < 1.0) > 0.5  # the error bar is an honest 1-sigma
     # One channel alone gives the same numbers.
     assert np.allclose(allan_deviation(x[:, 1], dt).adev, ad.adev[:, 1])
 
@@ -73,7 +74,7 @@ def test_random_walk_and_gauss_markov_slopes():
     rng = np.random.default_rng(2)
     dt, n = 0.05, 200_000
     K = 1e-4
-    rw = np.cumsum(rng.standard_normal(n)) * K * np.sqrt(dt)       # rate random walk
+    rw = np.cumsum(rng.standard_normal(n)) * K * np.sqrt(dt)  # rate random walk
     ad = allan_deviation(rw, dt)
     assert _slope(ad, 1.0, 200.0) == pytest.approx(0.5, abs=0.07)
     sel = (ad.taus >= 1.0) & (ad.taus <= 200.0)
@@ -88,11 +89,16 @@ def test_random_walk_and_gauss_markov_slopes():
     for s in range(0, n - 1, 2000):
         m = min(2000, n - 1 - s)
         p = a ** np.arange(1, m + 1)
-        gm[s + 1:s + m + 1] = p * (gm[s] + np.cumsum(drive[s + 1:s + m + 1] / p))
+        gm[s + 1 : s + m + 1] = p * (gm[s] + np.cumsum(drive[s + 1 : s + m + 1] / p))
     ad = allan_deviation(gm, dt)
     q = 2.0 * sig**2 / Tc
     tau = ad.taus
-    theory = q * Tc**2 / tau * (1.0 - Tc / (2.0 * tau) * (3.0 - 4.0 * np.exp(-tau / Tc) + np.exp(-2.0 * tau / Tc)))
+    theory = (
+        q
+        * Tc**2
+        / tau
+        * (1.0 - Tc / (2.0 * tau) * (3.0 - 4.0 * np.exp(-tau / Tc) + np.exp(-2.0 * tau / Tc)))
+    )
     sel = tau <= 300.0
     assert np.allclose(ad.adev[sel], np.sqrt(theory[sel]), rtol=0.25)
     assert _slope(ad, 0.1, 0.5) == pytest.approx(0.5, abs=0.1)
@@ -108,10 +114,13 @@ def test_white_noise_density_robust_to_strong_harmonic_vibration(seed):
     dt, n = 0.01, 60_000
     t = np.arange(1, n + 1) * dt
     N = 0.01 * DEG
-    x = (_white(n, dt, N, rng) + _flicker(n, dt, 30.0 / 3600.0 * DEG, rng)
-         + _harmonics(t, dt, rng, [(30.0, 3.9 * DEG), (60.0, 1.0 * DEG), (90.0, 0.7 * DEG)]))
-    assert np.degrees(np.std(x)) > 2.0                       # the scatter the brief describes
-    assert np.std(x) * np.sqrt(dt) > 10.0 * N                  # a naive reading is 10x+ off
+    x = (
+        _white(n, dt, N, rng)
+        + _flicker(n, dt, 30.0 / 3600.0 * DEG, rng)
+        + _harmonics(t, dt, rng, [(30.0, 3.9 * DEG), (60.0, 1.0 * DEG), (90.0, 0.7 * DEG)])
+    )
+    assert np.degrees(np.std(x)) > 2.0  # the scatter the brief describes
+    assert np.std(x) * np.sqrt(dt) > 10.0 * N  # a naive reading is 10x+ off
     assert white_noise_density(x, dt) == pytest.approx(N, rel=0.10)
 
 
@@ -131,15 +140,17 @@ def test_bias_instability_floor_on_long_record_none_on_short():
     N, B = 1e-3, 5e-4
     for seed in (0, 1, 2):
         rng = np.random.default_rng(20 + seed)
-        dt, n = 0.1, 200_000                                    # 5.6 h
+        dt, n = 0.1, 200_000  # 5.6 h
         x = _white(n, dt, N, rng) + _flicker(n, dt, B, rng)
         assert bias_instability(x, dt) == pytest.approx(B, rel=0.25)
         assert white_noise_density(x, dt) == pytest.approx(N, rel=0.10)
     rng = np.random.default_rng(30)
     dt = 0.01
-    short = _white(2_000, dt, N, rng) + _flicker(2_000, dt, B, rng)  # 20 s: still on the white slope
+    short = _white(2_000, dt, N, rng) + _flicker(
+        2_000, dt, B, rng
+    )  # 20 s: still on the white slope
     assert bias_instability(short, dt) is None
-    white_only = _white(200_000, 0.1, N, rng)                          # never flattens
+    white_only = _white(200_000, 0.1, N, rng)  # never flattens
     assert bias_instability(white_only, 0.1) is None
 
 

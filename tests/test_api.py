@@ -1,5 +1,6 @@
 """The Python API is the command line's twin: the same numbers for every source kind, the same
 folder from ``Result.save``, trajectories as DataFrames equal to the CSV files."""
+
 import json
 import subprocess
 import sys
@@ -23,8 +24,11 @@ def sources(tmp_path_factory):
     """A simulated run as a CSV run directory and as a ROS 2 bag."""
     root = tmp_path_factory.mktemp("api")
     sim = gnssacc.simulate("car", 60.0, imu_grade="industrial", noise="white", seed=4)
-    return {"csv": str(write_csv_run(sim, root / "csvrun")), "bag": str(write_bag(sim, root / "bag", "ros2-sqlite3")),
-            "kitti": "kitti"}
+    return {
+        "csv": str(write_csv_run(sim, root / "csvrun")),
+        "bag": str(write_bag(sim, root / "bag", "ros2-sqlite3")),
+        "kitti": "kitti",
+    }
 
 
 def _cli_metrics(source, out, extra=()) -> dict:
@@ -38,10 +42,14 @@ def test_process_gives_the_numbers_of_gnssacc_run(kind, sources, tmp_path):
     whose preset the CLI used to resolve on its own (3.10 m there, 3.03 m from Python)."""
     extra = ["--noise", "white", "--seed", "3"] if kind != "bag" else []
     cli = _cli_metrics(sources[kind], tmp_path / "cli", extra)
-    res = gnssacc.process(sources[kind], **FAST, **({"noise": "white", "seed": 3} if kind != "bag" else {}))
+    res = gnssacc.process(
+        sources[kind], **FAST, **({"noise": "white", "seed": 3} if kind != "bag" else {})
+    )
     assert set(res.solutions) == {"ekf", "ekf-acc"}
     for m in ("ekf", "ekf-acc"):
-        assert res.metrics["methods"][m]["prmse_m"] == pytest.approx(cli["methods"][m]["prmse_m"], abs=1e-9)
+        assert res.metrics["methods"][m]["prmse_m"] == pytest.approx(
+            cli["methods"][m]["prmse_m"], abs=1e-9
+        )
     assert res.prmse()["gnss"] == pytest.approx(cli["gnss_prmse_m"], abs=1e-12)
     assert res.metrics["config_sources"] == cli["config_sources"]
 
@@ -51,7 +59,13 @@ def test_a_run_made_in_python_and_save_writes_the_cli_folder(tmp_path):
     res = gnssacc.process(run, **FAST)
     out = res.save(tmp_path / "out", plots=False)
     names = {p.name for p in out.iterdir()}
-    assert {"trajectory_ekf.csv", "trajectory_ekf-acc.csv", "metrics.json", "table.txt", "config.toml"} <= names
+    assert {
+        "trajectory_ekf.csv",
+        "trajectory_ekf-acc.csv",
+        "metrics.json",
+        "table.txt",
+        "config.toml",
+    } <= names
     assert (out / "table.txt").read_text().strip() == res.table().strip()
     saved = json.loads((out / "metrics.json").read_text())
     assert saved["methods"]["ekf"]["prmse_m"] == pytest.approx(res.prmse()["ekf"], abs=1e-12)
@@ -69,7 +83,9 @@ def test_a_run_made_in_python_and_save_writes_the_cli_folder(tmp_path):
         assert np.allclose(df[col].to_numpy(), csv[name], rtol=1e-5, atol=tol), col
     # Independent check of the units at the edge: degrees from the solution's radians.
     sol = res.solutions["ekf"]
-    assert np.allclose(df["lat_deg"], np.degrees(sol.lat)) and np.allclose(df["yaw_deg"], np.degrees(sol.rpy[:, 2]))
+    assert np.allclose(df["lat_deg"], np.degrees(sol.lat)) and np.allclose(
+        df["yaw_deg"], np.degrees(sol.rpy[:, 2])
+    )
 
 
 def test_configuration_as_overrides_file_or_preset(tmp_path):
@@ -80,7 +96,9 @@ def test_configuration_as_overrides_file_or_preset(tmp_path):
     assert np.allclose(over["gnss"]["default_sigma_m"], [1.0, 1.0, 2.0])
     path = tmp_path / "c.toml"
     path.write_text("[gnss]\ndefault_sigma_m = [4.0, 4.0, 8.0]\n")
-    assert np.allclose(gnssacc.configure("run_dir", config=path)["gnss"]["default_sigma_m"], [4.0, 4.0, 8.0])
+    assert np.allclose(
+        gnssacc.configure("run_dir", config=path)["gnss"]["default_sigma_m"], [4.0, 4.0, 8.0]
+    )
 
 
 def test_bad_input_raises_input_error_naming_it(tmp_path):
@@ -96,9 +114,13 @@ def test_run_is_process_and_the_data_model_is_gnssacc_recording():
     """``gnssacc.run`` is the verb (it used to be the data-model module, not callable)."""
     import gnssacc.core.recording
 
-    assert gnssacc.run is gnssacc.process and isinstance(gnssacc.simulate("car", 10.0), gnssacc.core.recording.RecordedRun)
+    assert gnssacc.run is gnssacc.process and isinstance(
+        gnssacc.simulate("car", 10.0), gnssacc.core.recording.RecordedRun
+    )
 
 
 def test_python_dash_m_is_the_command():
-    out = subprocess.run([sys.executable, "-m", "gnssacc", "--version"], capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [sys.executable, "-m", "gnssacc", "--version"], capture_output=True, text=True, timeout=60
+    )
     assert out.returncode == 0 and gnssacc.__version__ in out.stdout

@@ -1,6 +1,7 @@
 """Tests of the bag reader's and writer's parts on their own: the ROS 1 salvage reader against
 rosbags' reader of the intact bag, the time-stamp repair against hand-made rows, the topic rules
 on made-up surveys, the ``"auto"`` mounting through the typed accessor, and write_bag's options."""
+
 from __future__ import annotations
 
 import warnings
@@ -26,7 +27,9 @@ from gnssacc.sources.sim import simulate  # noqa: E402
 
 @pytest.fixture(scope="module")
 def sim():
-    return simulate("car", duration_s=60.0, imu_grade="industrial", noise="white", seed=5, truth_rate_hz=10.0)
+    return simulate(
+        "car", duration_s=60.0, imu_grade="industrial", noise="white", seed=5, truth_rate_hz=10.0
+    )
 
 
 def test_salvage_reads_the_complete_chunks_as_rosbags_reads_the_intact_bag(sim, tmp_path):
@@ -45,8 +48,9 @@ def test_salvage_reads_the_complete_chunks_as_rosbags_reads_the_intact_bag(sim, 
     rest.subtract(Counter(got))
     assert min(rest.values()) >= 0 and rest.total() == len(intact) - len(got)
     assert max(m[1] for m in got) <= min(m[1] for m, n in rest.items() if n > 0)
-    assert {s: salvage.topics[s].msgcount for s in salvage.topics} == \
-        {s: sum(1 for m in got if m[0] == s) for s in ("/vectornav/IMU", "/UBX/hpposllh", "/truth")}
+    assert {s: salvage.topics[s].msgcount for s in salvage.topics} == {
+        s: sum(1 for m in got if m[0] == s) for s in ("/vectornav/IMU", "/UBX/hpposllh", "/truth")
+    }
 
 
 def test_sorted_unique_repairs_and_counts():
@@ -57,9 +61,17 @@ def test_sorted_unique_repairs_and_counts():
         warnings.simplefilter("always")
         out = sorted_unique(rows, "bag", "topic /x", meta, "imu")
     np.testing.assert_array_equal(out, [[0, 10], [1, 11], [2, 12], [3, 13], [4, 14]])
-    assert meta["time_fixes"]["imu"] == {"backwards_steps": 1, "exact_duplicates": 1, "conflicting_duplicates": 1}
+    assert meta["time_fixes"]["imu"] == {
+        "backwards_steps": 1,
+        "exact_duplicates": 1,
+        "conflicting_duplicates": 1,
+    }
     text = " ".join(str(x.message) for x in w if issubclass(x.category, DataWarning))
-    assert "backwards 1 time" in text and "1 exact duplicate" in text and "1 message(s) repeating" in text
+    assert (
+        "backwards 1 time" in text
+        and "1 exact duplicate" in text
+        and "1 message(s) repeating" in text
+    )
 
 
 def test_find_gaps():
@@ -75,8 +87,13 @@ def _stat(topic, typ, rate):
 
 def test_select_topics_rules_on_a_survey():
     imu, fix = "sensor_msgs/msg/Imu", "sensor_msgs/msg/NavSatFix"
-    stats = [_stat("/imu_fast", imu, 200.0), _stat("/imu_slow", imu, 100.0), _stat("/fix", fix, 1.0),
-             _stat("/odom", "nav_msgs/msg/Odometry", 50.0), _stat("/cam", "sensor_msgs/msg/Image", 10.0)]
+    stats = [
+        _stat("/imu_fast", imu, 200.0),
+        _stat("/imu_slow", imu, 100.0),
+        _stat("/fix", fix, 1.0),
+        _stat("/odom", "nav_msgs/msg/Odometry", 50.0),
+        _stat("/cam", "sensor_msgs/msg/Image", 10.0),
+    ]
     sel = select_topics(stats, "bag")
     # An Odometry topic is only a candidate: truth if its data are geo-referenced and agree with the
     # fixes, else the wheel odometry (decided when the bag is read).
@@ -84,12 +101,23 @@ def test_select_topics_rules_on_a_survey():
     assert [(c.topic, k) for c, k in sel.truth_candidates] == [("/odom", "pose")]
     assert [c.topic for c in sel.odom_candidates] == ["/odom"]
     close = [_stat("/a", imu, 100.0), _stat("/b", imu, 80.0), _stat("/fix", fix, 1.0)]
-    with pytest.raises(InputError, match=r"ambiguous IMU topic: 2 candidates: /a .*/b .*--imu-topic"):
+    with pytest.raises(
+        InputError, match=r"ambiguous IMU topic: 2 candidates: /a .*/b .*--imu-topic"
+    ):
         select_topics(close, "bag")
-    sel = select_topics(close + [_stat("/rtk", fix, 10.0)], "bag", imu_topic="/b", gnss_topic="/fix")
-    assert sel.imu.topic == "/b" and [(c.topic, k) for c, k in sel.truth_candidates] == [("/rtk", "fix")]
-    sel = select_topics(close + [_stat("/rtk", fix, 10.0)], "bag", imu_topic="/b", gnss_topic="/fix",
-                        truth_topic="/rtk")
+    sel = select_topics(
+        close + [_stat("/rtk", fix, 10.0)], "bag", imu_topic="/b", gnss_topic="/fix"
+    )
+    assert sel.imu.topic == "/b" and [(c.topic, k) for c, k in sel.truth_candidates] == [
+        ("/rtk", "fix")
+    ]
+    sel = select_topics(
+        close + [_stat("/rtk", fix, 10.0)],
+        "bag",
+        imu_topic="/b",
+        gnss_topic="/fix",
+        truth_topic="/rtk",
+    )
     assert (sel.truth.topic, sel.truth_kind, sel.truth_candidates) == ("/rtk", "fix", [])
     sel = select_topics(close[:1] + [_stat("/rtk", fix, 10.0)], "bag", gnss_from_truth=True)
     assert sel.gnss is None and sel.truth.topic == "/rtk"
@@ -117,8 +145,14 @@ def test_write_bag_options(sim, tmp_path):
     """An options object and keywords write the same bytes; bad options write nothing."""
     opts = BagOptions(truth_topic="/truth", receive_delay_s=0.05, with_orientation=True)
     a = write_bag(sim, tmp_path / "a.bag", "ros1-rooad", opts)
-    b = write_bag(sim, tmp_path / "b.bag", "ros1-rooad", truth_topic="/truth", receive_delay_s=0.05,
-                  with_orientation=True)
+    b = write_bag(
+        sim,
+        tmp_path / "b.bag",
+        "ros1-rooad",
+        truth_topic="/truth",
+        receive_delay_s=0.05,
+        with_orientation=True,
+    )
     c = write_bag(sim, tmp_path / "c.bag", "ros1-rooad", opts, receive_delay_s=0.0)
     assert a.read_bytes() == b.read_bytes() != c.read_bytes()
     with pytest.raises(TypeError, match="imu_topik"):

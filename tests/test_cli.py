@@ -1,4 +1,5 @@
 """The gnssacc command end to end: outputs, and one clear line with exit code 2 for bad input."""
+
 import csv
 import json
 import re
@@ -12,13 +13,26 @@ from gnssacc.cli import main
 from gnssacc.sources.csvdir import write_csv_run
 from gnssacc.sources.sim import simulate
 
-REQUIRED_COLUMNS = ["t", "lat_deg", "lon_deg", "h_m", "vn", "ve", "vd", "roll_deg", "pitch_deg", "yaw_deg"]
+REQUIRED_COLUMNS = [
+    "t",
+    "lat_deg",
+    "lon_deg",
+    "h_m",
+    "vn",
+    "ve",
+    "vd",
+    "roll_deg",
+    "pitch_deg",
+    "yaw_deg",
+]
 
 
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     path = tmp_path_factory.mktemp("simrun") / "run"
-    write_csv_run(simulate("car", duration_s=120.0, imu_grade="industrial", noise="white", seed=2), path)
+    write_csv_run(
+        simulate("car", duration_s=120.0, imu_grade="industrial", noise="white", seed=2), path
+    )
     return path
 
 
@@ -33,9 +47,13 @@ ALL_IDS = ("ekf", "ekf-acc", "smoother", "smoother-online", "smoother-acc", "smo
 
 def test_run_on_csv_dir_writes_all_outputs(run_dir, tmp_path, capsys):
     out = tmp_path / "res"
-    code, stdout, stderr = _run_cli(["run", run_dir, "--out", out], capsys)  # default: all four methods
+    code, stdout, stderr = _run_cli(
+        ["run", run_dir, "--out", out], capsys
+    )  # default: all four methods
     assert code == 0, stderr
-    for name in ["metrics.json", "errors.png", "trajectory.png"] + [f"trajectory_{m}.csv" for m in ALL_IDS]:
+    for name in ["metrics.json", "errors.png", "trajectory.png"] + [
+        f"trajectory_{m}.csv" for m in ALL_IDS
+    ]:
         assert (out / name).is_file(), name
     m = json.loads((out / "metrics.json").read_text())
     assert m["source"] == "run" and m["duration_s"] == pytest.approx(120.0, abs=0.1)
@@ -65,8 +83,24 @@ def test_run_on_csv_dir_writes_all_outputs(run_dir, tmp_path, capsys):
 
 def test_noise_and_outages_on_a_run_with_truth(run_dir, tmp_path, capsys):
     out = tmp_path / "res"
-    code, stdout, stderr = _run_cli(["run", run_dir, "--methods", "ekf", "--noise", "gm", "--seed", "3",
-                                     "--outage", "40:15", "--out", out, "--no-plots"], capsys)
+    code, stdout, stderr = _run_cli(
+        [
+            "run",
+            run_dir,
+            "--methods",
+            "ekf",
+            "--noise",
+            "gm",
+            "--seed",
+            "3",
+            "--outage",
+            "40:15",
+            "--out",
+            out,
+            "--no-plots",
+        ],
+        capsys,
+    )
     assert code == 0, stderr
     m = json.loads((out / "metrics.json").read_text())
     assert m["run"]["noise"] == "gm" and m["run"]["outages"] == [[40.0, 55.0]]
@@ -95,29 +129,59 @@ def test_the_table_comes_before_the_files_and_figures(run_dir, tmp_path, capsys,
     printed = []
 
     def write_result(*args, **kwargs):
-        printed.append(capsys.readouterr().out)   # what was on the terminal when writing began
+        printed.append(capsys.readouterr().out)  # what was on the terminal when writing began
         return real(*args, **kwargs)
 
     real = api.write_result
     monkeypatch.setattr(api, "write_result", write_result)
     out = tmp_path / "res"
-    code, rest, stderr = _run_cli(["run", run_dir, "--methods", "ekf", "--tune", "none", "--out", out], capsys)
+    code, rest, stderr = _run_cli(
+        ["run", run_dir, "--methods", "ekf", "--tune", "none", "--out", out], capsys
+    )
     assert code == 0, stderr
-    assert len(printed) == 1 and re.search(r"^method\s+PRMSE", printed[0], re.M) and "results:" not in printed[0]
-    assert rest.strip() == f"results: {out}" and (out / "metrics.json").is_file() and (out / "errors.png").is_file()
+    assert (
+        len(printed) == 1
+        and re.search(r"^method\s+PRMSE", printed[0], re.M)
+        and "results:" not in printed[0]
+    )
+    assert (
+        rest.strip() == f"results: {out}"
+        and (out / "metrics.json").is_file()
+        and (out / "errors.png").is_file()
+    )
 
 
 def test_a_reader_gone_before_the_table_still_gets_the_files(run_dir, tmp_path):
     """``gnssacc run ... | head -0``: the table cannot be printed (exit 141, as a shell reports
     SIGPIPE), but the results are written all the same."""
     out = tmp_path / "res"
-    args = ["run", str(run_dir), "--methods", "ekf", "--tune", "none", "--no-plots", "--out", str(out)]
-    proc = subprocess.Popen([sys.executable, "-c", f"import sys; from gnssacc.cli import main; sys.exit(main({args!r}))"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    args = [
+        "run",
+        str(run_dir),
+        "--methods",
+        "ekf",
+        "--tune",
+        "none",
+        "--no-plots",
+        "--out",
+        str(out),
+    ]
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            f"import sys; from gnssacc.cli import main; sys.exit(main({args!r}))",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     proc.stdout.close()
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=300) == 141, err
-    assert "gnssacc: error" not in err and json.loads((out / "metrics.json").read_text())["methods"]["ekf"]["status"] == "ok"
+    assert (
+        "gnssacc: error" not in err
+        and json.loads((out / "metrics.json").read_text())["methods"]["ekf"]["status"] == "ok"
+    )
 
 
 def test_missing_source(tmp_path, capsys):
@@ -168,7 +232,9 @@ def test_nan_rows_dropped_with_warning_or_error_above_fraction(run_dir, tmp_path
     for k in (100, 2000, 4000):
         lines[k] = ",".join([lines[k].split(",")[0]] + ["nan"] * (n_cols - 1))
     _write(d / "imu.csv", "\n".join(lines) + "\n")
-    code, stdout, stderr = _run_cli(["run", d, "--methods", "ekf", "--out", tmp_path / "o", "--no-plots"], capsys)
+    code, stdout, stderr = _run_cli(
+        ["run", d, "--methods", "ekf", "--out", tmp_path / "o", "--no-plots"], capsys
+    )
     assert code == 0
     assert "warning" in stderr and "imu.csv" in stderr and "3 " in stderr
     cfg = _write(tmp_path / "strict.toml", "[data]\nmax_bad_fraction = 0.0001\n")
@@ -186,8 +252,13 @@ def test_bad_config(tmp_path, capsys):
 
 def test_console_script_and_default_source(tmp_path):
     """`gnssacc run` with no argument: the KITTI default, through the installed entry point."""
-    res = subprocess.run([sys.executable, "-m", "gnssacc.cli", "run", "--out", str(tmp_path / "k"), "--no-plots"],
-                         capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    res = subprocess.run(
+        [sys.executable, "-m", "gnssacc.cli", "run", "--out", str(tmp_path / "k"), "--no-plots"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=300,
+    )
     assert res.returncode == 0, res.stderr
     assert "kitti" in res.stdout and "ekf-acc" in res.stdout
     m = json.loads((tmp_path / "k" / "metrics.json").read_text())
@@ -201,45 +272,91 @@ def test_config_show_round_trips(tmp_path, capsys):
     code2, stdout2, _ = _run_cli(["config", "--config", f], capsys)
     assert code2 == 0
     import tomllib  # the same values (the notes say what set them: the preset, then the file)
+
     assert tomllib.loads(stdout) == tomllib.loads(stdout2)
     assert "# set by preset kitti" in stdout and f"# set by {f}" in stdout2
 
 
 def test_sim_command_writes_a_loadable_run(tmp_path, capsys):
-    code, stdout, _ = _run_cli(["sim", tmp_path / "s", "--scenario", "ugv", "--duration", "60"], capsys)
-    assert code == 0 and (tmp_path / "s" / "imu.csv").is_file() and (tmp_path / "s" / "truth.csv").is_file()
+    code, stdout, _ = _run_cli(
+        ["sim", tmp_path / "s", "--scenario", "ugv", "--duration", "60"], capsys
+    )
+    assert (
+        code == 0
+        and (tmp_path / "s" / "imu.csv").is_file()
+        and (tmp_path / "s" / "truth.csv").is_file()
+    )
 
 
 def test_run_tunes_by_default_and_the_tuned_file_reproduces_it(run_dir, tmp_path, capsys):
     out = tmp_path / "auto"
-    code, stdout, stderr = _run_cli(["run", run_dir, "--methods", "ekf", "--out", out, "--no-plots"], capsys)
+    code, stdout, stderr = _run_cli(
+        ["run", run_dir, "--methods", "ekf", "--out", out, "--no-plots"], capsys
+    )
     assert code == 0, stderr
     assert "tuned noise (" in stdout and "start: " in stdout and "scored over t = " in stdout
     m = json.loads((out / "metrics.json").read_text())
     assert m["tuning"]["n_evaluations"] > 0 and m["tuning"]["seconds"] > 0
-    assert m["consistency"]["ekf"]["nis"]["pos"] == pytest.approx(m["methods"]["ekf"]["stats"]["nis_pos_mean"])
+    assert m["consistency"]["ekf"]["nis"]["pos"] == pytest.approx(
+        m["methods"]["ekf"]["stats"]["nis_pos_mean"]
+    )
     assert m["coverage"]["ekf"]["fraction"] == pytest.approx(1.0)
     # The NIS column of the table shows the consistency figure.
     line = next(ln for ln in stdout.splitlines() if ln.startswith("ekf "))
     assert f"{m['consistency']['ekf']['nis']['pos']:.2f}" in line
     again = tmp_path / "again"
-    code, stdout2, stderr = _run_cli(["run", run_dir, "--methods", "ekf", "--out", again, "--no-plots",
-                                      "--config", out / "tuned.toml", "--tune", "none"], capsys)
+    code, stdout2, stderr = _run_cli(
+        [
+            "run",
+            run_dir,
+            "--methods",
+            "ekf",
+            "--out",
+            again,
+            "--no-plots",
+            "--config",
+            out / "tuned.toml",
+            "--tune",
+            "none",
+        ],
+        capsys,
+    )
     assert code == 0, stderr
     assert "tuned noise" not in stdout2 and not (again / "tuned.toml").exists()
     m2 = json.loads((again / "metrics.json").read_text())
-    assert m2["methods"]["ekf"]["prmse_m"] == pytest.approx(m["methods"]["ekf"]["prmse_m"], rel=0.01)
+    assert m2["methods"]["ekf"]["prmse_m"] == pytest.approx(
+        m["methods"]["ekf"]["prmse_m"], rel=0.01
+    )
 
 
 def test_too_optimistic_noise_prints_a_warning_naming_the_method(tmp_path, capsys):
     # A consumer IMU (vibration, scale-factor errors) configured 10x too optimistic.
-    write_csv_run(simulate("car-city", duration_s=200.0, imu_grade="consumer", noise="white", seed=1), tmp_path / "r")
+    write_csv_run(
+        simulate("car-city", duration_s=200.0, imu_grade="consumer", noise="white", seed=1),
+        tmp_path / "r",
+    )
     cfg = tmp_path / "optimistic.toml"
-    cfg.write_text("[imu]\ngyro_arw_deg_rth = 0.06\naccel_vrw_mps_rth = 0.02\ngyro_bias_instability_deg_h = 3.0\n"
-                   "accel_bias_instability_mg = 0.05\ngyro_bias_sigma0_deg_h = 50.0\naccel_bias_sigma0_mg = 3.0\n")
-    code, stdout, stderr = _run_cli(["run", tmp_path / "r", "--methods", "ekf,smoother", "--config", cfg, "--tune",
-                                     "none", "--out", tmp_path / "o", "--no-plots"], capsys)
+    cfg.write_text(
+        "[imu]\ngyro_arw_deg_rth = 0.06\naccel_vrw_mps_rth = 0.02\ngyro_bias_instability_deg_h = 3.0\n"
+        "accel_bias_instability_mg = 0.05\ngyro_bias_sigma0_deg_h = 50.0\naccel_bias_sigma0_mg = 3.0\n"
+    )
+    code, stdout, stderr = _run_cli(
+        [
+            "run",
+            tmp_path / "r",
+            "--methods",
+            "ekf,smoother",
+            "--config",
+            cfg,
+            "--tune",
+            "none",
+            "--out",
+            tmp_path / "o",
+            "--no-plots",
+        ],
+        capsys,
+    )
     assert code == 0
     for mid in ("ekf", "smoother"):
         assert f"gnssacc: warning: {mid}: " in stderr, stderr
-    assert " !" in stdout   # the table marks the warned rows
+    assert " !" in stdout  # the table marks the warned rows

@@ -1,5 +1,6 @@
 """``gnssacc config --show`` documents every key and round-trips; ``--template`` is a commented
 starting file whose uncommented lines are exactly what the user sets."""
+
 import tomllib
 
 from gnssacc.cli import main
@@ -32,7 +33,16 @@ def test_template_sets_nothing_until_a_line_is_uncommented(capsys, tmp_path):
     text = capsys.readouterr().out
     path = tmp_path / "t.toml"
     path.write_text(text)
-    assert load_config(None, path).explicit == frozenset() and load_config(None, path).values == DEFAULTS
-    path.write_text(text.replace("# default_sigma_m = [3.0, 3.0, 5.0]", "default_sigma_m = [1.0, 1.0, 2.0]"))
+    assert (
+        load_config(None, path).explicit == frozenset()
+        and load_config(None, path).values == DEFAULTS
+    )
+    path.write_text(
+        text.replace("# default_sigma_m = [3.0, 3.0, 5.0]", "default_sigma_m = [1.0, 1.0, 2.0]")
+    )
     cfg = load_config(None, path)
-    assert cfg.explicit == {("gnss", "default_sigma_m")} and cfg["gnss"]["default_sigma_m"] == [1.0, 1.0, 2.0]
+    assert cfg.explicit == {("gnss", "default_sigma_m")} and cfg["gnss"]["default_sigma_m"] == [
+        1.0,
+        1.0,
+        2.0,
+    ]

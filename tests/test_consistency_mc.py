@@ -29,6 +29,7 @@ central 98 % interval is binomial with p = 0.02. Each test makes :data:`N_CHECKS
 asks the whole test to fail at most once in 1000 when the filter is consistent (Bonferroni:
 each check at 1e-3 / N_CHECKS).
 """
+
 from __future__ import annotations
 
 import functools
@@ -50,12 +51,17 @@ from gnssacc.sources.sim_imu_errors import UNMODELLED_KEYS, imu_sigmas_si
 GRADE = "tactical"
 RUNS = 100
 DURATION_S, OUTAGE = 90.0, (60.0, 90.0)
-EPOCHS = (59.0, 90.0)              # the last fix before the outage, and the end of the outage
+EPOCHS = (59.0, 90.0)  # the last fix before the outage, and the end of the outage
 SEED0 = 5000
 #: 1-sigma of the initial position [m], velocity [m/s] and attitude error [rad] the filter is given.
 SIG_P, SIG_V, SIG_ATT = np.array([1.0, 1.0, 1.5]), np.full(3, 0.1), np.radians([0.3, 0.3, 1.0])
-BLOCKS = {"position": slice(0, 3), "velocity": slice(3, 6), "attitude": slice(6, 9), "accel bias": slice(9, 12),
-          "gyro bias": slice(12, 15)}
+BLOCKS = {
+    "position": slice(0, 3),
+    "velocity": slice(3, 6),
+    "attitude": slice(6, 9),
+    "accel bias": slice(9, 12),
+    "gyro bias": slice(12, 15),
+}
 #: Pooled full NEES at both epochs, each block at the end, pooled NIS, and the per-run tails of the
 #: full NEES (both epochs) and of the NIS.
 N_CHECKS = 2 + len(BLOCKS) + 1 + 3
@@ -72,10 +78,19 @@ def _initial_state(run, seed: int, grade_si: dict) -> InitialState:
     # The simulator's bias at the start is the turn-on bias plus the stationary Gauss-Markov value.
     sig_ba = np.hypot(grade_si["accel_sigma0"], grade_si["accel_bi"])
     sig_bg = np.hypot(grade_si["gyro_sigma0"], grade_si["gyro_bi"])
-    return InitialState(t=tr.t[0], lat=tr.lat[0] + dp[0] / (R_M + tr.h[0]),
-                        lon=tr.lon[0] + dp[1] / ((R_N + tr.h[0]) * np.cos(tr.lat[0])), h=tr.h[0] - dp[2],
-                        v_n=tr.v_n[0] + dv, rpy=np.array(dcm_to_euler(R_est)), sigma_pos_m=SIG_P,
-                        sigma_vel_mps=SIG_V, sigma_att_rad=SIG_ATT, sigma_b_a=sig_ba, sigma_b_g=sig_bg)
+    return InitialState(
+        t=tr.t[0],
+        lat=tr.lat[0] + dp[0] / (R_M + tr.h[0]),
+        lon=tr.lon[0] + dp[1] / ((R_N + tr.h[0]) * np.cos(tr.lat[0])),
+        h=tr.h[0] - dp[2],
+        v_n=tr.v_n[0] + dv,
+        rpy=np.array(dcm_to_euler(R_est)),
+        sigma_pos_m=SIG_P,
+        sigma_vel_mps=SIG_V,
+        sigma_att_rad=SIG_ATT,
+        sigma_b_a=sig_ba,
+        sigma_b_g=sig_bg,
+    )
 
 
 def _error(run, sol, i: int, bias_a: np.ndarray, bias_g: np.ndarray) -> np.ndarray:
@@ -105,35 +120,58 @@ def _simulated(scenario: str, runs: int) -> tuple:
     grade_si = imu_sigmas_si(grade_config(GRADE))
     out = []
     for seed in range(SEED0, SEED0 + runs):
-        run = simulate(scenario, DURATION_S, imu_grade=GRADE, noise="rtk", seed=seed,
-                       imu_overrides={k: 0.0 for k in UNMODELLED_KEYS})
-        run = replace(run, gnss=run.gnss.select((run.gnss.t < OUTAGE[0]) | (run.gnss.t > OUTAGE[1])))
+        run = simulate(
+            scenario,
+            DURATION_S,
+            imu_grade=GRADE,
+            noise="rtk",
+            seed=seed,
+            imu_overrides={k: 0.0 for k in UNMODELLED_KEYS},
+        )
+        run = replace(
+            run, gnss=run.gnss.select((run.gnss.t < OUTAGE[0]) | (run.gnss.t > OUTAGE[1]))
+        )
         out.append((run, run.sim.bias.at(np.array(EPOCHS)), _initial_state(run, seed, grade_si)))
     return tuple(out)
 
 
-def monte_carlo(scenario: str, q_scale: float = 1.0, r_scale: float = 1.0, runs: int = RUNS, method: str = "ekf") -> dict:
+def monte_carlo(
+    scenario: str, q_scale: float = 1.0, r_scale: float = 1.0, runs: int = RUNS, method: str = "ekf"
+) -> dict:
     """NEES per run and epoch (full and per block) and the NIS of every position update, with the
     filter's Q (white noise and bias random-walk PSDs) and R (fix covariances) scaled by the given
     factors against the simulator's truth."""
     grade = grade_config(GRADE)
     told = dict(grade)
-    for key in ("gyro_arw_deg_rth", "accel_vrw_mps_rth", "gyro_bias_instability_deg_h", "accel_bias_instability_mg"):
-        told[key] = grade[key] * np.sqrt(q_scale)       # densities and sigmas: PSD x q_scale
+    for key in (
+        "gyro_arw_deg_rth",
+        "accel_vrw_mps_rth",
+        "gyro_bias_instability_deg_h",
+        "accel_bias_instability_mg",
+    ):
+        told[key] = grade[key] * np.sqrt(q_scale)  # densities and sigmas: PSD x q_scale
     cfg = load_config(overrides={"imu": told})
     nees = np.empty((runs, len(EPOCHS), 1 + len(BLOCKS)))
     nis = []
     for r, (run, (bias_a, bias_g), init) in enumerate(_simulated(scenario, runs)):
         run = replace(run, gnss=replace(run.gnss, sigma_ned=run.gnss.sigma_ned * np.sqrt(r_scale)))
-        sol = run_ekf(run, cfg, method, init=init, quality=QualityReport(), store_P=True, record_innovations=True,
-                      output_times=np.array(EPOCHS))
+        sol = run_ekf(
+            run,
+            cfg,
+            method,
+            init=init,
+            quality=QualityReport(),
+            store_P=True,
+            record_innovations=True,
+            output_times=np.array(EPOCHS),
+        )
         assert np.allclose(sol.t, EPOCHS)
         for i in range(len(EPOCHS)):
             e, P = _error(run, sol, i, bias_a[i], bias_g[i]), sol.P[i][:15, :15]
             nees[r, i, 0] = e @ np.linalg.solve(P, e)
             for b, sl in enumerate(BLOCKS.values()):
                 nees[r, i, 1 + b] = e[sl] @ np.linalg.solve(P[sl, sl], e[sl])
-        nis.append(3.0 * np.asarray(sol.stats["nis_pos"]))     # stats keep NIS per dof
+        nis.append(3.0 * np.asarray(sol.stats["nis_pos"]))  # stats keep NIS per dof
     return {"nees": nees, "nis": nis}
 
 
@@ -164,7 +202,11 @@ def verdict(mc: dict) -> dict[str, tuple[float, float, float]]:
     # Per run, the sum of its NIS is chi-square with 3 x (its updates) dof.
     per_run = np.array([chi2.cdf(x.sum(), 3 * len(x)) for x in nis])
     n_out = int(np.sum((per_run < 0.01) | (per_run > 0.99)))
-    out["runs outside their NIS band"] = (float(n_out), 0.0, float(binom.ppf(1 - ALPHA, len(nis), 0.02)))
+    out["runs outside their NIS band"] = (
+        float(n_out),
+        0.0,
+        float(binom.ppf(1 - ALPHA, len(nis), 0.02)),
+    )
     assert len(out) == N_CHECKS
     return out
 
@@ -174,8 +216,9 @@ def _failed(v: dict) -> dict:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("scenario, method", [("ugv-slow", "ekf"), ("car-city", "ekf-accw"),
-                                              ("car-city", "ekf")])   # car-city last: its runs are replayed below
+@pytest.mark.parametrize(
+    "scenario, method", [("ugv-slow", "ekf"), ("car-city", "ekf-accw"), ("car-city", "ekf")]
+)  # car-city last: its runs are replayed below
 def test_ekf_is_consistent_when_its_model_is_the_truth(scenario, method):
     """``ekf-accw``'s acceleration update (window-consistent) is held to the same bands. The
     paper's ``ekf-acc`` is not: its acceleration model ignores the correlation with the fixes and is
@@ -185,10 +228,13 @@ def test_ekf_is_consistent_when_its_model_is_the_truth(scenario, method):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("q_scale, r_scale, must_fail", [
-    (1.5, 1.0, "full NEES at 90 s"),     # Q 1.5x: the covariance grown in the outage is too large
-    (1.0, 1.5, "NIS"),                   # R 1.5x: innovations smaller than the filter expects
-])
+@pytest.mark.parametrize(
+    "q_scale, r_scale, must_fail",
+    [
+        (1.5, 1.0, "full NEES at 90 s"),  # Q 1.5x: the covariance grown in the outage is too large
+        (1.0, 1.5, "NIS"),  # R 1.5x: innovations smaller than the filter expects
+    ],
+)
 def test_a_1_5x_noise_error_falls_outside_the_band(q_scale, r_scale, must_fail):
     """The bands have the power they claim: a filter told 1.5x the true Q, or 1.5x the true R,
     fails them (on the same seeds that pass above)."""
@@ -214,16 +260,29 @@ def smoother_z2(runs: int = RUNS) -> tuple[dict[str, np.ndarray], dict[str, np.n
     cfg, grade_si = load_config(overrides={"imu": grade}), imu_sigmas_si(grade)
     out, ratio = {"smoother": [], "smoother-online": []}, {"smoother": [], "smoother-online": []}
     for seed in range(SM_SEED0, SM_SEED0 + runs):
-        run = simulate(SM_SCENARIO, SM_DURATION_S, imu_grade=GRADE, noise="rtk", seed=seed,
-                       imu_overrides={k: 0.0 for k in UNMODELLED_KEYS})
-        sols = run_smoother(run, cfg, "smoother", init=_initial_state(run, seed, grade_si), quality=QualityReport())
+        run = simulate(
+            SM_SCENARIO,
+            SM_DURATION_S,
+            imu_grade=GRADE,
+            noise="rtk",
+            seed=seed,
+            imu_overrides={k: 0.0 for k in UNMODELLED_KEYS},
+        )
+        sols = run_smoother(
+            run, cfg, "smoother", init=_initial_state(run, seed, grade_si), quality=QualityReport()
+        )
         tr = run.truth
         j = [int(np.argmin(np.abs(tr.t - t))) for t in SM_EPOCHS]
         p_true = run.origin.to_ned(tr.lat[j], tr.lon[j], tr.h[j])
         for method, sol in sols.items():
             i = [int(np.argmin(np.abs(sol.t - t))) for t in SM_EPOCHS]
             assert np.allclose(sol.t[i], SM_EPOCHS)
-            e = np.hstack([run.origin.to_ned(sol.lat[i], sol.lon[i], sol.h[i]) - p_true, sol.v_n[i] - tr.v_n[j]])
+            e = np.hstack(
+                [
+                    run.origin.to_ned(sol.lat[i], sol.lon[i], sol.h[i]) - p_true,
+                    sol.v_n[i] - tr.v_n[j],
+                ]
+            )
             out[method].append((e / sol.sigma[i, 0:6]) ** 2)
             ratio[method].append(sol.stats["nis_pos_mean"])
     return {m: np.array(v) for m, v in out.items()}, {m: np.array(v) for m, v in ratio.items()}
@@ -243,8 +302,13 @@ def test_smoother_marginals_are_consistent_when_its_model_is_the_truth():
     n_checks = len(z2) * len(SM_EPOCHS) * len(SM_AXES) + len(ratio)
     alpha = 1e-3 / n_checks
     lo, hi = chi2.ppf([alpha / 2, 1 - alpha / 2], RUNS) / RUNS
-    bad = {(m, t, ax): round(float(v[:, k, a].mean()), 3) for m, v in z2.items() for k, t in enumerate(SM_EPOCHS)
-           for a, ax in enumerate(SM_AXES) if not lo <= v[:, k, a].mean() <= hi}
+    bad = {
+        (m, t, ax): round(float(v[:, k, a].mean()), 3)
+        for m, v in z2.items()
+        for k, t in enumerate(SM_EPOCHS)
+        for a, ax in enumerate(SM_AXES)
+        if not lo <= v[:, k, a].mean() <= hi
+    }
     assert not bad, (lo, hi, bad)
     for m, r in ratio.items():
         half = student.ppf(1 - alpha / 2, RUNS - 1) * r.std(ddof=1) / np.sqrt(RUNS)

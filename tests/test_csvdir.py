@@ -1,4 +1,5 @@
 """Tests of the CSV run directory reader/writer and the shared source helpers."""
+
 from __future__ import annotations
 
 import json
@@ -15,7 +16,7 @@ from gnssacc.core.recording import GnssFixes, ImuData, InitialState, RecordedRun
 from gnssacc.sources.common import apply_mounting, read_table
 from gnssacc.sources.csvdir import load_csv_run, write_csv_run
 
-LAT0, LON0, H0 = 49.0, 8.4, 110.0          # degrees, degrees, metres
+LAT0, LON0, H0 = 49.0, 8.4, 110.0  # degrees, degrees, metres
 
 
 @pytest.fixture(scope="module")
@@ -50,8 +51,16 @@ def _make_dir(tmp_path, a, imu_names=("t", "ax", "ay", "az", "gx", "gy", "gz"), 
     """Write imu.csv (with an extra column and a comment) and gnss.csv from the arrays."""
     d = tmp_path / "myrun"
     d.mkdir()
-    cols = {"t": a["t"], "ax": a["f"][:, 0], "ay": a["f"][:, 1], "az": a["f"][:, 2],
-            "gx": a["w"][:, 0], "gy": a["w"][:, 1], "gz": a["w"][:, 2], "temp_c": np.full(len(a["t"]), 25.0)}
+    cols = {
+        "t": a["t"],
+        "ax": a["f"][:, 0],
+        "ay": a["f"][:, 1],
+        "az": a["f"][:, 2],
+        "gx": a["w"][:, 0],
+        "gy": a["w"][:, 1],
+        "gz": a["w"][:, 2],
+        "temp_c": np.full(len(a["t"]), 25.0),
+    }
     names = list(imu_names) + ["temp_c"]
     _write_csv(d / "imu.csv", names, [cols[n.strip().lower()] for n in names], "a comment line")
     gcols = [a["tg"], a["lat"], a["lon"], a["h"]]
@@ -64,6 +73,7 @@ def _make_dir(tmp_path, a, imu_names=("t", "ax", "ay", "az", "gx", "gy", "gz"), 
 
 
 # --- round trips ---------------------------------------------------------------------------------------
+
 
 def test_read_values_units_and_names(tmp_path, cfg):
     a = _arrays()
@@ -85,7 +95,9 @@ def test_read_values_units_and_names(tmp_path, cfg):
 def test_default_gnss_sigma_from_config(tmp_path):
     d = _make_dir(tmp_path, _arrays(), with_sigma=False)
     cfg = load_config(overrides={"gnss": {"default_sigma_m": [2.0, 2.0, 4.0]}})
-    np.testing.assert_array_equal(load_csv_run(d, cfg).gnss.sigma_ned, np.tile([2.0, 2.0, 4.0], (20, 1)))
+    np.testing.assert_array_equal(
+        load_csv_run(d, cfg).gnss.sigma_ned, np.tile([2.0, 2.0, 4.0], (20, 1))
+    )
 
 
 def test_flu_is_converted_to_frd(tmp_path, cfg):
@@ -97,14 +109,34 @@ def test_flu_is_converted_to_frd(tmp_path, cfg):
 
 def _full_run(a):
     lat, lon = a["lat"] * DEG, a["lon"] * DEG
-    truth = Truth(a["tg"], lat, lon, a["h"], v_n=np.zeros((20, 3)) + [0.1, 0.2, 0.0],
-                  rpy=np.tile([0.01, -0.02, 1.0], (20, 1)))
-    init = InitialState(t=100.0, lat=lat[0], lon=lon[0], h=a["h"][0], v_n=np.array([0.0, 0.1, 0.0]),
-                        rpy=np.array([0.01, -0.02, 1.0]), sigma_pos_m=np.array([1.0, 1.5, 2.5]),
-                        sigma_vel_mps=np.array([0.2, 0.2, 0.3]), sigma_att_rad=np.array([1.0, 1.0, 4.0]) * DEG)
-    return RecordedRun("sim", "synthetic", ImuData(a["t"], a["f"], a["w"]),
-                       GnssFixes(a["tg"], lat, lon, a["h"], a["sig"]),
-                       LocalTangentFrame(lat[0], lon[0], a["h"][0]), truth, init)
+    truth = Truth(
+        a["tg"],
+        lat,
+        lon,
+        a["h"],
+        v_n=np.zeros((20, 3)) + [0.1, 0.2, 0.0],
+        rpy=np.tile([0.01, -0.02, 1.0], (20, 1)),
+    )
+    init = InitialState(
+        t=100.0,
+        lat=lat[0],
+        lon=lon[0],
+        h=a["h"][0],
+        v_n=np.array([0.0, 0.1, 0.0]),
+        rpy=np.array([0.01, -0.02, 1.0]),
+        sigma_pos_m=np.array([1.0, 1.5, 2.5]),
+        sigma_vel_mps=np.array([0.2, 0.2, 0.3]),
+        sigma_att_rad=np.array([1.0, 1.0, 4.0]) * DEG,
+    )
+    return RecordedRun(
+        "sim",
+        "synthetic",
+        ImuData(a["t"], a["f"], a["w"]),
+        GnssFixes(a["tg"], lat, lon, a["h"], a["sig"]),
+        LocalTangentFrame(lat[0], lon[0], a["h"][0]),
+        truth,
+        init,
+    )
 
 
 def test_write_then_load_round_trip(tmp_path, cfg):
@@ -115,20 +147,51 @@ def test_write_then_load_round_trip(tmp_path, cfg):
     for name in ("t", "f_b", "omega_ib_b"):
         np.testing.assert_array_equal(getattr(back.imu, name), getattr(run.imu, name))
     for name in ("t", "lat", "lon", "h", "sigma_ned"):
-        np.testing.assert_allclose(getattr(back.gnss, name), getattr(run.gnss, name), rtol=1e-15, atol=0)
+        np.testing.assert_allclose(
+            getattr(back.gnss, name), getattr(run.gnss, name), rtol=1e-15, atol=0
+        )
     for name in ("t", "lat", "lon", "h", "v_n", "rpy"):
-        np.testing.assert_allclose(getattr(back.truth, name), getattr(run.truth, name), rtol=1e-15, atol=1e-18)
-    for name in ("t", "lat", "lon", "h", "v_n", "rpy", "sigma_pos_m", "sigma_vel_mps", "sigma_att_rad"):
-        np.testing.assert_allclose(getattr(back.init, name), getattr(run.init, name), rtol=1e-15, atol=1e-18)
+        np.testing.assert_allclose(
+            getattr(back.truth, name), getattr(run.truth, name), rtol=1e-15, atol=1e-18
+        )
+    for name in (
+        "t",
+        "lat",
+        "lon",
+        "h",
+        "v_n",
+        "rpy",
+        "sigma_pos_m",
+        "sigma_vel_mps",
+        "sigma_att_rad",
+    ):
+        np.testing.assert_allclose(
+            getattr(back.init, name), getattr(run.init, name), rtol=1e-15, atol=1e-18
+        )
 
 
 def test_truth_without_optional_groups_and_init_defaults(tmp_path, cfg):
     a = _arrays()
     d = _make_dir(tmp_path, a)
-    _write_csv(d / "truth.csv", ["t", "lat_deg", "lon_deg", "h_m"], [a["tg"], a["lat"], a["lon"], a["h"]])
-    (d / "init.json").write_text(json.dumps({"t": 100.0, "lat_deg": LAT0, "lon_deg": LON0, "h_m": H0,
-                                             "vn": 0, "ve": 0, "vd": 0, "roll_deg": 1.0, "pitch_deg": -2.0,
-                                             "yaw_deg": 90.0}))
+    _write_csv(
+        d / "truth.csv", ["t", "lat_deg", "lon_deg", "h_m"], [a["tg"], a["lat"], a["lon"], a["h"]]
+    )
+    (d / "init.json").write_text(
+        json.dumps(
+            {
+                "t": 100.0,
+                "lat_deg": LAT0,
+                "lon_deg": LON0,
+                "h_m": H0,
+                "vn": 0,
+                "ve": 0,
+                "vd": 0,
+                "roll_deg": 1.0,
+                "pitch_deg": -2.0,
+                "yaw_deg": 90.0,
+            }
+        )
+    )
     run = load_csv_run(d, cfg)
     assert run.truth.v_n is None and run.truth.rpy is None
     np.testing.assert_allclose(run.init.rpy, np.array([1.0, -2.0, 90.0]) * DEG)
@@ -138,6 +201,7 @@ def test_truth_without_optional_groups_and_init_defaults(tmp_path, cfg):
 
 
 # --- mounting -----------------------------------------------------------------------------------------
+
 
 def test_mounting_upside_down_flips_y_and_z(tmp_path):
     a = _arrays()
@@ -166,6 +230,7 @@ def test_apply_mounting_yaw(cfg):
 
 # --- bad input ------------------------------------------------------------------------------------------
 
+
 def _error(d, cfg, **kw) -> str:
     with pytest.raises(InputError) as exc:
         load_csv_run(d, cfg, **kw)
@@ -189,20 +254,35 @@ def test_missing_directory_and_files(tmp_path, cfg):
 def test_missing_columns_named_with_header(tmp_path, cfg):
     a = _arrays()
     d = _make_dir(tmp_path, a)
-    _write_csv(d / "imu.csv", ["t", "ax", "ay", "az", "gx", "gy"], [a["t"], *a["f"].T, *a["w"][:, :2].T])
+    _write_csv(
+        d / "imu.csv", ["t", "ax", "ay", "az", "gx", "gy"], [a["t"], *a["f"].T, *a["w"][:, :2].T]
+    )
     msg = _error(d, cfg)
-    assert "imu.csv" in msg and "missing required column(s) gz" in msg and "header found: t, ax" in msg
+    assert (
+        "imu.csv" in msg and "missing required column(s) gz" in msg and "header found: t, ax" in msg
+    )
 
 
-@pytest.mark.parametrize("what, make, words", [
-    ("non-numeric", lambda c: c.replace("\n100.05,", "\n100.05x,", 1), ("imu.csv", "non-numeric", "line")),
-    ("backwards", lambda c: c.replace("\n100.05,", "\n100.02,", 1), ("imu.csv", "backwards")),
-    ("repeat", lambda c: c.replace("\n100.05,", "\n100.04,", 1), ("imu.csv", "repeats")),
-    ("ragged", lambda c: c.replace("\n100.05,", "\n100.05,1,", 1), ("imu.csv", "cells", "line")),
-    ("empty", lambda c: "", ("imu.csv", "empty")),
-    ("comment only", lambda c: "# nothing\n\n", ("imu.csv", "empty")),
-    ("header only", lambda c: c.splitlines()[1] + "\n", ("imu.csv", "row")),
-])
+@pytest.mark.parametrize(
+    "what, make, words",
+    [
+        (
+            "non-numeric",
+            lambda c: c.replace("\n100.05,", "\n100.05x,", 1),
+            ("imu.csv", "non-numeric", "line"),
+        ),
+        ("backwards", lambda c: c.replace("\n100.05,", "\n100.02,", 1), ("imu.csv", "backwards")),
+        ("repeat", lambda c: c.replace("\n100.05,", "\n100.04,", 1), ("imu.csv", "repeats")),
+        (
+            "ragged",
+            lambda c: c.replace("\n100.05,", "\n100.05,1,", 1),
+            ("imu.csv", "cells", "line"),
+        ),
+        ("empty", lambda c: "", ("imu.csv", "empty")),
+        ("comment only", lambda c: "# nothing\n\n", ("imu.csv", "empty")),
+        ("header only", lambda c: c.splitlines()[1] + "\n", ("imu.csv", "row")),
+    ],
+)
 def test_bad_imu_file(tmp_path, cfg, what, make, words):
     d = _make_dir(tmp_path, _arrays())
     p = d / "imu.csv"
@@ -221,7 +301,11 @@ def test_bad_gnss_file(tmp_path, cfg):
     _write_csv(d / "gnss.csv", ["t", "lat_deg", "lon_deg", "h_m"], [[], [], [], []])
     msg = _error(d, cfg)
     assert "gnss.csv" in msg and "no GNSS fix" in msg
-    _write_csv(d / "gnss.csv", ["t", "lat_deg", "lon_deg", "h_m"], [a["tg"], a["lat"] + 50.0, a["lon"], a["h"]])
+    _write_csv(
+        d / "gnss.csv",
+        ["t", "lat_deg", "lon_deg", "h_m"],
+        [a["tg"], a["lat"] + 50.0, a["lon"], a["h"]],
+    )
     msg = _error(d, cfg)
     assert "gnss.csv" in msg and "latitude out of range" in msg
     tg = a["tg"].copy()
@@ -229,12 +313,18 @@ def test_bad_gnss_file(tmp_path, cfg):
     _write_csv(d / "gnss.csv", ["t", "lat_deg", "lon_deg", "h_m"], [tg, a["lat"], a["lon"], a["h"]])
     msg = _error(d, cfg)
     assert "gnss.csv" in msg and "backwards" in msg
-    _write_csv(d / "gnss.csv", ["t", "lat_deg", "lon_deg", "h_m", "sn"], [a["tg"], a["lat"], a["lon"], a["h"],
-                                                                         a["sig"][:, 0]])
+    _write_csv(
+        d / "gnss.csv",
+        ["t", "lat_deg", "lon_deg", "h_m", "sn"],
+        [a["tg"], a["lat"], a["lon"], a["h"], a["sig"][:, 0]],
+    )
     msg = _error(d, cfg)
     assert "gnss.csv" in msg and "sn, se, sd" in msg
-    _write_csv(d / "gnss.csv", ["t", "lat_deg", "lon_deg", "h_m", "sn", "se", "sd"],
-               [a["tg"], a["lat"], a["lon"], a["h"], a["sig"][:, 0], a["sig"][:, 1], 0 * a["sig"][:, 2]])
+    _write_csv(
+        d / "gnss.csv",
+        ["t", "lat_deg", "lon_deg", "h_m", "sn", "se", "sd"],
+        [a["tg"], a["lat"], a["lon"], a["h"], a["sig"][:, 0], a["sig"][:, 1], 0 * a["sig"][:, 2]],
+    )
     assert "positive" in _error(d, cfg)
 
 
@@ -242,15 +332,31 @@ def test_bad_truth_and_init(tmp_path, cfg):
     a = _arrays()
     d = _make_dir(tmp_path, a)
     tg = a["tg"][::-1]
-    _write_csv(d / "truth.csv", ["t", "lat_deg", "lon_deg", "h_m"], [tg, a["lat"], a["lon"], a["h"]])
+    _write_csv(
+        d / "truth.csv", ["t", "lat_deg", "lon_deg", "h_m"], [tg, a["lat"], a["lon"], a["h"]]
+    )
     msg = _error(d, cfg)
     assert "truth.csv" in msg and "backwards" in msg
     (d / "truth.csv").unlink()
-    good = {"t": 100.0, "lat_deg": LAT0, "lon_deg": LON0, "h_m": H0, "vn": 0, "ve": 0, "vd": 0,
-            "roll_deg": 0, "pitch_deg": 0, "yaw_deg": 0}
-    for doc, word in ((good | {"lat_deg": 95.0}, "latitude"), ({k: v for k, v in good.items() if k != "vd"}, "vd"),
-                      (good | {"yaw": 1.0}, "unknown"), (good | {"vn": "fast"}, "number"),
-                      (good | {"sigma": {"pos_m": -1}}, "positive")):
+    good = {
+        "t": 100.0,
+        "lat_deg": LAT0,
+        "lon_deg": LON0,
+        "h_m": H0,
+        "vn": 0,
+        "ve": 0,
+        "vd": 0,
+        "roll_deg": 0,
+        "pitch_deg": 0,
+        "yaw_deg": 0,
+    }
+    for doc, word in (
+        (good | {"lat_deg": 95.0}, "latitude"),
+        ({k: v for k, v in good.items() if k != "vd"}, "vd"),
+        (good | {"yaw": 1.0}, "unknown"),
+        (good | {"vn": "fast"}, "number"),
+        (good | {"sigma": {"pos_m": -1}}, "positive"),
+    ):
         (d / "init.json").write_text(json.dumps(doc))
         msg = _error(d, cfg)
         assert "init.json" in msg and word in msg, msg
@@ -264,7 +370,9 @@ def test_gnss_not_overlapping_imu(tmp_path, cfg):
     assert "overlap" in _error(_make_dir(tmp_path, a), cfg)
 
 
-@pytest.mark.parametrize("unit, scale, divisor", [("milliseconds", 1e3, "1000"), ("nanoseconds", 1e9, "1e9")])
+@pytest.mark.parametrize(
+    "unit, scale, divisor", [("milliseconds", 1e3, "1000"), ("nanoseconds", 1e9, "1e9")]
+)
 def test_imu_stamps_in_another_unit_named_or_rescaled(tmp_path, unit, scale, divisor):
     # Stamps since the Unix epoch: the IMU's in ms or ns, the fixes' in s. The loader names the
     # unit (not "different clocks?") and, with repair = "auto", rescales before the time offset (the
@@ -275,13 +383,16 @@ def test_imu_stamps_in_another_unit_named_or_rescaled(tmp_path, unit, scale, div
     with pytest.raises(InputError) as exc:
         load_csv_run(d, load_config(), time_units=fix_imu_time_units)
     assert exc.value.where == str(d / "imu.csv") and unit in exc.value.problem
-    cfg = load_config(overrides={"checks": {"repair": "auto"}, "mounting": {"imu_time_offset_s": -0.1}})
+    cfg = load_config(
+        overrides={"checks": {"repair": "auto"}, "mounting": {"imu_time_offset_s": -0.1}}
+    )
     with pytest.warns(DataWarning, match=f"divided the IMU time stamps by {divisor} "):
         run = load_csv_run(d, cfg, time_units=fix_imu_time_units)
     np.testing.assert_allclose(run.imu.t, a["t"] / scale - 0.1, rtol=0, atol=1e-6)
 
 
 # --- NaN rows -------------------------------------------------------------------------------------------
+
 
 def test_nan_rows_dropped_with_warning(tmp_path, cfg):
     a = _arrays()
@@ -291,7 +402,7 @@ def test_nan_rows_dropped_with_warning(tmp_path, cfg):
     # An empty cell is a missing value too.
     p = d / "imu.csv"
     lines = p.read_text().splitlines()
-    cells = lines[2 + 50].split(",")                  # comment, header, then data row 50
+    cells = lines[2 + 50].split(",")  # comment, header, then data row 50
     cells[3] = ""
     lines[2 + 50] = ",".join(cells)
     p.write_text("\n".join(lines) + "\n")
@@ -303,7 +414,7 @@ def test_nan_rows_dropped_with_warning(tmp_path, cfg):
 
 def test_nan_rows_above_fraction_is_error(tmp_path, cfg):
     a = _arrays()
-    a["f"][:100, 2] = np.nan                          # 5 % > 1 %
+    a["f"][:100, 2] = np.nan  # 5 % > 1 %
     msg = _error(_make_dir(tmp_path, a), cfg)
     assert "imu.csv" in msg and "max_bad_fraction" in msg
     loose = load_config(overrides={"data": {"max_bad_fraction": 0.1}})
@@ -321,6 +432,7 @@ def test_truncated_last_line_dropped(tmp_path, cfg):
 
 
 # --- speed ------------------------------------------------------------------------------------------------
+
 
 def test_read_table_100k_rows(tmp_path):
     """(Its speed is measured by bench/bench_inputs.py.)"""
@@ -343,7 +455,9 @@ def test_read_table_in_blocks_equals_one_pass_and_keeps_line_numbers(tmp_path, m
     from gnssacc.sources import common
 
     rows = [f"{0.01 * k:.2f},{k},{-k}" for k in range(23)]
-    text = "# a comment\nt,a,b\n" + "\n".join(rows[:10]) + "\n\n# mid\n" + "\n".join(rows[10:]) + "\n"
+    text = (
+        "# a comment\nt,a,b\n" + "\n".join(rows[:10]) + "\n\n# mid\n" + "\n".join(rows[10:]) + "\n"
+    )
     path = tmp_path / "x.csv"
     path.write_text(text)
     whole = common.read_table(path, ["t", "a", "b"])
@@ -355,9 +469,10 @@ def test_read_table_in_blocks_equals_one_pass_and_keeps_line_numbers(tmp_path, m
     path.write_text(text.replace("17,-17", "17,x"))
     with pytest.raises(InputError, match="line 22"):
         common.read_table(path, ["t", "a", "b"])
-    path.write_text(text + "0.24,24")           # 24 data rows: the truncated one alone in the 6th block
+    path.write_text(text + "0.24,24")  # 24 data rows: the truncated one alone in the 6th block
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         out = common.read_table(path, ["t", "a", "b"])
-    assert len(out["t"]) == 23 and any(issubclass(w.category, DataWarning) and "truncated" in str(w.message)
-                                       for w in caught)
+    assert len(out["t"]) == 23 and any(
+        issubclass(w.category, DataWarning) and "truncated" in str(w.message) for w in caught
+    )

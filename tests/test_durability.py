@@ -1,6 +1,7 @@
 """Durability: one method failing never costs the others, and --out holds exactly one complete
 result (lock, write aside, swap) whatever happens: re-runs, foreign folders, a second run,
 SIGINT/SIGTERM at any moment, a process killed outright. Outputs cover the run, not the truth."""
+
 import dataclasses
 import json
 import os
@@ -30,7 +31,9 @@ DURATION = 60.0
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     path = tmp_path_factory.mktemp("durability") / "car"
-    write_csv_run(simulate("car", duration_s=DURATION, imu_grade="industrial", noise="white", seed=4), path)
+    write_csv_run(
+        simulate("car", duration_s=DURATION, imu_grade="industrial", noise="white", seed=4), path
+    )
     return path
 
 
@@ -46,7 +49,11 @@ def _listing(folder):
 
 def _leftovers(parent):
     """gnssacc's own temporary entries in a parent folder (partial, trash, lock)."""
-    return sorted(p.name for p in parent.iterdir() if p.name.startswith(".gnssacc-") or p.name.endswith(".lock"))
+    return sorted(
+        p.name
+        for p in parent.iterdir()
+        if p.name.startswith(".gnssacc-") or p.name.endswith(".lock")
+    )
 
 
 def _assert_complete(out, methods):
@@ -56,7 +63,9 @@ def _assert_complete(out, methods):
     m = json.loads((out / "metrics.json").read_text())
     assert set(m["methods"]) == set(methods)
     ok = [mid for mid, e in m["methods"].items() if e["status"] == "ok"]
-    assert sorted(n for n in _listing(out) if n.startswith("trajectory_")) == sorted(f"trajectory_{i}.csv" for i in ok)
+    assert sorted(n for n in _listing(out) if n.startswith("trajectory_")) == sorted(
+        f"trajectory_{i}.csv" for i in ok
+    )
     return m
 
 
@@ -66,40 +75,58 @@ def _snapshot(out):
 
 # --- one method failing never costs the others ----------------------------------------------------
 
+
 def _failing_smoother(*args, **kwargs):
-    raise RuntimeError("\nIndeterminate linear system detected while working near variable 7061644215716937729 "
-                       "(Symbol: b1).\n\nThrown when a linear system is ill-posed.")
+    raise RuntimeError(
+        "\nIndeterminate linear system detected while working near variable 7061644215716937729 "
+        "(Symbol: b1).\n\nThrown when a linear system is ill-posed."
+    )
 
 
 def test_a_failing_smoother_keeps_the_ekf_results(run_dir, tmp_path, capsys, monkeypatch):
     monkeypatch.setattr("gnssacc.estimators.smoother.run_smoother", _failing_smoother)
     out = tmp_path / "res"
-    code, stdout, stderr = _cli(["run", run_dir, "--methods", "ekf,smoother", "--out", out] + FAST, capsys)
+    code, stdout, stderr = _cli(
+        ["run", run_dir, "--methods", "ekf,smoother", "--out", out] + FAST, capsys
+    )
     assert code == 0, stderr
     m = _assert_complete(out, ["ekf", "smoother"])
-    assert m["methods"]["ekf"]["status"] == "ok" and m["methods"]["ekf"]["prmse_m"] < 0.7 * m["gnss_prmse_m"]
+    assert (
+        m["methods"]["ekf"]["status"] == "ok"
+        and m["methods"]["ekf"]["prmse_m"] < 0.7 * m["gnss_prmse_m"]
+    )
     sm = m["methods"]["smoother"]
-    assert sm == {"status": "failed", "error": "RuntimeError: Indeterminate linear system detected while working "
-                                               "near variable 7061644215716937729 (Symbol: b1)."}
+    assert sm == {
+        "status": "failed",
+        "error": "RuntimeError: Indeterminate linear system detected while working "
+        "near variable 7061644215716937729 (Symbol: b1).",
+    }
     row = next(ln for ln in stdout.splitlines() if ln.startswith("smoother "))
     assert "failed: RuntimeError: Indeterminate linear system" in row
     assert (out / "table.txt").read_text().count("failed: RuntimeError") == 1
-    warn = [ln for ln in stderr.splitlines() if ln.startswith("gnssacc: warning: smoother: failed:")]
+    warn = [
+        ln for ln in stderr.splitlines() if ln.startswith("gnssacc: warning: smoother: failed:")
+    ]
     assert len(warn) == 1 and "Traceback" not in stderr
     rows = np.loadtxt(out / "trajectory_ekf.csv", delimiter=",", skiprows=1)
     assert len(rows) == m["methods"]["ekf"]["n_epochs"] and rows[-1, 0] == pytest.approx(DURATION)
 
 
-def test_every_method_failing_exits_1_and_keeps_the_old_result(run_dir, tmp_path, capsys, monkeypatch):
+def test_every_method_failing_exits_1_and_keeps_the_old_result(
+    run_dir, tmp_path, capsys, monkeypatch
+):
     out = tmp_path / "res"
     assert _cli(["run", run_dir, "--methods", "ekf", "--out", out] + FAST, capsys)[0] == 0
     before = _snapshot(out)
 
     def boom(*args, **kwargs):
         raise FloatingPointError("covariance lost positive definiteness")
+
     monkeypatch.setattr("gnssacc.pipeline.estimate_ekf", boom)
     monkeypatch.setattr("gnssacc.estimators.smoother.run_smoother", _failing_smoother)
-    code, _, stderr = _cli(["run", run_dir, "--methods", "ekf,smoother", "--out", out] + FAST, capsys)
+    code, _, stderr = _cli(
+        ["run", run_dir, "--methods", "ekf,smoother", "--out", out] + FAST, capsys
+    )
     assert code == 1
     err = [ln for ln in stderr.splitlines() if ln.startswith("gnssacc: error:")]
     assert len(err) == 1 and "every method failed" in err[0] and "ekf: FloatingPointError" in err[0]
@@ -110,23 +137,33 @@ def test_every_method_failing_exits_1_and_keeps_the_old_result(run_dir, tmp_path
 def test_bad_input_inside_a_method_is_still_an_input_error(run_dir, tmp_path, capsys, monkeypatch):
     def bad(*args, **kwargs):
         raise InputError("cfg.toml", "[smoother] lag_s must be positive")
+
     monkeypatch.setattr("gnssacc.estimators.smoother.run_smoother", bad)
-    code, _, stderr = _cli(["run", run_dir, "--methods", "ekf,smoother", "--out", tmp_path / "res"] + FAST, capsys)
+    code, _, stderr = _cli(
+        ["run", run_dir, "--methods", "ekf,smoother", "--out", tmp_path / "res"] + FAST, capsys
+    )
     assert code == 2 and "gnssacc: error: cfg.toml: [smoother] lag_s must be positive" in stderr
     assert not (tmp_path / "res").exists() and _leftovers(tmp_path) == []
 
 
-@pytest.mark.parametrize("keys", ["gyro_bias_instability_deg_h = 0\naccel_bias_instability_mg = 0",
-                                  "gyro_bias_sigma0_deg_h = 0\naccel_bias_sigma0_mg = 0"],
-                         ids=["constant-bias", "calibrated-bias"])
+@pytest.mark.parametrize(
+    "keys",
+    [
+        "gyro_bias_instability_deg_h = 0\naccel_bias_instability_mg = 0",
+        "gyro_bias_sigma0_deg_h = 0\naccel_bias_sigma0_mg = 0",
+    ],
+    ids=["constant-bias", "calibrated-bias"],
+)
 def test_zero_bias_noise_runs_the_smoother(keys, run_dir, tmp_path, capsys):
     """A constant or a calibrated bias is a valid statement; GTSAM must not see a zero covariance.
     (The simulated industrial IMU has a bias, so the zero start sigma is wrong but must still run.)"""
     cfg = tmp_path / "zero.toml"
     cfg.write_text(f"[imu]\n{keys}\n")
     out = tmp_path / "res"
-    code, _, stderr = _cli(["run", run_dir, "--methods", "ekf,smoother-acc", "--config", cfg, "--out", out] + FAST,
-                           capsys)
+    code, _, stderr = _cli(
+        ["run", run_dir, "--methods", "ekf,smoother-acc", "--config", cfg, "--out", out] + FAST,
+        capsys,
+    )
     assert code == 0, stderr
     m = _assert_complete(out, ["ekf", "smoother-acc", "smoother-acc-online"])
     for mid, e in m["methods"].items():
@@ -134,16 +171,32 @@ def test_zero_bias_noise_runs_the_smoother(keys, run_dir, tmp_path, capsys):
 
 
 def test_failure_reason_is_one_line():
-    assert failure_reason(ValueError("bad\nthing happened.  More text\nhere")) == "ValueError: bad thing happened."
+    assert (
+        failure_reason(ValueError("bad\nthing happened.  More text\nhere"))
+        == "ValueError: bad thing happened."
+    )
     assert failure_reason(RuntimeError()) == "RuntimeError"
     assert len(failure_reason(RuntimeError("x" * 500))) == 200
 
 
 def test_table_shows_a_failed_row():
-    metrics = {"duration_s": 10.0, "gnss_prmse_m": None, "methods": {
-        "ekf": {"status": "ok", "prmse_m": 1.0, "hrmse_m": 0.5, "prmse_outage_m": None, "n_epochs": 11,
-                "improvement_pct": None, "runtime_s": 0.1, "realtime_factor": 100.0},
-        "smoother-acc": {"status": "failed", "error": "RuntimeError: boom"}}}
+    metrics = {
+        "duration_s": 10.0,
+        "gnss_prmse_m": None,
+        "methods": {
+            "ekf": {
+                "status": "ok",
+                "prmse_m": 1.0,
+                "hrmse_m": 0.5,
+                "prmse_outage_m": None,
+                "n_epochs": 11,
+                "improvement_pct": None,
+                "runtime_s": 0.1,
+                "realtime_factor": 100.0,
+            },
+            "smoother-acc": {"status": "failed", "error": "RuntimeError: boom"},
+        },
+    }
     lines = format_table(metrics).splitlines()
     assert lines[-1].split() == ["smoother-acc", "failed:", "RuntimeError:", "boom"]
     assert lines[-2].startswith("ekf ") and "1.00" in lines[-2]
@@ -151,15 +204,20 @@ def test_table_shows_a_failed_row():
 
 # --- what --out may hold --------------------------------------------------------------------------
 
+
 def test_rerun_with_fewer_methods_leaves_no_stale_files(run_dir, tmp_path, capsys):
     out = tmp_path / "res"
-    code, _, stderr = _cli(["run", run_dir, "--methods", "ekf,ekf-acc", "--tune", "none", "--out", out], capsys)
+    code, _, stderr = _cli(
+        ["run", run_dir, "--methods", "ekf,ekf-acc", "--tune", "none", "--out", out], capsys
+    )
     assert code == 0, stderr
     assert {"trajectory_ekf-acc.csv", "errors.png", "trajectory.png"} <= set(_listing(out))
     code, _, stderr = _cli(["run", run_dir, "--methods", "ekf", "--out", out] + FAST, capsys)
     assert code == 0, stderr
     _assert_complete(out, ["ekf"])
-    assert _listing(out) == sorted([MARKER, "config.toml", "metrics.json", "table.txt", "trajectory_ekf.csv"])
+    assert _listing(out) == sorted(
+        [MARKER, "config.toml", "metrics.json", "table.txt", "trajectory_ekf.csv"]
+    )
     assert _leftovers(tmp_path) == []
 
 
@@ -171,17 +229,24 @@ def test_a_foreign_folder_is_refused_without_overwrite(run_dir, tmp_path, capsys
     assert code == 2 and stderr.count("gnssacc: error: --out:") == 1
     assert "not a gnssacc result" in stderr and "--overwrite" in stderr
     assert _listing(out) == ["thesis.tex"] and _leftovers(tmp_path) == []
-    code, _, stderr = _cli(["run", run_dir, "--methods", "ekf", "--out", out, "--overwrite"] + FAST, capsys)
+    code, _, stderr = _cli(
+        ["run", run_dir, "--methods", "ekf", "--out", out, "--overwrite"] + FAST, capsys
+    )
     assert code == 0, stderr
     _assert_complete(out, ["ekf"])
 
 
 def test_what_out_may_be(run_dir, tmp_path, capsys):
     (tmp_path / "empty").mkdir()
-    assert _cli(["run", run_dir, "--methods", "ekf", "--out", tmp_path / "empty"] + FAST, capsys)[0] == 0
+    assert (
+        _cli(["run", run_dir, "--methods", "ekf", "--out", tmp_path / "empty"] + FAST, capsys)[0]
+        == 0
+    )
     _assert_complete(tmp_path / "empty", ["ekf"])
     (tmp_path / "afile").write_text("x")
-    code, _, stderr = _cli(["run", run_dir, "--methods", "ekf", "--out", tmp_path / "afile"] + FAST, capsys)
+    code, _, stderr = _cli(
+        ["run", run_dir, "--methods", "ekf", "--out", tmp_path / "afile"] + FAST, capsys
+    )
     assert code == 2 and "not a folder" in stderr and (tmp_path / "afile").read_text() == "x"
     # A result from before the marker file (metrics.json only) is replaced as a whole.
     old = tmp_path / "old"
@@ -191,8 +256,9 @@ def test_what_out_may_be(run_dir, tmp_path, capsys):
     assert _cli(["run", run_dir, "--methods", "ekf", "--out", old] + FAST, capsys)[0] == 0
     _assert_complete(old, ["ekf"])
     # Never the input itself, not even with --overwrite.
-    code, _, stderr = _cli(["run", run_dir, "--methods", "ekf", "--out", run_dir.parent, "--overwrite"] + FAST,
-                           capsys)
+    code, _, stderr = _cli(
+        ["run", run_dir, "--methods", "ekf", "--out", run_dir.parent, "--overwrite"] + FAST, capsys
+    )
     assert code == 2 and "would delete" in stderr and (run_dir / "imu.csv").is_file()
 
 
@@ -201,7 +267,9 @@ def test_a_second_run_is_refused_before_computing(run_dir, tmp_path, capsys, mon
     lock = FolderLock(out)
     assert lock.acquire()
     try:
-        monkeypatch.setattr("gnssacc.pipeline.load_source", lambda *a, **k: pytest.fail("computed while locked"))
+        monkeypatch.setattr(
+            "gnssacc.pipeline.load_source", lambda *a, **k: pytest.fail("computed while locked")
+        )
         code, _, stderr = _cli(["run", run_dir, "--methods", "ekf", "--out", out] + FAST, capsys)
     finally:
         lock.release()
@@ -211,9 +279,26 @@ def test_a_second_run_is_refused_before_computing(run_dir, tmp_path, capsys, mon
 
 def test_two_runs_started_together(run_dir, tmp_path):
     out = tmp_path / "res"
-    procs = [subprocess.Popen([sys.executable, "-m", "gnssacc.cli", "run", str(run_dir), "--methods", m,
-                               "--out", str(out)] + FAST, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-             for m in ("ekf", "ekf-acc")]
+    procs = [
+        subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "gnssacc.cli",
+                "run",
+                str(run_dir),
+                "--methods",
+                m,
+                "--out",
+                str(out),
+            ]
+            + FAST,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for m in ("ekf", "ekf-acc")
+    ]
     res = [(p.wait(timeout=120), p.stderr.read()) for p in procs]
     for p in procs:
         p.stdout.close()
@@ -234,19 +319,30 @@ def test_two_runs_started_together(run_dir, tmp_path):
 
 # --- leftovers of a process killed outright ---------------------------------------------------------
 
+
 def test_stale_partials_are_cleaned_but_not_a_live_one(run_dir, tmp_path, capsys):
-    for name in (".gnssacc-partial-res-a1b2c3", ".gnssacc-trash-res-0f0f", ".gnssacc-partial-gone-x_y",
-                 ".gnssacc-partial-busy-zz9"):
+    for name in (
+        ".gnssacc-partial-res-a1b2c3",
+        ".gnssacc-trash-res-0f0f",
+        ".gnssacc-partial-gone-x_y",
+        ".gnssacc-partial-busy-zz9",
+    ):
         (tmp_path / name).mkdir()
         (tmp_path / name / "trajectory_ekf.csv").write_text("t\n")
     busy = FolderLock(tmp_path / "busy")
     assert busy.acquire()
     try:
-        assert _cli(["run", run_dir, "--methods", "ekf", "--out", tmp_path / "res"] + FAST, capsys)[0] == 0
+        assert (
+            _cli(["run", run_dir, "--methods", "ekf", "--out", tmp_path / "res"] + FAST, capsys)[0]
+            == 0
+        )
         assert _leftovers(tmp_path) == [".busy.lock", ".gnssacc-partial-busy-zz9"]
     finally:
         busy.release()
-    assert clean_stale(tmp_path) == [tmp_path / ".gnssacc-partial-busy-zz9"] and _leftovers(tmp_path) == []
+    assert (
+        clean_stale(tmp_path) == [tmp_path / ".gnssacc-partial-busy-zz9"]
+        and _leftovers(tmp_path) == []
+    )
 
 
 def test_killed_between_the_two_renames_the_old_result_comes_back(tmp_path):
@@ -285,13 +381,15 @@ def _swallow(sig):
         pass
 
 
-@pytest.mark.parametrize("sig, expected", [(signal.SIGTERM, Terminated), (signal.SIGINT, KeyboardInterrupt)])
+@pytest.mark.parametrize(
+    "sig, expected", [(signal.SIGTERM, Terminated), (signal.SIGINT, KeyboardInterrupt)]
+)
 def test_an_error_after_a_swallowed_signal_is_the_interruption(sig, expected):
     """Within signals_raise, any exception met after a signal arrived is that interruption; outside
     it, or before a signal, an exception is only itself; the handlers are restored."""
     handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     with signals_raise():
-        raise_if_interrupted(ValueError("before any signal"))   # no signal yet: not raised
+        raise_if_interrupted(ValueError("before any signal"))  # no signal yet: not raised
         _swallow(sig)
         with pytest.raises(expected) as info:
             raise_if_interrupted(ValueError("Invalid bounding box"))
@@ -300,9 +398,12 @@ def test_an_error_after_a_swallowed_signal_is_the_interruption(sig, expected):
     assert {s: signal.getsignal(s) for s in handlers} == handlers
 
 
-@pytest.mark.parametrize("sig, then", [(signal.SIGTERM, "raise"), (signal.SIGINT, "raise"),
-                                       (signal.SIGTERM, "return")])
-def test_a_signal_swallowed_while_plotting_interrupts_the_run(run_dir, tmp_path, capsys, monkeypatch, sig, then):
+@pytest.mark.parametrize(
+    "sig, then", [(signal.SIGTERM, "raise"), (signal.SIGINT, "raise"), (signal.SIGTERM, "return")]
+)
+def test_a_signal_swallowed_while_plotting_interrupts_the_run(
+    run_dir, tmp_path, capsys, monkeypatch, sig, then
+):
     """The CI failure of 2026-11-24: SIGTERM inside matplotlib came back as 'ValueError: Invalid
     bounding box' and the run ended as an internal error (exit 1) instead of an interruption."""
     out = tmp_path / "res"
@@ -317,13 +418,15 @@ def test_a_signal_swallowed_while_plotting_interrupts_the_run(run_dir, tmp_path,
     from gnssacc.outputs import figures
 
     monkeypatch.setitem(figures.FIGURES, "errors", plot)
-    code, _, stderr = _cli(["run", run_dir, "--methods", "ekf,ekf-acc", "--tune", "none", "--out", out], capsys)
+    code, _, stderr = _cli(
+        ["run", run_dir, "--methods", "ekf,ekf-acc", "--tune", "none", "--out", out], capsys
+    )
     assert code == (143 if sig == signal.SIGTERM else 130), stderr
     assert "internal error" not in stderr and _leftovers(tmp_path) == []
     said = [ln for ln in stderr.splitlines() if ln.startswith("gnssacc: interrupted:")]
-    if then == "raise":   # the plot failed: the old result stays
+    if then == "raise":  # the plot failed: the old result stays
         assert said == [f"gnssacc: interrupted: {out} left unchanged"] and _snapshot(out) == before
-    else:                 # the plot went on: the new result is complete, and the run still stops
+    else:  # the plot went on: the new result is complete, and the run still stops
         assert said == [f"gnssacc: interrupted: {out} holds the new complete result"]
         _assert_complete(out, ["ekf", "ekf-acc"])
 
@@ -333,9 +436,15 @@ def test_a_failed_rename_restores_the_old_result(tmp_path, monkeypatch):
     out.mkdir()
     (out / MARKER).write_text("{}")
     real = os.rename
-    monkeypatch.setattr(outdir.os, "rename",
-                        lambda a, b: (_ for _ in ()).throw(OSError("disk gone")) if str(a).find("partial") > 0
-                        else real(a, b))
+    monkeypatch.setattr(
+        outdir.os,
+        "rename",
+        lambda a, b: (
+            (_ for _ in ()).throw(OSError("disk gone"))
+            if str(a).find("partial") > 0
+            else real(a, b)
+        ),
+    )
     with ResultDir(out) as target, pytest.raises(OSError, match="disk gone"):
         target.replace(lambda folder: (folder / "metrics.json").write_text("{}"))
     assert _listing(out) == [MARKER] and _leftovers(tmp_path) == []
@@ -362,16 +471,23 @@ setattr(module, name, wrapped)
 from gnssacc.cli import main
 sys.exit(main(sys.argv[4:]))
 """
-HOOK_WHEN = {"pipeline.load_source": "before",           # the very start, the lock just taken
-             "pipeline.run_methods": "before",           # computing
-             "pipeline.write_trajectory_csv": "after",   # writing the new result (one file written)
-             "outputs.report.format_table": "before",    # printing the table, before the files (the pipeline has its own name)
-             "api.write_result": "after"}                # the new result in place, "results:" not yet printed
+HOOK_WHEN = {
+    "pipeline.load_source": "before",  # the very start, the lock just taken
+    "pipeline.run_methods": "before",  # computing
+    "pipeline.write_trajectory_csv": "after",  # writing the new result (one file written)
+    "outputs.report.format_table": "before",  # printing the table, before the files (the pipeline has its own name)
+    "api.write_result": "after",
+}  # the new result in place, "results:" not yet printed
 
 
 def _start(hook, pause, args):
-    return subprocess.Popen([sys.executable, "-c", SCRIPT, hook, HOOK_WHEN[hook], str(pause), "run"]
-                            + [str(a) for a in args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        [sys.executable, "-c", SCRIPT, hook, HOOK_WHEN[hook], str(pause), "run"]
+        + [str(a) for a in args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
 
 
 def _wait_for(proc, text):
@@ -383,15 +499,18 @@ def _wait_for(proc, text):
     raise AssertionError(f"never reached {text!r}: {''.join(lines)}")
 
 
-@pytest.mark.parametrize("sig, hook, old", [
-    (signal.SIGTERM, "pipeline.load_source", True),
-    (signal.SIGINT, "pipeline.run_methods", True),
-    (signal.SIGTERM, "pipeline.run_methods", False),
-    (signal.SIGTERM, "pipeline.write_trajectory_csv", True),
-    (signal.SIGINT, "pipeline.write_trajectory_csv", False),
-    (signal.SIGINT, "outputs.report.format_table", True),
-    (signal.SIGINT, "api.write_result", True),
-])
+@pytest.mark.parametrize(
+    "sig, hook, old",
+    [
+        (signal.SIGTERM, "pipeline.load_source", True),
+        (signal.SIGINT, "pipeline.run_methods", True),
+        (signal.SIGTERM, "pipeline.run_methods", False),
+        (signal.SIGTERM, "pipeline.write_trajectory_csv", True),
+        (signal.SIGINT, "pipeline.write_trajectory_csv", False),
+        (signal.SIGINT, "outputs.report.format_table", True),
+        (signal.SIGINT, "api.write_result", True),
+    ],
+)
 def test_interrupted_leaves_the_old_result_or_the_new(run_dir, tmp_path, capsys, sig, hook, old):
     out = tmp_path / "res"
     if old:
@@ -401,18 +520,23 @@ def test_interrupted_leaves_the_old_result_or_the_new(run_dir, tmp_path, capsys,
     _wait_for(proc, "AT " + hook)
     if hook == "pipeline.write_trajectory_csv":
         partial = [n for n in _leftovers(tmp_path) if n.startswith(".gnssacc-partial-")]
-        assert len(partial) == 1 and _listing(tmp_path / partial[0])   # caught in the middle of writing
+        assert len(partial) == 1 and _listing(
+            tmp_path / partial[0]
+        )  # caught in the middle of writing
     proc.send_signal(sig)
     _, stderr = proc.communicate(timeout=30)
     assert proc.returncode == (130 if sig == signal.SIGINT else 143)
     said = [ln for ln in stderr.splitlines() if ln.startswith("gnssacc: interrupted:")]
     assert "Traceback" not in stderr and _leftovers(tmp_path) == []
-    if hook == "api.write_result":   # after the swap
+    if hook == "api.write_result":  # after the swap
         assert said == [f"gnssacc: interrupted: {out} holds the new complete result"]
         _assert_complete(out, ["ekf", "ekf-acc"])
         return
-    assert said == [f"gnssacc: interrupted: {out} left unchanged" if old
-                    else f"gnssacc: interrupted: nothing written to {out}"]
+    assert said == [
+        f"gnssacc: interrupted: {out} left unchanged"
+        if old
+        else f"gnssacc: interrupted: nothing written to {out}"
+    ]
     assert _snapshot(out) == before
 
 
@@ -421,7 +545,7 @@ def test_sigterm_at_random_moments_leaves_old_or_new(run_dir, tmp_path, capsys):
     complete result or the new one, the message says which, and nothing else is left."""
     out = tmp_path / "res"
     args = [run_dir, "--methods", "ekf,ekf-acc", "--tune", "none", "--out", out]
-    proc = _start("pipeline.load_source", 0, args)   # how long a run takes from its start
+    proc = _start("pipeline.load_source", 0, args)  # how long a run takes from its start
     _wait_for(proc, "AT pipeline.load_source")
     t0 = time.perf_counter()
     proc.communicate(timeout=60)
@@ -429,7 +553,9 @@ def test_sigterm_at_random_moments_leaves_old_or_new(run_dir, tmp_path, capsys):
     assert proc.returncode == 0
     rng, n = random.Random(7), 6
     seen = set()
-    for delay in [span * (i + rng.random()) / n for i in range(n)] + [1.5 * span]:   # spread over the run
+    for delay in [span * (i + rng.random()) / n for i in range(n)] + [
+        1.5 * span
+    ]:  # spread over the run
         before = _snapshot(out)
         proc = _start("pipeline.load_source", 0, args)
         _wait_for(proc, "AT pipeline.load_source")
@@ -439,20 +565,25 @@ def test_sigterm_at_random_moments_leaves_old_or_new(run_dir, tmp_path, capsys):
         said = [ln for ln in stderr.splitlines() if ln.startswith("gnssacc: interrupted:")]
         assert "Traceback" not in stderr, stderr
         assert _leftovers(tmp_path) == [], (_leftovers(tmp_path), stderr)
-        finished = "results: " in stdout   # then a SIGTERM during the interpreter's exit just ends it
+        finished = (
+            "results: " in stdout
+        )  # then a SIGTERM during the interpreter's exit just ends it
         if finished or said == [f"gnssacc: interrupted: {out} holds the new complete result"]:
             assert proc.returncode in ((0, -signal.SIGTERM) if finished else (143,))
             _assert_complete(out, ["ekf", "ekf-acc"])
             assert _snapshot(out) != before
             seen.add("new")
         else:
-            assert proc.returncode == 143 and said == [f"gnssacc: interrupted: {out} left unchanged"], stderr
+            assert proc.returncode == 143 and said == [
+                f"gnssacc: interrupted: {out} left unchanged"
+            ], stderr
             assert _snapshot(out) == before
             seen.add("old")
     assert seen == {"old", "new"}
 
 
 # --- outputs cover the run ------------------------------------------------------------------------
+
 
 def _copy(run_dir, dst):
     dst.mkdir()
@@ -465,14 +596,24 @@ def test_truth_shorter_than_the_run_leaves_full_outputs(run_dir, tmp_path, capsy
     d = _copy(run_dir, tmp_path / "short")
     lines = (d / "truth.csv").read_text().splitlines()
     head = next(i for i, ln in enumerate(lines) if not ln.startswith("#")) + 1
-    (d / "truth.csv").write_text("\n".join(lines[:head + 21]) + "\n")   # truth for t = 0 .. 20 s only
+    (d / "truth.csv").write_text(
+        "\n".join(lines[: head + 21]) + "\n"
+    )  # truth for t = 0 .. 20 s only
     out = tmp_path / "res"
-    code, stdout, stderr = _cli(["run", d, "--methods", "ekf,smoother", "--out", out] + FAST, capsys)
+    code, stdout, stderr = _cli(
+        ["run", d, "--methods", "ekf,smoother", "--out", out] + FAST, capsys
+    )
     assert code == 0, stderr
     warn = [ln for ln in stderr.splitlines() if "truth covers only" in ln]
-    assert len(warn) == 1 and warn[0].startswith("gnssacc: warning:") and f"20.0 of {DURATION:.1f} s" in warn[0]
+    assert (
+        len(warn) == 1
+        and warn[0].startswith("gnssacc: warning:")
+        and f"20.0 of {DURATION:.1f} s" in warn[0]
+    )
     m = json.loads((out / "metrics.json").read_text())
-    assert m["scored_window_s"] == pytest.approx([0.0, 20.0]) and m["truth_coverage"]["fraction"] < 0.4
+    assert (
+        m["scored_window_s"] == pytest.approx([0.0, 20.0]) and m["truth_coverage"]["fraction"] < 0.4
+    )
     assert "scored over t = 0.0 .. 20.0 s" in stdout
     for mid in ("ekf", "smoother"):
         t = np.loadtxt(out / f"trajectory_{mid}.csv", delimiter=",", skiprows=1)[:, 0]
@@ -487,6 +628,7 @@ def test_output_epochs_do_not_depend_on_the_truth(run_dir, tmp_path):
     from gnssacc.estimators.ekf import default_output_times
     from gnssacc.pipeline import with_outages
     from gnssacc.sources.csvdir import load_csv_run
+
     run = load_csv_run(run_dir, load_config())
     full = default_output_times(run)
     short = default_output_times(dataclasses.replace(run, truth=None))
@@ -499,13 +641,22 @@ def test_output_epochs_do_not_depend_on_the_truth(run_dir, tmp_path):
 
 def test_init_outside_the_run_is_refused(tmp_path, capsys):
     d = tmp_path / "r"
-    write_csv_run(simulate("car", duration_s=30.0, imu_grade="industrial", noise="white", seed=1, give_init=True), d)
+    write_csv_run(
+        simulate(
+            "car", duration_s=30.0, imu_grade="industrial", noise="white", seed=1, give_init=True
+        ),
+        d,
+    )
     doc = json.loads((d / "init.json").read_text())
     for t, what in ((45.0, "after the run's end"), (-5.0, "before the run's start")):
         (d / "init.json").write_text(json.dumps({**doc, "t": t}))
-        code, _, stderr = _cli(["run", d, "--methods", "ekf", "--out", tmp_path / "o"] + FAST, capsys)
+        code, _, stderr = _cli(
+            ["run", d, "--methods", "ekf", "--out", tmp_path / "o"] + FAST, capsys
+        )
         err = [ln for ln in stderr.splitlines() if ln.startswith("gnssacc: error:")]
         assert code == 2 and len(err) == 1, stderr
         assert "init.json" in err[0] and what in err[0] and "0.000 .. 30.000 s" in err[0]
-    (d / "init.json").write_text(json.dumps({**doc, "t": -0.2}))   # a start taken a little early is fine
+    (d / "init.json").write_text(
+        json.dumps({**doc, "t": -0.2})
+    )  # a start taken a little early is fine
     assert _cli(["run", d, "--methods", "ekf", "--out", tmp_path / "o"] + FAST, capsys)[0] == 0

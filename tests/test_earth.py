@@ -1,9 +1,17 @@
 """Earth model and frame conversions against published WGS-84 values and round trips."""
+
 import numpy as np
 import pytest
 
 from gnssacc.core import earth
-from gnssacc.core.rotations import dcm_to_euler, dcm_to_rotvec, euler_error_jacobian, euler_to_dcm, rotvec_to_dcm, skew
+from gnssacc.core.rotations import (
+    dcm_to_euler,
+    dcm_to_rotvec,
+    euler_error_jacobian,
+    euler_to_dcm,
+    rotvec_to_dcm,
+    skew,
+)
 
 
 def test_normal_gravity_published_values():
@@ -27,7 +35,9 @@ def test_radii_of_curvature():
 def test_ecef_known_points():
     np.testing.assert_allclose(earth.llh_to_ecef(0.0, 0.0, 0.0), [earth.A, 0, 0], atol=1e-9)
     np.testing.assert_allclose(earth.llh_to_ecef(np.pi / 2, 0.0, 0.0), [0, 0, earth.B], atol=1e-6)
-    np.testing.assert_allclose(earth.llh_to_ecef(0.0, np.pi / 2, 100.0), [0, earth.A + 100, 0], atol=1e-6)
+    np.testing.assert_allclose(
+        earth.llh_to_ecef(0.0, np.pi / 2, 100.0), [0, earth.A + 100, 0], atol=1e-6
+    )
 
 
 def test_llh_ecef_round_trip():
@@ -50,7 +60,9 @@ def test_tangent_frame_round_trip_and_axes():
     R_M, R_N = earth.radii(np.radians(49.0))
     assert lat - np.radians(49.0) == pytest.approx(1.0 / (R_M + 110.0), rel=1e-6)
     lat, lon, h = frame.to_llh([0.0, 1.0, 0.0])
-    assert lon - np.radians(8.4) == pytest.approx(1.0 / ((R_N + 110.0) * np.cos(np.radians(49.0))), rel=1e-6)
+    assert lon - np.radians(8.4) == pytest.approx(
+        1.0 / ((R_N + 110.0) * np.cos(np.radians(49.0))), rel=1e-6
+    )
     assert frame.to_llh([0.0, 0.0, -5.0])[2] == pytest.approx(115.0, abs=1e-6)
 
 
@@ -69,8 +81,11 @@ def test_rotation_helpers():
         np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
         np.testing.assert_allclose(dcm_to_euler(R), rpy, atol=1e-12)
         phi = rng.normal(size=3) * rng.uniform(0, 3)
-        np.testing.assert_allclose(dcm_to_rotvec(rotvec_to_dcm(phi)) if np.linalg.norm(phi) < np.pi else 0,
-                                   phi if np.linalg.norm(phi) < np.pi else 0, atol=1e-10)
+        np.testing.assert_allclose(
+            dcm_to_rotvec(rotvec_to_dcm(phi)) if np.linalg.norm(phi) < np.pi else 0,
+            phi if np.linalg.norm(phi) < np.pi else 0,
+            atol=1e-10,
+        )
     np.testing.assert_allclose(skew([1, 2, 3]) @ [4, 5, 6], np.cross([1, 2, 3], [4, 5, 6]))
     # Near-pi rotations recover the angle and the (sign-ambiguous) axis.
     axis = np.array([1.0, 2.0, -2.0]) / 3.0
@@ -86,22 +101,25 @@ def test_euler_error_jacobian_by_finite_differences():
     for i in range(3):
         phi = np.zeros(3)
         phi[i] = eps
-        d = (np.array(dcm_to_euler(rotvec_to_dcm(phi) @ R)) - np.array(dcm_to_euler(rotvec_to_dcm(-phi) @ R))) / (2 * eps)
+        d = (
+            np.array(dcm_to_euler(rotvec_to_dcm(phi) @ R))
+            - np.array(dcm_to_euler(rotvec_to_dcm(-phi) @ R))
+        ) / (2 * eps)
         np.testing.assert_allclose(d, J[:, i], atol=1e-6)
 
 
 # WGS-84 as published in NIMA TR8350.2, 3rd edition (2000), typed from the standard and not taken
 # from gnssacc: Table 3.1 (defining parameters) and Table 3.3 (derived geometric and physical constants).
-WGS84_A = 6378137.0                  # semi-major axis [m]
-WGS84_INV_F = 298.257223563          # reciprocal of flattening [-]
-WGS84_OMEGA = 7292115.0e-11          # angular velocity of the earth [rad/s]
-WGS84_GM = 3986004.418e8             # earth's gravitational constant [m^3/s^2]
-WGS84_B = 6356752.3142               # semi-minor axis [m]
-WGS84_E2 = 6.69437999014e-3          # first eccentricity squared [-]
-WGS84_GAMMA_E = 9.7803253359         # normal gravity at the equator [m/s^2]
-WGS84_GAMMA_P = 9.8321849378         # normal gravity at the poles [m/s^2]
-WGS84_K = 0.00193185265241           # Somigliana's constant k [-]
-WGS84_M = 0.00344978650684           # m = omega^2 a^2 b / GM [-]
+WGS84_A = 6378137.0  # semi-major axis [m]
+WGS84_INV_F = 298.257223563  # reciprocal of flattening [-]
+WGS84_OMEGA = 7292115.0e-11  # angular velocity of the earth [rad/s]
+WGS84_GM = 3986004.418e8  # earth's gravitational constant [m^3/s^2]
+WGS84_B = 6356752.3142  # semi-minor axis [m]
+WGS84_E2 = 6.69437999014e-3  # first eccentricity squared [-]
+WGS84_GAMMA_E = 9.7803253359  # normal gravity at the equator [m/s^2]
+WGS84_GAMMA_P = 9.8321849378  # normal gravity at the poles [m/s^2]
+WGS84_K = 0.00193185265241  # Somigliana's constant k [-]
+WGS84_M = 0.00344978650684  # m = omega^2 a^2 b / GM [-]
 
 
 def test_wgs84_constants_equal_the_published_values():
@@ -122,13 +140,16 @@ def _published_normal_gravity(lat, h):
     s2 = np.sin(lat) ** 2
     f = 1.0 / WGS84_INV_F
     g0 = WGS84_GAMMA_E * (1.0 + WGS84_K * s2) / np.sqrt(1.0 - WGS84_E2 * s2)
-    return g0 * (1.0 - 2.0 / WGS84_A * (1.0 + f + WGS84_M - 2.0 * f * s2) * h + 3.0 * h**2 / WGS84_A**2)
+    return g0 * (
+        1.0 - 2.0 / WGS84_A * (1.0 + f + WGS84_M - 2.0 * f * s2) * h + 3.0 * h**2 / WGS84_A**2
+    )
 
 
 @pytest.mark.parametrize("lat_deg, h", [(0.0, 0.0), (32.0, 50.0), (60.0, 1500.0), (-45.0, -30.0)])
 def test_normal_gravity_equals_the_published_formula(lat_deg, h):
-    assert earth.normal_gravity(np.radians(lat_deg), h) == pytest.approx(_published_normal_gravity(np.radians(lat_deg), h),
-                                                                         abs=1e-10)
+    assert earth.normal_gravity(np.radians(lat_deg), h) == pytest.approx(
+        _published_normal_gravity(np.radians(lat_deg), h), abs=1e-10
+    )
     assert _published_normal_gravity(np.pi / 2, 0.0) == pytest.approx(WGS84_GAMMA_P, abs=1e-9)
 
 
@@ -149,10 +170,24 @@ def test_compiled_strapdown_holds_still_under_the_published_earth_rate_and_gravi
     w_n = WGS84_OMEGA * np.array([np.cos(lat), 0.0, -np.sin(lat)])
     f_n = np.array([0.0, 0.0, -_published_normal_gravity(lat, h)])
     z3, seg = np.zeros(3), np.zeros(0, np.int64)
-    prop = Propagator(t, np.tile(R_nb.T @ f_n, (n, 1)), np.tile(R_nb.T @ w_n, (n, 1)), z3, z3, z3, z3,
-                      (seg, seg, np.zeros((0, 3)), np.zeros((0, 3))))
-    s = SimpleNamespace(pos=np.array([lat, lon, h]), v_n=z3.copy(), R_nb=R_nb.copy(), b_a=z3.copy(), b_g=z3.copy(),
-                        P=np.eye(15))
+    prop = Propagator(
+        t,
+        np.tile(R_nb.T @ f_n, (n, 1)),
+        np.tile(R_nb.T @ w_n, (n, 1)),
+        z3,
+        z3,
+        z3,
+        z3,
+        (seg, seg, np.zeros((0, 3)), np.zeros((0, 3))),
+    )
+    s = SimpleNamespace(
+        pos=np.array([lat, lon, h]),
+        v_n=z3.copy(),
+        R_nb=R_nb.copy(),
+        b_a=z3.copy(),
+        b_g=z3.copy(),
+        P=np.eye(15),
+    )
     prop.advance(s, 1, 0.0, 600.0, with_cov=False)
     drift = earth.LocalTangentFrame(lat, lon, h).to_ned(*s.pos)
     assert np.linalg.norm(drift) < 1e-3, drift

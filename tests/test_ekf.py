@@ -1,4 +1,5 @@
 """Mechanization and EKF against simulated runs with known truth, and the KITTI integration test."""
+
 from types import SimpleNamespace
 
 import numpy as np
@@ -22,8 +23,16 @@ def _free_inertial(run, duration_s, b_a=np.zeros(3), b_g=np.zeros(3)):
     R_nb = euler_to_dcm(*tr.rpy[0])
     imu = run.imu
     z3, no_seg = np.zeros(3), np.zeros(0, np.int64)
-    prop = mech.Propagator(imu.t, imu.f_b + b_a, imu.omega_ib_b + b_g, z3, z3, z3, z3,
-                           (no_seg, no_seg, np.zeros((0, 3)), np.zeros((0, 3))))
+    prop = mech.Propagator(
+        imu.t,
+        imu.f_b + b_a,
+        imu.omega_ib_b + b_g,
+        z3,
+        z3,
+        z3,
+        z3,
+        (no_seg, no_seg, np.zeros((0, 3)), np.zeros((0, 3))),
+    )
     t0 = imu.t[0]
     state = SimpleNamespace(pos=pos, v_n=v_n, R_nb=R_nb, b_a=z3.copy(), b_g=z3.copy(), P=np.eye(15))
     prop.advance(state, 1, t0, t0 + duration_s, with_cov=False)
@@ -40,7 +49,9 @@ def test_stationary_perfect_imu_stays_put():
 
 
 def test_stationary_biased_imu_drifts_as_theory_says():
-    run = simulate("static", duration_s=65.0, imu_grade="perfect", noise="none", seed=0, initial_yaw_deg=0.0)
+    run = simulate(
+        "static", duration_s=65.0, imu_grade="perfect", noise="none", seed=0, initial_yaw_deg=0.0
+    )
     t = 60.0
     # Accelerometer bias along body x (= north at yaw 0): dp_N = b t^2 / 2 (Schuler term < 0.1 %).
     b = 1e-3 * 9.80665
@@ -101,8 +112,12 @@ def test_suspect_spans_get_inflated_noise():
     clean = check_imu(run.imu, cfg)
     assert not clean.spans
     i0, i1 = 5000, 5150
-    flagged = QualityReport([Span("interpolated", run.imu.t[i0], run.imu.t[i1 - 1], i0, i1, "all", "test")],
-                            len(run.imu), 0.01, 0.01)
+    flagged = QualityReport(
+        [Span("interpolated", run.imu.t[i0], run.imu.t[i1 - 1], i0, i1, "all", "test")],
+        len(run.imu),
+        0.01,
+        0.01,
+    )
     t_out = np.array([run.imu.t[i1]])
     a = run_ekf(run, cfg, "ekf", quality=clean, output_times=t_out)
     b = run_ekf(run, cfg, "ekf", quality=flagged, output_times=t_out)
@@ -143,7 +158,9 @@ def test_self_initialisation_of_a_slow_ugv_with_correlated_gnss_noise():
     z = []
     for seed in range(8):
         run = simulate("ugv", duration_s=120.0, imu_grade="industrial", noise="gm", seed=seed)
-        ini = select_yaw(run, cfg, detect_stationary(run.imu, run.gnss, run.origin), filter_pass=run_ekf).init
+        ini = select_yaw(
+            run, cfg, detect_stationary(run.imu, run.gnss, run.origin), filter_pass=run_ekf
+        ).init
         assert ini.t == run.t_start
         err = (ini.rpy[2] - run.truth.rpy[0, 2] + np.pi) % (2 * np.pi) - np.pi
         z.append(err / ini.sigma_att_rad[2])
@@ -159,7 +176,7 @@ def test_yaw_bank_is_not_misled_by_an_imu_still_cruise_inside_an_outage():
 
     run = simulate("car", 300.0, imu_grade="industrial", seed=0)
     res = process(run, methods=["ekf"], outage_every="60:20", tune="none")
-    assert any(not s.gnss_checked for s in res.ident.stationary.spans)   # the trap is there
+    assert any(not s.gnss_checked for s in res.ident.stationary.spans)  # the trap is there
     init = res.ident.init
     err = np.degrees(abs((init.rpy[2] - run.truth.rpy[0, 2] + np.pi) % (2 * np.pi) - np.pi))
     assert err < 3.0 * np.degrees(init.sigma_att_rad[2]), err

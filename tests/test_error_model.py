@@ -1,4 +1,5 @@
 """The error model F (and Phi) against finite differences of the nonlinear mechanization."""
+
 import numpy as np
 import pytest
 
@@ -12,17 +13,26 @@ def _error(est, true):
     pos_e, v_e, R_e, ba_e, bg_e = est
     pos, v, R, ba, bg = true
     R_M, R_N = earth.radii(pos[0])
-    dp = np.array([(R_M + pos[2]) * (pos_e[0] - pos[0]),
-                   (R_N + pos[2]) * np.cos(pos[0]) * (pos_e[1] - pos[1]),
-                   -(pos_e[2] - pos[2])])
+    dp = np.array(
+        [
+            (R_M + pos[2]) * (pos_e[0] - pos[0]),
+            (R_N + pos[2]) * np.cos(pos[0]) * (pos_e[1] - pos[1]),
+            -(pos_e[2] - pos[2]),
+        ]
+    )
     return np.concatenate([dp, v_e - v, dcm_to_rotvec(R_e @ R.T), ba_e - ba, bg_e - bg])
 
 
 def _perturb(true, e):
     pos, v, R, ba, bg = true
     R_M, R_N = earth.radii(pos[0])
-    pos_e = np.array([pos[0] + e[0] / (R_M + pos[2]), pos[1] + e[1] / ((R_N + pos[2]) * np.cos(pos[0])),
-                      pos[2] - e[2]])
+    pos_e = np.array(
+        [
+            pos[0] + e[0] / (R_M + pos[2]),
+            pos[1] + e[1] / ((R_N + pos[2]) * np.cos(pos[0])),
+            pos[2] - e[2],
+        ]
+    )
     return pos_e, v + e[3:6], rotvec_to_dcm(e[6:9]) @ R, ba + e[9:12], bg + e[12:15]
 
 
@@ -45,8 +55,9 @@ def _error_rate(true, e, f_b, w_b, h):
     return (4 * _central(true, est, f_b, w_b, h / 2) - _central(true, est, f_b, w_b, h)) / 3
 
 
-@pytest.mark.parametrize("lat_deg,v_n", [(50.0, [20.0, -15.0, 1.0]), (-33.0, [-3.0, 2.0, -0.5]),
-                                         (10.0, [0.0, 0.0, 0.0])])
+@pytest.mark.parametrize(
+    "lat_deg,v_n", [(50.0, [20.0, -15.0, 1.0]), (-33.0, [-3.0, 2.0, -0.5]), (10.0, [0.0, 0.0, 0.0])]
+)
 def test_F_matches_finite_differences(lat_deg, v_n):
     pos = np.array([np.radians(lat_deg), np.radians(8.0), 300.0])
     v = np.array(v_n)
@@ -59,7 +70,9 @@ def test_F_matches_finite_differences(lat_deg, v_n):
     for j in range(15):
         e = np.zeros(15)
         e[j] = eps[j]
-        F_num[:, j] = (_error_rate(true, e, f_b, w_b, 0.05) - _error_rate(true, -e, f_b, w_b, 0.05)) / (2 * eps[j])
+        F_num[:, j] = (
+            _error_rate(true, e, f_b, w_b, 0.05) - _error_rate(true, -e, f_b, w_b, 0.05)
+        ) / (2 * eps[j])
     F = system_matrix(pos, v, R, f_b)
     # Block tolerances (absolute, plus 0.5 % relative). Rows of the position error are limited by
     # the double precision of latitude (~1e-9 m), which these perturbations turn into ~5e-6;
@@ -72,7 +85,9 @@ def test_F_matches_finite_differences(lat_deg, v_n):
     err = np.abs(F - F_num)
     tol = atol + 5e-3 * np.abs(F_num)
     bad = np.argwhere(err > tol)
-    assert bad.size == 0, "\n".join(f"F[{i},{j}] = {F[i, j]:.6e}, numeric {F_num[i, j]:.6e}" for i, j in bad)
+    assert bad.size == 0, "\n".join(
+        f"F[{i},{j}] = {F[i, j]:.6e}, numeric {F_num[i, j]:.6e}" for i, j in bad
+    )
     # The blocks the paper names explicitly are exact.
     np.testing.assert_allclose(F[0:3, 3:6], np.eye(3))
     np.testing.assert_allclose(F[3:6, 9:12], R)

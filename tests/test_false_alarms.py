@@ -6,6 +6,7 @@ the count is the same on every run: the test asserts 0 of n. That bounds the rat
 95 % confidence (1.3 % for 238 cases), and a check that fires on 2 % of clean runs passes it with
 probability 0.98^n = 0.8 % (a mutation that makes a check fire on one run in fifty was caught).
 """
+
 from __future__ import annotations
 
 import sys

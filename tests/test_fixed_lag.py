@@ -8,6 +8,7 @@
 * With a loose turn-on bias sigma, biases far from their linearisation point are relinearised
   before they are marginalised: the smoother stays better than the EKF instead of drifting.
 """
+
 import gtsam
 import numpy as np
 import pytest
@@ -34,6 +35,7 @@ def test_linear_chain_matches_the_batch_solution_of_all_factors(monkeypatch, uno
                 self._unordered = True
                 return
             real(self, t_cut)
+
         monkeypatch.setattr(FixedLagISAM2, "_marginalize", marginalize)
     rng = np.random.default_rng(3)
     params = gtsam.ISAM2Params()
@@ -53,7 +55,7 @@ def test_linear_chain_matches_the_batch_solution_of_all_factors(monkeypatch, uno
         everything.push_back(g)
         truth.insert(X(i), x)
         prev = x
-    assert not fl.getLinearizationPoint().exists(X(53))      # marginalised: older than 2.5 s
+    assert not fl.getLinearizationPoint().exists(X(53))  # marginalised: older than 2.5 s
     assert fl.getLinearizationPoint().exists(X(54))
     batch = gtsam.LevenbergMarquardtOptimizer(everything, truth).optimize()
     newest = fl.isam.calculateEstimatePoint3(X(59))
@@ -70,7 +72,9 @@ def _run(monkeypatch, cls, run, cfg, method):
 
     class Counted(cls):
         def __init__(self, lag, params, threshold, guard=""):
-            super().__init__(lag, params, threshold)   # no guard: relinearised as GTSAM's smoother does
+            super().__init__(
+                lag, params, threshold
+            )  # no guard: relinearised as GTSAM's smoother does
 
         def update(self, graph, values, stamps):
             super().update(graph, values, stamps)
@@ -80,18 +84,30 @@ def _run(monkeypatch, cls, run, cfg, method):
     return S.run_smoother(run, cfg, method), count[0]
 
 
-@pytest.mark.parametrize("method,overrides,rate", [
-    ("smoother", {}, 1.0),
-    # GNSS-error states; the non-holonomic factors off: with them the two smoothers' estimates
-    # part by 2.8 mm here (iSAM2 updates its solution only where a change exceeds its wildfire
-    # threshold, and where it looks depends on the tree), beyond this test's 1e-6 m.
-    ("smoother-acc", {"gnss": {"gm_sigma_m": 1.5, "gm_tau_s": 40.0}, "nhc": {"enabled": False}}, 5.0),
-    ("smoother-accw", {"smoother": {"max_node_spacing_s": 0.5}}, 1.0)],          # factors on 3-5 nodes
-    ids=["white", "gauss-markov-5hz", "window-factors"])
-def test_same_estimates_as_gtsams_fixed_lag_smoother_with_fewer_eliminations(monkeypatch, method, overrides, rate):
+@pytest.mark.parametrize(
+    "method,overrides,rate",
+    [
+        ("smoother", {}, 1.0),
+        # GNSS-error states; the non-holonomic factors off: with them the two smoothers' estimates
+        # part by 2.8 mm here (iSAM2 updates its solution only where a change exceeds its wildfire
+        # threshold, and where it looks depends on the tree), beyond this test's 1e-6 m.
+        (
+            "smoother-acc",
+            {"gnss": {"gm_sigma_m": 1.5, "gm_tau_s": 40.0}, "nhc": {"enabled": False}},
+            5.0,
+        ),
+        ("smoother-accw", {"smoother": {"max_node_spacing_s": 0.5}}, 1.0),
+    ],  # factors on 3-5 nodes
+    ids=["white", "gauss-markov-5hz", "window-factors"],
+)
+def test_same_estimates_as_gtsams_fixed_lag_smoother_with_fewer_eliminations(
+    monkeypatch, method, overrides, rate
+):
     cfg = load_config(overrides={"imu": grade_config("industrial"), **overrides})
-    run = simulate("ugv", duration_s=90.0, imu_grade="industrial", noise="white", seed=5, gnss_rate_hz=rate)
-    run = with_outages(run, "40:8", None)            # fill nodes, then a window without fixes
+    run = simulate(
+        "ugv", duration_s=90.0, imu_grade="industrial", noise="white", seed=5, gnss_rate_hz=rate
+    )
+    run = with_outages(run, "40:8", None)  # fill nodes, then a window without fixes
     ref, n_ref = _run(monkeypatch, GtsamFixedLag, run, cfg, method)
     ours, n_ours = _run(monkeypatch, FixedLagISAM2, run, cfg, method)
     for key in (method, method + "-online"):
@@ -112,9 +128,18 @@ def test_biases_far_from_their_linearisation_point_are_relinearised_before_margi
     from gnssacc.pipeline import prepare
 
     run = simulate("ugv", 180.0, imu_grade="consumer", noise="white", seed=2)
-    cfg = load_config(overrides={"imu": {"gyro_arw_deg_rth": 0.65, "accel_vrw_mps_rth": 0.41,
-                                         "gyro_bias_instability_deg_h": 10.0, "accel_bias_instability_mg": 1.3,
-                                         "gyro_bias_sigma0_deg_h": 60.0, "accel_bias_sigma0_mg": 526.0}})
+    cfg = load_config(
+        overrides={
+            "imu": {
+                "gyro_arw_deg_rth": 0.65,
+                "accel_vrw_mps_rth": 0.41,
+                "gyro_bias_instability_deg_h": 10.0,
+                "accel_bias_instability_mg": 1.3,
+                "gyro_bias_sigma0_deg_h": 60.0,
+                "accel_bias_sigma0_mg": 526.0,
+            }
+        }
+    )
     ident = prepare(run, cfg, "none")
     kw = dict(init=ident.init, stationary=ident.stationary, quality=ident.quality)
     ekf = score(run, run_ekf(ident.run, ident.cfg, "ekf", **kw)).prmse_m
@@ -127,7 +152,9 @@ def test_biases_far_from_their_linearisation_point_are_relinearised_before_margi
     assert lo < st["nis_pos_mean"] < hi, (lo, st["nis_pos_mean"], hi)
 
 
-@pytest.mark.parametrize("per_node", [3, 4, 5], ids=["nav", "gnss-error", "gnss-error+odometry-scale"])
+@pytest.mark.parametrize(
+    "per_node", [3, 4, 5], ids=["nav", "gnss-error", "gnss-error+odometry-scale"]
+)
 def test_ordering_groups_never_outnumber_the_variables_isam2_must_reeliminate(per_node):
     """CCOLAMD takes no group number at or above the number of variables it orders (it corrupted
     memory: folded fixes, Gauss-Markov and odometry-scale states, window acceleration factors).
@@ -138,14 +165,14 @@ def test_ordering_groups_never_outnumber_the_variables_isam2_must_reeliminate(pe
     from gnssacc.estimators import fixed_lag as FL
 
     chars = "xvbgk"[:per_node]
-    node = lambda i: (float(i), [gtsam.symbol(c, i) for c in chars])   # noqa: E731
+    node = lambda i: (float(i), [gtsam.symbol(c, i) for c in chars])  # noqa: E731
     nodes, new = [node(i) for i in range(30)], [node(30)]
     for first in range(len(nodes)):
         for n_touched in range(1, per_node + 1):
             touched = set(nodes[first][1][:n_touched]) | set(new[0][1])
             lo = max(first - FL._older_groups(nodes, first, new, touched), 0)
             must = n_touched + per_node * (len(nodes) - first - 1 + len(new))
-            n_groups = len(nodes) + len(new) - lo          # numbered 0 .. n_groups - 1
+            n_groups = len(nodes) + len(new) - lo  # numbered 0 .. n_groups - 1
             assert lo <= first and n_groups <= must
-            if must - (len(nodes) - first + len(new)) <= first:   # enough older nodes to fill
+            if must - (len(nodes) - first + len(new)) <= first:  # enough older nodes to fill
                 assert n_groups == must

@@ -1,4 +1,5 @@
 """The paper's least-squares acceleration (A, B), its noise, and H_a / H_p by finite differences."""
+
 import numpy as np
 import pytest
 
@@ -31,8 +32,14 @@ def test_B_irregular_three_fixes_closed_form():
     np.testing.assert_allclose(acceleration_row(t), expected, rtol=1e-10)
 
 
-@pytest.mark.parametrize("t", [np.arange(5) * 1.0, np.array([0.0, 0.9, 2.2, 2.9, 4.3, 5.0]),
-                               1e5 + np.array([0.0, 0.1, 0.2, 0.35])])
+@pytest.mark.parametrize(
+    "t",
+    [
+        np.arange(5) * 1.0,
+        np.array([0.0, 0.9, 2.2, 2.9, 4.3, 5.0]),
+        1e5 + np.array([0.0, 0.1, 0.2, 0.35]),
+    ],
+)
 def test_B_is_exact_on_quadratics_for_any_m(t):
     B = acceleration_row(t)
     A = design_matrix(t)
@@ -50,7 +57,9 @@ def test_acceleration_covariance_matches_monte_carlo():
     t = np.array([0.0, 1.0, 2.1, 3.0])
     sig = np.array([[3.0, 3.0, 5.0], [2.0, 2.5, 4.0], [3.0, 3.0, 5.0], [1.0, 1.0, 2.0]])
     _, cov = ls_acceleration(t, np.zeros((4, 3)), sig)
-    draws = np.array([ls_acceleration(t, rng.standard_normal((4, 3)) * sig, sig)[0] for _ in range(20000)])
+    draws = np.array(
+        [ls_acceleration(t, rng.standard_normal((4, 3)) * sig, sig)[0] for _ in range(20000)]
+    )
     np.testing.assert_allclose(np.var(draws, axis=0), np.diag(cov), rtol=0.05)
     # Uniform 1 Hz, 3 fixes, sigma 3 m: sigma_a = 3 * sqrt(6).
     _, cov3 = ls_acceleration(np.arange(3.0), np.zeros((3, 3)), np.full((3, 3), 3.0))
@@ -92,8 +101,12 @@ def test_H_a_by_finite_differences_against_the_nonlinear_model():
     for i in range(3):
         e = np.zeros(3)
         e[i] = eps
-        num_phi = (_a_pred_of_error(R_true, f_true, e, 0 * e) - _a_pred_of_error(R_true, f_true, -e, 0 * e)) / (2 * eps)
-        num_ba = (_a_pred_of_error(R_true, f_true, 0 * e, e) - _a_pred_of_error(R_true, f_true, 0 * e, -e)) / (2 * eps)
+        num_phi = (
+            _a_pred_of_error(R_true, f_true, e, 0 * e) - _a_pred_of_error(R_true, f_true, -e, 0 * e)
+        ) / (2 * eps)
+        num_ba = (
+            _a_pred_of_error(R_true, f_true, 0 * e, e) - _a_pred_of_error(R_true, f_true, 0 * e, -e)
+        ) / (2 * eps)
         np.testing.assert_allclose(d_phi[:, i], num_phi, atol=1e-7)
         np.testing.assert_allclose(d_ba[:, i], num_ba, atol=1e-7)
     H = H_a(R_true, f_true)
@@ -104,7 +117,9 @@ def test_H_a_by_finite_differences_against_the_nonlinear_model():
     lin = d_phi @ dphi + d_ba @ dba
     full = _a_pred_of_error(R_true, f_true, dphi, dba) - R_true @ f_true
     n_phi = np.linalg.norm(dphi)
-    assert np.linalg.norm(full - lin) <= n_phi**2 * np.linalg.norm(f_true) / 2 + n_phi * np.linalg.norm(dba)
+    assert np.linalg.norm(full - lin) <= n_phi**2 * np.linalg.norm(
+        f_true
+    ) / 2 + n_phi * np.linalg.norm(dba)
 
 
 def test_paper_H_a_maps_onto_ours():
@@ -124,8 +139,16 @@ def test_H_p_with_lever_arm_by_finite_differences():
     R_M, R_N = radii(lat)
 
     def dz(err):
-        s = FilterState(np.array([lat + err[0] / (R_M + h), lon + err[1] / ((R_N + h) * np.cos(lat)), h - err[2]]),
-                   np.zeros(3), rotvec_to_dcm(err[6:9]) @ R, np.zeros(3), np.zeros(3), np.eye(15))
+        s = FilterState(
+            np.array(
+                [lat + err[0] / (R_M + h), lon + err[1] / ((R_N + h) * np.cos(lat)), h - err[2]]
+            ),
+            np.zeros(3),
+            rotvec_to_dcm(err[6:9]) @ R,
+            np.zeros(3),
+            np.zeros(3),
+            np.eye(15),
+        )
         # The measurement is the true antenna position (zero error).
         ant_n = R @ lever
         m_lat = lat + ant_n[0] / (R_M + h)
@@ -150,7 +173,7 @@ def test_window_accelerations_equal_the_sliding_window(override):
     from gnssacc.estimators.gnss_accel import AccelWindow, window_accelerations
 
     rng = np.random.default_rng(5)
-    t = np.cumsum(rng.choice([0.2, 1.0, 1.0, 3.0], size=80))          # 3 s steps exceed the gap
+    t = np.cumsum(rng.choice([0.2, 1.0, 1.0, 3.0], size=80))  # 3 s steps exceed the gap
     p = rng.normal(size=(80, 3)) * 5 + t[:, None] ** 2
     sig = rng.uniform(0.5, 3.0, size=(80, 3))
     full, a_n, var = window_accelerations(t, p, sig, 4, 2.5, override)

@@ -1,6 +1,7 @@
 """GNSS files through the estimators: the same fixes as gnss.csv, gnss.pos and gnss.nmea give the
 same PRMSE to the files' precision, a .pos file's per-fix covariance (with its correlations) is
 the EKF's R, and ``--gnss FILE`` replaces a source's fixes."""
+
 from __future__ import annotations
 
 import warnings
@@ -23,7 +24,9 @@ CONFIG = {"mounting": {"imu_time_offset_s": 0.0, "imu_to_body_rpy_deg": [0.0, 0.
 
 @pytest.fixture(scope="module")
 def sim_run():
-    return simulate("car", 120.0, imu_grade="industrial", t_start_s=UNIX_2024, noise="white", seed=5)
+    return simulate(
+        "car", 120.0, imu_grade="industrial", t_start_s=UNIX_2024, noise="white", seed=5
+    )
 
 
 def test_csv_pos_and_nmea_give_the_same_prmse(sim_run, tmp_path):
@@ -36,7 +39,9 @@ def test_csv_pos_and_nmea_give_the_same_prmse(sim_run, tmp_path):
         write_csv_run(sim_run, tmp_path / fmt, gnss_format=fmt)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", DataWarning)
-            res = gnssacc.process(str(tmp_path / fmt), methods=["ekf"], tune="none", config=CONFIG, preset="none")
+            res = gnssacc.process(
+                str(tmp_path / fmt), methods=["ekf"], tune="none", config=CONFIG, preset="none"
+            )
         prmse[fmt] = res.prmse()
         assert res.run.meta.get("gnss_format", "csv") in ("csv", "rtklib-pos", "nmea")
     for fmt in ("pos", "nmea"):
@@ -57,30 +62,45 @@ def test_pos_covariance_with_correlations_is_the_ekf_r(sim_run, tmp_path):
     run = simulate("car", 60.0, t_start_s=UNIX_2024, noise="white", seed=5)
     m = len(run.gnss)
     rng = np.random.default_rng(3)
-    corr = np.column_stack([rng.uniform(-0.5, 0.5, m), rng.uniform(-0.3, 0.3, m), rng.uniform(-0.3, 0.3, m)])
+    corr = np.column_stack(
+        [rng.uniform(-0.5, 0.5, m), rng.uniform(-0.3, 0.3, m), rng.uniform(-0.3, 0.3, m)]
+    )
     run.gnss.corr_ned = corr
     write_csv_run(run, tmp_path, gnss_format="pos")
     cfg = load_config(None, overrides=CONFIG)
     loaded = load_csv_run(tmp_path, cfg)
     ident = prepare(loaded, cfg, "none")
     obs = _Rs()
-    run_ekf(ident.run, ident.cfg, "ekf", init=ident.init, quality=ident.quality, stationary=ident.stationary,
-            observer=obs)
+    run_ekf(
+        ident.run,
+        ident.cfg,
+        "ekf",
+        init=ident.init,
+        quality=ident.quality,
+        stationary=ident.stationary,
+        observer=obs,
+    )
     assert len(obs.R) > 40
-    expected = {float(t): run.gnss.cov_ned(k) for k, t in enumerate(run.gnss.t)}   # as simulated, unrounded
+    expected = {
+        float(t): run.gnss.cov_ned(k) for k, t in enumerate(run.gnss.t)
+    }  # as simulated, unrounded
     for t, R in obs.R:
         # the file holds sigmas and signed roots of covariances to 1e-4 m: covariances to ~1e-3 m^2 of 25 m^2
         np.testing.assert_allclose(R, expected[t], atol=2e-3)
-        assert abs(R[0, 1]) > 0.0                                                # correlated, not diagonal
+        assert abs(R[0, 1]) > 0.0  # correlated, not diagonal
 
 
 def test_gnss_option_replaces_a_sources_fixes(sim_run, tmp_path):
     write_csv_run(sim_run, tmp_path / "pos", gnss_format="pos")
-    other = simulate("car", 120.0, t_start_s=UNIX_2024, noise="gm", seed=9)      # same IMU clock, other fixes
+    other = simulate(
+        "car", 120.0, t_start_s=UNIX_2024, noise="gm", seed=9
+    )  # same IMU clock, other fixes
     write_csv_run(other, tmp_path / "run")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DataWarning)
-        run = gnssacc.load(str(tmp_path / "run"), config=CONFIG, preset="none", gnss=tmp_path / "pos" / "gnss.pos")
+        run = gnssacc.load(
+            str(tmp_path / "run"), config=CONFIG, preset="none", gnss=tmp_path / "pos" / "gnss.pos"
+        )
     assert run.meta["gnss_format"] == "rtklib-pos" and run.meta["gnss_clock"] == "unix"
     np.testing.assert_allclose((run.gnss.lat - sim_run.gnss.lat) * 6.4e6, 0, atol=1e-3)
     with pytest.raises(InputError, match="--noise and --gnss-from-truth"):
@@ -109,18 +129,32 @@ def test_smoother_gnss_factors_use_the_full_covariance(tmp_path):
     e = pose.translation() + pose.rotation().matrix() @ lever + g - p_fix
     assert f.error(values) == pytest.approx(0.5 * e @ np.linalg.solve(cov, e), rel=1e-9)
     R = pose.rotation().matrix()
-    rec = SimpleNamespace(R=R[None], p_n=np.array([pose.translation()]), g=g[None], cov_xg=np.zeros((1, 6, 3)),
-                          cov_pose=np.zeros((1, 6, 6)), cov_g=np.zeros((1, 3, 3)))
+    rec = SimpleNamespace(
+        R=R[None],
+        p_n=np.array([pose.translation()]),
+        g=g[None],
+        cov_xg=np.zeros((1, 6, 3)),
+        cov_pose=np.zeros((1, 6, 6)),
+        cov_g=np.zeros((1, 3, 3)),
+    )
     chi2, expected = residual_chi2(rec, np.array([0]), p_fix[None], cov[None], lever)
-    assert chi2[0] == pytest.approx(e @ np.linalg.solve(cov, e)) and expected[0] == pytest.approx(3.0)
+    assert chi2[0] == pytest.approx(e @ np.linalg.solve(cov, e)) and expected[0] == pytest.approx(
+        3.0
+    )
 
     run = simulate("car", 60.0, t_start_s=UNIX_2024, noise="white", seed=5)
     run.gnss.corr_ned = np.tile([0.4, -0.2, 0.1], (len(run.gnss), 1))
     write_csv_run(run, tmp_path, gnss_format="pos")
     cfg = load_config(None, overrides=CONFIG)
     ident = prepare(load_csv_run(tmp_path, cfg), cfg, "none")
-    sols = run_smoother(ident.run, ident.cfg, "smoother", init=ident.init, quality=ident.quality,
-                        stationary=ident.stationary)
+    sols = run_smoother(
+        ident.run,
+        ident.cfg,
+        "smoother",
+        init=ident.init,
+        quality=ident.quality,
+        stationary=ident.stationary,
+    )
     assert sols["smoother"].stats["n_gps_factors"] > 40
 
 

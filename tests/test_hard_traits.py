@@ -9,6 +9,7 @@ corrections only where the estimator proves them, and what the recording states 
 * a slow rover at 0.4 m/s with 10 Hz receiver-filtered fixes that state no sigma;
 * a parked vehicle and a two-second recording, whose yaw nothing can tell.
 """
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -29,16 +30,34 @@ def sideways_bag(tmp_path_factory):
     pytest.importorskip("rosbags")
     from gnssacc.sources.bagwrite import write_bag
 
-    run = simulate("ugv", 240.0, imu_grade="consumer", imu_rate_hz=30.0, gnss_rate_hz=2.5, noise="precise", seed=4,
-                   odom_hz=10.0)
+    run = simulate(
+        "ugv",
+        240.0,
+        imu_grade="consumer",
+        imu_rate_hz=30.0,
+        gnss_rate_hz=2.5,
+        noise="precise",
+        seed=4,
+        odom_hz=10.0,
+    )
     path = tmp_path_factory.mktemp("bags") / "robot.bag"
-    write_bag(run, path, "ros1-rooad", imu_mount_rpy_deg=(90.0, 0.0, 90.0), with_orientation=True,
-              orientation_yaw_error_deg=110.0, orientation_sigma_deg=(1.0, 1.0, 2.0), odom_topic="/odom",
-              write_tf=False)
+    write_bag(
+        run,
+        path,
+        "ros1-rooad",
+        imu_mount_rpy_deg=(90.0, 0.0, 90.0),
+        with_orientation=True,
+        orientation_yaw_error_deg=110.0,
+        orientation_sigma_deg=(1.0, 1.0, 2.0),
+        odom_topic="/odom",
+        write_tf=False,
+    )
     return run, path
 
 
-def test_sideways_imu_is_refused_with_the_evidence_when_the_configuration_says_otherwise(sideways_bag):
+def test_sideways_imu_is_refused_with_the_evidence_when_the_configuration_says_otherwise(
+    sideways_bag,
+):
     _, path = sideways_bag
     with pytest.raises(InputError) as exc:
         gnssacc.process(str(path), methods=["ekf"])
@@ -51,15 +70,22 @@ def test_sideways_imu_with_automatic_mounting_and_a_magnetometer_yaw(sideways_ba
     motion, the odometry is not scored as truth, and the estimates beat the fixes."""
     run, path = sideways_bag
     loaded = gnssacc.load(str(path), config=AUTO_MOUNT)
-    assert loaded.truth is None and loaded.odometry is not None          # odometry, not truth
+    assert loaded.truth is None and loaded.odometry is not None  # odometry, not truth
     assert loaded.init is not None and loaded.init.yaw_evidence == "orientation"
-    res = gnssacc.process(replace(loaded, truth=run.truth), methods=["ekf", "smoother"], config=AUTO_MOUNT)
-    assert "magnetometer-grade: not used" in res.metrics["init"] and res.metrics["start"]["yaw_determined"]
+    res = gnssacc.process(
+        replace(loaded, truth=run.truth), methods=["ekf", "smoother"], config=AUTO_MOUNT
+    )
+    assert (
+        "magnetometer-grade: not used" in res.metrics["init"]
+        and res.metrics["start"]["yaw_determined"]
+    )
     m = res.metrics["methods"]
     raw = res.metrics["gnss_prmse_m"]
     assert m["ekf"]["prmse_m"] <= 0.75 * raw and m["smoother"]["prmse_m"] <= 0.5 * raw
     assert m["ekf"]["yaw_rms_deg"] < 5.0
-    assert [(f.check, f.action) for f in res.prepared.checks if f.check == "mounting"] == [("mounting", "applied")]
+    assert [(f.check, f.action) for f in res.prepared.checks if f.check == "mounting"] == [
+        ("mounting", "applied")
+    ]
 
 
 def _stationary_truth(run) -> np.ndarray:
@@ -74,7 +100,9 @@ def _stationary_truth(run) -> np.ndarray:
 def test_slow_ugv_with_long_parks_and_pivots():
     """No refusal (a clock offset or a gyro unit from a chance correlation was one), the parks
     found as stationary spans and nothing while it drives, and the estimates beat the fixes."""
-    res = gnssacc.process("sim:ugv-slow,imu=consumer,duration=235", methods=["ekf", "smoother"], seed=3)
+    res = gnssacc.process(
+        "sim:ugv-slow,imu=consumer,duration=235", methods=["ekf", "smoother"], seed=3
+    )
     run = res.run
     still = _stationary_truth(run)
     for span in res.prepared.stationary.spans:
@@ -89,9 +117,14 @@ def test_slow_rover_with_high_rate_fixes_without_sigmas():
     """The fixes' own scatter replaces the 3 m default, so the rover is not taken for standing
     while it drives (zero-velocity updates then pulled it metres off); the estimate stays at the
     fixes' accuracy or says it does not."""
-    run = simulate("rover", 150.0, imu_grade="consumer", gnss_rate_hz=10.0, noise="filtered", seed=2)
-    run = run.with_gnss(replace(run.gnss, sigma_ned=np.tile([3.0, 3.0, 5.0], (len(run.gnss), 1)),
-                                sigma_stated=False))
+    run = simulate(
+        "rover", 150.0, imu_grade="consumer", gnss_rate_hz=10.0, noise="filtered", seed=2
+    )
+    run = run.with_gnss(
+        replace(
+            run.gnss, sigma_ned=np.tile([3.0, 3.0, 5.0], (len(run.gnss), 1)), sigma_stated=False
+        )
+    )
     res = gnssacc.process(run, methods=["ekf"])
     still = _stationary_truth(res.run)
     for span in res.prepared.stationary.spans:

@@ -1,6 +1,7 @@
 """The input checks' IMU signals computed block by block (bounded memory on long runs) give the
 numbers of the straightforward whole-array computations, bit for bit where the arithmetic is the
 same, and the exact averages where those are known in closed form."""
+
 import numpy as np
 import pytest
 
@@ -16,7 +17,9 @@ def whole_box_average(t, x, t0, step, n):
     g = np.clip(t0 + step * (np.arange(n + 1) - 0.5), edges[0], edges[-1])
     width = np.maximum(np.diff(g), 1e-12)
     cum = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum(x * dt[:, None], axis=0)])
-    return np.column_stack([np.diff(np.interp(g, edges, cum[:, i])) / width for i in range(x.shape[1])])
+    return np.column_stack(
+        [np.diff(np.interp(g, edges, cum[:, i])) / width for i in range(x.shape[1])]
+    )
 
 
 def jittered_record(n, seed=0):
@@ -32,7 +35,9 @@ def test_box_average_in_blocks_equals_the_whole_record(monkeypatch, block, grid)
     monkeypatch.setattr(mm, "BOX_BLOCK", block)
     t, x = jittered_record(1000)
     t0, step, n = (t[0], 0.01, 1100) if grid == "samples" else (t[0] - 0.7, 1.0, 14)
-    np.testing.assert_array_equal(mm.box_average(t, x, t0, step, n), whole_box_average(t, x, t0, step, n))
+    np.testing.assert_array_equal(
+        mm.box_average(t, x, t0, step, n), whole_box_average(t, x, t0, step, n)
+    )
 
 
 def test_box_average_of_whole_samples_is_their_mean(monkeypatch):
@@ -40,7 +45,7 @@ def test_box_average_of_whole_samples_is_their_mean(monkeypatch):
     monkeypatch.setattr(mm, "BOX_BLOCK", 7)
     t = np.arange(101.0)
     x = np.random.default_rng(1).standard_normal((101, 2))
-    out = mm.box_average(t, x, 1.0, 2.0, 50)       # cell j = [2j, 2j + 2]: samples 2j+1, 2j+2
+    out = mm.box_average(t, x, 1.0, 2.0, 50)  # cell j = [2j, 2j + 2]: samples 2j+1, 2j+2
     np.testing.assert_allclose(out, 0.5 * (x[1::2] + x[2::2]), rtol=1e-12, atol=1e-14)
 
 
@@ -51,7 +56,7 @@ def test_level_imu_projects_one_channel_at_a_time(monkeypatch, block):
     w = np.random.default_rng(3).standard_normal((700, 3))
     lev = mm.level_imu(ImuData(t, f, w), step=0.01)
     dt = np.diff(t, prepend=t[0] - (t[1] - t[0]))
-    f_mean = dt @ f / dt.sum()                                   # the time-weighted mean specific force
+    f_mean = dt @ f / dt.sum()  # the time-weighted mean specific force
     down = -f_mean / np.linalg.norm(f_mean)
     np.testing.assert_array_equal(lev.down, down)
     proj = np.column_stack([f @ lev.e1, f @ lev.e2, w @ down])
@@ -64,8 +69,16 @@ def levelled(n=1500, seed=4):
     rng = np.random.default_rng(seed)
     f_h = np.cumsum(rng.standard_normal((n, 2)), axis=0) * 0.01
     omega = 0.3 * np.sin(np.arange(n) * 0.01) + 0.01 * rng.standard_normal(n)
-    return mm.LevelledImu(5.0, 0.01, np.array([0, 0, 1.0]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]),
-                          f_h, omega, 9.8)
+    return mm.LevelledImu(
+        5.0,
+        0.01,
+        np.array([0, 0, 1.0]),
+        np.array([1.0, 0, 0]),
+        np.array([0, 1.0, 0]),
+        f_h,
+        omega,
+        9.8,
+    )
 
 
 def direct_smooth(x, k):
@@ -79,15 +92,21 @@ def test_smooth_horizontal_in_blocks_equals_the_direct_sum(monkeypatch, block):
     # Ground frame: turned by the integrated heading, averaged, turned back.
     monkeypatch.setattr(mm, "SMOOTH_BLOCK", block)
     lev = levelled()
-    k = (1 - (np.arange(-150, 151) / 151.0) ** 2) ** 2          # 3 s biweight on the 0.01 s grid
+    k = (1 - (np.arange(-150, 151) / 151.0) ** 2) ** 2  # 3 s biweight on the 0.01 s grid
     turn = np.exp(1j * lev.step * np.cumsum(lev.omega_v))
     f = direct_smooth((lev.f_h[:, 0] + 1j * lev.f_h[:, 1]) * turn, k) / turn
     scale = np.abs(f).max()
-    np.testing.assert_allclose(mm.smooth_horizontal(lev, 3.0), np.column_stack([f.real, f.imag]),
-                               rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(
+        mm.smooth_horizontal(lev, 3.0),
+        np.column_stack([f.real, f.imag]),
+        rtol=0,
+        atol=1e-12 * scale,
+    )
     imu_axes = mm.LevelledImu(**{**lev.__dict__, "ground_frame": False})
     ref = np.column_stack([direct_smooth(lev.f_h[:, i], k) for i in range(2)])
-    np.testing.assert_allclose(mm.smooth_horizontal(imu_axes, 3.0), ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+    np.testing.assert_allclose(
+        mm.smooth_horizontal(imu_axes, 3.0), ref, rtol=0, atol=1e-12 * np.abs(ref).max()
+    )
 
 
 @pytest.mark.parametrize("block", [37, 1 << 16])
@@ -101,8 +120,10 @@ def test_smooth_horizontal_keeps_the_whole_array_arithmetic(monkeypatch, block):
     np.testing.assert_array_equal(mm.smooth_horizontal(lev, 3.0), np.column_stack([f.real, f.imag]))
     k = (1 - (np.arange(-150, 151) / 151.0) ** 2) ** 2
     den = np.maximum(mm._convolve_same(np.ones(len(z)), k), 1e-12)
-    np.testing.assert_array_equal(mm.smooth(lev.f_h, lev.step, 3.0),
-                                  np.column_stack([mm._convolve_same(lev.f_h[:, i], k) / den for i in range(2)]))
+    np.testing.assert_array_equal(
+        mm.smooth(lev.f_h, lev.step, 3.0),
+        np.column_stack([mm._convolve_same(lev.f_h[:, i], k) / den for i in range(2)]),
+    )
 
 
 @pytest.mark.parametrize("block", [3, 1 << 14])
@@ -115,7 +136,7 @@ def test_gap_cells_in_blocks_equal_the_whole_record(monkeypatch, block):
     for k in (1, 50, 149, 150, 151, 300, 599, 600, 1002):
         t[k:] += 0.05
     c, J = 5, 1003 // 5
-    gap = np.concatenate([[False], np.diff(t) > 0.03])[:J * c]
+    gap = np.concatenate([[False], np.diff(t) > 0.03])[: J * c]
     np.testing.assert_array_equal(st._gap_cells(t, c, J, 0.03), gap.reshape(J, c).any(axis=1))
 
 
@@ -125,7 +146,7 @@ def test_running_median_in_blocks_equals_each_window_median(monkeypatch, block):
 
     monkeypatch.setattr(st, "MEDIAN_BLOCK_ROWS", block)
     x = np.random.default_rng(6).standard_normal((103, 6))
-    ref = np.array([[np.median(x[i:i + 11, c]) for c in range(6)] for i in range(103 - 10)])
+    ref = np.array([[np.median(x[i : i + 11, c]) for c in range(6)] for i in range(103 - 10)])
     np.testing.assert_array_equal(st._running_median(x, 11), ref)
 
 
@@ -143,4 +164,4 @@ def test_still_positions_in_blocks_equal_the_whole_record(monkeypatch):
     whole = st._still_positions(mu, se2, gap_cells, B, p)
     monkeypatch.setattr(st, "STILL_BLOCK", 7)
     np.testing.assert_array_equal(st._still_positions(mu, se2, gap_cells, B, p), whole)
-    assert 0 < whole.sum() < len(whole)             # both verdicts occur
+    assert 0 < whole.sum() < len(whole)  # both verdicts occur

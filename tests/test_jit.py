@@ -8,6 +8,7 @@ probe process starts the background compilation for the methods in ``$METHODS`` 
 methods when unset) and prints the cache folder, the EKF propagation kernel's cache hits and
 misses in the probe itself, the number of compiling child processes and the groups loaded.
 """
+
 from __future__ import annotations
 
 import os
@@ -36,8 +37,11 @@ print(len(b._children), ",".join(b.groups))
 
 def _read_only_copy(tmp_path: Path) -> Path:
     root = tmp_path / "site"
-    shutil.copytree(Path(gnssacc.__file__).parent, root / "gnssacc",
-                    ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+    shutil.copytree(
+        Path(gnssacc.__file__).parent,
+        root / "gnssacc",
+        ignore=shutil.ignore_patterns("__pycache__", "*.pyc"),
+    )
     if os.geteuid() == 0:
         for pkg in [root / "gnssacc", *(p for p in (root / "gnssacc").iterdir() if p.is_dir())]:
             (pkg / "__pycache__").write_text("not a folder\n")
@@ -50,8 +54,9 @@ def _read_only_copy(tmp_path: Path) -> Path:
 def _probe(root: Path, cache_home: Path, **extra) -> subprocess.CompletedProcess:
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
     env.update(PYTHONPATH=str(root), XDG_CACHE_HOME=str(cache_home), **extra)
-    return subprocess.run([sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, check=True,
-                          cwd=root)
+    return subprocess.run(
+        [sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, check=True, cwd=root
+    )
 
 
 def test_read_only_install_caches_in_the_user_folder_and_says_so_once(tmp_path):
@@ -63,23 +68,28 @@ def test_read_only_install_caches_in_the_user_folder_and_says_so_once(tmp_path):
     notice = [line for line in first.stderr.splitlines() if line.startswith("gnssacc: ")]
     assert len(notice) == 1 and "compiling" in notice[0] and str(folder) in notice[0]
     hits, misses = first.stdout.splitlines()[1].split()
-    assert hits != "0" and misses == "0"      # compiled by the child processes, loaded from the cache
-    assert list(folder.rglob("mechanization.propagate-*.nbi"))      # ... written to the user folder
-    assert list(folder.rglob("window_marginals.*.nbi"))             # the smoother's too
-    assert not list(folder.rglob("mechanization.kernel_force_integrals-*.nbi"))   # only ekf-accw's
-    assert not list(folder.rglob("window_marginals._band_*.nbi"))                 # only smoother-accw's
+    assert hits != "0" and misses == "0"  # compiled by the child processes, loaded from the cache
+    assert list(folder.rglob("mechanization.propagate-*.nbi"))  # ... written to the user folder
+    assert list(folder.rglob("window_marginals.*.nbi"))  # the smoother's too
+    assert not list(folder.rglob("mechanization.kernel_force_integrals-*.nbi"))  # only ekf-accw's
+    assert not list(folder.rglob("window_marginals._band_*.nbi"))  # only smoother-accw's
     assert not (root / "gnssacc" / "__pycache__").is_dir()
 
     second = _probe(root, cache_home)
-    assert "gnssacc: " not in second.stderr                           # no notice once cached
+    assert "gnssacc: " not in second.stderr  # no notice once cached
     hits, misses = second.stdout.splitlines()[1].split()
-    assert hits != "0" and misses == "0"                              # loaded from the user folder
+    assert hits != "0" and misses == "0"  # loaded from the user folder
 
 
 def test_numba_cache_dir_set_by_the_user_is_kept(tmp_path):
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "mine")}
-    out = subprocess.run([sys.executable, "-c", "import os, gnssacc; print(os.environ['NUMBA_CACHE_DIR'])"],
-                         env=env, capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", "import os, gnssacc; print(os.environ['NUMBA_CACHE_DIR'])"],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     assert out.stdout.strip() == str(tmp_path / "mine")
 
 
@@ -88,7 +98,7 @@ def test_failed_compiling_processes_fall_back_to_compiling_in_process(tmp_path):
     cache_home = tmp_path / "cache"
     first = _probe(root, cache_home, CHILDREN_FAIL="1")
     hits, misses = first.stdout.splitlines()[1].split()
-    assert misses != "0"                      # compiled here
+    assert misses != "0"  # compiled here
     folder = cache_home / "gnssacc" / "numba"
     assert list(folder.rglob("window_marginals.*.nbi"))
     assert not list(folder.rglob("*.stamp"))  # numba's own index files say what is compiled
@@ -97,7 +107,11 @@ def test_failed_compiling_processes_fall_back_to_compiling_in_process(tmp_path):
 
 
 def _notice(proc: subprocess.CompletedProcess) -> list[str]:
-    return [line for line in proc.stderr.splitlines() if line.startswith("gnssacc: ") and "compiling" in line]
+    return [
+        line
+        for line in proc.stderr.splitlines()
+        if line.startswith("gnssacc: ") and "compiling" in line
+    ]
 
 
 def _counts(proc: subprocess.CompletedProcess) -> tuple[int, int, int]:
@@ -121,17 +135,17 @@ def test_compiled_is_decided_by_the_source_content_as_numba_decides(tmp_path):
     assert len(_notice(first)) == 1 and _counts(first)[2] > 0
     source = root / "gnssacc" / "estimators" / "mechanization.py"
     st = source.stat()
-    os.utime(source, ns=(st.st_atime_ns, st.st_mtime_ns + 10**10))   # 10 s newer, same content
+    os.utime(source, ns=(st.st_atime_ns, st.st_mtime_ns + 10**10))  # 10 s newer, same content
     touched = _probe(root, cache_home, METHODS="ekf")
     hits, misses, children = _counts(touched)
-    assert not _notice(touched) and children == 0     # no notice, no compiling process
-    assert hits > 0 and misses == 0                   # and numba loads it: nothing compiled
+    assert not _notice(touched) and children == 0  # no notice, no compiling process
+    assert hits > 0 and misses == 0  # and numba loads it: nothing compiled
 
     _writable(source).write_text(source.read_text() + "\n# an edit: the content changed\n")
     edited = _probe(root, cache_home, METHODS="ekf")
     hits, misses, children = _counts(edited)
-    assert len(_notice(edited)) == 1 and children > 0   # said at once, compiled by the children
-    assert hits > 0 and misses == 0                     # then loaded here
+    assert len(_notice(edited)) == 1 and children > 0  # said at once, compiled by the children
+    assert hits > 0 and misses == 0  # then loaded here
     again = _probe(root, cache_home, METHODS="ekf")
     assert not _notice(again) and _counts(again)[2] == 0
 
@@ -142,11 +156,13 @@ def test_a_run_compiles_only_the_kernels_its_methods_need(tmp_path):
     folder = cache_home / "gnssacc" / "numba"
     ekf = _probe(root, cache_home, METHODS="ekf,ekf-acc")
     assert ekf.stdout.splitlines()[2].split()[1] == "propagation,update"
-    assert not list(folder.rglob("window_marginals.*.nbi")) and not list(folder.rglob("*kernel_force_integrals*"))
+    assert not list(folder.rglob("window_marginals.*.nbi")) and not list(
+        folder.rglob("*kernel_force_integrals*")
+    )
     more = _probe(root, cache_home, METHODS="ekf,ekf-accw,smoother-accw")
     hits, misses, children = _counts(more)
-    assert len(_notice(more)) == 1 and children == 1    # one process for what is missing
-    assert hits > 0 and misses == 0                     # the EKF's are not compiled again
+    assert len(_notice(more)) == 1 and children == 1  # one process for what is missing
+    assert hits > 0 and misses == 0  # the EKF's are not compiled again
     assert list(folder.rglob("window_marginals._band_covariances-*.nbi"))
     assert list(folder.rglob("mechanization.kernel_force_integrals-*.nbi"))
     assert not _notice(_probe(root, cache_home, METHODS="ekf-accw,smoother-accw"))
@@ -183,7 +199,9 @@ def test_the_group_warm_ups_compile_every_kernel_a_run_calls():
     kernel compiled with other types, or not at all, is compiled again inside an estimator); a
     run of every method then compiles nothing new, nor does one with wheel odometry (its scale
     state) and folded fast fixes."""
-    out = subprocess.run([sys.executable, "-c", RUN_TYPES], capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", RUN_TYPES], capture_output=True, text=True, check=True
+    )
     assert out.stdout.strip() == "[]"
 
 
@@ -198,13 +216,20 @@ def test_the_install_compiles_the_kernels_into_the_package_and_a_first_run_loads
         pytest.skip("not a source checkout (no setup.py)")
     build = tmp_path / "build"
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
-    subprocess.run([sys.executable, "setup.py", "-q", "build_py", "--build-lib", str(build)], cwd=repo, env=env,
-                   check=True, capture_output=True)
-    kernels = sorted(p.name for p in (build / "gnssacc" / "estimators" / "__pycache__").glob("*.nbi"))
+    subprocess.run(
+        [sys.executable, "setup.py", "-q", "build_py", "--build-lib", str(build)],
+        cwd=repo,
+        env=env,
+        check=True,
+        capture_output=True,
+    )
+    kernels = sorted(
+        p.name for p in (build / "gnssacc" / "estimators" / "__pycache__").glob("*.nbi")
+    )
     assert any(n.startswith("mechanization.propagate-") for n in kernels)
     assert any(n.startswith("window_marginals._band_covariances-") for n in kernels)
     site = tmp_path / "site"
-    shutil.copytree(build, site)   # elsewhere, every file with a new modification time
+    shutil.copytree(build, site)  # elsewhere, every file with a new modification time
     probe = _probe(site, tmp_path / "cache", METHODS="ekf,ekf-accw,smoother,smoother-accw")
     hits, misses, children = _counts(probe)
     assert not _notice(probe) and children == 0 and misses == 0 and hits > 0

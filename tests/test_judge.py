@@ -1,5 +1,6 @@
 """The estimator's verdict on a proposed correction (gnssacc.prepare.judge, settle, clock): the
 likelihood arithmetic in closed form, and the verdicts that a single heuristic got wrong."""
+
 from __future__ import annotations
 
 import math
@@ -19,15 +20,23 @@ from gnssacc.sources.sim import simulate
 
 def _inn(t, ll, nis=1.0, t_start=0.0, t_end=1e9):
     t = np.asarray(t, float)
-    return Innovations(t, np.full(len(t), float(ll)) if np.ndim(ll) == 0 else np.asarray(ll, float),
-                       np.full(len(t), nis), t_start, t_end)
+    return Innovations(
+        t,
+        np.full(len(t), float(ll)) if np.ndim(ll) == 0 else np.asarray(ll, float),
+        np.full(len(t), nis),
+        t_start,
+        t_end,
+    )
 
 
 def test_compare_sums_over_the_common_fixes_after_the_burn_in():
     t = np.arange(0.0, 100.0)
-    given, corrected = _inn(t, -2.0), _inn(t[5:], -1.5, t_start=5.0)   # the corrected pass starts later
+    given, corrected = (
+        _inn(t, -2.0),
+        _inn(t[5:], -1.5, t_start=5.0),
+    )  # the corrected pass starts later
     v = compare(given, corrected)
-    scored = t[(t >= 15.0)]                                          # 10 s after the later start
+    scored = t[(t >= 15.0)]  # 10 s after the later start
     assert v.n_fixes == len(scored) and v.gain == pytest.approx(0.5 * len(scored))
     assert v.minutes == pytest.approx((scored[-1] - scored[0]) / 60.0)
     jac = compare(given, corrected, log_jacobian=-0.25)
@@ -35,12 +44,19 @@ def test_compare_sums_over_the_common_fixes_after_the_burn_in():
 
 
 def test_decisive_needs_both_bounds_and_a_consistent_correction():
-    assert Verdict(LR_MIN, 50, 1.0, 1.0).decisive and not Verdict(LR_MIN - 0.1, 50, 1.0, 1.0).decisive
-    long = 3.0 * LR_MIN / RATE_MIN    # a long recording needs the per-minute rate too
-    assert not Verdict(2.0 * LR_MIN, 500, long, 1.0).decisive and Verdict(3.5 * LR_MIN, 500, long, 1.0).decisive
-    assert not Verdict(1e4, 50, 1.0, 40.0, nis_given=5.0).decisive          # corrected: a model that does not fit
-    assert Verdict(1e4, 50, 1.0, 40.0, nis_given=400.0).decisive            # ... but far better than as given
-    assert not Verdict(1e4, 5, 1.0, 1.0).decisive                           # too few fixes
+    assert (
+        Verdict(LR_MIN, 50, 1.0, 1.0).decisive and not Verdict(LR_MIN - 0.1, 50, 1.0, 1.0).decisive
+    )
+    long = 3.0 * LR_MIN / RATE_MIN  # a long recording needs the per-minute rate too
+    assert (
+        not Verdict(2.0 * LR_MIN, 500, long, 1.0).decisive
+        and Verdict(3.5 * LR_MIN, 500, long, 1.0).decisive
+    )
+    assert not Verdict(
+        1e4, 50, 1.0, 40.0, nis_given=5.0
+    ).decisive  # corrected: a model that does not fit
+    assert Verdict(1e4, 50, 1.0, 40.0, nis_given=400.0).decisive  # ... but far better than as given
+    assert not Verdict(1e4, 5, 1.0, 1.0).decisive  # too few fixes
     assert Verdict(1.0, 50, 1.0, 1.0).refuted and not Verdict(5.0, 50, 1.0, 1.0).refuted
 
 
@@ -69,7 +85,7 @@ def _chance_peak(monkeypatch, offset_s=44.5):
 def test_a_chance_correlation_peak_is_contradicted_by_the_turns(monkeypatch, slow_ugv):
     _chance_peak(monkeypatch)
     with warnings.catch_warnings():
-        warnings.simplefilter("error")          # not even a warning: one view against another
+        warnings.simplefilter("error")  # not even a warning: one view against another
         out, _, findings = check_input(slow_ugv, load_config())
     assert out is slow_ugv
     assert [(f.check, f.action) for f in findings] == [("time_offset", "refuted")]
@@ -93,4 +109,4 @@ def test_a_true_offset_is_refused_with_the_evidence(slow_ugv):
         check_input(bad, load_config())
     problem = exc.value.problem
     assert "imu_time_offset_s = 18." in problem and "the estimator confirms it" in problem
-    assert "as given" in problem and "as corrected" in problem     # the evidence both ways
+    assert "as given" in problem and "as corrected" in problem  # the evidence both ways

@@ -1,5 +1,6 @@
 """The compiled Kalman update (``gnssacc.estimators.kalman.joseph_update``: Joseph form, NIS gate,
 Cholesky inverse) against a plain scipy update on random SPD cases."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -23,8 +24,8 @@ def _case(seed: int, n: int, m: int):
     rng = np.random.default_rng(seed)
     scale = 10.0 ** rng.uniform(-5, 1, n)
     P = _spd(rng, n, scale)
-    H = rng.standard_normal((m, n)) * (rng.random((m, n)) < 0.5)   # sparse, like the filter's rows
-    H[:, :m] += np.eye(m)                                            # never rank-deficient
+    H = rng.standard_normal((m, n)) * (rng.random((m, n)) < 0.5)  # sparse, like the filter's rows
+    H[:, :m] += np.eye(m)  # never rank-deficient
     R = _spd(rng, m, 10.0 ** rng.uniform(-2, 0.5, m))
     S = H @ P @ H.T + R
     dz = np.linalg.cholesky(S) @ rng.standard_normal(m)
@@ -35,15 +36,23 @@ def _oracle(P, H, R, dz):
     """The textbook update with scipy: gain by Cholesky solve, Joseph covariance."""
     S = H @ P @ H.T + R
     c = cho_factor(S, lower=True)
-    K = cho_solve(c, H @ P).T                       # K = P H^T S^-1 (S, P symmetric)
+    K = cho_solve(c, H @ P).T  # K = P H^T S^-1 (S, P symmetric)
     A = np.eye(P.shape[0]) - K @ H
     P_new = A @ P @ A.T + K @ R @ K.T
     L = np.linalg.cholesky(S)
-    return dict(dx=K @ dz, P=P_new, nis=float(dz @ cho_solve(c, dz)), logdet=np.linalg.slogdet(S)[1],
-                wz=solve_triangular(L, dz, lower=True))
+    return dict(
+        dx=K @ dz,
+        P=P_new,
+        nis=float(dz @ cho_solve(c, dz)),
+        logdet=np.linalg.slogdet(S)[1],
+        wz=solve_triangular(L, dz, lower=True),
+    )
 
 
-CASES = [(seed, n, m) for seed, (n, m) in enumerate([(15, 3), (15, 1), (18, 3), (15, 6), (18, 6), (9, 2)] * 3)]
+CASES = [
+    (seed, n, m)
+    for seed, (n, m) in enumerate([(15, 3), (15, 1), (18, 3), (15, 6), (18, 6), (9, 2)] * 3)
+]
 
 
 @pytest.mark.parametrize("seed, n, m", CASES)
@@ -56,7 +65,9 @@ def test_update_equals_scipy_on_random_spd_cases(seed, n, m):
     scale = np.sqrt(np.diag(P))
     # Relative to each state's prior sigma (the states span six decades).
     np.testing.assert_allclose(dx / scale, ref["dx"] / scale, atol=1e-10)
-    np.testing.assert_allclose(P_k / np.outer(scale, scale), ref["P"] / np.outer(scale, scale), atol=1e-10)
+    np.testing.assert_allclose(
+        P_k / np.outer(scale, scale), ref["P"] / np.outer(scale, scale), atol=1e-10
+    )
     assert nis == pytest.approx(ref["nis"], rel=1e-10)
     assert logdet == pytest.approx(ref["logdet"], rel=1e-10, abs=1e-10)
     np.testing.assert_allclose(wz, ref["wz"], rtol=1e-9, atol=1e-12)
@@ -71,7 +82,9 @@ def test_posterior_information_is_prior_plus_measurement_information(seed):
     joseph_update(P_k, H, R, dz, 0.0)
     info = np.linalg.inv(P) + H.T @ np.linalg.solve(R, H)
     scale = np.sqrt(np.diag(P))
-    np.testing.assert_allclose(np.linalg.inv(info) / np.outer(scale, scale), P_k / np.outer(scale, scale), atol=1e-8)
+    np.testing.assert_allclose(
+        np.linalg.inv(info) / np.outer(scale, scale), P_k / np.outer(scale, scale), atol=1e-8
+    )
 
 
 @pytest.mark.parametrize("seed", range(6))

@@ -8,6 +8,7 @@ Stages, lowest first (a module may import from its own stage, a lower one, or ``
 ``__main__``, the package ``__init__``). Every import counts, also one made inside a
 function: a deferred import is still a dependency.
 """
+
 from __future__ import annotations
 
 import ast
@@ -17,7 +18,17 @@ import gnssacc
 
 PACKAGE = Path(gnssacc.__file__).resolve().parent
 FACTORS = PACKAGE / "factors" if (PACKAGE / "factors").is_dir() else PACKAGE.parents[1] / "factors"
-STAGES = ("core", "sources", "checks", "prepare", "estimators", "analysis", "outputs", "pipeline", "campaign")
+STAGES = (
+    "core",
+    "sources",
+    "checks",
+    "prepare",
+    "estimators",
+    "analysis",
+    "outputs",
+    "pipeline",
+    "campaign",
+)
 PACKAGES = tuple(s for s in STAGES if s != "pipeline")
 RANK = {name: i for i, name in enumerate(STAGES)} | {"factors": STAGES.index("estimators")}
 TOP = len(STAGES)
@@ -47,13 +58,13 @@ def _imports(name: str, path: Path, modules: dict) -> list[tuple[str, list[str]]
         elif isinstance(node, ast.ImportFrom):
             if node.level:
                 base = name.split(".") if is_pkg else name.split(".")[:-1]
-                base = base[:len(base) - node.level + 1]
+                base = base[: len(base) - node.level + 1]
                 target = ".".join(base + ([node.module] if node.module else []))
             else:
                 target = node.module or ""
             if not target.startswith("gnssacc"):
                 continue
-            for a in node.names:   # `from pkg import module` imports that module
+            for a in node.names:  # `from pkg import module` imports that module
                 sub = f"{target}.{a.name}"
                 out.append((sub, []) if sub in modules else (target, [a.name]))
     return out
@@ -61,23 +72,34 @@ def _imports(name: str, path: Path, modules: dict) -> list[tuple[str, list[str]]
 
 def _rank(module: str) -> int:
     parts = module.split(".")
-    return RANK.get(parts[1], TOP) if len(parts) > 2 or (len(parts) == 2 and parts[1] in RANK) else TOP
+    return (
+        RANK.get(parts[1], TOP) if len(parts) > 2 or (len(parts) == 2 and parts[1] in RANK) else TOP
+    )
 
 
 def _graph() -> dict[str, set[str]]:
     modules = _modules()
-    return {m: {t for t, _ in _imports(m, p, modules) if t in modules and t != m} for m, p in modules.items()}
+    return {
+        m: {t for t, _ in _imports(m, p, modules) if t in modules and t != m}
+        for m, p in modules.items()
+    }
 
 
 def test_every_stage_is_a_package_that_says_what_it_is_for():
     for stage in PACKAGES:
         doc = ast.get_docstring(ast.parse((PACKAGE / stage / "__init__.py").read_text())) or ""
-        assert "Input" in doc and "Output" in doc, f"gnssacc.{stage}: its docstring must state inputs and outputs"
+        assert "Input" in doc and "Output" in doc, (
+            f"gnssacc.{stage}: its docstring must state inputs and outputs"
+        )
 
 
 def test_imports_point_down_the_stages():
-    upward = [f"{m} -> {t}" for m, deps in _graph().items() for t in deps
-              if _rank(t) > _rank(m) and not (m == "gnssacc" and t == "gnssacc.api")]
+    upward = [
+        f"{m} -> {t}"
+        for m, deps in _graph().items()
+        for t in deps
+        if _rank(t) > _rank(m) and not (m == "gnssacc" and t == "gnssacc.api")
+    ]
     assert upward == []
 
 
@@ -88,7 +110,7 @@ def test_no_import_circles():
         state[m] = 1
         for t in sorted(graph[m]):
             if state.get(t) == 1:
-                cycles.append(" -> ".join(stack[stack.index(t):] + [t]))
+                cycles.append(" -> ".join(stack[stack.index(t) :] + [t]))
             elif t not in state:
                 visit(t, stack + [t])
         state[m] = 2
@@ -101,6 +123,11 @@ def test_no_import_circles():
 
 def test_nothing_private_is_imported_across_modules():
     modules = _modules()
-    private = [f"{m}: {t}.{n}" for m, p in modules.items() for t, names in _imports(m, p, modules)
-               for n in names if n.startswith("_") and not n.startswith("__") and t != m]
+    private = [
+        f"{m}: {t}.{n}"
+        for m, p in modules.items()
+        for t, names in _imports(m, p, modules)
+        for n in names
+        if n.startswith("_") and not n.startswith("__") and t != m
+    ]
     assert private == []

@@ -1,4 +1,5 @@
 """A user with an upside-down, rotated IMU and a 0.1 s logging delay fixes it in the config."""
+
 import numpy as np
 import pytest
 
@@ -16,12 +17,20 @@ def test_mounting_and_time_offset_from_config(tmp_path):
     R_bi = euler_to_dcm(*np.radians([180.0, 0.0, 90.0]))  # IMU axes -> body axes
     delay = 0.1
     # What the badly mounted, late-stamped IMU logs: body vectors in IMU axes, stamps 0.1 s late.
-    logged = run.__class__(**{**run.__dict__, "imu": ImuData(run.imu.t + delay, run.imu.f_b @ R_bi,
-                                                             run.imu.omega_ib_b @ R_bi)})
+    logged = run.__class__(
+        **{
+            **run.__dict__,
+            "imu": ImuData(run.imu.t + delay, run.imu.f_b @ R_bi, run.imu.omega_ib_b @ R_bi),
+        }
+    )
     write_csv_run(logged, tmp_path / "logged")
     imu_cfg = grade_config("industrial")
-    fixed_cfg = load_config(overrides={"imu": imu_cfg, "mounting": {"imu_to_body_rpy_deg": [180.0, 0.0, 90.0],
-                                                                    "imu_time_offset_s": -delay}})
+    fixed_cfg = load_config(
+        overrides={
+            "imu": imu_cfg,
+            "mounting": {"imu_to_body_rpy_deg": [180.0, 0.0, 90.0], "imu_time_offset_s": -delay},
+        }
+    )
     fixed = load_csv_run(tmp_path / "logged", fixed_cfg)
     np.testing.assert_allclose(fixed.imu.f_b, run.imu.f_b, atol=1e-9)
     np.testing.assert_allclose(fixed.imu.t, run.imu.t, atol=1e-9)
@@ -36,6 +45,7 @@ def test_mounting_and_time_offset_from_config(tmp_path):
     imu_only = load_config(overrides={"imu": imu_cfg, "nhc": {"enabled": False}})
     sol = run_ekf(raw, imu_only, "ekf")
     from gnssacc.analysis.metrics import gnss_score
+
     assert score(raw, sol).prmse_m < gnss_score(raw).prmse_m
     assert np.all(np.abs(np.degrees(sol.rpy[:, 0])) > 170.0)
 
@@ -66,4 +76,6 @@ def test_fft_convolution_equals_the_direct_sum(monkeypatch, block):
     rng = np.random.default_rng(5)
     k = rng.random(61)
     for x in (rng.standard_normal(997), rng.standard_normal(997) + 1j * rng.standard_normal(997)):
-        np.testing.assert_allclose(mm._convolve_same(x, k), np.convolve(x, k, "same"), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            mm._convolve_same(x, k), np.convolve(x, k, "same"), rtol=0, atol=1e-12
+        )

@@ -2,6 +2,7 @@
 and of the smoother's factors by finite differences (and the map between the two conventions),
 the applicability rule in closed form, and on a simulated skid-steer run: never applied at rest or
 in a turn on the spot, counted, and the outage drift it removes."""
+
 from __future__ import annotations
 
 import warnings
@@ -21,20 +22,28 @@ from gnssacc.estimators.ekf import FilterState
 
 LAT, LON, H = np.radians(47.3), np.radians(8.5), 420.0
 R_TRUE = euler_to_dcm(0.04, -0.03, 2.1)
-V_TRUE = np.array([6.0, -3.5, 0.4])            # NED [m/s]
-B_G = np.array([3e-4, -2e-4, 5e-4])            # gyro bias [rad/s]
-OMEGA = np.array([0.02, -0.05, 0.35]) + B_G    # raw gyro [rad/s]
+V_TRUE = np.array([6.0, -3.5, 0.4])  # NED [m/s]
+B_G = np.array([3e-4, -2e-4, 5e-4])  # gyro bias [rad/s]
+OMEGA = np.array([0.02, -0.05, 0.35]) + B_G  # raw gyro [rad/s]
 W_IE = earth_rate_n(LAT)
 LEVER = np.array([-1.2, 0.3, 0.4])
-K_TRUE = 0.04                                  # odometry scale-factor error
+K_TRUE = 0.04  # odometry scale-factor error
 
 
 def _state(err: np.ndarray) -> FilterState:
     """The 16-state estimate that is ``err`` (estimate minus truth) off the truth."""
     R_M, R_N = radii(LAT)
     pos = np.array([LAT + err[0] / (R_M + H), LON + err[1] / ((R_N + H) * np.cos(LAT)), H - err[2]])
-    return FilterState(pos, V_TRUE + err[3:6], rotvec_to_dcm(err[6:9]) @ R_TRUE, np.zeros(3), B_G - err[12:15],
-                       np.eye(16), np.array([K_TRUE + err[15]]), 0)
+    return FilterState(
+        pos,
+        V_TRUE + err[3:6],
+        rotvec_to_dcm(err[6:9]) @ R_TRUE,
+        np.zeros(3),
+        B_G - err[12:15],
+        np.eye(16),
+        np.array([K_TRUE + err[15]]),
+        0,
+    )
 
 
 def _v_true(lever=LEVER) -> np.ndarray:
@@ -45,14 +54,20 @@ def _check(dz, Hm, steps, atol):
     for j, eps in steps.items():
         e = np.zeros(16)
         e[j] = eps
-        np.testing.assert_allclose(Hm[:, j], (dz(e) - dz(-e)) / (2 * eps), atol=atol, err_msg=f"column {j}")
+        np.testing.assert_allclose(
+            Hm[:, j], (dz(e) - dz(-e)) / (2 * eps), atol=atol, err_msg=f"column {j}"
+        )
     np.testing.assert_allclose(dz(np.zeros(16)), 0.0, atol=1e-12)
 
 
-STEPS = {**{j: 1e-3 for j in range(3, 6)}, **{j: 1e-5 for j in range(6, 9)}, **{j: 1e-5 for j in range(12, 16)}}
+STEPS = {
+    **{j: 1e-3 for j in range(3, 6)},
+    **{j: 1e-5 for j in range(6, 9)},
+    **{j: 1e-5 for j in range(12, 16)},
+}
 
 
-R_VB = euler_to_dcm(0.0, 0.012, -0.008)       # a small misalignment of the vehicle's axes
+R_VB = euler_to_dcm(0.0, 0.012, -0.008)  # a small misalignment of the vehicle's axes
 
 
 @pytest.mark.parametrize("lever, R_vb", [(LEVER, None), (np.zeros(3), None), (LEVER, R_VB)])
@@ -63,17 +78,19 @@ def test_nhc_jacobian_by_finite_differences(lever, R_vb):
     _check(dz, m.H, STEPS, 1e-7)
     assert m.kind == "nhc" and np.allclose(m.R, np.diag([0.01, 0.04]))
     assert np.all(m.H[:, 0:3] == 0) and np.all(m.H[:, 9:12] == 0) and np.all(m.H[:, 15] == 0)
-    assert np.any(m.H[:, 12:15] != 0) == bool(np.any(lever))   # the gyro bias enters through the lever arm
+    assert np.any(m.H[:, 12:15] != 0) == bool(
+        np.any(lever)
+    )  # the gyro bias enters through the lever arm
 
 
 @pytest.mark.parametrize("lever, R_vb", [(LEVER, None), (np.zeros(3), None), (LEVER, R_VB)])
 def test_odometry_jacobian_by_finite_differences(lever, R_vb):
     v_x = (_v_true(lever) if R_vb is None else R_vb @ _v_true(lever))[0]
-    v_odo = (1 + K_TRUE) * v_x       # what a noise-free odometry reads
+    v_odo = (1 + K_TRUE) * v_x  # what a noise-free odometry reads
     dz = lambda e: mm.odometry(_state(e), v_odo, 0.1, OMEGA, lever, W_IE, R_vb).dz  # noqa: E731
     m = mm.odometry(_state(np.zeros(16)), v_odo, 0.1, OMEGA, lever, W_IE, R_vb)
     _check(dz, m.H, STEPS, 1e-7)
-    assert m.H[0, 15] == pytest.approx(v_x)   # the scale column is the speed itself
+    assert m.H[0, 15] == pytest.approx(v_x)  # the scale column is the speed itself
 
 
 def _values(pose, v, bias, k=None):
@@ -123,10 +140,14 @@ def test_factor_jacobians_by_finite_differences_on_the_manifold(lever, R_vb):
     for factor, err, extra in ((nf, nhc_err, []), (of, odo_err, [15])):
         vals = _values(POSE, V_TRUE, BIAS, K_TRUE)
         A = _unwhitened_jacobian(factor, vals)
-        np.testing.assert_allclose(factor.unwhitenedError(vals), err(POSE, V_TRUE, BIAS, K_TRUE), atol=1e-12)
+        np.testing.assert_allclose(
+            factor.unwhitenedError(vals), err(POSE, V_TRUE, BIAS, K_TRUE), atol=1e-12
+        )
         assert A.shape[1] == len(cols) + len(extra)
         for c, k in enumerate(cols + extra):
-            num = (np.atleast_1d(err(*_perturbed(k, 1e-6))) - np.atleast_1d(err(*_perturbed(k, -1e-6)))) / 2e-6
+            num = (
+                np.atleast_1d(err(*_perturbed(k, 1e-6))) - np.atleast_1d(err(*_perturbed(k, -1e-6)))
+            ) / 2e-6
             np.testing.assert_allclose(A[:, c], num, atol=1e-7, err_msg=f"tangent {k}")
 
 
@@ -135,7 +156,9 @@ def test_factor_jacobians_are_the_ekf_ones_through_the_conventions():
     R = POSE.rotation().matrix()
     s = FilterState(np.array([LAT, LON, H]), V_TRUE, R, np.zeros(3), BIAS.gyroscope(), np.eye(15))
     v_ekf, H_ekf = mm.vehicle_velocity(s, OMEGA, LEVER, W_IE)
-    v_f, J_pose, J_vel, J_bias = vehicle_velocity(POSE, V_TRUE, BIAS.gyroscope(), OMEGA, LEVER, W_IE)
+    v_f, J_pose, J_vel, J_bias = vehicle_velocity(
+        POSE, V_TRUE, BIAS.gyroscope(), OMEGA, LEVER, W_IE
+    )
     np.testing.assert_allclose(v_f, v_ekf, atol=1e-12)
     np.testing.assert_allclose(J_pose[:, 0:3], H_ekf[:, 6:9] @ R, atol=1e-12)
     np.testing.assert_allclose(J_vel, H_ekf[:, 3:6], atol=1e-12)
@@ -144,21 +167,26 @@ def test_factor_jacobians_are_the_ekf_ones_through_the_conventions():
     np.testing.assert_allclose(J_bias[:, 3:6], skew(LEVER))
 
 
-@pytest.mark.parametrize("rest, v_x, sigma_vx, yaw_rate, expected", [
-    (True, 5.0, 0.1, 0.0, nhc.REST),          # in a stationary span, whatever the estimate says
-    (False, 0.0, 0.05, 0.52, nhc.TURN),       # a 30 deg/s pivot: slip 0.26 m/s at d = 0.5 m
-    (False, 0.2, 0.05, 0.52, nhc.TURN),       # creeping slower than the pivot moves the point
-    (False, 2.0, 0.05, 0.52, nhc.APPLY),      # a rolling turn (radius 3.8 m)
-    (False, 0.0, 0.05, 0.15, nhc.APPLY),      # slip 0.075 m/s: within the constraint's 0.1 m/s
-    (False, 0.5, 0.2, 0.52, nhc.TURN),        # speed not known to be above the slip (0.5 - 0.6 < 0)
-    (False, -2.0, 0.05, 0.52, nhc.APPLY),     # reversing through a turn rolls too
-])
+@pytest.mark.parametrize(
+    "rest, v_x, sigma_vx, yaw_rate, expected",
+    [
+        (True, 5.0, 0.1, 0.0, nhc.REST),  # in a stationary span, whatever the estimate says
+        (False, 0.0, 0.05, 0.52, nhc.TURN),  # a 30 deg/s pivot: slip 0.26 m/s at d = 0.5 m
+        (False, 0.2, 0.05, 0.52, nhc.TURN),  # creeping slower than the pivot moves the point
+        (False, 2.0, 0.05, 0.52, nhc.APPLY),  # a rolling turn (radius 3.8 m)
+        (False, 0.0, 0.05, 0.15, nhc.APPLY),  # slip 0.075 m/s: within the constraint's 0.1 m/s
+        (False, 0.5, 0.2, 0.52, nhc.TURN),  # speed not known to be above the slip (0.5 - 0.6 < 0)
+        (False, -2.0, 0.05, 0.52, nhc.APPLY),  # reversing through a turn rolls too
+    ],
+)
 def test_decision_rule(rest, v_x, sigma_vx, yaw_rate, expected):
     assert nhc.decide(rest, v_x, sigma_vx, yaw_rate, 0.1, 0.5) == expected
 
 
 def test_decision_needs_a_pivot_offset():
-    assert nhc.decide(False, 0.0, 0.05, 1.0, 0.1, 0.0) == nhc.APPLY   # the turn's centre is the point itself
+    assert (
+        nhc.decide(False, 0.0, 0.05, 1.0, 0.1, 0.0) == nhc.APPLY
+    )  # the turn's centre is the point itself
 
 
 @pytest.fixture(scope="module")
@@ -206,7 +234,13 @@ def test_never_at_rest_or_on_the_spot_on_a_skid_steer_run(ugv_run):
     assert not np.any(prep.stationary.mask(t_app))
     # Every epoch is counted once: applied, at rest or on the spot.
     n_epochs = int(np.floor((run.t_end - prep.init.t) / settings.nhc.interval_s + 1e-9))
-    assert st["n_nhc_updates"] + st["n_nhc_rejected"] + st["n_nhc_skipped_rest"] + st["n_nhc_skipped_turn"] == n_epochs
+    assert (
+        st["n_nhc_updates"]
+        + st["n_nhc_rejected"]
+        + st["n_nhc_skipped_rest"]
+        + st["n_nhc_skipped_turn"]
+        == n_epochs
+    )
 
 
 def test_smoother_attaches_one_epoch_per_node():
@@ -215,7 +249,7 @@ def test_smoother_attaches_one_epoch_per_node():
     times = np.array([0.0, 0.1, 0.2, 0.3, 1.0, 1.5, 2.0, 3.9, 5.0])
     # Epoch 1.0 -> node 4; 2.0 -> node 6; 3.0 has none within 0.5 s; 4.0 -> node 7; 5.0 -> node 8.
     assert nearest_nodes(times, np.array([1.0, 2.0, 3.0, 4.0, 5.0]), 1.0).tolist() == [4, 6, 7, 8]
-    assert nearest_nodes(times, np.array([0.0]), 1.0).tolist() == []      # the start has no prediction
+    assert nearest_nodes(times, np.array([0.0]), 1.0).tolist() == []  # the start has no prediction
 
 
 def _misaligned(run, pitch_deg: float, yaw_deg: float):
@@ -239,15 +273,18 @@ def test_the_tuner_finds_the_vehicle_axes_and_only_when_they_are_there(pitch_deg
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        run = _misaligned(gnssacc.simulate("car", 200.0, imu_grade="industrial", seed=4), pitch_deg, yaw_deg)
+        run = _misaligned(
+            gnssacc.simulate("car", 200.0, imu_grade="industrial", seed=4), pitch_deg, yaw_deg
+        )
         nhc_values = prepare(run, gnssacc.configure(run), "auto").tuning.values["nhc"]
     found = np.array([nhc_values["pitch_offset_deg"], nhc_values["yaw_offset_deg"]])
     if pitch_deg == yaw_deg == 0.0:
         assert np.all(found == 0.0), found
     else:
         # Within a third of each applied angle: far closer than the model without them.
-        np.testing.assert_allclose(found, [pitch_deg, yaw_deg], atol=0.3 * min(abs(pitch_deg), abs(yaw_deg)))
-
+        np.testing.assert_allclose(
+            found, [pitch_deg, yaw_deg], atol=0.3 * min(abs(pitch_deg), abs(yaw_deg))
+        )
 
 
 class _Quadratic:
@@ -268,7 +305,9 @@ def test_an_axis_angle_is_kept_only_on_a_decisive_likelihood_gain():
 
     free = [("nhc", "sigma_lateral_mps"), ("nhc", "pitch_offset_deg"), ("nhc", "yaw_offset_deg")]
     gain = tuning.OFFSET_MIN_GAIN
-    theta, n, dropped = tuning._significant_offsets(_Quadratic(free, [50.0, 2.0 * gain, 0.5 * gain]), np.ones(3))
+    theta, n, dropped = tuning._significant_offsets(
+        _Quadratic(free, [50.0, 2.0 * gain, 0.5 * gain]), np.ones(3)
+    )
     # The sigma is not an angle: kept; the pitch brings twice the threshold: kept; the yaw half: dropped.
     assert theta.tolist() == [1.0, 1.0, 0.0] and n == 3 and dropped == [2]
 
@@ -276,9 +315,9 @@ def test_an_axis_angle_is_kept_only_on_a_decisive_likelihood_gain():
 def test_correlation_inflation_is_the_ar1_variance_factor():
     from gnssacc.prepare.tuning import correlation_inflation
 
-    assert correlation_inflation(0.5, 400) == pytest.approx(np.sqrt(3.0))      # (1 + 0.5) / (1 - 0.5)
-    assert correlation_inflation(0.1, 400) == 1.0            # within three standard errors (0.15) of zero
-    assert correlation_inflation(0.99, 400) == pytest.approx(np.sqrt(1.9 / 0.1))   # capped at 0.9
+    assert correlation_inflation(0.5, 400) == pytest.approx(np.sqrt(3.0))  # (1 + 0.5) / (1 - 0.5)
+    assert correlation_inflation(0.1, 400) == 1.0  # within three standard errors (0.15) of zero
+    assert correlation_inflation(0.99, 400) == pytest.approx(np.sqrt(1.9 / 0.1))  # capped at 0.9
     assert correlation_inflation(None, 400) == 1.0 and correlation_inflation(0.5, 5) == 1.0
 
 
@@ -286,12 +325,11 @@ def test_the_clock_check_decides_without_the_aids():
     """The clock offset's likelihood stage runs the IMU and GNSS model alone: with the constraint
     (its axes not identified yet) KITTI seed 3 with outages measured a -0.148 s offset, decisively,
     and the run was refused."""
-    from gnssacc.core.config import load_config
     from gnssacc.pipeline import check_input, load_source, with_outages
 
     cfg = load_config("kitti")
     run = with_outages(load_source("kitti", cfg, noise="white", seed=3), None, "60:20")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        checked, _, _ = check_input(run, cfg)      # raised InputError before
-    assert checked.imu.t[0] == run.imu.t[0]          # no offset applied
+        checked, _, _ = check_input(run, cfg)  # raised InputError before
+    assert checked.imu.t[0] == run.imu.t[0]  # no offset applied

@@ -1,4 +1,5 @@
 """Known-answer tests of gnssacc.analysis.observability and gnssacc.analysis.motion (simulated runs, < 30 s)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -45,7 +46,9 @@ def test_replay_reproduces_the_filter_covariance(static):
     # With the acceleration update too.
     sol_a = run_ekf(run, cfg, "ekf-acc", output_times=run.gnss.t, store_P=True)
     rp_a = ob.replay_ekf(run, cfg, "ekf-acc")
-    np.testing.assert_allclose(np.array([e.P_plus for e in rp_a.epochs]), sol_a.P, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(
+        np.array([e.P_plus for e in rp_a.epochs]), sol_a.P, rtol=1e-9, atol=1e-12
+    )
 
 
 def test_sigma_history_is_the_solution_sigma(static):
@@ -111,7 +114,7 @@ def test_turning_makes_heading_observable(static, turns):
     sol = run_ekf(run, cfg, "ekf")
     yaw = ob.sigma_history(sol)["yaw"]
     assert yaw[-1] < 0.7 * yaw[0]
-    straight = ob.gramian(rp, 0.0, 10.0, "pos")     # the straight segment before the circles
+    straight = ob.gramian(rp, 0.0, 10.0, "pos")  # the straight segment before the circles
     turning = ob.gramian(rp, 30.0, 60.0, "pos")
     static_deg = ob.gramian(static[2], 30.0, 60.0, "pos").degree_of("yaw")
     assert straight.degree_of("yaw") < 0.05
@@ -167,6 +170,9 @@ def test_motion_classifier_matches_the_simulated_segments():
     for code in range(4):
         sel = m & (ref == code)
         assert sel.sum() > 100
-        assert np.mean(mc.label[sel] == code) > 0.85, (motion.LABELS[code], np.mean(mc.label[sel] == code))
+        assert np.mean(mc.label[sel] == code) > 0.85, (
+            motion.LABELS[code],
+            np.mean(mc.label[sel] == code),
+        )
     spans = mc.spans()
     assert spans[0][0] == mc.t[0] and {s[2] for s in spans} == set(motion.LABELS)

@@ -1,5 +1,6 @@
 """Wheel odometry in the estimators, against the simulator's truth: the scale-factor state finds the
 simulated scale error, and the odometry bridges GNSS outages far better than the IMU alone."""
+
 from __future__ import annotations
 
 import warnings
@@ -10,7 +11,7 @@ import pytest
 
 import gnssacc
 
-SCALE = 0.03          # the odometry's scale error imposed on the simulated run (3 sigma of the prior)
+SCALE = 0.03  # the odometry's scale error imposed on the simulated run (3 sigma of the prior)
 OUTAGES = "60:20"
 
 
@@ -36,9 +37,9 @@ def test_scale_factor_state_converges_to_the_simulated_scale_error(car):
         st = res.metrics["methods"][mid]["stats"]
         k, sigma = st["odometry_scale"], st["odometry_scale_sigma"]
         assert abs(k - SCALE) <= 3.0 * sigma, (mid, k, sigma)
-        assert abs(k) > 3.0 * sigma, (mid, k, sigma)       # found, not left at its zero start
+        assert abs(k) > 3.0 * sigma, (mid, k, sigma)  # found, not left at its zero start
         assert st.get("n_odo_updates", st.get("n_odo_factors")) > 100
-        assert st["n_odo_skipped_sign"] == 0                # the car never reverses
+        assert st["n_odo_skipped_sign"] == 0  # the car never reverses
 
 
 def test_odometry_bridges_outages_at_a_quarter_of_the_imu_only_error():
@@ -64,8 +65,24 @@ def test_without_odometry_the_filter_is_the_fifteen_state_one(car):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         prep = prepare(plain, cfg, "none")
-    a = run_ekf(plain, cfg, "ekf", init=prep.init, quality=prep.quality, stationary=prep.stationary, store_P=True)
-    b = run_ekf(car, cfg, "ekf", init=prep.init, quality=prep.quality, stationary=prep.stationary, store_P=True)
+    a = run_ekf(
+        plain,
+        cfg,
+        "ekf",
+        init=prep.init,
+        quality=prep.quality,
+        stationary=prep.stationary,
+        store_P=True,
+    )
+    b = run_ekf(
+        car,
+        cfg,
+        "ekf",
+        init=prep.init,
+        quality=prep.quality,
+        stationary=prep.stationary,
+        store_P=True,
+    )
     assert a.P.shape[1:] == (15, 15) and "odometry_scale" not in a.stats
     np.testing.assert_array_equal(a.lat, b.lat)
     np.testing.assert_array_equal(a.P, b.P)

@@ -1,6 +1,7 @@
 """What a user reads: the report on every kind of run, the evo-style statistics (checked against an
 independent APE computed as evo computes it), like-for-like comparison with the raw fixes, NEES
 warnings, grouped warnings, and the export and inspect options."""
+
 import json
 import re
 from dataclasses import replace
@@ -36,17 +37,21 @@ def run_dir(sim_run, tmp_path_factory):
 
 # --- the report never takes the run down ----------------------------------------------------------
 
+
 def _no_truth_dir(sim_run, tmp_path):
     d = write_csv_run(replace(sim_run, truth=None), tmp_path / "notruth")
     assert not (d / "truth.csv").exists()
     return d
 
 
-CASES = {   # name: (source maker, extra arguments)
+CASES = {  # name: (source maker, extra arguments)
     "gauss-markov": (lambda r, d, t: "sim:car,duration=60", ["--noise", "gm"]),
     "outages": (lambda r, d, t: d, ["--outage-every", "30:10", "--tune", "none"]),
     "no-truth": (lambda r, d, t: _no_truth_dir(r, t), ["--tune", "none"]),
-    "bag": (lambda r, d, t: write_bag(r, t / "b", "ros2-sqlite3"), ["--tune", "none", "--methods", "ekf,smoother"]),
+    "bag": (
+        lambda r, d, t: write_bag(r, t / "b", "ros2-sqlite3"),
+        ["--tune", "none", "--methods", "ekf,smoother"],
+    ),
     "one-method": (lambda r, d, t: d, ["--tune", "none", "--methods", "ekf"]),
 }
 
@@ -55,15 +60,19 @@ CASES = {   # name: (source maker, extra arguments)
 def test_report_is_written_for_every_kind_of_run(case, sim_run, run_dir, tmp_path, capsys):
     make, extra = CASES[case]
     out = tmp_path / "o"
-    code, stdout, stderr = _cli(["run", make(sim_run, run_dir, tmp_path), "--report", "--out", out] + extra, capsys)
+    code, stdout, stderr = _cli(
+        ["run", make(sim_run, run_dir, tmp_path), "--report", "--out", out] + extra, capsys
+    )
     assert code == 0, stderr
     page = (out / "report.html").read_text()
     assert "could not be made" not in page and "not drawn" not in stderr
-    for name in re.findall(r'<img src="([^"]+)"', page):   # every figure the page shows exists
+    for name in re.findall(r'<img src="([^"]+)"', page):  # every figure the page shows exists
         assert (out / name).is_file(), name
-    assert 'src="summary.png"' in page and 'src="trajectory.png"' in page and 'src="nis.png"' in page
-    assert "/site-packages/" not in page and str(tmp_path) not in page   # relative paths only
-    if case in ("no-truth", "bag"):   # the bag has no truth topic: what the issue's user had
+    assert (
+        'src="summary.png"' in page and 'src="trajectory.png"' in page and 'src="nis.png"' in page
+    )
+    assert "/site-packages/" not in page and str(tmp_path) not in page  # relative paths only
+    if case in ("no-truth", "bag"):  # the bag has no truth topic: what the issue's user had
         assert "No truth" in page and "fix residual [m]" in stdout and "PRMSE" not in stdout
         assert not (out / "errors.png").exists()
     else:
@@ -83,19 +92,43 @@ def test_a_failing_report_section_is_one_line(run_dir, tmp_path, capsys, monkeyp
 
     monkeypatch.setattr(htmlreport, "statistics_html", broken)
     out = tmp_path / "o"
-    assert _cli(["run", run_dir, "--methods", "ekf", "--tune", "none", "--report", "--plots", "none",
-                 "--out", out], capsys)[0] == 0
+    assert (
+        _cli(
+            [
+                "run",
+                run_dir,
+                "--methods",
+                "ekf",
+                "--tune",
+                "none",
+                "--report",
+                "--plots",
+                "none",
+                "--out",
+                out,
+            ],
+            capsys,
+        )[0]
+        == 0
+    )
     page = (out / "report.html").read_text()
-    assert page.count("could not be made") == 1 and "Consistency</h2>" in page and "KeyError" in page
+    assert (
+        page.count("could not be made") == 1 and "Consistency</h2>" in page and "KeyError" in page
+    )
 
 
 # --- statistics ----------------------------------------------------------------------------------
+
 
 def test_summary_has_evos_statistics():
     x = np.array([3.0, 4.0, 0.0, 5.0])
     s = errorstats.summary(x)
     assert s["rmse"] == pytest.approx(np.sqrt(50 / 4)) and s["mean"] == 3.0 and s["median"] == 3.5
-    assert s["std"] == pytest.approx(np.sqrt(((x - 3) ** 2).mean())) and (s["min"], s["max"], s["n"]) == (0, 5, 4)
+    assert s["std"] == pytest.approx(np.sqrt(((x - 3) ** 2).mean())) and (
+        s["min"],
+        s["max"],
+        s["n"],
+    ) == (0, 5, 4)
 
 
 def test_cep_of_a_circular_gaussian_is_its_closed_form():
@@ -122,15 +155,22 @@ def test_nees_inside_its_band_when_the_sigma_is_right_and_named_per_axis_when_no
     s = np.tile([1.0, 2.0, 0.5], (3000, 1))
     e = rng.normal(size=s.shape) * s
     ok = errorstats.nees(e, s, errorstats.AXES_NED)
-    assert ok["band"][0] <= ok["value"] <= ok["band"][1] and ok["outside"] == [] and not ok["pooled_outside"]
+    assert (
+        ok["band"][0] <= ok["value"] <= ok["band"][1]
+        and ok["outside"] == []
+        and not ok["pooled_outside"]
+    )
     assert nees_warnings({"nees_position": ok}) == []
-    e[:, 2] *= 5.0   # the down errors 5x their stated sigma: NEES 25 on that axis
+    e[:, 2] *= 5.0  # the down errors 5x their stated sigma: NEES 25 on that axis
     bad = errorstats.nees(e, s, errorstats.AXES_NED)
     assert bad["per_axis"]["D"]["value"] == pytest.approx(25, rel=0.1) and bad["outside"] == ["D"]
     (text,) = nees_warnings({"nees_position": bad})
-    assert text.startswith("position NEES per dof") and "D: errors larger than the stated sigma" in text
+    assert (
+        text.startswith("position NEES per dof")
+        and "D: errors larger than the stated sigma" in text
+    )
     assert "N:" not in text and "E:" not in text
-    e[:, 0] *= 0.1   # north errors a tenth of their sigma: too cautious there
+    e[:, 0] *= 0.1  # north errors a tenth of their sigma: too cautious there
     (text,) = nees_warnings({"nees_position": errorstats.nees(e, s, errorstats.AXES_NED)})
     assert "D: errors larger" in text and "N: stated sigma larger than the errors" in text
 
@@ -141,7 +181,18 @@ def _solution_from_truth(run, offset_ned):
     p = run.origin.to_ned(tr.lat, tr.lon, tr.h) + offset_ned(tr.t - run.t_start)
     lat, lon, h = run.origin.to_llh(p)
     k = len(tr.t)
-    return NavSolution("test", tr.t, lat, lon, h, tr.v_n, tr.rpy, np.zeros((k, 3)), np.zeros((k, 3)), np.ones((k, 15)))
+    return NavSolution(
+        "test",
+        tr.t,
+        lat,
+        lon,
+        h,
+        tr.v_n,
+        tr.rpy,
+        np.zeros((k, 3)),
+        np.zeros((k, 3)),
+        np.ones((k, 15)),
+    )
 
 
 def test_the_raw_fixes_are_compared_at_their_own_epochs(sim_run):
@@ -149,17 +200,21 @@ def test_the_raw_fixes_are_compared_at_their_own_epochs(sim_run):
     error is known: the comparison at the fix epochs sees the 0.5 m only."""
     from gnssacc.sources.gnss_noise import apply_outages
 
-    run = apply_outages(sim_run, [(30.0, 50.0)])   # spans are (start, end) [s from the start]
-    far_in = lambda t: (t > 30.5) & (t < 49.5)   # off by 40 m away from the fixes around the outage
-    sol = _solution_from_truth(run, lambda t: np.where(far_in(t)[:, None], [40.0, 0, 0], [0.3, 0.4, 0.0]))
+    run = apply_outages(sim_run, [(30.0, 50.0)])  # spans are (start, end) [s from the start]
+    far_in = lambda t: (t > 30.5) & (t < 49.5)  # off by 40 m away from the fixes around the outage
+    sol = _solution_from_truth(
+        run, lambda t: np.where(far_in(t)[:, None], [40.0, 0, 0], [0.3, 0.4, 0.0])
+    )
     t = sol.t - run.t_start
-    in_outage = (t >= 30.0) & (t < 50.0)   # spans are [start, end)
+    in_outage = (t >= 30.0) & (t < 50.0)  # spans are [start, end)
     off = np.where(far_in(t), 40.0, 0.5)
     stats = errorstats.error_statistics(run, sol)
     g = run.gnss
     fix_err = run.origin.to_ned(g.lat, g.lon, g.h) - run.origin.to_ned(*_truth_llh_at(run, g.t))
     assert stats["at_fixes"]["prmse_m"] == pytest.approx(0.5, abs=1e-6)
-    assert stats["at_fixes"]["gnss_prmse_m"] == pytest.approx(np.sqrt(np.mean(np.sum(fix_err**2, axis=1))), rel=1e-6)
+    assert stats["at_fixes"]["gnss_prmse_m"] == pytest.approx(
+        np.sqrt(np.mean(np.sum(fix_err**2, axis=1))), rel=1e-6
+    )
     assert stats["outage"]["rmse"] == pytest.approx(np.sqrt(np.mean(off[in_outage] ** 2)), abs=1e-6)
     assert stats["no_outage"]["rmse"] == pytest.approx(0.5, abs=1e-6)
     assert stats["position"]["max"] == pytest.approx(40.0, abs=1e-6)
@@ -169,12 +224,29 @@ def test_no_worse_than_the_fixes_warning_for_outage_errors(tmp_path, capsys):
     """The issue's KITTI case on a simulated run: outage errors make the EKF's all-epoch PRMSE far
     worse than the raw fixes', but at the fixes' own epochs it beats them: no warning, no '!'."""
     out = tmp_path / "o"
-    code, stdout, err = _cli(["run", "sim:car,imu=consumer,duration=120", "--outage-every", "60:30", "--methods",
-                              "ekf", "--tune", "none", "--nhc", "off", "--plots", "none", "--out", out], capsys)
-    assert code == 0, err   # IMU-only through the outages (the constraint would bridge them)
+    code, stdout, err = _cli(
+        [
+            "run",
+            "sim:car,imu=consumer,duration=120",
+            "--outage-every",
+            "60:30",
+            "--methods",
+            "ekf",
+            "--tune",
+            "none",
+            "--nhc",
+            "off",
+            "--plots",
+            "none",
+            "--out",
+            out,
+        ],
+        capsys,
+    )
+    assert code == 0, err  # IMU-only through the outages (the constraint would bridge them)
     m = json.loads((out / "metrics.json").read_text())
     ekf = m["methods"]["ekf"]
-    assert ekf["prmse_m"] > 2 * m["gnss_prmse_m"]   # the old, unfair comparison would have warned
+    assert ekf["prmse_m"] > 2 * m["gnss_prmse_m"]  # the old, unfair comparison would have warned
     assert ekf["errors"]["at_fixes"]["prmse_m"] < ekf["errors"]["at_fixes"]["gnss_prmse_m"]
     assert "worse than the raw fixes" not in err and "fixes" not in m["consistency"]["ekf"]["flags"]
     row = next(ln for ln in stdout.splitlines() if ln.startswith("ekf "))
@@ -190,6 +262,7 @@ def _truth_llh_at(run, t):
 
 # --- evo ----------------------------------------------------------------------------------------
 
+
 def evo_like_ape(ref_tum, est_tum, max_diff=0.01):
     """``evo_ape tum REF EST --pose_relation trans_part`` with ``--align`` off, as evo computes it
     (evo.core.sync.associate_trajectories, then APE): every estimate pose is matched to the reference
@@ -200,14 +273,38 @@ def evo_like_ape(ref_tum, est_tum, max_diff=0.01):
     j = np.where(np.abs(ref[j - 1, 0] - est[:, 0]) <= np.abs(ref[j, 0] - est[:, 0]), j - 1, j)
     keep = np.abs(ref[j, 0] - est[:, 0]) <= max_diff
     d = np.linalg.norm(est[keep, 1:4] - ref[j[keep], 1:4], axis=1)
-    return {"rmse": np.sqrt(np.mean(d**2)), "mean": d.mean(), "median": np.median(d), "std": d.std(),
-            "max": d.max(), "n": int(keep.sum())}
+    return {
+        "rmse": np.sqrt(np.mean(d**2)),
+        "mean": d.mean(),
+        "median": np.median(d),
+        "std": d.std(),
+        "max": d.max(),
+        "n": int(keep.sum()),
+    }
 
 
 def test_evo_ape_on_the_tum_export_is_the_tables_position_error(run_dir, tmp_path, capsys):
     out = tmp_path / "o"
-    assert _cli(["run", run_dir, "--methods", "ekf,smoother", "--tune", "none", "--plots", "none",
-                 "--export", "tum", "--out", out], capsys)[0] == 0
+    assert (
+        _cli(
+            [
+                "run",
+                run_dir,
+                "--methods",
+                "ekf,smoother",
+                "--tune",
+                "none",
+                "--plots",
+                "none",
+                "--export",
+                "tum",
+                "--out",
+                out,
+            ],
+            capsys,
+        )[0]
+        == 0
+    )
     metrics = json.loads((out / "metrics.json").read_text())
     for mid in ("ekf", "smoother", "smoother-online"):
         ours = metrics["methods"][mid]
@@ -223,17 +320,37 @@ def test_evo_ape_agrees_where_the_truth_is_sparser_than_the_estimate(tmp_path, c
     interpolation) sees the table's errors only because truth.tum holds the truth at every estimate
     epoch too."""
     out = tmp_path / "k"
-    assert _cli(["run", "kitti", "--methods", "smoother", "--tune", "none", "--plots", "none", "--export", "tum",
-                 "--out", out], capsys)[0] == 0
+    assert (
+        _cli(
+            [
+                "run",
+                "kitti",
+                "--methods",
+                "smoother",
+                "--tune",
+                "none",
+                "--plots",
+                "none",
+                "--export",
+                "tum",
+                "--out",
+                out,
+            ],
+            capsys,
+        )[0]
+        == 0
+    )
     metrics = json.loads((out / "metrics.json").read_text())
     import gnssacc
 
-    own = gnssacc.load("kitti").truth.t   # the truth as the source has it
+    own = gnssacc.load("kitti").truth.t  # the truth as the source has it
     est_t = np.loadtxt(out / "trajectory_smoother.tum")[:, 0]
     inside = (est_t >= own[0]) & (est_t <= own[-1])
     gap = np.min(np.abs(est_t[inside, None] - own[None, :]), axis=1)
-    assert np.sum(gap > 0.01) >= 5   # epochs evo would drop against the source's truth alone
-    assert np.all(np.isin(np.round(own, 6), np.round(np.loadtxt(out / "truth.tum")[:, 0], 6)))   # own epochs kept
+    assert np.sum(gap > 0.01) >= 5  # epochs evo would drop against the source's truth alone
+    assert np.all(
+        np.isin(np.round(own, 6), np.round(np.loadtxt(out / "truth.tum")[:, 0], 6))
+    )  # own epochs kept
     for mid in ("smoother", "smoother-online"):
         ape = evo_like_ape(out / "truth.tum", out / f"trajectory_{mid}.tum")
         assert ape["n"] == metrics["methods"][mid]["n_epochs"]
@@ -242,20 +359,35 @@ def test_evo_ape_agrees_where_the_truth_is_sparser_than_the_estimate(tmp_path, c
 
 # --- warnings, options ---------------------------------------------------------------------------
 
+
 def test_warnings_that_differ_in_numbers_only_are_one_line():
-    items = [("ekf", "PRMSE 3.10 m at 300 epochs is worse"), ("ekf-acc", "PRMSE 3.40 m at 300 epochs is worse"),
-             ("smoother", "model misfit"), ("smoother-acc", "model misfit")]
-    assert group_warnings(items) == [("ekf, ekf-acc", "PRMSE 3.10/3.40 m at 300 epochs is worse"),
-                                     ("smoother, smoother-acc", "model misfit")]
+    items = [
+        ("ekf", "PRMSE 3.10 m at 300 epochs is worse"),
+        ("ekf-acc", "PRMSE 3.40 m at 300 epochs is worse"),
+        ("smoother", "model misfit"),
+        ("smoother-acc", "model misfit"),
+    ]
+    assert group_warnings(items) == [
+        ("ekf, ekf-acc", "PRMSE 3.10/3.40 m at 300 epochs is worse"),
+        ("smoother, smoother-acc", "model misfit"),
+    ]
 
 
-@pytest.mark.parametrize("export", [["--export", "tum,bag"], ["--export", "tum", "--export", "bag"]])
+@pytest.mark.parametrize(
+    "export", [["--export", "tum,bag"], ["--export", "tum", "--export", "bag"]]
+)
 def test_export_takes_a_comma_list_or_a_repeated_flag(export, run_dir, tmp_path, capsys):
     out = tmp_path / "o"
-    code, _, err = _cli(["run", run_dir, "--methods", "ekf", "--tune", "none", "--no-plots", "--out", out] + export,
-                        capsys)
+    code, _, err = _cli(
+        ["run", run_dir, "--methods", "ekf", "--tune", "none", "--no-plots", "--out", out] + export,
+        capsys,
+    )
     assert code == 0, err
-    assert (out / "trajectory_ekf.tum").is_file() and (out / "truth.tum").is_file() and (out / "trajectories").is_dir()
+    assert (
+        (out / "trajectory_ekf.tum").is_file()
+        and (out / "truth.tum").is_file()
+        and (out / "trajectories").is_dir()
+    )
     assert not list(out.glob("*.png"))
 
 
@@ -268,6 +400,6 @@ def test_a_bad_export_kind_is_named(run_dir, capsys):
 def test_inspect_exits_2_when_it_cannot_pick_the_topics(sim_run, tmp_path, capsys):
     p = write_bag(sim_run, tmp_path / "two", "ros2-sqlite3", truth_topic="/rtk/fix")
     code, out, err = _cli(["inspect", p], capsys)
-    assert code == 2 and "/rtk/fix" in out   # the listing, to choose from
+    assert code == 2 and "/rtk/fix" in out  # the listing, to choose from
     assert err.count("\n") == 1 and err.startswith("gnssacc: error: ") and "--gnss-topic" in err
     assert _cli(["inspect", p, "--gnss-topic", "/gnss/fix"], capsys)[0] == 0

@@ -8,6 +8,7 @@ spot; its slope-based checks need three minutes of its gentle turns) are used. C
 ``test_bad_inputs.py`` (malformed files and config) and ``test_mounting.py`` (a mounting and
 offset written in the config) are not repeated.
 """
+
 from __future__ import annotations
 
 import json
@@ -35,13 +36,14 @@ SCENARIOS = list(DURATION_S)
 GRADES = ("consumer", "industrial", "tactical")
 SEED = 11
 G0 = 9.80665
-RUN_DIR = "rundir"     # where the runs below claim to come from (a CSV run directory)
+RUN_DIR = "rundir"  # where the runs below claim to come from (a CSV run directory)
 AUTO_MOUNT = {"mounting": {"imu_to_body_rpy_deg": "auto"}}
 AUTO_OFFSET = {"mounting": {"imu_time_offset_s": "auto"}}
 REPAIR = {"checks": {"repair": "auto"}}
 
 
 # --- runs ---------------------------------------------------------------------------------------------
+
 
 def _as_csv(run):
     """The run as if loaded from the CSV run directory ``RUN_DIR`` (so messages name its files)."""
@@ -53,7 +55,10 @@ def _rtk(run, sigma_m: float, seed: int):
     matching sigmas: RTK-grade fixes (``run`` simulated with ``noise="none"``)."""
     g = run.gnss
     sig = np.array([sigma_m, sigma_m, 1.6 * sigma_m])
-    p = run.origin.to_ned(g.lat, g.lon, g.h) + np.random.default_rng(seed).normal(size=(len(g), 3)) * sig
+    p = (
+        run.origin.to_ned(g.lat, g.lon, g.h)
+        + np.random.default_rng(seed).normal(size=(len(g), 3)) * sig
+    )
     lat, lon, h = run.origin.to_llh(p)
     return replace(run, gnss=replace(g, lat=lat, lon=lon, h=h, sigma_ned=np.tile(sig, (len(g), 1))))
 
@@ -69,16 +74,23 @@ def sims():
         key = (scenario, grade, noise, seed)
         if key not in cache:
             sim_noise = "none" if noise == "rtk" else noise
-            run = simulate(scenario, DURATION_S[scenario], imu_grade=grade, noise=sim_noise, seed=seed)
+            run = simulate(
+                scenario, DURATION_S[scenario], imu_grade=grade, noise=sim_noise, seed=seed
+            )
             cache[key] = _as_csv(_rtk(run, 0.05, seed + 1) if noise == "rtk" else run)
         return cache[key]
+
     return get
 
 
 def _imu(run, t=None, f=None, w=None):
     i = run.imu
-    return replace(run, imu=ImuData(i.t if t is None else t, i.f_b if f is None else f,
-                                    i.omega_ib_b if w is None else w))
+    return replace(
+        run,
+        imu=ImuData(
+            i.t if t is None else t, i.f_b if f is None else f, i.omega_ib_b if w is None else w
+        ),
+    )
 
 
 def _fixes(run, lat, lon, h=None):
@@ -125,6 +137,7 @@ def _max_angle_deg(a: np.ndarray, b: np.ndarray) -> float:
 
 # --- 1. clean runs: no false alarms --------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("grade", GRADES)
 @pytest.mark.parametrize("scenario", SCENARIOS)
 def test_clean_run_passes_untouched(scenario, grade, sims):
@@ -140,8 +153,11 @@ def test_clean_run_with_everything_automatic_is_left_as_it_is(scenario, sims):
     and no offset applied: the estimator does not find the stamps improved by any (its measurement
     is consistent with the true 0)."""
     run = sims(scenario)
-    out, cfg, findings, _ = _check(run, checks={"repair": "auto"},
-                                   mounting={"imu_to_body_rpy_deg": "auto", "imu_time_offset_s": "auto"})
+    out, cfg, findings, _ = _check(
+        run,
+        checks={"repair": "auto"},
+        mounting={"imu_to_body_rpy_deg": "auto", "imu_time_offset_s": "auto"},
+    )
     assert sorted(f.check for f in findings) == ["mounting", "time_offset"]
     assert next(f for f in findings if f.check == "mounting").action == "applied"
     np.testing.assert_array_equal(cfg["mounting"]["imu_to_body_rpy_deg"], [0.0, 0.0, 0.0])
@@ -149,12 +165,15 @@ def test_clean_run_with_everything_automatic_is_left_as_it_is(scenario, sims):
     off = next(f for f in findings if f.check == "time_offset")
     assert off.action in ("refuted", "not confirmed", "noted"), off
     if "measured_s" in off.details:
-        assert abs(off.details["measured_s"]) <= max(3.0 * off.details["sigma_s"], 0.02), off.details
+        assert abs(off.details["measured_s"]) <= max(3.0 * off.details["sigma_s"], 0.02), (
+            off.details
+        )
     assert cfg["mounting"]["imu_time_offset_s"] == 0.0
     np.testing.assert_array_equal(out.imu.t, run.imu.t)
 
 
 # --- 2-4. IMU units ----------------------------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("scenario", SCENARIOS)
 def test_accelerometer_in_g(scenario, sims):
@@ -198,8 +217,10 @@ def test_gyro_in_degrees_per_second_on_a_parked_vehicle_is_proven_by_the_estimat
     np.testing.assert_allclose(out.imu.omega_ib_b, np.radians(spun.imu.omega_ib_b), rtol=1e-12)
 
 
-@pytest.mark.parametrize("unit, scale, divisor", [("milliseconds", 1e3, "1000"), ("microseconds", 1e6, "1e6"),
-                                                  ("nanoseconds", 1e9, "1e9")])
+@pytest.mark.parametrize(
+    "unit, scale, divisor",
+    [("milliseconds", 1e3, "1000"), ("microseconds", 1e6, "1e6"), ("nanoseconds", 1e9, "1e9")],
+)
 @pytest.mark.parametrize("scenario", SCENARIOS)
 def test_imu_time_stamps_not_in_seconds(scenario, unit, scale, divisor, sims):
     run = sims(scenario)
@@ -242,13 +263,24 @@ def test_unit_and_layout_errors_found_whatever_the_draw(scenario):
     check and none of the clean runs is flagged. (A slope-precision gate of 15 % missed the slow
     UGV's deg/s gyro at 16 %; a slope band around -1 missed its swapped fixes, which the swap
     also stretches by cos(lat)/cos(lon).)"""
-    cases = {"accel_units": lambda r: _imu(r, f=r.imu.f_b / G0),
-             "gyro_units": lambda r: _imu(r, w=np.degrees(r.imu.omega_ib_b)),
-             "time_units": lambda r: _imu(r, t=r.imu.t * 1000.0),
-             "latlon": lambda r: _fixes(r, r.gnss.lon, r.gnss.lat)}
-    words = {"accel_units": "in g", "gyro_units": "deg/s", "time_units": "milliseconds", "latlon": "mirror image"}
+    cases = {
+        "accel_units": lambda r: _imu(r, f=r.imu.f_b / G0),
+        "gyro_units": lambda r: _imu(r, w=np.degrees(r.imu.omega_ib_b)),
+        "time_units": lambda r: _imu(r, t=r.imu.t * 1000.0),
+        "latlon": lambda r: _fixes(r, r.gnss.lon, r.gnss.lat),
+    }
+    words = {
+        "accel_units": "in g",
+        "gyro_units": "deg/s",
+        "time_units": "milliseconds",
+        "latlon": "mirror image",
+    }
     for seed in range(6):
-        run = _as_csv(simulate(scenario, DURATION_S[scenario], imu_grade=GRADES[seed % 3], noise="white", seed=seed))
+        run = _as_csv(
+            simulate(
+                scenario, DURATION_S[scenario], imu_grade=GRADES[seed % 3], noise="white", seed=seed
+            )
+        )
         assert _check(run)[2] == []
         for check, corrupt in cases.items():
             assert words[check] in _error(corrupt(run)).problem, (seed, check)
@@ -257,6 +289,7 @@ def test_unit_and_layout_errors_found_whatever_the_draw(scenario):
 # --- 5. clock offset ---------------------------------------------------------------------------------------
 # The offset is what [mounting] imu_time_offset_s means: ADDED to the IMU stamps it puts them on
 # the GNSS clock. An IMU stamping on UTC beside fixes on GPS time logs t_gps - 18: offset +18.
+
 
 def _late_clock(run, offset_s):
     """The IMU as logged by a clock that needs ``offset_s`` added to reach the GNSS clock."""
@@ -275,7 +308,11 @@ def test_auto_clock_offset_within_20_ms(scenario, offset_s, sims):
     assert abs(applied - offset_s) <= 0.020, (applied, offset_s)
     np.testing.assert_allclose(out.imu.t, run.imu.t, atol=0.020)
     assert [(f.check, f.action) for f in findings] == [("time_offset", "applied")]
-    assert len(texts) == 1 and texts[0].startswith(f"{RUN_DIR}/imu.csv: ") and 'imu_time_offset_s = "auto"' in texts[0]
+    assert (
+        len(texts) == 1
+        and texts[0].startswith(f"{RUN_DIR}/imu.csv: ")
+        and 'imu_time_offset_s = "auto"' in texts[0]
+    )
 
 
 @pytest.mark.parametrize("scenario, seed", [("car", SEED), ("ugv-slow", SEED), ("ugv-slow", 2)])
@@ -302,9 +339,11 @@ def test_clock_offset_contradicting_the_configuration(scenario, offset_s, sims):
     value = float(_value_after(err.problem, "set [mounting] imu_time_offset_s"))
     assert abs(value - offset_s) <= 0.5, value
     line = {"mounting": {"imu_time_offset_s": value}}
-    fixed = replace(bad, imu=apply_mounting(bad.imu, load_config(overrides=line)))   # as a source loads it
+    fixed = replace(
+        bad, imu=apply_mounting(bad.imu, load_config(overrides=line))
+    )  # as a source loads it
     np.testing.assert_allclose(fixed.imu.t, run.imu.t, atol=0.5)
-    _, _, findings, _ = _check(fixed, **line)                                          # ... and it passes
+    _, _, findings, _ = _check(fixed, **line)  # ... and it passes
     assert findings == []
 
 
@@ -315,9 +354,11 @@ def test_auto_clock_offset_is_not_held_at_the_first_guess():
     run = _as_csv(simulate("ugv-slow", 120.0, imu_grade="consumer", noise="white", seed=17))
     _, cfg, findings, _ = _check(run, **AUTO_OFFSET)
     d = findings[0].details
-    assert d["offset_s"] == 0.0 and cfg["mounting"]["imu_time_offset_s"] == 0.0, d   # nothing applied
+    assert d["offset_s"] == 0.0 and cfg["mounting"]["imu_time_offset_s"] == 0.0, (
+        d
+    )  # nothing applied
     assert abs(d["measured_s"]) <= 3.0 * d["sigma_s"] and abs(d["measured_s"]) < 0.5, d
-    _check(run)                                            # and no error with the default 0
+    _check(run)  # and no error with the default 0
 
 
 @pytest.mark.parametrize("scenario", SCENARIOS)
@@ -331,16 +372,19 @@ def test_small_clock_offset_is_left_alone(scenario, sims):
 
 # --- 6. latitude and longitude -----------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("how", ["swapped", "longitude-sign-lost"])
 @pytest.mark.parametrize("scenario", SCENARIOS)
 def test_mirrored_track_is_an_error(scenario, how, sims):
     run = sims(scenario)
     g = run.gnss
     bad = _fixes(run, g.lon, g.lat) if how == "swapped" else _fixes(run, g.lat, -g.lon)
-    for overrides in ({}, REPAIR):          # never repaired: which of the two is wrong is not known
+    for overrides in ({}, REPAIR):  # never repaired: which of the two is wrong is not known
         err = _error(bad, **overrides)
         assert err.where == f"{RUN_DIR}/gnss.csv"
-        assert "mirror image" in err.problem and "swapped" in err.problem and "lat_deg" in err.problem
+        assert (
+            "mirror image" in err.problem and "swapped" in err.problem and "lat_deg" in err.problem
+        )
 
 
 @pytest.mark.parametrize("scenario", SCENARIOS)
@@ -353,36 +397,53 @@ def test_latlon_in_radians_from_a_csv_file(scenario, sims, tmp_path):
     in_radians = replace(run, gnss=replace(g, lat=np.radians(g.lat), lon=np.radians(g.lon)))
     folder = write_csv_run(in_radians, tmp_path / "rad")
     loaded = load_csv_run(folder, load_config())
-    np.testing.assert_allclose(np.degrees(loaded.gnss.lat), g.lat, rtol=1e-12)     # as it arrives
+    np.testing.assert_allclose(np.degrees(loaded.gnss.lat), g.lat, rtol=1e-12)  # as it arrives
     err = _error(loaded)
-    assert err.where == str(folder / "gnss.csv") and "radians" in err.problem and "180/pi" in err.problem
+    assert (
+        err.where == str(folder / "gnss.csv")
+        and "radians" in err.problem
+        and "180/pi" in err.problem
+    )
     out, _, findings, texts = _check(loaded, **REPAIR)
     assert [(f.check, f.action) for f in findings] == [("latlon", "repaired")]
     np.testing.assert_allclose(out.gnss.lat, g.lat, rtol=1e-12, atol=0)
     np.testing.assert_allclose(out.gnss.lon, g.lon, rtol=1e-12, atol=0)
     # The tangent plane moved with them: the repaired track is the true one, metre for metre.
     true_ned = run.origin.to_ned(g.lat, g.lon, g.h)
-    np.testing.assert_allclose(out.origin.to_ned(out.gnss.lat, out.gnss.lon, out.gnss.h),
-                               true_ned - true_ned[0], atol=1e-3)
-    np.testing.assert_allclose(out.truth.lat, run.truth.lat, rtol=1e-12)           # truth.csv was right
+    np.testing.assert_allclose(
+        out.origin.to_ned(out.gnss.lat, out.gnss.lon, out.gnss.h), true_ned - true_ned[0], atol=1e-3
+    )
+    np.testing.assert_allclose(out.truth.lat, run.truth.lat, rtol=1e-12)  # truth.csv was right
     assert len(texts) == 1 and "multiplied latitude and longitude by 180/pi" in texts[0]
 
 
 def test_a_track_really_near_0_0_is_not_taken_for_radians():
     """A recording really made within 1.6 deg of latitude and 3.2 deg of longitude of (0, 0) (where
     radians read as degrees land): the IMU agrees with the track's accelerations as they are."""
-    run = _as_csv(simulate("car", 120.0, imu_grade="consumer", noise="white", seed=SEED,
-                           origin_llh_deg=(0.5, 1.0, 0.0)))
-    assert np.all(np.abs(np.degrees(run.gnss.lat)) < 1.57) and np.all(np.abs(np.degrees(run.gnss.lon)) < 3.14)
+    run = _as_csv(
+        simulate(
+            "car",
+            120.0,
+            imu_grade="consumer",
+            noise="white",
+            seed=SEED,
+            origin_llh_deg=(0.5, 1.0, 0.0),
+        )
+    )
+    assert np.all(np.abs(np.degrees(run.gnss.lat)) < 1.57) and np.all(
+        np.abs(np.degrees(run.gnss.lon)) < 3.14
+    )
     out, _, findings, _ = _check(run, **REPAIR)
     assert out is run and findings == []
 
 
 # --- 7. mounting -------------------------------------------------------------------------------------------
 
-MOUNTINGS = {"upside-down": np.diag([1.0, -1.0, -1.0]),
-             "sideways": euler_to_dcm(np.pi / 2, 0.0, 0.0),
-             "yawed-90": euler_to_dcm(0.0, 0.0, np.pi / 2)}
+MOUNTINGS = {
+    "upside-down": np.diag([1.0, -1.0, -1.0]),
+    "sideways": euler_to_dcm(np.pi / 2, 0.0, 0.0),
+    "yawed-90": euler_to_dcm(0.0, 0.0, np.pi / 2),
+}
 
 
 @pytest.mark.parametrize("mounting", list(MOUNTINGS))
@@ -391,13 +452,18 @@ def test_mounting_error_names_the_line_that_fixes_it(scenario, mounting, sims):
     run = sims(scenario)
     bad = _rotated(run, MOUNTINGS[mounting])
     err = _error(bad)
-    assert err.where == f"{RUN_DIR}/imu.csv" and "not as [mounting] imu_to_body_rpy_deg = [0, 0, 0] says" in err.problem
+    assert (
+        err.where == f"{RUN_DIR}/imu.csv"
+        and "not as [mounting] imu_to_body_rpy_deg = [0, 0, 0] says" in err.problem
+    )
     rpy = json.loads(_value_after(err.problem, "set [mounting] imu_to_body_rpy_deg"))
     line = {"mounting": {"imu_to_body_rpy_deg": rpy}}
-    fixed = replace(bad, imu=apply_mounting(bad.imu, load_config(overrides=line)))     # as a source loads it
+    fixed = replace(
+        bad, imu=apply_mounting(bad.imu, load_config(overrides=line))
+    )  # as a source loads it
     assert _max_angle_deg(fixed.imu.f_b, run.imu.f_b) < 1.0
     assert _max_angle_deg(fixed.imu.omega_ib_b, run.imu.omega_ib_b) < 1.0
-    _, _, findings, _ = _check(fixed, **line)                                          # ... and it passes
+    _, _, findings, _ = _check(fixed, **line)  # ... and it passes
     assert findings == []
 
 
@@ -422,8 +488,14 @@ def test_auto_mounting_restores_the_body_axes(scenario, mounting, sims):
     assert _max_angle_deg(out.imu.f_b, run.imu.f_b) < 1.0
     assert _max_angle_deg(out.imu.omega_ib_b, run.imu.omega_ib_b) < 1.0
     # The configuration returned holds the rotation applied: from the IMU as logged to the body.
-    again = apply_mounting(bad.imu, load_config(overrides={"mounting": {
-        "imu_to_body_rpy_deg": list(cfg["mounting"]["imu_to_body_rpy_deg"])}}))
+    again = apply_mounting(
+        bad.imu,
+        load_config(
+            overrides={
+                "mounting": {"imu_to_body_rpy_deg": list(cfg["mounting"]["imu_to_body_rpy_deg"])}
+            }
+        ),
+    )
     np.testing.assert_allclose(again.f_b, out.imu.f_b, atol=1e-9)
     assert [(f.check, f.action) for f in findings] == [("mounting", "applied")]
     assert len(texts) == 1 and "applied imu_to_body_rpy_deg" in texts[0]
@@ -446,10 +518,15 @@ def test_one_gyro_axis_with_the_wrong_sign(scenario, sims):
     """The gyro's z axis negated: it turns against the fixes while the accelerometer agrees."""
     run = sims(scenario)
     err = _error(_imu(run, w=run.imu.omega_ib_b * np.array([1.0, 1.0, -1.0])))
-    assert err.where == f"{RUN_DIR}/imu.csv" and "wrong sign" in err.problem and "gx, gy, gz" in err.problem
+    assert (
+        err.where == f"{RUN_DIR}/imu.csv"
+        and "wrong sign" in err.problem
+        and "gx, gy, gz" in err.problem
+    )
 
 
 # --- 8. fixes and start ------------------------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("scenario", SCENARIOS)
 def test_heights_not_in_metres(scenario, sims):
@@ -459,8 +536,13 @@ def test_heights_not_in_metres(scenario, sims):
     run = sims(scenario)
     mm = _fixes(run, run.gnss.lat, run.gnss.lon, run.gnss.h * 1000.0)
     err = _error(mm)
-    assert err.where == f"{RUN_DIR}/gnss.csv" and "h_m" in err.problem and "millimetres" in err.problem
-    assert f"{np.median(mm.gnss.h):.6g} m" in err.problem and "the estimator confirms it" in err.problem
+    assert (
+        err.where == f"{RUN_DIR}/gnss.csv" and "h_m" in err.problem and "millimetres" in err.problem
+    )
+    assert (
+        f"{np.median(mm.gnss.h):.6g} m" in err.problem
+        and "the estimator confirms it" in err.problem
+    )
     out, _, findings, _ = _check(mm, **REPAIR)
     assert [(f.check, f.action) for f in findings] == [("heights", "repaired")]
     np.testing.assert_allclose(out.gnss.h, run.gnss.h, rtol=1e-12)
@@ -475,15 +557,29 @@ def test_only_two_fixes(scenario, sims):
     run = sims(scenario)
     err = _error(replace(run, gnss=run.gnss.select(np.arange(len(run.gnss)) < 2)))
     assert err.where == f"{RUN_DIR}/gnss.csv"
-    assert "2 GNSS fix(es) within the IMU data's time span" in err.problem and "at least 3" in err.problem
+    assert (
+        "2 GNSS fix(es) within the IMU data's time span" in err.problem
+        and "at least 3" in err.problem
+    )
 
 
 def _init_at(run, north_m: float) -> InitialState:
     """The true start, moved ``north_m`` north."""
     tr = run.truth
-    lat, lon, h = run.origin.to_llh(run.origin.to_ned(tr.lat[0], tr.lon[0], tr.h[0]) + np.array([north_m, 0.0, 0.0]))
-    return InitialState(float(tr.t[0]), float(lat), float(lon), float(h), tr.v_n[0], tr.rpy[0],
-                        np.full(3, 1.0), np.full(3, 0.1), np.radians([1.0, 1.0, 2.0]))
+    lat, lon, h = run.origin.to_llh(
+        run.origin.to_ned(tr.lat[0], tr.lon[0], tr.h[0]) + np.array([north_m, 0.0, 0.0])
+    )
+    return InitialState(
+        float(tr.t[0]),
+        float(lat),
+        float(lon),
+        float(h),
+        tr.v_n[0],
+        tr.rpy[0],
+        np.full(3, 1.0),
+        np.full(3, 0.1),
+        np.radians([1.0, 1.0, 2.0]),
+    )
 
 
 @pytest.mark.parametrize("scenario", SCENARIOS)
@@ -493,11 +589,12 @@ def test_initial_position_far_from_the_fixes(scenario, sims):
     assert err.where == f"{RUN_DIR}/init.json" and "initial position" in err.problem
     km = float(re.search(r"is ([0-9.]+) km from the GNSS fix", err.problem).group(1))
     assert 4.9 < km < 5.1, err.problem
-    _, _, findings, _ = _check(replace(run, init=_init_at(run, 2.0)))   # fix noise away: fine
+    _, _, findings, _ = _check(replace(run, init=_init_at(run, 2.0)))  # fix noise away: fine
     assert findings == []
 
 
 # --- 9. configuration of the checks ------------------------------------------------------------------------
+
 
 def test_skip_leaves_a_check_out(sims):
     run = sims("car")
@@ -514,13 +611,18 @@ def test_skip_leaves_a_check_out(sims):
     in_g = _imu(run, f=run.imu.f_b / G0)
     out, _, _, texts = _check(in_g, checks={"skip": "accel_units", "repair": "auto"})
     assert out.imu.f_b is in_g.imu.f_b and not any("the accelerometer reads" in t for t in texts)
-    ratio = float(re.search(r"the IMU measures ([0-9.]+) times the accelerations", " ".join(texts)).group(1))
+    ratio = float(
+        re.search(r"the IMU measures ([0-9.]+) times the accelerations", " ".join(texts)).group(1)
+    )
     assert ratio == pytest.approx(1.0 / G0, rel=0.2)
 
 
-@pytest.mark.parametrize("overrides, words", [
-    ({"checks": {"skip": "heights, speeds"}}, ["[checks] skip", "speeds", "time_offset"]),
-])
+@pytest.mark.parametrize(
+    "overrides, words",
+    [
+        ({"checks": {"skip": "heights, speeds"}}, ["[checks] skip", "speeds", "time_offset"]),
+    ],
+)
 def test_bad_check_configuration(overrides, words, sims):
     err = _error(sims("car"), **overrides)
     assert err.where == "config"
@@ -542,8 +644,10 @@ def test_bad_repair_mode_is_refused_when_the_configuration_is_read(tmp_path):
 def test_every_check_name_can_be_skipped(sims):
     """All of them at once: the checks are bypassed even on a run that is wrong in every way."""
     run = sims("car")
-    bad = _rotated(_imu(_fixes(run, run.gnss.lon, run.gnss.lat, run.gnss.h * 1000.0), f=run.imu.f_b / G0),
-                   MOUNTINGS["sideways"])
+    bad = _rotated(
+        _imu(_fixes(run, run.gnss.lon, run.gnss.lat, run.gnss.h * 1000.0), f=run.imu.f_b / G0),
+        MOUNTINGS["sideways"],
+    )
     out, cfg, findings, texts = _check(bad, checks={"skip": ", ".join(CHECKS)})
     assert out is bad and findings == [] and texts == []
 
@@ -589,22 +693,32 @@ def test_cli_accelerometer_in_g(car_csv, tmp_path, capsys):
     config = _auto_config(tmp_path, '[checks]\nrepair = "auto"\n')
     code, err = _cli(["run", in_g, "--config", config, "--out", tmp_path / "o_auto"], capsys)
     assert code == 0, err
-    warn = [ln for ln in err.splitlines() if ln.startswith(f"gnssacc: warning: {in_g / 'imu.csv'}: ")]
+    warn = [
+        ln for ln in err.splitlines() if ln.startswith(f"gnssacc: warning: {in_g / 'imu.csv'}: ")
+    ]
     assert len(warn) == 1 and "9.80665" in warn[0]
     got = _metrics(tmp_path / "o_auto")
-    assert got["methods"]["ekf"]["prmse_m"] == pytest.approx(clean["methods"]["ekf"]["prmse_m"], rel=0.05)
+    assert got["methods"]["ekf"]["prmse_m"] == pytest.approx(
+        clean["methods"]["ekf"]["prmse_m"], rel=0.05
+    )
 
 
 def test_cli_upside_down_imu_with_automatic_mounting(car_csv, tmp_path, capsys):
     run, clean = car_csv
     bad = write_csv_run(_rotated(run, MOUNTINGS["upside-down"]), tmp_path / "bad")
     code, err = _cli(["run", bad, "--out", tmp_path / "o_never"], capsys)
-    assert code == 2 and "set [mounting] imu_to_body_rpy_deg = [180, 0, 0]" in err and "Traceback" not in err, err
+    assert (
+        code == 2
+        and "set [mounting] imu_to_body_rpy_deg = [180, 0, 0]" in err
+        and "Traceback" not in err
+    ), err
     config = _auto_config(tmp_path, '[mounting]\nimu_to_body_rpy_deg = "auto"\n')
     code, err = _cli(["run", bad, "--config", config, "--out", tmp_path / "o_auto"], capsys)
     assert code == 0 and "applied imu_to_body_rpy_deg = [180, 0, 0]" in err, err
     got = _metrics(tmp_path / "o_auto")
-    assert got["methods"]["ekf"]["prmse_m"] == pytest.approx(clean["methods"]["ekf"]["prmse_m"], rel=0.05)
+    assert got["methods"]["ekf"]["prmse_m"] == pytest.approx(
+        clean["methods"]["ekf"]["prmse_m"], rel=0.05
+    )
 
 
 def _utc_imu_run(car_csv, tmp_path, capsys):
@@ -626,13 +740,17 @@ def test_cli_imu_on_utc_with_automatic_offset(car_csv, tmp_path, capsys):
     assert abs(measured - 18.0) <= 0.25, err
 
 
-def test_cli_imu_on_utc_with_automatic_offset_is_scored_over_the_whole_run(car_csv, tmp_path, capsys):
+def test_cli_imu_on_utc_with_automatic_offset_is_scored_over_the_whole_run(
+    car_csv, tmp_path, capsys
+):
     err, got = _utc_imu_run(car_csv, tmp_path, capsys)
     _, clean = car_csv
     assert "truth covers only" not in err
     assert got["scored_window_s"][1] == pytest.approx(120.0)
     assert got["coverage"]["ekf"]["fraction"] == pytest.approx(1.0)
-    assert got["methods"]["ekf"]["prmse_m"] == pytest.approx(clean["methods"]["ekf"]["prmse_m"], rel=0.05)
+    assert got["methods"]["ekf"]["prmse_m"] == pytest.approx(
+        clean["methods"]["ekf"]["prmse_m"], rel=0.05
+    )
 
 
 @pytest.mark.parametrize("seed", [0, 7])
@@ -643,6 +761,12 @@ def test_no_clock_or_gyro_false_alarm_across_outages_on_a_slow_ugv(seed):
     # GNSS course rate" for seed 0). Windows with a long stretch without fixes are not used.
     import gnssacc
 
-    res = gnssacc.process("sim:ugv-slow,imu=industrial,gnss_hz=5,duration=180", methods=["ekf"], noise="white",
-                          seed=seed, tune="none", outage_every="60:20")
+    res = gnssacc.process(
+        "sim:ugv-slow,imu=industrial,gnss_hz=5,duration=180",
+        methods=["ekf"],
+        noise="white",
+        seed=seed,
+        tune="none",
+        outage_every="60:20",
+    )
     assert res.metrics["methods"]["ekf"]["prmse_m"] < 5.0

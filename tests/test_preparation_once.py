@@ -2,6 +2,7 @@
 yaw bank each run once (the bank once per noise model: with the configured noise for the tuner's
 start, and again with the tuned noise, whose hypotheses' filters differ), and every estimator
 reads the prepared recording instead of repeating them."""
+
 from __future__ import annotations
 
 import pytest

@@ -4,6 +4,7 @@ transform: EKF error states drawn from the EKF's own initial covariance, each tu
 state by the EKF's documented error convention and then into the prior factor's error by GTSAM's
 own ``Pose3.Logmap``; the sample covariance must equal the mapped one within a likelihood-ratio
 (Wishart) bound."""
+
 from __future__ import annotations
 
 import gtsam
@@ -41,7 +42,9 @@ def test_joint_prior_jacobians_by_finite_differences_on_the_manifold(with_gm):
     rng = np.random.default_rng(3)
     L = rng.standard_normal((m, m))
     cov = L @ L.T + np.eye(m)
-    f = joint_prior_factor(X(0), B(0), G(0) if with_gm else None, POSE0, BIAS0, G0_PRIOR if with_gm else None, cov)
+    f = joint_prior_factor(
+        X(0), B(0), G(0) if with_gm else None, POSE0, BIAS0, G0_PRIOR if with_gm else None, cov
+    )
     # Far from the prior (0.5 rad, metres), where LogmapDerivative differs clearly from identity.
     xi = np.array([0.3, -0.25, 0.3, 2.0, -1.0, 0.5])
     pose = POSE0.compose(gtsam.Pose3.Expmap(xi))
@@ -70,8 +73,12 @@ def test_joint_prior_jacobians_by_finite_differences_on_the_manifold(with_gm):
                 args_p[0], args_m[0] = pose.retract(d), pose.retract(-d)
             else:
                 args_p[var], args_m[var] = args_p[var] + d, args_m[var] - d
-            num = (f.unwhitenedError(_values(*args_p)) - f.unwhitenedError(_values(*args_m))) / (2 * eps)
-            np.testing.assert_allclose(J[:, col], num, atol=1e-8, err_msg=f"variable {var}, column {k}")
+            num = (f.unwhitenedError(_values(*args_p)) - f.unwhitenedError(_values(*args_m))) / (
+                2 * eps
+            )
+            np.testing.assert_allclose(
+                J[:, col], num, atol=1e-8, err_msg=f"variable {var}, column {k}"
+            )
             col += 1
 
 
@@ -84,11 +91,23 @@ def _start(with_gm: bool):
     """A self-initialised start: levelled (tilt tied to the accelerometer bias) and, with the GNSS
     error modelled, a position fitted to the fixes (tied to the GNSS error). Small roll/pitch sigmas
     make the tilt almost entirely the bias's image, so the correlation signs matter."""
-    init = InitialState(t=0.0, lat=LAT, lon=LON, h=H, v_n=np.array([3.0, -1.0, 0.1]), rpy=np.array([0.05, -0.08, 2.0]),
-                        sigma_pos_m=np.array([0.8, 0.9, 1.5]), sigma_vel_mps=np.array([0.1, 0.12, 0.2]),
-                        sigma_att_rad=np.array([1e-3, 1.5e-3, 0.05]), b_a=np.array([0.01, -0.02, 0.005]),
-                        b_g=np.array([1e-4, -2e-4, 5e-5]), sigma_b_a=np.array([0.05, 0.04, 0.06]),
-                        sigma_b_g=np.array([2e-4, 3e-4, 1e-4]), fit_window=(0.0, 5.0), levelled=True)
+    init = InitialState(
+        t=0.0,
+        lat=LAT,
+        lon=LON,
+        h=H,
+        v_n=np.array([3.0, -1.0, 0.1]),
+        rpy=np.array([0.05, -0.08, 2.0]),
+        sigma_pos_m=np.array([0.8, 0.9, 1.5]),
+        sigma_vel_mps=np.array([0.1, 0.12, 0.2]),
+        sigma_att_rad=np.array([1e-3, 1.5e-3, 0.05]),
+        b_a=np.array([0.01, -0.02, 0.005]),
+        b_g=np.array([1e-4, -2e-4, 5e-5]),
+        sigma_b_a=np.array([0.05, 0.04, 0.06]),
+        sigma_b_g=np.array([2e-4, 3e-4, 1e-4]),
+        fit_window=(0.0, 5.0),
+        levelled=True,
+    )
     gnss = {"gm_sigma_m": [2.5, 2.0, 4.0]} if with_gm else {}
     return init, load_config(overrides={"gnss": gnss} if gnss else None)
 
@@ -103,10 +122,10 @@ def _smoother_error(init, origin, pose0, dx):
     h = init.h + dx[2]
     R_true = rotvec_to_dcm(-dx[6:9]) @ init.R_nb
     truth = gtsam.Pose3(gtsam.Rot3(R_true), origin.to_ned(lat, lon, h))
-    e = [gtsam.Pose3.Logmap(pose0.between(truth)), dx[9:15]]   # b_true - b0 = db
+    e = [gtsam.Pose3.Logmap(pose0.between(truth)), dx[9:15]]  # b_true - b0 = db
     if len(dx) > 15:
-        e.append(-dx[15:18])                                  # g_true - g0, g0 = 0
-    e.append(-dx[3:6])                                         # v_true - v0
+        e.append(-dx[15:18])  # g_true - g0, g0 = 0
+    e.append(-dx[3:6])  # v_true - v0
     return np.concatenate(e)
 
 
@@ -125,12 +144,12 @@ def test_initial_prior_covariance_matches_the_sampled_nonlinear_transform(with_g
     cfg = SmootherSettings.from_config(cfg)
     P = initial_state(init, cfg).P
     assert P.shape[0] == (18 if with_gm else 15)
-    origin = LocalTangentFrame(LAT + 1e-5, LON - 2e-5, H - 3.0)   # the run's origin, near the start
+    origin = LocalTangentFrame(LAT + 1e-5, LON - 2e-5, H - 3.0)  # the run's origin, near the start
     pose0 = gtsam.Pose3(gtsam.Rot3(init.R_nb), origin.to_ned(init.lat, init.lon, init.h))
     cov, c_vel = initial_prior(init, cfg)
     m = cov.shape[0]
     C = np.zeros((m + 3, m + 3))
-    C[:m, :m], C[m:, m:] = cov, c_vel                   # velocity: uncorrelated with the rest
+    C[:m, :m], C[m:, m:] = cov, c_vel  # velocity: uncorrelated with the rest
     rng = np.random.default_rng(11)
     n = 10000
     dx = rng.standard_normal((n, P.shape[0])) @ np.linalg.cholesky(P).T

@@ -9,6 +9,7 @@ e^{F^T s} ds``, which Van Loan's matrix exponential gives exactly. The kernel's 
 halving the IMU interval must halve it, and the Richardson extrapolation ``2 P(dt/2) - P(dt)``
 must agree to second order.
 """
+
 from __future__ import annotations
 
 from types import SimpleNamespace
@@ -24,10 +25,10 @@ from gnssacc.estimators.mechanization import Propagator, system_matrix
 LAT, LON, H = np.radians(52.0), np.radians(4.4), 30.0
 R_NB = euler_to_dcm(0.2, -0.15, 2.3)
 # Per-axis PSDs with different values on each axis, so that R diag(q) R^T is not isotropic.
-Q_A = np.array([1.0, 2.0, 4.0]) * 1e-4        # (m/s^2)^2/s
-Q_G = np.array([3.0, 1.0, 2.0]) * 1e-7        # rad^2/s
-Q_BA = np.array([2.0, 1.0, 3.0]) * 1e-8       # (m/s^2)^2/s^3 ... per s
-Q_BG = np.array([1.0, 3.0, 2.0]) * 1e-12      # (rad/s)^2/s
+Q_A = np.array([1.0, 2.0, 4.0]) * 1e-4  # (m/s^2)^2/s
+Q_G = np.array([3.0, 1.0, 2.0]) * 1e-7  # rad^2/s
+Q_BA = np.array([2.0, 1.0, 3.0]) * 1e-8  # (m/s^2)^2/s^3 ... per s
+Q_BG = np.array([1.0, 3.0, 2.0]) * 1e-12  # (rad/s)^2/s
 GM_TAU, GM_SIGMA = np.array([60.0, 30.0, 10.0]), np.array([2.0, 1.5, 3.0])
 T = 4.0
 
@@ -44,9 +45,17 @@ def _kernel_q(rate_hz: float, n_states: int, order: int) -> np.ndarray:
     t, f, w, _ = _still_imu(rate_hz)
     z3, seg = np.zeros(3), np.zeros(0, np.int64)
     gm = dict(gm_tau_s=GM_TAU, gm_sigma_m=GM_SIGMA) if n_states > 15 else {}
-    prop = Propagator(t, f, w, Q_A, Q_G, Q_BA, Q_BG, (seg, seg, np.zeros((0, 3)), np.zeros((0, 3))), order, **gm)
-    s = SimpleNamespace(pos=np.array([LAT, LON, H]), v_n=z3.copy(), R_nb=R_NB.copy(), b_a=z3.copy(),
-                        b_g=z3.copy(), P=np.zeros((n_states, n_states)))
+    prop = Propagator(
+        t, f, w, Q_A, Q_G, Q_BA, Q_BG, (seg, seg, np.zeros((0, 3)), np.zeros((0, 3))), order, **gm
+    )
+    s = SimpleNamespace(
+        pos=np.array([LAT, LON, H]),
+        v_n=z3.copy(),
+        R_nb=R_NB.copy(),
+        b_a=z3.copy(),
+        b_g=z3.copy(),
+        P=np.zeros((n_states, n_states)),
+    )
     prop.advance(s, 1, 0.0, T)
     # The nominal state did not move, so F was the same at every sample.
     np.testing.assert_allclose(s.R_nb, R_NB, atol=1e-12)
@@ -64,7 +73,7 @@ def _van_loan(n_states: int) -> np.ndarray:
     GQG[6:9, 6:9] = R_NB @ np.diag(Q_G) @ R_NB.T
     GQG[9:12, 9:12] = np.diag(Q_BA)
     GQG[12:15, 12:15] = np.diag(Q_BG)
-    if n_states > 15:   # first-order Gauss-Markov: dx/dt = -x / tau + w, PSD 2 sigma^2 / tau
+    if n_states > 15:  # first-order Gauss-Markov: dx/dt = -x / tau + w, PSD 2 sigma^2 / tau
         F[15:, 15:] = -np.diag(1.0 / GM_TAU)
         GQG[15:, 15:] = np.diag(2.0 * GM_SIGMA**2 / GM_TAU)
     z = np.zeros_like(F)

@@ -1,4 +1,5 @@
 """Tests of the IMU data-quality check (synthetic defects and the real KITTI file from gtsam)."""
+
 from __future__ import annotations
 
 import json
@@ -30,7 +31,7 @@ def _with_defects():
     # Linear interpolation (per sample) between real anchors 999 and 1051: samples 1000..1050.
     a, b = 999, 1051
     for x in (f_b, w_b):
-        x[a:b + 1] = np.linspace(x[a], x[b], b - a + 1)
+        x[a : b + 1] = np.linspace(x[a], x[b], b - a + 1)
     # Frozen: samples 2001..2010 repeat sample 2000.
     f_b[2001:2011] = f_b[2000]
     w_b[2001:2011] = w_b[2000]
@@ -86,6 +87,7 @@ def test_interpolation_check_in_blocks_finds_the_same_spans(cfg, monkeypatch, bl
     # Blocks of rows (bounded memory on long runs) with the defect straddling block edges:
     # the same spans, anchors and notes (the largest second difference) as in one piece.
     import gnssacc.checks.quality as quality
+
     imu, _ = _with_defects()
     whole = check_imu(imu, cfg).spans
     monkeypatch.setattr(quality, "CHECK_BLOCK_ROWS", block)
@@ -94,21 +96,21 @@ def test_interpolation_check_in_blocks_finds_the_same_spans(cfg, monkeypatch, bl
 
 
 def test_time_linear_interpolation_with_jittered_stamps(cfg):
-    imu = _clean(jitter_s=3e-3)          # stamps jitter by up to 30 % of the interval
+    imu = _clean(jitter_s=3e-3)  # stamps jitter by up to 30 % of the interval
     t = imu.t
     a, b = 2000, 2100
     for x in (imu.f_b, imu.omega_ib_b):
-        frac = ((t[a:b + 1] - t[a]) / (t[b] - t[a]))[:, None]
-        x[a:b + 1] = x[a] + frac * (x[b] - x[a])
+        frac = ((t[a : b + 1] - t[a]) / (t[b] - t[a]))[:, None]
+        x[a : b + 1] = x[a] + frac * (x[b] - x[a])
     spans = check_imu(imu, cfg).of_kind("interpolated")
     assert [(s.i_start, s.i_end) for s in spans] == [(a + 1, b)]
 
 
 def test_short_straight_stretch_is_not_flagged(cfg):
     imu = _clean()
-    a, b = 500, 510                       # 0.1 s < interp_min_s = 0.2 s
+    a, b = 500, 510  # 0.1 s < interp_min_s = 0.2 s
     for x in (imu.f_b, imu.omega_ib_b):
-        x[a:b + 1] = np.linspace(x[a], x[b], b - a + 1)
+        x[a : b + 1] = np.linspace(x[a], x[b], b - a + 1)
     assert check_imu(imu, cfg).spans == []
 
 
@@ -132,7 +134,7 @@ def test_inflation_psd_integrates_to_sigma_T_squared(cfg, mode):
     rep = check_imu(imu, cfg)
     q_gyro, q_accel = inflation_psd(imu, rep, SuspectNoise.from_config(cfg))
     assert q_gyro.shape == q_accel.shape == (len(imu), 3)
-    dt = np.diff(imu.t, prepend=imu.t[0])          # sample k holds over (t[k-1], t[k]]
+    dt = np.diff(imu.t, prepend=imu.t[0])  # sample k holds over (t[k-1], t[k]]
     cap_g = cfg["quality"]["suspect_gyro_sigma_dps"] * DEG
     cap_a = cfg["quality"]["suspect_accel_sigma_mps2"]
     clean = ~rep.suspect_mask(len(imu))
@@ -152,19 +154,31 @@ def test_inflation_psd_integrates_to_sigma_T_squared(cfg, mode):
             sa = np.minimum(imu.f_b[idx].std(axis=0), cap_a)
             assert np.all(sg < cap_g)  # quiet channels get far less than the cap
         if s.channels != "ax":
-            np.testing.assert_allclose(np.sum(q_gyro[sl] * dt[sl, None], axis=0), (sg * T) ** 2, rtol=1e-9)
+            np.testing.assert_allclose(
+                np.sum(q_gyro[sl] * dt[sl, None], axis=0), (sg * T) ** 2, rtol=1e-9
+            )
         if s.channels != "gz":
-            np.testing.assert_allclose(np.sum(q_accel[sl] * dt[sl, None], axis=0), (sa * T) ** 2, rtol=1e-9)
+            np.testing.assert_allclose(
+                np.sum(q_accel[sl] * dt[sl, None], axis=0), (sa * T) ** 2, rtol=1e-9
+            )
     # A clipped gyro does not de-weight the accelerometers, and vice versa.
     gz = rep.of_kind("saturated")[0]
-    assert q_accel[gz.i_start:gz.i_end].max() == 0.0 and q_gyro[4000:4008].max() == 0.0
+    assert q_accel[gz.i_start : gz.i_end].max() == 0.0 and q_gyro[4000:4008].max() == 0.0
     assert np.all(q_gyro[clean] == 0) and np.all(q_accel[clean] == 0)
 
 
 # --- the real KITTI file shipped with gtsam --------------------------------------------------------
 
-KITTI_INTERP_STARTS = (46570.894, 46733.226, 46737.575, 46754.163, 46770.751, 46813.457, 46840.094,
-                       46842.273)
+KITTI_INTERP_STARTS = (
+    46570.894,
+    46733.226,
+    46737.575,
+    46754.163,
+    46770.751,
+    46813.457,
+    46840.094,
+    46842.273,
+)
 
 
 @pytest.fixture(scope="module")
@@ -173,7 +187,7 @@ def kitti_imu():
     path = os.path.join(os.path.dirname(gtsam.__file__), "Data", "KittiEquivBiasedImu.txt")
     if not os.path.exists(path):
         pytest.skip("gtsam wheel without Data/KittiEquivBiasedImu.txt")
-    a = np.loadtxt(path, skiprows=1)   # Time dt accelX accelY accelZ omegaX omegaY omegaZ
+    a = np.loadtxt(path, skiprows=1)  # Time dt accelX accelY accelZ omegaX omegaY omegaZ
     return ImuData(a[:, 0], a[:, 2:5], a[:, 5:8])
 
 

@@ -14,6 +14,7 @@ reason when it is absent.
 No expected number below comes from this package's own output: thresholds come from the data
 documentation (SOURCE.txt), the reference solutions, or the physics of a static sensor.
 """
+
 from __future__ import annotations
 
 import csv
@@ -41,8 +42,10 @@ MG = 9.80665e-3  # one milli-g [m/s^2]
 def _data_dir(name: str) -> Path:
     path = DATA / name
     if not path.is_dir():
-        pytest.skip(f"real-data folder {path} is absent (it sits beside the repository at ../shared/data; "
-                    f"a fresh clone has none)")
+        pytest.skip(
+            f"real-data folder {path} is absent (it sits beside the repository at ../shared/data; "
+            f"a fresh clone has none)"
+        )
     return path
 
 
@@ -55,8 +58,14 @@ _E2 = _F * (2.0 - _F)
 def _llh_to_ecef(lat, lon, h):
     lat, lon, h = (np.asarray(v, float) for v in (lat, lon, h))
     n = _A / np.sqrt(1.0 - _E2 * np.sin(lat) ** 2)
-    return np.stack([(n + h) * np.cos(lat) * np.cos(lon), (n + h) * np.cos(lat) * np.sin(lon),
-                     (n * (1.0 - _E2) + h) * np.sin(lat)], axis=-1)
+    return np.stack(
+        [
+            (n + h) * np.cos(lat) * np.cos(lon),
+            (n + h) * np.cos(lat) * np.sin(lon),
+            (n * (1.0 - _E2) + h) * np.sin(lat),
+        ],
+        axis=-1,
+    )
 
 
 def _R_ned_from_ecef(lat, lon):
@@ -72,9 +81,16 @@ def _R_ned_from_ecef(lat, lon):
 #: VRW 0.1 m/s/sqrt(h), bias instability 5 deg/h and 0.05 mg); the turn-on bias sigmas are the
 #: package simulator's "industrial (VN-300 class)" grade (360 deg/h, 5 mg), chosen a priori and
 #: not tuned on this log.
-VN310_CONFIG = {"imu": {"gyro_arw_deg_rth": 0.3, "accel_vrw_mps_rth": 0.1, "gyro_bias_instability_deg_h": 5.0,
-                        "accel_bias_instability_mg": 0.05, "gyro_bias_sigma0_deg_h": 360.0,
-                        "accel_bias_sigma0_mg": 5.0}}
+VN310_CONFIG = {
+    "imu": {
+        "gyro_arw_deg_rth": 0.3,
+        "accel_vrw_mps_rth": 0.1,
+        "gyro_bias_instability_deg_h": 5.0,
+        "accel_bias_instability_mg": 0.05,
+        "gyro_bias_sigma0_deg_h": 360.0,
+        "accel_bias_sigma0_mg": 5.0,
+    }
+}
 
 
 def _read_vn_csv(path: Path) -> dict[str, np.ndarray]:
@@ -94,7 +110,9 @@ def _read_vn_csv(path: Path) -> dict[str, np.ndarray]:
 @dataclass
 class VnLog:
     run: RecordedRun
-    t_imu_raw: np.ndarray     # IMU GPS time of week minus the first sample's [s], straight from the file
+    t_imu_raw: (
+        np.ndarray
+    )  # IMU GPS time of week minus the first sample's [s], straight from the file
     att_rpy_deg: np.ndarray | None  # VN attitude (roll, pitch, yaw) per GNSS row [deg], when logged
     att_t: np.ndarray | None
 
@@ -112,8 +130,13 @@ def _load_vn(log: str) -> VnLog:
     # unit in the file; its scatter equals that of Y/Z (~3e-4 rad/s), so it is rad/s too. At rest
     # the specific force reads about (0.10, 0.30, -9.80) m/s^2: FRD convention, no conversion.
     f_b = np.column_stack([imu[f"IMU::Accel::{a} [m/s^2]"] for a in "XYZ"])
-    w_b = np.column_stack([imu["IMU::AngularRate::X"], imu["IMU::AngularRate::Y [rad/s]"],
-                           imu["IMU::AngularRate::Z [rad/s]"]])
+    w_b = np.column_stack(
+        [
+            imu["IMU::AngularRate::X"],
+            imu["IMU::AngularRate::Y [rad/s]"],
+            imu["IMU::AngularRate::Z [rad/s]"],
+        ]
+    )
     # GNSS: the fix epoch is "GNSS1::Tow [ns]" (the row's own GpsTow is its arrival, ~70 ms later).
     t_fix = gnss["GNSS1::Tow [ns]"] * 1e-9 - t0
     lat = np.radians(gnss["GNSS1::PosLla::latitude [deg]"])
@@ -122,13 +145,22 @@ def _load_vn(log: str) -> VnLog:
     # The receiver's own 1-sigma position uncertainty, NED [m].
     sigma = np.column_stack([gnss[f"GNSS1::PosU::{a} [m]"] for a in "NED"])
     fixes = GnssFixes(t_fix, lat, lon, h, sigma)
-    run = RecordedRun(name=f"vn310-{log}", where=str(root / f"{log}_vn310-*.csv"),
-                      imu=ImuData(t_imu, f_b, w_b), gnss=fixes,
-                      origin=LocalTangentFrame(lat[0], lon[0], h[0])).validate()
+    run = RecordedRun(
+        name=f"vn310-{log}",
+        where=str(root / f"{log}_vn310-*.csv"),
+        imu=ImuData(t_imu, f_b, w_b),
+        gnss=fixes,
+        origin=LocalTangentFrame(lat[0], lon[0], h[0]),
+    ).validate()
     att = None
     if "Att::YawPitchRoll::R [deg]" in gnss:
-        att = np.column_stack([gnss["Att::YawPitchRoll::R [deg]"], gnss["Att::YawPitchRoll::P [deg]"],
-                               gnss["Att::YawPitchRoll::Y [deg]"]])
+        att = np.column_stack(
+            [
+                gnss["Att::YawPitchRoll::R [deg]"],
+                gnss["Att::YawPitchRoll::P [deg]"],
+                gnss["Att::YawPitchRoll::Y [deg]"],
+            ]
+        )
     return VnLog(run, t_imu, att, gnss["GpsTow [s]"] - t0 if att is not None else None)
 
 
@@ -150,10 +182,18 @@ def vn_ekf(vn_lckf, vn_cfg):
     # First fix inside the IMU span (the very first fix is stamped 48 ms before the first IMU sample).
     k = int(np.searchsorted(g.t, run.t_start))
     j = int(np.argmin(np.abs(vn_lckf.att_t - g.t[k])))
-    init = InitialState(t=float(g.t[k]), lat=float(g.lat[k]), lon=float(g.lon[k]), h=float(g.h[k]),
-                        v_n=np.zeros(3), rpy=np.radians(att[j]), sigma_pos_m=g.sigma_ned[k].copy(),
-                        sigma_vel_mps=np.full(3, 0.1), sigma_att_rad=np.radians([1.0, 1.0, 5.0]),
-                        how="first fix + VN-310 attitude")
+    init = InitialState(
+        t=float(g.t[k]),
+        lat=float(g.lat[k]),
+        lon=float(g.lon[k]),
+        h=float(g.h[k]),
+        v_n=np.zeros(3),
+        rpy=np.radians(att[j]),
+        sigma_pos_m=g.sigma_ned[k].copy(),
+        sigma_vel_mps=np.full(3, 0.1),
+        sigma_att_rad=np.radians([1.0, 1.0, 5.0]),
+        how="first fix + VN-310 attitude",
+    )
     return {m: run_ekf(run, vn_cfg, m, init=init) for m in METHODS}
 
 
@@ -176,7 +216,9 @@ def test_vn310_yaw_is_reported_undetermined_on_a_static_log(vn_lckf, vn_cfg):
     # A static antenna and an IMU that never turns carry no yaw: the bank must say so and give a
     # yaw sigma that covers its hypotheses instead of inventing a heading.
     run = vn_lckf.run
-    bank = select_yaw(run, vn_cfg, detect_stationary(run.imu, run.gnss, run.origin), filter_pass=run_ekf)
+    bank = select_yaw(
+        run, vn_cfg, detect_stationary(run.imu, run.gnss, run.origin), filter_pass=run_ekf
+    )
     assert bank.t_decided is None
     assert "UNDETERMINED" in bank.init.how
     assert np.degrees(bank.init.sigma_att_rad[2]) > 60.0
@@ -237,10 +279,17 @@ def test_vn310_ekf_stays_put(method, vn_lckf, vn_ekf):
 
 #: Consumer MEMS (phone) IMU: the package simulator's "consumer" grade numbers, a priori.
 #: The u-blox log has no uncertainty, so every fix gets gnss.default_sigma_m.
-COMMA_CONFIG = {"imu": {"gyro_arw_deg_rth": 0.6, "accel_vrw_mps_rth": 0.2, "gyro_bias_instability_deg_h": 30.0,
-                        "accel_bias_instability_mg": 0.5, "gyro_bias_sigma0_deg_h": 1800.0,
-                        "accel_bias_sigma0_mg": 30.0},
-                "gnss": {"default_sigma_m": [2.5, 2.5, 5.0]}}
+COMMA_CONFIG = {
+    "imu": {
+        "gyro_arw_deg_rth": 0.6,
+        "accel_vrw_mps_rth": 0.2,
+        "gyro_bias_instability_deg_h": 30.0,
+        "accel_bias_instability_mg": 0.5,
+        "gyro_bias_sigma0_deg_h": 1800.0,
+        "accel_bias_sigma0_mg": 30.0,
+    },
+    "gnss": {"default_sigma_m": [2.5, 2.5, 5.0]},
+}
 
 #: SOURCE.txt: u-blox minus pose, ENU, mean [-0.45, -1.38, 1.06] m (antenna-camera offset), std
 #: [0.08, 0.27, 0.41] m. As NED, and the horizontal scatter about it (~0.28 m).
@@ -254,8 +303,8 @@ class CommaData:
     ref_t: np.ndarray
     ref_ecef: np.ndarray
     ref_v_ned: np.ndarray
-    ref_heading: np.ndarray   # unwrapped course from the reference velocity [rad]
-    R0: np.ndarray            # ECEF -> NED at the reference start
+    ref_heading: np.ndarray  # unwrapped course from the reference velocity [rad]
+    R0: np.ndarray  # ECEF -> NED at the reference start
     ublox_speed: np.ndarray
 
 
@@ -269,7 +318,7 @@ def comma(comma_cfg) -> CommaData:
     root = _data_dir("comma2k19_example1")
 
     def arr(rel):
-        return np.load(root / rel)   # .npy content without the extension
+        return np.load(root / rel)  # .npy content without the extension
 
     t_imu = arr("processed_log/IMU/accelerometer/t")
     acc = arr("processed_log/IMU/accelerometer/value")
@@ -295,12 +344,22 @@ def comma(comma_cfg) -> CommaData:
     ref_v_ecef = arr("global_pose/frame_velocities")
     assert ref_ecef.shape == ref_v_ecef.shape == (len(ref_t), 3)
     lat, lon, h = ecef_to_llh(ref_ecef)
-    v_ned = np.einsum("kij,kj->ki", np.array([_R_ned_from_ecef(a, b) for a, b in zip(lat, lon)]), ref_v_ecef)
+    v_ned = np.einsum(
+        "kij,kj->ki", np.array([_R_ned_from_ecef(a, b) for a, b in zip(lat, lon)]), ref_v_ecef
+    )
     truth = Truth(ref_t, lat, lon, h, v_n=v_ned)
-    run = RecordedRun(name="comma2k19-ex1", where=str(root), imu=ImuData(t_imu, acc, gyr), gnss=fixes,
-                      origin=LocalTangentFrame(fixes.lat[0], fixes.lon[0], fixes.h[0]), truth=truth).validate()
+    run = RecordedRun(
+        name="comma2k19-ex1",
+        where=str(root),
+        imu=ImuData(t_imu, acc, gyr),
+        gnss=fixes,
+        origin=LocalTangentFrame(fixes.lat[0], fixes.lon[0], fixes.h[0]),
+        truth=truth,
+    ).validate()
     heading = np.unwrap(np.arctan2(v_ned[:, 1], v_ned[:, 0]))
-    return CommaData(run, ref_t, ref_ecef, v_ned, heading, _R_ned_from_ecef(lat[0], lon[0]), ub[:, 2])
+    return CommaData(
+        run, ref_t, ref_ecef, v_ned, heading, _R_ned_from_ecef(lat[0], lon[0]), ub[:, 2]
+    )
 
 
 @pytest.fixture(scope="module")
@@ -342,7 +401,7 @@ def test_comma_ublox_fixes_near_reference(comma):
     err = _ned(comma, run.gnss.lat, run.gnss.lon, run.gnss.h) - _ref_ned_at(comma, run.gnss.t)
     inside = (run.gnss.t >= comma.ref_t[0]) & (run.gnss.t <= comma.ref_t[-1])
     err = err[inside]
-    assert _hrmse(err) < 3.0                                     # raw: a few metres at most
+    assert _hrmse(err) < 3.0  # raw: a few metres at most
     # With the documented antenna-camera offset removed, the scatter is SOURCE.txt's (~0.3 m).
     assert _hrmse(err - UBLOX_MINUS_POSE_NED) < 3.0 * UBLOX_POSE_STD_H + 0.1
     # gnssacc.analysis.metrics computes the same number through its own path.
@@ -353,7 +412,7 @@ def test_comma_ublox_fixes_near_reference(comma):
 def test_comma_ekf_tracks_reference(method, comma, comma_ekf):
     run, sol = comma.run, comma_ekf[method]
     assert "moving start" in sol.stats["init"] and "yaw from a bank" in sol.stats["init"]
-    assert sol.stats["t_init"] - run.t_start < 0.5               # the filter starts with the recording
+    assert sol.stats["t_init"] - run.t_start < 0.5  # the filter starts with the recording
     # Outputs at the fixes (and through gaps), to the end of the recording: not at the reference's epochs.
     assert len(sol) > 0.95 * len(run.gnss) and sol.t[-1] == run.t_end
     if method == "ekf-acc":
@@ -364,7 +423,9 @@ def test_comma_ekf_tracks_reference(method, comma, comma_ekf):
     assert _hrmse(err - UBLOX_MINUS_POSE_NED) < 1.0, _hrmse(err - UBLOX_MINUS_POSE_NED)
     assert score(run, sol).hrmse_m == pytest.approx(_hrmse(err), abs=0.01)
     # Velocity against the reference velocity (the lever arm adds < 0.02 m/s on this straight road).
-    v_ref = np.column_stack([np.interp(sol.t, comma.ref_t, comma.ref_v_ned[:, i]) for i in range(3)])
+    v_ref = np.column_stack(
+        [np.interp(sol.t, comma.ref_t, comma.ref_v_ned[:, i]) for i in range(3)]
+    )
     assert _hrmse(sol.v_n - v_ref) < 0.5
     # Yaw against the reference course (covers the phone mount's yaw and the car's sideslip).
     d_yaw = np.degrees(wrap_angle(sol.rpy[:, 2] - np.interp(sol.t, comma.ref_t, comma.ref_heading)))
@@ -385,6 +446,8 @@ def test_comma_with_white_noise_fixes_is_not_taken_for_a_late_clock(seed, comma)
     from gnssacc.pipeline import check_input
     from gnssacc.sources.gnss_noise import fixes_from_truth
 
-    run = comma.run.with_gnss(fixes_from_truth(comma.run, comma.run.truth, "white", seed), noise="white", seed=seed)
+    run = comma.run.with_gnss(
+        fixes_from_truth(comma.run, comma.run.truth, "white", seed), noise="white", seed=seed
+    )
     _, _, findings = check_input(run, load_config())
     assert [f for f in findings if f.check == "clock"] == []

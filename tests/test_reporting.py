@@ -1,4 +1,5 @@
 """TUM export, the Monte-Carlo bench with its paired test, and the HTML report."""
+
 import json
 
 import numpy as np
@@ -14,9 +15,13 @@ from gnssacc.sources.sim import simulate
 
 def _quat_to_dcm(q):
     x, y, z, w = q
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def test_quaternion_round_trip_including_near_pi():
@@ -45,14 +50,30 @@ def test_paired_permutation_pvalue_exact_values():
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     path = tmp_path_factory.mktemp("rep") / "run"
-    write_csv_run(simulate("car", duration_s=90.0, imu_grade="industrial", noise="white", seed=1), path)
+    write_csv_run(
+        simulate("car", duration_s=90.0, imu_grade="industrial", noise="white", seed=1), path
+    )
     return path
 
 
 def test_run_with_report_and_tum_export(run_dir, tmp_path, capsys):
     out = tmp_path / "o"
-    assert main(["run", str(run_dir), "--methods", "ekf,smoother", "--report", "--export", "tum", "--out",
-                 str(out)]) == 0
+    assert (
+        main(
+            [
+                "run",
+                str(run_dir),
+                "--methods",
+                "ekf,smoother",
+                "--report",
+                "--export",
+                "tum",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
     page = (out / "report.html").read_text()
     for name in ("errors.png", "trajectory.png", "sigmas.png"):
@@ -61,7 +82,13 @@ def test_run_with_report_and_tum_export(run_dir, tmp_path, capsys):
     # The observability section: motion shares that add up, and per-state variance shares.
     assert "Observability" in page and "position + acceleration" in page
     import re
-    shares = [float(x) for x in re.findall(r"<tr><td>(?:stationary|straight|accelerating|turning)</td><td>([0-9.]+)", page)]
+
+    shares = [
+        float(x)
+        for x in re.findall(
+            r"<tr><td>(?:stationary|straight|accelerating|turning)</td><td>([0-9.]+)", page
+        )
+    ]
     assert len(shares) == 4 and sum(shares) == pytest.approx(100.0, abs=0.2)
     # The comparison is a real table whose PRMSE cells are metrics.json's, method by method.
     from html.parser import HTMLParser
@@ -93,7 +120,9 @@ def test_run_with_report_and_tum_export(run_dir, tmp_path, capsys):
     col = head.index("PRMSE [m]")
     for row in body[:-1]:
         assert float(row[col]) == pytest.approx(metrics["methods"][row[0]]["prmse_m"], abs=0.006)
-    assert body[-1][0] == "gnss (raw fixes)" and float(body[-1][col]) == pytest.approx(metrics["gnss_prmse_m"], abs=0.006)
+    assert body[-1][0] == "gnss (raw fixes)" and float(body[-1][col]) == pytest.approx(
+        metrics["gnss_prmse_m"], abs=0.006
+    )
     tum = np.loadtxt(out / "trajectory_ekf.tum")
     csv = np.genfromtxt(out / "trajectory_ekf.csv", delimiter=",", names=True)
     assert tum.shape == (len(csv), 8)
@@ -103,7 +132,9 @@ def test_run_with_report_and_tum_export(run_dir, tmp_path, capsys):
     # the body's forward axis keeps its direction, its right axis becomes minus the left one.
     enu_ned = np.array([[0, 1, 0], [1, 0, 0], [0, 0, -1]])
     for k in (0, len(csv) // 2, len(csv) - 1):
-        R_nb = euler_to_dcm(*np.radians([csv["roll_deg"][k], csv["pitch_deg"][k], csv["yaw_deg"][k]]))
+        R_nb = euler_to_dcm(
+            *np.radians([csv["roll_deg"][k], csv["pitch_deg"][k], csv["yaw_deg"][k]])
+        )
         R = _quat_to_dcm(tum[k, 4:8])
         np.testing.assert_allclose(R[:, 0], enu_ned @ R_nb[:, 0], atol=1e-5)
         np.testing.assert_allclose(R[:, 1], -(enu_ned @ R_nb[:, 1]), atol=1e-5)
@@ -112,20 +143,43 @@ def test_run_with_report_and_tum_export(run_dir, tmp_path, capsys):
     from gnssacc.core.earth import LocalTangentFrame
 
     head = (out / "trajectory_ekf.tum").read_text().splitlines()[0]
-    lat0, lon0, h0 = (float(x) for x in re.search(r"origin lat (\S+) deg, lon (\S+) deg, h (\S+) m", head).groups())
+    lat0, lon0, h0 = (
+        float(x)
+        for x in re.search(r"origin lat (\S+) deg, lon (\S+) deg, h (\S+) m", head).groups()
+    )
     p_n = LocalTangentFrame(np.radians(lat0), np.radians(lon0), h0).to_ned(
-        np.radians(csv["lat_deg"]), np.radians(csv["lon_deg"]), csv["h_m"])
-    np.testing.assert_allclose(tum[:, 1:4], np.column_stack([p_n[:, 1], p_n[:, 0], -p_n[:, 2]]), atol=2e-3)
+        np.radians(csv["lat_deg"]), np.radians(csv["lon_deg"]), csv["h_m"]
+    )
+    np.testing.assert_allclose(
+        tum[:, 1:4], np.column_stack([p_n[:, 1], p_n[:, 0], -p_n[:, 2]]), atol=2e-3
+    )
     # Estimates and truth share the frame: the EKF is within metres of the truth at common epochs.
-    common, ia, ib = np.intersect1d(np.round(tum[:, 0], 3), np.round(truth[:, 0], 3), return_indices=True)
+    common, ia, ib = np.intersect1d(
+        np.round(tum[:, 0], 3), np.round(truth[:, 0], 3), return_indices=True
+    )
     assert len(common) > 50
     assert np.sqrt(np.mean(np.sum((tum[ia, 1:4] - truth[ib, 1:4]) ** 2, axis=1))) < 6.0
 
 
 def test_bench_command(run_dir, tmp_path, capsys):
     out = tmp_path / "bench.json"
-    assert main(["bench", str(run_dir), "--seeds", "0-2", "--methods", "ekf,ekf-acc", "--jobs", "2",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "bench",
+                str(run_dir),
+                "--seeds",
+                "0-2",
+                "--methods",
+                "ekf,ekf-acc",
+                "--jobs",
+                "2",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     assert "ekf-acc" in text and "p (paired)" in text
     data = json.loads(out.read_text())
@@ -151,22 +205,43 @@ def _read_odometry(path):
     with AnyReader([path]) as reader:
         for conn, _, raw in reader.messages():
             msg = reader.deserialize(raw, conn.msgtype)
-            out.setdefault(conn.topic, []).append((msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec, msg))
+            out.setdefault(conn.topic, []).append(
+                (msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec, msg)
+            )
     return out
 
 
 @pytest.mark.parametrize("kind, name", [("bag", "trajectories"), ("ros1bag", "trajectories.bag")])
-def test_odometry_bag_export_reads_back_as_the_csv_trajectory(kind, name, run_dir, tmp_path, capsys):
+def test_odometry_bag_export_reads_back_as_the_csv_trajectory(
+    kind, name, run_dir, tmp_path, capsys
+):
     from gnssacc.core.earth import LocalTangentFrame
     from gnssacc.outputs.odombag import ORIGIN_TOPIC, topic_of
 
     out = tmp_path / "o"
-    assert main(["run", str(run_dir), "--methods", "ekf,smoother", "--tune", "none", "--no-plots", "--export", kind,
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "run",
+                str(run_dir),
+                "--methods",
+                "ekf,smoother",
+                "--tune",
+                "none",
+                "--no-plots",
+                "--export",
+                kind,
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
     msgs = _read_odometry(out / name)
-    assert set(msgs) == {ORIGIN_TOPIC, topic_of("truth")} | {topic_of(m) for m in
-                                                              ("ekf", "smoother", "smoother-online")}
+    assert set(msgs) == {ORIGIN_TOPIC, topic_of("truth")} | {
+        topic_of(m) for m in ("ekf", "smoother", "smoother-online")
+    }
     fix = msgs[ORIGIN_TOPIC][0][1]
     origin = LocalTangentFrame(*np.radians([fix.latitude, fix.longitude]), fix.altitude)
     for method in ("ekf", "smoother-online"):
@@ -176,23 +251,40 @@ def test_odometry_bag_export_reads_back_as_the_csv_trajectory(kind, name, run_di
         t = np.array([s for s, _ in got])
         np.testing.assert_allclose(t, csv["t"], atol=1e-6)
         # Positions: ENU in the bag, lat/lon/h in the CSV, compared in NED through the stated origin.
-        enu = np.array([[m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z] for _, m in got])
+        enu = np.array(
+            [
+                [m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z]
+                for _, m in got
+            ]
+        )
         ned = origin.to_ned(np.radians(csv["lat_deg"]), np.radians(csv["lon_deg"]), csv["h_m"])
         np.testing.assert_allclose(enu, ned[:, [1, 0, 2]] * [1, 1, -1], atol=2e-3)
         # Attitude: the FLU->ENU quaternion is the CSV's roll/pitch/yaw (FRD->NED) in ROS axes.
-        flu_frd, enu_ned = np.diag([1.0, -1.0, -1.0]), np.array([[0.0, 1, 0], [1, 0, 0], [0, 0, -1]])
+        flu_frd, enu_ned = (
+            np.diag([1.0, -1.0, -1.0]),
+            np.array([[0.0, 1, 0], [1, 0, 0], [0, 0, -1]]),
+        )
         for k in (0, len(csv) // 2, len(csv) - 1):
             q = got[k][1].pose.pose.orientation
-            R_nb = euler_to_dcm(*np.radians([csv["roll_deg"][k], csv["pitch_deg"][k], csv["yaw_deg"][k]]))
-            np.testing.assert_allclose(_quat_to_dcm([q.x, q.y, q.z, q.w]), enu_ned @ R_nb @ flu_frd, atol=1e-5)
+            R_nb = euler_to_dcm(
+                *np.radians([csv["roll_deg"][k], csv["pitch_deg"][k], csv["yaw_deg"][k]])
+            )
+            np.testing.assert_allclose(
+                _quat_to_dcm([q.x, q.y, q.z, q.w]), enu_ned @ R_nb @ flu_frd, atol=1e-5
+            )
             # Covariance diagonal: east, north, up sigmas of the CSV squared.
             cov = np.asarray(got[k][1].pose.covariance).reshape(6, 6)
-            np.testing.assert_allclose(np.sqrt(np.diag(cov)[:3]), [csv["se_m"][k], csv["sn_m"][k], csv["sd_m"][k]],
-                                       rtol=1e-4)
+            np.testing.assert_allclose(
+                np.sqrt(np.diag(cov)[:3]),
+                [csv["se_m"][k], csv["sn_m"][k], csv["sd_m"][k]],
+                rtol=1e-4,
+            )
             # Twist: the NED velocity expressed in body FLU axes.
             v = got[k][1].twist.twist.linear
             v_ned = np.array([csv["vn"][k], csv["ve"][k], csv["vd"][k]])
-            np.testing.assert_allclose(enu_ned @ R_nb @ flu_frd @ [v.x, v.y, v.z], enu_ned @ v_ned, atol=2e-4)
+            np.testing.assert_allclose(
+                enu_ned @ R_nb @ flu_frd @ [v.x, v.y, v.z], enu_ned @ v_ned, atol=2e-4
+            )
 
 
 def test_truth_without_attitude_is_exported_as_positions_only_and_says_so(tmp_path):
@@ -205,11 +297,13 @@ def test_truth_without_attitude_is_exported_as_positions_only_and_says_so(tmp_pa
     run = replace(run, truth=replace(run.truth, rpy=None))
     with pytest.warns(DataWarning, match="trans_part"):
         path = write_truth_tum(run, tmp_path)
-    assert path.name == "truth.tum"   # one name whatever the truth holds
+    assert path.name == "truth.tum"  # one name whatever the truth holds
     assert "POSITIONS ONLY" in path.read_text().splitlines()[0]
     data = np.loadtxt(path)
     p_n = run.origin.to_ned(run.truth.lat, run.truth.lon, run.truth.h)
-    np.testing.assert_allclose(data[:, 1:4], np.column_stack([p_n[:, 1], p_n[:, 0], -p_n[:, 2]]), atol=1e-5)
+    np.testing.assert_allclose(
+        data[:, 1:4], np.column_stack([p_n[:, 1], p_n[:, 0], -p_n[:, 2]]), atol=1e-5
+    )
     np.testing.assert_allclose(data[:, 4:8], np.tile([0, 0, 0, 1.0], (len(data), 1)))
 
 
@@ -221,8 +315,14 @@ def test_report_reads_the_filters_own_pass(run_dir, tmp_path, monkeypatch):
 
     res = gnssacc.process(str(run_dir), methods=["ekf", "ekf-acc"], tune="none")
     ident = res.ident
-    again = ob.replay_ekf(res.run, ident.cfg, "ekf-acc", quality=ident.quality, init=ident.init,
-                          stationary=ident.stationary)
+    again = ob.replay_ekf(
+        res.run,
+        ident.cfg,
+        "ekf-acc",
+        quality=ident.quality,
+        init=ident.init,
+        stationary=ident.stationary,
+    )
     a, b = ob.aiding_information(res.replay).summary(), ob.aiding_information(again).summary()
     for name in ob.STATE_NAMES:
         assert a[name]["pos_acc"] == pytest.approx(b[name]["pos_acc"], rel=1e-9, abs=1e-12)

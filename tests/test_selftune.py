@@ -1,5 +1,6 @@
 """Self-tuning, Gauss-Markov GNSS errors, consistency warnings and whole-run coverage, on problems
 with known answers: a linear-Gaussian toy and simulated runs with known truth and noise."""
+
 from __future__ import annotations
 
 import re
@@ -39,8 +40,10 @@ def test_ml_search_recovers_known_noise_on_a_linear_gaussian_toy():
     rng = np.random.default_rng(3)
     q_true, r_true, n = 0.04, 1.0, 3000
     z = np.cumsum(rng.normal(0, np.sqrt(q_true), n)) + rng.normal(0, np.sqrt(r_true), n)
-    q0, r0 = 0.4, 0.3   # a start a decade and half a decade off
-    theta, _, n_eval = ml_search(lambda th: -_local_level_loglik(z, q0 * 10 ** th[0], r0 * 10 ** th[1]), 2, 80, 2.0)
+    q0, r0 = 0.4, 0.3  # a start a decade and half a decade off
+    theta, _, n_eval = ml_search(
+        lambda th: -_local_level_loglik(z, q0 * 10 ** th[0], r0 * 10 ** th[1]), 2, 80, 2.0
+    )
     q, r = q0 * 10 ** theta[0], r0 * 10 ** theta[1]
     assert n_eval <= 80
     # ML standard errors for n = 3000: ~3 % on r, ~12 % on q; tolerance 25 % on both.
@@ -60,7 +63,7 @@ def test_draw_back_moves_a_flat_parameter_to_the_likelihood_bound_and_leaves_a_s
 
     theta, n, moved = draw_back(nll, np.array([1.5, 1.0]), 1.0, value=0.0)
     assert moved == [0] and n == len(calls) <= 6
-    assert 0.062 <= theta[0] <= 0.062 + 0.25 * 1.5   # within one bisection step of the bound
+    assert 0.062 <= theta[0] <= 0.062 + 0.25 * 1.5  # within one bisection step of the bound
     assert theta[1] == 1.0
     assert nll(theta) <= SHRINK_TOLERANCE
     assert draw_back(nll, np.array([1.5, 1.0]), 1.0, np.array([False, True]), value=0.0)[2] == []
@@ -81,10 +84,14 @@ def test_a_turn_on_sigma_the_data_hardly_inform_stays_near_its_start():
     assert "drawn back toward the start, as far as the likelihood allows: " in ident.tuning.line()
     assert "accel_bias_sigma0_mg" in ident.tuning.line().split("drawn back")[1]
     from gnssacc.outputs.htmlreport import tuning_html
+
     row = tuning_html(metrics).split(" (drawn back toward the start)")[0].rsplit("<tr>", 1)[1]
     assert "imu.accel_bias_sigma0_mg" in row
     m = metrics["methods"]
-    assert m["smoother"]["prmse_m"] < 1.1 * m["ekf"]["prmse_m"], (m["smoother"]["prmse_m"], m["ekf"]["prmse_m"])
+    assert m["smoother"]["prmse_m"] < 1.1 * m["ekf"]["prmse_m"], (
+        m["smoother"]["prmse_m"],
+        m["ekf"]["prmse_m"],
+    )
     for mid, c in metrics["consistency"].items():
         _assert_nis_in_band(mid, c)
 
@@ -105,7 +112,14 @@ def _assert_nis_in_band(method: str, c: dict) -> None:
 
 
 def _ekf(run, ident):
-    return run_ekf(ident.run, ident.cfg, "ekf", init=ident.init, stationary=ident.stationary, quality=ident.quality)
+    return run_ekf(
+        ident.run,
+        ident.cfg,
+        "ekf",
+        init=ident.init,
+        stationary=ident.stationary,
+        quality=ident.quality,
+    )
 
 
 def test_tuner_recovers_the_white_noise_of_a_model_exact_imu():
@@ -115,10 +129,14 @@ def test_tuner_recovers_the_white_noise_of_a_model_exact_imu():
     res = prepare(run, load_config(), "auto").tuning
     p = grade_config("industrial-basic")
     assert res.from_stationary["stationary_s"] > 30.0
-    assert np.mean(res.values["imu"]["gyro_arw_deg_rth"]) == pytest.approx(p["gyro_arw_deg_rth"], rel=0.25)
-    assert np.mean(res.values["imu"]["accel_vrw_mps_rth"]) == pytest.approx(p["accel_vrw_mps_rth"], rel=0.5)
+    assert np.mean(res.values["imu"]["gyro_arw_deg_rth"]) == pytest.approx(
+        p["gyro_arw_deg_rth"], rel=0.25
+    )
+    assert np.mean(res.values["imu"]["accel_vrw_mps_rth"]) == pytest.approx(
+        p["accel_vrw_mps_rth"], rel=0.5
+    )
     assert res.values["gnss"]["sigma_scale"] == pytest.approx(1.0, abs=0.1)
-    assert "gm_sigma_m" not in res.values["gnss"]   # white fixes: no Gauss-Markov model
+    assert "gm_sigma_m" not in res.values["gnss"]  # white fixes: no Gauss-Markov model
 
 
 def test_tuned_consumer_imu_is_as_accurate_as_its_true_noise_and_consistent(consumer_car):
@@ -139,9 +157,13 @@ def test_tuned_consumer_imu_is_as_accurate_as_its_true_noise_and_consistent(cons
 
 def test_tuner_never_overrides_keys_the_user_set(consumer_car):
     cfg = load_config(overrides={"imu": {"gyro_arw_deg_rth": 0.123}, "gnss": {"sigma_scale": 1.0}})
-    tuned, res = tune(consumer_car, cfg, init=prepare(consumer_car, cfg, "none").init, filter_pass=run_ekf)
+    tuned, res = tune(
+        consumer_car, cfg, init=prepare(consumer_car, cfg, "none").init, filter_pass=run_ekf
+    )
     assert tuned["imu"]["gyro_arw_deg_rth"] == 0.123 and tuned["gnss"]["sigma_scale"] == 1.0
-    assert "gyro_arw_deg_rth" not in res.values.get("imu", {}) and "imu.gyro_arw_deg_rth" in res.fixed
+    assert (
+        "gyro_arw_deg_rth" not in res.values.get("imu", {}) and "imu.gyro_arw_deg_rth" in res.fixed
+    )
 
 
 def _nees_pos(run, sol) -> tuple[float, int]:
@@ -182,11 +204,20 @@ def test_gauss_markov_gnss_errors_are_found_and_make_the_estimators_honest():
     lo_nis, hi_nis = nis_band(st["n_pos_updates"], 3, st["acf1_pos"], CALIBRATION)
     assert abs(st["acf1_pos"]) < 0.15 and lo_nis < st["nis_pos_mean"] < hi_nis, st["nis_pos_mean"]
     from gnssacc.estimators.smoother import run_smoother
-    sm = run_smoother(auto.run, auto.cfg, "smoother", init=auto.init, stationary=auto.stationary,
-                      quality=auto.quality)["smoother"]
+
+    sm = run_smoother(
+        auto.run,
+        auto.cfg,
+        "smoother",
+        init=auto.init,
+        stationary=auto.stationary,
+        quality=auto.quality,
+    )["smoother"]
     nees_s, n = _nees_pos(run, sm)
     assert lo < nees_s < hi, (lo, nees_s, hi)
-    lo_nis, hi_nis = nis_band(sm.stats["n_pos_updates"], 1, None, CALIBRATION)   # residuals: < 3 dof per fix
+    lo_nis, hi_nis = nis_band(
+        sm.stats["n_pos_updates"], 1, None, CALIBRATION
+    )  # residuals: < 3 dof per fix
     assert lo_nis < sm.stats["nis_pos_mean"] < hi_nis, sm.stats["nis_pos_mean"]
 
 
@@ -195,8 +226,10 @@ def test_the_position_gate_does_not_steer_the_noise_identification():
     # shrank until most fixes were rejected (EKF 54 m off on this clean run, 1.2 m ungated).
     run = simulate("ugv-slow", 235.0, imu_grade="industrial", noise="white", seed=1)
     plain, _, _ = compare(run, load_config(), ["ekf"])
-    gated, _, ident = compare(run, load_config(overrides={"ekf": {"position_gate_nis": 16.27}}), ["ekf"])
-    assert ident.cfg["ekf"]["position_gate_nis"] == 16.27   # the estimates keep the user's gate
+    gated, _, ident = compare(
+        run, load_config(overrides={"ekf": {"position_gate_nis": 16.27}}), ["ekf"]
+    )
+    assert ident.cfg["ekf"]["position_gate_nis"] == 16.27  # the estimates keep the user's gate
     assert gated["methods"]["ekf"]["prmse_m"] < 1.1 * plain["methods"]["ekf"]["prmse_m"]
     _assert_nis_in_band("ekf", gated["consistency"]["ekf"])
 
@@ -220,7 +253,10 @@ def test_a_gauss_markov_time_constant_far_from_the_default_is_found(monkeypatch)
 
 
 def _optimistic(params: dict) -> dict:
-    return {k: (v if k == "bias_correlation_time_s" else float(np.mean(v)) / 10.0) for k, v in params.items()}
+    return {
+        k: (v if k == "bias_correlation_time_s" else float(np.mean(v)) / 10.0)
+        for k, v in params.items()
+    }
 
 
 def test_too_optimistic_imu_noise_is_warned_about_for_every_method(consumer_car):
@@ -240,12 +276,16 @@ def test_optimistic_noise_of_a_tactical_imu_is_caught_at_rest_where_innovations_
     run = simulate("ugv-slow", 150.0, imu_grade="tactical", noise="white", seed=6)
     true = grade_config("tactical")
     assert check_model(prepare(run, load_config(overrides={"imu": true}), "none")).rest == []
-    metrics, _, _ = compare(run, load_config(overrides={"imu": _optimistic(true)}), ["ekf", "smoother"], tune="none")
+    metrics, _, _ = compare(
+        run, load_config(overrides={"imu": _optimistic(true)}), ["ekf", "smoother"], tune="none"
+    )
     for mid, c in metrics["consistency"].items():
         rest = [w for w in c["warnings"] if "at rest" in w]
-        assert rest, f"{mid}: no at-rest warning with 10x optimistic tactical noise: {c['warnings']}"
+        assert rest, (
+            f"{mid}: no at-rest warning with 10x optimistic tactical noise: {c['warnings']}"
+        )
         factor = float(re.search(r"is ([0-9.]+)x below", rest[0]).group(1))
-        assert 7.0 < factor < 14.0, rest   # the true factor is 10
+        assert 7.0 < factor < 14.0, rest  # the true factor is 10
     assert metrics["model_check"]["at_rest"]
 
 
@@ -255,7 +295,9 @@ def test_slow_ugv_starts_with_the_recording_and_never_flips_heading():
         run = simulate("ugv-slow", 235.0, imu_grade="consumer", noise="white", seed=seed)
         ident = prepare(run, load_config(), "none")
         moving = 36.0 + run.t_start
-        assert ident.bank.t_decided is not None and ident.bank.t_decided - moving < 30.0, ident.init.how
+        assert ident.bank.t_decided is not None and ident.bank.t_decided - moving < 30.0, (
+            ident.init.how
+        )
         sol = _ekf(run, ident)
         assert sol.t[0] == run.t_start and sol.t[-1] == run.t_end
         yaw_true = np.interp(sol.t, run.truth.t, np.unwrap(run.truth.rpy[:, 2]))
@@ -268,27 +310,35 @@ def test_slow_ugv_starts_with_the_recording_and_never_flips_heading():
 def test_a_vehicle_that_starts_by_reversing_gets_the_right_heading():
     from gnssacc.sources.sim import Scenario
 
-    scen = Scenario("reverse-first").hold(10.0).speed_to(-1.5, 3.0).cruise(25.0).turn(-60.0, radius_m=8.0)
+    scen = (
+        Scenario("reverse-first")
+        .hold(10.0)
+        .speed_to(-1.5, 3.0)
+        .cruise(25.0)
+        .turn(-60.0, radius_m=8.0)
+    )
     scen.speed_to(0.0, 3.0).hold(5.0).speed_to(2.0, 3.0).cruise(20.0)
     run = simulate(scen, 90.0, imu_grade="industrial", noise="white", seed=4, initial_yaw_deg=75.0)
     ident = prepare(run, load_config(), "none")
     yaw0 = np.degrees(ident.init.rpy[2])
     d = (yaw0 - 75.0 + 180.0) % 360.0 - 180.0
-    assert abs(d) <= 15.0, ident.init.how   # the nearest hypothesis, not 255 deg (the course)
+    assert abs(d) <= 15.0, ident.init.how  # the nearest hypothesis, not 255 deg (the course)
 
 
 def test_zero_velocity_updates_hold_a_parked_vehicle_through_a_gnss_gap():
     from gnssacc.sources.gnss_noise import apply_outages
 
     run = simulate("ugv-slow", 235.0, imu_grade="consumer", noise="white", seed=3)
-    run = apply_outages(run, [(170.0, 235.0)])   # the parked tail (from 160 s) without GNSS
+    run = apply_outages(run, [(170.0, 235.0)])  # the parked tail (from 160 s) without GNSS
     end = {}
     for enabled in (True, False):
         cfg = load_config(overrides={"imu": grade_config("consumer"), "zupt": {"enabled": enabled}})
         ident = prepare(run, cfg, "none")
         sol = _ekf(run, ident)
         p_true, _ = truth_at(run, sol.t[-1:])
-        end[enabled] = float(np.linalg.norm(run.origin.to_ned(sol.lat[-1], sol.lon[-1], sol.h[-1]) - p_true[0]))
+        end[enabled] = float(
+            np.linalg.norm(run.origin.to_ned(sol.lat[-1], sol.lon[-1], sol.h[-1]) - p_true[0])
+        )
         if enabled:
             assert sol.stats["n_zupt_updates"] > 100 and sol.stats["n_zaru_updates"] > 100
     assert end[True] < 3.0, end
@@ -299,9 +349,13 @@ def test_every_method_covers_the_whole_recording_and_the_table_states_the_window
     run = simulate("ugv-slow", 120.0, imu_grade="industrial", noise="white", seed=5)
     metrics, sols, _ = compare(run, load_config(), ["ekf", "smoother"], tune="none")
     for mid, cov in metrics["coverage"].items():
-        assert cov["first_s"] == pytest.approx(0.0) and cov["fraction"] == pytest.approx(1.0), (mid, cov)
+        assert cov["first_s"] == pytest.approx(0.0) and cov["fraction"] == pytest.approx(1.0), (
+            mid,
+            cov,
+        )
     assert metrics["scored_window_s"] == pytest.approx([run.t_start, run.t_end])
     from gnssacc.outputs.report import format_table
+
     assert "scored over t = 0.0 .. 120.0 s" in format_table(metrics)
 
 
@@ -319,6 +373,7 @@ def test_tuned_toml_reproduces_the_tuned_run(tmp_path, consumer_car):
 def _binomial_sf(k: int, n: int, p: float) -> float:
     """P(X >= k), X ~ Binomial(n, p), summed term by term (independent of scipy)."""
     import math
+
     return 1.0 - sum(math.comb(n, i) * p**i * (1 - p) ** (n - i) for i in range(k))
 
 
@@ -326,21 +381,24 @@ def test_heavy_tail_check_against_its_closed_form():
     from gnssacc.analysis.consistency import TAIL_ALARM, heavy_tails
     from gnssacc.estimators.measurements import TAIL_P, tail_bound
 
-    assert tail_bound(3) == pytest.approx(16.2662, abs=1e-3)   # chi-square table, 3 dof, 0.1 %
+    assert tail_bound(3) == pytest.approx(16.2662, abs=1e-3)  # chi-square table, 3 dof, 0.1 %
     for n in (50, 579, 5000):
         first = next(k for k in range(3, n) if _binomial_sf(k, n, TAIL_P) < TAIL_ALARM)
         assert heavy_tails(first - 1, n, "its") is None
         said = heavy_tails(first, n, "its")
         assert said is not None and f"{first} of its {n} position innovations" in said
         # Innovations correlated in time: the count assumes independent ones; not reported.
-        assert heavy_tails(first, n, "its", acf1=0.9) is None and heavy_tails(first, n, "its", acf1=0.0)
+        assert heavy_tails(first, n, "its", acf1=0.9) is None and heavy_tails(
+            first, n, "its", acf1=0.0
+        )
 
 
 def test_add_outliers_moves_only_the_chosen_fixes_by_the_stated_spread():
     run = simulate("car", 60.0, imu_grade="industrial", noise="white", seed=0)
     out, moved = add_outliers(run, 0.5, 10.0, seed=3)
-    d = run.origin.to_ned(out.gnss.lat, out.gnss.lon, out.gnss.h) - \
-        run.origin.to_ned(run.gnss.lat, run.gnss.lon, run.gnss.h)
+    d = run.origin.to_ned(out.gnss.lat, out.gnss.lon, out.gnss.h) - run.origin.to_ned(
+        run.gnss.lat, run.gnss.lon, run.gnss.h
+    )
     assert np.abs(d[~moved]).max() < 1e-6 and 15 < moved.sum() < 45
     assert np.std(d[moved]) == pytest.approx(10.0, rel=0.25)
     assert np.array_equal(out.gnss.sigma_ned, run.gnss.sigma_ned)

@@ -5,6 +5,7 @@ package) that must reproduce the truth from the perfect IMU: it proves that the 
 is consistent with the WGS-84 model of gnssacc.core.earth and with the sample convention "sample k
 is the average over (t[k-1], t[k]]".
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -22,6 +23,7 @@ DEG = np.pi / 180.0
 # ----------------------------------------------------------------------------------------------
 # An independent strapdown integrator
 # ----------------------------------------------------------------------------------------------
+
 
 def strapdown(t, f_b, omega_ib_b, lat, lon, h, v_n, R_nb):
     """Integrate IMU samples in NED from the state at ``t[0]``.
@@ -73,8 +75,16 @@ def roundtrip(scenario, duration_s, rate_hz=100.0):
     truth = sim.dense_truth(scenario, duration_s, rate_hz)
     np.testing.assert_array_equal(truth.t, run.imu.t)
     k0 = 0
-    out = strapdown(run.imu.t, run.imu.f_b, run.imu.omega_ib_b, truth.lat[k0], truth.lon[k0], truth.h[k0],
-                    truth.v_n[k0], truth.R_nb[k0])
+    out = strapdown(
+        run.imu.t,
+        run.imu.f_b,
+        run.imu.omega_ib_b,
+        truth.lat[k0],
+        truth.lon[k0],
+        truth.h[k0],
+        truth.v_n[k0],
+        truth.R_nb[k0],
+    )
     return truth, out, run.origin
 
 
@@ -85,6 +95,7 @@ def ned_error(origin, truth, lat, lon, h):
 # ----------------------------------------------------------------------------------------------
 # Round trips
 # ----------------------------------------------------------------------------------------------
+
 
 def test_static_strapdown_roundtrip_within_1mm():
     truth, (lat, lon, h, v_n, R_nb), origin = roundtrip("static", 60.0)
@@ -130,8 +141,16 @@ def test_reversing_strapdown_roundtrip(name, t0, t1):
     k0 = int(round(t0 * rate))
     tr = sim.TruthSamples(*(getattr(truth, f)[k0:] for f in sim.TruthSamples.__dataclass_fields__))
     assert tr.speed.min() < -0.9
-    lat, lon, h, v_n, R_nb = strapdown(run.imu.t[k0:], run.imu.f_b[k0:], run.imu.omega_ib_b[k0:], tr.lat[0],
-                                       tr.lon[0], tr.h[0], tr.v_n[0], tr.R_nb[0])
+    lat, lon, h, v_n, R_nb = strapdown(
+        run.imu.t[k0:],
+        run.imu.f_b[k0:],
+        run.imu.omega_ib_b[k0:],
+        tr.lat[0],
+        tr.lon[0],
+        tr.h[0],
+        tr.v_n[0],
+        tr.R_nb[0],
+    )
     # The simulator achieves ~0.05 mm, 3e-6 m/s, 1e-7 deg here.
     err = ned_error(run.origin, tr, lat, lon, h)
     assert np.max(np.linalg.norm(err, axis=1)) < 1e-3
@@ -144,15 +163,22 @@ def test_reversing_strapdown_roundtrip(name, t0, t1):
 # IMU signals
 # ----------------------------------------------------------------------------------------------
 
+
 def test_stationary_imu_closed_form():
     yaw = 75.0
-    run = sim.simulate("static", 5.0, imu_grade="perfect", initial_yaw_deg=yaw, origin_llh_deg=(47.0, 8.0, 400.0))
+    run = sim.simulate(
+        "static", 5.0, imu_grade="perfect", initial_yaw_deg=yaw, origin_llh_deg=(47.0, 8.0, 400.0)
+    )
     lat, h = 47.0 * DEG, 400.0
     R_bn = euler_to_dcm(0.0, 0.0, yaw * DEG).T
     f_expected = -R_bn @ gravity_n(lat, h)
     w_expected = R_bn @ earth_rate_n(lat)
-    np.testing.assert_allclose(run.imu.f_b, np.tile(f_expected, (len(run.imu), 1)), rtol=0, atol=1e-10)
-    np.testing.assert_allclose(run.imu.omega_ib_b, np.tile(w_expected, (len(run.imu), 1)), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(
+        run.imu.f_b, np.tile(f_expected, (len(run.imu), 1)), rtol=0, atol=1e-10
+    )
+    np.testing.assert_allclose(
+        run.imu.omega_ib_b, np.tile(w_expected, (len(run.imu), 1)), rtol=0, atol=1e-13
+    )
 
 
 def test_interval_averages_match_instantaneous_signals():
@@ -179,6 +205,7 @@ def test_first_imu_sample_is_truth_start_and_rate():
 # ----------------------------------------------------------------------------------------------
 # Scenarios
 # ----------------------------------------------------------------------------------------------
+
 
 def test_ugv_speed_bounds_and_stops():
     tr = sim.dense_truth("ugv", 300.0, 10.0)
@@ -229,7 +256,9 @@ def test_straight_and_turns_shapes():
 
 
 def test_origin_and_initial_yaw():
-    run = sim.simulate("straight", 10.0, origin_llh_deg=(-33.9, 151.2, 20.0), initial_yaw_deg=120.0, noise="none")
+    run = sim.simulate(
+        "straight", 10.0, origin_llh_deg=(-33.9, 151.2, 20.0), initial_yaw_deg=120.0, noise="none"
+    )
     assert run.truth.lat[0] == pytest.approx(-33.9 * DEG, abs=1e-15)
     assert run.truth.lon[0] == pytest.approx(151.2 * DEG, abs=1e-15)
     assert run.truth.h[0] == pytest.approx(20.0, abs=1e-9)
@@ -248,9 +277,16 @@ def test_origin_and_initial_yaw():
 UNMODELLED_OFF = {k: 0.0 for k in sim.UNMODELLED_KEYS}
 
 
-@pytest.mark.parametrize("grade, overrides", [("consumer-basic", None), ("industrial-basic", None),
-                                              ("tactical-basic", None), ("consumer", UNMODELLED_OFF),
-                                              ("industrial", UNMODELLED_OFF)])
+@pytest.mark.parametrize(
+    "grade, overrides",
+    [
+        ("consumer-basic", None),
+        ("industrial-basic", None),
+        ("tactical-basic", None),
+        ("consumer", UNMODELLED_OFF),
+        ("industrial", UNMODELLED_OFF),
+    ],
+)
 def test_imu_noise_statistics_match_grade(grade, overrides):
     # The realistic grades' white noise and Gauss-Markov bias follow grade_config too.
     dt = 0.01
@@ -276,10 +312,14 @@ def test_imu_noise_statistics_match_grade(grade, overrides):
 def test_turn_on_bias_is_drawn_with_grade_sigma(grade):
     # Across seeds, the initial bias spread follows sqrt(sigma0^2 + BI^2) (the drift starts at 0).
     p = sim.grade_config(grade)
-    runs = [sim.simulate("static", 1.0, imu_grade=grade, seed=s, imu_rate_hz=20.0, gnss_rate_hz=1.0)
-            for s in range(200)]
+    runs = [
+        sim.simulate("static", 1.0, imu_grade=grade, seed=s, imu_rate_hz=20.0, gnss_rate_hz=1.0)
+        for s in range(200)
+    ]
     b0 = np.array([r.sim.true_bias_g[0] for r in runs])
-    expected = np.hypot(p["gyro_bias_sigma0_deg_h"], p["gyro_bias_instability_deg_h"]) * DEG / 3600.0
+    expected = (
+        np.hypot(p["gyro_bias_sigma0_deg_h"], p["gyro_bias_instability_deg_h"]) * DEG / 3600.0
+    )
     np.testing.assert_allclose(b0.std(), expected, rtol=0.1)
     on = np.array([r.sim.imu_error_draws["gyro_turn_on_bias"] for r in runs])
     np.testing.assert_allclose(on.std(), p["gyro_bias_sigma0_deg_h"] * DEG / 3600.0, rtol=0.1)
@@ -298,7 +338,9 @@ def test_gauss_markov_is_stationary_with_short_tau():
 def test_perfect_grade_has_zero_bias_and_overrides_apply():
     run = sim.simulate("static", 10.0, imu_grade="perfect")
     assert not np.any(run.sim.true_bias_a) and not np.any(run.sim.true_bias_g)
-    over = sim.simulate("static", 10.0, imu_grade="perfect", imu_overrides={"gyro_arw_deg_rth": 1.0})
+    over = sim.simulate(
+        "static", 10.0, imu_grade="perfect", imu_overrides={"gyro_arw_deg_rth": 1.0}
+    )
     assert np.any(over.imu.omega_ib_b != run.imu.omega_ib_b)
     np.testing.assert_array_equal(over.imu.f_b, run.imu.f_b)
     assert over.sim.imu_params["gyro_arw_deg_rth"] == 1.0
@@ -323,6 +365,7 @@ def test_grade_config_builds_filter_config():
 # Seeds, GNSS, the run object
 # ----------------------------------------------------------------------------------------------
 
+
 def test_seed_reproducibility():
     a = sim.simulate("ugv", 30.0, imu_grade="consumer", seed=7)
     b = sim.simulate("ugv", 30.0, imu_grade="consumer", seed=7)
@@ -337,8 +380,15 @@ def test_seed_reproducibility():
 
 
 def test_gnss_white_noise_statistics():
-    run = sim.simulate("car", 600.0, imu_grade="perfect", imu_rate_hz=20.0, gnss_rate_hz=10.0,
-                       noise="white", seed=11)
+    run = sim.simulate(
+        "car",
+        600.0,
+        imu_grade="perfect",
+        imu_rate_hz=20.0,
+        gnss_rate_hz=10.0,
+        noise="white",
+        seed=11,
+    )
     assert np.array_equal(run.gnss.t, run.truth.t)
     err = ned_error(run.origin, run.truth, run.gnss.lat, run.gnss.lon, run.gnss.h)
     n = len(err)
@@ -376,8 +426,20 @@ def test_truth_rate_and_init():
 def test_run_validates_and_records_arguments(name):
     run = sim.simulate(name, 40.0, noise="gm", seed=5).validate()
     assert run.name == f"sim-{name}" and run.where == f"simulator({name}, seed=5)"
-    for key in ("scenario", "duration_s", "imu_grade", "imu_rate_hz", "gnss_rate_hz", "noise", "seed",
-                "origin_llh_deg", "initial_yaw_deg", "lever_arm_b", "give_init", "imu_overrides"):
+    for key in (
+        "scenario",
+        "duration_s",
+        "imu_grade",
+        "imu_rate_hz",
+        "gnss_rate_hz",
+        "noise",
+        "seed",
+        "origin_llh_deg",
+        "initial_yaw_deg",
+        "lever_arm_b",
+        "give_init",
+        "imu_overrides",
+    ):
         assert key in run.meta
     assert run.sim.true_bias_a.shape == (len(run.imu), 3)
     assert run.sim.segments[0]["t0"] == 0.0

@@ -4,6 +4,7 @@ Expected timings are those of the real vehicles the scenarios imitate (a slow UG
 ~36 s at the start and ~75 s at the end, 30 s backwards, at most 2.2 m/s; a city car: parked
 ~35 s, 10-15 m/s, corners of 15-60 m radius, stops of 10-30 s, a few seconds backwards at 1-2 m/s).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -24,7 +25,7 @@ def _spans(mask: np.ndarray, t: np.ndarray) -> list[tuple[float, float]]:
 def _circle_radius(p: np.ndarray) -> float:
     """Least-squares (Kasa) circle fit to 2-D points."""
     A = np.column_stack([2.0 * p[:, 0], 2.0 * p[:, 1], np.ones(len(p))])
-    cx, cy, c = np.linalg.lstsq(A, (p ** 2).sum(axis=1), rcond=None)[0]
+    cx, cy, c = np.linalg.lstsq(A, (p**2).sum(axis=1), rcond=None)[0]
     return float(np.sqrt(c + cx * cx + cy * cy))
 
 
@@ -33,11 +34,15 @@ def test_ugv_slow_timeline():
     tr = sim.dense_truth("ugv-slow", 235.0, rate)
     t, v = tr.t, tr.speed
     stopped = _spans(v == 0.0, t)
-    assert stopped[0][0] == 0.0 and stopped[0][1] == pytest.approx(36.0, abs=0.1)    # parked start
-    assert stopped[-1][1] == 235.0 and stopped[-1][1] - stopped[-1][0] == pytest.approx(75.0, abs=0.1)
-    still = _spans((v == 0.0) & (np.abs(tr.omega_ib_b[:, 2] - tr.omega_ib_b[0, 2]) < 1e-6), t)  # no pivot
+    assert stopped[0][0] == 0.0 and stopped[0][1] == pytest.approx(36.0, abs=0.1)  # parked start
+    assert stopped[-1][1] == 235.0 and stopped[-1][1] - stopped[-1][0] == pytest.approx(
+        75.0, abs=0.1
+    )
+    still = _spans(
+        (v == 0.0) & (np.abs(tr.omega_ib_b[:, 2] - tr.omega_ib_b[0, 2]) < 1e-6), t
+    )  # no pivot
     short = [b - a for a, b in still[1:-1]]
-    assert len(short) >= 3 and all(2.5 <= d <= 10.5 for d in short)                   # short stops
+    assert len(short) >= 3 and all(2.5 <= d <= 10.5 for d in short)  # short stops
     assert 2.19 < v.max() <= 2.2 + 1e-9
     back = _spans(v < 0.0, t)
     assert len(back) == 1 and back[0][1] - back[0][0] == pytest.approx(30.0, abs=0.1)
@@ -52,7 +57,7 @@ def test_ugv_slow_timeline():
 def test_car_city_timeline():
     rate = 10.0
     cycle = sim.make_scenario("car-city", 1.0).t_end
-    assert 120.0 <= cycle <= 400.0                                                      # a few minutes
+    assert 120.0 <= cycle <= 400.0  # a few minutes
     tr = sim.dense_truth("car-city", cycle, rate)
     t, v = tr.t, tr.speed
     stopped = _spans(v == 0.0, t)
@@ -60,7 +65,7 @@ def test_car_city_timeline():
     lights = [b - a for a, b in stopped[1:-1] if b - a > 5.0]
     assert len(lights) >= 2 and all(10.0 - 0.2 <= d <= 30.0 + 0.2 for d in lights)
     assert 10.0 <= v.max() <= 15.0 + 1e-9
-    turning = (v > 1.0) & (np.abs(tr.omega_ib_b[:, 2]) > 0.02)     # forward turns (parking aside)
+    turning = (v > 1.0) & (np.abs(tr.omega_ib_b[:, 2]) > 0.02)  # forward turns (parking aside)
     radius = v[turning] / np.abs(tr.omega_ib_b[turning, 2])
     assert 15.0 * 0.999 <= radius.min() <= 15.0 * 1.01 and np.any(np.abs(radius - 60.0) < 0.5)
     back = _spans(v < 0.0, t)
@@ -78,13 +83,16 @@ def test_cycles_repeat_up_to_30_min(name):
     first, later = scen.kinematics(t, yaw0), scen.kinematics(t + 3.0 * cycle, yaw0)
     np.testing.assert_allclose(later.speed, first.speed, atol=1e-9)
     np.testing.assert_allclose(later.yaw_rate, first.yaw_rate, atol=1e-12)
-    assert len(sim.reversing_spans(scen.segments)) == len(sim.reversing_spans(sim.make_scenario(name, 1.0).segments)) * (
-        int(np.ceil(1800.0 / cycle)))
+    assert len(sim.reversing_spans(scen.segments)) == len(
+        sim.reversing_spans(sim.make_scenario(name, 1.0).segments)
+    ) * (int(np.ceil(1800.0 / cycle)))
 
 
 @pytest.mark.parametrize("name, radius", [("ugv-slow", 5.0), ("car-city", 6.0)])
 def test_reversing_geometry(name, radius):
-    run = sim.simulate(name, 280.0, imu_grade="perfect", imu_rate_hz=20.0, gnss_rate_hz=20.0, noise="none")
+    run = sim.simulate(
+        name, 280.0, imu_grade="perfect", imu_rate_hz=20.0, gnss_rate_hz=20.0, noise="none"
+    )
     spans = sim.reversing_spans(run.sim.segments)
     assert len(spans) == 1
     a, b = spans[0]
@@ -107,9 +115,18 @@ def test_custom_scenario_reversing_segments():
     s = sim.Scenario("back").hold(2.0).speed_to(-2.0, 3.0).cruise(4.0).turn(-90.0, radius_m=8.0)
     s.hill(1.0, slope_deg=5.0).speed_to(0.0, 3.0).hold(1.0)
     kinds = [(g["kind"], g["reverse"]) for g in s.segments]
-    assert kinds == [("hold", False), ("speed", True), ("cruise", True), ("turn", True), ("hill", True),
-                     ("speed", True), ("hold", False)]
-    traj = sim.build_trajectory(s, s.t_end, 50.0, initial_yaw_deg=0.0, origin_llh_deg=(10.0, 20.0, 100.0))
+    assert kinds == [
+        ("hold", False),
+        ("speed", True),
+        ("cruise", True),
+        ("turn", True),
+        ("hill", True),
+        ("speed", True),
+        ("hold", False),
+    ]
+    traj = sim.build_trajectory(
+        s, s.t_end, 50.0, initial_yaw_deg=0.0, origin_llh_deg=(10.0, 20.0, 100.0)
+    )
     tr = traj.at(np.arange(0.0, s.t_end, 0.1))
     # Reversing over the hill: back at the starting height, and the nose points downhill on the
     # way up (height rises while pitch < 0).

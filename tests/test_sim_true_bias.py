@@ -10,6 +10,7 @@
 * A run's bias errors as scored (:func:`gnssacc.analysis.observability.state_errors`) are the estimate
   minus the interpolated per-sample truth.
 """
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -22,15 +23,19 @@ from gnssacc.core.solution import NavSolution
 from gnssacc.sources import sim, sim_path
 from gnssacc.sources.sim_true_bias import TrueBias
 
-FULL = dict(imu_grade="consumer", seed=5, noise="none",
-            imu_overrides={"bias_correlation_time_s": 0.2, "vib_engine_wander_time_s": 0.5})
+FULL = dict(
+    imu_grade="consumer",
+    seed=5,
+    noise="none",
+    imu_overrides={"bias_correlation_time_s": 0.2, "vib_engine_wander_time_s": 0.5},
+)
 
 
 def _interp(t, t_samples, b):
     return np.column_stack([np.interp(t, t_samples, b[:, i]) for i in range(3)])
 
 
-@pytest.mark.parametrize("sweep_block", [250, 10 ** 9])
+@pytest.mark.parametrize("sweep_block", [250, 10**9])
 def test_redrawn_biases_are_those_the_sweep_added(monkeypatch, sweep_block):
     added = []
     with_drift = TrueBias.with_drift
@@ -44,8 +49,12 @@ def test_redrawn_biases_are_those_the_sweep_added(monkeypatch, sweep_block):
     monkeypatch.setattr(TrueBias, "with_drift", record)
     run = sim.simulate("car", 30.0, **FULL)
     monkeypatch.setattr(TrueBias, "with_drift", with_drift)
-    assert [a[0] for a in added] == [0] + [a[1] for a in added[:-1]] and added[-1][1] == len(run.imu)
-    assert len(added) == (1 if sweep_block > len(run.imu) else pytest.approx(len(run.imu) / sweep_block, abs=1))
+    assert [a[0] for a in added] == [0] + [a[1] for a in added[:-1]] and added[-1][1] == len(
+        run.imu
+    )
+    assert len(added) == (
+        1 if sweep_block > len(run.imu) else pytest.approx(len(run.imu) / sweep_block, abs=1)
+    )
     b_a, b_g = np.concatenate([a[2] for a in added]), np.concatenate([a[3] for a in added])
     assert b_a.shape == (len(run.imu), 3) and np.any(run.sim.imu_error_draws["gyro_warmup"] != 0)
     for size in (1, 7, 8192):
@@ -53,7 +62,9 @@ def test_redrawn_biases_are_those_the_sweep_added(monkeypatch, sweep_block):
         np.testing.assert_array_equal(run.sim.true_bias_a, b_a)
         np.testing.assert_array_equal(run.sim.true_bias_g, b_g)
     # ... and not a constant: turn-on + Gauss-Markov (tau 0.2 s) + drift.
-    assert np.all(b_g.std(axis=0) > 0) and np.all(np.abs(b_a[0] - run.sim.imu_error_draws["accel_turn_on_bias"]) > 0)
+    assert np.all(b_g.std(axis=0) > 0) and np.all(
+        np.abs(b_a[0] - run.sim.imu_error_draws["accel_turn_on_bias"]) > 0
+    )
 
 
 def test_at_is_interp_over_every_sample_bit_for_bit(monkeypatch):
@@ -62,10 +73,14 @@ def test_at_is_interp_over_every_sample_bit_for_bit(monkeypatch):
     t_imu, bias = run.imu.t, run.sim.bias
     full_a, full_g = bias.samples()
     rng = np.random.default_rng(1)
-    t = np.concatenate([rng.uniform(t_imu[0] - 1.0, t_imu[-1] + 1.0, 300),        # unsorted, outside too
-                        t_imu[[0, 1, 63, 64, 65, 127, 128, -2, -1]],                # samples, block edges
-                        t_imu[[63, 127]] + 0.5 * (t_imu[[64, 128]] - t_imu[[63, 127]]),
-                        [t_imu[-1] + 5.0, t_imu[0] - 5.0]])
+    t = np.concatenate(
+        [
+            rng.uniform(t_imu[0] - 1.0, t_imu[-1] + 1.0, 300),  # unsorted, outside too
+            t_imu[[0, 1, 63, 64, 65, 127, 128, -2, -1]],  # samples, block edges
+            t_imu[[63, 127]] + 0.5 * (t_imu[[64, 128]] - t_imu[[63, 127]]),
+            [t_imu[-1] + 5.0, t_imu[0] - 5.0],
+        ]
+    )
     for q in (t, t[:1], np.array([t_imu[-1] + 1.0]), np.array([t_imu[0] - 1.0]), np.zeros(0)):
         for clock in (t_imu, t_imu + 0.0123):
             a, g = bias.at(q, clock)
@@ -76,12 +91,18 @@ def test_at_is_interp_over_every_sample_bit_for_bit(monkeypatch):
 def test_the_run_keeps_no_per_sample_bias():
     short, long = (sim.simulate("car", d, imu_grade="industrial", seed=2) for d in (60.0, 600.0))
     for run in (short, long):
-        assert run.sim.bias.t is run.imu.t   # the run's own sample times, not a copy
-    kept = [sum(np.asarray(v).nbytes for v in (*vars(r.sim.bias.seed).values(), *vars(r.sim.bias.drift).values())
-                if isinstance(v, np.ndarray)) for r in (short, long)]
+        assert run.sim.bias.t is run.imu.t  # the run's own sample times, not a copy
+    kept = [
+        sum(
+            np.asarray(v).nbytes
+            for v in (*vars(r.sim.bias.seed).values(), *vars(r.sim.bias.drift).values())
+            if isinstance(v, np.ndarray)
+        )
+        for r in (short, long)
+    ]
     # Only the drift's 1-s random walk (6 floats and its time per second) grows with the run.
     assert kept[1] - kept[0] == 7 * 8 * 540
-    assert kept[1] < 0.05 * long.imu.f_b.nbytes   # per-sample biases would be 2x f_b
+    assert kept[1] < 0.05 * long.imu.f_b.nbytes  # per-sample biases would be 2x f_b
     assert [r.sim.bias.nbytes for r in (short, long)] == kept
 
 
@@ -90,8 +111,20 @@ def test_scored_bias_errors_are_estimate_minus_interpolated_truth():
     t = np.linspace(run.t_start + 0.005, run.t_end - 0.3, 41)
     n = len(t)
     b_a, b_g = np.full((n, 3), 1e-3), np.full((n, 3), -2e-5)
-    sol = NavSolution("x", t, np.zeros(n), np.zeros(n), np.zeros(n), np.zeros((n, 3)), np.zeros((n, 3)),
-                      b_a, b_g, np.ones((n, 15)), 0.0, {})
+    sol = NavSolution(
+        "x",
+        t,
+        np.zeros(n),
+        np.zeros(n),
+        np.zeros(n),
+        np.zeros((n, 3)),
+        np.zeros((n, 3)),
+        b_a,
+        b_g,
+        np.ones((n, 15)),
+        0.0,
+        {},
+    )
     err = state_errors(run, sol)
     np.testing.assert_array_equal(err[:, 9:12], b_a - _interp(t, run.imu.t, run.sim.true_bias_a))
     np.testing.assert_array_equal(err[:, 12:15], b_g - _interp(t, run.imu.t, run.sim.true_bias_g))

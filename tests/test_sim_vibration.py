@@ -3,6 +3,7 @@
 The IMU is integrating (sample k = mean over (t[k-1], t[k]]), so the expected values are interval
 means of the continuous vibration, computed here by numerical quadrature.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -14,8 +15,10 @@ DEG = np.pi / 180.0
 DT = 0.01
 
 #: Every error source off; tests switch on the one they look at.
-ALL_OFF = {**{k: 0.0 for k in sim.GRADE_KEYS if k != "bias_correlation_time_s"},
-           **{k: 0.0 for k in sim.UNMODELLED_KEYS}}
+ALL_OFF = {
+    **{k: 0.0 for k in sim.GRADE_KEYS if k != "bias_correlation_time_s"},
+    **{k: 0.0 for k in sim.UNMODELLED_KEYS},
+}
 
 
 def _simpson_means(phase_a, phase_b, fn, m=2000):
@@ -36,14 +39,16 @@ def _boxcar_autocov(lag, dt, lo, hi):
 
 
 def _residual(scenario, duration, overrides, seed=2):
-    run = sim.simulate(scenario, duration, imu_grade="consumer", imu_overrides=overrides, noise="none", seed=seed)
+    run = sim.simulate(
+        scenario, duration, imu_grade="consumer", imu_overrides=overrides, noise="none", seed=seed
+    )
     perfect = sim.simulate(scenario, duration, imu_grade="perfect", noise="none")
     return run, run.imu.f_b - perfect.imu.f_b, run.imu.omega_ib_b - perfect.imu.omega_ib_b
 
 
 def test_harmonic_interval_mean_matches_numerical_integration():
     rng = np.random.default_rng(0)
-    f = rng.uniform(20.0, 80.0, 40)                      # fundamental per interval [Hz]
+    f = rng.uniform(20.0, 80.0, 40)  # fundamental per interval [Hz]
     edges = 1.3 + 2.0 * np.pi * DT * np.concatenate([[0.0], np.cumsum(f)])
     offsets = np.array([0.0, 1.0, -2.5])
     for order in (1, 2, 3):
@@ -51,7 +56,9 @@ def test_harmonic_interval_mean_matches_numerical_integration():
         for j, off in enumerate(offsets):
             ref = _simpson_means(edges[:-1], edges[1:], lambda p: np.sin(order * p + off))
             np.testing.assert_allclose(got[:, j], ref, rtol=0, atol=1e-10)
-        np.testing.assert_allclose(sim_vibration.harmonic_interval_mean(edges, order, 1.0), got[:, 1], atol=1e-15)
+        np.testing.assert_allclose(
+            sim_vibration.harmonic_interval_mean(edges, order, 1.0), got[:, 1], atol=1e-15
+        )
     # A harmonic at exactly the sample rate averages to zero in every interval.
     edges = 0.7 + 2.0 * np.pi * np.arange(11) * (100.0 * DT)
     np.testing.assert_allclose(sim_vibration.harmonic_interval_mean(edges, 1, 0.3), 0.0, atol=1e-12)
@@ -61,7 +68,9 @@ def test_harmonic_interval_mean_matches_numerical_integration():
 def test_band_limited_interval_means_have_boxcar_statistics(band):
     # Variance and autocovariances of the synthesised interval means equal those of the continuous
     # band-limited process averaged over each interval (including aliasing above 50 Hz).
-    z = sim_vibration.band_limited_interval_means(2 ** 17, DT, band, np.random.default_rng(1), channels=4)
+    z = sim_vibration.band_limited_interval_means(
+        2**17, DT, band, np.random.default_rng(1), channels=4
+    )
     r0 = _boxcar_autocov(0, DT, *band)
     assert r0 < 1.0
     np.testing.assert_allclose(z.var(axis=0), r0, rtol=0.03)
@@ -85,7 +94,9 @@ def test_engine_vibration_frequency_follows_speed_and_idles_at_rest():
         peak = np.fft.rfftfreq(len(dg), DT)[np.argmax(spec)]
         assert abs(peak - alias) < 0.05 * f0, (speed, peak, alias)
         # Sampled sines: variance sum of (A r_h sinc(h f0 dt))^2 / 2 (the wander changes f0 by ~3 %).
-        expected = np.sqrt(0.5 * np.sum((rel[:, None] * amp * np.sinc(np.arange(1, 4)[:, None] * f0 * DT)) ** 2, 0))
+        expected = np.sqrt(
+            0.5 * np.sum((rel[:, None] * amp * np.sinc(np.arange(1, 4)[:, None] * f0 * DT)) ** 2, 0)
+        )
         np.testing.assert_allclose(dg.std(axis=0), expected, rtol=0.08)
 
 
@@ -93,10 +104,14 @@ def test_road_vibration_level_grows_with_speed():
     model = sim.imu_error_model("consumer")
     rms_g = np.asarray(model["vib_road_gyro_dps"]) * DEG
     rms_a = np.asarray(model["vib_road_accel_mps2"])
-    over = {**ALL_OFF, "vib_road_gyro_dps": model["vib_road_gyro_dps"], "vib_road_accel_mps2": rms_a}
+    over = {
+        **ALL_OFF,
+        "vib_road_gyro_dps": model["vib_road_gyro_dps"],
+        "vib_road_accel_mps2": rms_a,
+    }
     atten = np.sqrt(_boxcar_autocov(0, DT, *model["vib_road_band_hz"]))
     _, da, dg = _residual("static", 20.0, over)
-    assert not np.any(da) and not np.any(dg)                       # no road vibration at rest
+    assert not np.any(da) and not np.any(dg)  # no road vibration at rest
     for speed in (5.0, 15.0):
         _, da, dg = _residual(sim.Scenario(f"v{speed}", speed).cruise(70.0), 60.0, over)
         gain = speed / model["vib_road_ref_speed_mps"]

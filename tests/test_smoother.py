@@ -1,4 +1,5 @@
 """The GTSAM fixed-lag smoother and the GNSS-acceleration factor."""
+
 import gtsam
 import numpy as np
 import pytest
@@ -40,11 +41,15 @@ def test_factor_jacobians_by_finite_differences_on_the_manifold():
     for k in range(6):
         d = np.zeros(6)
         d[k] = eps
-        num = (accel_error(POSE.retract(d), BIAS, F_B, A_N, G_N)
-               - accel_error(POSE.retract(-d), BIAS, F_B, A_N, G_N)) / (2 * eps)
+        num = (
+            accel_error(POSE.retract(d), BIAS, F_B, A_N, G_N)
+            - accel_error(POSE.retract(-d), BIAS, F_B, A_N, G_N)
+        ) / (2 * eps)
         np.testing.assert_allclose(J_pose[:, k], num, atol=1e-6)
-        num_b = (accel_error(POSE, BIAS.retract(d), F_B, A_N, G_N)
-                 - accel_error(POSE, BIAS.retract(-d), F_B, A_N, G_N)) / (2 * eps)
+        num_b = (
+            accel_error(POSE, BIAS.retract(d), F_B, A_N, G_N)
+            - accel_error(POSE, BIAS.retract(-d), F_B, A_N, G_N)
+        ) / (2 * eps)
         np.testing.assert_allclose(J_bias[:, k], num_b, atol=1e-6)
     assert np.all(J_pose[:, 3:6] == 0) and np.all(J_bias[:, 3:6] == 0)
 
@@ -78,16 +83,24 @@ def test_preintegration_reproduces_a_perfect_imu_in_turns():
 
     run = simulate("turns", 40.0, imu_grade="perfect", noise="none", seed=0, truth_rate_hz=100.0)
     tr, imu, o = run.truth, run.imu, run.origin
-    model = _ImuModel(SmootherSettings.from_config(load_config()), normal_gravity(o.lat0, o.h0), earth_rate_n(o.lat0))
+    model = _ImuModel(
+        SmootherSettings.from_config(load_config()),
+        normal_gravity(o.lat0, o.h0),
+        earth_rate_n(o.lat0),
+    )
     bias = gtsam.imuBias.ConstantBias()
     dt_all = np.diff(imu.t, prepend=imu.t[0])
-    for t0 in (15.0, 31.0):               # the left circle, the right circle
+    for t0 in (15.0, 31.0):  # the left circle, the right circle
         i0, i1 = (int(np.argmin(np.abs(tr.t - t))) for t in (t0, t0 + 1.0))
         j0 = int(np.searchsorted(imu.t, t0, side="right"))
         k1 = int(np.searchsorted(imu.t, t0 + 1.0, side="left")) + 1
         pim = _preintegrate(imu, model, bias, t0, t0 + 1.0, j0, k1, (None, None), dt_all)
-        start = gtsam.NavState(gtsam.Pose3(gtsam.Rot3(euler_to_dcm(*tr.rpy[i0])), o.to_ned(tr.lat[i0], tr.lon[i0], tr.h[i0])),
-                               tr.v_n[i0])
+        start = gtsam.NavState(
+            gtsam.Pose3(
+                gtsam.Rot3(euler_to_dcm(*tr.rpy[i0])), o.to_ned(tr.lat[i0], tr.lon[i0], tr.h[i0])
+            ),
+            tr.v_n[i0],
+        )
         nav = pim.predict(start, bias)
         assert np.linalg.norm(nav.velocity() - tr.v_n[i1]) < 1e-4, nav.velocity() - tr.v_n[i1]
         assert np.linalg.norm(nav.position() - o.to_ned(tr.lat[i1], tr.lon[i1], tr.h[i1])) < 5e-4
@@ -132,7 +145,9 @@ def test_smoothing_claims_less_uncertainty_than_the_online_estimate(sim_results)
     model equal to the truth over 100 runs (test_consistency_mc.py); here only that the fixed-lag
     estimate, which has seen 10 s more fixes, states a smaller sigma than the online one."""
     for _, sols in sim_results:
-        assert np.median(sols["smoother"].sigma[:-20, 0]) < np.median(sols["smoother-online"].sigma[:-20, 0])
+        assert np.median(sols["smoother"].sigma[:-20, 0]) < np.median(
+            sols["smoother-online"].sigma[:-20, 0]
+        )
 
 
 def test_ill_posed_updates_are_recovered_and_counted():
@@ -206,7 +221,10 @@ def test_kitti_integration():
     run = load_source("kitti", cfg, noise="white", seed=7)
     ekf = score(run, run_ekf(run, cfg, "ekf")).prmse_m
     sols = run_smoother(run, cfg, "smoother-acc")
-    fixed, online = score(run, sols["smoother-acc"]).prmse_m, score(run, sols["smoother-acc-online"]).prmse_m
+    fixed, online = (
+        score(run, sols["smoother-acc"]).prmse_m,
+        score(run, sols["smoother-acc-online"]).prmse_m,
+    )
     assert fixed < 0.75 * ekf, (fixed, ekf)
     assert online < 1.15 * ekf, (online, ekf)
     assert sols["smoother-acc"].stats["n_acc_factors"] > 400
@@ -220,12 +238,20 @@ def test_imu_still_cruise_in_an_outage_gets_no_zero_velocity_factor():
     import gnssacc
 
     # IMU-only through the outage (no non-holonomic constraint), as the ratios below were measured.
-    res = gnssacc.process("kitti", methods=["ekf", "smoother"], tune="none", outage="90:10", seed=7,
-                          config={"nhc": {"enabled": False}})
+    res = gnssacc.process(
+        "kitti",
+        methods=["ekf", "smoother"],
+        tune="none",
+        outage="90:10",
+        seed=7,
+        config={"nhc": {"enabled": False}},
+    )
     stats = res.solutions["smoother"].stats
     assert stats["n_zupt_gated"] >= 1
     prmse = res.prmse()
-    assert prmse["smoother"] < 0.75 * prmse["ekf"] and prmse["smoother-online"] < 1.15 * prmse["ekf"], prmse
+    assert (
+        prmse["smoother"] < 0.75 * prmse["ekf"] and prmse["smoother-online"] < 1.15 * prmse["ekf"]
+    ), prmse
     for m in ("smoother", "smoother-online"):
         # The residual chi-square of a fix the estimate has used has fewer than 3 dof (here about
         # 3 (1 - (sigma_est / sigma_fix)^2) ~ 2.4); 1 dof per fix gives a band wider than the true
@@ -242,7 +268,9 @@ def test_true_stops_keep_their_zero_velocity_factors():
     run = simulate("ugv-slow", duration_s=240.0, imu_grade="consumer", noise="white", seed=2)
     res = gnssacc.process(run, methods=["smoother"], tune="none")
     stats = res.solutions["smoother"].stats
-    assert stats["n_zupt_factors"] > 10 and stats["n_zupt_gated"] <= 0.05 * stats["n_zupt_factors"], stats
+    assert (
+        stats["n_zupt_factors"] > 10 and stats["n_zupt_gated"] <= 0.05 * stats["n_zupt_factors"]
+    ), stats
 
 
 def _gm_exact_model_errors(seeds=range(12)):
@@ -280,7 +308,9 @@ def test_fixed_lag_smoother_is_no_worse_than_the_ekf_under_gauss_markov_fixes():
     online within 2 % of the EKF (a stated equivalence margin: the two differ only in
     linearisation) at the confidence bound."""
     rows = _gm_exact_model_errors(range(40, 52))
-    fixed, online, ekf = (np.array([r[m][0] for r in rows]) for m in ("smoother-gm", "smoother-gm-online", "ekf-gm"))
+    fixed, online, ekf = (
+        np.array([r[m][0] for r in rows]) for m in ("smoother-gm", "smoother-gm-online", "ekf-gm")
+    )
     mean, bound = paired_not_worse(fixed, ekf)
     assert mean < bound, (fixed, ekf)
     v_ratio = np.array([r["smoother-gm"][1] / r["ekf-gm"][1] for r in rows])

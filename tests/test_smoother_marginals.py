@@ -6,6 +6,7 @@ two independent references computed at the same moment: iSAM2's own joint margin
 Bayes tree) and a batch QR elimination of all the smoother's factors linearised at its
 linearisation point.
 """
+
 import gtsam
 import numpy as np
 import pytest
@@ -47,16 +48,22 @@ def _diagonal_blocks(C):
 FILL = {"smoother": {"max_node_spacing_s": 0.5}}
 
 
-@pytest.mark.parametrize("method,overrides,band", [
-    ("smoother", {}, None), ("smoother-acc", {}, None), ("smoother", GM, None),
-    ("smoother-accw", {}, None),          # window factors on three nodes: a band of the window's width
-    ("smoother-accw", FILL, None),        # fill nodes between the fixes: factors on up to five nodes
-    ("smoother-accw", {}, 1)],            # a factor wider than the band: iSAM2's queries meanwhile
-    ids=["smoother", "smoother-acc", "gauss-markov", "accw", "accw-fill", "accw-too-wide"])
+@pytest.mark.parametrize(
+    "method,overrides,band",
+    [
+        ("smoother", {}, None),
+        ("smoother-acc", {}, None),
+        ("smoother", GM, None),
+        ("smoother-accw", {}, None),  # window factors on three nodes: a band of the window's width
+        ("smoother-accw", FILL, None),  # fill nodes between the fixes: factors on up to five nodes
+        ("smoother-accw", {}, 1),
+    ],  # a factor wider than the band: iSAM2's queries meanwhile
+    ids=["smoother", "smoother-acc", "gauss-markov", "accw", "accw-fill", "accw-too-wide"],
+)
 def test_recorded_covariances_equal_full_marginals(monkeypatch, method, overrides, band):
     cfg = load_config(overrides={"imu": grade_config("industrial"), **overrides})
     run = simulate("car", duration_s=70.0, imu_grade="industrial", noise="white", seed=4)
-    run = with_outages(run, "30:6", None)            # fill nodes, then a window without fixes
+    run = with_outages(run, "30:6", None)  # fill nodes, then a window without fixes
     if band is not None:
         monkeypatch.setattr(S, "_bandwidth", lambda cfg: band)
     part = _diagonal_blocks if band is not None else (lambda C: C)
@@ -74,7 +81,7 @@ def test_recorded_covariances_equal_full_marginals(monkeypatch, method, override
         covs = orig(self, nodes)
         for i, c in zip(nodes, covs):
             stats["calls"] += 1
-            C = part(c)                              # the node's whole joint marginal
+            C = part(c)  # the node's whole joint marginal
             keys = self.keys(i)
             ref = self.isam.getISAM2().jointMarginalCovariance(keys).fullMatrix()
             stats["isam"] = max(stats["isam"], _worst(C, ref))
@@ -90,9 +97,11 @@ def test_recorded_covariances_equal_full_marginals(monkeypatch, method, override
     # Every node: online and fixed-lag; the last node is both at the end (one query).
     assert stats["calls"] == 2 * n - 1
     if band is None:
-        assert stats["fast"] == stats["calls"]       # never iSAM2's slow query
+        assert stats["fast"] == stats["calls"]  # never iSAM2's slow query
     else:
-        assert stats["fast"] < stats["calls"] // 2   # mostly iSAM2's (the chain's first nodes are not)
+        assert (
+            stats["fast"] < stats["calls"] // 2
+        )  # mostly iSAM2's (the chain's first nodes are not)
     assert stats["n_batch"] >= 2 * n // 5
     assert stats["isam"] < 1e-5, stats
     assert stats["batch"] < 1e-5, stats
@@ -107,8 +116,12 @@ def _add_random_factors(wm, H, rng, nodes, last, w, scale):
     for k in nodes:
         for span in range(min(w, last - k) + 1):
             keys = sorted(f(j) for j in range(k, k + span + 1) for f in (X, V, B))
-            idx = np.concatenate([(key & W._INDEX_MASK) * b + W._layout(key)[0] + np.arange(W._layout(key)[1])
-                                  for key in keys])
+            idx = np.concatenate(
+                [
+                    (key & W._INDEX_MASK) * b + W._layout(key)[0] + np.arange(W._layout(key)[1])
+                    for key in keys
+                ]
+            )
             A = rng.normal(size=(len(idx) + 3, len(idx))) / scale[idx % b]
             aug = np.zeros((len(idx) + 1, len(idx) + 1))
             aug[:-1, :-1] = A.T @ A
@@ -129,18 +142,20 @@ def test_band_marginals_equal_the_dense_inverse(w):
     wm.first = 0
     wm._grow(n - 2)
     H = np.zeros((n * b, n * b))
-    _add_random_factors(wm, H, rng, range(n - 1), n - 2, w, scale)   # nodes 0 .. n-2
-    H_now = H[:(n - 1) * b, :(n - 1) * b]
+    _add_random_factors(wm, H, rng, range(n - 1), n - 2, w, scale)  # nodes 0 .. n-2
+    H_now = H[: (n - 1) * b, : (n - 1) * b]
 
     def worst(H, nodes):
         ref = np.linalg.inv(H)
         covs = wm.covariances(nodes)
-        return max(_worst(c, ref[j * b:(j + 1) * b, j * b:(j + 1) * b]) for c, j in zip(covs, nodes))
+        return max(
+            _worst(c, ref[j * b : (j + 1) * b, j * b : (j + 1) * b]) for c, j in zip(covs, nodes)
+        )
 
     assert worst(H_now, list(range(n - 1))) < 1e-9
-    _add_random_factors(wm, H, rng, range(n - 1 - w, n), n - 1, w, scale)   # up to the new node n-1
+    _add_random_factors(wm, H, rng, range(n - 1 - w, n), n - 1, w, scale)  # up to the new node n-1
     assert worst(H, list(range(n))) < 1e-9
-    _add_random_factors(wm, H, rng, [1], n - 1, w, scale)     # behind what the kept copy eliminated
+    _add_random_factors(wm, H, rng, [1], n - 1, w, scale)  # behind what the kept copy eliminated
     assert worst(H, list(range(n))) < 1e-9
     wm.marginalize_first()
     wm.marginalize_first()

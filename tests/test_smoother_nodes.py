@@ -1,5 +1,6 @@
 """The smoother's node layout with fast fixes: which fixes are nodes, the factor that folds the
 others into the node before them, and the estimates against a node per fix."""
+
 import subprocess
 import sys
 from dataclasses import replace
@@ -45,19 +46,37 @@ def _error(pim, pose, vel, bias, z, lever):
 @pytest.mark.parametrize("gm", [False, True], ids=["white", "gauss-markov"])
 def test_folded_fix_factor_jacobians_by_finite_differences_on_the_manifold(gm):
     rng = np.random.default_rng(4)
-    n = 40   # 0.4 s of turning, accelerating IMU samples
+    n = 40  # 0.4 s of turning, accelerating IMU samples
     f_b = np.array([0.8, 0.3, -9.7]) + 0.3 * rng.normal(size=(n, 3))
     w_b = np.array([0.02, -0.01, 0.25]) + 0.05 * rng.normal(size=(n, 3))
-    pim = _pim(f_b, w_b, 0.01, gtsam.imuBias.ConstantBias(np.array([0.02, 0.0, -0.01]), np.array([1e-3, 0, 0])),
-               omega=earth_rate_n(0.6))
+    pim = _pim(
+        f_b,
+        w_b,
+        0.01,
+        gtsam.imuBias.ConstantBias(np.array([0.02, 0.0, -0.01]), np.array([1e-3, 0, 0])),
+        omega=earth_rate_n(0.6),
+    )
     pose = gtsam.Pose3(gtsam.Rot3(euler_to_dcm(0.05, -0.1, 2.0)), np.array([12.0, -3.0, 0.5]))
-    vel, bias = np.array([6.0, -2.0, 0.1]), gtsam.imuBias.ConstantBias(np.array([0.05, -0.03, 0.02]),
-                                                                      np.array([2e-3, -1e-3, 5e-4]))
+    vel, bias = (
+        np.array([6.0, -2.0, 0.1]),
+        gtsam.imuBias.ConstantBias(np.array([0.05, -0.03, 0.02]), np.array([2e-3, -1e-3, 5e-4])),
+    )
     z = np.array([14.0, -4.0, 0.0])
-    tau, g0, g1 = np.array([20.0, 30.0, 5.0]), np.array([0.4, -0.7, 1.1]), np.array([0.5, -0.6, 0.9])
+    tau, g0, g1 = (
+        np.array([20.0, 30.0, 5.0]),
+        np.array([0.4, -0.7, 1.1]),
+        np.array([0.5, -0.6, 0.9]),
+    )
     keys = (X(0), V(0), B(0)) + ((G(0), G(1)) if gm else ())
-    factor = preintegrated_position_factor(keys, pim, z, LEVER, np.eye(3), np.eye(3),
-                                           (tau, np.array([1.0, 1.0, 2.0]), 0.5) if gm else None)
+    factor = preintegrated_position_factor(
+        keys,
+        pim,
+        z,
+        LEVER,
+        np.eye(3),
+        np.eye(3),
+        (tau, np.array([1.0, 1.0, 2.0]), 0.5) if gm else None,
+    )
     values = gtsam.Values()
     values.insert(X(0), pose)
     values.insert(V(0), vel)
@@ -71,16 +90,28 @@ def test_folded_fix_factor_jacobians_by_finite_differences_on_the_manifold(gm):
     w_j = phi(T - s) * (1 - phi(s) ** 2) / (1 - phi(T) ** 2) if gm else np.zeros(3)
     w_i = phi(s) - w_j * phi(T) if gm else np.zeros(3)
     err = lambda p, v, b, ga, gb: _error(pim, p, v, b, z, LEVER) + w_i * ga + w_j * gb  # noqa: E731
-    np.testing.assert_allclose(factor.unwhitenedError(values), err(pose, vel, bias, g0, g1), atol=1e-12)
+    np.testing.assert_allclose(
+        factor.unwhitenedError(values), err(pose, vel, bias, g0, g1), atol=1e-12
+    )
     A, b = factor.linearize(values).jacobian()
-    L = np.linalg.cholesky(np.linalg.inv(factor.noiseModel().covariance()))   # the whitening GTSAM applied
-    J = np.linalg.solve(L.T, A)   # back to the unwhitened Jacobian: A = L^T J
+    L = np.linalg.cholesky(
+        np.linalg.inv(factor.noiseModel().covariance())
+    )  # the whitening GTSAM applied
+    J = np.linalg.solve(L.T, A)  # back to the unwhitened Jacobian: A = L^T J
     eps = 1e-6
     for k in range(21 if gm else 15):
         d = np.zeros(21)
         d[k] = eps
-        args = [(pose.retract(s * d[0:6]), vel + s * d[6:9], bias.retract(s * d[9:15]), g0 + s * d[15:18],
-                 g1 + s * d[18:21]) for s in (1, -1)]
+        args = [
+            (
+                pose.retract(s * d[0:6]),
+                vel + s * d[6:9],
+                bias.retract(s * d[9:15]),
+                g0 + s * d[15:18],
+                g1 + s * d[18:21],
+            )
+            for s in (1, -1)
+        ]
         num = (err(*args[0]) - err(*args[1])) / (2 * eps)
         np.testing.assert_allclose(J[:, k], num, atol=2e-6)
 
@@ -108,18 +139,31 @@ def test_folded_fix_factor_predicts_the_true_antenna_from_a_perfect_imu():
     true state at a node carried 0.45 s ahead by the preintegrated samples lands on the true
     antenna: the error is the integration's discretisation only (a car's jerk of ~1 m/s^3 over
     10 ms samples: millimetres over half a second), far below any fix's sigma."""
-    run = simulate("car", 40.0, imu_grade="perfect", noise="none", seed=2, truth_rate_hz=100.0,
-                   lever_arm_b=tuple(LEVER))
+    run = simulate(
+        "car",
+        40.0,
+        imu_grade="perfect",
+        noise="none",
+        seed=2,
+        truth_rate_hz=100.0,
+        lever_arm_b=tuple(LEVER),
+    )
     o, tr, imu = run.origin, run.truth, run.imu
     p_true = o.to_ned(tr.lat, tr.lon, tr.h)
     g = float(normal_gravity(o.lat0, o.h0))
     worst = 0.0
-    for i0 in range(500, 3500, 250):         # nodes at 5 .. 35 s
+    for i0 in range(500, 3500, 250):  # nodes at 5 .. 35 s
         i1 = i0 + 45
         k0 = int(np.searchsorted(imu.t, tr.t[i0], side="right"))
         k1 = int(np.searchsorted(imu.t, tr.t[i1], side="right"))
-        pim = _pim(imu.f_b[k0:k1], imu.omega_ib_b[k0:k1], float(np.median(np.diff(imu.t))),
-                   gtsam.imuBias.ConstantBias(), g=g, omega=earth_rate_n(o.lat0))
+        pim = _pim(
+            imu.f_b[k0:k1],
+            imu.omega_ib_b[k0:k1],
+            float(np.median(np.diff(imu.t))),
+            gtsam.imuBias.ConstantBias(),
+            g=g,
+            omega=earth_rate_n(o.lat0),
+        )
         R0 = euler_to_dcm(*tr.rpy[i0])
         pose = gtsam.Pose3(gtsam.Rot3(R0), p_true[i0])
         R1 = euler_to_dcm(*tr.rpy[i1])
@@ -133,11 +177,11 @@ def test_fixes_taken_as_nodes():
     rng = np.random.default_rng(1)
     t20 = np.arange(0.0, 30.0, 0.05) + rng.uniform(-0.004, 0.004, 600)
     keep = node_fixes(t20, 0.5)
-    assert np.all(keep[::10]) and keep.sum() == 60             # every tenth fix of 20 Hz
+    assert np.all(keep[::10]) and keep.sum() == 60  # every tenth fix of 20 Hz
     t1 = np.arange(0.0, 30.0, 1.0) + rng.uniform(-0.1, 0.1, 30)
-    assert np.all(node_fixes(t1, 0.5))                          # 1 Hz with jitter: all of them
+    assert np.all(node_fixes(t1, 0.5))  # 1 Hz with jitter: all of them
     t2 = np.arange(0.0, 30.0, 0.5) + rng.uniform(-0.05, 0.05, 60)
-    assert np.all(node_fixes(t2, 0.5))                          # as fast as the spacing: all
+    assert np.all(node_fixes(t2, 0.5))  # as fast as the spacing: all
     gap = np.concatenate([np.arange(0.0, 10.0, 0.05), np.arange(10.37, 20.0, 0.05)])
     keep = node_fixes(gap, 0.5)
     assert keep[np.searchsorted(gap, 10.37)] and keep.sum() == 40
@@ -148,8 +192,11 @@ def _smoothed(run, methods, spacings, **over):
     cfg = load_config(None, overrides=over or None)
     prep = pipeline.prepare(run, cfg, "none", methods)
     base = SmootherSettings.from_config(prep.cfg)
-    return prep, {(m, sp): estimate(prep, replace(base, min_node_spacing_s=sp), m)[m]
-                  for m in methods for sp in spacings}
+    return prep, {
+        (m, sp): estimate(prep, replace(base, min_node_spacing_s=sp), m)[m]
+        for m in methods
+        for sp in spacings
+    }
 
 
 def test_one_hertz_fixes_keep_a_node_each_and_the_same_estimates():
@@ -162,25 +209,37 @@ def test_one_hertz_fixes_keep_a_node_each_and_the_same_estimates():
             np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
 
 
-@pytest.mark.parametrize("method,gm", [("smoother", False), ("smoother-acc", False), ("smoother", True)],
-                         ids=["smoother", "smoother-acc", "gauss-markov"])
+@pytest.mark.parametrize(
+    "method,gm",
+    [("smoother", False), ("smoother-acc", False), ("smoother", True)],
+    ids=["smoother", "smoother-acc", "gauss-markov"],
+)
 def test_twenty_hertz_fixes_folded_give_the_estimates_of_a_node_per_fix(method, gm):
     """Nodes every 0.5 s with the 9 fixes between them folded in, against a node at each of the
     fixes: at the common nodes every state within one sigma of the other's estimate (the same
     information: they differ by the IMU noise correlation the folded factors leave out and, for
     -acc, the acceleration windows over the nodes' fixes)."""
     # (the car for the Gauss-Markov fixes: on the slow UGV their 2.5 m wander reads as a unit error)
-    run = simulate("car" if gm else "ugv-slow", 60.0, gnss_rate_hz=20.0, seed=7, noise="gm" if gm else "white")
-    over = {"gnss": {"gm_sigma_m": [2.5, 2.5, 4.0], "gm_tau_s": 60.0}} if gm else {}   # the simulator's
+    run = simulate(
+        "car" if gm else "ugv-slow", 60.0, gnss_rate_hz=20.0, seed=7, noise="gm" if gm else "white"
+    )
+    over = (
+        {"gnss": {"gm_sigma_m": [2.5, 2.5, 4.0], "gm_tau_s": 60.0}} if gm else {}
+    )  # the simulator's
     prep, sols = _smoothed(run, [method], (0.5, 0.0), **over)
     a, b = sols[(method, 0.5)], sols[(method, 0.0)]
-    assert a.stats["n_gps_folded"] > 0.85 * len(run.gnss.t) and a.stats["n_nodes"] < 0.12 * b.stats["n_nodes"]
+    assert (
+        a.stats["n_gps_folded"] > 0.85 * len(run.gnss.t)
+        and a.stats["n_nodes"] < 0.12 * b.stats["n_nodes"]
+    )
     common, ia, ib = np.intersect1d(a.t, b.t, return_indices=True)
-    assert len(common) == len(a.t)   # the folded layout's nodes are nodes of the other
+    assert len(common) == len(a.t)  # the folded layout's nodes are nodes of the other
     o = prep.run.origin
     d_pos = o.to_ned(a.lat[ia], a.lon[ia], a.h[ia]) - o.to_ned(b.lat[ib], b.lon[ib], b.h[ib])
     d_att = (a.rpy[ia] - b.rpy[ib] + np.pi) % (2 * np.pi) - np.pi
-    diff = np.hstack([d_pos, a.v_n[ia] - b.v_n[ib], d_att, a.b_a[ia] - b.b_a[ib], a.b_g[ia] - b.b_g[ib]])
+    diff = np.hstack(
+        [d_pos, a.v_n[ia] - b.v_n[ib], d_att, a.b_a[ia] - b.b_a[ib], a.b_g[ia] - b.b_g[ib]]
+    )
     assert np.all(np.abs(diff) <= b.sigma[ib])
 
 
@@ -190,12 +249,19 @@ def test_folded_smoother_sigmas_are_consistent_with_its_errors():
     runs of test_smoother's consistency test for a node per fix."""
     zs = []
     for seed in (0, 1):
-        run = simulate("car", 240.0, imu_grade="industrial", noise="white", seed=seed, gnss_rate_hz=20.0)
+        run = simulate(
+            "car", 240.0, imu_grade="industrial", noise="white", seed=seed, gnss_rate_hz=20.0
+        )
         prep, sols = _smoothed(run, ["smoother"], (0.5,))
         sol = sols[("smoother", 0.5)]
         assert sol.stats["n_gps_folded"] > 0.85 * len(run.gnss.t)
         p_true, valid = truth_at(prep.run, sol.t)
-        zs.append(((prep.run.origin.to_ned(sol.lat, sol.lon, sol.h) - p_true)[valid] / sol.sigma[valid, 0:3])[60:])
+        zs.append(
+            (
+                (prep.run.origin.to_ned(sol.lat, sol.lon, sol.h) - p_true)[valid]
+                / sol.sigma[valid, 0:3]
+            )[60:]
+        )
     msq = np.mean(np.concatenate(zs) ** 2, axis=0)
     assert np.all(msq > 0.3) and np.all(msq < 3.0), msq
 
@@ -208,21 +274,31 @@ def test_folded_fixes_with_wheel_odometry_and_the_constraint_on_the_nodes(gm):
     nodes. The odometry is used every 0.5 s ([odometry] interval_s), so that both layouts have a
     node at each sample used (the aids are not folded: at the default 0.2 s a node per fix would
     use 2.5 times as many samples, and its estimates differ by more than the folded fixes')."""
-    run = simulate("car", 60.0, gnss_rate_hz=10.0, odom_hz=10.0, seed=2, noise="gm" if gm else "white")
-    over = {"gnss": {"gm_sigma_m": [2.5, 2.5, 4.0], "gm_tau_s": 60.0}} if gm else {}   # the simulator's
+    run = simulate(
+        "car", 60.0, gnss_rate_hz=10.0, odom_hz=10.0, seed=2, noise="gm" if gm else "white"
+    )
+    over = (
+        {"gnss": {"gm_sigma_m": [2.5, 2.5, 4.0], "gm_tau_s": 60.0}} if gm else {}
+    )  # the simulator's
     over["odometry"] = {"interval_s": 0.5}
     prep, sols = _smoothed(run, ["smoother"], (0.5, 0.0), **over)
     a, b = sols[("smoother", 0.5)], sols[("smoother", 0.0)]
     n = a.stats["n_nodes"]
     assert a.stats["n_gps_folded"] > 0.75 * len(run.gnss.t) and n < 0.25 * b.stats["n_nodes"]
     assert 0.9 * (n - 1) <= a.stats["n_odo_factors"] + a.stats["n_odo_skipped_sign"] <= n - 1
-    assert 0 < a.stats["n_nhc_factors"] + a.stats["n_nhc_skipped_rest"] + a.stats["n_nhc_skipped_turn"] <= n - 1
+    assert (
+        0
+        < a.stats["n_nhc_factors"] + a.stats["n_nhc_skipped_rest"] + a.stats["n_nhc_skipped_turn"]
+        <= n - 1
+    )
     common, ia, ib = np.intersect1d(a.t, b.t, return_indices=True)
     assert len(common) == len(a.t)
     o = prep.run.origin
     d_pos = o.to_ned(a.lat[ia], a.lon[ia], a.h[ia]) - o.to_ned(b.lat[ib], b.lon[ib], b.h[ib])
     d_att = (a.rpy[ia] - b.rpy[ib] + np.pi) % (2 * np.pi) - np.pi
-    diff = np.hstack([d_pos, a.v_n[ia] - b.v_n[ib], d_att, a.b_a[ia] - b.b_a[ib], a.b_g[ia] - b.b_g[ib]])
+    diff = np.hstack(
+        [d_pos, a.v_n[ia] - b.v_n[ib], d_att, a.b_a[ia] - b.b_a[ib], a.b_g[ia] - b.b_g[ib]]
+    )
     assert np.all(np.abs(diff) <= b.sigma[ib])
 
 
@@ -245,6 +321,8 @@ def test_folded_fixes_with_every_extra_state_and_window_factors_run():
     of their oldest node: the smoother runs to the end (the ordering groups handed to iSAM2 once
     outnumbered the variables it re-eliminated, and CCOLAMD corrupted memory: an abort, hence
     the separate process)."""
-    out = subprocess.run([sys.executable, "-c", EVERY_STATE], capture_output=True, text=True, timeout=600)
+    out = subprocess.run(
+        [sys.executable, "-c", EVERY_STATE], capture_output=True, text=True, timeout=600
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     assert all(int(c) > 0 for c in out.stdout.split())

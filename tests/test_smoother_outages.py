@@ -1,6 +1,7 @@
 """The smoother through GNSS outages: a stationary span the fixes could not vet (inside an outage,
 its GNSS check made from the first fixes after it) may be a cruise, and its zero-velocity factors
 are gated as the EKF's updates are."""
+
 from __future__ import annotations
 
 import warnings
@@ -16,8 +17,8 @@ from gnssacc.pipeline import prepare
 from gnssacc.sources.gnss_noise import apply_outages
 from gnssacc.sources.sim import grade_config, simulate
 
-OUTAGE = (100.0, 20.0)         # the ugv scenario cruises at 2 m/s over 109.6-119.6 s
-FAKE = (110.0, 119.0)          # a "stationary" span over that cruise, as the detector once found it
+OUTAGE = (100.0, 20.0)  # the ugv scenario cruises at 2 m/s over 109.6-119.6 s
+FAKE = (110.0, 119.0)  # a "stationary" span over that cruise, as the detector once found it
 
 
 @pytest.fixture(scope="module")
@@ -30,11 +31,19 @@ def prepared():
         prep = prepare(run, cfg, "none", ["smoother"])
     tr = run.truth
     i = (tr.t >= FAKE[0]) & (tr.t <= FAKE[1])
-    assert np.all(np.linalg.norm(tr.v_n[i], axis=1) > 1.5)   # it is a cruise
+    assert np.all(np.linalg.norm(tr.v_n[i], axis=1) > 1.5)  # it is a cruise
     imu_t = run.imu.t
-    span = replace(prep.stationary.spans[0], t_start=FAKE[0], t_end=FAKE[1],
-                   i_start=int(np.searchsorted(imu_t, FAKE[0])), i_end=int(np.searchsorted(imu_t, FAKE[1])),
-                   gnss_checked=True, gnss_speed_mps=4.7, gnss_speed_sigma_mps=4.3, gnss_n_fixes=0)
+    span = replace(
+        prep.stationary.spans[0],
+        t_start=FAKE[0],
+        t_end=FAKE[1],
+        i_start=int(np.searchsorted(imu_t, FAKE[0])),
+        i_end=int(np.searchsorted(imu_t, FAKE[1])),
+        gnss_checked=True,
+        gnss_speed_mps=4.7,
+        gnss_speed_sigma_mps=4.3,
+        gnss_n_fixes=0,
+    )
     spans = [s for s in prep.stationary.spans if s.t_end < FAKE[0] or s.t_start > FAKE[1]] + [span]
     report = replace(prep.stationary, spans=sorted(spans, key=lambda s: s.t_start))
     return replace(prep, stationary=report)
@@ -54,7 +63,9 @@ def test_unvetted_span_in_an_outage_does_not_stop_the_smoother(prepared):
     for sid in ("smoother", "smoother-online"):
         sol = sols[sid]
         m = (sol.t >= FAKE[0]) & (sol.t <= FAKE[1])
-        v_true = np.column_stack([np.interp(sol.t[m], run.truth.t, run.truth.v_n[:, k]) for k in range(3)])
+        v_true = np.column_stack(
+            [np.interp(sol.t[m], run.truth.t, run.truth.v_n[:, k]) for k in range(3)]
+        )
         err = np.linalg.norm(sol.v_n[m] - v_true, axis=1)
         # Zero-velocity factors over the cruise pull the speed towards zero: an error of about the
         # true speed (2 m/s). Gated, the smoother keeps the speed it predicts.

@@ -12,6 +12,7 @@ Real data (``../shared/data``, skipped when absent) and the KITTI sequence in th
 the expected figures come from the data documentation (static logs, a highway minute) and the
 KITTI truth positions.
 """
+
 from __future__ import annotations
 
 import csv
@@ -45,14 +46,20 @@ BIAS = np.array([0.05, -0.08, 0.10, 0.05 * DEG, -0.08 * DEG, 0.17 * DEG])
 
 # --- simulated IMU errors ------------------------------------------------------------------------
 
+
 def _vibration(t: np.ndarray, dt: float, rng) -> np.ndarray:
     """Idle-engine vibration (n, 6): 27/54/81 Hz harmonics as interval means, plus broadband."""
-    peak = np.array([0.7, 0.7, 1.0, 3.4 * DEG, 3.4 * DEG, 0.8 * DEG])   # fundamental, per channel
+    peak = np.array([0.7, 0.7, 1.0, 3.4 * DEG, 3.4 * DEG, 0.8 * DEG])  # fundamental, per channel
     out = np.zeros((len(t), 6))
     for order, share in ((1, 1.0), (2, 0.6), (3, 0.35)):
         w = 2.0 * np.pi * 27.0 * order
         ph = rng.uniform(0.0, 2.0 * np.pi, 6)
-        out += share * peak * (np.cos(w * (t[:, None] - dt) + ph) - np.cos(w * t[:, None] + ph)) / (w * dt)
+        out += (
+            share
+            * peak
+            * (np.cos(w * (t[:, None] - dt) + ph) - np.cos(w * t[:, None] + ph))
+            / (w * dt)
+        )
     # Broadband: the second difference of white noise has zero mean over any block (a shaking
     # mount does not drift away), like real vibration.
     e = rng.standard_normal((len(t) + 2, 6))
@@ -68,10 +75,12 @@ def _texture(t: np.ndarray, speed: np.ndarray, rng) -> np.ndarray:
     drive = rng.standard_normal((len(t), 6)) * np.sqrt(1.0 - a * a)
     x = np.empty_like(drive)
     x[0] = rng.standard_normal(6)
-    for s in range(0, len(t) - 1, 1000):      # x_k = a x_{k-1} + e_k, closed form per block
+    for s in range(0, len(t) - 1, 1000):  # x_k = a x_{k-1} + e_k, closed form per block
         m = min(1000, len(t) - 1 - s)
         p = a ** np.arange(1, m + 1)
-        x[s + 1:s + m + 1] = p[:, None] * (x[s] + np.cumsum(drive[s + 1:s + m + 1] / p[:, None], axis=0))
+        x[s + 1 : s + m + 1] = p[:, None] * (
+            x[s] + np.cumsum(drive[s + 1 : s + m + 1] / p[:, None], axis=0)
+        )
     rms = np.array([0.1, 0.1, 0.1, 0.3 * DEG, 0.3 * DEG, 0.5 * DEG])
     return x * rms * np.minimum(1.0, speed / 2.0)[:, None]
 
@@ -81,7 +90,9 @@ def _consumer(run: RecordedRun, seed: int, speed: np.ndarray | None = None) -> R
     rng = np.random.default_rng(1000 + seed)
     t = run.imu.t
     dt = float(np.median(np.diff(t)))
-    err = _vibration(t, dt, rng) + rng.standard_normal((len(t), 6)) * np.array([NA] * 3 + [NG] * 3) / np.sqrt(dt)
+    err = _vibration(t, dt, rng) + rng.standard_normal((len(t), 6)) * np.array(
+        [NA] * 3 + [NG] * 3
+    ) / np.sqrt(dt)
     if speed is not None:
         err += _texture(t, speed, rng)
     x = np.hstack([run.imu.f_b, run.imu.omega_ib_b]) + err + BIAS
@@ -105,12 +116,15 @@ def _score(report: StationaryReport, truth, segments, min_hold_s: float = 3.0) -
         if s["kind"] == "hold" and s["t1"] - s["t0"] >= min_hold_s:
             hold |= (truth.t >= s["t0"]) & (truth.t <= s["t1"])
     yaw_rate = np.gradient(np.unwrap(truth.rpy[:, 2]), truth.t)
-    return {"detected": float((m & hold).sum() / max(hold.sum(), 1)),
-            "fp_speed_s": float((m & (truth.speed > 0.05)).sum() * dt),
-            "fp_yaw_s": float((m & (np.abs(yaw_rate) > 0.5 * DEG)).sum() * dt)}
+    return {
+        "detected": float((m & hold).sum() / max(hold.sum(), 1)),
+        "fp_speed_s": float((m & (truth.speed > 0.05)).sum() * dt),
+        "fp_yaw_s": float((m & (np.abs(yaw_rate) > 0.5 * DEG)).sum() * dt),
+    }
 
 
 # --- simulated runs ------------------------------------------------------------------------------
+
 
 def test_parked_with_idling_engine_is_stationary():
     run, truth = _sim("static", 60.0)
@@ -122,9 +136,9 @@ def test_parked_with_idling_engine_is_stationary():
     assert all(s.gnss_checked for s in report.spans)
     # The span's mean rate is the bias plus the earth rate (truth), within its stated error.
     span = max(report.spans, key=lambda s: s.duration_s)
-    expected = BIAS[3:] + truth.omega_ib_b[span.i_start:span.i_end].mean(axis=0)
+    expected = BIAS[3:] + truth.omega_ib_b[span.i_start : span.i_end].mean(axis=0)
     assert np.all(np.abs(span.omega_mean_b - expected) < 4.0 * span.omega_se_b + 1e-6)
-    assert np.all(span.omega_se_b < 0.01 * DEG)     # the mean is good to < 36 deg/h ...
+    assert np.all(span.omega_se_b < 0.01 * DEG)  # the mean is good to < 36 deg/h ...
     assert np.all(span.omega_std_b[:2] > 2.0 * DEG)  # ... though each sample scatters by 2 deg/s
 
 
@@ -151,8 +165,10 @@ def test_imu_still_motion_is_never_accepted(scenario):
     report = detect_stationary(run.imu, run.gnss, run.origin)
     score = _score(report, truth, run.sim.segments)
     print(scenario, score, report.summary())
-    moving_still = [(a, b) for a, b in imu_still_stretches(run.imu) if np.max(truth.speed[a:b]) > 1.0]
-    assert len(moving_still) >= 3                   # the case is real
+    moving_still = [
+        (a, b) for a, b in imu_still_stretches(run.imu) if np.max(truth.speed[a:b]) > 1.0
+    ]
+    assert len(moving_still) >= 3  # the case is real
     assert score["fp_speed_s"] == 0.0 and score["fp_yaw_s"] == 0.0
     assert score["detected"] >= 0.75
 
@@ -161,7 +177,7 @@ def test_constant_speed_cruise_rejected_by_gnss():
     run, truth = _sim("straight", 60.0)
     assert np.all(truth.speed > 9.9)
     still = imu_still_stretches(run.imu)
-    assert sum(b - a for a, b in still) * 0.01 > 50.0     # the IMU alone would call it stationary
+    assert sum(b - a for a, b in still) * 0.01 > 50.0  # the IMU alone would call it stationary
     report = detect_stationary(run.imu, run.gnss, run.origin)
     assert report.spans == [] and report.fraction == 0.0
     assert report.rejected and all(r["why"] == "GNSS shows motion" for r in report.rejected)
@@ -174,14 +190,16 @@ def test_slow_creep_rejected_by_gnss_stops_kept():
     still = np.zeros(len(truth.t), bool)
     for a, b in imu_still_stretches(run.imu):
         still[a:b] = True
-    assert (still & creep).sum() > 0.8 * creep.sum()       # the creep looks IMU-still
+    assert (still & creep).sum() > 0.8 * creep.sum()  # the creep looks IMU-still
     report = detect_stationary(run.imu, run.gnss, run.origin)
     score = _score(report, truth, run.sim.segments)
     assert score["fp_speed_s"] == 0.0
     assert score["detected"] >= 0.85, score
     t_creep = truth.t[creep]
-    assert any(r["why"] == "GNSS shows motion" and r["t_start"] < t_creep[-1] and r["t_end"] > t_creep[0]
-               for r in report.rejected)
+    assert any(
+        r["why"] == "GNSS shows motion" and r["t_start"] < t_creep[-1] and r["t_end"] > t_creep[0]
+        for r in report.rejected
+    )
 
 
 def test_stop_in_gnss_outage_accepted_on_imu_evidence():
@@ -190,7 +208,9 @@ def test_stop_in_gnss_outage_accepted_on_imu_evidence():
     g = run.gnss
     run = replace(run, gnss=g.select((g.t < hold["t0"] - 5.0) | (g.t > hold["t1"] + 5.0)))
     report = detect_stationary(run.imu, run.gnss, run.origin)
-    inside = [s for s in report.spans if hold["t0"] - 1.0 <= s.t_start and s.t_end <= hold["t1"] + 1.0]
+    inside = [
+        s for s in report.spans if hold["t0"] - 1.0 <= s.t_start and s.t_end <= hold["t1"] + 1.0
+    ]
     assert len(inside) == 1 and not inside[0].gnss_checked and inside[0].gnss_speed_mps is None
     assert inside[0].duration_s >= 0.85 * (hold["t1"] - hold["t0"])
     assert all(s.gnss_checked for s in report.spans if s is not inside[0])
@@ -218,11 +238,13 @@ def test_report_interface():
     for s in report.spans:
         assert run.imu.t[s.i_start] == s.t_start and run.imu.t[s.i_end - 1] == s.t_end
         assert s.f_mean_b.shape == s.omega_se_b.shape == (3,)
-        assert np.allclose(s.f_mean_b, run.imu.f_b[s.i_start:s.i_end].mean(axis=0))
+        assert np.allclose(s.f_mean_b, run.imu.f_b[s.i_start : s.i_end].mean(axis=0))
     t = run.imu.t
     m = report.mask(t)
     assert m.sum() == sum(s.i_end - s.i_start for s in report.spans)
-    assert report.fraction == pytest.approx(sum(s.duration_s for s in report.spans) / (t[-1] - t[0]))
+    assert report.fraction == pytest.approx(
+        sum(s.duration_s for s in report.spans) / (t[-1] - t[0])
+    )
     d = json.loads(json.dumps(report.to_dict()))
     assert d["n_spans"] == len(report.spans) and len(json.dumps(d)) < 20_000
     assert "\n" not in report.summary() and str(len(report.spans)) in report.summary()
@@ -235,7 +257,8 @@ def test_report_interface():
 
 def test_params_from_config():
     from gnssacc.core.config import load_config
-    assert params_from_config(load_config()) == StationaryParams()       # no section: the defaults
+
+    assert params_from_config(load_config()) == StationaryParams()  # no section: the defaults
     p = params_from_config({"stationary": {"z": 5, "min_duration_s": 3}})
     assert p.z == 5.0 and p.min_duration_s == 3.0 and p.block_s == StationaryParams().block_s
     with pytest.raises(InputError):
@@ -247,11 +270,16 @@ def test_noise_densities_from_stationary_spans():
     report = detect_stationary(run.imu, run.gnss, run.origin)
     noise = noise_from_stationary(run.imu, report)
     assert noise.total_s > 280.0
-    assert np.allclose(noise.white_density, [NA] * 3 + [NG] * 3, rtol=0.10), noise.white_density / ([NA] * 3 + [NG] * 3)
-    assert noise.bias_instability == [None] * 6         # white noise only: no floor to read
-    assert np.array_equal(noise.gyro_density, noise.white_density[3:]) and noise.seconds == noise.total_s
+    assert np.allclose(noise.white_density, [NA] * 3 + [NG] * 3, rtol=0.10), noise.white_density / (
+        [NA] * 3 + [NG] * 3
+    )
+    assert noise.bias_instability == [None] * 6  # white noise only: no floor to read
+    assert (
+        np.array_equal(noise.gyro_density, noise.white_density[3:])
+        and noise.seconds == noise.total_s
+    )
     gz = np.array([d["omega_mean_b"][2] for d in noise.turn_on])
-    assert np.allclose(gz, BIAS[5] + truth.omega_ib_b[0, 2], atol=0.002 * DEG)   # bias + earth rate
+    assert np.allclose(gz, BIAS[5] + truth.omega_ib_b[0, 2], atol=0.002 * DEG)  # bias + earth rate
     json.dumps(noise.to_dict())
     # Too short to read densities from: NaN, not a guess.
     short = noise_from_stationary(run.imu, report, min_span_s=1e6)
@@ -260,11 +288,14 @@ def test_noise_densities_from_stationary_spans():
 
 # --- real data -----------------------------------------------------------------------------------
 
+
 def _data_dir(name: str) -> Path:
     path = DATA / name
     if not path.is_dir():
-        pytest.skip(f"real-data folder {path} is absent (it sits beside the repository at ../shared/data; "
-                    f"a fresh clone has none)")
+        pytest.skip(
+            f"real-data folder {path} is absent (it sits beside the repository at ../shared/data; "
+            f"a fresh clone has none)"
+        )
     return path
 
 
@@ -288,14 +319,29 @@ def _load_vn(log: str) -> RecordedRun:
     gnss = _read_vn_csv(root / f"{log}_vn310-gnss.csv")
     t0 = imu["GpsTow [s]"][0]
     f_b = np.column_stack([imu[f"IMU::Accel::{a} [m/s^2]"] for a in "XYZ"])
-    w_b = np.column_stack([imu["IMU::AngularRate::X"], imu["IMU::AngularRate::Y [rad/s]"],
-                           imu["IMU::AngularRate::Z [rad/s]"]])
+    w_b = np.column_stack(
+        [
+            imu["IMU::AngularRate::X"],
+            imu["IMU::AngularRate::Y [rad/s]"],
+            imu["IMU::AngularRate::Z [rad/s]"],
+        ]
+    )
     lat = np.radians(gnss["GNSS1::PosLla::latitude [deg]"])
     lon = np.radians(gnss["GNSS1::PosLla::longitude [deg]"])
-    fixes = GnssFixes(gnss["GNSS1::Tow [ns]"] * 1e-9 - t0, lat, lon, gnss["GNSS1::PosLla::altitude [m]"],
-                      np.column_stack([gnss[f"GNSS1::PosU::{a} [m]"] for a in "NED"]))
-    return RecordedRun(f"vn310-{log}", str(root), ImuData(imu["GpsTow [s]"] - t0, f_b, w_b), fixes,
-                       LocalTangentFrame(lat[0], lon[0], fixes.h[0])).validate()
+    fixes = GnssFixes(
+        gnss["GNSS1::Tow [ns]"] * 1e-9 - t0,
+        lat,
+        lon,
+        gnss["GNSS1::PosLla::altitude [m]"],
+        np.column_stack([gnss[f"GNSS1::PosU::{a} [m]"] for a in "NED"]),
+    )
+    return RecordedRun(
+        f"vn310-{log}",
+        str(root),
+        ImuData(imu["GpsTow [s]"] - t0, f_b, w_b),
+        fixes,
+        LocalTangentFrame(lat[0], lon[0], fixes.h[0]),
+    ).validate()
 
 
 @pytest.mark.parametrize("log", ["lckf", "tckf"])
@@ -314,19 +360,33 @@ def test_comma_highway_minute_has_no_stationary_time():
         return np.load(root / rel)
 
     t = arr("processed_log/IMU/accelerometer/t")
-    imu = ImuData(t, arr("processed_log/IMU/accelerometer/value"), arr("processed_log/IMU/gyro/value"))
-    tg, ub = arr("processed_log/GNSS/live_gnss_ublox/t"), arr("processed_log/GNSS/live_gnss_ublox/value")
+    imu = ImuData(
+        t, arr("processed_log/IMU/accelerometer/value"), arr("processed_log/IMU/gyro/value")
+    )
+    tg, ub = (
+        arr("processed_log/GNSS/live_gnss_ublox/t"),
+        arr("processed_log/GNSS/live_gnss_ublox/value"),
+    )
     # u-blox columns: lat deg, lon deg, speed, UTC ms, altitude m, bearing; no sigma: 2.5 m / 5 m.
-    fixes = GnssFixes(tg, np.radians(ub[:, 0]), np.radians(ub[:, 1]), ub[:, 4], np.tile([2.5, 2.5, 5.0], (len(tg), 1)))
-    report = detect_stationary(imu, fixes, LocalTangentFrame(fixes.lat[0], fixes.lon[0], fixes.h[0]))
+    fixes = GnssFixes(
+        tg,
+        np.radians(ub[:, 0]),
+        np.radians(ub[:, 1]),
+        ub[:, 4],
+        np.tile([2.5, 2.5, 5.0], (len(tg), 1)),
+    )
+    report = detect_stationary(
+        imu, fixes, LocalTangentFrame(fixes.lat[0], fixes.lon[0], fixes.h[0])
+    )
     print(report.summary())
     assert report.total_s == 0.0
-    assert ub[:, 2].min() > 5.0                        # it is indeed moving all the time
+    assert ub[:, 2].min() > 5.0  # it is indeed moving all the time
 
 
 def test_kitti_no_stationary_time_while_moving():
     from gnssacc.core.config import load_config
     from gnssacc.sources.kitti import load_kitti
+
     try:
         run = load_kitti(load_config("kitti"), "white", 0)
     except InputError as exc:
@@ -335,6 +395,6 @@ def test_kitti_no_stationary_time_while_moving():
     print(report.summary())
     tr = run.truth
     p = run.origin.to_ned(tr.lat, tr.lon, tr.h)
-    speed = np.hypot(*np.gradient(p[:, :2], tr.t, axis=0).T)    # 1 Hz truth, finite differences
+    speed = np.hypot(*np.gradient(p[:, :2], tr.t, axis=0).T)  # 1 Hz truth, finite differences
     t = run.imu.t[report.mask(run.imu.t)]
     assert not np.any(np.interp(t, tr.t, speed) > 0.3)

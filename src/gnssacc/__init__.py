@@ -29,10 +29,11 @@ Conventions (every module follows them; they are stated here once):
 * **Positions.** Geodetic latitude and longitude [rad] and ellipsoidal height [m], of the IMU
   (body origin); the GNSS antenna sits at the configured lever arm in b.
 """
+
 from .core.jit import configure_cache as _configure_cache
 from .core.version import __version__  # noqa: F401 (the package attribute)
 
-_configure_cache()   # before anything imports numba: a read-only install caches in the user's folder
+_configure_cache()  # before anything imports numba: a read-only install caches in the user's folder
 
 #: The API, imported when first used (so ``gnssacc --help`` stays instant).
 _API = ("process", "run", "load", "simulate", "configure", "evaluate", "Result")

@@ -1,4 +1,5 @@
 """``python -m gnssacc``: the ``gnssacc`` command."""
+
 from .cli import entry
 
 entry()

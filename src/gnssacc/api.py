@@ -14,6 +14,7 @@ this module): KITTI runs with the ``kitti`` preset unless another (or ``"none"``
 :func:`gnssacc.pipeline.compare`. A run made in Python (:func:`simulate`, or a
 :class:`gnssacc.core.recording.RecordedRun` of your own) can be given instead of a source.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -23,7 +24,14 @@ from .core.config import RunConfig
 from .core.recording import RecordedRun
 from .core.solution import NavSolution
 from .outputs.report import TRAJECTORY_COLUMNS, format_table, ok_methods, trajectory_table
-from .pipeline import compare_observed, configure, load, load_configured, parse_methods, write_result
+from .pipeline import (
+    compare_observed,
+    configure,
+    load,
+    load_configured,
+    parse_methods,
+    write_result,
+)
 from .prepare.prepared import Prepared
 from .sources.simspec import known_noise_config
 
@@ -39,9 +47,22 @@ def simulate(scenario: str = "car", duration_s: float = 300.0, **options) -> Rec
     return _simulate(scenario, duration_s, **options)
 
 
-def process(source=None, *, methods=None, config=None, preset: str | None = None, tune: str | None = None,
-            noise: str | None = None, seed: int = 0, outage: str | None = None, outage_every: str | None = None,
-            imu_frame: str = "frd", gnss=None, show_progress: bool = False, **bag_options) -> "Result":
+def process(
+    source=None,
+    *,
+    methods=None,
+    config=None,
+    preset: str | None = None,
+    tune: str | None = None,
+    noise: str | None = None,
+    seed: int = 0,
+    outage: str | None = None,
+    outage_every: str | None = None,
+    imu_frame: str = "frd",
+    gnss=None,
+    show_progress: bool = False,
+    **bag_options,
+) -> "Result":
     """Run the estimators on a source and score them: ``gnssacc run`` without the files.
 
     Parameters
@@ -84,23 +105,38 @@ def process(source=None, *, methods=None, config=None, preset: str | None = None
     gnssacc.core.errors.InputError
         Bad input, naming the file or option and the problem.
     """
-    ids = parse_methods(methods if methods is None or isinstance(methods, str) else ",".join(methods))
+    ids = parse_methods(
+        methods if methods is None or isinstance(methods, str) else ",".join(methods)
+    )
     cfg = configure(source, preset=preset, config=config)
-    run = load_configured(source, cfg, noise, seed, outage, outage_every, imu_frame, gnss, bag_options)
+    run = load_configured(
+        source, cfg, noise, seed, outage, outage_every, imu_frame, gnss, bag_options
+    )
     return evaluate(run, cfg, ids, tune=tune, show_progress=show_progress)
 
 
-def evaluate(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
-             show_progress: bool = False, observe: bool = True, say=None) -> "Result":
+def evaluate(
+    run: RecordedRun,
+    cfg: RunConfig,
+    methods: list[str],
+    *,
+    tune: str | None = None,
+    show_progress: bool = False,
+    observe: bool = True,
+    say=None,
+) -> "Result":
     """Check, prepare, run and score ``methods`` on a loaded run (:func:`gnssacc.pipeline.compare`).
 
     ``observe``: keep the ``ekf-acc`` pass's matrices for the report's observability section
     (:attr:`Result.replay`), so that ``save(report=True)`` does not run the filter again.
     ``say(line)``: told the preparation's findings and each method's end as they happen.
     """
-    cfg = known_noise_config(cfg, run, tune)   # a sim: source with --tune none: the simulator's IMU noise
-    metrics, sols, prep, replay = compare_observed(run, cfg, methods, tune=tune, show_progress=show_progress,
-                                                   observe=observe, say=say)
+    cfg = known_noise_config(
+        cfg, run, tune
+    )  # a sim: source with --tune none: the simulator's IMU noise
+    metrics, sols, prep, replay = compare_observed(
+        run, cfg, methods, tune=tune, show_progress=show_progress, observe=observe, say=say
+    )
     return Result(prep.run, cfg, metrics, sols, prep, replay)
 
 
@@ -157,14 +193,23 @@ class Result:
         try:
             import pandas as pd
         except ImportError:
-            raise ImportError("Result.to_dataframe needs pandas (pip install pandas); Result.solutions holds "
-                              "the same numbers as numpy arrays") from None
+            raise ImportError(
+                "Result.to_dataframe needs pandas (pip install pandas); Result.solutions holds "
+                "the same numbers as numpy arrays"
+            ) from None
         if method not in self.solutions:
             raise KeyError(f"{method!r}: no solution (have: {', '.join(self.solutions) or 'none'})")
         return pd.DataFrame(trajectory_table(self.solutions[method]), columns=TRAJECTORY_COLUMNS)
 
-    def save(self, folder, *, plots: bool = True, report: bool = False, export: tuple = (),
-             overwrite: bool = False) -> Path:
+    def save(
+        self,
+        folder,
+        *,
+        plots: bool = True,
+        report: bool = False,
+        export: tuple = (),
+        overwrite: bool = False,
+    ) -> Path:
         """Write the folder ``gnssacc run --out folder`` writes (all or nothing); return its path.
 
         Raises
@@ -177,9 +222,26 @@ class Result:
         with ResultDir(Path(folder), overwrite=overwrite) as target:
             return self.write(target, plots=plots, report=report, export=export)
 
-    def write(self, target, *, plots: bool = True, report: bool = False, export: tuple = (),
-              extra_files=None) -> Path | None:
+    def write(
+        self,
+        target,
+        *,
+        plots: bool = True,
+        report: bool = False,
+        export: tuple = (),
+        extra_files=None,
+    ) -> Path | None:
         """Write into a locked :class:`gnssacc.outputs.outdir.ResultDir` (``None`` when every method failed:
         nothing is written)."""
-        return write_result(target, self.run, self.solutions, self.metrics, self.prepared, plots=plots, report=report,
-                            export=tuple(export), extra_files=extra_files, replay=self.replay)
+        return write_result(
+            target,
+            self.run,
+            self.solutions,
+            self.metrics,
+            self.prepared,
+            plots=plots,
+            report=report,
+            export=tuple(export),
+            extra_files=extra_files,
+            replay=self.replay,
+        )

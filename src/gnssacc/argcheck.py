@@ -5,6 +5,7 @@ problem with the range expected, so a bad argument costs the user nothing but on
 The same parsers serve the Python API (:func:`gnssacc.sources.gnss_noise.parse_outages`,
 :func:`gnssacc.analysis.montecarlo.parse_seeds`, :func:`gnssacc.pipeline.parse_methods`).
 """
+
 from __future__ import annotations
 
 import os
@@ -26,7 +27,9 @@ def check_option(value, flag: str, bound: Bound, integer: bool = False) -> None:
     """Raise :class:`InputError` unless ``value`` is a finite number (whole if ``integer``) in ``bound``."""
     problem = number_problem(value, integer, bound)
     if problem:
-        raise InputError(flag, f"{problem} (expected {'a whole' if integer else 'a'} number {bound})")
+        raise InputError(
+            flag, f"{problem} (expected {'a whole' if integer else 'a'} number {bound})"
+        )
 
 
 def check_input_file(path: str, flag: str) -> None:
@@ -58,7 +61,9 @@ def check_output(path: str, where: str, folder: bool = True, overwrite: bool = F
     """
     p = Path(os.path.abspath(path))
     if p.is_file() and folder and not overwrite:
-        raise InputError(where, f"{path} exists and is a file, not a folder; choose another output folder")
+        raise InputError(
+            where, f"{path} exists and is a file, not a folder; choose another output folder"
+        )
     if p.is_dir() and not folder:
         raise InputError(where, f"{path} is a folder; give a file name")
     above = p.parent
@@ -66,9 +71,11 @@ def check_output(path: str, where: str, folder: bool = True, overwrite: bool = F
         above = above.parent
     if not above.is_dir():
         raise InputError(where, f"cannot create {path}: {above} is a file, not a folder")
-    for d in ([above, p] if p.is_dir() else [above]):
+    for d in [above, p] if p.is_dir() else [above]:
         if not writable(d):
-            raise InputError(where, f"cannot write in {d} (no permission, or a read-only file system)")
+            raise InputError(
+                where, f"cannot write in {d} (no permission, or a read-only file system)"
+            )
 
 
 def writable(folder: Path) -> bool:
@@ -90,8 +97,11 @@ def seeds(text: str) -> list[int]:
     try:
         return parse_seeds(text)
     except ValueError as exc:
-        raise InputError("--seeds", f"{exc}; expected non-negative whole numbers such as 0-19 or 1,4,7 (at most "
-                                    f"{MAX_SEEDS} seeds)") from None
+        raise InputError(
+            "--seeds",
+            f"{exc}; expected non-negative whole numbers such as 0-19 or 1,4,7 (at most "
+            f"{MAX_SEEDS} seeds)",
+        ) from None
 
 
 def check_args(args) -> None:
@@ -102,7 +112,13 @@ def check_args(args) -> None:
         check_option(args.seed, "--seed", SEED, integer=True)
     if getattr(args, "gnss", None):
         check_input_file(args.gnss, "--gnss")
-    checks = {"run": _run, "bench": _bench, "batch": _batch, "sim": _sim, "inspect": lambda a: check_source(a.bag)}
+    checks = {
+        "run": _run,
+        "bench": _bench,
+        "batch": _batch,
+        "sim": _sim,
+        "inspect": lambda a: check_source(a.bag),
+    }
     checks.get(args.command, lambda a: None)(args)
 
 
@@ -121,7 +137,12 @@ def _run(args) -> None:
     if args.gnss_from_truth is not None:
         check_option(args.gnss_from_truth, "--gnss-from-truth", RATE_FROM_TRUTH_HZ)
     where = "--out" if args.out else "output folder (default ./gnssacc-out; choose one with --out)"
-    check_output(args.out or "gnssacc-out/run", where, folder=True, overwrite=getattr(args, "overwrite", False))
+    check_output(
+        args.out or "gnssacc-out/run",
+        where,
+        folder=True,
+        overwrite=getattr(args, "overwrite", False),
+    )
 
 
 def _bench(args) -> None:
@@ -138,14 +159,22 @@ def _batch(args) -> None:
     from .sources.gnss_noise import parse_outages
 
     if not args.sources and args.resume is None:
-        raise InputError("SOURCE", "give the recordings to process ('kitti', bags, CSV run directories), or "
-                                   "--resume CAMPAIGN to finish a campaign")
-    for flag, bad in (("--out", args.out is not None and args.resume is not None),
-                      ("--retry-failed", args.retry_failed and args.resume is None),
-                      ("--jobs", args.jobs is not None and args.scheduler is not None)):
+        raise InputError(
+            "SOURCE",
+            "give the recordings to process ('kitti', bags, CSV run directories), or "
+            "--resume CAMPAIGN to finish a campaign",
+        )
+    for flag, bad in (
+        ("--out", args.out is not None and args.resume is not None),
+        ("--retry-failed", args.retry_failed and args.resume is None),
+        ("--jobs", args.jobs is not None and args.scheduler is not None),
+    ):
         if bad:
-            other = {"--out": "with --resume (the campaign's folder is given there)", "--retry-failed":
-                     "only with --resume CAMPAIGN", "--jobs": "not with --scheduler (the cluster has its workers)"}
+            other = {
+                "--out": "with --resume (the campaign's folder is given there)",
+                "--retry-failed": "only with --resume CAMPAIGN",
+                "--jobs": "not with --scheduler (the cluster has its workers)",
+            }
             raise InputError(flag, other[flag])
     for source in args.sources:
         check_source(source)
@@ -162,8 +191,12 @@ def _batch(args) -> None:
         check_option(args.jobs, "--jobs", JOBS, integer=True)
     if args.gnss_from_truth is not None:
         check_option(args.gnss_from_truth, "--gnss-from-truth", RATE_FROM_TRUTH_HZ)
-    if args.scheduler is not None and not re.fullmatch(r"([a-z0-9]+://)?[^\s/]+:\d+/?", args.scheduler):
-        raise InputError("--scheduler", f"{args.scheduler!r} is not a scheduler address such as tcp://host:8786")
+    if args.scheduler is not None and not re.fullmatch(
+        r"([a-z0-9]+://)?[^\s/]+:\d+/?", args.scheduler
+    ):
+        raise InputError(
+            "--scheduler", f"{args.scheduler!r} is not a scheduler address such as tcp://host:8786"
+        )
     if args.resume is not None and not os.path.isdir(args.resume):
         raise InputError("--resume", f"{args.resume}: no such folder")
     if args.out is not None:
@@ -175,24 +208,41 @@ def _sim(args) -> None:
     from .sources.sim_scenarios import SCENARIOS
 
     if args.scenario not in SCENARIOS:
-        raise InputError("--scenario", f"unknown scenario {args.scenario!r} (known: {', '.join(SCENARIOS)})")
+        raise InputError(
+            "--scenario", f"unknown scenario {args.scenario!r} (known: {', '.join(SCENARIOS)})"
+        )
     if args.grade not in IMU_GRADES:
-        raise InputError("--grade", f"unknown IMU grade {args.grade!r} (known: {', '.join(IMU_GRADES)})")
+        raise InputError(
+            "--grade", f"unknown IMU grade {args.grade!r} (known: {', '.join(IMU_GRADES)})"
+        )
     check_option(args.duration, "--duration", SIM_DURATION_S)
     check_option(args.imu_rate, "--imu-rate", SIM_IMU_RATE_HZ)
-    check_option(args.gnss_rate, "--gnss-rate", Bound(0.0, min(args.imu_rate, SIM_MAX_GNSS_RATE_HZ), lo_open=True))
+    check_option(
+        args.gnss_rate,
+        "--gnss-rate",
+        Bound(0.0, min(args.imu_rate, SIM_MAX_GNSS_RATE_HZ), lo_open=True),
+    )
     if args.duration * args.gnss_rate < 1.0:
-        raise InputError("--duration", f"{args.duration:g} s at --gnss-rate {args.gnss_rate:g} Hz gives fewer than two "
-                                       f"GNSS fixes")
+        raise InputError(
+            "--duration",
+            f"{args.duration:g} s at --gnss-rate {args.gnss_rate:g} Hz gives fewer than two "
+            f"GNSS fixes",
+        )
     if args.duration * args.imu_rate > SIM_MAX_SAMPLES:
-        raise InputError("--duration", f"{args.duration:g} s at --imu-rate {args.imu_rate:g} Hz makes "
-                                       f"{args.duration * args.imu_rate:.3g} IMU samples, more than {SIM_MAX_SAMPLES}: "
-                                       f"shorten the run or lower the rate")
+        raise InputError(
+            "--duration",
+            f"{args.duration:g} s at --imu-rate {args.imu_rate:g} Hz makes "
+            f"{args.duration * args.imu_rate:.3g} IMU samples, more than {SIM_MAX_SAMPLES}: "
+            f"shorten the run or lower the rate",
+        )
     if args.odom_rate is not None:
         check_option(args.odom_rate, "--odom-rate", Bound(0.0, args.imu_rate, lo_open=True))
     if args.t_start is not None:
         check_option(args.t_start, "--t-start", Bound(0.0, 4.1e9))
         if args.gnss_format != "csv" and args.t_start < 1e8:
-            raise InputError("--t-start", f"{args.t_start:g} s is not a UNIX time: gnss.{args.gnss_format} holds "
-                                          f"absolute times, so the run must start at one (e.g. 1709294400)")
+            raise InputError(
+                "--t-start",
+                f"{args.t_start:g} s is not a UNIX time: gnss.{args.gnss_format} holds "
+                f"absolute times, so the run must start at one (e.g. 1709294400)",
+            )
     check_output(args.out, "output folder", folder=True)

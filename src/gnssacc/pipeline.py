@@ -3,6 +3,7 @@
 Used by the CLI (``gnssacc run``), the benchmarks and the notebooks, so that all of them
 compute the same numbers the same way.
 """
+
 from __future__ import annotations
 
 import time
@@ -28,7 +29,14 @@ from .estimators.ekf import run_ekf
 from .estimators.settings import EkfSettings
 from .outputs.figures import PLOT_SETS, write_figures
 from .outputs.outdir import ResultDir
-from .outputs.report import format_table, group_warnings, metrics_dict, quality_line, write_json, write_trajectory_csv
+from .outputs.report import (
+    format_table,
+    group_warnings,
+    metrics_dict,
+    quality_line,
+    write_json,
+    write_trajectory_csv,
+)
 from .prepare.prepared import Prepared, checked
 from .prepare.prepared import prepare as prepare_recording
 from .sources.gnss_noise import apply_outages, parse_outages
@@ -36,18 +44,32 @@ from .sources.simspec import is_sim_spec, load_sim
 
 
 def _ekf(prep: Prepared, method: str, show_progress: bool, observer=None) -> dict[str, NavSolution]:
-    return {method: estimate_ekf(prep, EkfSettings.from_config(prep.cfg), method, show_progress=show_progress,
-                                 observer=observer, record_innovations=True)}   # the NIS over time of nis.png
+    return {
+        method: estimate_ekf(
+            prep,
+            EkfSettings.from_config(prep.cfg),
+            method,
+            show_progress=show_progress,
+            observer=observer,
+            record_innovations=True,
+        )
+    }  # the NIS over time of nis.png
 
 
 def _smoother(prep: Prepared, method: str, show_progress: bool) -> dict[str, NavSolution]:
     from .estimators.settings import SmootherSettings
-    from .estimators.smoother import estimate  # gtsam import only when a smoother method is asked for
-    return estimate(prep, SmootherSettings.from_config(prep.cfg), method, show_progress=show_progress)
+    from .estimators.smoother import (
+        estimate,
+    )  # gtsam import only when a smoother method is asked for
+
+    return estimate(
+        prep, SmootherSettings.from_config(prep.cfg), method, show_progress=show_progress
+    )
 
 
 def _gm(prep: Prepared, method: str, show_progress: bool) -> dict[str, NavSolution]:
     from .estimators.gm_variant import BASE_OF, run_gm
+
     return run_gm(prep, method, show_progress, METHODS[BASE_OF[method]])
 
 
@@ -67,14 +89,27 @@ def check_input(run: RecordedRun, cfg: RunConfig) -> tuple[RecordedRun, RunConfi
 def prepare(run: RecordedRun, cfg: RunConfig, tune: str | None = None, methods=()) -> Prepared:
     """The prepared recording (:func:`gnssacc.prepare.prepared.prepare`) with the EKF as its filter
     pass, and the ``-gm`` methods' setup when ``methods`` has one."""
-    return prepare_recording(run, cfg, tune, filter_pass=_filter_pass,
-                             gauss_markov=any(METHODS.get(m) is _gm for m in methods))
+    return prepare_recording(
+        run,
+        cfg,
+        tune,
+        filter_pass=_filter_pass,
+        gauss_markov=any(METHODS.get(m) is _gm for m in methods),
+    )
 
 
 #: Estimators by method id: ``(prepared, method, show_progress) -> {id: NavSolution}``.
 #: A smoother method also returns its online estimate as ``<id>-online``.
-METHODS = {"ekf": _ekf, "ekf-acc": _ekf, "ekf-accw": _ekf, "smoother": _smoother, "smoother-acc": _smoother,
-           "smoother-accw": _smoother, "ekf-gm": _gm, "smoother-gm": _gm}
+METHODS = {
+    "ekf": _ekf,
+    "ekf-acc": _ekf,
+    "ekf-accw": _ekf,
+    "smoother": _smoother,
+    "smoother-acc": _smoother,
+    "smoother-accw": _smoother,
+    "ekf-gm": _gm,
+    "smoother-gm": _gm,
+}
 DEFAULT_METHODS = ("ekf", "ekf-acc", "smoother", "smoother-acc")
 
 
@@ -85,7 +120,10 @@ def parse_methods(text: str | None) -> list[str]:
     ids = [m.strip() for m in text.split(",") if m.strip()]
     bad = [m for m in ids if m not in METHODS]
     if bad or not ids:
-        raise InputError("--methods", f"unknown method(s) {', '.join(bad) or '(none)'}; known: {', '.join(METHODS)}")
+        raise InputError(
+            "--methods",
+            f"unknown method(s) {', '.join(bad) or '(none)'}; known: {', '.join(METHODS)}",
+        )
     return ids
 
 
@@ -109,14 +147,26 @@ def is_bag(path: Path) -> bool:
         return path.suffix in MAGIC
     if not path.is_dir():
         return False
-    return (path / "metadata.yaml").exists() or (not (path / "imu.csv").exists() and bool(storage_files(path)))
+    return (path / "metadata.yaml").exists() or (
+        not (path / "imu.csv").exists() and bool(storage_files(path))
+    )
 
 
-def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None, seed: int = 0,
-                imu_frame: str = "frd", imu_topic: str | None = None, gnss_topic: str | None = None,
-                truth_topic: str | None = None, time_source: str = "header",
-                gnss_from_truth_hz: float | None = None, odom_topic: str | None = None,
-                gnss: str | None = None) -> RecordedRun:
+def load_source(
+    source: str | None,
+    cfg: RunConfig,
+    *,
+    noise: str | None = None,
+    seed: int = 0,
+    imu_frame: str = "frd",
+    imu_topic: str | None = None,
+    gnss_topic: str | None = None,
+    truth_topic: str | None = None,
+    time_source: str = "header",
+    gnss_from_truth_hz: float | None = None,
+    odom_topic: str | None = None,
+    gnss: str | None = None,
+) -> RecordedRun:
     """Load a run from a source spec (with ``gnss``: its fixes replaced by a file's).
 
     Parameters
@@ -144,14 +194,28 @@ def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None,
     """
     if gnss is not None:
         if noise is not None or gnss_from_truth_hz is not None:
-            raise InputError("--gnss", "the fixes come from the GNSS file: --noise and --gnss-from-truth (fixes made "
-                                       "from the truth) do not apply")
+            raise InputError(
+                "--gnss",
+                "the fixes come from the GNSS file: --noise and --gnss-from-truth (fixes made "
+                "from the truth) do not apply",
+            )
         from .sources.gnssfile import with_gnss_file
-        run = load_source(source, cfg, seed=seed, imu_frame=imu_frame, imu_topic=imu_topic, gnss_topic=gnss_topic,
-                          truth_topic=truth_topic, time_source=time_source, odom_topic=odom_topic)
+
+        run = load_source(
+            source,
+            cfg,
+            seed=seed,
+            imu_frame=imu_frame,
+            imu_topic=imu_topic,
+            gnss_topic=gnss_topic,
+            truth_topic=truth_topic,
+            time_source=time_source,
+            odom_topic=odom_topic,
+        )
         return with_gnss_file(run, gnss, cfg)
     if source in (None, "kitti"):
         from .sources.kitti import load_kitti
+
         return load_kitti(cfg, noise or "white", seed)
     if is_sim_spec(source):
         return load_sim(source, noise, seed)
@@ -160,26 +224,51 @@ def load_source(source: str | None, cfg: RunConfig, *, noise: str | None = None,
         raise InputError(source, "no such file or directory")
     if is_bag(path):
         from .sources.rosbag import load_bag_run
-        return load_bag_run(path, cfg, imu_topic=imu_topic, gnss_topic=gnss_topic, truth_topic=truth_topic,
-                            time_source=time_source, gnss_from_truth_hz=gnss_from_truth_hz,
-                            noise=noise, seed=seed, odom_topic=odom_topic)
+
+        return load_bag_run(
+            path,
+            cfg,
+            imu_topic=imu_topic,
+            gnss_topic=gnss_topic,
+            truth_topic=truth_topic,
+            time_source=time_source,
+            gnss_from_truth_hz=gnss_from_truth_hz,
+            noise=noise,
+            seed=seed,
+            odom_topic=odom_topic,
+        )
     if path.is_dir():
         from .checks.plausibility import fix_imu_time_units
         from .sources.common import with_noisy_fixes
         from .sources.csvdir import load_csv_run
-        if not (path / "imu.csv").exists() and not any((path / n).exists() for n in ("gnss.csv", "gnss.pos", "gnss.nmea")):
+
+        if not (path / "imu.csv").exists() and not any(
+            (path / n).exists() for n in ("gnss.csv", "gnss.pos", "gnss.nmea")
+        ):
             names = sorted(p.name for p in path.iterdir())
-            held = f"it holds {', '.join(names[:5])}{', ...' if len(names) > 5 else ''}" if names else "it is empty"
-            raise InputError(source, f"not a run directory: no imu.csv and gnss.csv (a CSV run) and no metadata.yaml "
-                                     f"(a ROS 2 bag); {held}")
+            held = (
+                f"it holds {', '.join(names[:5])}{', ...' if len(names) > 5 else ''}"
+                if names
+                else "it is empty"
+            )
+            raise InputError(
+                source,
+                f"not a run directory: no imu.csv and gnss.csv (a CSV run) and no metadata.yaml "
+                f"(a ROS 2 bag); {held}",
+            )
         run = load_csv_run(path, cfg, imu_frame=imu_frame, time_units=fix_imu_time_units)
         if noise is not None:
             if run.truth is None:
-                raise InputError(str(path), "--noise makes fixes from the truth, but the run has no truth.csv")
+                raise InputError(
+                    str(path), "--noise makes fixes from the truth, but the run has no truth.csv"
+                )
             run = with_noisy_fixes(run, run.truth, noise, seed)
         return run
-    raise InputError(source, "not a run: expected a CSV run directory (imu.csv, gnss.csv), a ROS 1 .bag, "
-                             "a .mcap file or a ROS 2 bag directory")
+    raise InputError(
+        source,
+        "not a run: expected a CSV run directory (imu.csv, gnss.csv), a ROS 1 .bag, "
+        "a .mcap file or a ROS 2 bag directory",
+    )
 
 
 def with_outages(run: RecordedRun, outage: str | None, outage_every: str | None) -> RecordedRun:
@@ -207,31 +296,68 @@ def configure(source=None, *, preset: str | None = None, config=None) -> RunConf
     return load_config(resolve_preset(preset, name), path, overrides=overrides)
 
 
-def load(source=None, *, config=None, preset: str | None = None, noise: str | None = None, seed: int = 0,
-         outage: str | None = None, outage_every: str | None = None, imu_frame: str = "frd", gnss=None,
-         **bag_options) -> RecordedRun:
+def load(
+    source=None,
+    *,
+    config=None,
+    preset: str | None = None,
+    noise: str | None = None,
+    seed: int = 0,
+    outage: str | None = None,
+    outage_every: str | None = None,
+    imu_frame: str = "frd",
+    gnss=None,
+    **bag_options,
+) -> RecordedRun:
     """A recorded run, as ``gnssacc run`` loads it (see :func:`gnssacc.api.process` for the parameters)."""
-    return load_configured(source, configure(source, preset=preset, config=config), noise, seed, outage,
-                           outage_every, imu_frame, gnss, bag_options)
+    return load_configured(
+        source,
+        configure(source, preset=preset, config=config),
+        noise,
+        seed,
+        outage,
+        outage_every,
+        imu_frame,
+        gnss,
+        bag_options,
+    )
 
 
-def load_configured(source, cfg, noise, seed, outage, outage_every, imu_frame, gnss, bag_options) -> RecordedRun:
+def load_configured(
+    source, cfg, noise, seed, outage, outage_every, imu_frame, gnss, bag_options
+) -> RecordedRun:
     """:func:`load` with the configuration resolved (``gnss``: a fix file replacing the source's fixes)."""
     if isinstance(source, RecordedRun):
         run = source
         if gnss is not None:
             from .sources.gnssfile import with_gnss_file
+
             run = with_gnss_file(run, str(gnss), cfg)
     else:
-        run = load_source(None if source is None else str(source), cfg, noise=noise, seed=seed,
-                          imu_frame=imu_frame, gnss=None if gnss is None else str(gnss), **bag_options)
+        run = load_source(
+            None if source is None else str(source),
+            cfg,
+            noise=noise,
+            seed=seed,
+            imu_frame=imu_frame,
+            gnss=None if gnss is None else str(gnss),
+            **bag_options,
+        )
     return with_outages(run, outage, outage_every)
 
 
-def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
-                prep: Prepared | None = None, show_progress: bool = False,
-                failures: dict[str, str] | None = None, observers: dict | None = None,
-                say: Callable[[str], None] | None = None) -> dict[str, NavSolution]:
+def run_methods(
+    run: RecordedRun,
+    cfg: RunConfig,
+    methods: list[str],
+    *,
+    tune: str | None = None,
+    prep: Prepared | None = None,
+    show_progress: bool = False,
+    failures: dict[str, str] | None = None,
+    observers: dict | None = None,
+    say: Callable[[str], None] | None = None,
+) -> dict[str, NavSolution]:
     """Run each method on the same run, from the same identified start and noise.
 
     Parameters
@@ -267,10 +393,12 @@ def run_methods(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: s
             extra = {"observer": observers[m]} if observers and m in observers else {}
             got = METHODS[m](prep, m, show_progress, **extra)
             out.update(got)
-            release_free_memory()   # one method's work arrays, before the next one's
+            release_free_memory()  # one method's work arrays, before the next one's
             if say:
-                say(f"{m}: done in {max(s.runtime_s for s in got.values()):.2f} s"
-                    + (f" ({', '.join(got)})" if len(got) > 1 else ""))
+                say(
+                    f"{m}: done in {max(s.runtime_s for s in got.values()):.2f} s"
+                    + (f" ({', '.join(got)})" if len(got) > 1 else "")
+                )
         except InputError:
             raise
         except Exception as exc:  # an estimator failure costs that method only
@@ -287,9 +415,9 @@ def failure_reason(exc: BaseException, limit: int = 200) -> str:
     """One line for a method's failure: the exception type and its first sentence."""
     text = " ".join(str(exc).split())
     cut = text.find(". ")
-    text = text[:cut + 1] if cut > 0 else text
+    text = text[: cut + 1] if cut > 0 else text
     text = f"{type(exc).__name__}: {text}" if text else type(exc).__name__
-    return text if len(text) <= limit else text[:limit - 3] + "..."
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def common_window(run: RecordedRun, sols: dict[str, NavSolution]) -> tuple[float, float]:
@@ -299,9 +427,16 @@ def common_window(run: RecordedRun, sols: dict[str, NavSolution]) -> tuple[float
     return max(starts), min(ends)
 
 
-def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
-            show_progress: bool = False, observers: dict | None = None,
-            say: Callable[[str], None] | None = None) -> tuple[dict, dict, Prepared]:
+def compare(
+    run: RecordedRun,
+    cfg: RunConfig,
+    methods: list[str],
+    *,
+    tune: str | None = None,
+    show_progress: bool = False,
+    observers: dict | None = None,
+    say: Callable[[str], None] | None = None,
+) -> tuple[dict, dict, Prepared]:
     """Prepare the recording, run and score the methods over a common window, with consistency figures.
 
     A method whose estimator fails is reported (a ``gnssacc: warning:`` naming it, and
@@ -324,15 +459,23 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
     for line in preparation_lines(prep) if say else ():
         say(line)
     t = time.perf_counter()
-    models = {"": check_model(prep)}   # the final noise model against the recording
+    models = {"": check_model(prep)}  # the final noise model against the recording
     seconds = {**prep.seconds, "model_check_s": time.perf_counter() - t}
     # The kernels' compile (or load) time, in the background, and the wait for the kernels of
     # the methods (not inside their wall times).
     jit_s = kernels.warm_up() + kernels.ready(methods)
-    run = prep.run   # as the input checks left it: repaired units, the measured clock offset applied
+    run = prep.run  # as the input checks left it: repaired units, the measured clock offset applied
     failed: dict[str, str] = {}
-    sols = run_methods(run, cfg, methods, prep=prep, show_progress=show_progress, failures=failed,
-                       observers=observers, say=say)
+    sols = run_methods(
+        run,
+        cfg,
+        methods,
+        prep=prep,
+        show_progress=show_progress,
+        failures=failed,
+        observers=observers,
+        say=say,
+    )
     window = scored_window(run, sols)
     raw = gnss_score(run, window)
     raw.errors = fix_statistics(run, window)
@@ -343,8 +486,16 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
             scores[m].errors = error_statistics(run, s, window)
             fixes = scores[m].errors.get("at_fixes") or {}
             judged, model = _noise_model_of(prep, m, sols, models)
-            cons[m] = assess(judged.run, s, fixes.get("prmse_m"), fixes.get("gnss_prmse_m"), model,
-                             judged.cfg.gnss_gm_sigma, errors=scores[m].errors, n_fixes=fixes.get("n"))
+            cons[m] = assess(
+                judged.run,
+                s,
+                fixes.get("prmse_m"),
+                fixes.get("gnss_prmse_m"),
+                model,
+                judged.cfg.gnss_gm_sigma,
+                errors=scores[m].errors,
+                n_fixes=fixes.get("n"),
+            )
         except Exception as exc:
             raise_if_interrupted(exc)
             failed[m] = failure_reason(exc)
@@ -354,26 +505,41 @@ def compare(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str |
         warn_data(who, text)
     for m, reason in failed.items():
         warn_data(m, f"failed: {reason}; the other methods' results are kept")
-    extra = {"jit_compile_s": jit_s, "identify_s": seconds, "quality": prep.quality.to_dict(),
-             "config_sources": prep.cfg.sources, "scored_window_s": [window[0], window[1]],
-             "truth_coverage": truth_coverage(run),
-             "coverage": {m: _coverage(run, s) for m, s in sols.items()},
-             "consistency": {m: c.to_dict() for m, c in cons.items()},
-             "init": prep.init.how, "start": start_dict(prep.init), "stationary": prep.stationary.to_dict(),
-             "input_checks": [f.to_dict() for f in prep.checks],
-             "model_check": models[""].to_dict(),
-             "model_check_gm": models["gm"].to_dict() if "gm" in models else None,
-             "tuning": prep.tuning.to_dict() if prep.tuning is not None else None}
+    extra = {
+        "jit_compile_s": jit_s,
+        "identify_s": seconds,
+        "quality": prep.quality.to_dict(),
+        "config_sources": prep.cfg.sources,
+        "scored_window_s": [window[0], window[1]],
+        "truth_coverage": truth_coverage(run),
+        "coverage": {m: _coverage(run, s) for m, s in sols.items()},
+        "consistency": {m: c.to_dict() for m, c in cons.items()},
+        "init": prep.init.how,
+        "start": start_dict(prep.init),
+        "stationary": prep.stationary.to_dict(),
+        "input_checks": [f.to_dict() for f in prep.checks],
+        "model_check": models[""].to_dict(),
+        "model_check_gm": models["gm"].to_dict() if "gm" in models else None,
+        "tuning": prep.tuning.to_dict() if prep.tuning is not None else None,
+    }
     return metrics_dict(run, sols, scores, raw, extra, failed), sols, prep
 
 
 def start_dict(init) -> dict:
     """The start's yaw and what it rests on (``metrics.json`` ``start``; the table says when it is
     undetermined)."""
-    why = ("the vehicle never turned or accelerated enough to tell it" if init.yaw_evidence == "undetermined"
-           else "")
-    return {"yaw_deg": float(np.degrees(init.rpy[2])), "yaw_sigma_deg": float(np.degrees(init.sigma_att_rad[2])),
-            "yaw_evidence": init.yaw_evidence, "yaw_determined": bool(init.yaw_determined), "why": why}
+    why = (
+        "the vehicle never turned or accelerated enough to tell it"
+        if init.yaw_evidence == "undetermined"
+        else ""
+    )
+    return {
+        "yaw_deg": float(np.degrees(init.rpy[2])),
+        "yaw_sigma_deg": float(np.degrees(init.sigma_att_rad[2])),
+        "yaw_evidence": init.yaw_evidence,
+        "yaw_determined": bool(init.yaw_determined),
+        "why": why,
+    }
 
 
 def _noise_model_of(prep: Prepared, sid: str, sols: dict, models: dict):
@@ -398,7 +564,11 @@ def truth_coverage(run: RecordedRun) -> dict | None:
     a = max(float(run.truth.t[0]), run.t_start) - run.t_start
     b = min(float(run.truth.t[-1]), run.t_end) - run.t_start
     span = max(b - a, 0.0)
-    return {"first_s": a, "last_s": b, "fraction": span / run.duration_s if run.duration_s > 0 else 1.0}
+    return {
+        "first_s": a,
+        "last_s": b,
+        "fraction": span / run.duration_s if run.duration_s > 0 else 1.0,
+    }
 
 
 def scored_window(run: RecordedRun, sols: dict[str, NavSolution]) -> tuple[float, float]:
@@ -412,9 +582,12 @@ def scored_window(run: RecordedRun, sols: dict[str, NavSolution]) -> tuple[float
         return a, b
     span = max(cov["last_s"] - cov["first_s"], 0.0)
     if run.duration_s - span > TRUTH_SHORT_TOLERANCE_S:
-        warn_data(f"{run.where} (truth)", f"the truth covers only {span:.1f} of {run.duration_s:.1f} s of the run "
-                                          f"(t = {cov['first_s']:.1f} .. {cov['last_s']:.1f} s from the start); "
-                                          f"the outputs cover the whole run, the scores only that part")
+        warn_data(
+            f"{run.where} (truth)",
+            f"the truth covers only {span:.1f} of {run.duration_s:.1f} s of the run "
+            f"(t = {cov['first_s']:.1f} .. {cov['last_s']:.1f} s from the start); "
+            f"the outputs cover the whole run, the scores only that part",
+        )
     return max(a, run.t_start + cov["first_s"]), min(b, run.t_start + cov["last_s"])
 
 
@@ -423,20 +596,37 @@ def _coverage(run: RecordedRun, sol: NavSolution) -> dict:
     if not len(sol):
         return {"first_s": None, "last_s": None, "fraction": 0.0}
     a, b = float(sol.t[0]) - run.t_start, float(sol.t[-1]) - run.t_start
-    return {"first_s": a, "last_s": b, "fraction": (b - a) / run.duration_s if run.duration_s > 0 else 1.0}
+    return {
+        "first_s": a,
+        "last_s": b,
+        "fraction": (b - a) / run.duration_s if run.duration_s > 0 else 1.0,
+    }
 
 
 def preparation_lines(prep: Prepared) -> list[str]:
     """What the preparation found, one line each: IMU data quality, stationary spans, the start and
     (``--tune auto``) the identified noise."""
-    lines = [quality_line(prep.quality.to_dict()), prep.stationary.summary(), f"start: {prep.init.how}"]
+    lines = [
+        quality_line(prep.quality.to_dict()),
+        prep.stationary.summary(),
+        f"start: {prep.init.how}",
+    ]
     return lines + ([prep.tuning.line()] if prep.tuning is not None else [])
 
 
-def compare_and_write(run: RecordedRun, cfg: RunConfig, methods: list[str], target: ResultDir, *,
-                      tune: str | None = None, plots: bool = True, report: bool = False, export: tuple = (),
-                      extra_files: Callable[[dict], dict[str, str]] | None = None,
-                      show_progress: bool = False) -> tuple[dict, dict, Prepared, Path | None]:
+def compare_and_write(
+    run: RecordedRun,
+    cfg: RunConfig,
+    methods: list[str],
+    target: ResultDir,
+    *,
+    tune: str | None = None,
+    plots: bool = True,
+    report: bool = False,
+    export: tuple = (),
+    extra_files: Callable[[dict], dict[str, str]] | None = None,
+    show_progress: bool = False,
+) -> tuple[dict, dict, Prepared, Path | None]:
     """:func:`compare`, then :func:`write_result` (what each ``gnssacc batch`` task does).
 
     Returns
@@ -446,14 +636,38 @@ def compare_and_write(run: RecordedRun, cfg: RunConfig, methods: list[str], targ
     out : Path or None
         As from :func:`write_result`.
     """
-    metrics, sols, prep, replay = compare_observed(run, cfg, methods, tune=tune, show_progress=show_progress,
-                                                   observe=report)
-    return metrics, sols, prep, write_result(target, prep.run, sols, metrics, prep, plots=plots, report=report,
-                                              export=export, extra_files=extra_files, replay=replay)
+    metrics, sols, prep, replay = compare_observed(
+        run, cfg, methods, tune=tune, show_progress=show_progress, observe=report
+    )
+    return (
+        metrics,
+        sols,
+        prep,
+        write_result(
+            target,
+            prep.run,
+            sols,
+            metrics,
+            prep,
+            plots=plots,
+            report=report,
+            export=export,
+            extra_files=extra_files,
+            replay=replay,
+        ),
+    )
 
 
-def compare_observed(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tune: str | None = None,
-                     show_progress: bool = False, observe: bool = True, say: Callable[[str], None] | None = None):
+def compare_observed(
+    run: RecordedRun,
+    cfg: RunConfig,
+    methods: list[str],
+    *,
+    tune: str | None = None,
+    show_progress: bool = False,
+    observe: bool = True,
+    say: Callable[[str], None] | None = None,
+):
     """:func:`compare`, keeping (with ``observe``, when ``ekf-acc`` runs) that pass's matrices at
     every GNSS epoch for the report's observability section.
 
@@ -468,15 +682,34 @@ def compare_observed(run: RecordedRun, cfg: RunConfig, methods: list[str], *, tu
         from .analysis.observability import EpochCollector
 
         collector = EpochCollector(False)
-    metrics, sols, prep = compare(run, cfg, methods, tune=tune, show_progress=show_progress,
-                                   observers={"ekf-acc": collector} if collector else None, say=say)
-    replay = collector.replay("ekf-acc", sols["ekf-acc"]) if collector and "ekf-acc" in sols else None
+    metrics, sols, prep = compare(
+        run,
+        cfg,
+        methods,
+        tune=tune,
+        show_progress=show_progress,
+        observers={"ekf-acc": collector} if collector else None,
+        say=say,
+    )
+    replay = (
+        collector.replay("ekf-acc", sols["ekf-acc"]) if collector and "ekf-acc" in sols else None
+    )
     return metrics, sols, prep, replay
 
 
-def write_result(target: ResultDir, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict,
-                 prep: Prepared, *, plots: bool = True, report: bool = False, export: tuple = (),
-                 extra_files: Callable[[dict], dict[str, str]] | None = None, replay=None) -> Path | None:
+def write_result(
+    target: ResultDir,
+    run: RecordedRun,
+    sols: dict[str, NavSolution],
+    metrics: dict,
+    prep: Prepared,
+    *,
+    plots: bool = True,
+    report: bool = False,
+    export: tuple = (),
+    extra_files: Callable[[dict], dict[str, str]] | None = None,
+    replay=None,
+) -> Path | None:
     """Write a complete result through ``target`` (all or nothing).
 
     Parameters
@@ -504,8 +737,18 @@ def write_result(target: ResultDir, run: RecordedRun, sols: dict[str, NavSolutio
     tuned = prep.tuning.to_toml(prep.cfg) if prep.tuning is not None else None
 
     def fill(folder: Path) -> None:
-        write_result_files(folder, run, sols, metrics, prep.cfg, plots=plots, report=report, export=export,
-                           tuned_toml=tuned, replay=replay)
+        write_result_files(
+            folder,
+            run,
+            sols,
+            metrics,
+            prep.cfg,
+            plots=plots,
+            report=report,
+            export=export,
+            tuned_toml=tuned,
+            replay=replay,
+        )
         for name, text in (extra_files(metrics) if extra_files else {}).items():
             (folder / name).write_text(text)
 
@@ -516,9 +759,18 @@ def default_out_dir(run: RecordedRun) -> Path:
     return Path("gnssacc-out") / f"{run.name}-{datetime.now().strftime('%Y%m%d-%H%M%S')}"
 
 
-def write_outputs(out_dir: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict, cfg: RunConfig,
-                  plots: bool = True, report: bool = False, export: tuple = (), tuned_toml: str | None = None,
-                  overwrite: bool = False) -> Path:
+def write_outputs(
+    out_dir: Path,
+    run: RecordedRun,
+    sols: dict[str, NavSolution],
+    metrics: dict,
+    cfg: RunConfig,
+    plots: bool = True,
+    report: bool = False,
+    export: tuple = (),
+    tuned_toml: str | None = None,
+    overwrite: bool = False,
+) -> Path:
     """Replace ``out_dir`` as a whole by a complete result (:class:`gnssacc.outputs.outdir.ResultDir`).
 
     Takes the folder's lock for the time of writing; the CLI instead holds a
@@ -527,8 +779,19 @@ def write_outputs(out_dir: Path, run: RecordedRun, sols: dict[str, NavSolution],
     parameters are those of :func:`write_result_files`.
     """
     with ResultDir(out_dir, overwrite=overwrite) as target:
-        return target.replace(lambda folder: write_result_files(folder, run, sols, metrics, cfg, plots=plots,
-                                                                report=report, export=export, tuned_toml=tuned_toml))
+        return target.replace(
+            lambda folder: write_result_files(
+                folder,
+                run,
+                sols,
+                metrics,
+                cfg,
+                plots=plots,
+                report=report,
+                export=export,
+                tuned_toml=tuned_toml,
+            )
+        )
 
 
 def plot_set(plots: bool | str | None, report: bool = False) -> str:
@@ -543,9 +806,18 @@ def plot_set(plots: bool | str | None, report: bool = False) -> str:
     return plots
 
 
-def write_result_files(folder: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict,
-                       cfg: RunConfig, plots: bool | str = True, report: bool = False, export: tuple = (),
-                       tuned_toml: str | None = None, replay=None) -> None:
+def write_result_files(
+    folder: Path,
+    run: RecordedRun,
+    sols: dict[str, NavSolution],
+    metrics: dict,
+    cfg: RunConfig,
+    plots: bool | str = True,
+    report: bool = False,
+    export: tuple = (),
+    tuned_toml: str | None = None,
+    replay=None,
+) -> None:
     """Write every output file into ``folder`` (a fresh folder; see :func:`write_outputs`).
 
     ``trajectory_<id>.csv`` per solution, ``config.toml``, ``table.txt``, ``metrics.json`` (with
@@ -566,15 +838,18 @@ def write_result_files(folder: Path, run: RecordedRun, sols: dict[str, NavSoluti
     drawn = write_figures(folder, run, sols, metrics, plot_set(plots, report))
     if "tum" in export:
         from .outputs.export import write_truth_tum, write_tum
+
         for mid, sol in sols.items():
             write_tum(sol, run, folder / f"trajectory_{mid}.tum")
         if run.truth is not None:
             write_truth_tum(run, folder, sols, metrics.get("scored_window_s"))
     for kind in set(export) & {"bag", "ros1bag"}:
         from .outputs.odombag import BAG_EXPORTS, write_odometry_bag
+
         write_odometry_bag(sols, run, folder / BAG_EXPORTS[kind])
     if report:
         from .outputs.htmlreport import write_html_report
+
         write_html_report(folder, run, sols, metrics, cfg, replay=replay, figures=drawn)
     (folder / "table.txt").write_text(format_table(metrics) + "\n")
     write_json(metrics, folder / "metrics.json")

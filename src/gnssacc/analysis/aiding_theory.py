@@ -56,6 +56,7 @@ graph's own Hessian); :func:`fg_departure` measures, in closed form, how far (b)
 stated over actual error variance per state, the expected NEES per dof, and the Kullback-Leibler
 divergence of (b)'s posterior from (a)'s averaged over the fixes.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -74,13 +75,19 @@ def kf_model(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
     """Transition ``F`` and process covariance ``Q`` (3 x 3) of ``[p, v, a]`` over ``dt`` [s] under
     white jerk of PSD ``q`` [m^2/s^5] (exact discretisation)."""
     F = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
-    Q = q * np.array([[dt**5 / 20, dt**4 / 8, dt**3 / 6], [dt**4 / 8, dt**3 / 3, dt**2 / 2],
-                      [dt**3 / 6, dt**2 / 2, dt]])
+    Q = q * np.array(
+        [
+            [dt**5 / 20, dt**4 / 8, dt**3 / 6],
+            [dt**4 / 8, dt**3 / 3, dt**2 / 2],
+            [dt**3 / 6, dt**2 / 2, dt],
+        ]
+    )
     return F, Q
 
 
-def kf_simulate(n: int, dt: float, q: float, R: float, x0: np.ndarray, P0: np.ndarray,
-                rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def kf_simulate(
+    n: int, dt: float, q: float, R: float, x0: np.ndarray, P0: np.ndarray, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
     """True states ``(n, 3)`` (the first drawn from ``N(x0, P0)``) and fixes ``(n,)`` [m]."""
     F, Q = kf_model(dt, q)
     L, LQ = np.linalg.cholesky(P0), np.linalg.cholesky(Q)
@@ -128,16 +135,24 @@ def _shift(x, P, F, Q, R):
     """Clone the position and shift the noise slots (newest from its prior), then predict ``dt``."""
     T = np.zeros((_N, _N))
     T[:3, :3] = F
-    T[3, 0] = T[4, 3] = 1.0         # p_{k-1} <- p (before the prediction), p_{k-2} <- p_{k-1}
-    T[6, 5] = T[7, 6] = 1.0         # n_{k-1} <- n_k, n_{k-2} <- n_{k-1}; n_k fresh
+    T[3, 0] = T[4, 3] = 1.0  # p_{k-1} <- p (before the prediction), p_{k-2} <- p_{k-1}
+    T[6, 5] = T[7, 6] = 1.0  # n_{k-1} <- n_k, n_{k-2} <- n_{k-1}; n_k fresh
     x[:] = T @ x
     P[:] = T @ P @ T.T
     P[:3, :3] += Q
     P[5, 5] = R
 
 
-def kf_filter(z: np.ndarray, dt: float, q: float, R: float, variant: str, x0: np.ndarray, P0: np.ndarray,
-              accel_first: bool = False) -> KfResult:
+def kf_filter(
+    z: np.ndarray,
+    dt: float,
+    q: float,
+    R: float,
+    variant: str,
+    x0: np.ndarray,
+    P0: np.ndarray,
+    accel_first: bool = False,
+) -> KfResult:
     """Run one of :data:`KF_VARIANTS` over fixes ``z`` [m] at interval ``dt`` [s].
 
     Parameters
@@ -177,7 +192,7 @@ def kf_filter(z: np.ndarray, dt: float, q: float, R: float, variant: str, x0: np
             _shift(x, P, F, Q, R)
         steps = [("pos", z[k])]
         if variant != "position" and k >= 2:
-            steps.insert(0 if accel_first else 1, ("acc", B @ z[k - 2:k + 1]))
+            steps.insert(0 if accel_first else 1, ("acc", B @ z[k - 2 : k + 1]))
         for kind, y in steps:
             if kind == "pos":
                 _update(x, P, h_pos, r_pos, y)
@@ -187,8 +202,17 @@ def kf_filter(z: np.ndarray, dt: float, q: float, R: float, variant: str, x0: np
     return out
 
 
-def kf_monte_carlo(variants=KF_VARIANTS, runs: int = 200, n: int = 60, dt: float = 1.0, q: float = 1.0,
-                   R: float = 1.0, seed: int = 0, burn_in: int = 10, accel_first: bool = False) -> dict:
+def kf_monte_carlo(
+    variants=KF_VARIANTS,
+    runs: int = 200,
+    n: int = 60,
+    dt: float = 1.0,
+    q: float = 1.0,
+    R: float = 1.0,
+    seed: int = 0,
+    burn_in: int = 10,
+    accel_first: bool = False,
+) -> dict:
     """Each variant on the same ``runs`` simulated runs of ``n`` fixes (prior ``N(0, P0)``,
     ``P0 = diag(R, 1, 1)``); scored on the epochs from ``burn_in`` on.
 
@@ -208,12 +232,16 @@ def kf_monte_carlo(variants=KF_VARIANTS, runs: int = 200, n: int = 60, dt: float
             res = kf_filter(z, dt, q, R, v, x0, P0, accel_first)
             e = (res.x - truth)[burn_in:]
             P = res.P[burn_in:]
-            acc[v]["nees"] += float(np.einsum("ki,ki->", e, np.linalg.solve(P, e[..., None])[..., 0]))
+            acc[v]["nees"] += float(
+                np.einsum("ki,ki->", e, np.linalg.solve(P, e[..., None])[..., 0])
+            )
             acc[v]["stated"] += np.diagonal(P, axis1=1, axis2=2).sum(0)
             acc[v]["sq"] += (e * e).sum(0)
     m = runs * (n - burn_in)
-    return {v: {"nees": a["nees"] / (3 * m), "stated_var": a["stated"] / m, "error_var": a["sq"] / m}
-            for v, a in acc.items()}
+    return {
+        v: {"nees": a["nees"] / (3 * m), "stated_var": a["stated"] / m, "error_var": a["sq"] / m}
+        for v, a in acc.items()
+    }
 
 
 def kf_departure(variant: str = "paper", **kw) -> np.ndarray:
@@ -247,6 +275,7 @@ class FgChain:
     P0 : ndarray (3, 3)
         Prior covariance of ``x_0``.
     """
+
     n: int
     dt: float
     q: float
@@ -263,8 +292,13 @@ class FgChain:
     def Q(self) -> np.ndarray:
         """Process covariance over ``dt`` of white jerk with PSD ``q`` (exact discretisation)."""
         dt = self.dt
-        return self.q * np.array([[dt**5 / 20, dt**4 / 8, dt**3 / 6], [dt**4 / 8, dt**3 / 3, dt**2 / 2],
-                                  [dt**3 / 6, dt**2 / 2, dt]])
+        return self.q * np.array(
+            [
+                [dt**5 / 20, dt**4 / 8, dt**3 / 6],
+                [dt**4 / 8, dt**3 / 3, dt**2 / 2],
+                [dt**3 / 6, dt**2 / 2, dt],
+            ]
+        )
 
     @property
     def B(self) -> np.ndarray:
@@ -275,23 +309,23 @@ class FgChain:
         """``(n - 2, n)``: the acceleration of the window ending at epoch ``k + 2`` from all fixes."""
         D = np.zeros((self.n - 2, self.n))
         for k in range(self.n - 2):
-            D[k, k:k + 3] = self.B
+            D[k, k : k + 3] = self.B
         return D
 
     def prior_covariance(self) -> np.ndarray:
         """``(3n, 3n)`` joint covariance of the stacked states before any fix."""
         n, F, Q = self.n, self.F, self.Q
-        Phi = [np.eye(3)]                                  # F^k
+        Phi = [np.eye(3)]  # F^k
         for _ in range(n - 1):
             Phi.append(F @ Phi[-1])
-        P = [self.P0]                                      # marginal covariances
+        P = [self.P0]  # marginal covariances
         for _ in range(n - 1):
             P.append(F @ P[-1] @ F.T + Q)
         C = np.zeros((3 * n, 3 * n))
         for i in range(n):
             for j in range(i, n):
-                C[3 * j:3 * j + 3, 3 * i:3 * i + 3] = Phi[j - i] @ P[i]   # cov(x_j, x_i)
-                C[3 * i:3 * i + 3, 3 * j:3 * j + 3] = C[3 * j:3 * j + 3, 3 * i:3 * i + 3].T
+                C[3 * j : 3 * j + 3, 3 * i : 3 * i + 3] = Phi[j - i] @ P[i]  # cov(x_j, x_i)
+                C[3 * i : 3 * i + 3, 3 * j : 3 * j + 3] = C[3 * j : 3 * j + 3, 3 * i : 3 * i + 3].T
         return C
 
 
@@ -318,7 +352,7 @@ def _base_graph(m: FgChain, stacked: bool) -> gtsam.GaussianFactorGraph:
     g.add(gtsam.JacobianFactor(0, A, np.zeros(3), unit))
     for k in range(m.n - 1):
         A = np.zeros((3, 3 * m.n))
-        A[:, 3 * k:3 * k + 3], A[:, 3 * k + 3:3 * k + 6] = -Wq @ m.F, Wq
+        A[:, 3 * k : 3 * k + 3], A[:, 3 * k + 3 : 3 * k + 6] = -Wq @ m.F, Wq
         g.add(gtsam.JacobianFactor(0, A, np.zeros(3), unit))
     return g
 
@@ -333,20 +367,30 @@ def fg_graph(m: FgChain, z: np.ndarray, variant: str) -> gtsam.GaussianFactorGra
         # One factor touches every epoch, and GTSAM's Python JacobianFactor takes at most three
         # keys: this graph holds the stacked states as one variable (key 0, dimension 3n).
         T = np.vstack([np.eye(m.n), m.D()])
-        U, S, _ = np.linalg.svd(T * m.r, full_matrices=False)   # T R^(1/2), full column rank n
-        W = (U / S).T                                           # whitening on the range of T R T^T
-        Hz = np.kron(np.eye(m.n), _H)                           # positions from the stacked states
+        U, S, _ = np.linalg.svd(T * m.r, full_matrices=False)  # T R^(1/2), full column rank n
+        W = (U / S).T  # whitening on the range of T R T^T
+        Hz = np.kron(np.eye(m.n), _H)  # positions from the stacked states
         g.add(gtsam.JacobianFactor(0, W @ T @ Hz, W @ (T @ z), gtsam.noiseModel.Unit.Create(m.n)))
         return g
     fix = gtsam.noiseModel.Isotropic.Sigma(1, m.r)
     for k in range(m.n):
-        g.add(gtsam.JacobianFactor(k, _H, z[k:k + 1], fix))
+        g.add(gtsam.JacobianFactor(k, _H, z[k : k + 1], fix))
     if variant == "paper":
         B = m.B
         acc = gtsam.noiseModel.Isotropic.Sigma(1, m.r * float(np.sqrt(np.sum(B**2))))
         for k in range(1, m.n - 1):
-            g.add(gtsam.JacobianFactor(k - 1, B[0] * _H, k, B[1] * _H, k + 1, B[2] * _H,
-                                       np.array([B @ z[k - 1:k + 2]]), acc))
+            g.add(
+                gtsam.JacobianFactor(
+                    k - 1,
+                    B[0] * _H,
+                    k,
+                    B[1] * _H,
+                    k + 1,
+                    B[2] * _H,
+                    np.array([B @ z[k - 1 : k + 2]]),
+                    acc,
+                )
+            )
     return g
 
 
@@ -383,13 +427,18 @@ def fg_gain(m: FgChain, variant: str) -> np.ndarray:
 def fg_actual_covariance(m: FgChain, variant: str) -> np.ndarray:
     """Covariance (3n, 3n) of the variant's actual error ``G z - x`` over truth and fixes."""
     G = fg_gain(m, variant)
-    Hz = np.kron(np.eye(m.n), _H)                       # positions from the stacked states
+    Hz = np.kron(np.eye(m.n), _H)  # positions from the stacked states
     E = G @ Hz - np.eye(3 * m.n)
     return E @ m.prior_covariance() @ E.T + m.r**2 * G @ G.T
 
 
-def fg_departure(ratios=(0.1, 0.3, 1.0, 3.0, 10.0, 100.0), n: int = 30, dt: float = 1.0, r: float = 3.0,
-                 p0_sigma=(10.0, 3.0, 1.0)) -> list[dict]:
+def fg_departure(
+    ratios=(0.1, 0.3, 1.0, 3.0, 10.0, 100.0),
+    n: int = 30,
+    dt: float = 1.0,
+    r: float = 3.0,
+    p0_sigma=(10.0, 3.0, 1.0),
+) -> list[dict]:
     """How far the paper's uncorrelated acceleration factors (b) depart from position only (a).
 
     Parameters
@@ -420,18 +469,27 @@ def fg_departure(ratios=(0.1, 0.3, 1.0, 3.0, 10.0, 100.0), n: int = 30, dt: floa
             C = fg_actual_covariance(m, v)
             ratio_pva = np.median((np.diag(P) / np.diag(C)).reshape(n, 3), axis=0)
             ip = np.arange(0, 3 * n, 3)
-            out.append({"ratio": float(ratio), "variant": v,
-                        "nees_per_dof": float(np.trace(np.linalg.solve(P, C)) / (3 * n)),
-                        "nees_pos_per_dof": float(np.trace(np.linalg.solve(P[np.ix_(ip, ip)], C[np.ix_(ip, ip)])) / n),
-                        "var_ratio_pva": ratio_pva, "kl_from_position": _kl(m, post[v], post["position"],
-                                                                           gain[v] - gain["position"])})
+            out.append(
+                {
+                    "ratio": float(ratio),
+                    "variant": v,
+                    "nees_per_dof": float(np.trace(np.linalg.solve(P, C)) / (3 * n)),
+                    "nees_pos_per_dof": float(
+                        np.trace(np.linalg.solve(P[np.ix_(ip, ip)], C[np.ix_(ip, ip)])) / n
+                    ),
+                    "var_ratio_pva": ratio_pva,
+                    "kl_from_position": _kl(
+                        m, post[v], post["position"], gain[v] - gain["position"]
+                    ),
+                }
+            )
     return out
 
 
 def _kl(m: FgChain, Pb: np.ndarray, Pa: np.ndarray, dG: np.ndarray) -> float:
     """``E_z KL(N(G_b z, Pb) || N(G_a z, Pa))`` with ``dG = G_b - G_a`` [nats]."""
     Hz = np.kron(np.eye(m.n), _H)
-    Sz = Hz @ m.prior_covariance() @ Hz.T + m.r**2 * np.eye(m.n)   # covariance of the fixes
+    Sz = Hz @ m.prior_covariance() @ Hz.T + m.r**2 * np.eye(m.n)  # covariance of the fixes
     k = Pa.shape[0]
     _, ld_a = np.linalg.slogdet(Pa)
     _, ld_b = np.linalg.slogdet(Pb)

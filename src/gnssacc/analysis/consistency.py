@@ -46,6 +46,7 @@ estimate fits the fixes either way). Every method of a run shares one noise mode
 checked once, by the innovations of one EKF pass (:class:`ModelCheck`, made by
 :func:`gnssacc.prepare.prepared.prepare`), and a failed check is reported for the smoothers too.
 """
+
 from __future__ import annotations
 
 import math
@@ -79,8 +80,14 @@ TAIL_ALARM = 1e-4
 #: Table columns a warning can be about: the NIS, the comparison with the raw fixes, the NEES.
 COLUMNS = ("nis", "fixes", "nees")
 #: Update kinds and their names in messages.
-KIND_NAMES = {"pos": "position", "acc": "acceleration", "zupt": "zero-velocity", "zaru": "zero-rate",
-              "nhc": "non-holonomic", "odo": "wheel-odometry"}
+KIND_NAMES = {
+    "pos": "position",
+    "acc": "acceleration",
+    "zupt": "zero-velocity",
+    "zaru": "zero-rate",
+    "nhc": "non-holonomic",
+    "odo": "wheel-odometry",
+}
 _DOF = {"pos": 3, "acc": 3, "zupt": 3, "zaru": 3, "nhc": 2, "odo": 1}
 
 
@@ -98,13 +105,16 @@ def heavy_tails(n_beyond: int, n: int, who: str, acf1: float | None = None) -> s
     if n <= 0 or n_beyond < 3 or correlated(acf1, n):
         return None
     from scipy.stats import binom
+
     if binom.sf(n_beyond - 1, n, TAIL_P) >= TAIL_ALARM:
         return None
-    return (f"the fixes carry outliers the noise model does not cover: {n_beyond} of {who} {n} position "
-            f"innovations lie beyond the 0.1 % chi-square bound ({n * TAIL_P:.1f} expected for Gaussian errors); "
-            f"the stated uncertainty averages over them, too large for most fixes and too small for these "
-            f"([ekf] position_gate_nis = {tail_bound(3):.1f} makes the EKF reject them; the noise is still "
-            f"identified from every fix)")
+    return (
+        f"the fixes carry outliers the noise model does not cover: {n_beyond} of {who} {n} position "
+        f"innovations lie beyond the 0.1 % chi-square bound ({n * TAIL_P:.1f} expected for Gaussian errors); "
+        f"the stated uncertainty averages over them, too large for most fixes and too small for these "
+        f"([ekf] position_gate_nis = {tail_bound(3):.1f} makes the EKF reject them; the noise is still "
+        f"identified from every fix)"
+    )
 
 
 @dataclass
@@ -139,8 +149,14 @@ class Consistency:
         self.flags.append(column)
 
     def to_dict(self) -> dict:
-        return {"nis": self.nis, "n": self.n, "fix_residual_ratio": self.fix_ratio, "innovation_acf1": self.acf1,
-                "warnings": self.warnings, "flags": self.flags}
+        return {
+            "nis": self.nis,
+            "n": self.n,
+            "fix_residual_ratio": self.fix_ratio,
+            "innovation_acf1": self.acf1,
+            "warnings": self.warnings,
+            "flags": self.flags,
+        }
 
 
 @dataclass
@@ -177,9 +193,16 @@ class ModelCheck:
     @classmethod
     def from_stats(cls, stats: dict, rest: list | None = None) -> "ModelCheck":
         """From an EKF pass's ``stats`` and the at-rest findings (:func:`rest_noise_findings`)."""
-        return cls(stats.get("nis_pos_mean"), stats.get("acf1_pos"), int(stats.get("n_pos_updates", 0) or 0),
-                   stats.get("nis_zupt_mean"), int(stats.get("n_zupt_updates", 0) or 0), list(rest or []),
-                   int(stats.get("n_pos_beyond", 0) or 0), int(stats.get("n_pos_rejected", 0) or 0))
+        return cls(
+            stats.get("nis_pos_mean"),
+            stats.get("acf1_pos"),
+            int(stats.get("n_pos_updates", 0) or 0),
+            stats.get("nis_zupt_mean"),
+            int(stats.get("n_zupt_updates", 0) or 0),
+            list(rest or []),
+            int(stats.get("n_pos_beyond", 0) or 0),
+            int(stats.get("n_pos_rejected", 0) or 0),
+        )
 
     def warnings(self) -> list[str]:
         """The model-level findings, worded for any method that uses the model."""
@@ -187,24 +210,39 @@ class ModelCheck:
         if self.nis is not None and self.n:
             lo, hi = band(self.n)
             if not lo <= self.nis <= hi:
-                out.append(f"the noise model does not fit this recording: the EKF's position NIS per dof with it is "
-                           f"{self.nis:.2f}, outside [{lo:.2f}, {hi:.2f}]")
+                out.append(
+                    f"the noise model does not fit this recording: the EKF's position NIS per dof with it is "
+                    f"{self.nis:.2f}, outside [{lo:.2f}, {hi:.2f}]"
+                )
         if correlated(self.acf1, self.n):
-            out.append(f"the noise model misses a slowly varying error: the EKF's position innovations with it are "
-                       f"correlated in time (lag-1 autocorrelation {self.acf1:.2f} > {ACF_MAX}); IMU noise set too low "
-                       f"or time-correlated GNSS errors not modelled")
+            out.append(
+                f"the noise model misses a slowly varying error: the EKF's position innovations with it are "
+                f"correlated in time (lag-1 autocorrelation {self.acf1:.2f} > {ACF_MAX}); IMU noise set too low "
+                f"or time-correlated GNSS errors not modelled"
+            )
         if self.nis_zupt is not None and self.n_zupt and self.nis_zupt > band(self.n_zupt)[1]:
-            out.append(f"the noise model lets the velocity error grow too slowly: the EKF's zero-velocity NIS per dof "
-                       f"with it is {self.nis_zupt:.2f} > {band(self.n_zupt)[1]:.2f} while the vehicle stands "
-                       f"(IMU noise set too low)")
+            out.append(
+                f"the noise model lets the velocity error grow too slowly: the EKF's zero-velocity NIS per dof "
+                f"with it is {self.nis_zupt:.2f} > {band(self.n_zupt)[1]:.2f} while the vehicle stands "
+                f"(IMU noise set too low)"
+            )
         # Fixes a position gate rejected count as beyond the bound: the smoothers take them.
-        tails = heavy_tails(self.n_beyond + self.n_rejected, self.n + self.n_rejected, "the EKF's", self.acf1)
+        tails = heavy_tails(
+            self.n_beyond + self.n_rejected, self.n + self.n_rejected, "the EKF's", self.acf1
+        )
         return out + ([tails] if tails else [])
 
     def to_dict(self) -> dict:
-        return {"nis_pos": self.nis, "innovation_acf1": self.acf1, "n_pos_updates": self.n,
-                "nis_zupt": self.nis_zupt, "n_zupt_updates": self.n_zupt, "at_rest": self.rest,
-                "n_pos_beyond": self.n_beyond, "n_pos_rejected": self.n_rejected}
+        return {
+            "nis_pos": self.nis,
+            "innovation_acf1": self.acf1,
+            "n_pos_updates": self.n,
+            "nis_zupt": self.nis_zupt,
+            "n_zupt_updates": self.n_zupt,
+            "at_rest": self.rest,
+            "n_pos_beyond": self.n_beyond,
+            "n_pos_rejected": self.n_rejected,
+        }
 
 
 def rest_noise_findings(measured: np.ndarray, configured: np.ndarray, seconds: float) -> list[str]:
@@ -227,16 +265,19 @@ def rest_noise_findings(measured: np.ndarray, configured: np.ndarray, seconds: f
         naming the configuration key and the value the recording shows.
     """
     out = []
-    for name, key, sl, to_user, unit in (("accelerometer", "accel_vrw_mps_rth", slice(0, 3), 60.0, "m/s/sqrt(h)"),
-                                         ("gyro", "gyro_arw_deg_rth", slice(3, 6), 60.0 * 180.0 / math.pi,
-                                          "deg/sqrt(h)")):
+    for name, key, sl, to_user, unit in (
+        ("accelerometer", "accel_vrw_mps_rth", slice(0, 3), 60.0, "m/s/sqrt(h)"),
+        ("gyro", "gyro_arw_deg_rth", slice(3, 6), 60.0 * 180.0 / math.pi, "deg/sqrt(h)"),
+    ):
         m, c = np.asarray(measured[sl], float), np.asarray(configured[sl], float)
         ratio = np.where(np.isfinite(m) & (c > 0), m / np.where(c > 0, c, 1.0), np.nan)
         if np.any(ratio > REST_FACTOR):
             k = int(np.nanargmax(ratio))
-            out.append(f"the configured {name} white noise ({key} = {c[k] * to_user:.3g} {unit} on axis "
-                       f"{'xyz'[k]}) is {ratio[k]:.1f}x below what the IMU shows at rest ({m[k] * to_user:.3g} "
-                       f"{unit}, from {seconds:.0f} s stationary): its stated uncertainty is too small")
+            out.append(
+                f"the configured {name} white noise ({key} = {c[k] * to_user:.3g} {unit} on axis "
+                f"{'xyz'[k]}) is {ratio[k]:.1f}x below what the IMU shows at rest ({m[k] * to_user:.3g} "
+                f"{unit}, from {seconds:.0f} s stationary): its stated uncertainty is too small"
+            )
     return out
 
 
@@ -275,15 +316,30 @@ def check_model(prep) -> ModelCheck:
     prep : gnssacc.prepare.prepared.Prepared
     """
     cfg = prep.cfg
-    check = run_ekf(prep.run, cfg, "ekf", init=prep.init, stationary=prep.stationary, quality=prep.quality,
-                    output_times=np.zeros(0), cov_every=int(cfg["tune"]["cov_every"]))
+    check = run_ekf(
+        prep.run,
+        cfg,
+        "ekf",
+        init=prep.init,
+        stationary=prep.stationary,
+        quality=prep.quality,
+        output_times=np.zeros(0),
+        cov_every=int(cfg["tune"]["cov_every"]),
+    )
     noise = prep.rest_noise
-    rest = (rest_noise_findings(noise.white_density, np.sqrt(np.r_[cfg.accel_psd, cfg.gyro_psd]), noise.total_s)
-            if noise is not None else [])
+    rest = (
+        rest_noise_findings(
+            noise.white_density, np.sqrt(np.r_[cfg.accel_psd, cfg.gyro_psd]), noise.total_s
+        )
+        if noise is not None
+        else []
+    )
     return ModelCheck.from_stats(check.stats, rest)
 
 
-def check_gm_model(prep, baseline: ModelCheck | None, ekf_gm: NavSolution | None = None) -> ModelCheck:
+def check_gm_model(
+    prep, baseline: ModelCheck | None, ekf_gm: NavSolution | None = None
+) -> ModelCheck:
     """The ``-gm`` methods' noise-model check (:attr:`gnssacc.prepare.prepared.Prepared.gauss_markov`):
     one EKF pass with the Gauss-Markov states, as :func:`check_model` checks the baselines' model;
     what the ``-gm`` methods' consistency is judged with (a smoother's own figures cannot show the
@@ -291,14 +347,28 @@ def check_gm_model(prep, baseline: ModelCheck | None, ekf_gm: NavSolution | None
     the run has one, which is that pass (its outputs change nothing in the filter); the at-rest
     findings are the baseline's."""
     gm = prep.gauss_markov[0]
-    check = ekf_gm or run_ekf(gm.run, gm.cfg, "ekf", init=gm.init, stationary=gm.stationary, quality=gm.quality,
-                              output_times=np.zeros(0))
+    check = ekf_gm or run_ekf(
+        gm.run,
+        gm.cfg,
+        "ekf",
+        init=gm.init,
+        stationary=gm.stationary,
+        quality=gm.quality,
+        output_times=np.zeros(0),
+    )
     return ModelCheck.from_stats(check.stats, baseline.rest if baseline is not None else [])
 
 
-def assess(run, sol: NavSolution, prmse_m: float | None = None, gnss_prmse_m: float | None = None,
-           model: ModelCheck | None = None, gm_sigma: np.ndarray | None = None, errors: dict | None = None,
-           n_fixes: int | None = None) -> Consistency:
+def assess(
+    run,
+    sol: NavSolution,
+    prmse_m: float | None = None,
+    gnss_prmse_m: float | None = None,
+    model: ModelCheck | None = None,
+    gm_sigma: np.ndarray | None = None,
+    errors: dict | None = None,
+    n_fixes: int | None = None,
+) -> Consistency:
     """Consistency figures and warnings of one solution.
 
     ``prmse_m`` / ``gnss_prmse_m``: with truth, the solution's and the raw fixes' PRMSE at the same
@@ -317,38 +387,63 @@ def assess(run, sol: NavSolution, prmse_m: float | None = None, gnss_prmse_m: fl
             continue
         lo, hi = band(n[kind], _DOF[kind])
         if kind in ("zupt", "zaru", "nhc"):
-            lo = 0.0   # pseudo-measurements: a conservative noise (the constraint's default) loses no trust
+            lo = 0.0  # pseudo-measurements: a conservative noise (the constraint's default) loses no trust
         if not lo <= value <= hi:
-            what = ("its stated uncertainty is too small: its errors are larger than it thinks" if value > hi else
-                    "its stated uncertainty is too large: it discards information")
-            c.add(f"{KIND_NAMES[kind]} NIS per dof {value:.2f} outside the consistent band "
-                              f"[{lo:.2f}, {hi:.2f}] ({n[kind]} updates): {what}; check the noise configuration "
-                              f"(--tune auto identifies it from the recording)", "nis")
+            what = (
+                "its stated uncertainty is too small: its errors are larger than it thinks"
+                if value > hi
+                else "its stated uncertainty is too large: it discards information"
+            )
+            c.add(
+                f"{KIND_NAMES[kind]} NIS per dof {value:.2f} outside the consistent band "
+                f"[{lo:.2f}, {hi:.2f}] ({n[kind]} updates): {what}; check the noise configuration "
+                f"(--tune auto identifies it from the recording)",
+                "nis",
+            )
     if correlated(c.acf1, n["pos"]):
-        c.add(f"its position innovations are correlated in time (lag-1 autocorrelation {c.acf1:.2f} > "
-                          f"{ACF_MAX}): the model misses a slowly varying error (IMU noise set too low, or "
-                          f"time-correlated GNSS errors not modelled), so its stated uncertainty is not to be trusted",
-              "nis")
-    tails = heavy_tails(int(st.get("n_pos_beyond", 0) or 0), n["pos"], "the EKF's", c.acf1) if c.acf1 is not None else None
+        c.add(
+            f"its position innovations are correlated in time (lag-1 autocorrelation {c.acf1:.2f} > "
+            f"{ACF_MAX}): the model misses a slowly varying error (IMU noise set too low, or "
+            f"time-correlated GNSS errors not modelled), so its stated uncertainty is not to be trusted",
+            "nis",
+        )
+    tails = (
+        heavy_tails(int(st.get("n_pos_beyond", 0) or 0), n["pos"], "the EKF's", c.acf1)
+        if c.acf1 is not None
+        else None
+    )
     if tails:
         c.add(tails, "nis")
-    if model is not None and c.acf1 is None:   # not an EKF: its own figures cannot see the model
+    if model is not None and c.acf1 is None:  # not an EKF: its own figures cannot see the model
         for text in model.warnings():
             c.add(text, "nis")
-    if model is not None:   # no method's own figures can see it
+    if model is not None:  # no method's own figures can see it
         for text in model.rest:
             c.add(text, "nis")
     if c.fix_ratio is not None and c.fix_ratio > FIX_RATIO_MAX:
-        c.add(f"its positions are as far from the GNSS fixes as an independent estimate no better "
-                          f"than them would be (RMS normalised residual {c.fix_ratio:.2f} > {FIX_RATIO_MAX:.2f}): it "
-                          f"does no better than the raw fixes it is fed", "fixes")
-    if prmse_m is not None and gnss_prmse_m is not None and prmse_m > (1.0 + WORSE_MARGIN) * gnss_prmse_m:
-        c.add(f"PRMSE {prmse_m:.2f} m at the {n_fixes} raw fix epochs is worse than the raw fixes' "
-              f"{gnss_prmse_m:.2f} m at the same epochs (against the truth)", "fixes")
+        c.add(
+            f"its positions are as far from the GNSS fixes as an independent estimate no better "
+            f"than them would be (RMS normalised residual {c.fix_ratio:.2f} > {FIX_RATIO_MAX:.2f}): it "
+            f"does no better than the raw fixes it is fed",
+            "fixes",
+        )
+    if (
+        prmse_m is not None
+        and gnss_prmse_m is not None
+        and prmse_m > (1.0 + WORSE_MARGIN) * gnss_prmse_m
+    ):
+        c.add(
+            f"PRMSE {prmse_m:.2f} m at the {n_fixes} raw fix epochs is worse than the raw fixes' "
+            f"{gnss_prmse_m:.2f} m at the same epochs (against the truth)",
+            "fixes",
+        )
     elif prmse_m is not None and gnss_prmse_m is not None and prmse_m >= gnss_prmse_m:
-        c.add(f"PRMSE {prmse_m:.2f} m at the {n_fixes} raw fix epochs is no better than the raw fixes' "
-              f"{gnss_prmse_m:.2f} m at the same epochs (within {100 * WORSE_MARGIN:.0f} %): it adds nothing over "
-              f"the fixes on this recording", "fixes")
+        c.add(
+            f"PRMSE {prmse_m:.2f} m at the {n_fixes} raw fix epochs is no better than the raw fixes' "
+            f"{gnss_prmse_m:.2f} m at the same epochs (within {100 * WORSE_MARGIN:.0f} %): it adds nothing over "
+            f"the fixes on this recording",
+            "fixes",
+        )
     for text in nees_warnings(errors or {}):
         c.add(text, "nees")
     return c
@@ -368,8 +463,15 @@ def nees_warnings(stats: dict) -> list[str]:
         below = [a for a in n["outside"] if a not in above]
         if not above and not below:
             above, below = (["pooled"], []) if n["value"] > hi else ([], ["pooled"])
-        says = ([f"{', '.join(above)}: errors larger than the stated sigma says"] if above else []) + \
-               ([f"{', '.join(below)}: stated sigma larger than the errors (too cautious)"] if below else [])
-        out.append(f"{what} NEES per dof {n['value']:.1f} against the truth is outside its chi-square band "
-                   f"[{lo:.1f}, {hi:.1f}] (per axis {axes}); {'; '.join(says)}")
+        says = (
+            [f"{', '.join(above)}: errors larger than the stated sigma says"] if above else []
+        ) + (
+            [f"{', '.join(below)}: stated sigma larger than the errors (too cautious)"]
+            if below
+            else []
+        )
+        out.append(
+            f"{what} NEES per dof {n['value']:.1f} against the truth is outside its chi-square band "
+            f"[{lo:.1f}, {hi:.1f}] (per axis {axes}); {'; '.join(says)}"
+        )
     return out

@@ -21,6 +21,7 @@ The solutions keep per-state sigmas, not full covariances: the NEES here is the 
 ``mean((e_i / sigma_i)^2)``, which equals the full NEES per dof for a covariance diagonal in those
 axes (:func:`gnssacc.analysis.metrics.truth_figures`).
 """
+
 from __future__ import annotations
 
 import math
@@ -45,8 +46,15 @@ def summary(x: np.ndarray) -> dict | None:
     x = x[np.isfinite(x)]
     if not len(x):
         return None
-    return {"rmse": float(np.sqrt(np.mean(x**2))), "mean": float(np.mean(x)), "median": float(np.median(x)),
-            "std": float(np.std(x)), "min": float(np.min(x)), "max": float(np.max(x)), "n": int(len(x))}
+    return {
+        "rmse": float(np.sqrt(np.mean(x**2))),
+        "mean": float(np.mean(x)),
+        "median": float(np.median(x)),
+        "std": float(np.std(x)),
+        "min": float(np.min(x)),
+        "max": float(np.max(x)),
+        "n": int(len(x)),
+    }
 
 
 def per_axis(e: np.ndarray, names, unit: float = 1.0) -> dict | None:
@@ -56,8 +64,14 @@ def per_axis(e: np.ndarray, names, unit: float = 1.0) -> dict | None:
     e = e[np.all(np.isfinite(e), axis=1)] * unit
     if not len(e):
         return None
-    return {n: {"rmse": float(np.sqrt(np.mean(e[:, i] ** 2))), "mean": float(np.mean(e[:, i])),
-                "max_abs": float(np.max(np.abs(e[:, i])))} for i, n in enumerate(names)}
+    return {
+        n: {
+            "rmse": float(np.sqrt(np.mean(e[:, i] ** 2))),
+            "mean": float(np.mean(e[:, i])),
+            "max_abs": float(np.max(np.abs(e[:, i]))),
+        }
+        for i, n in enumerate(names)
+    }
 
 
 def horizontal(e_ne: np.ndarray) -> dict | None:
@@ -113,8 +127,15 @@ def nees(e: np.ndarray, s: np.ndarray, names) -> dict | None:
     n_eff = float(np.mean([effective_count(z[:, i]) for i in range(z.shape[1])]))
     value = float(np.mean(z**2))
     band = nees_band(n_eff, z.shape[1])
-    return {"value": value, "band": list(band), "n": int(ok.sum()), "n_eff": n_eff, "per_axis": axes,
-            "outside": outside, "pooled_outside": not band[0] <= value <= band[1]}
+    return {
+        "value": value,
+        "band": list(band),
+        "n": int(ok.sum()),
+        "n_eff": n_eff,
+        "per_axis": axes,
+        "outside": outside,
+        "pooled_outside": not band[0] <= value <= band[1],
+    }
 
 
 def _in_window(t: np.ndarray, window) -> np.ndarray:
@@ -137,7 +158,11 @@ def at_fixes(run: RecordedRun, sol: NavSolution, window=None) -> dict | None:
     p_at = np.column_stack([np.interp(g.t[keep], sol.t, p_sol[:, i]) for i in range(3)])
     p_fix = run.origin.to_ned(g.lat[keep], g.lon[keep], g.h[keep])
     rms = lambda d: float(np.sqrt(np.mean(np.sum(d**2, axis=1))))
-    return {"prmse_m": rms(p_at - p_true[keep]), "gnss_prmse_m": rms(p_fix - p_true[keep]), "n": int(keep.sum())}
+    return {
+        "prmse_m": rms(p_at - p_true[keep]),
+        "gnss_prmse_m": rms(p_fix - p_true[keep]),
+        "n": int(keep.sum()),
+    }
 
 
 def fix_residuals(run: RecordedRun, sol: NavSolution, window=None) -> dict | None:
@@ -152,7 +177,9 @@ def fix_residuals(run: RecordedRun, sol: NavSolution, window=None) -> dict | Non
         return None
     p_sol = run.origin.to_ned(sol.lat, sol.lon, sol.h)
     p_at = np.column_stack([np.interp(g.t[keep], sol.t, p_sol[:, i]) for i in range(3)])
-    return summary(np.linalg.norm(p_at - run.origin.to_ned(g.lat[keep], g.lon[keep], g.h[keep]), axis=1))
+    return summary(
+        np.linalg.norm(p_at - run.origin.to_ned(g.lat[keep], g.lon[keep], g.h[keep]), axis=1)
+    )
 
 
 def error_statistics(run: RecordedRun, sol: NavSolution, window=None) -> dict:
@@ -178,19 +205,25 @@ def error_statistics(run: RecordedRun, sol: NavSolution, window=None) -> dict:
     sig = np.asarray(sol.sigma, float)[keep]
     t = sol.t[keep] - run.t_start
     dp = err[:, 0:3]
-    out = {"position": summary(np.linalg.norm(dp, axis=1)), "horizontal": horizontal(dp[:, :2]),
-           "position_axes": per_axis(dp, AXES_NED), "no_outage": None, "outage": None,
-           "at_fixes": at_fixes(run, sol, window),
-           "velocity": summary(np.linalg.norm(err[:, 3:6], axis=1)), "velocity_axes": per_axis(err[:, 3:6], AXES_NED),
-           "attitude_axes": per_axis(err[:, 6:9], AXES_RPY, math.degrees(1.0)),
-           "nees_position": nees(dp, sig[:, 0:3], AXES_NED), "nees_attitude": nees(err[:, 6:9], sig[:, 6:9], AXES_RPY),
-           "fix_residual": fix_residuals(run, sol, window)}
+    out = {
+        "position": summary(np.linalg.norm(dp, axis=1)),
+        "horizontal": horizontal(dp[:, :2]),
+        "position_axes": per_axis(dp, AXES_NED),
+        "no_outage": None,
+        "outage": None,
+        "at_fixes": at_fixes(run, sol, window),
+        "velocity": summary(np.linalg.norm(err[:, 3:6], axis=1)),
+        "velocity_axes": per_axis(err[:, 3:6], AXES_NED),
+        "attitude_axes": per_axis(err[:, 6:9], AXES_RPY, math.degrees(1.0)),
+        "nees_position": nees(dp, sig[:, 0:3], AXES_NED),
+        "nees_attitude": nees(err[:, 6:9], sig[:, 6:9], AXES_RPY),
+        "fix_residual": fix_residuals(run, sol, window),
+    }
     if run.outages:
         inside = in_spans(t, run.outages)
         rms = lambda d: summary(np.linalg.norm(d, axis=1))
         out["outage"], out["no_outage"] = rms(dp[inside]), rms(dp[~inside])
     return out
-
 
 
 def fix_statistics(run: RecordedRun, window=None) -> dict:
@@ -207,5 +240,8 @@ def fix_statistics(run: RecordedRun, window=None) -> dict:
     err = (run.origin.to_ned(g.lat, g.lon, g.h) - p_true)[valid]
     if not len(err):
         return {}
-    return {"position": summary(np.linalg.norm(err, axis=1)), "horizontal": horizontal(err[:, :2]),
-            "position_axes": per_axis(err, AXES_NED)}
+    return {
+        "position": summary(np.linalg.norm(err, axis=1)),
+        "horizontal": horizontal(err[:, :2]),
+        "position_axes": per_axis(err, AXES_NED),
+    }

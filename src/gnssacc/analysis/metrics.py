@@ -1,5 +1,6 @@
 """Scoring against truth: PRMSE (paper eq. rmse), horizontal RMSE, outage-only PRMSE, and the
 truth figures of attitude, biases and consistency (:func:`truth_figures`)."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -12,10 +13,17 @@ from ..core.solution import NavSolution
 from ..sources.gnss_noise import in_spans
 
 #: Baseline of each aided method, for the improvement column.
-BASELINES = {"ekf-acc": "ekf", "ekf-accw": "ekf", "smoother-acc": "smoother", "smoother-acc-online": "smoother-online",
-             "smoother-accw": "smoother", "smoother-accw-online": "smoother-online",
-             "ekf-gm": "ekf", "smoother-gm": "smoother", "smoother-gm-online": "smoother-online"}
-
+BASELINES = {
+    "ekf-acc": "ekf",
+    "ekf-accw": "ekf",
+    "smoother-acc": "smoother",
+    "smoother-acc-online": "smoother-online",
+    "smoother-accw": "smoother",
+    "smoother-accw-online": "smoother-online",
+    "ekf-gm": "ekf",
+    "smoother-gm": "smoother",
+    "smoother-gm-online": "smoother-online",
+}
 
 
 @dataclass
@@ -90,7 +98,7 @@ def state_errors(run: RecordedRun, sol: NavSolution) -> np.ndarray:
         err[~inside, :9] = np.nan
     bias = run.sim.bias if run.sim is not None else None
     if bias is not None and len(bias) == len(run.imu.t):
-        b_a, b_g = bias.at(t, run.imu.t)   # drawn again, at these epochs only
+        b_a, b_g = bias.at(t, run.imu.t)  # drawn again, at these epochs only
         err[:, 9:12], err[:, 12:15] = sol.b_a - b_a, sol.b_g - b_g
     return err
 
@@ -132,16 +140,29 @@ def score(run: RecordedRun, sol: NavSolution, window: tuple | None = None) -> Sc
     if run.truth.rpy is not None:
         tr = run.truth
         m = _in_window(sol.t, window)
-        d = np.column_stack([wrap_angle(sol.rpy[m, i] - np.interp(sol.t[m], tr.t, np.unwrap(tr.rpy[:, i])))
-                             for i in range(3)])
+        d = np.column_stack(
+            [
+                wrap_angle(sol.rpy[m, i] - np.interp(sol.t[m], tr.t, np.unwrap(tr.rpy[:, i])))
+                for i in range(3)
+            ]
+        )
         rpy = np.degrees(np.sqrt(np.mean(d**2, axis=0))).tolist()
-    return Score(_rms(err), _rms(err[:, :2]), prmse_out, len(err), rpy, truth_figures(run, sol, window))
+    return Score(
+        _rms(err), _rms(err[:, :2]), prmse_out, len(err), rpy, truth_figures(run, sol, window)
+    )
 
 
 #: The figures of :func:`truth_figures`, in the order of ``summary.csv``.
-TRUTH_FIGURES = ("tilt_rms_deg", "yaw_rms_deg", "bias_a_rms_mg", "bias_g_rms_deg_h", "nees_pos", "nees_att")
-_MG = 9.80665e-3                     # m/s^2 per milli-g
-_DEG_H = np.pi / 180.0 / 3600.0      # rad/s per deg/h
+TRUTH_FIGURES = (
+    "tilt_rms_deg",
+    "yaw_rms_deg",
+    "bias_a_rms_mg",
+    "bias_g_rms_deg_h",
+    "nees_pos",
+    "nees_att",
+)
+_MG = 9.80665e-3  # m/s^2 per milli-g
+_DEG_H = np.pi / 180.0 / 3600.0  # rad/s per deg/h
 
 
 def truth_figures(run: RecordedRun, sol: NavSolution, window: tuple | None = None) -> dict:
@@ -166,10 +187,14 @@ def truth_figures(run: RecordedRun, sol: NavSolution, window: tuple | None = Non
     err = state_errors(run, sol)[keep] if run.truth is not None else np.full((0, 15), np.nan)
     sig = np.asarray(sol.sigma, float)[keep] if len(err) else np.zeros((0, 15))
     deg = np.degrees(1.0)
-    return {"tilt_rms_deg": _rms_rows(err[:, 6:8], deg), "yaw_rms_deg": _rms_rows(err[:, 8:9], deg),
-            "bias_a_rms_mg": _rms_rows(err[:, 9:12], 1.0 / _MG),
-            "bias_g_rms_deg_h": _rms_rows(err[:, 12:15], 1.0 / _DEG_H),
-            "nees_pos": _nees(err[:, 0:3], sig[:, 0:3]), "nees_att": _nees(err[:, 6:9], sig[:, 6:9])}
+    return {
+        "tilt_rms_deg": _rms_rows(err[:, 6:8], deg),
+        "yaw_rms_deg": _rms_rows(err[:, 8:9], deg),
+        "bias_a_rms_mg": _rms_rows(err[:, 9:12], 1.0 / _MG),
+        "bias_g_rms_deg_h": _rms_rows(err[:, 12:15], 1.0 / _DEG_H),
+        "nees_pos": _nees(err[:, 0:3], sig[:, 0:3]),
+        "nees_att": _nees(err[:, 6:9], sig[:, 6:9]),
+    }
 
 
 def _rms_rows(e: np.ndarray, unit: float) -> float | None:

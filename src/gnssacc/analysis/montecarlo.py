@@ -12,6 +12,7 @@ randomisation test; see Good, *Permutation, Parametric and Bootstrap Tests of Hy
 2005, ch. 3). Exact for n <= 20 seeds, 200,000 random sign patterns above that. It assumes no
 normality, which PRMSE differences over a handful of seeds rarely justify.
 """
+
 from __future__ import annotations
 
 from collections import Counter
@@ -99,28 +100,60 @@ def summarise(results: dict) -> dict:
     table = {}
     for m in methods:
         v = np.array([results[s][m][0] for s in seeds], float)
-        o = np.array([np.nan if results[s][m][1] is None else results[s][m][1] for s in seeds], float)
-        row = {"n": len(v), "mean": float(np.mean(v)), "std": float(np.std(v, ddof=1)) if len(v) > 1 else 0.0,
-               "min": float(np.min(v)), "max": float(np.max(v)),
-               "outage_mean": None if np.all(np.isnan(o)) else float(np.nanmean(o))}
+        o = np.array(
+            [np.nan if results[s][m][1] is None else results[s][m][1] for s in seeds], float
+        )
+        row = {
+            "n": len(v),
+            "mean": float(np.mean(v)),
+            "std": float(np.std(v, ddof=1)) if len(v) > 1 else 0.0,
+            "min": float(np.min(v)),
+            "max": float(np.max(v)),
+            "outage_mean": None if np.all(np.isnan(o)) else float(np.nanmean(o)),
+        }
         base = BASELINES.get(m)
         if base in methods:
             b = np.array([results[s][base][0] for s in seeds], float)
             diff = b - v
-            row.update({"baseline": base, "improvement_pct_mean": float(np.mean(100 * diff / b)),
-                        "helped": int(np.sum(diff > 0)), "p_value": paired_permutation_pvalue(diff)})
+            row.update(
+                {
+                    "baseline": base,
+                    "improvement_pct_mean": float(np.mean(100 * diff / b)),
+                    "helped": int(np.sum(diff > 0)),
+                    "p_value": paired_permutation_pvalue(diff),
+                }
+            )
         table[m] = row
     return table
 
 
 def format_summary(table: dict, title: str) -> str:
     """The paper-style table: baseline, with acc, improvement %, spread and significance."""
-    head = ["method", "PRMSE mean [m]", "std", "min", "max", "outage PRMSE", "acc gain [%]", "helped", "p (paired)"]
+    head = [
+        "method",
+        "PRMSE mean [m]",
+        "std",
+        "min",
+        "max",
+        "outage PRMSE",
+        "acc gain [%]",
+        "helped",
+        "p (paired)",
+    ]
     rows = []
     for m, r in table.items():
         acc = "improvement_pct_mean" in r
-        rows.append([m, f"{r['mean']:.3f}", f"{r['std']:.3f}", f"{r['min']:.3f}", f"{r['max']:.3f}",
-                     "-" if r["outage_mean"] is None else f"{r['outage_mean']:.2f}",
-                     f"{r['improvement_pct_mean']:+.2f}" if acc else "-",
-                     f"{r['helped']}/{r['n']}" if acc else "-", f"{r['p_value']:.3f}" if acc else "-"])
+        rows.append(
+            [
+                m,
+                f"{r['mean']:.3f}",
+                f"{r['std']:.3f}",
+                f"{r['min']:.3f}",
+                f"{r['max']:.3f}",
+                "-" if r["outage_mean"] is None else f"{r['outage_mean']:.2f}",
+                f"{r['improvement_pct_mean']:+.2f}" if acc else "-",
+                f"{r['helped']}/{r['n']}" if acc else "-",
+                f"{r['p_value']:.3f}" if acc else "-",
+            ]
+        )
     return "\n".join([title] + text_table(head, rows))

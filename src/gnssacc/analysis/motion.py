@@ -35,6 +35,7 @@ a 0.3 deg/s consumer sensor, and 0.25 m/s^2 is well above the gravity leak of a 
 error (0.09 m/s^2) plus a 5 mg accelerometer bias; the rates and accelerations are averaged over
 ``smooth_s``, many periods of engine vibration.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -51,10 +52,21 @@ from ..prepare.stationary import StationaryReport, detect_stationary
 LABELS = ("stationary", "straight", "accelerating", "turning")
 STATIONARY, STRAIGHT, ACCELERATING, TURNING = range(4)
 #: Plot colours per label (for :func:`shade`).
-COLOURS = {"stationary": "0.75", "straight": "tab:green", "accelerating": "tab:orange", "turning": "tab:purple"}
+COLOURS = {
+    "stationary": "0.75",
+    "straight": "tab:green",
+    "accelerating": "tab:orange",
+    "turning": "tab:purple",
+}
 
 #: Simulator segment kind -> label (``gnssacc.sources.sim.Scenario``).
-SEGMENT_LABELS = {"hold": STATIONARY, "cruise": STRAIGHT, "hill": STRAIGHT, "speed": ACCELERATING, "turn": TURNING}
+SEGMENT_LABELS = {
+    "hold": STATIONARY,
+    "cruise": STRAIGHT,
+    "hill": STRAIGHT,
+    "speed": ACCELERATING,
+    "turn": TURNING,
+}
 
 
 @dataclass(frozen=True)
@@ -113,7 +125,9 @@ class MotionContext:
 
     def at(self, t: np.ndarray) -> np.ndarray:
         """Label codes at times ``t`` [s] (the label of the latest epoch at or before each time)."""
-        i = np.clip(np.searchsorted(self.t, np.asarray(t, float), side="right") - 1, 0, len(self.t) - 1)
+        i = np.clip(
+            np.searchsorted(self.t, np.asarray(t, float), side="right") - 1, 0, len(self.t) - 1
+        )
         return self.label[i]
 
     def fractions(self) -> dict[str, float]:
@@ -135,8 +149,13 @@ def _moving_average(x: np.ndarray, n: int) -> np.ndarray:
     return num / (den[:, None] if x.ndim > 1 else den)
 
 
-def classify_motion(run: RecordedRun, sol: NavSolution, thresholds: MotionThresholds | None = None,
-                    t: np.ndarray | None = None, stationary: StationaryReport | None = None) -> MotionContext:
+def classify_motion(
+    run: RecordedRun,
+    sol: NavSolution,
+    thresholds: MotionThresholds | None = None,
+    t: np.ndarray | None = None,
+    stationary: StationaryReport | None = None,
+) -> MotionContext:
     """Classify the motion of a run from its IMU and an estimated navigation solution.
 
     Parameters
@@ -235,7 +254,9 @@ def label_spans(t: np.ndarray, label: np.ndarray) -> list[tuple[float, float, st
     return [(float(t[a]), float(t[b]), LABELS[int(label[a])]) for a, b in zip(starts, ends)]
 
 
-def shade(ax, spans: list[tuple[float, float, str]], t_ref: float = 0.0, alpha: float = 0.15) -> list:
+def shade(
+    ax, spans: list[tuple[float, float, str]], t_ref: float = 0.0, alpha: float = 0.15
+) -> list:
     """Shade a matplotlib axis with motion spans (times relative to ``t_ref``).
 
     Returns one legend handle per label (``ax.legend(handles=...)``)."""

@@ -50,6 +50,7 @@ Kalman filtering", IEEE Trans. Aerospace and Electronic Systems, AES-19(2):269-2
 The Gramian itself: A. H. Jazwinski, *Stochastic Processes and Filtering Theory*, 1970 (the
 information matrix of a linear system, Ch. 7).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -58,7 +59,11 @@ import numpy as np
 
 from ..checks.quality import QualityReport
 from ..core.config import RunConfig
-from ..core.display import DISPLAY_SCALE, DISPLAY_UNITS, STATE_NAMES  # noqa: F401 (part of this module's API)
+from ..core.display import (  # noqa: F401 (part of this module's API)
+    DISPLAY_SCALE,
+    DISPLAY_UNITS,
+    STATE_NAMES,
+)
 from ..core.recording import RecordedRun
 from ..core.rotations import dcm_to_euler, euler_error_jacobian
 from ..core.solution import NavSolution
@@ -79,6 +84,7 @@ def state_index(name: str) -> int:
 # ---------------------------------------------------------------------------------------------
 # 1. Uncertainty histories and actual errors
 # ---------------------------------------------------------------------------------------------
+
 
 @dataclass
 class SigmaHistory:
@@ -152,10 +158,19 @@ class Consistency:
         """One dict per state with truth (for a table)."""
         k = DISPLAY_SCALE if display_units else np.ones(15)
         units = DISPLAY_UNITS if display_units else STATE_UNITS
-        return [{"state": STATE_NAMES[i], "unit": units[i], "rms_error": self.rms_error[i] * k[i],
-                 "rms_sigma": self.rms_sigma[i] * k[i], "within_1sigma": self.within_1sigma[i],
-                 "within_3sigma": self.within_3sigma[i], "nees": self.nees[i]}
-                for i in range(15) if self.n[i] > 0]
+        return [
+            {
+                "state": STATE_NAMES[i],
+                "unit": units[i],
+                "rms_error": self.rms_error[i] * k[i],
+                "rms_sigma": self.rms_sigma[i] * k[i],
+                "within_1sigma": self.within_1sigma[i],
+                "within_3sigma": self.within_3sigma[i],
+                "nees": self.nees[i],
+            }
+            for i in range(15)
+            if self.n[i] > 0
+        ]
 
 
 def consistency(run: RecordedRun, sol: NavSolution, t_min: float | None = None) -> Consistency:
@@ -190,6 +205,7 @@ def consistency(run: RecordedRun, sol: NavSolution, t_min: float | None = None) 
 # ---------------------------------------------------------------------------------------------
 # 2. Replay of the EKF with its own matrices
 # ---------------------------------------------------------------------------------------------
+
 
 @dataclass
 class GnssEpoch:
@@ -297,9 +313,15 @@ class EpochCollector(EkfObserver):
 
     def before(self, t, kind, s, prop):
         if kind == "gnss":
-            self._cur = {"t": float(t), "P_minus": s.P.copy(), "J": euler_error_jacobian(*_rpy(s.R_nb)),
-                         "Phi": prop.Phi.copy() if self.with_phi else None, "H_a": None, "R_a": None,
-                         "acc_used": False}
+            self._cur = {
+                "t": float(t),
+                "P_minus": s.P.copy(),
+                "J": euler_error_jacobian(*_rpy(s.R_nb)),
+                "Phi": prop.Phi.copy() if self.with_phi else None,
+                "H_a": None,
+                "R_a": None,
+                "acc_used": False,
+            }
 
     def update(self, t, m, nis, used, s):
         if m.kind == "pos":
@@ -309,20 +331,47 @@ class EpochCollector(EkfObserver):
 
     def replay(self, method: str, sol) -> EkfReplay:
         """The :class:`EkfReplay` of the pass this collector watched (``sol``: its solution)."""
-        return EkfReplay(method, self.epochs, self.P0, euler_error_jacobian(*self.init.rpy), float(self.init.t),
-                         {"accel_window_resets": sol.stats["accel_window_resets"]})
+        return EkfReplay(
+            method,
+            self.epochs,
+            self.P0,
+            euler_error_jacobian(*self.init.rpy),
+            float(self.init.t),
+            {"accel_window_resets": sol.stats["accel_window_resets"]},
+        )
 
     def after(self, t, kind, s, prop):
         if kind == "gnss":
             c = self._cur
-            self.epochs.append(GnssEpoch(c["t"], c["P_minus"], s.P.copy(), c["H_p"], c["R_p"], c["H_a"], c["R_a"],
-                                         c["J"], c["Phi"], c["pos_used"], c["acc_used"]))
+            self.epochs.append(
+                GnssEpoch(
+                    c["t"],
+                    c["P_minus"],
+                    s.P.copy(),
+                    c["H_p"],
+                    c["R_p"],
+                    c["H_a"],
+                    c["R_a"],
+                    c["J"],
+                    c["Phi"],
+                    c["pos_used"],
+                    c["acc_used"],
+                )
+            )
             prop.reset_phi()
 
 
-def replay_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, with_phi: bool = False,
-               quality: QualityReport | None = None, t_end: float | None = None, init=None,
-               stationary=None) -> EkfReplay:
+def replay_ekf(
+    run: RecordedRun,
+    cfg: RunConfig,
+    method: str = "ekf",
+    *,
+    with_phi: bool = False,
+    quality: QualityReport | None = None,
+    t_end: float | None = None,
+    init=None,
+    stationary=None,
+) -> EkfReplay:
     """Run :func:`gnssacc.estimators.ekf.run_ekf` once and keep its matrices at every GNSS epoch.
 
     This is the filter's own pass (an :class:`gnssacc.estimators.ekf.EkfObserver` watches it), so the
@@ -353,8 +402,17 @@ def replay_ekf(run: RecordedRun, cfg: RunConfig, method: str = "ekf", *, with_ph
     if method not in ("ekf", "ekf-acc"):
         raise ValueError(f"replay_ekf replays 'ekf' or 'ekf-acc', not {method!r}")
     c = EpochCollector(with_phi)
-    sol = run_ekf(run, cfg, method, output_times=np.zeros(0), quality=quality, init=init, stationary=stationary,
-                  observer=c, t_stop=t_end)
+    sol = run_ekf(
+        run,
+        cfg,
+        method,
+        output_times=np.zeros(0),
+        quality=quality,
+        init=init,
+        stationary=stationary,
+        observer=c,
+        t_stop=t_end,
+    )
     return c.replay(method, sol)
 
 
@@ -365,6 +423,7 @@ def _rpy(R: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 # Information contributed by each aiding
 # ---------------------------------------------------------------------------------------------
+
 
 @dataclass
 class AidingInformation:
@@ -410,19 +469,30 @@ class AidingInformation:
 
     def cumulative(self) -> dict[str, np.ndarray]:
         """Accumulated variance drops ``{"pos": (n, 15), "pos_acc": (n, 15)}``."""
-        return {"pos": np.cumsum(self.drop_pos, axis=0), "pos_acc": np.cumsum(self.drop_pos_acc, axis=0)}
+        return {
+            "pos": np.cumsum(self.drop_pos, axis=0),
+            "pos_acc": np.cumsum(self.drop_pos_acc, axis=0),
+        }
 
     def relative(self) -> dict[str, np.ndarray]:
         """Fraction of the predicted variance removed per epoch, ``{"pos": ..., "pos_acc": ...}`` (n, 15)."""
         with np.errstate(invalid="ignore", divide="ignore"):
-            return {"pos": 1.0 - self.var_pos / self.var_prior, "pos_acc": 1.0 - self.var_pos_acc / self.var_prior}
+            return {
+                "pos": 1.0 - self.var_pos / self.var_prior,
+                "pos_acc": 1.0 - self.var_pos_acc / self.var_prior,
+            }
 
     def summary(self) -> dict[str, dict[str, float]]:
         """Per state: mean fraction of the predicted variance removed by each aiding (epochs with acceleration)."""
         rel = self.relative()
         m = self.has_acc
-        return {n: {"pos": float(np.nanmean(rel["pos"][m, i])), "pos_acc": float(np.nanmean(rel["pos_acc"][m, i]))}
-                for i, n in enumerate(STATE_NAMES)}
+        return {
+            n: {
+                "pos": float(np.nanmean(rel["pos"][m, i])),
+                "pos_acc": float(np.nanmean(rel["pos_acc"][m, i])),
+            }
+            for i, n in enumerate(STATE_NAMES)
+        }
 
 
 def aiding_information(replay: EkfReplay) -> AidingInformation:
@@ -450,6 +520,7 @@ def aiding_information(replay: EkfReplay) -> AidingInformation:
 # ---------------------------------------------------------------------------------------------
 # 3. Observability Gramian
 # ---------------------------------------------------------------------------------------------
+
 
 @dataclass
 class Gramian:
@@ -504,8 +575,13 @@ class Gramian:
         for j in range(n):
             v = self.eigvecs[:, j]
             idx = np.argsort(-np.abs(v))[:top]
-            out.append({"eigval": float(self.eigvals[j]), "P_bar_eig": float(1.0 / (1.0 + max(self.eigvals[j], 0.0))),
-                        "components": {STATE_NAMES[i]: float(v[i]) for i in idx}})
+            out.append(
+                {
+                    "eigval": float(self.eigvals[j]),
+                    "P_bar_eig": float(1.0 / (1.0 + max(self.eigvals[j], 0.0))),
+                    "components": {STATE_NAMES[i]: float(v[i]) for i in idx},
+                }
+            )
         return out
 
     def information(self, direction: np.ndarray) -> float:
@@ -531,7 +607,9 @@ def prior_scale(replay: EkfReplay) -> np.ndarray:
     return np.sqrt(_euler_var(replay.P0, replay.J0))
 
 
-def gramian(replay: EkfReplay, t0: float, t1: float, aiding: str = "pos", scale: np.ndarray | None = None) -> Gramian:
+def gramian(
+    replay: EkfReplay, t0: float, t1: float, aiding: str = "pos", scale: np.ndarray | None = None
+) -> Gramian:
     """Observability Gramian over the GNSS epochs in ``[t0, t1]`` (see the module docstring).
 
     Parameters
@@ -552,7 +630,9 @@ def gramian(replay: EkfReplay, t0: float, t1: float, aiding: str = "pos", scale:
     if not eps:
         raise ValueError(f"no GNSS epoch in [{t0}, {t1}]")
     if eps[0].Phi is None:
-        raise ValueError("the replay has no transition matrices: use replay_ekf(..., with_phi=True)")
+        raise ValueError(
+            "the replay has no transition matrices: use replay_ekf(..., with_phi=True)"
+        )
     # Reference: the state just before the first epoch's update, attitude as Euler errors there.
     T0 = _euler_T(eps[0].J)
     W = np.zeros((15, 15))
@@ -574,7 +654,9 @@ def gramian(replay: EkfReplay, t0: float, t1: float, aiding: str = "pos", scale:
     W_bar = S[:, None] * W * S[None, :]
     lam, V = np.linalg.eigh(W_bar)
     degree = 1.0 - np.diag(np.linalg.inv(np.eye(15) + W_bar))
-    return Gramian(eps[0].t, eps[-1].t, aiding, W, S, W_bar, lam, V, np.clip(degree, 0.0, 1.0), n_pos, n_acc)
+    return Gramian(
+        eps[0].t, eps[-1].t, aiding, W, S, W_bar, lam, V, np.clip(degree, 0.0, 1.0), n_pos, n_acc
+    )
 
 
 @dataclass
@@ -604,8 +686,13 @@ class SlidingGramian:
         return self.degree[:, state_index(name)]
 
 
-def sliding_gramian(replay: EkfReplay, window_s: float, step_s: float | None = None, aiding: str = "pos",
-                    scale: np.ndarray | None = None) -> SlidingGramian:
+def sliding_gramian(
+    replay: EkfReplay,
+    window_s: float,
+    step_s: float | None = None,
+    aiding: str = "pos",
+    scale: np.ndarray | None = None,
+) -> SlidingGramian:
     """:func:`gramian` over windows of ``window_s`` seconds every ``step_s`` (default ``window_s / 2``)."""
     t = replay.t
     step = window_s / 2.0 if step_s is None else step_s
@@ -617,5 +704,11 @@ def sliding_gramian(replay: EkfReplay, window_s: float, step_s: float | None = N
         deg.append(g.degree)
         mins.append(g.eigvals[0])
         weak.append(int(np.sum(g.eigvals < 1.0)))
-    return SlidingGramian(aiding, float(window_s), np.array(cen), np.array(deg).reshape(-1, 15), np.array(mins),
-                          np.array(weak, int))
+    return SlidingGramian(
+        aiding,
+        float(window_s),
+        np.array(cen),
+        np.array(deg).reshape(-1, 15),
+        np.array(mins),
+        np.array(weak, int),
+    )

@@ -18,6 +18,7 @@ Works on plain rows (``csv.DictReader``), no pandas needed::
     print(study.format_effects(eff))
     print(study.verdict(eff))
 """
+
 from __future__ import annotations
 
 import csv
@@ -34,8 +35,16 @@ from .montecarlo import paired_permutation_pvalue
 #: The settings that make a cell of the grid.
 CELL_KEYS = ("noise", "imu", "scenario", "gnss_hz", "outages")
 #: The figures compared (errors: smaller is better; ``nees_*``: 1 is consistent).
-FIGURES = ("prmse_m", "prmse_outage_m", "tilt_rms_deg", "yaw_rms_deg", "bias_a_rms_mg", "bias_g_rms_deg_h",
-           "nees_pos", "nees_att")
+FIGURES = (
+    "prmse_m",
+    "prmse_outage_m",
+    "tilt_rms_deg",
+    "yaw_rms_deg",
+    "bias_a_rms_mg",
+    "bias_g_rms_deg_h",
+    "nees_pos",
+    "nees_att",
+)
 #: The error figures, for :func:`verdict`.
 ERRORS = FIGURES[:6]
 
@@ -70,7 +79,9 @@ def read_rows(*paths) -> list[dict]:
     return list(out.values())
 
 
-def bootstrap_ci(d: np.ndarray, n_boot: int = 10_000, level: float = 0.95, seed: int = 0) -> tuple[float, float]:
+def bootstrap_ci(
+    d: np.ndarray, n_boot: int = 10_000, level: float = 0.95, seed: int = 0
+) -> tuple[float, float]:
     """Percentile-bootstrap interval of the mean of ``d`` (resampling its entries with replacement)."""
     d = np.asarray(d, float)
     rng = np.random.default_rng(seed)
@@ -135,7 +146,9 @@ def effects(rows: list[dict], figures=FIGURES, n_boot: int = 10_000) -> list[Eff
     table: dict = {}
     for r in rows:
         if r.get("status", "ok") == "ok":
-            table.setdefault(tuple(r[k] for k in CELL_KEYS), {}).setdefault(r["method"], {})[r["seed"]] = r
+            table.setdefault(tuple(r[k] for k in CELL_KEYS), {}).setdefault(r["method"], {})[
+                r["seed"]
+            ] = r
     out = []
     for cell, by_method in table.items():
         for variant, runs in by_method.items():
@@ -149,17 +162,29 @@ def effects(rows: list[dict], figures=FIGURES, n_boot: int = 10_000) -> list[Eff
                 e = paired_effect(b, v, n_boot)
                 if e is not None:
                     ok = np.isfinite(b) & np.isfinite(v) & (b > 0)
-                    out.append(Effect(cell, variant, base, fig, e[0], float(b[ok].mean()), float(v[ok].mean()),
-                                      *e[1:]))
+                    out.append(
+                        Effect(
+                            cell,
+                            variant,
+                            base,
+                            fig,
+                            e[0],
+                            float(b[ok].mean()),
+                            float(v[ok].mean()),
+                            *e[1:],
+                        )
+                    )
     return out
 
 
 def format_effects(eff: list[Effect], figures=FIGURES) -> str:
     """A text table: per cell and variant, each error figure's ``mean% [low, high] p`` and each
     NEES as ``baseline mean > variant mean`` (its distance from 1 matters, not its size)."""
-    lines = [" | ".join(CELL_KEYS) + " | variant (n seeds) | " + " | ".join(figures),
-             "(errors: mean paired difference to the baseline [%], 95 % bootstrap CI, sign-flip p; "
-             "NEES per dof: baseline > variant means)"]
+    lines = [
+        " | ".join(CELL_KEYS) + " | variant (n seeds) | " + " | ".join(figures),
+        "(errors: mean paired difference to the baseline [%], 95 % bootstrap CI, sign-flip p; "
+        "NEES per dof: baseline > variant means)",
+    ]
     rows: dict = {}
     for e in eff:
         rows.setdefault((e.cell, e.variant, e.n), {})[e.figure] = e
@@ -175,7 +200,9 @@ def _cell(e: Effect) -> str:
     return f"{e.mean_pct:+.1f} [{e.ci_low:+.1f},{e.ci_high:+.1f}] p={e.p:.3f}"
 
 
-def classify(eff: list[Effect], figure: str = "prmse_m", alpha: float = 0.05) -> dict[str, dict[str, list]]:
+def classify(
+    eff: list[Effect], figure: str = "prmse_m", alpha: float = 0.05
+) -> dict[str, dict[str, list]]:
     """Per variant, its cells on ``figure`` as ``{"helps", "hurts", "same"}``: lists of ``(Effect,
     q)``. Significant means at false-discovery rate ``alpha`` over that variant's cells
     (Benjamini-Hochberg q-value below ``alpha``: a grid of a hundred cells would otherwise show
@@ -188,7 +215,9 @@ def classify(eff: list[Effect], figure: str = "prmse_m", alpha: float = 0.05) ->
         kinds = {"helps": [], "hurts": [], "same": []}
         for e, qe in zip(mine, q):
             sig = qe < alpha
-            kinds["helps" if sig and e.ci_high < 0 else "hurts" if sig and e.ci_low > 0 else "same"].append((e, qe))
+            kinds[
+                "helps" if sig and e.ci_high < 0 else "hurts" if sig and e.ci_low > 0 else "same"
+            ].append((e, qe))
         by[variant] = kinds
     return by
 
@@ -199,11 +228,15 @@ def verdict(eff: list[Effect], figure: str = "prmse_m", alpha: float = 0.05) -> 
     for variant, kinds in classify(eff, figure, alpha).items():
         total = sum(len(v) for v in kinds.values())
         base = next(e.baseline for v in kinds.values() for e, _ in v)
-        lines.append(f"{variant} vs {base} on {figure}: helps in {len(kinds['helps'])}, hurts in "
-                     f"{len(kinds['hurts'])}, no significant change in {len(kinds['same'])} of {total} cells "
-                     f"(false-discovery rate {alpha:g})")
+        lines.append(
+            f"{variant} vs {base} on {figure}: helps in {len(kinds['helps'])}, hurts in "
+            f"{len(kinds['hurts'])}, no significant change in {len(kinds['same'])} of {total} cells "
+            f"(false-discovery rate {alpha:g})"
+        )
         for kind in ("helps", "hurts"):
             for e, qe in kinds[kind]:
-                lines.append(f"  {kind}: {'/'.join(e.cell)}: {e.mean_pct:+.1f} % [{e.ci_low:+.1f}, {e.ci_high:+.1f}] "
-                             f"p={e.p:.4f} q={qe:.4f}")
+                lines.append(
+                    f"  {kind}: {'/'.join(e.cell)}: {e.mean_pct:+.1f} % [{e.ci_low:+.1f}, {e.ci_high:+.1f}] "
+                    f"p={e.p:.4f} q={qe:.4f}"
+                )
     return "\n".join(lines)

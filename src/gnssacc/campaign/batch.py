@@ -13,6 +13,7 @@ missing ones run, and ``summary.csv`` and ``summary.md`` are rewritten (atomical
 arrive. ``gnssacc bench`` is :func:`run_campaign` over one source, writing nothing
 (:func:`bench`).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -36,7 +37,9 @@ from .campaign_summary import SummaryMarkdown, csv_text, task_rows
 from .summary_figures import html_page, write_figures
 
 #: The error line when Dask is needed and missing.
-NEEDS_DASK = 'needs dask.distributed: pip install "gnssacc[cluster]" (or --jobs 1 to run in this process)'
+NEEDS_DASK = (
+    'needs dask.distributed: pip install "gnssacc[cluster]" (or --jobs 1 to run in this process)'
+)
 #: Least time between two rewrites of summary.csv and of summary.md while a campaign runs [s];
 #: each also waits at least 10 times as long as its last rewrite took (so a campaign of thousands
 #: of tasks spends at most a tenth of its time on them). Both are written at the end.
@@ -78,27 +81,53 @@ class _Notary:
     """Makes a task's record with its time and warnings so far."""
 
     spec: TaskSpec
-    t0: float        # time.perf_counter() at the start [s]
-    cpu0: float      # time.process_time() at the start [s]
+    t0: float  # time.perf_counter() at the start [s]
+    cpu0: float  # time.process_time() at the start [s]
     caught: list
 
     def refused(self, exc: InputError) -> dict:
         """The record of a task stopped by bad input (``where`` and ``problem`` kept apart)."""
-        return {**self("failed", error=f"{exc.where}: {exc.problem}", kind="input"), "where": exc.where,
-                "problem": exc.problem}
+        return {
+            **self("failed", error=f"{exc.where}: {exc.problem}", kind="input"),
+            "where": exc.where,
+            "problem": exc.problem,
+        }
 
-    def __call__(self, status: str, *, metrics: dict | None = None, error: str | None = None,
-                 kind: str | None = None, trace: str | None = None) -> dict:
+    def __call__(
+        self,
+        status: str,
+        *,
+        metrics: dict | None = None,
+        error: str | None = None,
+        kind: str | None = None,
+        trace: str | None = None,
+    ) -> dict:
         """The record: ``metrics`` of a computed task, else ``error`` (see :func:`run_task`)."""
         s = self.spec
         texts = [str(w.message) for w in self.caught if issubclass(w.category, DataWarning)]
-        task = {"key": s.key, "source": s.name, "path": s.source, "seed": s.seed, "outages": s.pattern.text,
-                "folder": s.rel, "task_s": time.perf_counter() - self.t0, "warnings": len(texts),
-                "cpu_s": time.process_time() - self.cpu0}
+        task = {
+            "key": s.key,
+            "source": s.name,
+            "path": s.source,
+            "seed": s.seed,
+            "outages": s.pattern.text,
+            "folder": s.rel,
+            "task_s": time.perf_counter() - self.t0,
+            "warnings": len(texts),
+            "cpu_s": time.process_time() - self.cpu0,
+        }
         rows = task_rows(task, metrics, error, s.options["methods"])
-        return {"settings_hash": s.settings_hash, "task": task, "status": status, "error": error, "kind": kind,
-                "rows": rows, "data_warnings": texts, "worker": f"{socket.gethostname()}:{os.getpid()}",
-                "traceback": trace}
+        return {
+            "settings_hash": s.settings_hash,
+            "task": task,
+            "status": status,
+            "error": error,
+            "kind": kind,
+            "rows": rows,
+            "data_warnings": texts,
+            "worker": f"{socket.gethostname()}:{os.getpid()}",
+            "traceback": trace,
+        }
 
 
 def _guarded(spec: TaskSpec, note: _Notary, target: ResultDir | None) -> dict:
@@ -126,15 +155,28 @@ def _compute(spec: TaskSpec, note: _Notary, target: ResultDir | None) -> dict:
             return {TASK_FILE: json.dumps(kept[-1], indent=2) + "\n"}
 
         outputs = o["outputs"]
-        metrics, sols, _, _ = compare_and_write(run, cfg, o["methods"], target, tune=o["tune"],
-                                                plots=outputs["plots"], report=outputs["report"],
-                                                export=tuple(outputs["export"]), extra_files=files)
+        metrics, sols, _, _ = compare_and_write(
+            run,
+            cfg,
+            o["methods"],
+            target,
+            tune=o["tune"],
+            plots=outputs["plots"],
+            report=outputs["report"],
+            export=tuple(outputs["export"]),
+            extra_files=files,
+        )
         if sols:
             return kept[-1]
     if not sols:
-        reasons = "; ".join(f"{r['method']}: {r['error']}" for r in note("failed", metrics=metrics)["rows"]
-                            if r["status"] == "failed")
-        return note("failed", metrics=metrics, error=f"every method failed ({reasons})", kind="error")
+        reasons = "; ".join(
+            f"{r['method']}: {r['error']}"
+            for r in note("failed", metrics=metrics)["rows"]
+            if r["status"] == "failed"
+        )
+        return note(
+            "failed", metrics=metrics, error=f"every method failed ({reasons})", kind="error"
+        )
     return note("ok", metrics=metrics)
 
 
@@ -142,17 +184,30 @@ def _load(spec: TaskSpec):
     """The task's run (with its outages) and configuration, read from the paths."""
     o = spec.options
     if o["config"] and config_identity(o["config"]["path"])["sha256"] != o["config"]["sha256"]:
-        raise InputError(o["config"]["path"], "changed since the campaign started (its settings hash would change)")
+        raise InputError(
+            o["config"]["path"],
+            "changed since the campaign started (its settings hash would change)",
+        )
     source = None if spec.source == "kitti" else spec.source
     cfg = configure(source, preset=o["preset"], config=o["config"]["path"] if o["config"] else None)
-    run = load(source, config=cfg, noise=o["noise"], seed=spec.seed, outage=spec.pattern.outage,
-               outage_every=spec.pattern.outage_every, imu_frame=o["imu_frame"], **o["bag"])
+    run = load(
+        source,
+        config=cfg,
+        noise=o["noise"],
+        seed=spec.seed,
+        outage=spec.pattern.outage,
+        outage_every=spec.pattern.outage_every,
+        imu_frame=o["imu_frame"],
+        **o["bag"],
+    )
     return run, known_noise_config(cfg, run, o["tune"])
 
 
 def failed_record(spec: TaskSpec, error: str, kind: str = "worker") -> dict:
     """The record of a task that never returned (its workers died); written to its folder."""
-    record = _Notary(spec, time.perf_counter(), time.process_time(), [])("failed", error=error, kind=kind)
+    record = _Notary(spec, time.perf_counter(), time.process_time(), [])(
+        "failed", error=error, kind=kind
+    )
     if spec.folder is not None:
         with ResultDir(spec.folder) as target:
             target.replace(lambda folder: write_record(folder, record))
@@ -196,7 +251,9 @@ def open_executor(jobs: int | None, scheduler: str | None):
         from .cluster import DaskExecutor
     except ImportError:
         raise InputError("batch", NEEDS_DASK) from None
-    return DaskExecutor(run_task, failed_record, scheduler=scheduler, workers=None if scheduler else jobs)
+    return DaskExecutor(
+        run_task, failed_record, scheduler=scheduler, workers=None if scheduler else jobs
+    )
 
 
 class Ledger:
@@ -216,7 +273,7 @@ class Ledger:
         self.header = header
         self.records: dict[str, dict] = {}
         self._md = SummaryMarkdown()
-        self._due = {"summary.csv": 0.0, "summary.md": 0.0}   # monotonic time of the next rewrite
+        self._due = {"summary.csv": 0.0, "summary.md": 0.0}  # monotonic time of the next rewrite
 
     def add(self, record: dict) -> None:
         self.records[record["task"]["key"]] = record
@@ -234,8 +291,10 @@ class Ledger:
         if self.root is None:
             return
         figures = self._figures() if final else []
-        for name, every, text in (("summary.csv", SUMMARY_CSV_EVERY_S, lambda: csv_text(self.ordered())),
-                                  ("summary.md", SUMMARY_MD_EVERY_S, lambda: self.markdown(figures))):
+        for name, every, text in (
+            ("summary.csv", SUMMARY_CSV_EVERY_S, lambda: csv_text(self.ordered())),
+            ("summary.md", SUMMARY_MD_EVERY_S, lambda: self.markdown(figures)),
+        ):
             t0 = time.monotonic()
             if final or t0 >= self._due[name]:
                 write_atomic(self.root / name, text())
@@ -265,24 +324,34 @@ def run_tasks(tasks: list[TaskSpec], executor, ledger: Ledger, show: CampaignPro
     rewriting its summaries as results arrive; the final summaries are written even when
     interrupted (Ctrl-C: the tasks still running are discarded)."""
     pending = len(tasks)
-    if not tasks:   # nothing to run: no cluster to start
+    if not tasks:  # nothing to run: no cluster to start
         ledger.write(final=True)
         return
     try:
-        with executor, contextlib.closing(executor.run(tasks)) as records:   # closed (tasks cancelled) first
+        with (
+            executor,
+            contextlib.closing(executor.run(tasks)) as records,
+        ):  # closed (tasks cancelled) first
             show.started(executor.description, min(pending, executor.slots()))
             for record in records:
                 pending -= 1
                 ledger.add(record)
                 ledger.write()
-                show.update(record["task"]["folder"], record["status"] == "ok", record["task"]["task_s"],
-                            running=min(pending, executor.slots()), error=record["error"])
+                show.update(
+                    record["task"]["folder"],
+                    record["status"] == "ok",
+                    record["task"]["task_s"],
+                    running=min(pending, executor.slots()),
+                    error=record["error"],
+                )
     finally:
         show.close()
         ledger.write(final=True)
 
 
-def run_campaign(camp: Campaign, executor, *, retry_failed: bool = False, lines: bool = True) -> Ledger:
+def run_campaign(
+    camp: Campaign, executor, *, retry_failed: bool = False, lines: bool = True
+) -> Ledger:
     """Run what is missing of a campaign (entered by the caller, so locked) on ``executor``.
 
     Parameters
@@ -306,10 +375,12 @@ def run_campaign(camp: Campaign, executor, *, retry_failed: bool = False, lines:
         if record["status"] == "ok" or not retry_failed:
             ledger.add(record)
     todo = [t for t in tasks if t.key not in ledger.records]
-    show = CampaignProgress(len(tasks), done=len(ledger.records), failed=ledger.count("failed"), lines=lines)
+    show = CampaignProgress(
+        len(tasks), done=len(ledger.records), failed=ledger.count("failed"), lines=lines
+    )
     try:
         run_tasks(todo, executor, ledger, show)
-    except BaseException:   # interrupted: also keep the tasks that finished as the executor stopped
+    except BaseException:  # interrupted: also keep the tasks that finished as the executor stopped
         for key, record in camp.finished(tasks).items():
             ledger.records.setdefault(key, record)
         ledger.write(final=True)
@@ -317,10 +388,21 @@ def run_campaign(camp: Campaign, executor, *, retry_failed: bool = False, lines:
     return ledger
 
 
-def bench(source: str | None, methods: list[str], seeds: list[int], *, noise: str = "white",
-          outage: str | None = None, outage_every: str | None = None, preset: str | None = None,
-          config: str | None = None, tune: str | None = None, imu_frame: str = "frd", jobs: int = 1,
-          gnss: str | None = None) -> dict:
+def bench(
+    source: str | None,
+    methods: list[str],
+    seeds: list[int],
+    *,
+    noise: str = "white",
+    outage: str | None = None,
+    outage_every: str | None = None,
+    preset: str | None = None,
+    config: str | None = None,
+    tune: str | None = None,
+    imu_frame: str = "frd",
+    jobs: int = 1,
+    gnss: str | None = None,
+) -> dict:
     """``gnssacc bench``: a campaign of one source and outage pattern that writes nothing
     (``gnss``: a GNSS file replacing the source's fixes; the noise is then not drawn).
 
@@ -338,9 +420,18 @@ def bench(source: str | None, methods: list[str], seeds: list[int], *, noise: st
     from .campaign import Pattern, make_settings, plan
     from .campaign_summary import bench_results
 
-    settings = make_settings([source or "kitti"], methods, seeds, [Pattern(outage, outage_every)],
-                             noise=None if gnss else noise, preset=preset, tune=tune, config=config,
-                             imu_frame=imu_frame, bag={"gnss": gnss} if gnss else None)
+    settings = make_settings(
+        [source or "kitti"],
+        methods,
+        seeds,
+        [Pattern(outage, outage_every)],
+        noise=None if gnss else noise,
+        preset=preset,
+        tune=tune,
+        config=config,
+        imu_frame=imu_frame,
+        bag={"gnss": gnss} if gnss else None,
+    )
     tasks = plan(settings, None)
     ledger = Ledger(tasks)
     run_tasks(tasks, open_executor(jobs, None), ledger, CampaignProgress(len(tasks), lines=False))
@@ -352,7 +443,9 @@ def bench(source: str | None, methods: list[str], seeds: list[int], *, noise: st
         warnings.warn(text, DataWarning, stacklevel=2)
     for r in records:
         if r["status"] != "ok":
-            warnings.warn(f"seed {r['task']['seed']}: failed: {r['error']}", DataWarning, stacklevel=2)
+            warnings.warn(
+                f"seed {r['task']['seed']}: failed: {r['error']}", DataWarning, stacklevel=2
+            )
     results = bench_results(records)
     if not results:
         raise InputError(source or "kitti", "no seed gave a result to compare (see the warnings)")

@@ -24,6 +24,7 @@ The settings are everything that changes a task's numbers or files: sources, met
 outage patterns, noise, preset, tune mode, configuration file content (its SHA-256), IMU frame,
 bag options, outputs, and the gnssacc version.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -44,12 +45,29 @@ CAMPAIGN_FILE = "campaign.json"
 #: A task's record, in its folder.
 TASK_FILE = "batch.json"
 #: Names in the campaign folder that are not recordings.
-RESERVED = {CAMPAIGN_FILE, "summary.csv", "summary.md", "summary.html", "summary_prmse.png", "summary_effects.png"}
+RESERVED = {
+    CAMPAIGN_FILE,
+    "summary.csv",
+    "summary.md",
+    "summary.html",
+    "summary_prmse.png",
+    "summary_effects.png",
+}
 #: Settings that name what ``gnssacc batch`` options set them (for the refusal message).
-OPTION_OF = {"sources": "SOURCE", "methods": "--methods", "seeds": "--seeds", "outages": "--outage/--outage-every",
-             "noise": "--noise", "preset": "--preset", "tune": "--tune", "config": "--config",
-             "imu_frame": "--imu-frame", "bag": "the bag options", "outputs": "--no-plots/--report/--export",
-             "gnssacc": "the gnssacc version"}
+OPTION_OF = {
+    "sources": "SOURCE",
+    "methods": "--methods",
+    "seeds": "--seeds",
+    "outages": "--outage/--outage-every",
+    "noise": "--noise",
+    "preset": "--preset",
+    "tune": "--tune",
+    "config": "--config",
+    "imu_frame": "--imu-frame",
+    "bag": "the bag options",
+    "outputs": "--no-plots/--report/--export",
+    "gnssacc": "the gnssacc version",
+}
 
 
 @dataclass(frozen=True)
@@ -68,14 +86,17 @@ class Pattern:
     @property
     def text(self) -> str:
         """The ``outages`` column of ``summary.csv``: ``none``, ``120:30,300:10`` or ``every 60:20``."""
-        parts = ([self.outage] if self.outage else []) + ([f"every {self.outage_every}"] if self.outage_every else [])
+        parts = ([self.outage] if self.outage else []) + (
+            [f"every {self.outage_every}"] if self.outage_every else []
+        )
         return " + ".join(parts) or "none"
 
     @property
     def label(self) -> str:
         """A folder name for the pattern: ``none``, ``at-120_30-300_10``, ``every-60_20``."""
-        parts = ([f"at-{self.outage}"] if self.outage else []) + ([f"every-{self.outage_every}"]
-                                                                  if self.outage_every else [])
+        parts = ([f"at-{self.outage}"] if self.outage else []) + (
+            [f"every-{self.outage_every}"] if self.outage_every else []
+        )
         return "+".join(parts).replace(":", "_").replace(",", "-") or "none"
 
 
@@ -123,8 +144,15 @@ class TaskSpec:
 
 #: The bag options of a campaign and their defaults (``gnssacc run``'s), all stored, so that a
 #: campaign made through the API (which may give none) resumes from the command line.
-BAG_DEFAULTS = {"imu_topic": None, "gnss_topic": None, "truth_topic": None, "time_source": "header",
-                "gnss_from_truth_hz": None, "odom_topic": None, "gnss": None}
+BAG_DEFAULTS = {
+    "imu_topic": None,
+    "gnss_topic": None,
+    "truth_topic": None,
+    "time_source": "header",
+    "gnss_from_truth_hz": None,
+    "odom_topic": None,
+    "gnss": None,
+}
 
 
 def full_bag(bag: dict | None) -> dict:
@@ -132,10 +160,22 @@ def full_bag(bag: dict | None) -> dict:
     return {**BAG_DEFAULTS, **(bag or {})}
 
 
-def make_settings(sources: list[str], methods: list[str], seeds: list[int], patterns: list[Pattern], *,
-                  noise: str | None = None, preset: str | None = None, tune: str | None = None,
-                  config: str | None = None, imu_frame: str = "frd", bag: dict | None = None,
-                  plots: bool = True, report: bool = False, export: tuple = ()) -> dict:
+def make_settings(
+    sources: list[str],
+    methods: list[str],
+    seeds: list[int],
+    patterns: list[Pattern],
+    *,
+    noise: str | None = None,
+    preset: str | None = None,
+    tune: str | None = None,
+    config: str | None = None,
+    imu_frame: str = "frd",
+    bag: dict | None = None,
+    plots: bool = True,
+    report: bool = False,
+    export: tuple = (),
+) -> dict:
     """The settings of a campaign, as stored in :data:`CAMPAIGN_FILE` (JSON-ready).
 
     Parameters
@@ -161,7 +201,7 @@ def make_settings(sources: list[str], methods: list[str], seeds: list[int], patt
 
     for s in sources:
         if is_sim_spec(s):
-            parse_sim_spec(s)   # a bad spec: one line before the campaign starts
+            parse_sim_spec(s)  # a bad spec: one line before the campaign starts
     paths = [s if s == "kitti" or is_sim_spec(s) else os.path.abspath(s) for s in sources]
     bag = full_bag(bag)
     if bag["gnss"] is not None:
@@ -169,12 +209,20 @@ def make_settings(sources: list[str], methods: list[str], seeds: list[int], patt
     twice = sorted({p for p in paths if paths.count(p) > 1})
     if twice:
         raise InputError(twice[0], "given twice as a source")
-    return {"gnssacc": __version__, "sources": [[n, p] for n, p in zip(recording_names(paths), paths)],
-            "methods": list(methods), "seeds": [int(s) for s in seeds],
-            "outages": [[p.outage, p.outage_every] for p in patterns], "noise": noise, "preset": preset,
-            "tune": tune, "config": config_identity(config) if config else None, "imu_frame": imu_frame,
-            "bag": bag, "outputs": {"plots": bool(plots), "report": bool(report),
-                                                "export": sorted(export)}}
+    return {
+        "gnssacc": __version__,
+        "sources": [[n, p] for n, p in zip(recording_names(paths), paths)],
+        "methods": list(methods),
+        "seeds": [int(s) for s in seeds],
+        "outages": [[p.outage, p.outage_every] for p in patterns],
+        "noise": noise,
+        "preset": preset,
+        "tune": tune,
+        "config": config_identity(config) if config else None,
+        "imu_frame": imu_frame,
+        "bag": bag,
+        "outputs": {"plots": bool(plots), "report": bool(report), "export": sorted(export)},
+    }
 
 
 def config_identity(path: str) -> dict:
@@ -212,13 +260,20 @@ def grown(stored: dict, wanted: dict) -> dict:
     """
     out = dict(wanted)
     out["seeds"] = stored["seeds"] + [s for s in wanted["seeds"] if s not in stored["seeds"]]
-    out["outages"] = stored["outages"] + [p for p in wanted["outages"] if p not in stored["outages"]]
+    out["outages"] = stored["outages"] + [
+        p for p in wanted["outages"] if p not in stored["outages"]
+    ]
     if len(stored["outages"]) == 1 and len(out["outages"]) > 1:
-        raise InputError("--outage", "cannot add an outage pattern to a campaign of one pattern (its task folders "
-                                     "would move under a pattern folder); start a new campaign with --out")
+        raise InputError(
+            "--outage",
+            "cannot add an outage pattern to a campaign of one pattern (its task folders "
+            "would move under a pattern folder); start a new campaign with --out",
+        )
     paths = [p for _, p in stored["sources"]]
     paths += [p for _, p in wanted["sources"] if p not in paths]
-    out["sources"] = [[n, p] for n, p in zip(recording_names(paths), paths)]   # the stored ones keep their names
+    out["sources"] = [
+        [n, p] for n, p in zip(recording_names(paths), paths)
+    ]  # the stored ones keep their names
     return out
 
 
@@ -231,7 +286,13 @@ def recording_names(sources: list[str]) -> list[str]:
 
     names: list[str] = []
     for s in sources:
-        base = "kitti" if s == "kitti" else folder_name(s) if is_sim_spec(s) else (Path(s).name or "recording")
+        base = (
+            "kitti"
+            if s == "kitti"
+            else folder_name(s)
+            if is_sim_spec(s)
+            else (Path(s).name or "recording")
+        )
         base = "_" + base if base.startswith(".") else base
         name, k = base, 2
         while name in names or name in RESERVED:
@@ -246,16 +307,32 @@ def plan(settings: dict, root: Path | None) -> list[TaskSpec]:
     ``root`` is the campaign folder (``None``: tasks that write nothing).
     """
     patterns = [Pattern(*p) for p in settings["outages"]]
-    options = {k: settings[k] for k in ("methods", "noise", "preset", "tune", "config", "imu_frame", "bag",
-                                        "outputs")}
+    options = {
+        k: settings[k]
+        for k in ("methods", "noise", "preset", "tune", "config", "imu_frame", "bag", "outputs")
+    }
     digest = task_hash(settings)
     tasks = []
     for name, source in settings["sources"]:
         for pattern in patterns:
             for seed in settings["seeds"]:
-                rel = Path(name, pattern.label, str(seed)) if len(patterns) > 1 else Path(name, str(seed))
-                tasks.append(TaskSpec(source, name, seed, pattern, str(root) if root else None, rel.as_posix(),
-                                      options, digest))
+                rel = (
+                    Path(name, pattern.label, str(seed))
+                    if len(patterns) > 1
+                    else Path(name, str(seed))
+                )
+                tasks.append(
+                    TaskSpec(
+                        source,
+                        name,
+                        seed,
+                        pattern,
+                        str(root) if root else None,
+                        rel.as_posix(),
+                        options,
+                        digest,
+                    )
+                )
     return tasks
 
 
@@ -293,7 +370,7 @@ class Campaign:
         self.hash = settings_hash(settings)
         self.new = new
         self.lock = FolderLock(self.root)
-        self.added = 0   # tasks added by :meth:`grow`
+        self.added = 0  # tasks added by :meth:`grow`
 
     def grow(self, settings: dict) -> None:
         """Take ``settings`` (:func:`grown`: more seeds, sources or patterns) as the campaign's; written
@@ -320,7 +397,9 @@ class Campaign:
             raise InputError(str(path), f"not a readable campaign file ({exc})") from None
         camp = cls(root, settings)
         if camp.hash != digest:
-            raise InputError(str(path), "its settings do not match their stored hash (edited by hand?)")
+            raise InputError(
+                str(path), "its settings do not match their stored hash (edited by hand?)"
+            )
         return camp
 
     def __enter__(self) -> "Campaign":
@@ -339,16 +418,25 @@ class Campaign:
         """Check that the folder may hold a new campaign, and write :data:`CAMPAIGN_FILE` into it."""
         p = self.root
         if (p / CAMPAIGN_FILE).exists():
-            raise InputError("--out", f"{p} already holds a campaign; finish it with 'gnssacc batch --resume {p}', or "
-                                      f"choose another output folder")
+            raise InputError(
+                "--out",
+                f"{p} already holds a campaign; finish it with 'gnssacc batch --resume {p}', or "
+                f"choose another output folder",
+            )
         if os.path.lexists(p) and (not p.is_dir() or any(p.iterdir())):
-            raise InputError("--out", f"{p} exists and is not an empty folder; choose another output folder")
+            raise InputError(
+                "--out", f"{p} exists and is not an empty folder; choose another output folder"
+            )
         p.mkdir(exist_ok=True)
         self._write_settings()
 
     def _write_settings(self) -> None:
-        doc = {"gnssacc": __version__, "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-               "settings_hash": self.hash, "settings": self.settings}
+        doc = {
+            "gnssacc": __version__,
+            "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "settings_hash": self.hash,
+            "settings": self.settings,
+        }
         write_atomic(self.root / CAMPAIGN_FILE, json.dumps(doc, indent=2) + "\n")
 
     def __exit__(self, *exc) -> None:
@@ -374,12 +462,17 @@ class Campaign:
             record = read_record(Path(t.folder))
             if record is None:
                 continue
-            if record.get("settings_hash") not in (t.settings_hash, self.hash):   # the latter: before task hashes
-                raise InputError(t.folder, f"written with other settings (hash {record.get('settings_hash')}, "
-                                           f"campaign {t.settings_hash}); move it away to resume")
+            if record.get("settings_hash") not in (
+                t.settings_hash,
+                self.hash,
+            ):  # the latter: before task hashes
+                raise InputError(
+                    t.folder,
+                    f"written with other settings (hash {record.get('settings_hash')}, "
+                    f"campaign {t.settings_hash}); move it away to resume",
+                )
             done[t.key] = record
         return done
-
 
     def tidy(self, tasks: list[TaskSpec]) -> None:
         """Delete what killed or interrupted tasks left: partial folders and lock files that no
@@ -412,7 +505,7 @@ def differing_setting(stored: dict, given: dict) -> str | None:
     """The first setting (by its option's name) in which ``given`` differs from ``stored``."""
     for key in OPTION_OF:
         a, b = stored.get(key), given.get(key)
-        if key == "bag":   # campaigns stored before every bag option was kept
+        if key == "bag":  # campaigns stored before every bag option was kept
             a, b = full_bag(a), full_bag(b)
         if a != b:
             return key

@@ -23,6 +23,7 @@ Numbers are written with every digit (Python's shortest round-trip form); empty 
 for each recording and for all recordings together (each (recording, seed) one pair of the
 paired test), then the failed tasks.
 """
+
 from __future__ import annotations
 
 import csv
@@ -33,8 +34,25 @@ from ..analysis.metrics import TRUTH_FIGURES
 from ..analysis.montecarlo import format_summary, summarise
 from ..outputs.report import failed_methods, ok_methods
 
-COLUMNS = ["source", "seed", "outages", "method", "status", "error", "prmse_m", "hrmse_m", "prmse_outage_m", "nis",
-           "improvement_pct", *TRUTH_FIGURES, "runtime_s", "realtime_factor", "task_s", "warnings", "folder"]
+COLUMNS = [
+    "source",
+    "seed",
+    "outages",
+    "method",
+    "status",
+    "error",
+    "prmse_m",
+    "hrmse_m",
+    "prmse_outage_m",
+    "nis",
+    "improvement_pct",
+    *TRUTH_FIGURES,
+    "runtime_s",
+    "realtime_factor",
+    "task_s",
+    "warnings",
+    "folder",
+]
 #: The measured columns (wall times): they differ between two runs of the same campaign.
 TIMING_COLUMNS = ("runtime_s", "realtime_factor", "task_s")
 #: The raw GNSS fixes' row.
@@ -45,7 +63,9 @@ def _num(x) -> float | None:
     return None if x is None else float(x)
 
 
-def task_rows(task: dict, metrics: dict | None, error: str | None = None, methods: list[str] = ()) -> list[dict]:
+def task_rows(
+    task: dict, metrics: dict | None, error: str | None = None, methods: list[str] = ()
+) -> list[dict]:
     """The ``summary.csv`` rows of one task.
 
     Parameters
@@ -64,14 +84,34 @@ def task_rows(task: dict, metrics: dict | None, error: str | None = None, method
     rows = []
     for mid, m in ok_methods(metrics).items():
         nis = (cons.get(mid) or {}).get("nis", {}).get("pos")
-        rows.append({**base, "method": mid, "status": "ok", "prmse_m": _num(m["prmse_m"]),
-                     "hrmse_m": _num(m["hrmse_m"]), "prmse_outage_m": _num(m["prmse_outage_m"]), "nis": _num(nis),
-                     "improvement_pct": _num(m["improvement_pct"]), "runtime_s": _num(m["runtime_s"]),
-                     "realtime_factor": _num(m["realtime_factor"]), **{k: _num(m.get(k)) for k in TRUTH_FIGURES}})
-    rows += [{**base, "method": mid, "status": "failed", "error": reason}
-             for mid, reason in failed_methods(metrics).items()]
-    rows.append({**base, "method": GNSS_ROW, "status": "ok", "prmse_m": _num(metrics.get("gnss_prmse_m")),
-                 "hrmse_m": _num(metrics.get("gnss_hrmse_m"))})
+        rows.append(
+            {
+                **base,
+                "method": mid,
+                "status": "ok",
+                "prmse_m": _num(m["prmse_m"]),
+                "hrmse_m": _num(m["hrmse_m"]),
+                "prmse_outage_m": _num(m["prmse_outage_m"]),
+                "nis": _num(nis),
+                "improvement_pct": _num(m["improvement_pct"]),
+                "runtime_s": _num(m["runtime_s"]),
+                "realtime_factor": _num(m["realtime_factor"]),
+                **{k: _num(m.get(k)) for k in TRUTH_FIGURES},
+            }
+        )
+    rows += [
+        {**base, "method": mid, "status": "failed", "error": reason}
+        for mid, reason in failed_methods(metrics).items()
+    ]
+    rows.append(
+        {
+            **base,
+            "method": GNSS_ROW,
+            "status": "ok",
+            "prmse_m": _num(metrics.get("gnss_prmse_m")),
+            "hrmse_m": _num(metrics.get("gnss_hrmse_m")),
+        }
+    )
     return rows
 
 
@@ -120,9 +160,14 @@ class SummaryMarkdown:
     def text(self, records: list[dict], total: int, header: str = "") -> str:
         """The whole file from the records so far; ``total`` is the number of tasks in the campaign."""
         ok = sum(r["status"] == "ok" for r in records)
-        lines = ["# gnssacc batch: summary", "", header,
-                 f"{len(records)} of {total} tasks finished: {ok} ok, {len(records) - ok} failed "
-                 f"(written {datetime.now().isoformat(timespec='seconds')}).", ""]
+        lines = [
+            "# gnssacc batch: summary",
+            "",
+            header,
+            f"{len(records)} of {total} tasks finished: {ok} ok, {len(records) - ok} failed "
+            f"(written {datetime.now().isoformat(timespec='seconds')}).",
+            "",
+        ]
         previous, self._cache = self._cache, {}
         for pattern in dict.fromkeys(r["task"]["outages"] for r in records):
             in_pattern = [r for r in records if r["task"]["outages"] == pattern]
@@ -135,7 +180,11 @@ class SummaryMarkdown:
                 lines += ["```", self._table(title, pattern, group, previous), "```", ""]
         failed = [r for r in records if r["status"] != "ok"]
         if failed:
-            lines += ["## failed tasks", ""] + [f"- `{r['task']['folder']}`: {r['error']}" for r in failed] + [""]
+            lines += (
+                ["## failed tasks", ""]
+                + [f"- `{r['task']['folder']}`: {r['error']}" for r in failed]
+                + [""]
+            )
         return "\n".join(lines)
 
     def _table(self, title: str, pattern: str, records: list[dict], previous: dict) -> str:
@@ -144,6 +193,8 @@ class SummaryMarkdown:
         if key not in previous:
             results = bench_results(records)
             head = f"{title}: {len(results)} of {len(records)} tasks compared, outages {pattern}"
-            previous[key] = format_summary(summarise(results), head) if results else f"{head} (none yet)"
+            previous[key] = (
+                format_summary(summarise(results), head) if results else f"{head} (none yet)"
+            )
         self._cache[key] = previous[key]
         return previous[key]

@@ -14,6 +14,7 @@ next writer in that place deletes.
 Each worker keeps its compiled numba kernels across tasks (it is one long-lived process); the
 :class:`WarmUp` plugin loads them when a worker starts, before its first task.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -60,7 +61,9 @@ class WarmUp(WorkerPlugin):
 
     def setup(self, worker) -> None:
         if self.ignore_sigint:
-            signal.signal(signal.SIGINT, signal.SIG_IGN)   # the worker's event loop runs in its main thread
+            signal.signal(
+                signal.SIGINT, signal.SIG_IGN
+            )  # the worker's event loop runs in its main thread
         # tqdm's default lock holds a multiprocessing semaphore, which a worker killed mid-task
         # would leak (a warning at exit); a worker's bars are off, a thread lock is enough.
         tqdm.set_lock(threading.RLock())
@@ -76,7 +79,7 @@ def _warm_up() -> None:
     from ..estimators import mechanization, smoother  # noqa: F401
 
     mechanization.warm_up()
-    mechanization.warm_up_window()   # ekf-accw's kernel
+    mechanization.warm_up_window()  # ekf-accw's kernel
 
 
 @contextlib.contextmanager
@@ -113,7 +116,9 @@ class DaskExecutor:
         Without ``scheduler``: worker processes of the local cluster (one thread each).
     """
 
-    def __init__(self, run_task, failed_record, scheduler: str | None = None, workers: int | None = None):
+    def __init__(
+        self, run_task, failed_record, scheduler: str | None = None, workers: int | None = None
+    ):
         self.run_task, self.failed_record = run_task, failed_record
         self.scheduler = scheduler
         self.workers = workers
@@ -125,8 +130,13 @@ class DaskExecutor:
         try:
             if self.scheduler is None:
                 with _sigint_ignored(), dask.config.set(LOCAL_CONFIG):
-                    self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                                dashboard_address=None, silence_logs=logging.CRITICAL)
+                    self.cluster = LocalCluster(
+                        n_workers=self.workers,
+                        threads_per_worker=1,
+                        processes=True,
+                        dashboard_address=None,
+                        silence_logs=logging.CRITICAL,
+                    )
             self.client = Client(self.cluster or self.scheduler, timeout=CONNECT_TIMEOUT_S)
             self.client.register_plugin(WarmUp(ignore_sigint=self.cluster is not None))
         except OSError as exc:
@@ -152,8 +162,12 @@ class DaskExecutor:
         """Submit every task, then yield each one's record as it finishes; a task whose workers
         kept dying gets a failed record. Leaving early cancels the tasks not yet finished."""
         token = uuid.uuid4().hex[:8]
-        futures = {self.client.submit(self.run_task, t, key=f"gnssacc-{t.key}-{token}", pure=False, retries=RETRIES): t
-                   for t in tasks}
+        futures = {
+            self.client.submit(
+                self.run_task, t, key=f"gnssacc-{t.key}-{token}", pure=False, retries=RETRIES
+            ): t
+            for t in tasks
+        }
         try:
             for fut in as_completed(list(futures)):
                 spec = futures.pop(fut)
@@ -168,10 +182,16 @@ class DaskExecutor:
         try:
             return fut.result()
         except KilledWorker as exc:
-            return self.failed_record(spec, f"its workers died while running it (killed, or out of memory): "
-                                       f"{failure_reason(exc)}")
+            return self.failed_record(
+                spec,
+                f"its workers died while running it (killed, or out of memory): "
+                f"{failure_reason(exc)}",
+            )
         except Exception as exc:
             if fut.cancelled():
-                raise InputError(self.description, f"the cluster cancelled task {spec.key} (scheduler lost or "
-                                                   f"restarted?); resume the campaign with --resume") from None
+                raise InputError(
+                    self.description,
+                    f"the cluster cancelled task {spec.key} (scheduler lost or "
+                    f"restarted?); resume the campaign with --resume",
+                ) from None
             return self.failed_record(spec, failure_reason(exc), kind="error")

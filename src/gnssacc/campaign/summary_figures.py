@@ -10,6 +10,7 @@
 
 Only tasks where every method succeeded and has a PRMSE (truth) are drawn.
 """
+
 from __future__ import annotations
 
 import html
@@ -28,11 +29,14 @@ def prmse_by(records: list[dict]) -> dict:
     out: dict = {}
     for rec in records:
         rows = rec["rows"]
-        if rec["status"] != "ok" or any(r["status"] != "ok" or r.get("prmse_m") is None for r in rows):
+        if rec["status"] != "ok" or any(
+            r["status"] != "ok" or r.get("prmse_m") is None for r in rows
+        ):
             continue
         task = rec["task"]
         out.setdefault(task["outages"], {}).setdefault(task["source"], []).append(
-            {r["method"]: float(r["prmse_m"]) for r in rows})
+            {r["method"]: float(r["prmse_m"]) for r in rows}
+        )
     return out
 
 
@@ -42,28 +46,49 @@ def paired_effect(diff: np.ndarray) -> dict:
 
     n = len(diff)
     mean = float(np.mean(diff))
-    half = float(student.ppf(0.975, n - 1) * np.std(diff, ddof=1) / np.sqrt(n)) if n > 1 else float("nan")
-    return {"n": n, "mean": mean, "lo": mean - half, "hi": mean + half, "p": paired_permutation_pvalue(diff)}
+    half = (
+        float(student.ppf(0.975, n - 1) * np.std(diff, ddof=1) / np.sqrt(n))
+        if n > 1
+        else float("nan")
+    )
+    return {
+        "n": n,
+        "mean": mean,
+        "lo": mean - half,
+        "hi": mean + half,
+        "p": paired_permutation_pvalue(diff),
+    }
 
 
 def effects(data: dict) -> list[dict]:
     """One row per (pattern, cell, aided method): :func:`paired_effect` of the relative gain [%]."""
     rows = []
     for pattern, by_source in data.items():
-        cells = list(by_source.items()) + ([("all recordings", [t for ts in by_source.values() for t in ts])]
-                                           if len(by_source) > 1 else [])
+        cells = list(by_source.items()) + (
+            [("all recordings", [t for ts in by_source.values() for t in ts])]
+            if len(by_source) > 1
+            else []
+        )
         for cell, tasks in cells:
             for m in tasks[0]:
                 base = BASELINES.get(m)
                 if base in tasks[0] and not m.endswith("-online"):
                     diff = np.array([100.0 * (t[base] - t[m]) / t[base] for t in tasks])
-                    rows.append({"pattern": pattern, "cell": cell, "method": m, "baseline": base,
-                                 **paired_effect(diff)})
+                    rows.append(
+                        {
+                            "pattern": pattern,
+                            "cell": cell,
+                            "method": m,
+                            "baseline": base,
+                            **paired_effect(diff),
+                        }
+                    )
     return rows
 
 
 def _plt():
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -93,13 +118,28 @@ def plot_effects(rows: list[dict], path: Path) -> None:
     for k, r in enumerate(rows):
         sig = r["p"] < 0.05
         ax.plot([r["lo"], r["hi"]], [k, k], color="k" if sig else "0.55", lw=1.5)
-        ax.plot(r["mean"], k, "o", color="tab:green" if r["mean"] > 0 else "tab:red", mfc=None if sig else "white",
-                ms=7)
+        ax.plot(
+            r["mean"],
+            k,
+            "o",
+            color="tab:green" if r["mean"] > 0 else "tab:red",
+            mfc=None if sig else "white",
+            ms=7,
+        )
     ax.axvline(0.0, color="k", lw=0.8)
-    ax.set_yticks(range(len(rows)), [f"{r['method']} vs {r['baseline']} | {r['cell']} | {r['pattern']} "
-                                     f"(n={r['n']}, p={r['p']:.3f})" for r in rows], fontsize=8)
+    ax.set_yticks(
+        range(len(rows)),
+        [
+            f"{r['method']} vs {r['baseline']} | {r['cell']} | {r['pattern']} "
+            f"(n={r['n']}, p={r['p']:.3f})"
+            for r in rows
+        ],
+        fontsize=8,
+    )
     ax.invert_yaxis()
-    ax.set_xlabel("PRMSE gain [%] = 100 (baseline - aided) / baseline (> 0: the aiding helped), 95 % CI")
+    ax.set_xlabel(
+        "PRMSE gain [%] = 100 (baseline - aided) / baseline (> 0: the aiding helped), 95 % CI"
+    )
     ax.set_title("Paired effect of each aiding (filled: p < 0.05, sign-flip test)")
     ax.grid(alpha=0.3, axis="x")
     fig.savefig(path, dpi=100)
@@ -123,6 +163,8 @@ def write_figures(root: Path, records: list[dict]) -> list[str]:
 def html_page(markdown: str, figures: list[str]) -> str:
     """``summary.html``: the figures first, then ``summary.md``'s text as it is."""
     imgs = "".join(f'<p><img src="{f}" alt="{f}" style="max-width:100%"></p>' for f in figures)
-    return (f"<!doctype html><html><head><meta charset=\"utf-8\"><title>gnssacc batch summary</title></head>"
-            f"<body style=\"font-family:sans-serif;max-width:1100px;margin:1.5em auto\"><h1>gnssacc batch: summary</h1>"
-            f"{imgs}<pre>{html.escape(markdown)}</pre></body></html>\n")
+    return (
+        f'<!doctype html><html><head><meta charset="utf-8"><title>gnssacc batch summary</title></head>'
+        f'<body style="font-family:sans-serif;max-width:1100px;margin:1.5em auto"><h1>gnssacc batch: summary</h1>'
+        f"{imgs}<pre>{html.escape(markdown)}</pre></body></html>\n"
+    )

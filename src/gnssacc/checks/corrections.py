@@ -17,6 +17,7 @@ clock offset it also refines the offset by the likelihood (:mod:`gnssacc.prepare
   place (:meth:`gnssacc.core.recording.RecordedRun.with_mounting`: samples and a given start's
   attitude).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -37,7 +38,9 @@ MIN_OFFSET_S = 0.05
 SUSPECT_SIGMAS = 3.0
 
 
-def offset_proposal(run: RecordedRun, cfg: RunConfig, m: Motion, auto: bool, where: str) -> Finding | None:
+def offset_proposal(
+    run: RecordedRun, cfg: RunConfig, m: Motion, auto: bool, where: str
+) -> Finding | None:
     """The clock-offset proposal (module notes), or ``None``; its ``repair`` shifts the IMU stamps
     by stage 1's offset (the preparation stage refines it), ``details`` hold stage 1."""
     off = m.offset
@@ -47,16 +50,33 @@ def offset_proposal(run: RecordedRun, cfg: RunConfig, m: Motion, auto: bool, whe
     suspect = abs(off.offset_s) > max(MIN_OFFSET_S, SUSPECT_SIGMAS * off.sigma_s)
     if not auto and not suspect:
         return None
-    details = {"stage1_s": off.offset_s, "stage1_sigma_s": off.sigma_s, "configured_s": configured,
-               "turn_rho": {f"{k:+.3f}": v for k, v in (m.turn_rho or {}).items()}, "auto": auto}
-    if m.turns_contradict:   # one view against another: recorded, nothing to tell the user
+    details = {
+        "stage1_s": off.offset_s,
+        "stage1_sigma_s": off.sigma_s,
+        "configured_s": configured,
+        "turn_rho": {f"{k:+.3f}": v for k, v in (m.turn_rho or {}).items()},
+        "auto": auto,
+    }
+    if m.turns_contradict:  # one view against another: recorded, nothing to tell the user
         rho = m.turn_rho
-        return Finding("time_offset", where, f"the accelerations put the IMU time stamps {off.text()} off the GNSS "
-                       f"clock, but the turns match the stamps as given (correlation {rho[0.0]:.2f} against "
-                       f"{rho[off.offset_s]:.2f} at that offset)", action="refuted", details=details)
-    return Finding("time_offset", where, offset_problem(off, configured, auto),
-                   f'set [mounting] imu_time_offset_s = {configured + off.offset_s:.3f} (or "auto")',
-                   lambda r: shifted(r, off.offset_s), "added to the IMU time stamps", details=details)
+        return Finding(
+            "time_offset",
+            where,
+            f"the accelerations put the IMU time stamps {off.text()} off the GNSS "
+            f"clock, but the turns match the stamps as given (correlation {rho[0.0]:.2f} against "
+            f"{rho[off.offset_s]:.2f} at that offset)",
+            action="refuted",
+            details=details,
+        )
+    return Finding(
+        "time_offset",
+        where,
+        offset_problem(off, configured, auto),
+        f'set [mounting] imu_time_offset_s = {configured + off.offset_s:.3f} (or "auto")',
+        lambda r: shifted(r, off.offset_s),
+        "added to the IMU time stamps",
+        details=details,
+    )
 
 
 def offset_problem(off: OffsetEstimate, configured: float, auto: bool) -> str:
@@ -64,8 +84,10 @@ def offset_problem(off: OffsetEstimate, configured: float, auto: bool) -> str:
     if auto:
         return f'[mounting] imu_time_offset_s = "auto": measured {off.text()}'
     ahead = "behind" if off.offset_s > 0 else "ahead of"
-    return (f"the IMU time stamps run {abs(off.offset_s):.3f} s {ahead} the GNSS clock (measured from the motion: "
-            f"offset {off.text()}) with [mounting] imu_time_offset_s = {configured:g}")
+    return (
+        f"the IMU time stamps run {abs(off.offset_s):.3f} s {ahead} the GNSS clock (measured from the motion: "
+        f"offset {off.text()}) with [mounting] imu_time_offset_s = {configured:g}"
+    )
 
 
 def _axis_name(v: np.ndarray) -> str:
@@ -85,10 +107,15 @@ def rpy_text(R: np.ndarray, snapped: bool) -> str:
 def describe_mounting(me, f_mean_z: float) -> str:
     """Which IMU axes point forward and down, and on what evidence."""
     fwd, down = _axis_name(me.R_est[0]), _axis_name(me.R_est[2])
-    how = (f"from the turns, +-{me.yaw_sigma_deg:.0f} deg" if me.yaw_determined
-           else "assumed: too few turns to tell")
-    return (f"the IMU's {fwd} axis points forward ({how}) and its {down} axis down (the specific force along IMU z "
-            f"averages {f_mean_z:+.2f} m/s^2)")
+    how = (
+        f"from the turns, +-{me.yaw_sigma_deg:.0f} deg"
+        if me.yaw_determined
+        else "assumed: too few turns to tell"
+    )
+    return (
+        f"the IMU's {fwd} axis points forward ({how}) and its {down} axis down (the specific force along IMU z "
+        f"averages {f_mean_z:+.2f} m/s^2)"
+    )
 
 
 def mounting_rpy_deg(R: np.ndarray) -> list[float]:
@@ -96,7 +123,9 @@ def mounting_rpy_deg(R: np.ndarray) -> list[float]:
     return [float(v) for v in np.degrees(np.array(dcm_to_euler(R)))]
 
 
-def mount_proposal(run: RecordedRun, cfg: RunConfig, m: Motion, auto: bool, where: str) -> tuple[Finding | None, str]:
+def mount_proposal(
+    run: RecordedRun, cfg: RunConfig, m: Motion, auto: bool, where: str
+) -> tuple[Finding | None, str]:
     """The mounting proposal (module notes), or ``None``, and the account of what the data show.
 
     With ``auto`` the measured mounting is proposed unless it is the identity; otherwise only an
@@ -109,8 +138,18 @@ def mount_proposal(run: RecordedRun, cfg: RunConfig, m: Motion, auto: bool, wher
         return None, text
     absolute = me.R_bi if auto else me.R_bi @ cfg.R_bi
     line = rpy_text(absolute, me.snapped)
-    problem = text if auto else f"{text}, not as [mounting] imu_to_body_rpy_deg = {rpy_text(cfg.R_bi, True)} says"
+    problem = (
+        text
+        if auto
+        else f"{text}, not as [mounting] imu_to_body_rpy_deg = {rpy_text(cfg.R_bi, True)} says"
+    )
     R = me.R_bi
-    return Finding("mounting", where, problem, f'set [mounting] imu_to_body_rpy_deg = {line} (or "auto")',
-                   lambda r: r.with_mounting(R), f"applied imu_to_body_rpy_deg = {line}",
-                   details={"tilt_deg": me.tilt_deg, "rpy_deg": mounting_rpy_deg(absolute)}), text
+    return Finding(
+        "mounting",
+        where,
+        problem,
+        f'set [mounting] imu_to_body_rpy_deg = {line} (or "auto")',
+        lambda r: r.with_mounting(R),
+        f"applied imu_to_body_rpy_deg = {line}",
+        details={"tilt_deg": me.tilt_deg, "rpy_deg": mounting_rpy_deg(absolute)},
+    ), text

@@ -1,5 +1,6 @@
 """What an input check found (:mod:`gnssacc.checks.plausibility`): the problem, the fix, and the repair
 the evidence allows."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -57,5 +58,11 @@ class Finding:
         return f"{self.check}:{self.repaired or self.problem}"
 
     def to_dict(self) -> dict:
-        return {"check": self.check, "where": self.where, "problem": self.problem, "fix": self.fix,
-                "action": self.action, "details": self.details}
+        return {
+            "check": self.check,
+            "where": self.where,
+            "problem": self.problem,
+            "fix": self.fix,
+            "action": self.action,
+            "details": self.details,
+        }

@@ -26,6 +26,7 @@ r"""The GNSS fixes checked against physics and against the IMU (part of the inpu
 * **Initial state** (:func:`init_position`): a given start (``init.json``) must lie near the
   fix at its time.
 """
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -60,9 +61,15 @@ def gnss_time_units(t: np.ndarray, where: str) -> Finding | None:
     if FIX_INTERVAL_S[0] <= dt <= FIX_INTERVAL_S[1]:
         return None
     hint = " (milliseconds?)" if dt > FIX_INTERVAL_S[1] else ""
-    return Finding("time_units", where, f"GNSS fixes are {dt:.6g} s apart (median): no receiver gives fixes "
-                   f"{'that rarely' if dt > 1 else 'that often'}; the t column is not in seconds{hint}",
-                   "write the t column in seconds", details={"median_interval": dt}, impossible=True)
+    return Finding(
+        "time_units",
+        where,
+        f"GNSS fixes are {dt:.6g} s apart (median): no receiver gives fixes "
+        f"{'that rarely' if dt > 1 else 'that often'}; the t column is not in seconds{hint}",
+        "write the t column in seconds",
+        details={"median_interval": dt},
+        impossible=True,
+    )
 
 
 def fix_count(t_gnss: np.ndarray, t0: float, t1: float, where: str) -> Finding | None:
@@ -70,10 +77,16 @@ def fix_count(t_gnss: np.ndarray, t0: float, t1: float, where: str) -> Finding |
     n = int(np.sum((t_gnss >= t0) & (t_gnss <= t1)))
     if n >= MIN_FIXES:
         return None
-    return Finding("fix_count", where, f"{n} GNSS fix(es) within the IMU data's time span ({t0:.3f} .. {t1:.3f} s; "
-                   f"{len(t_gnss)} in the file): at least {MIN_FIXES} are needed to start (a position, a velocity "
-                   f"and an acceleration), and checking the units, clocks and mounting needs a minute of fixes",
-                   "record or export more fixes", details={"n_fixes": n}, impossible=True)
+    return Finding(
+        "fix_count",
+        where,
+        f"{n} GNSS fix(es) within the IMU data's time span ({t0:.3f} .. {t1:.3f} s; "
+        f"{len(t_gnss)} in the file): at least {MIN_FIXES} are needed to start (a position, a velocity "
+        f"and an acceleration), and checking the units, clocks and mounting needs a minute of fixes",
+        "record or export more fixes",
+        details={"n_fixes": n},
+        impossible=True,
+    )
 
 
 #: Height units a median outside the road range may be in: (metres per unit, name).
@@ -92,31 +105,50 @@ def heights(h: np.ndarray, where: str, declined=frozenset()) -> Finding | None:
     med = float(np.median(h))
     if HEIGHT_RANGE_M[0] <= med <= HEIGHT_RANGE_M[1]:
         return None
-    head = (f"the fixes' heights are around {med:.6g} m, outside the {HEIGHT_RANGE_M[0]:g} .. {HEIGHT_RANGE_M[1]:g} m "
-            f"of any road")
+    head = (
+        f"the fixes' heights are around {med:.6g} m, outside the {HEIGHT_RANGE_M[0]:g} .. {HEIGHT_RANGE_M[1]:g} m "
+        f"of any road"
+    )
     for k, name in HEIGHT_UNITS:
         if ROAD_HEIGHT_M[0] <= med * k <= ROAD_HEIGHT_M[1]:
-            f = Finding("heights", where, f"{head}: the h_m column is in {name}", "convert the h_m column to metres",
-                        _scaled_heights(k), f"multiplied the heights by {k:g}",
-                        details={"median_height_m": med, "log_jacobian_per_fix": float(np.log(k))})
+            f = Finding(
+                "heights",
+                where,
+                f"{head}: the h_m column is in {name}",
+                "convert the h_m column to metres",
+                _scaled_heights(k),
+                f"multiplied the heights by {k:g}",
+                details={"median_height_m": med, "log_jacobian_per_fix": float(np.log(k))},
+            )
             if f.key not in declined:
                 return f
-    return Finding("heights", where, f"{head}: the h_m column is in other units or is not an ellipsoidal height",
-                   "write ellipsoidal heights in metres", details={"median_height_m": med}, impossible=True)
+    return Finding(
+        "heights",
+        where,
+        f"{head}: the h_m column is in other units or is not an ellipsoidal height",
+        "write ellipsoidal heights in metres",
+        details={"median_height_m": med},
+        impossible=True,
+    )
 
 
 def _scaled_heights(k: float):
     """The proposal: heights times ``k`` (metres per unit)."""
+
     def repair(run: RecordedRun) -> RecordedRun:
         g = replace(run.gnss, h=run.gnss.h * k)
         return replace(run, gnss=g, origin=LocalTangentFrame(g.lat[0], g.lon[0], g.h[0]))
+
     return repair
 
 
 def in_radian_box(lat: np.ndarray, lon: np.ndarray) -> bool:
     """Whether every (lat, lon) [rad], read as degrees, would be a radian value: |lat| <= pi/2 deg
     and |lon| <= pi deg (module notes)."""
-    return bool(np.all(np.abs(lat) <= 0.5 * np.pi * RAD_PER_DEG) and np.all(np.abs(lon) <= np.pi * RAD_PER_DEG))
+    return bool(
+        np.all(np.abs(lat) <= 0.5 * np.pi * RAD_PER_DEG)
+        and np.all(np.abs(lon) <= np.pi * RAD_PER_DEG)
+    )
 
 
 def _radians_to_degrees(run: RecordedRun) -> RecordedRun:
@@ -137,18 +169,31 @@ def latlon_radians(run: RecordedRun, fit: HorizontalFit | None, where: str) -> F
     if not in_radian_box(g.lat, g.lon):
         return None
     decided = fit is not None and max(fit.rho_direct, fit.rho_mirror) >= MIN_RHO
-    head = (f"every fix lies within 1.6 deg of latitude and 3.2 deg of longitude of (0, 0), in the open sea, "
-            f"(first fix {np.degrees(g.lat[0]):.6f}, {np.degrees(g.lon[0]):.6f})")
+    head = (
+        f"every fix lies within 1.6 deg of latitude and 3.2 deg of longitude of (0, 0), in the open sea, "
+        f"(first fix {np.degrees(g.lat[0]):.6f}, {np.degrees(g.lon[0]):.6f})"
+    )
     if decided and SCALE_RANGE[0] <= fit.scale <= SCALE_RANGE[1]:
-        return None                        # the IMU agrees with the track as it is: a real place
+        return None  # the IMU agrees with the track as it is: a real place
     fix = "multiply the lat_deg and lon_deg columns by 180/pi"
     # Positions read as radians are 180/pi times further apart: the log-Jacobian of reading
     # latitude and longitude so, per fix (the estimator compares likelihoods of metres).
-    details = {"accel_ratio": fit.scale if fit is not None else None, "log_jacobian_per_fix": 2.0 * np.log(1.0 / RAD_PER_DEG)}
-    why = (f" and the IMU measures {fit.scale:.3g} times the track's accelerations" if decided else "")
-    return Finding("latlon", where, f"{head}{why}: the lat_deg and lon_deg columns look like radians",
-                   fix + ' (if the recording really is from there, set [checks] skip = "latlon")', _radians_to_degrees,
-                   "multiplied latitude and longitude by 180/pi", details=details)
+    details = {
+        "accel_ratio": fit.scale if fit is not None else None,
+        "log_jacobian_per_fix": 2.0 * np.log(1.0 / RAD_PER_DEG),
+    }
+    why = (
+        f" and the IMU measures {fit.scale:.3g} times the track's accelerations" if decided else ""
+    )
+    return Finding(
+        "latlon",
+        where,
+        f"{head}{why}: the lat_deg and lon_deg columns look like radians",
+        fix + ' (if the recording really is from there, set [checks] skip = "latlon")',
+        _radians_to_degrees,
+        "multiplied latitude and longitude by 180/pi",
+        details=details,
+    )
 
 
 def _slope_side(tf: TurnFit | None) -> int:
@@ -174,30 +219,53 @@ def _swapped(run: RecordedRun) -> RecordedRun:
     return replace(run, gnss=g, origin=LocalTangentFrame(g.lat[0], g.lon[0], g.h[0]))
 
 
-def mirror_image(fit: HorizontalFit | None, tf: TurnFit | None, lf: LateralFit | None, gnss_where: str,
-                 imu_where: str, lat: np.ndarray | None = None, lon: np.ndarray | None = None) -> Finding | None:
+def mirror_image(
+    fit: HorizontalFit | None,
+    tf: TurnFit | None,
+    lf: LateralFit | None,
+    gnss_where: str,
+    imu_where: str,
+    lat: np.ndarray | None = None,
+    lon: np.ndarray | None = None,
+) -> Finding | None:
     """The track mirrored against both IMU sensors (a proposal: latitude and longitude swapped back,
     which the estimator judges; swapped and sign-lost coordinates look alike, so a confirmed one is
     refused, never repaired), or the IMU's sensors against each other (a note). ``lat``, ``lon``:
     the fixes' [rad], for the log-Jacobian of swapping them (east is ``cos(lat)`` per degree)."""
     acc, gyr = _fit_side(fit), _slope_side(tf)
     if acc == -1 and gyr == -1:
-        jac = (float(np.mean(np.log(np.abs(np.cos(lon)) / np.maximum(np.abs(np.cos(lat)), 1e-12))))
-               if lat is not None and lon is not None else 0.0)
-        return Finding("latlon", gnss_where,
-                       "the fixes' track is the mirror image of the motion the IMU measured (it turns left where the "
-                       "gyro turns right, and its accelerations match the accelerometer's only mirrored): latitude "
-                       "and longitude are swapped, or one of them has lost its sign (hemisphere)",
-                       "check the lat_deg and lon_deg columns", _swapped, "swapped latitude and longitude",
-                       details={"slope": tf.k, "rho_direct": fit.rho_direct, "rho_mirror": fit.rho_mirror,
-                                "log_jacobian_per_fix": jac}, repairable=False)
+        jac = (
+            float(np.mean(np.log(np.abs(np.cos(lon)) / np.maximum(np.abs(np.cos(lat)), 1e-12))))
+            if lat is not None and lon is not None
+            else 0.0
+        )
+        return Finding(
+            "latlon",
+            gnss_where,
+            "the fixes' track is the mirror image of the motion the IMU measured (it turns left where the "
+            "gyro turns right, and its accelerations match the accelerometer's only mirrored): latitude "
+            "and longitude are swapped, or one of them has lost its sign (hemisphere)",
+            "check the lat_deg and lon_deg columns",
+            _swapped,
+            "swapped latitude and longitude",
+            details={
+                "slope": tf.k,
+                "rho_direct": fit.rho_direct,
+                "rho_mirror": fit.rho_mirror,
+                "log_jacobian_per_fix": jac,
+            },
+            repairable=False,
+        )
     if acc * gyr == -1:
-        return Finding("mounting", imu_where,
-                       "the gyro and the accelerometer disagree on the direction of the turns (one of them turns with "
-                       "the fixes, the other against them): one IMU axis has the wrong sign in one of the two sensors",
-                       "check the signs of the ax, ay, az and gx, gy, gz columns (both must be right-handed, the same axes)",
-                       details={"slope": tf.k, "rho_direct": fit.rho_direct, "rho_mirror": fit.rho_mirror},
-                       impossible=True)   # no frame makes both sensors right: nothing to estimate
+        return Finding(
+            "mounting",
+            imu_where,
+            "the gyro and the accelerometer disagree on the direction of the turns (one of them turns with "
+            "the fixes, the other against them): one IMU axis has the wrong sign in one of the two sensors",
+            "check the signs of the ax, ay, az and gx, gy, gz columns (both must be right-handed, the same axes)",
+            details={"slope": tf.k, "rho_direct": fit.rho_direct, "rho_mirror": fit.rho_mirror},
+            impossible=True,
+        )  # no frame makes both sensors right: nothing to estimate
     return None
 
 
@@ -207,9 +275,14 @@ def gnss_scale(fit: HorizontalFit | None, where: str) -> Finding | None:
         return None
     if SCALE_RANGE[0] <= fit.scale <= SCALE_RANGE[1]:
         return None
-    return Finding("latlon", where, f"the IMU measures {fit.scale:.3g} times the accelerations of the fixes' track: "
-                   f"the fixes' positions are not in degrees and metres", "check the units of lat_deg, lon_deg",
-                   details={"accel_ratio": fit.scale})
+    return Finding(
+        "latlon",
+        where,
+        f"the IMU measures {fit.scale:.3g} times the accelerations of the fixes' track: "
+        f"the fixes' positions are not in degrees and metres",
+        "check the units of lat_deg, lon_deg",
+        details={"accel_ratio": fit.scale},
+    )
 
 
 def init_position(run: RecordedRun, where: str) -> Finding | None:
@@ -220,14 +293,20 @@ def init_position(run: RecordedRun, where: str) -> Finding | None:
         return None
     k = int(np.argmin(np.abs(g.t - init.t)))
     dt = abs(float(g.t[k]) - float(init.t))
-    p = run.origin.to_ned(np.array([init.lat, g.lat[k]]), np.array([init.lon, g.lon[k]]),
-                          np.array([init.h, g.h[k]]))
+    p = run.origin.to_ned(
+        np.array([init.lat, g.lat[k]]), np.array([init.lon, g.lon[k]]), np.array([init.h, g.h[k]])
+    )
     d = float(np.linalg.norm(p[0] - p[1]))
     tol = 100.0 + 50.0 * dt + 10.0 * float(np.max(g.sigma_ned[k]))
     if d <= tol:
         return None
-    return Finding("init_position", where, f"the initial position is {d / 1000:.4g} km from the GNSS fix {dt:.2f} s "
-                   f"from it (at most {tol:.0f} m is plausible): the two disagree in their coordinates",
-                   "check lat_deg, lon_deg, h_m and t of the initial state against the fixes",
-                   lambda r: replace(r, init=None), "started from the fixes instead of the given initial state",
-                   details={"distance_m": d})
+    return Finding(
+        "init_position",
+        where,
+        f"the initial position is {d / 1000:.4g} km from the GNSS fix {dt:.2f} s "
+        f"from it (at most {tol:.0f} m is plausible): the two disagree in their coordinates",
+        "check lat_deg, lon_deg, h_m and t of the initial state against the fixes",
+        lambda r: replace(r, init=None),
+        "started from the fixes instead of the given initial state",
+        details={"distance_m": d},
+    )

@@ -36,6 +36,7 @@ The window ``W`` is chosen per recording (:func:`choose_window`): the shortest o
 IMU's smoothed dynamics stand well above the GNSS acceleration noise, which follows from the
 fixes' own scatter about short local fits (:func:`fix_scatter`), not from their stated sigmas.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -133,7 +134,9 @@ class BoxGrid:
     def __init__(self, t: np.ndarray, t0: float, step: float, n: int):
         self.t, self.t0, self.step, self.n = np.asarray(t, float), float(t0), float(step), int(n)
         t = self.t
-        self.dt0 = t[0] - (t[0] - (t[1] - t[0]))      # the first sample's interval, as np.diff(prepend=) gives it
+        self.dt0 = t[0] - (
+            t[0] - (t[1] - t[0])
+        )  # the first sample's interval, as np.diff(prepend=) gives it
         self.edges = np.empty(len(t) + 1)
         self.edges[0] = t[0] - self.dt0
         self.edges[1:] = t
@@ -145,12 +148,12 @@ class BoxGrid:
         t, cum, N = self.t, self.cum, len(self.t)
         for a in range(0, N, BOX_BLOCK):
             b = min(a + BOX_BLOCK, N)
-            seg = cum[a + 1:b + 1]
+            seg = cum[a + 1 : b + 1]
             if a == 0:
                 seg[0] = self.dt0
-                np.subtract(t[1:b], t[:b - 1], out=seg[1:])
+                np.subtract(t[1:b], t[: b - 1], out=seg[1:])
             else:
-                np.subtract(t[a:b], t[a - 1:b - 1], out=seg)
+                np.subtract(t[a:b], t[a - 1 : b - 1], out=seg)
             seg *= x[a:b]
             if a > 0:
                 seg[0] += cum[a]
@@ -189,7 +192,7 @@ def box_average(t: np.ndarray, x: np.ndarray, t0: float, step: float, n: int) ->
     """
     grid = BoxGrid(t, t0, step, n)
     out = np.empty((n, x.shape[1]))
-    for i in range(x.shape[1]):   # one channel at a time: a long run's temporaries stay one column
+    for i in range(x.shape[1]):  # one channel at a time: a long run's temporaries stay one column
         grid.average(x[:, i], out[:, i])
     return out
 
@@ -250,7 +253,7 @@ def smooth(x: np.ndarray, step: float, window_s: float, kernel: str = "biweight"
     k = _kernel(step, window_s, kernel)
     x2 = x.reshape(len(x), -1)
     out = np.empty(x2.shape, np.result_type(x2, float))
-    for a, b, lo, hi in _blocks(len(x), len(k) // 2):   # the normalisation shared by the channels
+    for a, b, lo, hi in _blocks(len(x), len(k) // 2):  # the normalisation shared by the channels
         den = _weights(k, a, b, lo, hi)
         for i in range(x2.shape[1]):
             out[a:b, i] = _convolve_block(x2[lo:hi, i], k, a - lo, b - lo) / den
@@ -288,7 +291,7 @@ def _blocks(n: int, half: int):
 def _convolve_block(x: np.ndarray, k: np.ndarray, a: int, b: int) -> np.ndarray:
     """Outputs ``a .. b-1`` of the "same" convolution of the samples ``x`` with an odd kernel ``k``."""
     half = len(k) // 2
-    return _convolve_full(x, k)[a + half:b + half]   # full[j] is output j - half
+    return _convolve_full(x, k)[a + half : b + half]  # full[j] is output j - half
 
 
 def _weights(k: np.ndarray, a: int, b: int, lo: int, hi: int) -> np.ndarray:
@@ -336,7 +339,7 @@ def smooth_horizontal(lev: LevelledImu, window_s: float) -> np.ndarray:
         z += lev.f_h[lo:hi, 0]
         z *= turn
         f = _convolve_block(z, k, a - lo, b - lo) / _weights(k, a, b, lo, hi)
-        f /= turn[a - lo:b - lo]
+        f /= turn[a - lo : b - lo]
         out[a:b, 0], out[a:b, 1] = f.real, f.imag
     return out
 
@@ -352,6 +355,7 @@ def at_times(t0: float, step: float, x: np.ndarray, t: np.ndarray) -> np.ndarray
 
 
 # --- GNSS side ---------------------------------------------------------------------------------
+
 
 @dataclass
 class GnssKinematics:
@@ -421,7 +425,9 @@ def local_fits(t: np.ndarray, p: np.ndarray, w: np.ndarray, centres: np.ndarray,
     ww = np.where(valid, w[idx], 0.0)
     A = np.stack([np.ones_like(s), s, 0.5 * s * s], -1)
     N = np.einsum("nmi,nm,nmj->nij", A, ww, A)
-    ok = ((hi - lo) >= MIN_FIXES) & ((valid & (s < 0)).sum(1) >= 2) & ((valid & (s > 0)).sum(1) >= 2)
+    ok = (
+        ((hi - lo) >= MIN_FIXES) & ((valid & (s < 0)).sum(1) >= 2) & ((valid & (s > 0)).sum(1) >= 2)
+    )
     ok &= _largest_gap(t, idx, valid, lo, hi, centres, half) <= _gap_limit(t, window_s)
     N[~ok] = np.eye(3)
     Ninv = np.linalg.inv(N)
@@ -448,7 +454,7 @@ def _gap_limit(t: np.ndarray, window_s: float) -> float:
 def _largest_gap(t, idx, valid, lo, hi, centres, half) -> np.ndarray:
     """Per window: its longest stretch without fixes [s], the ends of the window included."""
     last = t[np.maximum(hi - 1, 0)]
-    tv = np.where(valid, t[idx], last[:, None])                  # padding repeats the last fix
+    tv = np.where(valid, t[idx], last[:, None])  # padding repeats the last fix
     inner = np.diff(tv, axis=1).max(axis=1) if tv.shape[1] > 1 else np.zeros(len(tv))
     first = t[np.minimum(lo, len(t) - 1)]
     return np.maximum(inner, np.maximum(first - (centres - half), (centres + half) - last))
@@ -470,7 +476,9 @@ def fix_scatter(t: np.ndarray, p: np.ndarray, w: np.ndarray) -> float:
     return max(float(np.sqrt(sigma2)), 0.005)
 
 
-def gnss_kinematics(gnss, origin, window_s: float, scatter_m: float | None = None) -> GnssKinematics:
+def gnss_kinematics(
+    gnss, origin, window_s: float, scatter_m: float | None = None
+) -> GnssKinematics:
     """Velocity and acceleration of the fixes from quadratic fits over ``window_s`` (module notes).
 
     Window centres are uniformly spaced (a sixteenth of the window, at least the fix interval) over
@@ -482,13 +490,22 @@ def gnss_kinematics(gnss, origin, window_s: float, scatter_m: float | None = Non
     step = max(float(np.median(np.diff(t))), window_s / 16.0)
     centres = np.arange(t[0] + 0.5 * window_s, t[-1] - 0.5 * window_s + 1e-9, step)
     if len(centres) == 0:
-        return GnssKinematics(np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0),
-                              window_s, scatter)
+        return GnssKinematics(
+            np.zeros(0),
+            np.zeros((0, 2)),
+            np.zeros((0, 2)),
+            np.zeros(0),
+            np.zeros(0),
+            window_s,
+            scatter,
+        )
     x, var, ok, _, _ = local_fits(t, p, w, centres, window_s)
     a, sigma_a = x[ok, 2], scatter * np.sqrt(var[ok, 2])
     noise = float(np.mean(2.0 * sigma_a**2)) if np.any(ok) else float("nan")
     snr = (float(np.mean(np.sum(a**2, axis=1))) - noise) / noise if np.any(ok) else float("nan")
-    return GnssKinematics(centres[ok], x[ok, 1], a, scatter * np.sqrt(var[ok, 1]), sigma_a, window_s, scatter, snr)
+    return GnssKinematics(
+        centres[ok], x[ok, 1], a, scatter * np.sqrt(var[ok, 1]), sigma_a, window_s, scatter, snr
+    )
 
 
 def choose_window(gnss, origin, duration_s: float) -> GnssKinematics | None:
@@ -519,6 +536,7 @@ def choose_window(gnss, origin, duration_s: float) -> GnssKinematics | None:
 
 
 # --- comparison -------------------------------------------------------------------------------
+
 
 def velocity_frame(kin: GnssKinematics, min_speed_sigmas: float = 4.0):
     """GNSS acceleration along and across the GNSS velocity, ``a_t + i a_n`` (``a_n`` > 0 to the
@@ -573,7 +591,9 @@ class HorizontalFit:
         return float(abs(self.c))
 
 
-def complex_fit(z_imu: np.ndarray, z_gnss: np.ndarray, noise_var: np.ndarray, n_eff: float) -> HorizontalFit:
+def complex_fit(
+    z_imu: np.ndarray, z_gnss: np.ndarray, noise_var: np.ndarray, n_eff: float
+) -> HorizontalFit:
     """Fit ``z_imu ~ c z_gnss`` and ``z_imu ~ c conj(z_gnss)`` (see :class:`HorizontalFit`).
 
     ``noise_var`` (n,) is the GNSS acceleration noise variance per axis (subtracted twice from
@@ -610,7 +630,9 @@ def horizontal_fit(lev: LevelledImu, kin: GnssKinematics, offset_s: float) -> Ho
     if m.sum() < MIN_FIXES:
         return None
     x = at_times(lev.t0, lev.step, smooth_horizontal(lev, kin.window_s), kin.t[m] - offset_s)
-    return complex_fit(x[:, 0] + 1j * x[:, 1], z_g[m], kin.sigma_a[m] ** 2, _n_eff(kin, int(m.sum())))
+    return complex_fit(
+        x[:, 0] + 1j * x[:, 1], z_g[m], kin.sigma_a[m] ** 2, _n_eff(kin, int(m.sum()))
+    )
 
 
 @dataclass
@@ -653,8 +675,12 @@ def turn_rate_fit(lev: LevelledImu, kin: GnssKinematics, offset_s: float) -> Tur
     overlap = len(x) / _n_eff(kin, int(m.sum()))
     step = float(np.median(np.diff(kin.t))) if len(kin) > 1 else kin.window_s
     sxy = float(np.sum(w * x * y))
-    return TurnFit(sxy / sxx, float(np.sqrt(overlap / sxx)), float(np.degrees(np.sum(np.abs(x)) * step)),
-                   sxy / np.sqrt(sxx * syy) if syy > 0 else float("nan"))
+    return TurnFit(
+        sxy / sxx,
+        float(np.sqrt(overlap / sxx)),
+        float(np.degrees(np.sum(np.abs(x)) * step)),
+        sxy / np.sqrt(sxx * syy) if syy > 0 else float("nan"),
+    )
 
 
 @dataclass
@@ -687,7 +713,9 @@ class LateralFit:
     along_rho: float
 
 
-def lateral_fit(lev: LevelledImu, kin: GnssKinematics, offset_s: float, imu_window_s: float = 2.0) -> LateralFit | None:
+def lateral_fit(
+    lev: LevelledImu, kin: GnssKinematics, offset_s: float, imu_window_s: float = 2.0
+) -> LateralFit | None:
     """:class:`LateralFit` over the moving centres, the IMU smoothed over ``imu_window_s`` and
     shifted by ``offset_s`` onto the GNSS clock; ``None`` with fewer than :data:`MIN_FIXES` of them
     or fewer than :data:`MIN_INDEPENDENT_WINDOWS` independent windows."""
@@ -710,7 +738,7 @@ def lateral_fit(lev: LevelledImu, kin: GnssKinematics, offset_s: float, imu_wind
     cov = np.linalg.inv(A) * float(np.mean(resid**2)) * (len(y) / n_eff)
     yaw = float(np.arctan2(-b[0], b[1]))
     nb = float(np.linalg.norm(b))
-    perp = np.array([b[1], -b[0]]) / max(nb, 1e-12)        # unit vector along u
+    perp = np.array([b[1], -b[0]]) / max(nb, 1e-12)  # unit vector along u
     sigma_yaw = float(np.sqrt(max(perp @ cov @ perp, 0.0))) / max(nb, 1e-12)
     along = f @ perp
     a_t = z_g[m].real

@@ -17,6 +17,7 @@ IMUs are mounted on purpose along the vehicle's axes, so an estimate within
 orientation: the rest is the road's average grade, the vehicle's sitting attitude and the
 estimate's noise, and must not trigger anything.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -127,5 +128,11 @@ def estimate_mounting(lev: LevelledImu, fit: LateralFit | None) -> MountEstimate
     angles = np.array([rotation_angle_deg(R_est @ C.T) for C in cands])
     j = int(np.argmin(angles))
     snapped = bool(angles[j] <= SNAP_TOLERANCE_DEG)
-    return MountEstimate(cands[j] if snapped else R_est, R_est, tilt, bool(yaw_ok), sigma if yaw_ok else float("inf"),
-                         snapped)
+    return MountEstimate(
+        cands[j] if snapped else R_est,
+        R_est,
+        tilt,
+        bool(yaw_ok),
+        sigma if yaw_ok else float("inf"),
+        snapped,
+    )

@@ -47,6 +47,7 @@ Example messages::
       but the estimator does not confirm it: log-likelihood -201 as corrected over 180 fixes
       (-67 per minute); the data are used as given
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -63,8 +64,17 @@ from .corrections import mount_proposal, mounting_rpy_deg, offset_proposal
 from .findings import Finding
 from .views import measure_motion, rest_rate
 
-CHECKS = ("time_units", "fix_count", "heights", "accel_units", "gyro_units", "latlon", "init_position",
-          "time_offset", "mounting")
+CHECKS = (
+    "time_units",
+    "fix_count",
+    "heights",
+    "accel_units",
+    "gyro_units",
+    "latlon",
+    "init_position",
+    "time_offset",
+    "mounting",
+)
 REPAIR_MODES = ("never", "auto")
 
 
@@ -91,15 +101,28 @@ class Policy:
         """Read and check ``[checks]`` and the ``"auto"`` mounting keys; ``InputError`` naming the key."""
         c = cfg["checks"]
         if c["repair"] not in REPAIR_MODES:
-            raise InputError("config", f'[checks] repair must be "never" or "auto", got {c["repair"]!r}')
+            raise InputError(
+                "config", f'[checks] repair must be "never" or "auto", got {c["repair"]!r}'
+            )
         if not isinstance(c["skip"], str):
-            raise InputError("config", f'[checks] skip must be a string of check names, e.g. "mounting", got {c["skip"]!r}')
+            raise InputError(
+                "config",
+                f'[checks] skip must be a string of check names, e.g. "mounting", got {c["skip"]!r}',
+            )
         skip = frozenset(w for w in c["skip"].replace(",", " ").split())
         bad = sorted(skip - set(CHECKS))
         if bad:
-            raise InputError("config", f"[checks] skip: unknown check(s) {', '.join(bad)} (known: {', '.join(CHECKS)})")
+            raise InputError(
+                "config",
+                f"[checks] skip: unknown check(s) {', '.join(bad)} (known: {', '.join(CHECKS)})",
+            )
         m = cfg["mounting"]
-        return cls(c["repair"] == "auto", skip, m["imu_time_offset_s"] == "auto", m["imu_to_body_rpy_deg"] == "auto")
+        return cls(
+            c["repair"] == "auto",
+            skip,
+            m["imu_time_offset_s"] == "auto",
+            m["imu_to_body_rpy_deg"] == "auto",
+        )
 
 
 def file_names(run: RecordedRun) -> tuple[str, str, str]:
@@ -144,13 +167,20 @@ def consider(finding: Finding | None, policy: Policy, findings: list, declined=f
     """What the data alone decide about a finding (module notes): nothing, a note for a warning (one
     view), or a refusal of data that cannot be estimated; a proposal settled before (``declined``
     holds its key, or its check's name) is not made again."""
-    if finding is None or finding.check in policy.skip or finding.key in declined or finding.check in declined:
+    if (
+        finding is None
+        or finding.check in policy.skip
+        or finding.key in declined
+        or finding.check in declined
+    ):
         return
     if finding.repair is not None:
         raise _Proposed(finding)
     if finding.impossible:
         raise InputError(finding.where, f"{finding.problem}; {finding.fix}")
-    finding.action = finding.action or "noted"   # the caller warns of notes (once, however often the checks run)
+    finding.action = (
+        finding.action or "noted"
+    )  # the caller warns of notes (once, however often the checks run)
     findings.append(finding)
 
 
@@ -161,9 +191,15 @@ def settle_now(run: RecordedRun, finding: Finding | None, policy: Policy) -> Rec
     if finding is None or finding.check in policy.skip:
         return run
     if finding.repair is not None and policy.repair:
-        warn_data(finding.where, f'{finding.problem}; {finding.repaired} ([checks] repair = "auto")')
+        warn_data(
+            finding.where, f'{finding.problem}; {finding.repaired} ([checks] repair = "auto")'
+        )
         return finding.repair(run)
-    hint = ', or set [checks] repair = "auto" to let gnssacc do it' if finding.repair is not None else ""
+    hint = (
+        ', or set [checks] repair = "auto" to let gnssacc do it'
+        if finding.repair is not None
+        else ""
+    )
     raise InputError(finding.where, f"{finding.problem}; {finding.fix}{hint}")
 
 
@@ -196,17 +232,29 @@ def local_gravity(run: RecordedRun) -> float:
     """Normal gravity at the fixes' median latitude and height [m/s^2] (heights clipped to the
     range of roads, so that a height in the wrong units cannot move it)."""
     g = run.gnss
-    return float(normal_gravity(float(np.median(g.lat)), float(np.clip(np.median(g.h), -1000.0, 10000.0))))
+    return float(
+        normal_gravity(float(np.median(g.lat)), float(np.clip(np.median(g.h), -1000.0, 10000.0)))
+    )
 
 
 def _auto_offset_note(cfg: RunConfig, m, where: str, findings: list, settled: bool) -> RunConfig:
     """``imu_time_offset_s = "auto"`` with nothing (more) to propose: 0 s kept, said so unless a
     verdict on the proposal said it already (``settled``)."""
     if not settled:
-        text = ("the recording has too little motion to measure it; 0 s assumed" if not m.offset.determined
-                else f"measured {m.offset.text()}, 0 s kept")
-        findings.append(Finding("time_offset", where, f'[mounting] imu_time_offset_s = "auto": {text}',
-                                action="noted", details={"offset_s": 0.0}))
+        text = (
+            "the recording has too little motion to measure it; 0 s assumed"
+            if not m.offset.determined
+            else f"measured {m.offset.text()}, 0 s kept"
+        )
+        findings.append(
+            Finding(
+                "time_offset",
+                where,
+                f'[mounting] imu_time_offset_s = "auto": {text}',
+                action="noted",
+                details={"offset_s": 0.0},
+            )
+        )
     return cfg.with_values({"mounting": {"imu_time_offset_s": 0.0}}, "input checks")
 
 
@@ -215,21 +263,35 @@ def _motion_steps(run, cfg, policy, findings, declined, imu_w, gnss_w) -> RunCon
     m = measure_motion(run)
     consider(gnsscheck.latlon_radians(run, m.fit, gnss_w), policy, findings, declined)
     consider(unitcheck.gyro_units(m.turn, rest_rate(run, m), imu_w), policy, findings, declined)
-    consider(gnsscheck.mirror_image(m.fit, m.turn, m.lateral, gnss_w, imu_w, run.gnss.lat, run.gnss.lon), policy,
-             findings, declined)
+    consider(
+        gnsscheck.mirror_image(m.fit, m.turn, m.lateral, gnss_w, imu_w, run.gnss.lat, run.gnss.lon),
+        policy,
+        findings,
+        declined,
+    )
     consider(gnsscheck.gnss_scale(m.fit, gnss_w), policy, findings, declined)
     if "time_offset" not in policy.skip:
         offset = offset_proposal(run, cfg, m, policy.offset_auto, imu_w)
         consider(offset, policy, findings, declined)
-        if policy.offset_auto:   # nothing (more) to propose: the offset stays 0 s
+        if policy.offset_auto:  # nothing (more) to propose: the offset stays 0 s
             cfg = _auto_offset_note(cfg, m, imu_w, findings, "time_offset" in declined)
     if "mounting" not in policy.skip:
         mount, text = mount_proposal(run, cfg, m, policy.mount_auto, imu_w)
         consider(mount, policy, findings, declined)
-        if policy.mount_auto:    # nothing (more) to propose: the axes stay as they are
+        if policy.mount_auto:  # nothing (more) to propose: the axes stay as they are
             if "mounting" not in declined:
-                findings.append(Finding("mounting", imu_w, text, action="applied", details={"rpy_deg": [0.0, 0.0, 0.0]}))
-            cfg = cfg.with_values({"mounting": {"imu_to_body_rpy_deg": mounting_rpy_deg(np.eye(3))}}, "input checks")
+                findings.append(
+                    Finding(
+                        "mounting",
+                        imu_w,
+                        text,
+                        action="applied",
+                        details={"rpy_deg": [0.0, 0.0, 0.0]},
+                    )
+                )
+            cfg = cfg.with_values(
+                {"mounting": {"imu_to_body_rpy_deg": mounting_rpy_deg(np.eye(3))}}, "input checks"
+            )
     return cfg
 
 
@@ -254,11 +316,13 @@ def check_run(run: RecordedRun, cfg: RunConfig, declined=frozenset()) -> CheckRe
     imu_w, gnss_w, init_w = file_names(run)
     findings: list = []
     try:
-        for check in (lambda r: unitcheck.imu_time_units(r.imu.t, r.gnss.t, imu_w),
-                      lambda r: gnsscheck.gnss_time_units(r.gnss.t, gnss_w),
-                      lambda r: gnsscheck.fix_count(r.gnss.t, r.t_start, r.t_end, gnss_w),
-                      lambda r: gnsscheck.heights(r.gnss.h, gnss_w, declined),
-                      lambda r: unitcheck.accel_units(r.imu, local_gravity(r), imu_w)):
+        for check in (
+            lambda r: unitcheck.imu_time_units(r.imu.t, r.gnss.t, imu_w),
+            lambda r: gnsscheck.gnss_time_units(r.gnss.t, gnss_w),
+            lambda r: gnsscheck.fix_count(r.gnss.t, r.t_start, r.t_end, gnss_w),
+            lambda r: gnsscheck.heights(r.gnss.h, gnss_w, declined),
+            lambda r: unitcheck.accel_units(r.imu, local_gravity(r), imu_w),
+        ):
             consider(check(run), policy, findings, declined)
         cfg = _motion_steps(run, cfg, policy, findings, declined, imu_w, gnss_w)
         consider(gnsscheck.init_position(run, init_w), policy, findings, declined)

@@ -26,6 +26,7 @@ duration.
 
 Everything is vectorised over the samples: a 47k-sample file is checked in a few milliseconds.
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
@@ -108,27 +109,35 @@ class QualityReport:
         out = {}
         for kind in KINDS:
             spans = self.of_kind(kind)
-            out[kind] = {"count": len(spans),
-                         "seconds": float(sum(s.duration_s for s in spans)),
-                         "samples": int(sum(s.n_samples for s in spans))}
+            out[kind] = {
+                "count": len(spans),
+                "seconds": float(sum(s.duration_s for s in spans)),
+                "samples": int(sum(s.n_samples for s in spans)),
+            }
         return out
 
     def summary(self) -> str:
         """One line per kind with the number of spans and their total duration."""
         lines = []
         for kind, tot in self.totals().items():
-            lines.append(f"{kind:<12s} {tot['count']:4d} span(s) {tot['seconds']:9.3f} s "
-                         f"{tot['samples']:7d} sample(s)")
+            lines.append(
+                f"{kind:<12s} {tot['count']:4d} span(s) {tot['seconds']:9.3f} s "
+                f"{tot['samples']:7d} sample(s)"
+            )
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
         """JSON-ready description (plain Python types)."""
-        return {"n_samples": int(self.n_samples),
-                "dt_median_s": float(self.dt_median_s),
-                "dt_max_s": float(self.dt_max_s),
-                "totals": self.totals(),
-                "spans": [{k: (float(v) if isinstance(v, np.floating) else v) for k, v in asdict(s).items()}
-                          for s in self.spans]}
+        return {
+            "n_samples": int(self.n_samples),
+            "dt_median_s": float(self.dt_median_s),
+            "dt_max_s": float(self.dt_max_s),
+            "totals": self.totals(),
+            "spans": [
+                {k: (float(v) if isinstance(v, np.floating) else v) for k, v in asdict(s).items()}
+                for s in self.spans
+            ],
+        }
 
     def suspect_mask(self, n: int) -> np.ndarray:
         """Boolean array of length ``n``, True on every sample inside any span."""
@@ -142,6 +151,7 @@ class QualityReport:
 
 
 # --- helpers ---------------------------------------------------------------------------------------
+
 
 def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Start and (exclusive) end indices of the runs of True in a boolean array."""
@@ -183,14 +193,14 @@ def _straight(t: np.ndarray, x: np.ndarray, tol: float) -> tuple[np.ndarray, np.
     """Per centre sample ``j + 1`` (``j = 0 .. N-3``): whether it lies on the line through its
     neighbours, and its largest absolute second difference over the channels."""
     d1 = np.diff(x, axis=0)
-    d2 = np.diff(d1, axis=0)                 # index j: centre sample j+1
+    d2 = np.diff(d1, axis=0)  # index j: centre sample j+1
     # Loggers interpolate either per sample index or in time; with jittered time stamps only
     # the time-aware form vanishes, so accept either. The time-aware form is twice the distance
     # of the centre sample from the chord through its neighbours,
     # e2 = 2 (h1 d1[j] - h0 d1[j+1]) / (h0 + h1), which equals -d2 for uniform sampling.
     h0 = (t[1:-1] - t[:-2])[:, None]
     h1 = (t[2:] - t[1:-1])[:, None]
-    e2_scaled = np.abs(h1 * d1[:-1] - h0 * d1[1:])          # = |e2| (h0 + h1) / 2
+    e2_scaled = np.abs(h1 * d1[:-1] - h0 * d1[1:])  # = |e2| (h0 + h1) / 2
     worst = np.abs(d2).max(axis=1)
     straight = (worst < tol) | (e2_scaled.max(axis=1) < 0.5 * tol * (h0 + h1)[:, 0])
     # A constant stretch is also straight: leave it to the frozen check.
@@ -198,21 +208,31 @@ def _straight(t: np.ndarray, x: np.ndarray, tol: float) -> tuple[np.ndarray, np.
     return straight & ~(still[:-1] & still[1:]), worst
 
 
-def _interpolated(t: np.ndarray, x: tuple[np.ndarray, np.ndarray], tol: float, min_s: float) -> list[Span]:
+def _interpolated(
+    t: np.ndarray, x: tuple[np.ndarray, np.ndarray], tol: float, min_s: float
+) -> list[Span]:
     if len(t) < 3:
         return []
     n = len(t) - 2
     straight, worst = np.empty(n, bool), np.empty(n)
-    for a in range(0, n, CHECK_BLOCK_ROWS):   # centres a+1 .. b need samples a .. b+1
+    for a in range(0, n, CHECK_BLOCK_ROWS):  # centres a+1 .. b need samples a .. b+1
         b = min(a + CHECK_BLOCK_ROWS, n)
-        straight[a:b], worst[a:b] = _straight(t[a:b + 2], _rows(x, a, b + 2), tol)
+        straight[a:b], worst[a:b] = _straight(t[a : b + 2], _rows(x, a, b + 2), tol)
     spans = []
     for s, f in zip(*_runs(straight)):
-        i0, i1 = s + 1, f + 1               # the centres; the two end samples are the real anchors
+        i0, i1 = s + 1, f + 1  # the centres; the two end samples are the real anchors
         if t[i1 - 1] - t[i0 - 1] >= min_s:
-            spans.append(_span("interpolated", t, i0, i1, "all",
-                               f"{i1 - i0} samples on straight lines (max |second difference| "
-                               f"{float(worst[s:f].max()):.1e})"))
+            spans.append(
+                _span(
+                    "interpolated",
+                    t,
+                    i0,
+                    i1,
+                    "all",
+                    f"{i1 - i0} samples on straight lines (max |second difference| "
+                    f"{float(worst[s:f].max()):.1e})",
+                )
+            )
     return spans
 
 
@@ -220,8 +240,17 @@ def _gaps(t: np.ndarray, factor: float) -> tuple[list[Span], float, float]:
     idx, dt, dt_med = gap_indices(t, factor)
     if not len(dt):
         return [], float("nan"), float("nan")
-    spans = [_span("gap", t, k + 1, k + 2, "all",
-                   f"interval {dt[k]:.4f} s = {dt[k] / dt_med:.1f} x median {dt_med:.4f} s") for k in idx]
+    spans = [
+        _span(
+            "gap",
+            t,
+            k + 1,
+            k + 2,
+            "all",
+            f"interval {dt[k]:.4f} s = {dt[k] / dt_med:.1f} x median {dt_med:.4f} s",
+        )
+        for k in idx
+    ]
     return spans, dt_med, float(dt.max())
 
 
@@ -234,22 +263,32 @@ def _frozen(t: np.ndarray, x: tuple[np.ndarray, np.ndarray], min_samples: int) -
     for s, f in zip(*_runs(still)):
         if f - s >= min_samples:
             # The first sample of the run is the last real reading; its repeats are suspect.
-            spans.append(_span("frozen", t, s + 1, f + 1, "all",
-                               f"all channels repeat sample {s} exactly {f - s} times"))
+            spans.append(
+                _span(
+                    "frozen",
+                    t,
+                    s + 1,
+                    f + 1,
+                    "all",
+                    f"all channels repeat sample {s} exactly {f - s} times",
+                )
+            )
     return spans
 
 
 def _saturated(t: np.ndarray, x: tuple[np.ndarray, np.ndarray], min_samples: int) -> list[Span]:
     spans = []
-    for c, name in enumerate(CHANNELS):   # channel by channel: a long run's temporaries stay one column
+    for c, name in enumerate(
+        CHANNELS
+    ):  # channel by channel: a long run's temporaries stay one column
         col = _channel(x, c)
         med = float(np.median(col))
-        dev = col - med                      # one work column, reused in place
+        dev = col - med  # one work column, reused in place
         np.abs(dev, out=dev)
         # A coarsely quantised channel can have MAD = 0; fall back to the plain std then.
         sigma = 1.4826 * float(np.median(dev, overwrite_input=True)) or float(np.std(col))
         if sigma == 0:
-            continue                         # constant channel: nothing to tell apart
+            continue  # constant channel: nothing to tell apart
         for which, ext in (("max", col.max()), ("min", col.min())):
             far = abs(ext - med) / sigma
             if far <= SATURATION_ROBUST_SIGMAS:
@@ -258,9 +297,17 @@ def _saturated(t: np.ndarray, x: tuple[np.ndarray, np.ndarray], min_samples: int
             at_ext = np.abs(dev, out=dev) <= 1e-9 * max(abs(ext), 1.0)
             for s, f in zip(*_runs(at_ext)):
                 if f - s >= min_samples:
-                    spans.append(_span("saturated", t, s, f, name,
-                                       f"{name} held at its {which} {ext:.6g} for {f - s} samples "
-                                       f"({far:.0f} robust sigma from its median {med:.4g})"))
+                    spans.append(
+                        _span(
+                            "saturated",
+                            t,
+                            s,
+                            f,
+                            name,
+                            f"{name} held at its {which} {ext:.6g} for {f - s} samples "
+                            f"({far:.0f} robust sigma from its median {med:.4g})",
+                        )
+                    )
     return spans
 
 
@@ -286,13 +333,19 @@ def check_imu(imu: ImuData, cfg: RunConfig) -> QualityReport:
     x = _sensors(imu)
     stuck = int(q["stuck_min_samples"])
     gaps, dt_med, dt_max = _gaps(t, float(q["gap_factor"]))
-    spans = (_interpolated(t, x, float(q["interp_tol"]), float(q["interp_min_s"])) + gaps
-             + _frozen(t, x, stuck) + (_saturated(t, x, stuck) if len(t) else []))
+    spans = (
+        _interpolated(t, x, float(q["interp_tol"]), float(q["interp_min_s"]))
+        + gaps
+        + _frozen(t, x, stuck)
+        + (_saturated(t, x, stuck) if len(t) else [])
+    )
     spans.sort(key=lambda s: (s.i_start, KINDS.index(s.kind)))
     return QualityReport(spans, len(t), dt_med, dt_max)
 
 
-def inflation_psd(imu: ImuData, report: QualityReport, suspect: SuspectNoise) -> tuple[np.ndarray, np.ndarray]:
+def inflation_psd(
+    imu: ImuData, report: QualityReport, suspect: SuspectNoise
+) -> tuple[np.ndarray, np.ndarray]:
     """Extra white-noise PSD per IMU sample and channel, to de-weight suspect samples.
 
     Over a flagged span of duration ``T`` each channel's reading is treated as wrong by an
@@ -340,11 +393,17 @@ class SuspectNoise:
     @classmethod
     def from_config(cls, cfg: RunConfig) -> "SuspectNoise":
         q = cfg["quality"]
-        return cls(str(q["suspect_sigma_mode"]), float(q["suspect_local_window_s"]),
-                   float(q["suspect_gyro_sigma_dps"]), float(q["suspect_accel_sigma_mps2"]))
+        return cls(
+            str(q["suspect_sigma_mode"]),
+            float(q["suspect_local_window_s"]),
+            float(q["suspect_gyro_sigma_dps"]),
+            float(q["suspect_accel_sigma_mps2"]),
+        )
 
 
-def _span_sigmas(imu: ImuData, span: Span, clean: np.ndarray, suspect: SuspectNoise) -> tuple[np.ndarray, np.ndarray]:
+def _span_sigmas(
+    imu: ImuData, span: Span, clean: np.ndarray, suspect: SuspectNoise
+) -> tuple[np.ndarray, np.ndarray]:
     """Per-channel 1-sigma (gyro [rad/s], accel [m/s^2]) of the error assumed over a span."""
     cap_g = suspect.gyro_sigma_dps * DEG
     cap_a = suspect.accel_sigma_mps2
@@ -357,8 +416,10 @@ def _span_sigmas(imu: ImuData, span: Span, clean: np.ndarray, suspect: SuspectNo
     around = around[clean[lo:hi] & ((around < span.i_start) | (around >= span.i_end))]
     if around.size < 5:
         return np.full(3, cap_g), np.full(3, cap_a)
-    return (np.minimum(imu.omega_ib_b[around].std(axis=0), cap_g),
-            np.minimum(imu.f_b[around].std(axis=0), cap_a))
+    return (
+        np.minimum(imu.omega_ib_b[around].std(axis=0), cap_g),
+        np.minimum(imu.f_b[around].std(axis=0), cap_a),
+    )
 
 
 def inflation_segments(imu: ImuData, report: QualityReport, suspect: SuspectNoise):
@@ -385,7 +446,9 @@ def inflation_segments(imu: ImuData, report: QualityReport, suspect: SuspectNois
         sg, sa = _span_sigmas(imu, s, clean, suspect)
         gyro = s.kind != "saturated" or s.channels.startswith("g")
         accel = s.kind != "saturated" or s.channels.startswith("a")
-        spans.append((a, b, sg**2 * T if gyro else np.zeros(3), sa**2 * T if accel else np.zeros(3)))
+        spans.append(
+            (a, b, sg**2 * T if gyro else np.zeros(3), sa**2 * T if accel else np.zeros(3))
+        )
     # Split at every span edge; on each elementary piece keep the largest PSD of the spans covering it.
     edges = sorted({e for a, b, _, _ in spans for e in (a, b)})
     i0, i1, q_g, q_a = [], [], [], []

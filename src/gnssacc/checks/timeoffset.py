@@ -30,6 +30,7 @@ What is attainable depends on the fixes. Measured on a simulated 120 s car run (
 1 Hz fixes with 5 cm white noise give a 1-sigma of ~4 ms, 0.5 m white ~17 ms, 3 m white ~70 ms;
 stage 1 alone is good to a few tenths of a second with 3 m fixes.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -109,8 +110,9 @@ class OffsetEstimate:
         return f"{self.offset_s:+.3f} s +- {self.sigma_s:.3f} s ({self.method})"
 
 
-def _magnitude_rho(lev: LevelledImu, mag_s: np.ndarray, kin: GnssKinematics, lags: np.ndarray,
-                   edge: float) -> tuple[np.ndarray, np.ndarray]:
+def _magnitude_rho(
+    lev: LevelledImu, mag_s: np.ndarray, kin: GnssKinematics, lags: np.ndarray, edge: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Correlation of the GNSS acceleration magnitude with the smoothed IMU one per lag (lags in
     chunks, vectorised; lags overlapping fewer than a third of the centres give NaN), and the
     number of centres each was computed over."""
@@ -120,7 +122,7 @@ def _magnitude_rho(lev: LevelledImu, mag_s: np.ndarray, kin: GnssKinematics, lag
     need = max(MIN_CENTRES, len(kin) // 3)
     chunk = max(int(CHUNK_ENTRIES // max(len(kin), 1)), 1)
     for j0 in range(0, len(lags), chunk):
-        tq = kin.t[None, :] - lags[j0:j0 + chunk, None]
+        tq = kin.t[None, :] - lags[j0 : j0 + chunk, None]
         m = (tq >= lev.t0 + edge) & (tq <= lev.t_end - edge)
         x = at_times(lev.t0, lev.step, mag_s, tq.ravel()).reshape(tq.shape)
         n = m.sum(axis=1)
@@ -128,9 +130,11 @@ def _magnitude_rho(lev: LevelledImu, mag_s: np.ndarray, kin: GnssKinematics, lag
         mx, mg = (x * m).sum(1) / n_safe, (g * m).sum(1) / n_safe
         dx, dg = (x - mx[:, None]) * m, (g - mg[:, None]) * m
         den = np.sqrt((dx**2).sum(1) * (dg**2).sum(1))
-        rho = np.where((n >= need) & (den > 0), (dx * dg).sum(1) / np.where(den > 0, den, 1.0), np.nan)
-        out[j0:j0 + chunk] = rho
-        count[j0:j0 + chunk] = n
+        rho = np.where(
+            (n >= need) & (den > 0), (dx * dg).sum(1) / np.where(den > 0, den, 1.0), np.nan
+        )
+        out[j0 : j0 + chunk] = rho
+        count[j0 : j0 + chunk] = n
     return out, count
 
 
@@ -148,20 +152,30 @@ def _significance(rho: np.ndarray, count: np.ndarray, kin: GnssKinematics) -> np
     return z
 
 
-def _complex_rho(lev: LevelledImu, fh_s: np.ndarray, kin: GnssKinematics, lags: np.ndarray,
-                 sel: np.ndarray) -> np.ndarray:
+def _complex_rho(
+    lev: LevelledImu, fh_s: np.ndarray, kin: GnssKinematics, lags: np.ndarray, sel: np.ndarray
+) -> np.ndarray:
     """Best of the direct and mirrored complex correlations per lag, over centres ``sel`` (lags
     in chunks of :data:`CHUNK_ENTRIES` lag-centre pairs)."""
     z_g, _, moving = velocity_frame(kin)
     use = sel & moving
     t, zg = kin.t[use], z_g[use]
     chunk = max(int(CHUNK_ENTRIES // max(len(t), 1)), 1)
-    return np.concatenate([_complex_rho_lags(lev, fh_s, t, zg, lags[j:j + chunk], 0.5 * kin.window_s)
-                           for j in range(0, len(lags), chunk)]) if len(lags) else np.zeros(0)
+    return (
+        np.concatenate(
+            [
+                _complex_rho_lags(lev, fh_s, t, zg, lags[j : j + chunk], 0.5 * kin.window_s)
+                for j in range(0, len(lags), chunk)
+            ]
+        )
+        if len(lags)
+        else np.zeros(0)
+    )
 
 
-def _complex_rho_lags(lev: LevelledImu, fh_s: np.ndarray, t: np.ndarray, zg: np.ndarray, lags: np.ndarray,
-                      edge: float) -> np.ndarray:
+def _complex_rho_lags(
+    lev: LevelledImu, fh_s: np.ndarray, t: np.ndarray, zg: np.ndarray, lags: np.ndarray, edge: float
+) -> np.ndarray:
     """:func:`_complex_rho` for some lags, vectorised over lags and centres."""
     tq = t[None, :] - lags[:, None]
     m = (tq >= lev.t0 + edge) & (tq <= lev.t_end - edge)
@@ -176,7 +190,7 @@ def _complex_rho_lags(lev: LevelledImu, fh_s: np.ndarray, t: np.ndarray, zg: np.
 def _peak(lags: np.ndarray, rho: np.ndarray) -> float:
     """Lag of the maximum, refined by a parabola through it and its neighbours."""
     j = int(np.nanargmax(rho))
-    if 0 < j < len(rho) - 1 and np.all(np.isfinite(rho[j - 1:j + 2])):
+    if 0 < j < len(rho) - 1 and np.all(np.isfinite(rho[j - 1 : j + 2])):
         a, b, c = rho[j - 1], rho[j], rho[j + 1]
         den = a - 2 * b + c
         if den < 0:
@@ -200,7 +214,9 @@ def _jackknife(lev: LevelledImu, fh_s: np.ndarray, kin: GnssKinematics, tau: flo
     return float(np.sqrt((k - 1) / k * np.sum((np.array(peaks) - np.mean(peaks)) ** 2)))
 
 
-def coarse_offset(lev: LevelledImu, kin: GnssKinematics, max_offset_s: float = MAX_OFFSET_S) -> OffsetEstimate:
+def coarse_offset(
+    lev: LevelledImu, kin: GnssKinematics, max_offset_s: float = MAX_OFFSET_S
+) -> OffsetEstimate:
     """Stage 1 of the module notes: the clock offset from cross-correlations.
 
     Parameters
@@ -222,17 +238,19 @@ def coarse_offset(lev: LevelledImu, kin: GnssKinematics, max_offset_s: float = M
         return none
     W = kin.window_s
     fh_s = smooth_horizontal(lev, W)
-    lags = np.arange(-max_offset_s, max_offset_s + 1e-9, max(COARSE_STEP_S, COARSE_STEP_FRACTION * W))
+    lags = np.arange(
+        -max_offset_s, max_offset_s + 1e-9, max(COARSE_STEP_S, COARSE_STEP_FRACTION * W)
+    )
     mag = np.hypot(fh_s[:, 0], fh_s[:, 1])
     rho, count = _magnitude_rho(lev, mag, kin, lags, 0.5 * W)
-    np.square(fh_s[:, 0], out=mag)     # the power per grid point, in the magnitude's array
+    np.square(fh_s[:, 0], out=mag)  # the power per grid point, in the magnitude's array
     mag += np.square(fh_s[:, 1])
     imu_rms = float(np.sqrt(np.mean(mag)))
     del mag
     z = _significance(rho, count, kin)
     if np.all(np.isnan(z)):
         return none
-    j = int(np.nanargmax(z))     # the most significant lag, then the correlation peak near it
+    j = int(np.nanargmax(z))  # the most significant lag, then the correlation peak near it
     near = np.abs(lags - lags[j]) <= 0.5 * W
     tau0 = _peak(lags[near], np.where(np.isfinite(z[near]), rho[near], np.nan))
     rho_peak = float(np.nanmax(np.where(near & np.isfinite(z), rho, np.nan)))
@@ -242,15 +260,19 @@ def coarse_offset(lev: LevelledImu, kin: GnssKinematics, max_offset_s: float = M
     rho_f = _complex_rho(lev, fh_s, kin, fine, np.ones(len(kin), bool))
     tau = _peak(fine, rho_f) if np.any(np.isfinite(rho_f)) else tau0
     sigma = _jackknife(lev, fh_s, kin, tau)
-    ok = (rho_peak >= MIN_PEAK and rho_peak - rho_other >= MIN_MARGIN and sigma <= MAX_SIGMA_FRACTION * W
-          and imu_rms >= MIN_IMU_RMS_MPS2)
+    ok = (
+        rho_peak >= MIN_PEAK
+        and rho_peak - rho_other >= MIN_MARGIN
+        and sigma <= MAX_SIGMA_FRACTION * W
+        and imu_rms >= MIN_IMU_RMS_MPS2
+    )
     sigma = float(np.hypot(sigma, STAGE1_MODEL_SIGMA_S))
-    return OffsetEstimate(tau if ok else 0.0, sigma if ok else float("inf"), bool(ok), rho_peak, rho_other)
+    return OffsetEstimate(
+        tau if ok else 0.0, sigma if ok else float("inf"), bool(ok), rho_peak, rho_other
+    )
 
 
 def shifted(run: RecordedRun, delta_s: float) -> RecordedRun:
     """The run with ``delta_s`` [s] added to every IMU time stamp (and the wheel odometry's, on
     the same clock)."""
     return run.with_imu_shift(delta_s)
-
-

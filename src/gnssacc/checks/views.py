@@ -9,6 +9,7 @@ offset the turns favour of the two candidates (as given, or the accelerations' p
 chance correlation peak of the accelerations cannot shift the unit and mirror checks onto
 unrelated epochs (a slow UGV parked for minutes: 3 m fixes show accelerations that are only noise).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -97,10 +98,22 @@ def measure_motion(run: RecordedRun) -> Motion:
         rho[off.offset_s] = _turn_rho(lev, kin, off.offset_s)
         # The fits follow the view that is not contradicted: the accelerations' peak unless the
         # turns clearly favour the stamps as given.
-        tau = 0.0 if rho[0.0] is not None and (rho[off.offset_s] is None or rho[0.0] - rho[off.offset_s]
-                                               >= TURN_MARGIN) else off.offset_s
-    return Motion(lev, kin, off, tau, rho, horizontal_fit(lev, kin, tau), turn_rate_fit(lev, kin, tau),
-                  lateral_fit(lev, kin, tau))
+        tau = (
+            0.0
+            if rho[0.0] is not None
+            and (rho[off.offset_s] is None or rho[0.0] - rho[off.offset_s] >= TURN_MARGIN)
+            else off.offset_s
+        )
+    return Motion(
+        lev,
+        kin,
+        off,
+        tau,
+        rho,
+        horizontal_fit(lev, kin, tau),
+        turn_rate_fit(lev, kin, tau),
+        lateral_fit(lev, kin, tau),
+    )
 
 
 def rest_rate(run: RecordedRun, m: Motion) -> float | None:
@@ -116,5 +129,7 @@ def rest_rate(run: RecordedRun, m: Motion) -> float | None:
     imu = run.imu
     n = max(int(imu.t[-1] - imu.t[0]), 1)
     cells = box_average(imu.t, imu.omega_ib_b, float(imu.t[0]) + 0.5, 1.0, n)
-    norm = at_times(float(imu.t[0]) + 0.5, 1.0, np.linalg.norm(cells, axis=1), m.kin.t[rest] - m.fit_offset_s)
+    norm = at_times(
+        float(imu.t[0]) + 0.5, 1.0, np.linalg.norm(cells, axis=1), m.kin.t[rest] - m.fit_offset_s
+    )
     return float(np.median(norm))

@@ -9,6 +9,7 @@ body frame, or N, E, D for navigation-frame quantities).
 An example with every key at its default is printed by ``gnssacc config --show`` and listed in
 docs/configuration.md.
 """
+
 from __future__ import annotations
 
 import copy
@@ -93,7 +94,16 @@ DEFAULTS: dict[str, dict] = {
         # NMEA fixes without a GST sentence get sigmas from HDOP, an assumption: north and east
         # HDOP x UERE / sqrt(2), down nmea_vertical_factor x HDOP x UERE, with this UERE [m] per fix
         # quality (keys as for quality; a key not given keeps its default here).
-        "nmea_uere_m": {"fix": 0.02, "float": 0.3, "sbas": 1.0, "dgps": 0.7, "single": 3.0, "ppp": 0.2, "estimated": 10.0, "unknown": 5.0},
+        "nmea_uere_m": {
+            "fix": 0.02,
+            "float": 0.3,
+            "sbas": 1.0,
+            "dgps": 0.7,
+            "single": 3.0,
+            "ppp": 0.2,
+            "estimated": 10.0,
+            "unknown": 5.0,
+        },
         # VDOP / HDOP assumed for those fixes (open-sky geometries give about 1.5 to 2).
         "nmea_vertical_factor": 1.7,
     },
@@ -286,7 +296,9 @@ def vec3(value, key: str, where: str) -> np.ndarray:
     try:
         arr = np.atleast_1d(np.asarray(value, float))
     except (TypeError, ValueError):
-        raise InputError(where, f"{key} must be a number or a list of three numbers, got {value!r}") from None
+        raise InputError(
+            where, f"{key} must be a number or a list of three numbers, got {value!r}"
+        ) from None
     if arr.size == 1:
         arr = np.repeat(arr, 3)
     if arr.shape != (3,) or not np.all(np.isfinite(arr)):
@@ -297,14 +309,21 @@ def vec3(value, key: str, where: str) -> np.ndarray:
 def _merge(base: dict, update: dict, where: str) -> None:
     for section, values in update.items():
         if section not in base:
-            raise InputError(where, f"unknown config section [{section}] (known: {', '.join(base)})")
+            raise InputError(
+                where, f"unknown config section [{section}] (known: {', '.join(base)})"
+            )
         if not isinstance(values, dict):
-            raise InputError(where, f"{section} = {show(values)}: [{section}] must be a table (a [{section}] "
-                                    f"header followed by key = value lines), not a single value")
+            raise InputError(
+                where,
+                f"{section} = {show(values)}: [{section}] must be a table (a [{section}] "
+                f"header followed by key = value lines), not a single value",
+            )
         for key, value in values.items():
             if key not in base[section]:
-                raise InputError(where, f"unknown config key [{section}] {key} "
-                                        f"(known: {', '.join(base[section])})")
+                raise InputError(
+                    where,
+                    f"unknown config key [{section}] {key} (known: {', '.join(base[section])})",
+                )
             base[section][key] = value
 
 
@@ -324,9 +343,12 @@ def _read_toml(path: Path, where: str) -> dict:
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        line = data[:exc.start].count(b"\n") + 1
-        raise InputError(where, f"not a UTF-8 text file (byte 0x{data[exc.start]:02x} on line {line}); a TOML "
-                                f"file must be UTF-8: save it again with UTF-8 encoding") from None
+        line = data[: exc.start].count(b"\n") + 1
+        raise InputError(
+            where,
+            f"not a UTF-8 text file (byte 0x{data[exc.start]:02x} on line {line}); a TOML "
+            f"file must be UTF-8: save it again with UTF-8 encoding",
+        ) from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -362,7 +384,9 @@ class RunConfig:
     @property
     def gyro_psd(self) -> np.ndarray:
         """White gyro noise PSD per axis [rad^2/s]."""
-        return (vec3(self["imu"]["gyro_arw_deg_rth"], "gyro_arw_deg_rth", "config") * DEG / 60.0) ** 2
+        return (
+            vec3(self["imu"]["gyro_arw_deg_rth"], "gyro_arw_deg_rth", "config") * DEG / 60.0
+        ) ** 2
 
     @property
     def accel_psd(self) -> np.ndarray:
@@ -372,7 +396,9 @@ class RunConfig:
     @property
     def gyro_bias_rw_psd(self) -> np.ndarray:
         """Gyro bias random-walk PSD per axis [(rad/s)^2/s]."""
-        s = vec3(self["imu"]["gyro_bias_instability_deg_h"], "gyro_bias_instability_deg_h", "config")
+        s = vec3(
+            self["imu"]["gyro_bias_instability_deg_h"], "gyro_bias_instability_deg_h", "config"
+        )
         return 2.0 * (s * DEG / 3600.0) ** 2 / float(self["imu"]["bias_correlation_time_s"])
 
     @property
@@ -384,12 +410,18 @@ class RunConfig:
     @property
     def gyro_bias_sigma0(self) -> np.ndarray:
         """Initial gyro bias 1-sigma per axis [rad/s]."""
-        return vec3(self["imu"]["gyro_bias_sigma0_deg_h"], "gyro_bias_sigma0_deg_h", "config") * DEG / 3600.0
+        return (
+            vec3(self["imu"]["gyro_bias_sigma0_deg_h"], "gyro_bias_sigma0_deg_h", "config")
+            * DEG
+            / 3600.0
+        )
 
     @property
     def accel_bias_sigma0(self) -> np.ndarray:
         """Initial accelerometer bias 1-sigma per axis [m/s^2]."""
-        return vec3(self["imu"]["accel_bias_sigma0_mg"], "accel_bias_sigma0_mg", "config") * 1e-3 * G0
+        return (
+            vec3(self["imu"]["accel_bias_sigma0_mg"], "accel_bias_sigma0_mg", "config") * 1e-3 * G0
+        )
 
     # --- geometry ------------------------------------------------------------------------------
     @property
@@ -479,8 +511,9 @@ def preset_path(name: str):
     return resources.files("gnssacc") / "presets" / f"{name}.toml"
 
 
-def load_config(preset: str | None = None, path: str | Path | None = None,
-                overrides: dict | None = None) -> RunConfig:
+def load_config(
+    preset: str | None = None, path: str | Path | None = None, overrides: dict | None = None
+) -> RunConfig:
     """Resolve the run configuration.
 
     Parameters
@@ -504,7 +537,7 @@ def load_config(preset: str | None = None, path: str | Path | None = None,
     """
     values = copy.deepcopy(DEFAULTS)
     sources = ["defaults"]
-    origin: dict = {}   # (section, key) -> the preset or file that set it, named in messages
+    origin: dict = {}  # (section, key) -> the preset or file that set it, named in messages
     if preset:
         layer = tomllib.loads(preset_path(preset).read_text())
         _merge(values, layer, f"preset {preset}")
@@ -540,8 +573,18 @@ def _validate(cfg: RunConfig, where: str, origin: dict | None = None) -> None:
             if problem:
                 raise InputError(origin.get((section, key), where), problem)
     # Touch every derived quantity so malformed values fail now, naming the file.
-    for name in ("gyro_psd", "accel_psd", "gyro_bias_rw_psd", "accel_bias_rw_psd", "gyro_bias_sigma0",
-                 "accel_bias_sigma0", "R_bi", "lever_arm_b", "accel_sigma_override", "initial_sigma_overrides"):
+    for name in (
+        "gyro_psd",
+        "accel_psd",
+        "gyro_bias_rw_psd",
+        "accel_bias_rw_psd",
+        "gyro_bias_sigma0",
+        "accel_bias_sigma0",
+        "R_bi",
+        "lever_arm_b",
+        "accel_sigma_override",
+        "initial_sigma_overrides",
+    ):
         try:
             value = getattr(cfg, name)
             if callable(value):

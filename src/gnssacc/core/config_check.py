@@ -7,6 +7,7 @@ the range of each numeric key (every axis of a vector key) and :data:`CHOICES` t
 key that takes one of a few. Zero is allowed only where it means "off" and the code handles it
 (e.g. a bias random walk of zero, a gate of zero = never).
 """
+
 from __future__ import annotations
 
 import math
@@ -79,8 +80,11 @@ BOUNDS: dict[tuple[str, str], Bound] = {
     ("accel", "window"): Bound(3, 100),
     **_all("accel", "max_gap_s sigma_mps2", POSITIVE),
     ("accel", "specific_force_avg_s"): NON_NEGATIVE,
-    **_all("init", "pos_sigma_m vel_sigma_mps roll_pitch_sigma_deg yaw_sigma_deg yaw_horizon_s course_fit_s",
-           POSITIVE),
+    **_all(
+        "init",
+        "pos_sigma_m vel_sigma_mps roll_pitch_sigma_deg yaw_sigma_deg yaw_horizon_s course_fit_s",
+        POSITIVE,
+    ),
     ("init", "yaw_hypotheses"): Bound(4, 360),
     ("init", "yaw_confidence"): Bound(0.5, 1.0, hi_open=True),
     **_all("init", "roll_pitch_sigma_min_deg vel_sigma_min_mps", NON_NEGATIVE),
@@ -97,10 +101,18 @@ BOUNDS: dict[tuple[str, str], Bound] = {
     ("odometry", "lever_arm_b_m"): Bound(-1e3, 1e3),
     ("odometry", "scale_sigma"): Bound(0.0, 1.0, lo_open=True),
     ("odometry", "scale_tau_s"): Bound(0.0, 1e9, lo_open=True),
-    **_all("stationary", "cell_s block_s omega_max_dps z noise_window_s gnss_k_sigma gnss_excursion_k", POSITIVE),
-    **_all("stationary", "floor_accel_mps2 floor_gyro_dps min_duration_s edge_trim_s gnss_speed_floor_mps "
-                         "gnss_corr_s gnss_margin_s excursion_floor_mps2 chain_max_gap_s chain_floor_mps "
-                         "chain_cross_axis chain_margin", NON_NEGATIVE),
+    **_all(
+        "stationary",
+        "cell_s block_s omega_max_dps z noise_window_s gnss_k_sigma gnss_excursion_k",
+        POSITIVE,
+    ),
+    **_all(
+        "stationary",
+        "floor_accel_mps2 floor_gyro_dps min_duration_s edge_trim_s gnss_speed_floor_mps "
+        "gnss_corr_s gnss_margin_s excursion_floor_mps2 chain_max_gap_s chain_floor_mps "
+        "chain_cross_axis chain_margin",
+        NON_NEGATIVE,
+    ),
     ("stationary", "noise_spread"): Bound(1.0),
     ("stationary", "gap_factor"): Bound(1.0, lo_open=True),
     ("stationary", "gnss_min_fixes"): Bound(2),
@@ -131,18 +143,32 @@ UPPER_CASE = {("smoother", "factorization")}
 
 #: Fields of a ``[bag.fix_mappings."pkg/msg/Type"]`` table (see :data:`gnssacc.sources.rosbag.FIX_MAPPINGS`):
 #: message field paths, non-zero scale factors, and the status values that mean "no fix".
-FIX_MAPPING_FIELDS = {**dict.fromkeys(("lat", "lon", "height", "sigma_n", "sigma_e", "sigma_d", "stamp", "status"),
-                                      "path"),
-                      **dict.fromkeys(("latlon_scale_deg", "height_scale_m", "sigma_scale_m"), "scale"),
-                      "no_fix_values": "list"}
+FIX_MAPPING_FIELDS = {
+    **dict.fromkeys(
+        ("lat", "lon", "height", "sigma_n", "sigma_e", "sigma_d", "stamp", "status"), "path"
+    ),
+    **dict.fromkeys(("latlon_scale_deg", "height_scale_m", "sigma_scale_m"), "scale"),
+    "no_fix_values": "list",
+}
 
 #: Kinds that do not follow the default's type.
 KINDS: dict[tuple[str, str], str] = {
     # per-axis keys with a scalar default (a number, or x, y, z / N, E, D values)
-    **dict.fromkeys([("imu", k) for k in ("gyro_arw_deg_rth", "accel_vrw_mps_rth", "gyro_bias_instability_deg_h",
-                                          "accel_bias_instability_mg", "gyro_bias_sigma0_deg_h",
-                                          "accel_bias_sigma0_mg")] + [("gnss", "gm_sigma_m"), ("gnss", "gm_tau_s")],
-                    "vector"),
+    **dict.fromkeys(
+        [
+            ("imu", k)
+            for k in (
+                "gyro_arw_deg_rth",
+                "accel_vrw_mps_rth",
+                "gyro_bias_instability_deg_h",
+                "accel_bias_instability_mg",
+                "gyro_bias_sigma0_deg_h",
+                "accel_bias_sigma0_mg",
+            )
+        ]
+        + [("gnss", "gm_sigma_m"), ("gnss", "gm_tau_s")],
+        "vector",
+    ),
     ("mounting", "imu_to_body_rpy_deg"): "vector or auto",
     ("mounting", "imu_time_offset_s"): "number or auto",
     ("init", "roll_pitch_sigma_deg"): "number or empty",
@@ -237,7 +263,9 @@ def mappings_problem(mappings: dict) -> str | None:
 
 
 def _problem(kind: str, value, bound: Bound | None, choices: tuple | None) -> str | None:
-    if (kind.endswith(" or auto") and value == "auto") or (kind.endswith(" or empty") and value == []):
+    if (kind.endswith(" or auto") and value == "auto") or (
+        kind.endswith(" or empty") and value == []
+    ):
         return None
     base = kind.split(" or ")[0]
     if base == "bool":
@@ -280,9 +308,14 @@ def expectation(kind: str, bound: Bound | None, choices: tuple | None) -> str:
         return "one of " + ", ".join(show(c) for c in choices)
     base = kind.split(" or ")[0]
     rng = f" {bound}" if bound is not None else ""
-    text = {"bool": "true or false", "table": "a table of tables", "string": "a string",
-            "int": f"a whole number{rng}", "number": f"a number{rng}",
-            "vector": f"a number{rng} or a list of three such numbers"}[base]
+    text = {
+        "bool": "true or false",
+        "table": "a table of tables",
+        "string": "a string",
+        "int": f"a whole number{rng}",
+        "number": f"a number{rng}",
+        "vector": f"a number{rng} or a list of three such numbers",
+    }[base]
     if kind.endswith(" or empty"):
         text = f"[] (not set) or {text}"
     if kind.endswith(" or auto"):

@@ -5,6 +5,7 @@
 A comment block belongs to the key right below it; keys that follow without a comment of their
 own share it (``gyro_bias_instability_deg_h`` and ``accel_bias_instability_mg``).
 """
+
 from __future__ import annotations
 
 import inspect
@@ -15,7 +16,7 @@ import tokenize
 from . import config
 from .stationary_params import StationaryParams
 
-_SECTION = re.compile(r'^ {4}"(\w+)": \{\s*$')   # a section opens its own block
+_SECTION = re.compile(r'^ {4}"(\w+)": \{\s*$')  # a section opens its own block
 _KEY = re.compile(r'^\s*"(\w+)":')
 
 
@@ -46,10 +47,10 @@ def attribute_docs(cls, section: str) -> dict[tuple[str, str], list[str]]:
 def _defaults_comments() -> dict[tuple[str, str], list[str]]:
     try:
         source = inspect.getsource(config)
-    except (OSError, TypeError):   # installed without sources: no documentation to show
+    except (OSError, TypeError):  # installed without sources: no documentation to show
         return {}
-    block = source[source.index("DEFAULTS: dict"):]
-    block = block[:block.index("\n}\n") + 3]
+    block = source[source.index("DEFAULTS: dict") :]
+    block = block[: block.index("\n}\n") + 3]
     comments: dict[int, str] = {}
     for tok in tokenize.generate_tokens(io.StringIO(block).readline):
         if tok.type == tokenize.COMMENT:
@@ -67,7 +68,9 @@ def _defaults_comments() -> dict[tuple[str, str], list[str]]:
     return out
 
 
-def commented_toml(values: dict, header: list[str], origin: dict | None = None, keys_off: bool = False) -> str:
+def commented_toml(
+    values: dict, header: list[str], origin: dict | None = None, keys_off: bool = False
+) -> str:
     """TOML of ``values`` (section -> key -> value) with each key's documentation above it, and,
     from ``origin`` (``(section, key)`` -> what set it), a note after each value not at its
     default; ``keys_off`` writes every key commented out (a template: only what is uncommented
@@ -78,7 +81,11 @@ def commented_toml(values: dict, header: list[str], origin: dict | None = None, 
         lines += ["", f"[{section}]"]
         for key, value in keys.items():
             lines += [f"# {c}" if c else "#" for c in docs.get((section, key), [])]
-            note = f"   # set by {origin[(section, key)]}" if origin and (section, key) in origin else ""
+            note = (
+                f"   # set by {origin[(section, key)]}"
+                if origin and (section, key) in origin
+                else ""
+            )
             lines.append(f"{'# ' if keys_off else ''}{key} = {config.toml_value(value)}{note}")
     return "\n".join(lines) + "\n"
 
@@ -94,7 +101,9 @@ TEMPLATE_HEADER = [
 
 def template_toml(cfg: "config.RunConfig") -> str:
     """A commented starting file: every key of ``cfg`` documented and commented out."""
-    return commented_toml(cfg.values, TEMPLATE_HEADER + [f"values from: {', '.join(cfg.sources)}"], keys_off=True)
+    return commented_toml(
+        cfg.values, TEMPLATE_HEADER + [f"values from: {', '.join(cfg.sources)}"], keys_off=True
+    )
 
 
 def resolved_toml(cfg: "config.RunConfig") -> str:

@@ -4,6 +4,7 @@ and conversions between geodetic (LLH), ECEF and a local NED tangent plane.
 All angles are radians and all lengths metres. The navigation frame n is local
 North-East-Down (NED).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -88,7 +89,9 @@ def llh_to_ecef(lat, lon, h):
     -------
     ndarray, shape (..., 3)
     """
-    lat, lon, h = np.broadcast_arrays(np.asarray(lat, float), np.asarray(lon, float), np.asarray(h, float))
+    lat, lon, h = np.broadcast_arrays(
+        np.asarray(lat, float), np.asarray(lon, float), np.asarray(h, float)
+    )
     _, R_N = radii(lat)
     x = (R_N + h) * np.cos(lat) * np.cos(lon)
     y = (R_N + h) * np.cos(lat) * np.sin(lon)
@@ -162,8 +165,10 @@ class LocalTangentFrame:
         return ecef_to_llh(r_e)
 
     def __repr__(self) -> str:
-        return (f"LocalTangentFrame(lat0={np.degrees(self.lat0):.8f} deg, "
-                f"lon0={np.degrees(self.lon0):.8f} deg, h0={self.h0:.3f} m)")
+        return (
+            f"LocalTangentFrame(lat0={np.degrees(self.lat0):.8f} deg, "
+            f"lon0={np.degrees(self.lon0):.8f} deg, h0={self.h0:.3f} m)"
+        )
 
 
 def R_en_batch(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:

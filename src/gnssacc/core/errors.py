@@ -1,4 +1,5 @@
 """Errors and warnings raised for bad input: one clear line naming the file and the problem."""
+
 from __future__ import annotations
 
 import warnings
@@ -32,4 +33,3 @@ class DataWarning(UserWarning):
 def warn_data(where: str, problem: str) -> None:
     """Emit a :class:`DataWarning` naming the file and the repair that was made."""
     warnings.warn(f"{where}: {problem}", DataWarning, stacklevel=2)
-

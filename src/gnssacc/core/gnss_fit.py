@@ -6,6 +6,7 @@ One implementation, used wherever a GNSS-derived acceleration is needed: the sta
 (:mod:`gnssacc.estimators.gnss_accel`, :mod:`gnssacc.factors`), and the aiding theory
 (:mod:`gnssacc.analysis.aiding_theory`).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -37,7 +38,11 @@ def acceleration_row(t: np.ndarray) -> np.ndarray:
     u = [(x - t[0]) / scale for x in t]
     q = [0.5 * x * x for x in u]
     s0, s1, s2 = float(len(u)), sum(u), sum(qq for qq in q)
-    s11, s12, s22 = sum(x * x for x in u), sum(x * qq for x, qq in zip(u, q)), sum(qq * qq for qq in q)
+    s11, s12, s22 = (
+        sum(x * x for x in u),
+        sum(x * qq for x, qq in zip(u, q)),
+        sum(qq * qq for qq in q),
+    )
     # N = [[s0, s1, s2], [s1, s11, s12], [s2, s12, s22]]; third row of N^-1 by cofactors.
     c20 = s1 * s12 - s11 * s2
     c21 = -(s0 * s12 - s1 * s2)
@@ -48,7 +53,9 @@ def acceleration_row(t: np.ndarray) -> np.ndarray:
     return np.array([(c20 + c21 * x + c22 * qq) / det for x, qq in zip(u, q)]) / scale**2
 
 
-def ls_acceleration(t: np.ndarray, p_n: np.ndarray, sigma_ned: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def ls_acceleration(
+    t: np.ndarray, p_n: np.ndarray, sigma_ned: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares acceleration of a window of fixes and its covariance.
 
     Parameters
@@ -73,8 +80,14 @@ def ls_acceleration(t: np.ndarray, p_n: np.ndarray, sigma_ned: np.ndarray) -> tu
     return a_n, cov
 
 
-def window_accelerations(t: np.ndarray, p_n: np.ndarray, sigma_ned: np.ndarray, m: int, max_gap_s: float,
-                         sigma_override: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def window_accelerations(
+    t: np.ndarray,
+    p_n: np.ndarray,
+    sigma_ned: np.ndarray,
+    m: int,
+    max_gap_s: float,
+    sigma_override: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What :class:`AccelWindow` returns for each of a sequence of fixes pushed in order, at once.
 
     The window of fix ``j`` is fixes ``j - m + 1 .. j``; it is full when none of its intervals
@@ -108,13 +121,13 @@ def window_accelerations(t: np.ndarray, p_n: np.ndarray, sigma_ned: np.ndarray, 
     a_n, var = np.full((M, 3), np.nan), np.full((M, 3), np.nan)
     if M < m:
         return full, a_n, var
-    gap = np.diff(t) > max_gap_s                       # gap[j]: between fixes j and j + 1
-    bad = np.concatenate([[0], np.cumsum(gap)])        # gaps before fix j
+    gap = np.diff(t) > max_gap_s  # gap[j]: between fixes j and j + 1
+    bad = np.concatenate([[0], np.cumsum(gap)])  # gaps before fix j
     j = np.arange(m - 1, M)
     ok = bad[j] == bad[j - m + 1]
     j = j[ok]
     full[j] = True
-    idx = j[:, None] + np.arange(1 - m, 1)             # (K, m) fix indices per window
+    idx = j[:, None] + np.arange(1 - m, 1)  # (K, m) fix indices per window
     T = t[idx]
     scale = np.maximum(T[:, -1] - T[:, 0], 1e-9)
     u = (T - T[:, :1]) / scale[:, None]

@@ -8,6 +8,7 @@ with no trace of the cause. :func:`raise_if_interrupted` therefore treats any ex
 after a recorded arrival as that interruption, so that code which isolates failures never
 records an interruption as an estimator's (or a plot's) failure.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -48,7 +49,7 @@ def signals_raise():
     try:
         for s in _RAISED:
             old[s] = signal.signal(s, _record_and_raise)
-    except ValueError:   # not the main thread
+    except ValueError:  # not the main thread
         pass
     try:
         yield

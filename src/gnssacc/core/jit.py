@@ -11,6 +11,7 @@ numba would load a kernel from there or compile it, decided by numba's own rules
 importing numba (so that a first run can say at once that it compiles). Which kernels there are,
 and compiling them in the background, is :mod:`gnssacc.estimators.kernels`' business.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -67,8 +68,6 @@ def cache_folder() -> Path:
     return Path(os.environ[ENV]) if os.environ.get(ENV) else KERNEL_DIR / "__pycache__"
 
 
-
-
 def kernel_cache_folder(source: Path) -> Path:
     """The folder numba caches the kernels of the module file ``source`` in, chosen as numba's
     cache locators choose it: ``NUMBA_CACHE_DIR/<folder>_<SHA-1 of the folder's path>`` when the
@@ -115,8 +114,20 @@ def _index_stamp_and_strings(data: bytes) -> tuple[object, set]:
     overloads (that would import numba for their types)."""
     values, strings = [], set()
     for op, arg, _ in pickletools.genops(data):
-        if op.name in ("SHORT_BINBYTES", "BINBYTES", "BINBYTES8", "BINFLOAT", "BININT", "BININT1",
-                       "BININT2", "LONG1") and len(values) < 2:
+        if (
+            op.name
+            in (
+                "SHORT_BINBYTES",
+                "BINBYTES",
+                "BINBYTES8",
+                "BINFLOAT",
+                "BININT",
+                "BININT1",
+                "BININT2",
+                "LONG1",
+            )
+            and len(values) < 2
+        ):
             values.append(arg)
         elif isinstance(arg, str) and op.name.endswith("UNICODE"):
             strings.add(arg)
@@ -129,7 +140,7 @@ def _host_cpu_name() -> str:
     """The CPU name numba compiles for: ``NUMBA_CPU_NAME``, else LLVM's name of this CPU."""
     if os.environ.get("NUMBA_CPU_NAME"):
         return os.environ["NUMBA_CPU_NAME"]
-    import llvmlite.binding as ll   # numba's own dependency; a tenth of a second
+    import llvmlite.binding as ll  # numba's own dependency; a tenth of a second
 
     return ll.get_host_cpu_name()
 
@@ -153,7 +164,10 @@ def kernel_cached(source: Path, qualname: str) -> bool:
                 if pickle.load(f) != version:
                     continue
                 stamp, strings = _index_stamp_and_strings(f.read())
-            if stamp == _source_stamp(source, old=not isinstance(stamp, bytes)) and _host_cpu_name() in strings:
+            if (
+                stamp == _source_stamp(source, old=not isinstance(stamp, bytes))
+                and _host_cpu_name() in strings
+            ):
                 return True
         except (OSError, pickle.UnpicklingError, ValueError, EOFError):
             continue

@@ -7,6 +7,7 @@ process can hold a hundred MiB it no longer uses, which then adds to the next st
 ``malloc_trim(0)`` returns the free pages (also those inside the heap) at once. Elsewhere (macOS,
 musl, Windows) this is a no-op. Dask's workers do the same for the same reason.
 """
+
 from __future__ import annotations
 
 import ctypes

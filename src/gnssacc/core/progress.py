@@ -1,5 +1,6 @@
 """Progress bars: shown on a terminal, silent when stderr is not a TTY (CI, pipes, notebooks);
 a campaign also has plain lines for logs."""
+
 from __future__ import annotations
 
 import sys
@@ -31,8 +32,15 @@ class CampaignProgress:
     def __init__(self, total: int, done: int = 0, failed: int = 0, lines: bool = True):
         self.total, self.done, self.failed, self.lines = total, done, failed, lines
         self.tty = sys.stderr.isatty()
-        self.bar = tqdm(total=total, initial=done, desc="campaign", unit="task", disable=not self.tty, leave=False,
-                        dynamic_ncols=True)
+        self.bar = tqdm(
+            total=total,
+            initial=done,
+            desc="campaign",
+            unit="task",
+            disable=not self.tty,
+            leave=False,
+            dynamic_ncols=True,
+        )
         self.t0 = time.monotonic()
         self.ran = 0
 
@@ -43,10 +51,14 @@ class CampaignProgress:
     def started(self, where: str, running: int) -> None:
         """The executor is up (``where`` it runs) and ``running`` tasks have started."""
         self.t0 = time.monotonic()
-        self._say(f"{self.total - self.done} of {self.total} tasks to run on {where} ({self.done} finished before)")
+        self._say(
+            f"{self.total - self.done} of {self.total} tasks to run on {where} ({self.done} finished before)"
+        )
         self._postfix(running)
 
-    def update(self, label: str, ok: bool, seconds: float, running: int, error: str | None = None) -> None:
+    def update(
+        self, label: str, ok: bool, seconds: float, running: int, error: str | None = None
+    ) -> None:
         """Task ``label`` finished (``ok`` or failed with ``error``) after ``seconds``."""
         self.done += 1
         self.ran += 1
@@ -55,8 +67,10 @@ class CampaignProgress:
         self._postfix(running)
         left = self.total - self.done
         eta = (time.monotonic() - self.t0) / self.ran * left
-        self._say(f"[{self.done}/{self.total}] {label}: {'ok' if ok else 'failed: ' + str(error)} ({seconds:.1f} s); "
-                  f"{self.failed} failed, {running} running, ETA {eta:.0f} s")
+        self._say(
+            f"[{self.done}/{self.total}] {label}: {'ok' if ok else 'failed: ' + str(error)} ({seconds:.1f} s); "
+            f"{self.failed} failed, {running} running, ETA {eta:.0f} s"
+        )
 
     def _postfix(self, running: int) -> None:
         self.bar.set_postfix_str(f"failed {self.failed}, running {running}", refresh=True)

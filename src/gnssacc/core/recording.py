@@ -7,6 +7,7 @@ the same checks.
 Frames and units: body frame b is Front-Right-Down, navigation frame n is North-East-Down,
 times are seconds on one clock, angles radians, positions geodetic (lat, lon [rad], h [m]).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
@@ -51,7 +52,16 @@ class ImuData:
 
 #: Fix quality codes of :attr:`GnssFixes.quality` (RTKLIB's ``Q`` numbering, which NMEA GGA
 #: qualities and other receivers' flags are mapped onto by their readers), by name.
-FIX_QUALITY = {"unknown": 0, "fix": 1, "float": 2, "sbas": 3, "dgps": 4, "single": 5, "ppp": 6, "estimated": 7}
+FIX_QUALITY = {
+    "unknown": 0,
+    "fix": 1,
+    "float": 2,
+    "sbas": 3,
+    "dgps": 4,
+    "single": 5,
+    "ppp": 6,
+    "estimated": 7,
+}
 #: Quality code -> name.
 FIX_QUALITY_NAMES = {v: k for k, v in FIX_QUALITY.items()}
 
@@ -98,9 +108,16 @@ class GnssFixes:
         return len(self.t)
 
     def select(self, mask) -> "GnssFixes":
-        return GnssFixes(self.t[mask], self.lat[mask], self.lon[mask], self.h[mask], self.sigma_ned[mask],
-                         None if self.quality is None else self.quality[mask],
-                         None if self.corr_ned is None else self.corr_ned[mask], self.sigma_stated)
+        return GnssFixes(
+            self.t[mask],
+            self.lat[mask],
+            self.lon[mask],
+            self.h[mask],
+            self.sigma_ned[mask],
+            None if self.quality is None else self.quality[mask],
+            None if self.corr_ned is None else self.corr_ned[mask],
+            self.sigma_stated,
+        )
 
     def cov_ned(self, k) -> np.ndarray:
         """The NED covariance [m^2] of fix ``k`` (shape (3, 3)) or of fixes ``k`` (an index array:
@@ -152,8 +169,15 @@ class WheelOdometry:
     def select(self, mask) -> "WheelOdometry":
         def pick(a):
             return None if a is None else a[mask]
-        return WheelOdometry(self.t[mask], self.v_forward[mask], pick(self.yaw_rate), pick(self.sigma_v),
-                             pick(self.sigma_yaw_rate), self.frame)
+
+        return WheelOdometry(
+            self.t[mask],
+            self.v_forward[mask],
+            pick(self.yaw_rate),
+            pick(self.sigma_v),
+            pick(self.sigma_yaw_rate),
+            self.frame,
+        )
 
     def shifted(self, delta_s: float) -> "WheelOdometry":
         """A copy with ``delta_s`` [s] added to every time stamp (a shift of the IMU's clock)."""
@@ -271,7 +295,7 @@ class SimTruth:
         :func:`gnssacc.sources.sim_odometry.simulate_odometry`), when the run has odometry.
     """
 
-    bias: object   # gnssacc.sources.sim_true_bias.TrueBias (a source type: the model does not import it)
+    bias: object  # gnssacc.sources.sim_true_bias.TrueBias (a source type: the model does not import it)
     segments: list
     imu_error_draws: dict
     imu_params: dict
@@ -351,21 +375,35 @@ class RecordedRun:
             raise InputError(self.where, "IMU arrays must have shape (N, 3)")
         check_increasing(imu.t, self.where, "IMU")
         if len(gnss) == 0:
-            raise InputError(self.where, "no GNSS fix at all: at least one fix is needed to initialise")
+            raise InputError(
+                self.where, "no GNSS fix at all: at least one fix is needed to initialise"
+            )
         check_increasing(gnss.t, self.where, "GNSS")
-        for name, arr in (("IMU time", imu.t), ("specific force", imu.f_b), ("angular rate", imu.omega_ib_b),
-                          ("GNSS time", gnss.t), ("GNSS latitude", gnss.lat), ("GNSS longitude", gnss.lon),
-                          ("GNSS height", gnss.h), ("GNSS sigma", gnss.sigma_ned)):
+        for name, arr in (
+            ("IMU time", imu.t),
+            ("specific force", imu.f_b),
+            ("angular rate", imu.omega_ib_b),
+            ("GNSS time", gnss.t),
+            ("GNSS latitude", gnss.lat),
+            ("GNSS longitude", gnss.lon),
+            ("GNSS height", gnss.h),
+            ("GNSS sigma", gnss.sigma_ned),
+        ):
             if not np.all(np.isfinite(arr)):
                 raise InputError(self.where, f"{name} contains NaN or inf values")
         if np.any(gnss.sigma_ned <= 0):
             raise InputError(self.where, "GNSS sigmas must be positive metres")
         if np.any(np.abs(gnss.lat) > np.pi / 2) or np.any(np.abs(gnss.lon) > 2 * np.pi):
-            raise InputError(self.where, "GNSS latitude/longitude out of range (are they degrees, not radians?)")
+            raise InputError(
+                self.where, "GNSS latitude/longitude out of range (are they degrees, not radians?)"
+            )
         overlap = (gnss.t >= imu.t[0]) & (gnss.t <= imu.t[-1])
         if not np.any(overlap):
-            raise InputError(self.where, f"GNSS fixes ({gnss.t[0]:.3f}..{gnss.t[-1]:.3f} s) do not overlap the IMU "
-                                         f"time span ({imu.t[0]:.3f}..{imu.t[-1]:.3f} s): different clocks?")
+            raise InputError(
+                self.where,
+                f"GNSS fixes ({gnss.t[0]:.3f}..{gnss.t[-1]:.3f} s) do not overlap the IMU "
+                f"time span ({imu.t[0]:.3f}..{imu.t[-1]:.3f} s): different clocks?",
+            )
         _check_fix_extras(gnss, self.where)
         if self.truth is not None:
             check_increasing(self.truth.t, self.where, "truth")
@@ -373,9 +411,12 @@ class RecordedRun:
             check_odometry(self.odometry, self.where)
             odo_t = self.odometry.t
             if odo_t[-1] < imu.t[0] or odo_t[0] > imu.t[-1]:
-                raise InputError(self.where, f"wheel odometry ({odo_t[0]:.3f}..{odo_t[-1]:.3f} s) does not overlap the "
-                                             f"IMU time span ({imu.t[0]:.3f}..{imu.t[-1]:.3f} s): its times must be on "
-                                             f"the IMU's clock")
+                raise InputError(
+                    self.where,
+                    f"wheel odometry ({odo_t[0]:.3f}..{odo_t[-1]:.3f} s) does not overlap the "
+                    f"IMU time span ({imu.t[0]:.3f}..{imu.t[-1]:.3f} s): its times must be on "
+                    f"the IMU's clock",
+                )
         return self
 
     def with_imu_shift(self, delta_s: float) -> "RecordedRun":
@@ -399,9 +440,14 @@ class RecordedRun:
             def var_rot(sig):
                 return None if sig is None else np.sqrt(R2 @ np.asarray(sig, float) ** 2)
 
-            init = replace(init, rpy=np.array(dcm_to_euler(init.R_nb @ R.T)), b_a=R @ np.asarray(init.b_a, float),
-                           b_g=R @ np.asarray(init.b_g, float), sigma_b_a=var_rot(init.sigma_b_a),
-                           sigma_b_g=var_rot(init.sigma_b_g))
+            init = replace(
+                init,
+                rpy=np.array(dcm_to_euler(init.R_nb @ R.T)),
+                b_a=R @ np.asarray(init.b_a, float),
+                b_g=R @ np.asarray(init.b_g, float),
+                sigma_b_a=var_rot(init.sigma_b_a),
+                sigma_b_g=var_rot(init.sigma_b_g),
+            )
         return replace(self, imu=imu, init=init)
 
     def with_gnss(self, gnss: GnssFixes, **meta) -> "RecordedRun":
@@ -421,12 +467,17 @@ def _check_fix_extras(gnss: GnssFixes, where: str) -> None:
     if not np.all(np.isfinite(gnss.corr_ned)) or np.any(np.abs(gnss.corr_ned) >= 1.0):
         raise InputError(where, "GNSS correlation coefficients must be finite and inside (-1, 1)")
     r_ne, r_nd, r_ed = np.asarray(gnss.corr_ned, float).T
-    det = 1.0 + 2.0 * r_ne * r_nd * r_ed - r_ne**2 - r_nd**2 - r_ed**2   # det of the correlation matrix
+    det = (
+        1.0 + 2.0 * r_ne * r_nd * r_ed - r_ne**2 - r_nd**2 - r_ed**2
+    )  # det of the correlation matrix
     bad = np.flatnonzero(det <= 0.0)
     if bad.size:
         k = int(bad[0])
-        raise InputError(where, f"the GNSS fix covariance at t = {gnss.t[k]:.3f} s is not positive definite "
-                                f"(correlations {r_ne[k]:.3f}, {r_nd[k]:.3f}, {r_ed[k]:.3f}); {bad.size} such fix(es)")
+        raise InputError(
+            where,
+            f"the GNSS fix covariance at t = {gnss.t[k]:.3f} s is not positive definite "
+            f"(correlations {r_ne[k]:.3f}, {r_nd[k]:.3f}, {r_ed[k]:.3f}); {bad.size} such fix(es)",
+        )
 
 
 def check_odometry(odo: WheelOdometry, where: str) -> None:
@@ -434,8 +485,12 @@ def check_odometry(odo: WheelOdometry, where: str) -> None:
     increasing or non-positive sigmas."""
     k = len(odo.t)
     what = f"wheel odometry ({odo.frame})" if odo.frame else "wheel odometry"
-    for name, arr in (("speed", odo.v_forward), ("yaw rate", odo.yaw_rate), ("speed sigma", odo.sigma_v),
-                      ("yaw-rate sigma", odo.sigma_yaw_rate)):
+    for name, arr in (
+        ("speed", odo.v_forward),
+        ("yaw rate", odo.yaw_rate),
+        ("speed sigma", odo.sigma_v),
+        ("yaw-rate sigma", odo.sigma_yaw_rate),
+    ):
         if arr is None:
             continue
         if np.shape(arr) != (k,):
@@ -455,8 +510,11 @@ def check_increasing(t: np.ndarray, where: str, what: str) -> None:
     if bad.size:
         k = int(bad[0])
         kind = "goes backwards" if d[k] < 0 else "repeats"
-        raise InputError(where, f"{what} time {kind} at sample {k + 1} ({t[k]:.6f} s -> {t[k + 1]:.6f} s); "
-                                f"{bad.size} such place(s)")
+        raise InputError(
+            where,
+            f"{what} time {kind} at sample {k + 1} ({t[k]:.6f} s -> {t[k + 1]:.6f} s); "
+            f"{bad.size} such place(s)",
+        )
 
 
 def drop_nonfinite(table: np.ndarray, where: str, what: str, max_fraction: float) -> np.ndarray:
@@ -475,11 +533,14 @@ def drop_nonfinite(table: np.ndarray, where: str, what: str, max_fraction: float
     if n_bad:
         frac = n_bad / len(table)
         if frac > max_fraction:
-            raise InputError(where, f"{n_bad} of {len(table)} {what} rows ({100 * frac:.1f}%) contain NaN/inf, "
-                                    f"more than the allowed {100 * max_fraction:.1f}% (data.max_bad_fraction)")
+            raise InputError(
+                where,
+                f"{n_bad} of {len(table)} {what} rows ({100 * frac:.1f}%) contain NaN/inf, "
+                f"more than the allowed {100 * max_fraction:.1f}% (data.max_bad_fraction)",
+            )
         warn_data(where, f"dropped {n_bad} of {len(table)} {what} rows with NaN/inf values")
         return table[good]
-    return table   # no copy when every row is good: the common case, and a long run's largest array
+    return table  # no copy when every row is good: the common case, and a long run's largest array
 
 
 def gap_indices(t: np.ndarray, factor: float) -> tuple[np.ndarray, np.ndarray, float]:

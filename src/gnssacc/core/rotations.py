@@ -4,6 +4,7 @@ Convention: ``R_nb`` maps body-frame vectors into the navigation frame, ``v_n = 
 Euler angles are roll, pitch, yaw [rad] in the aerospace Z-Y-X sequence:
 ``R_nb = Rz(yaw) @ Ry(pitch) @ Rx(roll)``.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -17,7 +18,9 @@ def skew(v):
 def cross3(a, b) -> np.ndarray:
     """``a x b`` for two 3-vectors (``np.cross`` costs ten times more at this size, in the
     estimators' per-update paths)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+    return np.array(
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    )
 
 
 def rotvec_to_dcm(phi):
@@ -54,11 +57,13 @@ def euler_to_dcm(roll, pitch, yaw):
     cr, sr = np.cos(roll), np.sin(roll)
     cp, sp = np.cos(pitch), np.sin(pitch)
     cy, sy = np.cos(yaw), np.sin(yaw)
-    return np.array([
-        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-        [-sp, cp * sr, cp * cr],
-    ])
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
 
 
 def dcm_to_euler(R_nb):
@@ -122,7 +127,9 @@ def dcm_to_quaternion(R: np.ndarray) -> np.ndarray:
     tr = np.trace(R)
     if tr > 0:
         s = 2.0 * np.sqrt(tr + 1.0)
-        q = np.array([(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s])
+        q = np.array(
+            [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s]
+        )
     else:
         i = int(np.argmax(np.diag(R)))
         j, k = (i + 1) % 3, (i + 2) % 3
@@ -140,9 +147,13 @@ def quaternion_to_dcm(x: float, y: float, z: float, w: float) -> np.ndarray:
     """Rotation matrix of a quaternion ``(x, y, z, w)`` (normalised first)."""
     n = np.sqrt(x * x + y * y + z * z + w * w)
     x, y, z, w = x / n, y / n, z / n, w / n
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def wrap_angle(a):

@@ -1,4 +1,5 @@
 """NavSolution: what an estimator returns, one row per output epoch."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field

@@ -1,6 +1,7 @@
 """Thresholds of the stationary detector (:func:`gnssacc.prepare.stationary.detect_stationary`) and
 their reading from a configuration's ``[stationary]`` section; the section's defaults and key
 documentation come from here (:mod:`gnssacc.core.config`, :mod:`gnssacc.core.config_docs`)."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -129,5 +130,11 @@ def params_from_config(cfg) -> StationaryParams:
     known = StationaryParams.__dataclass_fields__
     unknown = sorted(set(section) - set(known))
     if unknown:
-        raise InputError("config", f"unknown [stationary] key(s) {', '.join(unknown)} (known: {', '.join(known)})")
-    return replace(StationaryParams(), **{k: type(getattr(StationaryParams(), k))(v) for k, v in section.items()})
+        raise InputError(
+            "config",
+            f"unknown [stationary] key(s) {', '.join(unknown)} (known: {', '.join(known)})",
+        )
+    return replace(
+        StationaryParams(),
+        **{k: type(getattr(StationaryParams(), k))(v) for k, v in section.items()},
+    )

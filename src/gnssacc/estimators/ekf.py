@@ -21,6 +21,7 @@ window, ``H_w``).
 An *observer* (see :class:`EkfObserver`) sees every epoch and update; the observability analysis
 uses it instead of a copy of this loop.
 """
+
 from __future__ import annotations
 
 import math
@@ -118,12 +119,23 @@ def initial_state(init: InitialState, settings, odometry: bool = False) -> Filte
     (``settings``: either estimator's settings, :mod:`gnssacc.estimators.settings`); with
     ``odometry`` the scale-factor state too (``[odometry] scale_sigma``, zero at the start)."""
     sig_p, sig_v, sig_att = initial_sigmas(init, settings.start_sigmas)
-    sig_ba = settings.imu.accel_bias_sigma0 if init.sigma_b_a is None else np.asarray(init.sigma_b_a, float)
-    sig_bg = settings.imu.gyro_bias_sigma0 if init.sigma_b_g is None else np.asarray(init.sigma_b_g, float)
+    sig_ba = (
+        settings.imu.accel_bias_sigma0
+        if init.sigma_b_a is None
+        else np.asarray(init.sigma_b_a, float)
+    )
+    sig_bg = (
+        settings.imu.gyro_bias_sigma0
+        if init.sigma_b_g is None
+        else np.asarray(init.sigma_b_g, float)
+    )
     gm = settings.gnss.gm_sigma
     n_gm = 3 if np.any(gm > 0) else 0
     sig_k = [[settings.odometry.scale_sigma]] if odometry else []
-    P = np.diag(np.concatenate([sig_p, sig_v, sig_att, sig_ba, sig_bg] + ([gm] if n_gm else []) + sig_k) ** 2)
+    P = np.diag(
+        np.concatenate([sig_p, sig_v, sig_att, sig_ba, sig_bg] + ([gm] if n_gm else []) + sig_k)
+        ** 2
+    )
     if init.levelled:
         _tie_tilt_to_accel_bias(P, init)
     if np.any(gm > 0) and init.fit_window is not None:
@@ -131,9 +143,16 @@ def initial_state(init: InitialState, settings, odometry: bool = False) -> Filte
         # x_g state starts at zero (dx_g = -x_g), so the two are known only in sum.
         P[0:3, 0:3] += np.diag(gm**2)
         P[0:3, 15:18] = P[15:18, 0:3] = -np.diag(gm**2)
-    return FilterState(np.array([init.lat, init.lon, init.h]), np.array(init.v_n, float).copy(), init.R_nb.copy(),
-                       np.array(init.b_a, float).copy(), np.array(init.b_g, float).copy(), P,
-                       np.zeros(n_gm + len(sig_k)), n_gm)
+    return FilterState(
+        np.array([init.lat, init.lon, init.h]),
+        np.array(init.v_n, float).copy(),
+        init.R_nb.copy(),
+        np.array(init.b_a, float).copy(),
+        np.array(init.b_g, float).copy(),
+        P,
+        np.zeros(n_gm + len(sig_k)),
+        n_gm,
+    )
 
 
 def _tie_tilt_to_accel_bias(P: np.ndarray, init: InitialState) -> None:
@@ -154,7 +173,9 @@ def correct(s: FilterState, dx: np.ndarray) -> None:
     apply_correction(s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, s.x_e, dx)
 
 
-def kalman_update(s: FilterState, m: meas_models.Measurement) -> tuple[float, float, bool, np.ndarray]:
+def kalman_update(
+    s: FilterState, m: meas_models.Measurement
+) -> tuple[float, float, bool, np.ndarray]:
     """Joseph-form update; returns the NIS, the Gaussian log-likelihood of the innovation, whether
     it was applied (a positive ``m.gate`` rejects it when NIS exceeds the gate) and the whitened
     innovation."""
@@ -173,7 +194,9 @@ class EkfObserver:
     def before(self, t: float, kind: str, s: FilterState, prop: Propagator) -> None:
         """After the prediction to an update epoch, before its updates."""
 
-    def update(self, t: float, m: meas_models.Measurement, nis: float, used: bool, s: FilterState) -> None:
+    def update(
+        self, t: float, m: meas_models.Measurement, nis: float, used: bool, s: FilterState
+    ) -> None:
         """After each update (``used`` False: gated out, or evaluated only for the observer)."""
 
     def after(self, t: float, kind: str, s: FilterState, prop: Propagator) -> None:
@@ -213,9 +236,21 @@ class _Recorder:
         sigma = np.sqrt(np.maximum(self.var[:n], 0.0))
         J = euler_error_jacobian(rpy[:, 0], rpy[:, 1], rpy[:, 2])
         sigma[:, 6:9] = np.sqrt(np.maximum(np.einsum("nij,njk,nik->ni", J, self.P_att[:n], J), 0.0))
-        return NavSolution(method, self.t[:n], self.pos[:n, 0], self.pos[:n, 1], self.pos[:n, 2], self.v_n[:n],
-                           rpy, self.b_a[:n], self.b_g[:n], sigma, runtime_s, stats,
-                           None if self.P is None else self.P[:n])
+        return NavSolution(
+            method,
+            self.t[:n],
+            self.pos[:n, 0],
+            self.pos[:n, 1],
+            self.pos[:n, 2],
+            self.v_n[:n],
+            rpy,
+            self.b_a[:n],
+            self.b_g[:n],
+            sigma,
+            runtime_s,
+            stats,
+            None if self.P is None else self.P[:n],
+        )
 
 
 class _Tally:
@@ -225,16 +260,18 @@ class _Tally:
     def __init__(self, keep: bool):
         self.keep = keep
         self.prev = {k: None for k in meas_models.KINDS}
-        self.lag1 = {k: np.zeros(2) for k in meas_models.KINDS}   # sum w_k w_(k-1), sum w_k^2
+        self.lag1 = {k: np.zeros(2) for k in meas_models.KINDS}  # sum w_k w_(k-1), sum w_k^2
         self.n = {k: 0 for k in meas_models.KINDS}
         self.rejected = {k: 0 for k in meas_models.KINDS}
         self.nis_sum = {k: 0.0 for k in meas_models.KINDS}
         self.dof = {k: 0 for k in meas_models.KINDS}
         self.loglik = {k: 0.0 for k in meas_models.KINDS}
-        self.beyond = {k: 0 for k in meas_models.KINDS}   # NIS beyond the chi-square tail bound
-        self.series = {k: ([], [], []) for k in meas_models.KINDS}   # t, NIS per dof, log-likelihood
+        self.beyond = {k: 0 for k in meas_models.KINDS}  # NIS beyond the chi-square tail bound
+        self.series = {k: ([], [], []) for k in meas_models.KINDS}  # t, NIS per dof, log-likelihood
 
-    def add(self, t: float, m: meas_models.Measurement, nis: float, loglik: float, used: bool, wz) -> None:
+    def add(
+        self, t: float, m: meas_models.Measurement, nis: float, loglik: float, used: bool, wz
+    ) -> None:
         k = m.kind
         if not used:
             self.rejected[k] += 1
@@ -264,11 +301,16 @@ class _Tally:
             out[f"loglik_{k}"] = self.loglik[k]
             # Whitened innovations of a correct model are white: ~0 here; a slowly varying
             # error the model misses (too little IMU noise, correlated GNSS errors) makes it > 0.
-            out[f"acf1_{k}"] = float(self.lag1[k][0] / self.lag1[k][1]) if self.lag1[k][1] > 0 else None
+            out[f"acf1_{k}"] = (
+                float(self.lag1[k][0] / self.lag1[k][1]) if self.lag1[k][1] > 0 else None
+            )
             if self.keep:
                 t, nis, ll = self.series[k]
-                out[f"nis_{k}_t"], out[f"nis_{k}"], out[f"loglik_{k}_series"] = (np.asarray(t), np.asarray(nis),
-                                                                                 np.asarray(ll))
+                out[f"nis_{k}_t"], out[f"nis_{k}"], out[f"loglik_{k}_series"] = (
+                    np.asarray(t),
+                    np.asarray(nis),
+                    np.asarray(ll),
+                )
         return out
 
 
@@ -284,9 +326,9 @@ class EkfSetup:
     gate: float
     lever_b: np.ndarray
     f_avg_s: float
-    p_fix_n: np.ndarray          # fixes in the run's tangent frame [m]
+    p_fix_n: np.ndarray  # fixes in the run's tangent frame [m]
     window: AccelWindow
-    k: int                       # IMU index of the sample holding at init.t
+    k: int  # IMU index of the sample holding at init.t
     stationary: StationaryEpochs = field(default_factory=StationaryEpochs.empty)
     zupt_sigma: float = 0.02
     zupt_gate: float = 0.0
@@ -300,30 +342,69 @@ class EkfSetup:
         return float(self.init.t)
 
 
-def prepare(run: RecordedRun, settings: EkfSettings, init: InitialState, quality: QualityReport, stationary=None,
-            cov_every: int = 1) -> EkfSetup:
+def prepare(
+    run: RecordedRun,
+    settings: EkfSettings,
+    init: InitialState,
+    quality: QualityReport,
+    stationary=None,
+    cov_every: int = 1,
+) -> EkfSetup:
     """Initial state and covariance, IMU propagator with noise and inflation, acceleration window,
     stationary epochs (``stationary``: a :class:`gnssacc.prepare.stationary.StationaryReport` or ``None``)."""
     segments = inflation_segments(run.imu, quality, settings.suspect)
-    imu, gnss_model, acc, z, odo = settings.imu, settings.gnss, settings.accel, settings.zupt, settings.odometry
+    imu, gnss_model, acc, z, odo = (
+        settings.imu,
+        settings.gnss,
+        settings.accel,
+        settings.zupt,
+        settings.odometry,
+    )
     odo_epochs = odometry_epochs_for(run, odo, float(init.t))
     with_odo = len(odo_epochs) > 0
-    prop = Propagator(run.imu.t, run.imu.f_b, run.imu.omega_ib_b, imu.accel_psd, imu.gyro_psd, imu.accel_bias_rw_psd,
-                      imu.gyro_bias_rw_psd, segments, settings.phi_order, cov_every,
-                      gm_tau_s=gnss_model.gm_tau, gm_sigma_m=gnss_model.gm_sigma,
-                      scale_tau_s=odo.scale_tau_s if with_odo else None, scale_sigma=odo.scale_sigma if with_odo else None)
+    prop = Propagator(
+        run.imu.t,
+        run.imu.f_b,
+        run.imu.omega_ib_b,
+        imu.accel_psd,
+        imu.gyro_psd,
+        imu.accel_bias_rw_psd,
+        imu.gyro_bias_rw_psd,
+        segments,
+        settings.phi_order,
+        cov_every,
+        gm_tau_s=gnss_model.gm_tau,
+        gm_sigma_m=gnss_model.gm_sigma,
+        scale_tau_s=odo.scale_tau_s if with_odo else None,
+        scale_sigma=odo.scale_sigma if with_odo else None,
+    )
     epochs = epochs_for(run, z, imu.gyro_psd, stationary)
     gnss = run.gnss
-    return EkfSetup(init, initial_state(init, settings, with_odo), prop, segments[0], segments[1],
-                    settings.position_gate_nis, gnss_model.lever_arm_b, acc.specific_force_avg_s,
-                    run.origin.to_ned(gnss.lat, gnss.lon, gnss.h),
-                    AccelWindow(acc.window, acc.max_gap_s, acc.sigma_override),
-                    int(np.searchsorted(prop.t, float(init.t), side="right")), epochs,
-                    z.velocity_sigma_mps, z.gate_nis, nhc_epochs_for(run, settings.nhc, float(init.t), stationary),
-                    settings.nhc, odo_epochs, odo)
+    return EkfSetup(
+        init,
+        initial_state(init, settings, with_odo),
+        prop,
+        segments[0],
+        segments[1],
+        settings.position_gate_nis,
+        gnss_model.lever_arm_b,
+        acc.specific_force_avg_s,
+        run.origin.to_ned(gnss.lat, gnss.lon, gnss.h),
+        AccelWindow(acc.window, acc.max_gap_s, acc.sigma_override),
+        int(np.searchsorted(prop.t, float(init.t), side="right")),
+        epochs,
+        z.velocity_sigma_mps,
+        z.gate_nis,
+        nhc_epochs_for(run, settings.nhc, float(init.t), stationary),
+        settings.nhc,
+        odo_epochs,
+        odo,
+    )
 
 
-def acceleration_model(run: RecordedRun, setup: EkfSetup, s: FilterState, t: float, acc, model: str = "acc"):
+def acceleration_model(
+    run: RecordedRun, setup: EkfSetup, s: FilterState, t: float, acc, model: str = "acc"
+):
     """The acceleration update at ``t`` for the window measurement ``acc``, or ``None`` when the
     specific force it needs comes from a suspect IMU span (fabricated or damaged data) or, for
     ``model="accw"``, the IMU does not cover the window.
@@ -336,7 +417,9 @@ def acceleration_model(run: RecordedRun, setup: EkfSetup, s: FilterState, t: flo
         if win is None or touches_segments(win[0], win[1], setup.seg_i0, setup.seg_i1):
             return None
         k0, k1, h, w = win
-        F_b, M, G = kernel_force_integrals(run.imu.f_b[k0:k1], run.imu.omega_ib_b[k0:k1], h, w, s.b_a, s.b_g)
+        F_b, M, G = kernel_force_integrals(
+            run.imu.f_b[k0:k1], run.imu.omega_ib_b[k0:k1], h, w, s.b_a, s.b_g
+        )
         return meas_models.window_acceleration(s, acc.a_n, acc.cov, F_b, M, G, g_n)
     f_meas = measured_specific_force(run.imu, t, setup.f_avg_s, setup.seg_i0, setup.seg_i1)
     if f_meas is None:
@@ -358,8 +441,11 @@ def default_output_times(run: RecordedRun) -> np.ndarray:
     base = np.concatenate([[run.t_start], inside, [run.t_end]])
     step = float(np.median(np.diff(gnss_t))) if len(gnss_t) > 1 else 1.0
     gaps = np.diff(base)
-    fill = [base[i] + gaps[i] * np.arange(1, n) / n
-            for i, n in enumerate(np.rint(gaps / step).astype(int)) if gaps[i] > 1.5 * step]
+    fill = [
+        base[i] + gaps[i] * np.arange(1, n) / n
+        for i, n in enumerate(np.rint(gaps / step).astype(int))
+        if gaps[i] > 1.5 * step
+    ]
     return np.union1d(base, np.concatenate(fill) if fill else np.zeros(0))
 
 
@@ -378,9 +464,20 @@ def _gnss_measurements(run, setup, s, t, i, acc, use_acc, evaluate_acc, stats):
     the acceleration model applied, a value of :data:`METHODS`; the paper's is evaluated when
     only ``evaluate_acc``)."""
     gnss = run.gnss
-    cov = None if gnss.corr_ned is None else gnss.cov_ned(i)   # correlated axes: the full covariance
-    yield meas_models.position(s, gnss.lat[i], gnss.lon[i], gnss.h[i], gnss.sigma_ned[i], setup.lever_b, setup.gate,
-                               cov), True
+    cov = None if gnss.corr_ned is None else gnss.cov_ned(i)  # correlated axes: the full covariance
+    yield (
+        meas_models.position(
+            s,
+            gnss.lat[i],
+            gnss.lon[i],
+            gnss.h[i],
+            gnss.sigma_ned[i],
+            setup.lever_b,
+            setup.gate,
+            cov,
+        ),
+        True,
+    )
     if acc is not None and (use_acc or evaluate_acc):
         m = acceleration_model(run, setup, s, t, acc, use_acc or "acc")
         if m is None:
@@ -398,14 +495,20 @@ def _nhc_measurements(setup, s, j, stats):
     """The non-holonomic constraint at its epoch ``j``, unless :func:`gnssacc.estimators.nhc.decide`
     says not (counted in ``stats``)."""
     ep, nhc = setup.nhc, setup.nhc_settings
-    if ep.rest[j]:   # decided without the state (nhc.decide's first test)
+    if ep.rest[j]:  # decided without the state (nhc.decide's first test)
         stats[nhc_rules.SKIPPED[nhc_rules.REST]] += 1
         return
     w_ie = earth_rate_n(s.pos[0])
     v_b, H = meas_models.vehicle_velocity(s, ep.omega_b[j], nhc.lever_arm_b, w_ie, nhc.R_vb)
-    yaw_rate = float(ep.omega_b[j, 2] - s.b_g[2] - s.R_nb[:, 2] @ w_ie)   # relative to the earth
-    why = nhc_rules.decide(bool(ep.rest[j]), float(v_b[0]), _row_sigma(s.P, H[0]), yaw_rate, float(nhc.sigma_mps[0]),
-                           nhc.pivot_offset_m)
+    yaw_rate = float(ep.omega_b[j, 2] - s.b_g[2] - s.R_nb[:, 2] @ w_ie)  # relative to the earth
+    why = nhc_rules.decide(
+        bool(ep.rest[j]),
+        float(v_b[0]),
+        _row_sigma(s.P, H[0]),
+        yaw_rate,
+        float(nhc.sigma_mps[0]),
+        nhc.pivot_offset_m,
+    )
     if why != nhc_rules.APPLY:
         stats[nhc_rules.SKIPPED[why]] += 1
         return
@@ -416,9 +519,18 @@ def _odometry_measurements(setup, s, j, stats):
     """The wheel odometry's sample ``j``, unless its sign contradicts the filter's
     (:func:`gnssacc.estimators.odometry.decide`, counted in ``stats``)."""
     ep, odo = setup.odometry, setup.odometry_settings
-    m = meas_models.odometry(s, ep.v[j], ep.sigma[j], ep.omega_b[j], odo.lever_arm_b, earth_rate_n(s.pos[0]),
-                             setup.nhc_settings.R_vb)
-    why = odo_rules.decide(float(ep.v[j]), float(ep.sigma[j]), float(m.dz[0] + ep.v[j]), _row_sigma(s.P, m.H[0]))
+    m = meas_models.odometry(
+        s,
+        ep.v[j],
+        ep.sigma[j],
+        ep.omega_b[j],
+        odo.lever_arm_b,
+        earth_rate_n(s.pos[0]),
+        setup.nhc_settings.R_vb,
+    )
+    why = odo_rules.decide(
+        float(ep.v[j]), float(ep.sigma[j]), float(m.dz[0] + ep.v[j]), _row_sigma(s.P, m.H[0])
+    )
     if why != odo_rules.APPLY:
         stats[odo_rules.SKIPPED[why]] += 1
         return
@@ -429,13 +541,28 @@ def _stationary_measurements(setup, s, j):
     st = setup.stationary
     yield meas_models.zero_velocity(s, setup.zupt_sigma, setup.zupt_gate), True
     w_ie = earth_rate_n(s.pos[0])
-    yield meas_models.zero_rate(s, st.omega_mean_b[j], st.omega_var_b[j], w_ie, setup.zupt_gate), True
+    yield (
+        meas_models.zero_rate(s, st.omega_mean_b[j], st.omega_var_b[j], w_ie, setup.zupt_gate),
+        True,
+    )
 
 
-def run_ekf(run: RecordedRun, settings, method: str = "ekf", *, output_times: np.ndarray | None = None,
-            quality: QualityReport | None = None, init: InitialState | None = None, stationary=None,
-            store_P: bool = False, record_innovations: bool = False, observer: EkfObserver | None = None,
-            t_stop: float | None = None, cov_every: int = 1, show_progress: bool = False) -> NavSolution:
+def run_ekf(
+    run: RecordedRun,
+    settings,
+    method: str = "ekf",
+    *,
+    output_times: np.ndarray | None = None,
+    quality: QualityReport | None = None,
+    init: InitialState | None = None,
+    stationary=None,
+    store_P: bool = False,
+    record_innovations: bool = False,
+    observer: EkfObserver | None = None,
+    t_stop: float | None = None,
+    cov_every: int = 1,
+    show_progress: bool = False,
+) -> NavSolution:
     """Run the EKF over a recorded run.
 
     Parameters
@@ -494,12 +621,30 @@ def run_ekf(run: RecordedRun, settings, method: str = "ekf", *, output_times: np
     t_end = prop.t[-1] if t_stop is None else min(float(t_stop), prop.t[-1])
     out_t = default_output_times(run) if output_times is None else np.asarray(output_times, float)
     out_t = out_t[(out_t >= t0) & (out_t <= t_end)]
-    ev_t, ev_kind, ev_idx = _events({GNSS: run.gnss.t, STATIONARY: setup.stationary.t, NHC: setup.nhc.t,
-                                     ODOMETRY: setup.odometry.t, OUTPUT: out_t})
+    ev_t, ev_kind, ev_idx = _events(
+        {
+            GNSS: run.gnss.t,
+            STATIONARY: setup.stationary.t,
+            NHC: setup.nhc.t,
+            ODOMETRY: setup.odometry.t,
+            OUTPUT: out_t,
+        }
+    )
     rec = _Recorder(len(out_t), store_P)
-    updates = _Updates(run, setup, use_acc, observer, _Tally(record_innovations),
-                       {"n_acc_skipped_suspect_imu": 0, "init": setup.init.how, "t_init": t0,
-                        **nhc_rules.counts(), **odo_rules.counts()})
+    updates = _Updates(
+        run,
+        setup,
+        use_acc,
+        observer,
+        _Tally(record_innovations),
+        {
+            "n_acc_skipped_suspect_imu": 0,
+            "init": setup.init.how,
+            "t_init": t0,
+            **nhc_rules.counts(),
+            **odo_rules.counts(),
+        },
+    )
     if observer is not None:
         observer.start(setup)
     t_cur = t0
@@ -507,14 +652,17 @@ def run_ekf(run: RecordedRun, settings, method: str = "ekf", *, output_times: np
         t_e, kind, i = ev_t[e], ev_kind[e], ev_idx[e]
         if t_e > t_end:
             break
-        acc = (setup.window.push(t_e, setup.p_fix_n[i], run.gnss.sigma_ned[i])
-               if kind == GNSS and (use_acc or observer is not None) else None)
+        acc = (
+            setup.window.push(t_e, setup.p_fix_n[i], run.gnss.sigma_ned[i])
+            if kind == GNSS and (use_acc or observer is not None)
+            else None
+        )
         if t_e < t0:
             continue
         if t_e > t_cur:
             t_prev = t_cur
             k, t_cur = prop.advance(s, k, t_cur, t_e)
-            if len(s.x_e):   # the estimated Gauss-Markov states decay
+            if len(s.x_e):  # the estimated Gauss-Markov states decay
                 s.x_e *= np.exp(-(t_cur - t_prev) / prop.extra_tau)
         if kind == OUTPUT:
             rec.add(t_e, s)
@@ -527,8 +675,15 @@ def estimate(prep, settings: EkfSettings, method: str = "ekf", **options) -> Nav
     """The EKF over a prepared recording (:class:`gnssacc.prepare.prepared.Prepared`): its run,
     start, quality report and stationary spans, with the filter's own ``settings``;
     ``options`` as for :func:`run_ekf`."""
-    return run_ekf(prep.run, settings, method, init=prep.init, quality=prep.quality, stationary=prep.stationary,
-                   **options)
+    return run_ekf(
+        prep.run,
+        settings,
+        method,
+        init=prep.init,
+        quality=prep.quality,
+        stationary=prep.stationary,
+        **options,
+    )
 
 
 @dataclass
@@ -551,7 +706,9 @@ class _Updates:
         if obs is not None:
             obs.before(t_e, name, s, setup.prop)
         if kind == GNSS:
-            models = _gnss_measurements(self.run, setup, s, t_e, i, acc, self.use_acc, obs is not None, self.stats)
+            models = _gnss_measurements(
+                self.run, setup, s, t_e, i, acc, self.use_acc, obs is not None, self.stats
+            )
         elif kind == STATIONARY:
             models = _stationary_measurements(setup, s, i)
         elif kind == NHC:
@@ -577,7 +734,7 @@ class _Updates:
         stats["n_pos_rejected"] = tally.rejected["pos"]
         stats["accel_window_resets"] = self.setup.window.resets
         s = self.setup.state
-        if s.i_scale >= 0:   # the odometry scale factor at the end, and its 1-sigma
+        if s.i_scale >= 0:  # the odometry scale factor at the end, and its 1-sigma
             stats["odometry_scale"] = s.scale
             stats["odometry_scale_sigma"] = math.sqrt(s.P[s.i_scale, s.i_scale])
         stats["loglik"] = float(sum(tally.loglik.values()))

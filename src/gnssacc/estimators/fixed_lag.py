@@ -36,6 +36,7 @@ agree up to iSAM2's own approximation, its wildfire threshold on solution update
 and on the simulated runs of the tests, with every kind of factor; 2.6 mm on the 10 Hz comma2k19
 drive).
 """
+
 from __future__ import annotations
 
 from collections import deque
@@ -52,20 +53,22 @@ class FixedLagISAM2:
     Offers the part of ``IncrementalFixedLagSmoother``'s interface :mod:`gnssacc.estimators.smoother` uses.
     """
 
-    def __init__(self, lag: float, params: gtsam.ISAM2Params, relinearize_threshold: float, guard: str = ""):
+    def __init__(
+        self, lag: float, params: gtsam.ISAM2Params, relinearize_threshold: float, guard: str = ""
+    ):
         self.lag = float(lag)
         #: Symbol characters of the variables relinearised before they are marginalised when their
         #: pending update reaches the threshold (:meth:`_stale_leaving`).
         self.guard = {ord(c) for c in guard}
-        params.enableAdaptiveReorder = False    # a batch reorder would not keep the time order
+        params.enableAdaptiveReorder = False  # a batch reorder would not keep the time order
         self.isam = gtsam.ISAM2(params)
         self._skip = max(int(params.relinearizeSkip), 1) if params.enableRelinearization else 0
         self._threshold = float(relinearize_threshold)
-        self._count = 0                         # updates so far (iSAM2's own count)
-        self._nodes: deque = deque()            # (t, [keys]) per node, oldest first
+        self._count = 0  # updates so far (iSAM2's own count)
+        self._nodes: deque = deque()  # (t, [keys]) per node, oldest first
         self._result = None
-        self._unordered = False                 # the last update may have broken the time order
-        self.unordered_updates = 0              # how often (diagnostics)
+        self._unordered = False  # the last update may have broken the time order
+        self.unordered_updates = 0  # how often (diagnostics)
 
     def update(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, stamps) -> None:
         """Add ``graph``'s factors and the new variables ``values`` with their time stamps
@@ -76,14 +79,16 @@ class FixedLagISAM2:
             raise ValueError("time stamps must not go back in time")
         self._count += 1
         nodes, touched = list(self._nodes), set(graph.keyVector())
-        up, lo = gtsam.ISAM2UpdateParams(), 0   # lo: the oldest node with a group of its own
-        if nodes:                               # (the first update: iSAM2 puts new variables last)
+        up, lo = gtsam.ISAM2UpdateParams(), 0  # lo: the oldest node with a group of its own
+        if nodes:  # (the first update: iSAM2 puts new variables last)
             first = _oldest_touched(nodes, touched)
             lo = max(first - _older_groups(nodes, first, new, touched), 0)
-            relinearize = self._relinearizes() or self._stale_leaving((new or nodes)[-1][0] - self.lag)
+            relinearize = self._relinearizes() or self._stale_leaving(
+                (new or nodes)[-1][0] - self.lag
+            )
             up.force_relinearize = relinearize
             if self._unordered or relinearize:
-                lo = 0                          # all in time order (see the module notes)
+                lo = 0  # all in time order (see the module notes)
                 up.extraReelimKeys = _key_list(nodes)
             up.constrainedKeys = _groups(nodes + new, lo)
         self._result = self.isam.update(graph, values, up)
@@ -119,7 +124,13 @@ class FixedLagISAM2:
         """
         if not self.guard or not self._skip or not self._nodes or self._nodes[0][0] >= t_cut:
             return False
-        keys = [k for t, ks in self._nodes if t < t_cut for k in ks if gtsam.Symbol(k).chr() in self.guard]
+        keys = [
+            k
+            for t, ks in self._nodes
+            if t < t_cut
+            for k in ks
+            if gtsam.Symbol(k).chr() in self.guard
+        ]
         if not keys:
             return False
         delta = self.isam.getDelta()
@@ -134,26 +145,26 @@ class FixedLagISAM2:
         if leaves.size():
             self.isam.marginalizeLeaves(leaves)
 
-    def getISAM2(self) -> gtsam.ISAM2:   # noqa: N802 (gtsam's names)
+    def getISAM2(self) -> gtsam.ISAM2:  # noqa: N802 (gtsam's names)
         return self.isam
 
-    def getISAM2Result(self):   # noqa: N802
+    def getISAM2Result(self):  # noqa: N802
         """The last update's ``gtsam.ISAM2Result``."""
         return self._result
 
-    def getFactors(self) -> gtsam.NonlinearFactorGraph:   # noqa: N802
+    def getFactors(self) -> gtsam.NonlinearFactorGraph:  # noqa: N802
         return self.isam.getFactorsUnsafe()
 
-    def getLinearizationPoint(self) -> gtsam.Values:   # noqa: N802
+    def getLinearizationPoint(self) -> gtsam.Values:  # noqa: N802
         return self.isam.getLinearizationPoint()
 
-    def calculateEstimatePose3(self, key: int) -> gtsam.Pose3:   # noqa: N802
+    def calculateEstimatePose3(self, key: int) -> gtsam.Pose3:  # noqa: N802
         return self.isam.calculateEstimatePose3(key)
 
-    def calculateEstimateVector(self, key: int) -> np.ndarray:   # noqa: N802
+    def calculateEstimateVector(self, key: int) -> np.ndarray:  # noqa: N802
         return self.isam.calculateEstimateVector(key)
 
-    def calculateEstimateConstantBias(self, key: int):   # noqa: N802
+    def calculateEstimateConstantBias(self, key: int):  # noqa: N802
         return self.isam.calculateEstimateConstantBias(key)
 
 
@@ -161,7 +172,9 @@ class GtsamFixedLag:
     """GTSAM's own ``IncrementalFixedLagSmoother`` behind :class:`FixedLagISAM2`'s interface: the
     reference the tests and ``bench/bench_fixed_lag.py`` compare with."""
 
-    def __init__(self, lag: float, params: gtsam.ISAM2Params, relinearize_threshold: float, guard: str = ""):
+    def __init__(
+        self, lag: float, params: gtsam.ISAM2Params, relinearize_threshold: float, guard: str = ""
+    ):
         # ``guard`` is accepted and ignored: GTSAM's smoother relinearises on its turns only.
         self.smoother = gtsam.IncrementalFixedLagSmoother(float(lag), params)
 
@@ -220,7 +233,7 @@ def _older_groups(nodes: list, first: int, new: list, touched: set) -> int:
     in the time-ordered path) and the new ones. Not all of node ``first``'s: those eliminated
     before its touched ones may sit in cliques below them (a window-consistent acceleration
     factor touches only the poses of its oldest node)."""
-    n_vars = sum(len(keys) for _, keys in nodes[first + 1:] + new)
+    n_vars = sum(len(keys) for _, keys in nodes[first + 1 :] + new)
     if first < len(nodes):
         n_vars += len(touched.intersection(nodes[first][1]))
     return max(n_vars - (len(nodes) - first + len(new)), 0)

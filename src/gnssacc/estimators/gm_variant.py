@@ -1,6 +1,7 @@
 """The ``-gm`` methods: ``ekf`` and ``smoother`` run on the Gauss-Markov setup of the prepared
 recording (:mod:`gnssacc.prepare.gauss_markov`, :attr:`gnssacc.prepare.prepared.Prepared.gauss_markov`),
 their solutions renamed."""
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -25,6 +26,6 @@ def run_gm(prep, method: str, show_progress: bool, runner) -> dict:
     sols = runner(gm_prep, base, show_progress)
     out = {}
     for sid, sol in sols.items():
-        new = method + sid[len(base):]
+        new = method + sid[len(base) :]
         out[new] = replace(sol, method=new, stats={**sol.stats, "gauss_markov": how})
     return out

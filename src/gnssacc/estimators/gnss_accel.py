@@ -76,6 +76,7 @@ is counted twice. An exact treatment (stochastic cloning with the fix noises car
 :mod:`gnssacc.analysis.aiding_theory`) reproduces the position-only filter in the linear-Gaussian case:
 the acceleration then carries no information of its own.
 """
+
 from __future__ import annotations
 
 from collections import deque
@@ -85,7 +86,12 @@ import numpy as np
 
 from ..checks.quality import touches_segments
 from ..core.earth import gravity_n
-from ..core.gnss_fit import acceleration_row, design_matrix, ls_acceleration, window_accelerations  # noqa: F401
+from ..core.gnss_fit import (  # noqa: F401
+    acceleration_row,
+    design_matrix,
+    ls_acceleration,
+    window_accelerations,
+)
 from ..core.rotations import euler_to_dcm, skew
 from .mechanization import kernel_force_integrals
 
@@ -129,7 +135,9 @@ class AccelWindow:
         Fixed 1-sigma N, E, D [m/s^2] replacing the propagated covariance.
     """
 
-    def __init__(self, m: int = 3, max_gap_s: float = 2.5, sigma_override: np.ndarray | None = None):
+    def __init__(
+        self, m: int = 3, max_gap_s: float = 2.5, sigma_override: np.ndarray | None = None
+    ):
         if m < 3:
             raise ValueError("the acceleration window needs at least 3 fixes")
         self.m, self.max_gap_s = int(m), float(max_gap_s)
@@ -154,7 +162,9 @@ class AccelWindow:
         return AccelMeasurement(float(t), a_n, cov, ts)
 
 
-def measured_specific_force(imu, t: float, avg_s: float, seg_i0: np.ndarray, seg_i1: np.ndarray) -> np.ndarray | None:
+def measured_specific_force(
+    imu, t: float, avg_s: float, seg_i0: np.ndarray, seg_i1: np.ndarray
+) -> np.ndarray | None:
     """The specific force [m/s^2, body] an acceleration update at ``t`` compares with ``a~``.
 
     The paper's choice, the sample holding at ``t`` (``avg_s = 0``), or its mean over
@@ -193,7 +203,9 @@ def peano_weights(t_fix: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarr
     return 0.5 * ((np.maximum(tj - lo, 0.0) ** 2 - np.maximum(tj - hi, 0.0) ** 2) @ B)
 
 
-def window_samples(t_imu: np.ndarray, t_fix: np.ndarray) -> tuple[int, int, np.ndarray, np.ndarray] | None:
+def window_samples(
+    t_imu: np.ndarray, t_fix: np.ndarray
+) -> tuple[int, int, np.ndarray, np.ndarray] | None:
     """The IMU samples covering the window ``[t_fix[0], t_fix[-1]]`` and their kernel weights.
 
     Parameters
@@ -219,7 +231,7 @@ def window_samples(t_imu: np.ndarray, t_fix: np.ndarray) -> tuple[int, int, np.n
     k1 = int(np.searchsorted(t_imu, t1, side="left")) + 1
     if k0 < 1 or k1 > len(t_imu):
         return None
-    lo = np.maximum(t_imu[k0 - 1:k1 - 1], t0)
+    lo = np.maximum(t_imu[k0 - 1 : k1 - 1], t0)
     hi = np.minimum(t_imu[k0:k1], t1)
     return k0, k1, hi - lo, peano_weights(t_fix, lo, hi)
 
@@ -258,8 +270,9 @@ def H_a(R_nb: np.ndarray, f_b: np.ndarray) -> np.ndarray:
     return H
 
 
-def H_w_blocks(R_nb: np.ndarray, F_b: np.ndarray, M: np.ndarray, G: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def H_w_blocks(
+    R_nb: np.ndarray, F_b: np.ndarray, M: np.ndarray, G: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Non-zero blocks of the window-consistent Jacobian ``H_w`` (see module docstring).
 
     Parameters
@@ -287,7 +300,9 @@ def paper_H_a_blocks(R_nb: np.ndarray, f_b: np.ndarray) -> tuple[np.ndarray, np.
     return R_nb @ skew(f_b), -R_nb
 
 
-def model_errors(run, m: int = 3, max_gap_s: float = 2.5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def model_errors(
+    run, m: int = 3, max_gap_s: float = 2.5
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``a~ - a_pred`` at the true state for every full window of a run with truth at its fixes.
 
     Parameters
@@ -309,17 +324,30 @@ def model_errors(run, m: int = 3, max_gap_s: float = 2.5) -> tuple[np.ndarray, n
     g, tr = run.gnss, run.truth
     if tr is None or tr.rpy is None or len(tr.t) != len(g.t) or not np.allclose(tr.t, g.t):
         raise ValueError("model_errors needs the truth's attitude at the GNSS epochs")
-    full, a_meas, _ = window_accelerations(g.t, run.origin.to_ned(g.lat, g.lon, g.h), g.sigma_ned, m, max_gap_s)
+    full, a_meas, _ = window_accelerations(
+        g.t, run.origin.to_ned(g.lat, g.lon, g.h), g.sigma_ned, m, max_gap_s
+    )
     z3, no = np.zeros(3), np.zeros(0, np.int64)
     rows = []
     for j in np.flatnonzero(full):
-        win = window_samples(run.imu.t, g.t[j - m + 1:j + 1])
+        win = window_samples(run.imu.t, g.t[j - m + 1 : j + 1])
         if win is None:
             continue
         k0, k1, h, w = win
         R, g_n = euler_to_dcm(*tr.rpy[j]), gravity_n(tr.lat[j], tr.h[j])
-        F, _, _ = kernel_force_integrals(run.imu.f_b[k0:k1], run.imu.omega_ib_b[k0:k1], h, w, z3, z3)
+        F, _, _ = kernel_force_integrals(
+            run.imu.f_b[k0:k1], run.imu.omega_ib_b[k0:k1], h, w, z3, z3
+        )
         f = measured_specific_force(run.imu, g.t[j], 0.0, no, no)
-        rows.append((g.t[j], predicted_acceleration(R, f, g_n) - a_meas[j], predicted_acceleration(R, F, g_n) - a_meas[j]))
-    return (np.array([r[0] for r in rows]), np.array([r[1] for r in rows]).reshape(-1, 3),
-            np.array([r[2] for r in rows]).reshape(-1, 3))
+        rows.append(
+            (
+                g.t[j],
+                predicted_acceleration(R, f, g_n) - a_meas[j],
+                predicted_acceleration(R, F, g_n) - a_meas[j],
+            )
+        )
+    return (
+        np.array([r[0] for r in rows]),
+        np.array([r[1] for r in rows]).reshape(-1, 3),
+        np.array([r[2] for r in rows]).reshape(-1, 3),
+    )

@@ -5,6 +5,7 @@ Joseph form, ``P <- (I - K H) P (I - K H)^T + K R K^T`` with the optimal gain
 safer). ``S`` is factored by Cholesky, which gives its inverse and ``log det S`` for the
 innovation log-likelihood.
 """
+
 from __future__ import annotations
 
 import math
@@ -69,7 +70,7 @@ def _innovation_cov(P, H, R):
             for k in range(n):
                 v += H[i, k] * PHt[k, j]
             S[i, j] += v
-    for i in range(m):   # symmetrise (loops: array expressions cost seconds of compilation)
+    for i in range(m):  # symmetrise (loops: array expressions cost seconds of compilation)
         for j in range(i + 1, m):
             S[i, j] = S[j, i] = 0.5 * (S[i, j] + S[j, i])
     return PHt, S

@@ -17,6 +17,7 @@ twice in one process (numba's compile lock). ``setup.py`` compiles every group i
 install time (:func:`compile_groups`), so that a first run after ``pip install`` finds them all.
 Where the cache lives is :mod:`gnssacc.core.jit`'s business.
 """
+
 from __future__ import annotations
 
 import os
@@ -33,7 +34,12 @@ GROUPS = {
     "update": (("kalman.py", ("joseph_update",)), ("mechanization.py", ("apply_correction",))),
     "window": (("mechanization.py", ("kernel_force_integrals",)),),
     "chain": (("window_marginals.py", ("_scatter", "_marginalize", "_node_covariances")),),
-    "band": (("window_marginals.py", ("_scatter", "_band_marginalize", "_band_advance", "_band_covariances")),),
+    "band": (
+        (
+            "window_marginals.py",
+            ("_scatter", "_band_marginalize", "_band_advance", "_band_covariances"),
+        ),
+    ),
 }
 #: The EKF's groups: every run needs them, the preparation stage first.
 EKF_GROUPS = ("propagation", "update")
@@ -58,7 +64,11 @@ def groups_for(methods) -> tuple[str, ...]:
 def group_cached(group: str) -> bool:
     """Whether numba would load every kernel of ``group`` from its cache (no compilation)."""
     try:
-        return all(kernel_cached(KERNEL_DIR / module, name) for module, names in GROUPS[group] for name in names)
+        return all(
+            kernel_cached(KERNEL_DIR / module, name)
+            for module, names in GROUPS[group]
+            for name in names
+        )
     except OSError:
         return False
 
@@ -91,12 +101,23 @@ def _spawn(groups: list[str]):
     would take turns with the loading it is meant to overlap); ``None`` when it cannot start."""
     import subprocess
 
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(PACKAGE_DIR.parent),
-                                                                       os.environ.get("PYTHONPATH")]))}
-    code = f"from gnssacc.estimators.kernels import compile_groups; compile_groups({list(groups)!r})"
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join(
+            filter(None, [str(PACKAGE_DIR.parent), os.environ.get("PYTHONPATH")])
+        ),
+    }
+    code = (
+        f"from gnssacc.estimators.kernels import compile_groups; compile_groups({list(groups)!r})"
+    )
     try:
-        return subprocess.Popen([sys.executable, "-c", code], env=env, stdin=subprocess.DEVNULL,
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        return subprocess.Popen(
+            [sys.executable, "-c", code],
+            env=env,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
     except OSError:
         return None
 
@@ -138,8 +159,12 @@ class BackgroundWarmUp:
         self._all_done = threading.Event()
         self._thread = threading.Thread(target=self._run, name="gnssacc-jit", daemon=True)
         if notice is not None and self.compiling:
-            print(f"gnssacc: first run: compiling the numba kernels it needs (once, several seconds; cache: "
-                  f"{cache_folder()}) while the data loads", file=notice, flush=True)
+            print(
+                f"gnssacc: first run: compiling the numba kernels it needs (once, several seconds; cache: "
+                f"{cache_folder()}) while the data loads",
+                file=notice,
+                flush=True,
+            )
 
     def start(self) -> "BackgroundWarmUp":
         if self._processes:
@@ -168,12 +193,12 @@ class BackgroundWarmUp:
         t0 = time.perf_counter()
         try:
             self._wait_children(["propagation"])
-            compile_groups(EKF_GROUPS)   # loads what the children cached, or compiles
-        except BaseException as exc:   # re-raised in the waiting thread
+            compile_groups(EKF_GROUPS)  # loads what the children cached, or compiles
+        except BaseException as exc:  # re-raised in the waiting thread
             self.error = exc
         self.seconds = time.perf_counter() - t0
-        self._done.set()   # the EKF's kernels: the preparation stage may start
-        try:               # then the other groups', while the EKF and the tuner run
+        self._done.set()  # the EKF's kernels: the preparation stage may start
+        try:  # then the other groups', while the EKF and the tuner run
             if self.error is None:
                 others = [g for g in self.groups if g not in EKF_GROUPS]
                 self._wait_children(others)
@@ -204,7 +229,7 @@ def start_background(methods=None, notice=sys.stderr, processes: bool = True) ->
     methods'); once per process: later calls return the same one. A first run compiles in child
     processes unless ``processes=False``."""
     global _background
-    with _start_lock:   # estimators in several threads may ask at once
+    with _start_lock:  # estimators in several threads may ask at once
         if _background is None:
             groups = DEFAULT_GROUPS if methods is None else groups_for(methods)
             _background = BackgroundWarmUp(groups, notice, processes).start()

@@ -45,6 +45,7 @@ bias-corrected rate is ``omega + db_g`` and ``R_est^T omega_ie = R^T omega_ie + 
 
     H_v = [0, R^T, R^T [v x] + [l x] R^T [omega_ie x], 0, -[l x]]   (blocks dp, dv, phi, b_a, b_g)
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -66,6 +67,7 @@ def tail_bound(dof: int) -> float:
     """The NIS exceeded with probability :data:`TAIL_P` by Gaussian innovations of ``dof``."""
     if dof not in _TAIL_BOUNDS:
         from scipy.stats import chi2
+
         _TAIL_BOUNDS[dof] = float(chi2.isf(TAIL_P, dof))
     return _TAIL_BOUNDS[dof]
 
@@ -95,21 +97,41 @@ class Measurement:
     gate: float = 0.0
 
 
-def position(s, lat: float, lon: float, h: float, sigma_ned: np.ndarray, lever_arm_b: np.ndarray,
-             gate: float = 0.0, cov_ned: np.ndarray | None = None) -> Measurement:
+def position(
+    s,
+    lat: float,
+    lon: float,
+    h: float,
+    sigma_ned: np.ndarray,
+    lever_arm_b: np.ndarray,
+    gate: float = 0.0,
+    cov_ned: np.ndarray | None = None,
+) -> Measurement:
     """GNSS antenna position fix (lat, lon [rad], h [m]) with 1-sigma ``sigma_ned`` [m], or with
     the full NED covariance ``cov_ned`` [m^2] (correlated axes, e.g. an RTKLIB solution's) when given."""
     R_M, R_N = radii(s.pos[0])
     l_n = s.R_nb @ lever_arm_b
-    dz = np.array([(s.pos[0] - lat) * (R_M + s.pos[2]), (s.pos[1] - lon) * (R_N + s.pos[2]) * np.cos(s.pos[0]),
-                   -(s.pos[2] - h)]) + l_n
+    dz = (
+        np.array(
+            [
+                (s.pos[0] - lat) * (R_M + s.pos[2]),
+                (s.pos[1] - lon) * (R_N + s.pos[2]) * np.cos(s.pos[0]),
+                -(s.pos[2] - h),
+            ]
+        )
+        + l_n
+    )
     H = _H(s, 3)
     H[:, 0:3] = np.eye(3)
     H[:, 6:9] = -skew(l_n)
     if s.n_gm:
         dz += s.gm
         H[:, 15:18] = np.eye(3)
-    R = np.diag(np.asarray(sigma_ned, float) ** 2) if cov_ned is None else np.asarray(cov_ned, float)
+    R = (
+        np.diag(np.asarray(sigma_ned, float) ** 2)
+        if cov_ned is None
+        else np.asarray(cov_ned, float)
+    )
     return Measurement("pos", dz, H, R, gate)
 
 
@@ -118,7 +140,9 @@ def _H(s, m: int) -> np.ndarray:
     return np.zeros((m, s.P.shape[0]))
 
 
-def acceleration(s, a_n: np.ndarray, cov: np.ndarray, f_meas_b: np.ndarray, g_n: np.ndarray) -> Measurement:
+def acceleration(
+    s, a_n: np.ndarray, cov: np.ndarray, f_meas_b: np.ndarray, g_n: np.ndarray
+) -> Measurement:
     """GNSS-derived acceleration ``a_n`` [m/s^2] (covariance ``cov``) against the INS prediction
     from the measured specific force ``f_meas_b`` [m/s^2, body] and gravity ``g_n``."""
     f_b = f_meas_b - s.b_a
@@ -130,8 +154,15 @@ def acceleration(s, a_n: np.ndarray, cov: np.ndarray, f_meas_b: np.ndarray, g_n:
     return Measurement("acc", a_pred - a_n, H, cov)
 
 
-def window_acceleration(s, a_n: np.ndarray, cov: np.ndarray, F_b: np.ndarray, M: np.ndarray, G: np.ndarray,
-                        g_n: np.ndarray) -> Measurement:
+def window_acceleration(
+    s,
+    a_n: np.ndarray,
+    cov: np.ndarray,
+    F_b: np.ndarray,
+    M: np.ndarray,
+    G: np.ndarray,
+    g_n: np.ndarray,
+) -> Measurement:
     """GNSS-derived acceleration ``a_n`` [m/s^2] (covariance ``cov``) against the window-consistent
     INS prediction ``R_nb F_b + g_n``, ``F_b, M, G`` the kernel integrals of
     :func:`gnssacc.estimators.mechanization.kernel_force_integrals` at the state's biases (body frame at the
@@ -151,7 +182,9 @@ def zero_velocity(s, sigma_mps: float, gate: float = 0.0) -> Measurement:
     return Measurement("zupt", s.v_n.copy(), H, np.eye(3) * sigma_mps**2, gate)
 
 
-def zero_rate(s, omega_mean_b: np.ndarray, var_b: np.ndarray, w_ie_n: np.ndarray, gate: float = 0.0) -> Measurement:
+def zero_rate(
+    s, omega_mean_b: np.ndarray, var_b: np.ndarray, w_ie_n: np.ndarray, gate: float = 0.0
+) -> Measurement:
     """The vehicle stands still: the mean raw gyro reading ``omega_mean_b`` [rad/s] over a block
     (variance of that mean ``var_b`` [(rad/s)^2] per axis) is the bias plus the earth rate
     ``w_ie_n`` [rad/s, NED]."""
@@ -162,8 +195,13 @@ def zero_rate(s, omega_mean_b: np.ndarray, var_b: np.ndarray, w_ie_n: np.ndarray
     return Measurement("zaru", dz, H, np.diag(var_b), gate)
 
 
-def vehicle_velocity(s, omega_meas_b: np.ndarray, lever_b: np.ndarray, w_ie_n: np.ndarray,
-                     R_vb: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def vehicle_velocity(
+    s,
+    omega_meas_b: np.ndarray,
+    lever_b: np.ndarray,
+    w_ie_n: np.ndarray,
+    R_vb: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Velocity of the point ``lever_b`` [m, body] from the IMU, relative to the earth, in the body
     frame [m/s], and its Jacobian ``H_v`` (3 x states) w.r.t. the error state (module docstring);
     with ``R_vb`` (body to vehicle axes, a constant), in the vehicle's axes: ``R_vb v``, ``R_vb H_v``.
@@ -199,9 +237,14 @@ def vehicle_velocity(s, omega_meas_b: np.ndarray, lever_b: np.ndarray, w_ie_n: n
     return R_vb @ v_b, R_vb @ H
 
 
-
-def non_holonomic(s, omega_meas_b: np.ndarray, lever_b: np.ndarray, w_ie_n: np.ndarray, sigma_mps: np.ndarray,
-                  R_vb: np.ndarray | None = None) -> Measurement:
+def non_holonomic(
+    s,
+    omega_meas_b: np.ndarray,
+    lever_b: np.ndarray,
+    w_ie_n: np.ndarray,
+    sigma_mps: np.ndarray,
+    R_vb: np.ndarray | None = None,
+) -> Measurement:
     """Zero lateral and vertical velocity at the vehicle's reference point ``lever_b`` [m, body],
     in the vehicle's axes (``R_vb``, see :func:`vehicle_velocity`), 1-sigma ``sigma_mps`` [m/s]
     (lateral, vertical); ``omega_meas_b`` the raw gyro [rad/s] at the epoch, ``w_ie_n`` the earth
@@ -215,8 +258,15 @@ def nhc_measurement(v_b: np.ndarray, H_v: np.ndarray, sigma_mps: np.ndarray) -> 
     return Measurement("nhc", v_b[1:3], H_v[1:3], np.diag(np.asarray(sigma_mps, float) ** 2))
 
 
-def odometry(s, v_odo: float, sigma_mps: float, omega_meas_b: np.ndarray, lever_b: np.ndarray,
-             w_ie_n: np.ndarray, R_vb: np.ndarray | None = None) -> Measurement:
+def odometry(
+    s,
+    v_odo: float,
+    sigma_mps: float,
+    omega_meas_b: np.ndarray,
+    lever_b: np.ndarray,
+    w_ie_n: np.ndarray,
+    R_vb: np.ndarray | None = None,
+) -> Measurement:
     """Wheel odometry's forward speed ``v_odo`` [m/s] (1-sigma ``sigma_mps``) of the point
     ``lever_b`` [m, body] along the vehicle's x axis (``R_vb``, see :func:`vehicle_velocity`), read
     with the scale factor of state ``s.i_scale`` (module docstring)."""

@@ -21,6 +21,7 @@ the tests.
 IMU samples: sample ``k`` is held over ``(t[k-1], t[k]]``. Intervals are split exactly at event
 times (GNSS epochs, outputs).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -106,11 +107,23 @@ def _strapdown(pos, v_n, R_nb, f_b, omega_ib_b, dt, w_ie_sign, work):
     _exp_so3_into(-(wie0 + wen0) * dt, -wen1 * dt, -(wie2 + wen2) * dt, E_n)
     _exp_so3_into(omega_ib_b[0] * dt, omega_ib_b[1] * dt, omega_ib_b[2] * dt, E_b)
     _mm3_into(E_n, R_nb, T)
-    _mm3_into(T, E_b, E_n)                     # E_n now holds R_new
+    _mm3_into(T, E_b, E_n)  # E_n now holds R_new
     # Specific force rotated by the mean of the old and new attitude.
-    f0 = 0.5 * ((R_nb[0, 0] + E_n[0, 0]) * f_b[0] + (R_nb[0, 1] + E_n[0, 1]) * f_b[1] + (R_nb[0, 2] + E_n[0, 2]) * f_b[2])
-    f1 = 0.5 * ((R_nb[1, 0] + E_n[1, 0]) * f_b[0] + (R_nb[1, 1] + E_n[1, 1]) * f_b[1] + (R_nb[1, 2] + E_n[1, 2]) * f_b[2])
-    f2 = 0.5 * ((R_nb[2, 0] + E_n[2, 0]) * f_b[0] + (R_nb[2, 1] + E_n[2, 1]) * f_b[1] + (R_nb[2, 2] + E_n[2, 2]) * f_b[2])
+    f0 = 0.5 * (
+        (R_nb[0, 0] + E_n[0, 0]) * f_b[0]
+        + (R_nb[0, 1] + E_n[0, 1]) * f_b[1]
+        + (R_nb[0, 2] + E_n[0, 2]) * f_b[2]
+    )
+    f1 = 0.5 * (
+        (R_nb[1, 0] + E_n[1, 0]) * f_b[0]
+        + (R_nb[1, 1] + E_n[1, 1]) * f_b[1]
+        + (R_nb[1, 2] + E_n[1, 2]) * f_b[2]
+    )
+    f2 = 0.5 * (
+        (R_nb[2, 0] + E_n[2, 0]) * f_b[0]
+        + (R_nb[2, 1] + E_n[2, 1]) * f_b[1]
+        + (R_nb[2, 2] + E_n[2, 2]) * f_b[2]
+    )
     # Coriolis (2 w_ie + w_en) x v.
     c0, c1, c2 = 2.0 * wie0 + wen0, wen1, 2.0 * wie2 + wen2
     vN, vE, vD = v_n[0], v_n[1], v_n[2]
@@ -158,8 +171,8 @@ def kernel_force_integrals(f_b, omega_b, h, w, b_a, b_g):
     F = np.zeros(3)
     M = np.zeros((3, 3))
     G = np.zeros((3, 3))
-    R = np.eye(3)                 # R_{b_k b(s)} at the start of the current step (walking back)
-    Gam = np.zeros((3, 3))        # Gamma at that time
+    R = np.eye(3)  # R_{b_k b(s)} at the start of the current step (walking back)
+    Gam = np.zeros((3, 3))  # Gamma at that time
     E = np.empty((3, 3))
     Rm = np.empty((3, 3))
     Gm = np.empty((3, 3))
@@ -173,15 +186,20 @@ def kernel_force_integrals(f_b, omega_b, h, w, b_a, b_g):
             for c in range(3):
                 Gm[r, c] = Gam[r, c] + 0.5 * hi * Rm[r, c]
         for r in range(3):
-            u[r] = (Rm[r, 0] * (f_b[i, 0] - b_a[0]) + Rm[r, 1] * (f_b[i, 1] - b_a[1])
-                    + Rm[r, 2] * (f_b[i, 2] - b_a[2]))
+            u[r] = (
+                Rm[r, 0] * (f_b[i, 0] - b_a[0])
+                + Rm[r, 1] * (f_b[i, 1] - b_a[1])
+                + Rm[r, 2] * (f_b[i, 2] - b_a[2])
+            )
         wi = w[i]
         for r in range(3):
             F[r] += wi * u[r]
             for c in range(3):
                 M[r, c] += wi * Rm[r, c]
                 # [u x] Gm, row r
-                G[r, c] += wi * (u[(r + 1) % 3] * Gm[(r + 2) % 3, c] - u[(r + 2) % 3] * Gm[(r + 1) % 3, c])
+                G[r, c] += wi * (
+                    u[(r + 1) % 3] * Gm[(r + 2) % 3, c] - u[(r + 2) % 3] * Gm[(r + 1) % 3, c]
+                )
         for r in range(3):
             for c in range(3):
                 Gam[r, c] += hi * Rm[r, c]
@@ -269,8 +287,8 @@ def _system_matrix_into(F, pos, v_n, R_nb, f_b, w_ie_sign):
     g, dg_dh = _gravity(lat, h)
     rm, rn = R_M + h, R_N + h
     tl, cl, sl = np.tan(lat), np.cos(lat), np.sin(lat)
-    wie0, wie2 = W * cl, -W * sl                       # earth rate, NED (east component 0)
-    wen0, wen1, wen2 = vE / rn, -vN / rm, -vE * tl / rn   # transport rate
+    wie0, wie2 = W * cl, -W * sl  # earth rate, NED (east component 0)
+    wen0, wen1, wen2 = vE / rn, -vN / rm, -vE * tl / rn  # transport rate
     # Position rows (metres): d(dp)/dt = F_pp dp + dv.
     F[0, 0] = -vD / rm
     F[0, 2] = vN / rm
@@ -281,7 +299,7 @@ def _system_matrix_into(F, pos, v_n, R_nb, f_b, w_ie_sign):
         F[i, 3 + i] = 1.0
     # Sensitivities of omega_ie + omega_en (d/dlat, d/dh) and of omega_en (d/dv):
     # drho_dv has [0, 1] = 1/rn, [1, 0] = -1/rm, [2, 1] = -tl/rn.
-    rho_lat2 = -vE / (rn * cl * cl)                    # d(w_en_D)/dlat
+    rho_lat2 = -vE / (rn * cl * cl)  # d(w_en_D)/dlat
     dh0, dh1, dh2 = -vE / rn**2, vN / rm**2, vE * tl / rn**2
     # Velocity rows: dv_dot = -[(2 w_ie + w_en) x] dv + [v x] d(2 w_ie + w_en) + dg - [(R f) x] phi + R b_a.
     c0, c1, c2 = 2.0 * wie0 + wen0, wen1, 2.0 * wie2 + wen2
@@ -294,7 +312,7 @@ def _system_matrix_into(F, pos, v_n, R_nb, f_b, w_ie_sign):
     n0, n1, n2 = _cross(vN, vE, vD, 2.0 * (-W * sl), 0.0, 2.0 * (-W * cl) + rho_lat2)
     d0, d1, d2 = _cross(vN, vE, vD, dh0, dh1, dh2)
     F[3, 0], F[4, 0], F[5, 0] = n0 / rm, n1 / rm, n2 / rm
-    F[3, 2], F[4, 2], F[5, 2] = -d0, -d1, -d2 - dg_dh   # dp_D = -dh and g_D = g(h)
+    F[3, 2], F[4, 2], F[5, 2] = -d0, -d1, -d2 - dg_dh  # dp_D = -dh and g_D = g(h)
     a0 = R_nb[0, 0] * f_b[0] + R_nb[0, 1] * f_b[1] + R_nb[0, 2] * f_b[2]
     a1 = R_nb[1, 0] * f_b[0] + R_nb[1, 1] * f_b[1] + R_nb[1, 2] * f_b[2]
     a2 = R_nb[2, 0] * f_b[0] + R_nb[2, 1] * f_b[1] + R_nb[2, 2] * f_b[2]
@@ -321,8 +339,8 @@ def _neg_skew_into(F, r, c, a0, a1, a2):
 
 
 # Column ranges of the non-zero entries of F, per block row (rows 9..14 of F are zero).
-_NZ_P = (0, 6)     # position rows: dp, dv
-_NZ_V = (0, 12)    # velocity rows: dp, dv, phi, b_a
+_NZ_P = (0, 6)  # position rows: dp, dv
+_NZ_V = (0, 12)  # velocity rows: dp, dv, phi, b_a
 
 
 @njit(cache=True)
@@ -469,9 +487,36 @@ def _step_phi(Phi, F, dt, phi_order):
 
 
 @njit(cache=True)
-def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
-              q_a, q_g, q_ba, q_bg, seg_i0, seg_i1, seg_qa, seg_qg, phi_order, with_cov, cov_every, Phi, with_phi,
-              w_ie_sign, gm_tau, gm_var):
+def propagate(
+    t_imu,
+    f_imu,
+    w_imu,
+    k,
+    t_cur,
+    t_to,
+    pos,
+    v_n,
+    R_nb,
+    b_a,
+    b_g,
+    P,
+    q_a,
+    q_g,
+    q_ba,
+    q_bg,
+    seg_i0,
+    seg_i1,
+    seg_qa,
+    seg_qg,
+    phi_order,
+    with_cov,
+    cov_every,
+    Phi,
+    with_phi,
+    w_ie_sign,
+    gm_tau,
+    gm_var,
+):
     """Propagate nominal state and covariance from ``t_cur`` to ``t_to`` (in place).
 
     Parameters
@@ -543,8 +588,28 @@ def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
                 dt_acc += dt
                 count += 1
                 if count >= cov_every or t_end >= t_to:
-                    _cov_step(P, F, A, Phi, with_phi, pos, v_n, R_nb, f, w_ie_sign, qa_int, qg_int, qa_k, qg_k, dt_acc,
-                              q_ba, q_bg, phi_order, gm_tau, gm_var)
+                    _cov_step(
+                        P,
+                        F,
+                        A,
+                        Phi,
+                        with_phi,
+                        pos,
+                        v_n,
+                        R_nb,
+                        f,
+                        w_ie_sign,
+                        qa_int,
+                        qg_int,
+                        qa_k,
+                        qg_k,
+                        dt_acc,
+                        q_ba,
+                        q_bg,
+                        phi_order,
+                        gm_tau,
+                        gm_var,
+                    )
                     dt_acc = 0.0
                     count = 0
             _strapdown(pos, v_n, R_nb, f, w, dt, w_ie_sign, work)
@@ -552,14 +617,54 @@ def propagate(t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P,
         if t_cur >= t_imu[k]:
             k += 1
     if with_cov and count > 0:  # the IMU data ended before t_to: flush what was accumulated
-        _cov_step(P, F, A, Phi, with_phi, pos, v_n, R_nb, f, w_ie_sign, qa_int, qg_int, qa_k, qg_k, dt_acc,
-                  q_ba, q_bg, phi_order, gm_tau, gm_var)
+        _cov_step(
+            P,
+            F,
+            A,
+            Phi,
+            with_phi,
+            pos,
+            v_n,
+            R_nb,
+            f,
+            w_ie_sign,
+            qa_int,
+            qg_int,
+            qa_k,
+            qg_k,
+            dt_acc,
+            q_ba,
+            q_bg,
+            phi_order,
+            gm_tau,
+            gm_var,
+        )
     return k, t_cur
 
 
 @njit(cache=True)
-def _cov_step(P, F, A, Phi, with_phi, pos, v_n, R_nb, f, w_ie_sign, qa_int, qg_int, qa_k, qg_k, dt_acc, q_ba, q_bg,
-              phi_order, gm_tau, gm_var):
+def _cov_step(
+    P,
+    F,
+    A,
+    Phi,
+    with_phi,
+    pos,
+    v_n,
+    R_nb,
+    f,
+    w_ie_sign,
+    qa_int,
+    qg_int,
+    qa_k,
+    qg_k,
+    dt_acc,
+    q_ba,
+    q_bg,
+    phi_order,
+    gm_tau,
+    gm_var,
+):
     """One covariance (and transition-matrix) step over ``dt_acc`` [s] with the noise integrated
     over it (``qa_int``, ``qg_int``: PSD x time, reset to zero here; ``qa_k``, ``qg_k``: scratch)."""
     _system_matrix_into(F, pos, v_n, R_nb, f, w_ie_sign)
@@ -605,23 +710,53 @@ class Propagator:
         when the filter has that state (after the GNSS error states).
     """
 
-    def __init__(self, t, f_b, omega_ib_b, q_a, q_g, q_ba, q_bg, segments, phi_order: int = 1,
-                 cov_every: int = 1, w_ie_sign: float = 1.0, gm_tau_s=None, gm_sigma_m=None,
-                 scale_tau_s: float | None = None, scale_sigma: float | None = None):
+    def __init__(
+        self,
+        t,
+        f_b,
+        omega_ib_b,
+        q_a,
+        q_g,
+        q_ba,
+        q_bg,
+        segments,
+        phi_order: int = 1,
+        cov_every: int = 1,
+        w_ie_sign: float = 1.0,
+        gm_tau_s=None,
+        gm_sigma_m=None,
+        scale_tau_s: float | None = None,
+        scale_sigma: float | None = None,
+    ):
         self.t, self.f, self.w = (kernel_array(x, float) for x in (t, f_b, omega_ib_b))
         self.q = tuple(np.array(q, float) for q in (q_a, q_g, q_ba, q_bg))
         seg_i0, seg_i1, seg_qg, seg_qa = segments
-        self.segments = (np.array(seg_i0, np.int64), np.array(seg_i1, np.int64),
-                         np.array(seg_qa, float).reshape(-1, 3), np.array(seg_qg, float).reshape(-1, 3))
-        self.phi_order, self.cov_every, self.w_ie_sign = int(phi_order), max(int(cov_every), 1), float(w_ie_sign)
+        self.segments = (
+            np.array(seg_i0, np.int64),
+            np.array(seg_i1, np.int64),
+            np.array(seg_qa, float).reshape(-1, 3),
+            np.array(seg_qg, float).reshape(-1, 3),
+        )
+        self.phi_order, self.cov_every, self.w_ie_sign = (
+            int(phi_order),
+            max(int(cov_every), 1),
+            float(w_ie_sign),
+        )
         self.gm_tau = np.array(np.broadcast_to(60.0 if gm_tau_s is None else gm_tau_s, (3,)), float)
-        self.gm_var = np.array(np.broadcast_to(0.0 if gm_sigma_m is None else gm_sigma_m, (3,)), float) ** 2
+        self.gm_var = (
+            np.array(np.broadcast_to(0.0 if gm_sigma_m is None else gm_sigma_m, (3,)), float) ** 2
+        )
         #: Correlation times and variances of the states after the fifteenth, in their order.
         gm_on = bool(np.any(self.gm_var > 0))
-        self.extra_tau = np.array(([*self.gm_tau] if gm_on else []) + ([] if scale_tau_s is None else [scale_tau_s]),
-                                  float)
-        self.extra_var = np.array(([*self.gm_var] if gm_on else [])
-                                  + ([] if scale_sigma is None else [float(scale_sigma) ** 2]), float)
+        self.extra_tau = np.array(
+            ([*self.gm_tau] if gm_on else []) + ([] if scale_tau_s is None else [scale_tau_s]),
+            float,
+        )
+        self.extra_var = np.array(
+            ([*self.gm_var] if gm_on else [])
+            + ([] if scale_sigma is None else [float(scale_sigma) ** 2]),
+            float,
+        )
         #: Transition-matrix accumulator (used when ``with_phi``); reset it with :meth:`reset_phi`.
         self.Phi = np.eye(15)
         self.with_phi = False
@@ -629,15 +764,41 @@ class Propagator:
     def reset_phi(self) -> None:
         self.Phi[:, :] = np.eye(15)
 
-    def advance(self, s, k: int, t_cur: float, t_to: float, with_cov: bool = True) -> tuple[int, float]:
+    def advance(
+        self, s, k: int, t_cur: float, t_to: float, with_cov: bool = True
+    ) -> tuple[int, float]:
         """Propagate the state ``s`` (``pos, v_n, R_nb, b_a, b_g, P``, in place) to ``t_to``.
 
         ``k`` is the first sample with ``t[k] > t_cur``; returns the updated ``k, t_cur``.
         """
         seg_i0, seg_i1, seg_qa, seg_qg = self.segments
-        return propagate(self.t, self.f, self.w, k, t_cur, t_to, s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, s.P,
-                         *self.q, seg_i0, seg_i1, seg_qa, seg_qg, self.phi_order, with_cov, self.cov_every,
-                         self.Phi, self.with_phi, self.w_ie_sign, self.extra_tau, self.extra_var)
+        return propagate(
+            self.t,
+            self.f,
+            self.w,
+            k,
+            t_cur,
+            t_to,
+            s.pos,
+            s.v_n,
+            s.R_nb,
+            s.b_a,
+            s.b_g,
+            s.P,
+            *self.q,
+            seg_i0,
+            seg_i1,
+            seg_qa,
+            seg_qg,
+            self.phi_order,
+            with_cov,
+            self.cov_every,
+            self.Phi,
+            self.with_phi,
+            self.w_ie_sign,
+            self.extra_tau,
+            self.extra_var,
+        )
 
 
 def warm_up(propagation: bool = True, update: bool = True) -> float:
@@ -651,12 +812,26 @@ def warm_up(propagation: bool = True, update: bool = True) -> float:
 
     t0 = time.perf_counter()
     z3 = np.zeros(3)
-    s = SimpleNamespace(pos=np.array([0.5, 0.1, 0.0]), v_n=z3.copy(), R_nb=np.eye(3), b_a=z3.copy(), b_g=z3.copy(),
-                        P=np.eye(15))
+    s = SimpleNamespace(
+        pos=np.array([0.5, 0.1, 0.0]),
+        v_n=z3.copy(),
+        R_nb=np.eye(3),
+        b_a=z3.copy(),
+        b_g=z3.copy(),
+        P=np.eye(15),
+    )
     if propagation:
         seg_i = np.zeros(1, np.int64)
-        prop = Propagator(np.array([0.0, 0.01, 0.02]), np.zeros((3, 3)), np.zeros((3, 3)), z3, z3, z3, z3,
-                          (seg_i, seg_i + 1, np.zeros((1, 3)), np.zeros((1, 3))))
+        prop = Propagator(
+            np.array([0.0, 0.01, 0.02]),
+            np.zeros((3, 3)),
+            np.zeros((3, 3)),
+            z3,
+            z3,
+            z3,
+            z3,
+            (seg_i, seg_i + 1, np.zeros((1, 3)), np.zeros((1, 3))),
+        )
         prop.advance(s, 1, 0.0, 0.015)
     if update:
         H = np.zeros((3, 15))
@@ -673,6 +848,12 @@ def warm_up_window() -> float:
 
     t0 = time.perf_counter()
     n = 4
-    kernel_force_integrals(np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, 0.01), np.full(n, 0.25),
-                           np.zeros(3), np.zeros(3))
+    kernel_force_integrals(
+        np.zeros((n, 3)),
+        np.zeros((n, 3)),
+        np.full(n, 0.01),
+        np.full(n, 0.25),
+        np.zeros(3),
+        np.zeros(3),
+    )
     return time.perf_counter() - t0

@@ -39,6 +39,7 @@ The yaw rate is the bias-corrected gyro's z (body down) at the epoch, the IMU sa
 The counts of each decision are in the estimators' ``stats`` (``n_nhc_updates`` or
 ``n_nhc_factors``, ``n_nhc_skipped_rest``, ``n_nhc_skipped_turn``).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -109,8 +110,14 @@ def epochs_for(run, nhc, t0: float, stationary) -> NhcEpochs:
     return nhc_epochs(run.imu, t0, run.t_end, nhc.interval_s, stationary)
 
 
-def decide(rest: bool, v_x: float, sigma_vx: float, yaw_rate: float, sigma_lateral: float,
-           pivot_offset_m: float) -> int:
+def decide(
+    rest: bool,
+    v_x: float,
+    sigma_vx: float,
+    yaw_rate: float,
+    sigma_lateral: float,
+    pivot_offset_m: float,
+) -> int:
     """Whether the constraint applies at an epoch (see the module docstring).
 
     Parameters

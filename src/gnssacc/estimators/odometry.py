@@ -20,6 +20,7 @@ an unsigned speed while the vehicle reverses, or a reversed wheel-encoder sign);
 ``n_odo_skipped_sign``. A speed near zero is used as it is: at standstill the odometry's zero is
 a measurement like any other.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -68,7 +69,9 @@ class OdometryEpochs:
         return cls(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, 3)))
 
 
-def odometry_epochs(imu, odo, t0: float, t_end: float, interval_s: float, sigma_mps: float) -> OdometryEpochs:
+def odometry_epochs(
+    imu, odo, t0: float, t_end: float, interval_s: float, sigma_mps: float
+) -> OdometryEpochs:
     """The samples of ``odo`` (:class:`gnssacc.core.recording.WheelOdometry`) in ``(t0, t_end]`` [s],
     at most one per ``interval_s`` [s], with the 1-sigma ``max(sigma_mps, stated)`` [m/s] and
     the gyro reading held at each (``imu``: :class:`gnssacc.core.recording.ImuData`)."""
@@ -81,8 +84,12 @@ def odometry_epochs(imu, odo, t0: float, t_end: float, interval_s: float, sigma_
     sigma = np.full(len(keep), float(sigma_mps))
     if stated is not None:
         sigma = np.maximum(sigma, np.nan_to_num(np.asarray(stated, float)[keep]))
-    return OdometryEpochs(t[keep], np.asarray(odo.v_forward, float)[keep], sigma,
-                          np.asarray(imu.omega_ib_b)[held_samples(imu.t, t[keep])])
+    return OdometryEpochs(
+        t[keep],
+        np.asarray(odo.v_forward, float)[keep],
+        sigma,
+        np.asarray(imu.omega_ib_b)[held_samples(imu.t, t[keep])],
+    )
 
 
 def epochs_for(run, odometry, t0: float) -> OdometryEpochs:
@@ -92,13 +99,19 @@ def epochs_for(run, odometry, t0: float) -> OdometryEpochs:
     odo = getattr(run, "odometry", None)
     if odo is None or not odometry.enabled or len(odo.t) == 0:
         return OdometryEpochs.empty()
-    return odometry_epochs(run.imu, odo, t0, run.t_end, odometry.interval_s, odometry.speed_sigma_mps)
+    return odometry_epochs(
+        run.imu, odo, t0, run.t_end, odometry.interval_s, odometry.speed_sigma_mps
+    )
 
 
 def decide(v_odo: float, sigma_odo: float, v_pred: float, sigma_pred: float) -> int:
     """:data:`SIGN` when the odometry's speed ``v_odo`` (1-sigma ``sigma_odo``) and the estimator's
     prediction of it ``v_pred`` (1-sigma ``sigma_pred``) [m/s] are both clearly non-zero and of
     opposite signs, else :data:`APPLY`."""
-    if v_odo * v_pred < 0 and abs(v_odo) > K_SIGMA * sigma_odo and abs(v_pred) > K_SIGMA * sigma_pred:
+    if (
+        v_odo * v_pred < 0
+        and abs(v_odo) > K_SIGMA * sigma_odo
+        and abs(v_pred) > K_SIGMA * sigma_pred
+    ):
         return SIGN
     return APPLY

@@ -9,6 +9,7 @@ odometry, the start's sigma overrides, the
 inflation of suspect IMU spans, and the estimator's own keys. The self-tuning changes the
 configuration; the estimators see the result through a new settings object.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -43,8 +44,14 @@ class ImuNoise:
 
     @classmethod
     def from_config(cls, cfg: RunConfig) -> "ImuNoise":
-        return cls(cfg.accel_psd, cfg.gyro_psd, cfg.accel_bias_rw_psd, cfg.gyro_bias_rw_psd, cfg.accel_bias_sigma0,
-                   cfg.gyro_bias_sigma0)
+        return cls(
+            cfg.accel_psd,
+            cfg.gyro_psd,
+            cfg.accel_bias_rw_psd,
+            cfg.gyro_bias_rw_psd,
+            cfg.accel_bias_sigma0,
+            cfg.gyro_bias_sigma0,
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,7 +105,12 @@ class AccelSettings:
     @classmethod
     def from_config(cls, cfg: RunConfig) -> "AccelSettings":
         a = cfg["accel"]
-        return cls(int(a["window"]), float(a["max_gap_s"]), float(a["specific_force_avg_s"]), cfg.accel_sigma_override)
+        return cls(
+            int(a["window"]),
+            float(a["max_gap_s"]),
+            float(a["specific_force_avg_s"]),
+            cfg.accel_sigma_override,
+        )
 
 
 @dataclass(frozen=True)
@@ -114,7 +126,12 @@ class ZuptSettings:
     @classmethod
     def from_config(cls, cfg: RunConfig) -> "ZuptSettings":
         z = cfg["zupt"]
-        return cls(bool(z["enabled"]), float(z["interval_s"]), float(z["velocity_sigma_mps"]), float(z["gate_nis"]))
+        return cls(
+            bool(z["enabled"]),
+            float(z["interval_s"]),
+            float(z["velocity_sigma_mps"]),
+            float(z["gate_nis"]),
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -150,9 +167,14 @@ class NhcSettings:
         c = cfg["nhc"]
         pitch, yaw = float(c["pitch_offset_deg"]), float(c["yaw_offset_deg"])
         R_vb = euler_to_dcm(0.0, np.radians(pitch), np.radians(yaw)).T if pitch or yaw else None
-        return cls(bool(c["enabled"]), float(c["interval_s"]),
-                   np.array([float(c["sigma_lateral_mps"]), float(c["sigma_vertical_mps"])]),
-                   vec3(c["lever_arm_b_m"], "[nhc] lever_arm_b_m", "config"), float(c["pivot_offset_m"]), R_vb)
+        return cls(
+            bool(c["enabled"]),
+            float(c["interval_s"]),
+            np.array([float(c["sigma_lateral_mps"]), float(c["sigma_vertical_mps"])]),
+            vec3(c["lever_arm_b_m"], "[nhc] lever_arm_b_m", "config"),
+            float(c["pivot_offset_m"]),
+            R_vb,
+        )
 
     @property
     def forward_b(self) -> np.ndarray:
@@ -190,9 +212,14 @@ class OdometrySettings:
     @classmethod
     def from_config(cls, cfg: RunConfig) -> "OdometrySettings":
         c = cfg["odometry"]
-        return cls(bool(c["enabled"]), float(c["interval_s"]), float(c["speed_sigma_mps"]),
-                   vec3(c["lever_arm_b_m"], "[odometry] lever_arm_b_m", "config"), float(c["scale_sigma"]),
-                   float(c["scale_tau_s"]))
+        return cls(
+            bool(c["enabled"]),
+            float(c["interval_s"]),
+            float(c["speed_sigma_mps"]),
+            vec3(c["lever_arm_b_m"], "[odometry] lever_arm_b_m", "config"),
+            float(c["scale_sigma"]),
+            float(c["scale_tau_s"]),
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -225,10 +252,16 @@ class _Common:
 
     @staticmethod
     def common(cfg: RunConfig) -> dict:
-        return dict(imu=ImuNoise.from_config(cfg), gnss=GnssModel.from_config(cfg),
-                    accel=AccelSettings.from_config(cfg), zupt=ZuptSettings.from_config(cfg),
-                    nhc=NhcSettings.from_config(cfg), odometry=OdometrySettings.from_config(cfg),
-                    suspect=SuspectNoise.from_config(cfg), start_sigmas=cfg.initial_sigma_overrides())
+        return dict(
+            imu=ImuNoise.from_config(cfg),
+            gnss=GnssModel.from_config(cfg),
+            accel=AccelSettings.from_config(cfg),
+            zupt=ZuptSettings.from_config(cfg),
+            nhc=NhcSettings.from_config(cfg),
+            odometry=OdometrySettings.from_config(cfg),
+            suspect=SuspectNoise.from_config(cfg),
+            start_sigmas=cfg.initial_sigma_overrides(),
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -249,7 +282,11 @@ class EkfSettings(_Common):
     @classmethod
     def from_config(cls, cfg: RunConfig) -> "EkfSettings":
         e = cfg["ekf"]
-        return cls(**cls.common(cfg), phi_order=int(e["phi_order"]), position_gate_nis=float(e["position_gate_nis"]))
+        return cls(
+            **cls.common(cfg),
+            phi_order=int(e["phi_order"]),
+            position_gate_nis=float(e["position_gate_nis"]),
+        )
 
     @classmethod
     def of(cls, settings) -> "EkfSettings":
@@ -289,11 +326,16 @@ class SmootherSettings(_Common):
     @classmethod
     def from_config(cls, cfg: RunConfig) -> "SmootherSettings":
         s = cfg["smoother"]
-        return cls(**cls.common(cfg), lag_s=float(s["lag_s"]), max_node_spacing_s=float(s["max_node_spacing_s"]),
-                   min_node_spacing_s=float(s["min_node_spacing_s"]),
-                   factorization=str(s["factorization"]).upper(),
-                   relinearize_threshold=float(s["relinearize_threshold"]),
-                   relinearize_skip=int(s["relinearize_skip"]), integration_sigma=float(s["integration_sigma"]))
+        return cls(
+            **cls.common(cfg),
+            lag_s=float(s["lag_s"]),
+            max_node_spacing_s=float(s["max_node_spacing_s"]),
+            min_node_spacing_s=float(s["min_node_spacing_s"]),
+            factorization=str(s["factorization"]).upper(),
+            relinearize_threshold=float(s["relinearize_threshold"]),
+            relinearize_skip=int(s["relinearize_skip"]),
+            integration_sigma=float(s["integration_sigma"]),
+        )
 
     @classmethod
     def of(cls, settings) -> "SmootherSettings":

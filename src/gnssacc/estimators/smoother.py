@@ -42,6 +42,7 @@ accel_bias_instability_mg`` or ``gyro_bias_instability_deg_h`` = 0, a constant b
 ``CombinedImuFactor`` or the start's prior a zero covariance, which GTSAM cannot factor. The floors are hundreds of times below any real IMU's random walk,
 so they change no estimate that a constant bias would not give.
 """
+
 from __future__ import annotations
 
 import time
@@ -144,7 +145,9 @@ class _ImuModel:
         self._cache: dict = {}
         self.base = self.params(np.zeros(3), np.zeros(3))  # first call fills the cache
 
-    def params(self, qa_extra: np.ndarray | None, qg_extra: np.ndarray | None) -> gtsam.PreintegrationCombinedParams:
+    def params(
+        self, qa_extra: np.ndarray | None, qg_extra: np.ndarray | None
+    ) -> gtsam.PreintegrationCombinedParams:
         if qa_extra is None and self._cache:
             return self.base
         qa_extra = np.zeros(3) if qa_extra is None else qa_extra
@@ -155,9 +158,13 @@ class _ImuModel:
             p = gtsam.PreintegrationCombinedParams.MakeSharedD(self.g)
             p.setAccelerometerCovariance(np.diag(imu.accel_psd + qa_extra))
             p.setGyroscopeCovariance(np.diag(imu.gyro_psd + qg_extra))
-            p.setBiasAccCovariance(np.diag(np.maximum(imu.accel_bias_rw_psd, ACCEL_BIAS_RW_FLOOR**2)))
-            p.setBiasOmegaCovariance(np.diag(np.maximum(imu.gyro_bias_rw_psd, GYRO_BIAS_RW_FLOOR**2)))
-            p.setIntegrationCovariance(np.eye(3) * self.settings.integration_sigma ** 2)
+            p.setBiasAccCovariance(
+                np.diag(np.maximum(imu.accel_bias_rw_psd, ACCEL_BIAS_RW_FLOOR**2))
+            )
+            p.setBiasOmegaCovariance(
+                np.diag(np.maximum(imu.gyro_bias_rw_psd, GYRO_BIAS_RW_FLOOR**2))
+            )
+            p.setIntegrationCovariance(np.eye(3) * self.settings.integration_sigma**2)
             p.setOmegaCoriolis(self.omega)
             self._cache[key] = p
         return self._cache[key]
@@ -180,14 +187,16 @@ def initial_prior(init: InitialState, settings: SmootherSettings) -> tuple[np.nd
     P = initial_state(init, settings).P
     n = P.shape[0]
     R = init.R_nb
-    T = np.zeros((n - 3, n))            # smoother offsets <- EKF error state (velocity dropped)
+    T = np.zeros((n - 3, n))  # smoother offsets <- EKF error state (velocity dropped)
     T[0:3, 6:9] = -R.T
     T[3:6, 0:3] = -R.T
     T[6:12, 9:15] = np.eye(6)
     if n > 15:
         T[12:15, 15:18] = -np.eye(3)
     cov = T @ P @ T.T
-    cov[6:12, 6:12] += np.diag(np.r_[np.full(3, ACCEL_BIAS_RW_FLOOR), np.full(3, GYRO_BIAS_RW_FLOOR)] ** 2)
+    cov[6:12, 6:12] += np.diag(
+        np.r_[np.full(3, ACCEL_BIAS_RW_FLOOR), np.full(3, GYRO_BIAS_RW_FLOOR)] ** 2
+    )
     return cov, P[3:6, 3:6]
 
 
@@ -200,11 +209,15 @@ class _Record:
         self.R = np.full((n, 3, 3), np.nan)
         self.v_n = np.full((n, 3), np.nan)
         self.bias = np.full((n, 6), np.nan)
-        self.cov_pose = np.full((n, 6, 6), np.nan)   # Pose3 tangent (body rotation, body translation)
+        self.cov_pose = np.full(
+            (n, 6, 6), np.nan
+        )  # Pose3 tangent (body rotation, body translation)
         self.cov_vel = np.full((n, 3, 3), np.nan)
         self.cov_bias = np.full((n, 6, 6), np.nan)
         self.done = np.zeros(n, bool)
-        self.chi2 = np.full((n, 2), np.nan)   # whitened GNSS residual and its expectation, nodes with a fix
+        self.chi2 = np.full(
+            (n, 2), np.nan
+        )  # whitened GNSS residual and its expectation, nodes with a fix
         # GNSS Gauss-Markov error (zeros when not modelled): estimate, its covariance and its
         # cross-covariance with the pose tangent.
         self.g = np.zeros((n, 3))
@@ -222,16 +235,34 @@ class _Record:
         self.v_n[i] = v_n
         self.bias[i] = bias.vector()
         self.g[i], self.k[i] = g, k
-        self.cov_pose[i], self.cov_vel[i], self.cov_bias[i] = cov[0:6, 0:6], cov[6:9, 6:9], cov[9:15, 9:15]
+        self.cov_pose[i], self.cov_vel[i], self.cov_bias[i] = (
+            cov[0:6, 0:6],
+            cov[6:9, 6:9],
+            cov[9:15, 9:15],
+        )
         if self.gm:
             self.cov_xg[i], self.cov_g[i] = cov[0:6, 15:18], cov[15:18, 15:18]
-        if cov.shape[0] in (16, 19):   # the scale factor is the last variable
+        if cov.shape[0] in (16, 19):  # the scale factor is the last variable
             self.var_k[i] = cov[-1, -1]
         self.done[i] = True
 
     def copy_from(self, other: "_Record", i: int) -> None:
-        for name in ("p_n", "R", "v_n", "bias", "cov_pose", "cov_vel", "cov_bias", "done", "chi2", "g", "cov_g",
-                     "cov_xg", "k", "var_k"):
+        for name in (
+            "p_n",
+            "R",
+            "v_n",
+            "bias",
+            "cov_pose",
+            "cov_vel",
+            "cov_bias",
+            "done",
+            "chi2",
+            "g",
+            "cov_g",
+            "cov_xg",
+            "k",
+            "var_k",
+        ):
             getattr(self, name)[i] = getattr(other, name)[i]
 
     def sigmas(self) -> np.ndarray:
@@ -244,14 +275,30 @@ class _Record:
         J = euler_error_jacobian(roll, pitch, yaw)
         c_eul = J @ c_att @ J.transpose(0, 2, 1)
         diag = lambda C: np.sqrt(np.maximum(np.diagonal(C, axis1=1, axis2=2), 0.0))
-        return np.concatenate([diag(c_pos), diag(self.cov_vel), diag(c_eul), diag(self.cov_bias)], axis=1)
+        return np.concatenate(
+            [diag(c_pos), diag(self.cov_vel), diag(c_eul), diag(self.cov_bias)], axis=1
+        )
 
-    def solution(self, run: RecordedRun, method: str, t: np.ndarray, runtime: float, stats: dict) -> NavSolution:
+    def solution(
+        self, run: RecordedRun, method: str, t: np.ndarray, runtime: float, stats: dict
+    ) -> NavSolution:
         ok = self.done
         lat, lon, h = run.origin.to_llh(self.p_n[ok])
         rpy = np.column_stack(dcm_to_euler(self.R[ok]))
-        return NavSolution(method, t[ok], lat, lon, h, self.v_n[ok], rpy, self.bias[ok, 0:3], self.bias[ok, 3:6],
-                           self.sigmas()[ok], runtime, dict(stats))
+        return NavSolution(
+            method,
+            t[ok],
+            lat,
+            lon,
+            h,
+            self.v_n[ok],
+            rpy,
+            self.bias[ok, 0:3],
+            self.bias[ok, 3:6],
+            self.sigmas()[ok],
+            runtime,
+            dict(stats),
+        )
 
 
 class _Smoother:
@@ -298,8 +345,13 @@ class _Smoother:
         isam = self.isam
         g = isam.calculateEstimateVector(G(i)) if self.gm else np.zeros(3)
         k = float(isam.calculateEstimateVector(K(i))[0]) if self.scale else 0.0
-        return (isam.calculateEstimatePose3(X(i)), isam.calculateEstimateVector(V(i)),
-                isam.calculateEstimateConstantBias(B(i)), g, k)
+        return (
+            isam.calculateEstimatePose3(X(i)),
+            isam.calculateEstimateVector(V(i)),
+            isam.calculateEstimateConstantBias(B(i)),
+            g,
+            k,
+        )
 
     def has_node(self, i: int) -> bool:
         """Whether node ``i`` is in the window (not marginalised, not dropped by a restart)."""
@@ -323,7 +375,7 @@ class _Smoother:
             try:
                 return self.marginals.covariances(nodes)
             except np.linalg.LinAlgError:
-                self.marginals.clear()   # rebuilt at the next update
+                self.marginals.clear()  # rebuilt at the next update
         return np.array([self._isam_covariance(i) for i in nodes])
 
     def _isam_covariance(self, i: int) -> np.ndarray:
@@ -345,8 +397,9 @@ def _is_ill_posed(exc: Exception) -> bool:
     return "indeterminant" in text or "indeterminate" in text or "ill-posed" in text
 
 
-def residual_chi2(rec: "_Record", idx: np.ndarray, p_fix: np.ndarray, cov_fix: np.ndarray,
-                  lever_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def residual_chi2(
+    rec: "_Record", idx: np.ndarray, p_fix: np.ndarray, cov_fix: np.ndarray, lever_b: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     r"""Whitened squared residuals of GNSS factors at nodes ``idx`` of an estimate, and their
     expectations.
 
@@ -376,7 +429,12 @@ def residual_chi2(rec: "_Record", idx: np.ndarray, p_fix: np.ndarray, cov_fix: n
     r = p_fix - (rec.p_n[idx] + R @ lever_b + rec.g[idx])
     J = np.concatenate([-R @ skew(lever_b), R], axis=2)
     cross = J @ rec.cov_xg[idx]
-    JCJ = J @ rec.cov_pose[idx] @ J.transpose(0, 2, 1) + rec.cov_g[idx] + cross + cross.transpose(0, 2, 1)
+    JCJ = (
+        J @ rec.cov_pose[idx] @ J.transpose(0, 2, 1)
+        + rec.cov_g[idx]
+        + cross
+        + cross.transpose(0, 2, 1)
+    )
     W = np.linalg.inv(cov_fix)
     chi2 = np.einsum("ki,kij,kj->k", r, W, r)
     expected = 3.0 - np.einsum("kij,kji->k", W, JCJ)
@@ -386,10 +444,16 @@ def residual_chi2(rec: "_Record", idx: np.ndarray, p_fix: np.ndarray, cov_fix: n
 class _Factors:
     """Builds each kind of factor for a node: GNSS position, GNSS acceleration, stationary."""
 
-    def __init__(self, run: RecordedRun, settings: SmootherSettings, stationary: StationaryEpochs, stats: dict,
-                 gnss_checked: np.ndarray):
+    def __init__(
+        self,
+        run: RecordedRun,
+        settings: SmootherSettings,
+        stationary: StationaryEpochs,
+        stats: dict,
+        gnss_checked: np.ndarray,
+    ):
         self.run, self.stats, self.st = run, stats, stationary
-        self.gnss_checked = gnss_checked   # per stationary epoch: its span was vetted by the fixes
+        self.gnss_checked = gnss_checked  # per stationary epoch: its span was vetted by the fixes
         gnss, origin = run.gnss, run.origin
         self.p_fix = origin.to_ned(gnss.lat, gnss.lon, gnss.h)
         self.fix_at = {float(t): i for i, t in enumerate(gnss.t)}
@@ -401,10 +465,10 @@ class _Factors:
         self.f_avg = acc.specific_force_avg_s
         self.acc_window = (acc.window, acc.max_gap_s, acc.sigma_override)
         self.acc = None
-        self.acc_fixes: dict = {}   # fix index -> the window's fix indices, oldest first
-        self.node_of: dict = {}     # fix index -> its node
+        self.acc_fixes: dict = {}  # fix index -> the window's fix indices, oldest first
+        self.node_of: dict = {}  # fix index -> its node
         self.zupt_noise = gtsam.noiseModel.Isotropic.Sigma(3, settings.zupt.velocity_sigma_mps)
-        self.zupt_var = settings.zupt.velocity_sigma_mps ** 2
+        self.zupt_var = settings.zupt.velocity_sigma_mps**2
         self.zupt_gate = settings.zupt.gate_nis
         self._noise: dict = {}
         self.gm_sigma, self.gm_tau = settings.gnss.gm_sigma, settings.gnss.gm_tau
@@ -417,7 +481,9 @@ class _Factors:
             return None
         gnss = self.run.gnss
         sig = gnss.sigma_ned[k]
-        cov = None if gnss.corr_ned is None else gnss.cov_ned(k)   # correlated axes: the full covariance
+        cov = (
+            None if gnss.corr_ned is None else gnss.cov_ned(k)
+        )  # correlated axes: the full covariance
         self.stats["n_gps_factors"] += 1
         self.node_of[k] = i
         if self.gm:
@@ -426,8 +492,11 @@ class _Factors:
         key = tuple(sig) if cov is None else tuple(cov.ravel())
         noise = self._noise.get(key)
         if noise is None:  # most runs have a handful of distinct fix sigmas
-            noise = self._noise[key] = (gtsam.noiseModel.Diagonal.Sigmas(sig) if cov is None
-                                        else gtsam.noiseModel.Gaussian.Covariance(cov))
+            noise = self._noise[key] = (
+                gtsam.noiseModel.Diagonal.Sigmas(sig)
+                if cov is None
+                else gtsam.noiseModel.Gaussian.Covariance(cov)
+            )
         if self.has_lever:
             graph.add(gtsam.GPSFactorArm(X(i), self.p_fix[k], self.lever, noise))
         else:
@@ -442,8 +511,11 @@ class _Factors:
         keys, gm = (X(i), V(i), B(i)), None
         if self.gm:
             keys, gm = keys + (G(i), G(i + 1)), (self.gm_tau, self.gm_sigma, interval)
-        graph.add(preintegrated_position_factor(keys, pim, self.p_fix[k], self.lever, self.run.gnss.cov_ned(k), R_f,
-                                                gm))
+        graph.add(
+            preintegrated_position_factor(
+                keys, pim, self.p_fix[k], self.lever, self.run.gnss.cov_ned(k), R_f, gm
+            )
+        )
         self.stats["n_gps_folded"] += 1
 
     def gm_chain(self, graph, values, i: int, dt: float, g_prev: np.ndarray) -> None:
@@ -457,12 +529,17 @@ class _Factors:
         at node times, in order, as :class:`gnssacc.estimators.gnss_accel.AccelWindow` would see them."""
         t_fix = self.run.gnss.t
         nodes = set(times.tolist())
-        pushed = np.flatnonzero((t_fix < times[0]) | np.array([t in nodes for t in t_fix.tolist()], bool))
-        full, a_n, var = window_accelerations(t_fix[pushed], self.p_fix[pushed], self.run.gnss.sigma_ned[pushed],
-                                              *self.acc_window)
+        pushed = np.flatnonzero(
+            (t_fix < times[0]) | np.array([t in nodes for t in t_fix.tolist()], bool)
+        )
+        full, a_n, var = window_accelerations(
+            t_fix[pushed], self.p_fix[pushed], self.run.gnss.sigma_ned[pushed], *self.acc_window
+        )
         self.acc = {int(k): (a_n[j], var[j]) for j, k in enumerate(pushed) if full[j]}
         m = self.acc_window[0]
-        self.acc_fixes = {int(k): pushed[j - m + 1:j + 1] for j, k in enumerate(pushed) if full[j]}
+        self.acc_fixes = {
+            int(k): pushed[j - m + 1 : j + 1] for j, k in enumerate(pushed) if full[j]
+        }
 
     def accel(self, graph, i: int, t: float, k: int, seg_i0, seg_i1) -> None:
         """GNSS-acceleration factor on (X_i, B_i) once the least-squares window is full."""
@@ -484,15 +561,20 @@ class _Factors:
             return
         fixes = self.acc_fixes[k]
         nodes = [self.node_of.get(int(f)) for f in fixes]
-        if any(n is None or not in_window(n) for n in nodes):   # fixes before the start, or marginalised
+        if any(
+            n is None or not in_window(n) for n in nodes
+        ):  # fixes before the start, or marginalised
             self.stats["n_acc_skipped_window"] = self.stats.get("n_acc_skipped_window", 0) + 1
             return
         B_row = acceleration_row(self.run.gnss.t[fixes])
-        graph.add(window_accel_factor([X(n) for n in nodes], B_row, meas[0], self.lever, np.diag(meas[1])))
+        graph.add(
+            window_accel_factor([X(n) for n in nodes], B_row, meas[0], self.lever, np.diag(meas[1]))
+        )
         self.stats["n_acc_factors"] += 1
 
-    def stationary(self, graph, i: int, j: int, R_nb: np.ndarray, bias, v_pred: np.ndarray,
-                   c_vel: np.ndarray) -> None:
+    def stationary(
+        self, graph, i: int, j: int, R_nb: np.ndarray, bias, v_pred: np.ndarray, c_vel: np.ndarray
+    ) -> None:
         """Zero velocity on V_i and the zero-rate reading of stationary epoch ``j`` on B_i's gyro
         part, unless the velocity predicted for the node (``v_pred`` NED [m/s], covariance
         ``c_vel``) rejects standing still: its NIS against zero above ``[zupt] gate_nis``, the
@@ -510,8 +592,13 @@ class _Factors:
         # Only the gyro half is measured; the accelerometer half gets a vanishing weight.
         b_g = self.st.omega_mean_b[j] - R_nb.T @ self.w_ie
         sig = np.concatenate([np.full(3, 1e3), np.sqrt(self.st.omega_var_b[j])])
-        graph.add(gtsam.PriorFactorConstantBias(B(i), gtsam.imuBias.ConstantBias(bias.accelerometer(), b_g),
-                                                gtsam.noiseModel.Diagonal.Sigmas(sig)))
+        graph.add(
+            gtsam.PriorFactorConstantBias(
+                B(i),
+                gtsam.imuBias.ConstantBias(bias.accelerometer(), b_g),
+                gtsam.noiseModel.Diagonal.Sigmas(sig),
+            )
+        )
         self.stats["n_zupt_factors"] += 1
 
 
@@ -568,7 +655,7 @@ def _preintegrate(imu, model, bias, t_prev, t, j_start, k_end, inflation, dt_all
     if k_end - j_start > 1 and imu_t[k_end - 1] > t:
         dts[-1] = t - imu_t[k_end - 2]
     f_b, w_b = imu.f_b[j_start:k_end], imu.omega_ib_b[j_start:k_end]
-    if min(dts) <= 0.0:                   # repeated time stamps: nothing to integrate
+    if min(dts) <= 0.0:  # repeated time stamps: nothing to integrate
         keep = [k for k, dt in enumerate(dts) if dt > 0.0]
         f_b, w_b, dts = f_b[keep], w_b[keep], [dts[k] for k in keep]
     f_b = _mid_interval_force(f_b, w_b - bias.gyroscope(), np.asarray(dts))
@@ -586,21 +673,30 @@ def _mid_interval_force(f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray) ->
     return Rotation.from_rotvec(0.5 * omega_b * dt[:, None]).apply(f_b)
 
 
-def _touches(first: np.ndarray, last: np.ndarray, seg_i0: np.ndarray, seg_i1: np.ndarray) -> np.ndarray:
+def _touches(
+    first: np.ndarray, last: np.ndarray, seg_i0: np.ndarray, seg_i1: np.ndarray
+) -> np.ndarray:
     """Per node interval, whether samples ``[first[i-1], last[i])`` overlap a suspect segment
     (segments sorted and disjoint, :func:`gnssacc.checks.quality.inflation_segments`)."""
     out = np.zeros(len(first), bool)
     if seg_i0.size:
         j0, k1 = first[:-1], last[1:]
-        s = np.searchsorted(seg_i1, j0, side="right")        # first segment ending after j0
+        s = np.searchsorted(seg_i1, j0, side="right")  # first segment ending after j0
         ok = s < len(seg_i0)
         out[1:][ok] = seg_i0[s[ok]] < k1[ok]
     return out
 
 
-def run_smoother(run: RecordedRun, settings, method: str = "smoother", *,
-                 quality: QualityReport | None = None, init: InitialState | None = None, stationary=None,
-                 show_progress: bool = False) -> dict[str, NavSolution]:
+def run_smoother(
+    run: RecordedRun,
+    settings,
+    method: str = "smoother",
+    *,
+    quality: QualityReport | None = None,
+    init: InitialState | None = None,
+    stationary=None,
+    show_progress: bool = False,
+) -> dict[str, NavSolution]:
     """Run the fixed-lag smoother.
 
     Parameters
@@ -635,16 +731,42 @@ def run_smoother(run: RecordedRun, settings, method: str = "smoother", *,
     z = settings.zupt
     st = epochs_for(run, z, settings.imu.gyro_psd, stationary)
     is_node_fix = node_fixes(run.gnss.t, settings.min_node_spacing_s)
-    times = node_times(float(init.t), float(run.imu.t[-1]),
-                       _node_epochs(run.gnss.t[is_node_fix], st.t, z.interval_s), settings.max_node_spacing_s)
-    stats = {"n_nodes": len(times), "n_gps_factors": 0, "n_gps_folded": 0, "n_acc_factors": 0,
-             "n_acc_skipped_suspect_imu": 0,
-             "n_zupt_factors": 0, "n_zupt_gated": 0, "n_ill_posed_recovered": 0, "factorization_switched_to_qr": False,
-             "init": init.how, "t_init": float(init.t), "lag_s": settings.lag_s}
-    checked = np.array([vetted_by_fixes(stationary.spans[j], stationary.params) for j in st.span], bool)
-    loop = _Loop(run, settings, METHODS[method], quality, init, times, _Factors(run, settings, st, stats, checked),
-                 _attach_stationary(times, st, z.interval_s), stats, NhcFactors(run, settings, times, stationary, stats),
-                 OdometryFactors(run, settings, times, stats))
+    times = node_times(
+        float(init.t),
+        float(run.imu.t[-1]),
+        _node_epochs(run.gnss.t[is_node_fix], st.t, z.interval_s),
+        settings.max_node_spacing_s,
+    )
+    stats = {
+        "n_nodes": len(times),
+        "n_gps_factors": 0,
+        "n_gps_folded": 0,
+        "n_acc_factors": 0,
+        "n_acc_skipped_suspect_imu": 0,
+        "n_zupt_factors": 0,
+        "n_zupt_gated": 0,
+        "n_ill_posed_recovered": 0,
+        "factorization_switched_to_qr": False,
+        "init": init.how,
+        "t_init": float(init.t),
+        "lag_s": settings.lag_s,
+    }
+    checked = np.array(
+        [vetted_by_fixes(stationary.spans[j], stationary.params) for j in st.span], bool
+    )
+    loop = _Loop(
+        run,
+        settings,
+        METHODS[method],
+        quality,
+        init,
+        times,
+        _Factors(run, settings, st, stats, checked),
+        _attach_stationary(times, st, z.interval_s),
+        stats,
+        NhcFactors(run, settings, times, stationary, stats),
+        OdometryFactors(run, settings, times, stats),
+    )
     loop.folded = _folded_by_node(times, run.gnss.t, is_node_fix)
     loop.feed(method, show_progress)
     loop.score()
@@ -656,40 +778,65 @@ def run_smoother(run: RecordedRun, settings, method: str = "smoother", *,
     for mid, rec in ((method, loop.fixed), (method + "-online", loop.online)):
         c = rec.chi2[np.isfinite(rec.chi2[:, 0])]
         ratio = float(c[:, 0].sum() / c[:, 1].sum()) if len(c) and c[:, 1].sum() > 0 else None
-        out[mid] = rec.solution(run, mid, times, runtime, {**stats, "n_pos_updates": len(c), "nis_pos_mean": ratio})
+        out[mid] = rec.solution(
+            run, mid, times, runtime, {**stats, "n_pos_updates": len(c), "nis_pos_mean": ratio}
+        )
     return out
 
 
-def estimate(prep, settings: SmootherSettings, method: str = "smoother", **options) -> dict[str, NavSolution]:
+def estimate(
+    prep, settings: SmootherSettings, method: str = "smoother", **options
+) -> dict[str, NavSolution]:
     """The smoother over a prepared recording (:class:`gnssacc.prepare.prepared.Prepared`): its run,
     start, quality report and stationary spans, with the smoother's own ``settings``; ``options``
     as for :func:`run_smoother`."""
-    return run_smoother(prep.run, settings, method, init=prep.init, quality=prep.quality,
-                        stationary=prep.stationary, **options)
+    return run_smoother(
+        prep.run,
+        settings,
+        method,
+        init=prep.init,
+        quality=prep.quality,
+        stationary=prep.stationary,
+        **options,
+    )
 
 
 class _Loop:
     """Feeds iSAM2 node by node and records the online and fixed-lag estimates."""
 
-    def __init__(self, run, settings, use_acc, quality, init, times, factors, stationary_at, stats, nhc, odo):
-        self.run, self.settings, self.use_acc, self.times, self.f = run, settings, use_acc, times, factors
+    def __init__(
+        self, run, settings, use_acc, quality, init, times, factors, stationary_at, stats, nhc, odo
+    ):
+        self.run, self.settings, self.use_acc, self.times, self.f = (
+            run,
+            settings,
+            use_acc,
+            times,
+            factors,
+        )
         self.stationary_at, self.stats, self.nhc, self.odo = stationary_at, stats, nhc, odo
         self.segs = inflation_segments(run.imu, quality, settings.suspect)
         origin = run.origin
         self.model = _ImuModel(settings, float(factors.g_n[2]), earth_rate_n(origin.lat0))
         n = len(times)
         self.online, self.fixed = _Record(n, factors.gm), _Record(n, factors.gm)
-        self.smoother = _Smoother(settings, _bandwidth(settings) if use_acc == "window" else 1, odo.active)
+        self.smoother = _Smoother(
+            settings, _bandwidth(settings) if use_acc == "window" else 1, odo.active
+        )
         self.fix_of = np.full(n, -1)
-        self.folded: dict = {}   # node -> fixes between it and the node before (run_smoother sets it)
+        self.folded: dict = {}  # node -> fixes between it and the node before (run_smoother sets it)
         self.window_start, self.oldest = 0, 0
         self._start(init)
 
-    def priors(self, i, pose, vel, bias, c_pose, c_vel, c_bias, g=None, c_g=None, k=0.0, var_k=None):
+    def priors(
+        self, i, pose, vel, bias, c_pose, c_vel, c_bias, g=None, c_g=None, k=0.0, var_k=None
+    ):
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         graph.add(gtsam.PriorFactorPose3(X(i), pose, gtsam.noiseModel.Gaussian.Covariance(c_pose)))
         graph.add(gtsam.PriorFactorVector(V(i), vel, gtsam.noiseModel.Gaussian.Covariance(c_vel)))
-        graph.add(gtsam.PriorFactorConstantBias(B(i), bias, gtsam.noiseModel.Gaussian.Covariance(c_bias)))
+        graph.add(
+            gtsam.PriorFactorConstantBias(B(i), bias, gtsam.noiseModel.Gaussian.Covariance(c_bias))
+        )
         values.insert(X(i), pose)
         values.insert(V(i), vel)
         values.insert(B(i), bias)
@@ -705,16 +852,31 @@ class _Loop:
         R0 = init.R_nb
         self.pose = gtsam.Pose3(gtsam.Rot3(R0), self.run.origin.to_ned(init.lat, init.lon, init.h))
         self.vel = np.asarray(init.v_n, float)
-        self.bias = gtsam.imuBias.ConstantBias(np.asarray(init.b_a, float), np.asarray(init.b_g, float))
+        self.bias = gtsam.imuBias.ConstantBias(
+            np.asarray(init.b_a, float), np.asarray(init.b_g, float)
+        )
         self.g, self.k = np.zeros(3), 0.0
         if self.use_acc:
             self.f.prepare_accel(self.times)
         cov, c_vel = initial_prior(init, self.settings)
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-        graph.add(joint_prior_factor(X(0), B(0), G(0) if self.f.gm else None, self.pose, self.bias.vector(),
-                                     self.g if self.f.gm else None, cov))
-        graph.add(gtsam.PriorFactorVector(V(0), self.vel, gtsam.noiseModel.Gaussian.Covariance(c_vel)))
-        for key, value in ((X(0), self.pose), (V(0), self.vel), (B(0), self.bias)) + (((G(0), self.g),) if self.f.gm else ()):
+        graph.add(
+            joint_prior_factor(
+                X(0),
+                B(0),
+                G(0) if self.f.gm else None,
+                self.pose,
+                self.bias.vector(),
+                self.g if self.f.gm else None,
+                cov,
+            )
+        )
+        graph.add(
+            gtsam.PriorFactorVector(V(0), self.vel, gtsam.noiseModel.Gaussian.Covariance(c_vel))
+        )
+        for key, value in ((X(0), self.pose), (V(0), self.vel), (B(0), self.bias)) + (
+            ((G(0), self.g),) if self.f.gm else ()
+        ):
             values.insert(key, value)
         if self.odo.active:
             self.odo.prior(graph, values, 0, 0.0, None)
@@ -735,17 +897,34 @@ class _Loop:
             elif self.use_acc:
                 self.f.accel(graph, i, t, k, self.segs[0], self.segs[1])
         if i in self.stationary_at:
-            if nav is None:      # the start: its own velocity and covariance
+            if nav is None:  # the start: its own velocity and covariance
                 R_nb, v_pred, c_vel = self._start_gate
             else:
-                R_nb, v_pred, c_vel = nav.pose().rotation().matrix(), nav.velocity(), self._predicted_velocity_cov(i, pim)
+                R_nb, v_pred, c_vel = (
+                    nav.pose().rotation().matrix(),
+                    nav.velocity(),
+                    self._predicted_velocity_cov(i, pim),
+                )
             self.f.stationary(graph, i, self.stationary_at[i], R_nb, self.bias, v_pred, c_vel)
         if nav is not None and i in self.nhc.nodes:
-            self.nhc.add(graph, i, nav.pose().rotation().matrix(), nav.velocity(), self._predicted_velocity_cov(i, pim),
-                         self.bias.gyroscope())
+            self.nhc.add(
+                graph,
+                i,
+                nav.pose().rotation().matrix(),
+                nav.velocity(),
+                self._predicted_velocity_cov(i, pim),
+                self.bias.gyroscope(),
+            )
         if nav is not None and i in self.odo.nodes:
-            self.odo.add(graph, i, nav.pose().rotation().matrix(), nav.velocity(), self._predicted_velocity_cov(i, pim),
-                         self.bias.gyroscope(), self.k)
+            self.odo.add(
+                graph,
+                i,
+                nav.pose().rotation().matrix(),
+                nav.velocity(),
+                self._predicted_velocity_cov(i, pim),
+                self.bias.gyroscope(),
+                self.k,
+            )
 
     def _predicted_velocity_cov(self, i, pim) -> np.ndarray:
         """Covariance of node ``i``'s predicted NED velocity [m^2/s^2]: node ``i - 1``'s online
@@ -762,8 +941,10 @@ class _Loop:
         self.oldest = max(self.oldest, self.window_start)
         leaving = []
         while self.oldest < i + 1 and self.times[self.oldest] < t_next - self.smoother.lag:
-            if not (t_next == np.inf and self.fixed.done[self.oldest]):   # at the end: not the nodes a
-                leaving.append(self.oldest)                                # restart already recorded
+            if not (
+                t_next == np.inf and self.fixed.done[self.oldest]
+            ):  # at the end: not the nodes a
+                leaving.append(self.oldest)  # restart already recorded
             self.oldest += 1
         nodes = leaving if leaving and leaving[-1] == i else leaving + [i]
         covs = self.smoother.covariances(nodes)
@@ -778,8 +959,9 @@ class _Loop:
         for rec in (self.online, self.fixed):
             idx = np.flatnonzero((self.fix_of >= 0) & rec.done)
             k = self.fix_of[idx]
-            rec.chi2[idx] = np.column_stack(residual_chi2(rec, idx, self.f.p_fix[k], self.run.gnss.cov_ned(k),
-                                                          self.f.lever))
+            rec.chi2[idx] = np.column_stack(
+                residual_chi2(rec, idx, self.f.p_fix[k], self.run.gnss.cov_ned(k), self.f.lever)
+            )
 
     def feed(self, method, show_progress):
         imu, times, n = self.run.imu, self.times, len(self.times)
@@ -794,8 +976,11 @@ class _Loop:
         for i in progress(range(1, n), desc=method, enable=show_progress):
             t_prev, t = times_l[i - 1], times_l[i]
             j0, k1 = first[i - 1], last[i]
-            inflation = (_inflation_over(imu.t, j0, k1, t_prev, t, seg_i0, seg_i1, seg_qa, seg_qg)
-                         if touches[i] else (None, None))
+            inflation = (
+                _inflation_over(imu.t, j0, k1, t_prev, t, seg_i0, seg_i1, seg_qa, seg_qg)
+                if touches[i]
+                else (None, None)
+            )
             pim = _preintegrate(imu, self.model, self.bias, t_prev, t, j0, k1, inflation, dt_all)
             nav = pim.predict(gtsam.NavState(self.pose, self.vel), self.bias)
             graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
@@ -807,13 +992,24 @@ class _Loop:
                 self.f.gm_chain(graph, values, i, t - t_prev, self.g)
             if self.odo.active:
                 self.odo.chain(graph, values, i, t - t_prev, self.k)
-            for k in self.folded.get(i, ()):   # fixes between the nodes: on node i - 1
+            for k in self.folded.get(i, ()):  # fixes between the nodes: on node i - 1
                 t_f = float(fix_t[k])
                 k_f = min(int(np.searchsorted(imu.t, t_f, side="left")) + 1, len(imu.t))
-                infl = (_inflation_over(imu.t, j0, k_f, t_prev, t_f, seg_i0, seg_i1, seg_qa, seg_qg)
-                        if touches[i] else (None, None))
-                self.f.folded_gps(graph, i - 1, k, _preintegrate(imu, self.model, self.bias, t_prev, t_f, j0, k_f,
-                                                                 infl, dt_all), self.pose, self.vel, self.bias, t - t_prev)
+                infl = (
+                    _inflation_over(imu.t, j0, k_f, t_prev, t_f, seg_i0, seg_i1, seg_qa, seg_qg)
+                    if touches[i]
+                    else (None, None)
+                )
+                self.f.folded_gps(
+                    graph,
+                    i - 1,
+                    k,
+                    _preintegrate(imu, self.model, self.bias, t_prev, t_f, j0, k_f, infl, dt_all),
+                    self.pose,
+                    self.vel,
+                    self.bias,
+                    t - t_prev,
+                )
             self._node_factors(graph, i, t, nav, pim)
             try:
                 self.smoother.update(graph, values, [(key, t) for key in self.smoother.keys(i)])
@@ -853,16 +1049,30 @@ def _reinitialise(loop: _Loop, i: int, graph, values) -> int:
     p = i - 1
     pose = gtsam.Pose3(gtsam.Rot3(online.R[p]), online.p_n[p])
     bias = gtsam.imuBias.ConstantBias(online.bias[p, 0:3], online.bias[p, 3:6])
-    p_graph, p_values = loop.priors(p, pose, online.v_n[p], bias, online.cov_pose[p], online.cov_vel[p],
-                                    online.cov_bias[p], online.g[p], online.cov_g[p] + 1e-12 * np.eye(3),
-                                    online.k[p], online.var_k[p])
+    p_graph, p_values = loop.priors(
+        p,
+        pose,
+        online.v_n[p],
+        bias,
+        online.cov_pose[p],
+        online.cov_vel[p],
+        online.cov_bias[p],
+        online.g[p],
+        online.cov_g[p] + 1e-12 * np.eye(3),
+        online.k[p],
+        online.var_k[p],
+    )
     p_values.insert(values)
     for j in range(graph.size()):
         if all(p_values.exists(key) for key in graph.at(j).keys()):
             p_graph.push_back(graph.at(j))
         else:
-            loop.stats["n_factors_dropped_at_restart"] = loop.stats.get("n_factors_dropped_at_restart", 0) + 1
-    stamps = [(key, times[p]) for key in loop.smoother.keys(p)] + [(key, times[i]) for key in loop.smoother.keys(i)]
+            loop.stats["n_factors_dropped_at_restart"] = (
+                loop.stats.get("n_factors_dropped_at_restart", 0) + 1
+            )
+    stamps = [(key, times[p]) for key in loop.smoother.keys(p)] + [
+        (key, times[i]) for key in loop.smoother.keys(i)
+    ]
     loop.smoother.update(p_graph, p_values, stamps)
     return p
 
@@ -880,4 +1090,3 @@ def _inflation_over(imu_t, k0, k1, t_a, t_b, seg_i0, seg_i1, seg_qa, seg_qg):
             qg += seg_qg[s] * overlap
     span = max(t_b - t_a, 1e-9)
     return qa / span, qg / span
-

@@ -22,6 +22,7 @@ refused (:func:`gnssacc.estimators.odometry.decide`). Counts: ``n_odo_factors``,
 ``n_odo_skipped_sign``; the scale factor at the last node and its 1-sigma: ``odometry_scale``,
 ``odometry_scale_sigma``.
 """
+
 from __future__ import annotations
 
 import math
@@ -73,16 +74,33 @@ class NhcFactors:
         stats.update(n_nhc_factors=0, **nhc_rules.counts())
         nodes = np.zeros(0, int)
         if self.cfg.enabled:
-            epochs = nhc_rules.nhc_epochs(run.imu, float(times[0]), float(times[-1]), self.cfg.interval_s)
+            epochs = nhc_rules.nhc_epochs(
+                run.imu, float(times[0]), float(times[-1]), self.cfg.interval_s
+            )
             nodes = nearest_nodes(times, epochs.t, self.cfg.interval_s)
         self.nodes = set(nodes.tolist())
         node_t = times[nodes]
-        self.rest = dict(zip(nodes.tolist(), (stationary.mask(node_t) if stationary is not None
-                                              else np.zeros(len(nodes), bool)).tolist()))
-        self.omega_b = dict(zip(nodes.tolist(), np.asarray(run.imu.omega_ib_b)[nhc_rules.held_samples(run.imu.t, node_t)]))
+        self.rest = dict(
+            zip(
+                nodes.tolist(),
+                (
+                    stationary.mask(node_t)
+                    if stationary is not None
+                    else np.zeros(len(nodes), bool)
+                ).tolist(),
+            )
+        )
+        self.omega_b = dict(
+            zip(
+                nodes.tolist(),
+                np.asarray(run.imu.omega_ib_b)[nhc_rules.held_samples(run.imu.t, node_t)],
+            )
+        )
         self.w_ie = earth_rate_n(run.origin.lat0)
 
-    def add(self, graph, i: int, R_nb: np.ndarray, v_n: np.ndarray, c_vel: np.ndarray, b_g: np.ndarray) -> None:
+    def add(
+        self, graph, i: int, R_nb: np.ndarray, v_n: np.ndarray, c_vel: np.ndarray, b_g: np.ndarray
+    ) -> None:
         """The constraint on node ``i`` when it has an epoch and :func:`gnssacc.estimators.nhc.decide`
         applies it: ``R_nb``, ``v_n`` [m/s, NED], ``c_vel`` [m^2/s^2] the node's predicted attitude,
         velocity and velocity covariance, ``b_g`` [rad/s] the gyro bias it was predicted with."""
@@ -92,13 +110,21 @@ class NhcFactors:
         w_b = omega - b_g - R_nb.T @ self.w_ie
         v_b = R_nb.T @ v_n + cross3(w_b, cfg.lever_arm_b)
         v_b = v_b if cfg.R_vb is None else cfg.R_vb @ v_b
-        fwd = R_nb @ cfg.forward_b     # the vehicle's forward axis, NED
-        why = nhc_rules.decide(self.rest[i], float(v_b[0]), math.sqrt(max(float(fwd @ c_vel @ fwd), 0.0)),
-                               float(w_b[2]), float(cfg.sigma_mps[0]), cfg.pivot_offset_m)
+        fwd = R_nb @ cfg.forward_b  # the vehicle's forward axis, NED
+        why = nhc_rules.decide(
+            self.rest[i],
+            float(v_b[0]),
+            math.sqrt(max(float(fwd @ c_vel @ fwd), 0.0)),
+            float(w_b[2]),
+            float(cfg.sigma_mps[0]),
+            cfg.pivot_offset_m,
+        )
         if why != nhc_rules.APPLY:
             self.stats[nhc_rules.SKIPPED[why]] += 1
             return
-        graph.add(nhc_factor(X(i), V(i), B(i), omega, cfg.lever_arm_b, self.w_ie, cfg.sigma_mps, cfg.R_vb))
+        graph.add(
+            nhc_factor(X(i), V(i), B(i), omega, cfg.lever_arm_b, self.w_ie, cfg.sigma_mps, cfg.R_vb)
+        )
         self.stats["n_nhc_factors"] += 1
 
 
@@ -132,8 +158,12 @@ class OdometryFactors:
         self.sample = dict(zip(nodes.tolist(), _nearest(ep.t, times[nodes]).tolist()))
         self.nodes = set(self.sample)
         self.ep = ep
-        self.omega_b = dict(zip(nodes.tolist(), np.asarray(run.imu.omega_ib_b)[nhc_rules.held_samples(run.imu.t,
-                                                                                                        times[nodes])]))
+        self.omega_b = dict(
+            zip(
+                nodes.tolist(),
+                np.asarray(run.imu.omega_ib_b)[nhc_rules.held_samples(run.imu.t, times[nodes])],
+            )
+        )
         self.w_ie = earth_rate_n(run.origin.lat0)
         self.tau, self.sigma = np.array([self.cfg.scale_tau_s]), np.array([self.cfg.scale_sigma])
 
@@ -141,7 +171,11 @@ class OdometryFactors:
         """The scale factor of node ``i`` with a prior at ``k`` of variance ``var_k`` (``None`` or
         not positive: the start's, ``[odometry] scale_sigma`` squared)."""
         var = var_k if var_k is not None and var_k > 0 else float(self.sigma[0]) ** 2
-        graph.add(gtsam.PriorFactorVector(K(i), np.array([k]), gtsam.noiseModel.Isotropic.Sigma(1, np.sqrt(var))))
+        graph.add(
+            gtsam.PriorFactorVector(
+                K(i), np.array([k]), gtsam.noiseModel.Isotropic.Sigma(1, np.sqrt(var))
+            )
+        )
         values.insert(K(i), np.array([k]))
 
     def chain(self, graph, values, i: int, dt: float, k_prev: float) -> None:
@@ -149,22 +183,44 @@ class OdometryFactors:
         graph.add(gauss_markov_factor(K(i - 1), K(i), dt, self.tau, self.sigma))
         values.insert(K(i), np.exp(-dt / self.tau) * k_prev)
 
-    def add(self, graph, i: int, R_nb: np.ndarray, v_n: np.ndarray, c_vel: np.ndarray, b_g: np.ndarray,
-            k: float) -> None:
+    def add(
+        self,
+        graph,
+        i: int,
+        R_nb: np.ndarray,
+        v_n: np.ndarray,
+        c_vel: np.ndarray,
+        b_g: np.ndarray,
+        k: float,
+    ) -> None:
         """The odometry factor of node ``i`` unless its sample's sign contradicts the node's
         prediction (``R_nb``, ``v_n`` [m/s, NED], ``c_vel`` [m^2/s^2], ``b_g`` [rad/s], the scale
         factor ``k`` it was predicted with)."""
         j, cfg, omega = self.sample[i], self.cfg, self.omega_b[i]
         w_b = omega - b_g - R_nb.T @ self.w_ie
-        fwd = R_nb @ self.forward_b    # the vehicle's forward axis, NED
+        fwd = R_nb @ self.forward_b  # the vehicle's forward axis, NED
         v_x = float(fwd @ v_n + self.forward_b @ cross3(w_b, cfg.lever_arm_b))
         sigma_pred = (1.0 + k) * math.sqrt(max(float(fwd @ c_vel @ fwd), 0.0))
-        why = odo_rules.decide(float(self.ep.v[j]), float(self.ep.sigma[j]), (1.0 + k) * v_x, sigma_pred)
+        why = odo_rules.decide(
+            float(self.ep.v[j]), float(self.ep.sigma[j]), (1.0 + k) * v_x, sigma_pred
+        )
         if why != odo_rules.APPLY:
             self.stats[odo_rules.SKIPPED[why]] += 1
             return
-        graph.add(odometry_factor(X(i), V(i), B(i), K(i), float(self.ep.v[j]), omega, cfg.lever_arm_b, self.w_ie,
-                                  float(self.ep.sigma[j]), self.R_vb))
+        graph.add(
+            odometry_factor(
+                X(i),
+                V(i),
+                B(i),
+                K(i),
+                float(self.ep.v[j]),
+                omega,
+                cfg.lever_arm_b,
+                self.w_ie,
+                float(self.ep.sigma[j]),
+                self.R_vb,
+            )
+        )
         self.stats["n_odo_factors"] += 1
 
     def final_stats(self, online) -> None:

@@ -37,6 +37,7 @@ New factors come in as one dense Hessian of the update's graph; a rebuild goes f
 (a whole window's dense Hessian grows with the square of its nodes). Kernels are compiled with
 numba, which also keeps these small dense operations off the BLAS thread pool.
 """
+
 from __future__ import annotations
 
 import time
@@ -45,7 +46,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-if TYPE_CHECKING:   # the kernels compile without gtsam (at install time, kernels.compile_groups)
+if TYPE_CHECKING:  # the kernels compile without gtsam (at install time, kernels.compile_groups)
     import gtsam
 
 _INDEX_MASK = (1 << 56) - 1
@@ -70,7 +71,7 @@ def _gram(W, scale):
     """``W^T W`` scaled by ``scale_i scale_j`` (explicit loops: numba's ``@`` would call BLAS)."""
     r, m = W.shape
     out = np.zeros((m, m))
-    for k in range(r):                   # row by row, contiguous inner loops
+    for k in range(r):  # row by row, contiguous inner loops
         for i in range(m):
             w = W[k, i]
             for j in range(i, m):
@@ -94,8 +95,8 @@ def _chol(A):
         d = A[j, j] * s[j] * s[j]
         for k in range(j):
             d -= L[j, k] * L[j, k]
-        if not d > 0.0:                  # not positive definite: all NaN, so that what
-            for i in range(b):           # divides by it gives NaN (numba raises on / 0.0)
+        if not d > 0.0:  # not positive definite: all NaN, so that what
+            for i in range(b):  # divides by it gives NaN (numba raises on / 0.0)
                 for k in range(b):
                     L[i, k] = np.nan
             return L, s
@@ -114,7 +115,7 @@ def _schur(A, C, transpose):
     b = A.shape[0]
     L, s = _chol(A)
     W = np.empty((b, b))
-    for i in range(b):                   # W = L^-1 S C, row by row
+    for i in range(b):  # W = L^-1 S C, row by row
         for j in range(b):
             W[i, j] = (C[j, i] if transpose else C[i, j]) * s[i]
         for k in range(i):
@@ -148,15 +149,15 @@ def _layout(key, b=15):
     """Offset and dimension of a variable in its node's block of ``b`` rows, from the GTSAM symbol
     character (the odometry scale factor ``k``, when nodes carry one, is the block's last row)."""
     c = key >> 56
-    if c == 120:                         # 'x': Pose3
+    if c == 120:  # 'x': Pose3
         return 0, 6
-    if c == 118:                         # 'v': velocity
+    if c == 118:  # 'v': velocity
         return 6, 3
-    if c == 98:                          # 'b': IMU bias
+    if c == 98:  # 'b': IMU bias
         return 9, 6
-    if c == 103:                         # 'g': GNSS error
+    if c == 103:  # 'g': GNSS error
         return 15, 3
-    if c == 107 and b in (16, 19):       # 'k': odometry scale factor
+    if c == 107 and b in (16, 19):  # 'k': odometry scale factor
         return b - 1, 1
     return -1, 0
 
@@ -175,7 +176,7 @@ def _scatter(D, O, Ox, info, keys, first, start):
     rows = np.empty(nk, np.int64)
     offs = np.empty(nk, np.int64)
     dims = np.empty(nk, np.int64)
-    pos = np.empty(nk, np.int64)         # first row of each key in ``info``
+    pos = np.empty(nk, np.int64)  # first row of each key in ``info``
     low = 1 << 62
     p0 = 0
     for p in range(nk):
@@ -232,21 +233,21 @@ def _node_covariances(D, O, F, start, f_valid, rows, last):
     if f_valid < start:
         _copy_into(F[start], D[start])
         f_valid = start
-    for k in range(f_valid, last):       # F_{k+1} = D_{k+1} - O_k^T F_k^-1 O_k
+    for k in range(f_valid, last):  # F_{k+1} = D_{k+1} - O_k^T F_k^-1 O_k
         _diff_into(F[k + 1], D[k + 1], _schur(F[k], O[k], False))
     f_valid = max(f_valid, last)
     b = D.shape[1]
     out = np.empty((len(rows), b, b))
-    G = np.empty((b, b))                 # G_k: the information of nodes k.. newest on node k
+    G = np.empty((b, b))  # G_k: the information of nodes k.. newest on node k
     _copy_into(G, D[last])
     info = np.empty((b, b))
     k = last
     for m in range(len(rows) - 1, -1, -1):
         j = rows[m]
-        while k > j + 1:                 # G_k = D_k - O_k G_{k+1}^-1 O_k^T
+        while k > j + 1:  # G_k = D_k - O_k G_{k+1}^-1 O_k^T
             k -= 1
             _diff_into(G, D[k], _schur(G, O[k], True))
-        if j < last:                     # less the newer nodes' Schur complement
+        if j < last:  # less the newer nodes' Schur complement
             _diff_into(info, F[j], _schur(G, O[j], True))
         else:
             _copy_into(info, F[j])
@@ -269,7 +270,7 @@ def _marginalize(D, O, F, start, count, f_valid):
         D[k] = 0.0
         O[k] = 0.0
         start += 1
-        if f_valid < start:              # F of the oldest node is its D (kept if already valid)
+        if f_valid < start:  # F of the oldest node is its D (kept if already valid)
             _copy_into(F[start], D[start])
             f_valid = start
     return start, f_valid
@@ -299,9 +300,9 @@ def _eliminate(D, O, Ox, k, lo, hi):
     m = 0
     for r in range(max(lo, k - w), min(hi, k + w) + 1):
         if r != k and _nonzero(_coupling(O, Ox, k, r - k) if r > k else _coupling(O, Ox, r, k - r)):
-            nbr[m] = r           # (a wide band costs only where factors actually reach)
+            nbr[m] = r  # (a wide band costs only where factors actually reach)
             m += 1
-    C = np.empty((b, m * b))             # H[k, neighbours]
+    C = np.empty((b, m * b))  # H[k, neighbours]
     for p in range(m):
         r = nbr[p]
         if r > k:
@@ -315,7 +316,7 @@ def _eliminate(D, O, Ox, k, lo, hi):
                 for j in range(b):
                     C[i, p * b + j] = blk[j, i]
     L, s = _chol(D[k])
-    for i in range(b):                   # C <- L^-1 S C (scaled pivot, as in _schur)
+    for i in range(b):  # C <- L^-1 S C (scaled pivot, as in _schur)
         for j in range(m * b):
             C[i, j] *= s[i]
         for q in range(i):
@@ -348,9 +349,9 @@ def _band_covariances(D, O, Ox, Dc, Oc, Oxc, start, fe, rows, last):
         s = fe if rows[m] >= fe else start
         j, n = rows[m] - s, last - s
         if s == fe:
-            D2, O2, Ox2 = Dc[s:last + 1].copy(), Oc[s:last + 1].copy(), Oxc[s:last + 1].copy()
+            D2, O2, Ox2 = Dc[s : last + 1].copy(), Oc[s : last + 1].copy(), Oxc[s : last + 1].copy()
         else:
-            D2, O2, Ox2 = D[s:last + 1].copy(), O[s:last + 1].copy(), Ox[s:last + 1].copy()
+            D2, O2, Ox2 = D[s : last + 1].copy(), O[s : last + 1].copy(), Ox[s : last + 1].copy()
         for k in range(j):
             _eliminate(D2, O2, Ox2, k, k + 1, n)
         for k in range(n, j, -1):
@@ -403,12 +404,12 @@ class WindowMarginals:
 
     def clear(self) -> None:
         """Forget the system (the next :meth:`sync` rebuilds it)."""
-        self.first = None                # node index of the oldest node held
-        self.n = 0                       # nodes held
-        self.start = 0                   # storage row of the oldest node
-        self.f_valid = -1                # storage rows <= this have a valid forward sweep F
-        self.fe = -1                     # band: the kept copy has rows < fe eliminated (-1: none)
-        self.reach = 1                   # band: widest factor seen since the last rebuild [nodes]
+        self.first = None  # node index of the oldest node held
+        self.n = 0  # nodes held
+        self.start = 0  # storage row of the oldest node
+        self.f_valid = -1  # storage rows <= this have a valid forward sweep F
+        self.fe = -1  # band: the kept copy has rows < fe eliminated (-1: none)
+        self.reach = 1  # band: widest factor seen since the last rebuild [nodes]
         self._alloc(64)
 
     def sync(self, isam, new_factors: gtsam.NonlinearFactorGraph) -> None:
@@ -423,8 +424,8 @@ class WindowMarginals:
             return
         try:
             gfg = new_factors.linearize(theta)
-        except RuntimeError:             # a new factor on a node already marginalised (a lag
-            self.rebuild(isam.getFactors(), theta)   # shorter than the node spacing)
+        except RuntimeError:  # a new factor on a node already marginalised (a lag
+            self.rebuild(isam.getFactors(), theta)  # shorter than the node spacing)
             return
         self.add(gfg)
         count = 0
@@ -458,15 +459,17 @@ class WindowMarginals:
         last = int((keys & _INDEX_MASK).max())
         if last >= self.first + self.n:
             self._grow(last)
-        info = np.asfortranarray(info)   # as gtsam gives it: one compiled version of the kernel
+        info = np.asfortranarray(info)  # as gtsam gives it: one compiled version of the kernel
         low = _scatter(self.D, self.O, self.Ox, info, keys, self.first, self.start)
         if low < 0:
-            raise NotAChain(f"a factor on {[key_name(int(k)) for k in keys]} does not fit "
-                            "the window's band of nodes")
+            raise NotAChain(
+                f"a factor on {[key_name(int(k)) for k in keys]} does not fit "
+                "the window's band of nodes"
+            )
         self.f_valid = min(self.f_valid, low - 1)
         self.reach = max(self.reach, last - (low - self.start + self.first))
-        if self.fe >= 0:                 # the kept copy of a band: the same information, unless
-            if low >= self.fe:           # it reaches a row already eliminated there
+        if self.fe >= 0:  # the kept copy of a band: the same information, unless
+            if low >= self.fe:  # it reaches a row already eliminated there
                 _scatter(self.Dc, self.Oc, self.Oxc, info, keys, self.first, self.start)
             else:
                 self.fe = -1
@@ -477,10 +480,14 @@ class WindowMarginals:
 
     def _marginalize(self, count: int) -> None:
         if self.w == 1:
-            self.start, self.f_valid = _marginalize(self.D, self.O, self.F, self.start, count, self.f_valid)
+            self.start, self.f_valid = _marginalize(
+                self.D, self.O, self.F, self.start, count, self.f_valid
+            )
         else:
-            self.start = _band_marginalize(self.D, self.O, self.Ox, self.start, count, self.start + self.n - 1)
-            if self.fe < self.start:     # the kept copy had not eliminated them yet
+            self.start = _band_marginalize(
+                self.D, self.O, self.Ox, self.start, count, self.start + self.n - 1
+            )
+            if self.fe < self.start:  # the kept copy had not eliminated them yet
                 self.fe = -1
         self.first += count
         self.n -= count
@@ -490,16 +497,22 @@ class WindowMarginals:
         tangent (6), velocity (3), bias (6)[, GNSS error (3)] each; array (len(nodes), b, b)."""
         last, shift = self.start + self.n - 1, self.start - self.first
         rows = [node + shift for node in nodes]
-        if not (self.start <= rows[0] and rows[-1] <= last and all(a < b for a, b in zip(rows, rows[1:]))):
+        if not (
+            self.start <= rows[0]
+            and rows[-1] <= last
+            and all(a < b for a, b in zip(rows, rows[1:]))
+        ):
             raise KeyError(f"nodes {list(nodes)} are not ascending nodes of the window")
         if self.w == 1:
-            covs, self.f_valid, ok = _node_covariances(self.D, self.O, self.F, self.start, self.f_valid,
-                                                       np.array(rows, np.int64), last)
+            covs, self.f_valid, ok = _node_covariances(
+                self.D, self.O, self.F, self.start, self.f_valid, np.array(rows, np.int64), last
+            )
         else:
             covs, ok = self._band_covariances(np.array(rows, np.int64), last)
         if not ok:
-            raise np.linalg.LinAlgError(f"the marginal information of a node of {list(nodes)} is not positive "
-                                        "definite")
+            raise np.linalg.LinAlgError(
+                f"the marginal information of a node of {list(nodes)} is not positive definite"
+            )
         return covs
 
     def _band_covariances(self, rows: np.ndarray, last: int):
@@ -514,14 +527,20 @@ class WindowMarginals:
         if target > self.fe:
             _band_advance(self.Dc, self.Oc, self.Oxc, self.fe, target, last)
             self.fe = target
-        return _band_covariances(self.D, self.O, self.Ox, self.Dc, self.Oc, self.Oxc, s, self.fe, rows, last)
+        return _band_covariances(
+            self.D, self.O, self.Ox, self.Dc, self.Oc, self.Oxc, s, self.fe, rows, last
+        )
 
     def _alloc(self, cap: int) -> None:
         b = self.b
         self.D, self.O, self.F = (np.zeros((cap, b, b)) for _ in range(3))
-        self.Ox = np.zeros((cap, self.w - 1, b, b))    # couplings two or more nodes apart
-        if self.w > 1:                                  # the band's kept, partly eliminated copy
-            self.Dc, self.Oc, self.Oxc = np.zeros_like(self.D), np.zeros_like(self.O), np.zeros_like(self.Ox)
+        self.Ox = np.zeros((cap, self.w - 1, b, b))  # couplings two or more nodes apart
+        if self.w > 1:  # the band's kept, partly eliminated copy
+            self.Dc, self.Oc, self.Oxc = (
+                np.zeros_like(self.D),
+                np.zeros_like(self.O),
+                np.zeros_like(self.Ox),
+            )
 
     def _grow(self, last: int) -> None:
         """Hold nodes up to ``last``; moves the window to the front of storage when it runs out."""
@@ -530,9 +549,14 @@ class WindowMarginals:
             D, O, Ox, F, s, m = self.D, self.O, self.Ox, self.F, self.start, self.n
             kept = (self.Dc, self.Oc, self.Oxc) if self.w > 1 else ()
             self._alloc(max(2 * n, 64))
-            self.D[:m], self.O[:m], self.Ox[:m], self.F[:m] = D[s:s + m], O[s:s + m], Ox[s:s + m], F[s:s + m]
+            self.D[:m], self.O[:m], self.Ox[:m], self.F[:m] = (
+                D[s : s + m],
+                O[s : s + m],
+                Ox[s : s + m],
+                F[s : s + m],
+            )
             for new, old in zip((self.Dc, self.Oc, self.Oxc) if self.w > 1 else (), kept):
-                new[:m] = old[s:s + m]
+                new[:m] = old[s : s + m]
             self.f_valid -= s
             self.fe = self.fe - s if self.fe >= s else -1
             self.start = 0

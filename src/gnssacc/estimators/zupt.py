@@ -9,6 +9,7 @@ vibration, quantisation and whatever else the white-noise model misses), floored
 configured white noise ``q_g / interval_s``. Both the EKF and the smoother take their stationary
 epochs from here.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -60,7 +61,9 @@ def _block_means(imu: ImuData, edges: np.ndarray) -> np.ndarray:
         return (c[idx[1:]] - c[idx[:-1]]) / np.where(n > 0, n, np.nan)[:, None]
 
 
-def stationary_epochs(imu: ImuData, spans, interval_s: float, gyro_psd: np.ndarray) -> StationaryEpochs:
+def stationary_epochs(
+    imu: ImuData, spans, interval_s: float, gyro_psd: np.ndarray
+) -> StationaryEpochs:
     """Epochs and gyro block means for the stationary updates.
 
     Parameters
@@ -85,7 +88,7 @@ def stationary_epochs(imu: ImuData, spans, interval_s: float, gyro_psd: np.ndarr
             continue
         edges = sp.t_start + interval_s * np.arange(n + 1)
         m = _block_means(imu, edges)
-        ok = np.all(np.isfinite(m), axis=1)   # a block inside an IMU gap has no samples
+        ok = np.all(np.isfinite(m), axis=1)  # a block inside an IMU gap has no samples
         m, edges = m[ok], np.concatenate([[edges[0]], edges[1:][ok]])
         n = len(m)
         if n < 1:
@@ -99,7 +102,9 @@ def stationary_epochs(imu: ImuData, spans, interval_s: float, gyro_psd: np.ndarr
         which.append(np.full(n, j))
     if not ts:
         return StationaryEpochs.empty()
-    return StationaryEpochs(np.concatenate(ts), np.vstack(means), np.vstack(var), np.concatenate(which))
+    return StationaryEpochs(
+        np.concatenate(ts), np.vstack(means), np.vstack(var), np.concatenate(which)
+    )
 
 
 def epochs_for(run, zupt, gyro_psd: np.ndarray, stationary) -> StationaryEpochs:

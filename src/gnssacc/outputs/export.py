@@ -15,6 +15,7 @@ KITTI sequence) gets placeholder identity quaternions, says ``POSITIONS ONLY`` i
 is warned about: ``evo_ape ... --pose_relation trans_part`` compares positions correctly, ``evo_rpe``
 (relative motion in the reference's body axes) does not.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -44,19 +45,25 @@ def enu_pose(p_n: np.ndarray, rpy: np.ndarray | None) -> tuple[np.ndarray, np.nd
 
 def _write(path: Path, t, p_n, rpy, note: str) -> None:
     p_enu, quats = enu_pose(p_n, rpy)
-    header = ("gnssacc TUM trajectory: timestamp[s] x y z [m, local ENU tangent frame: x east, y north, z up] "
-              f"qx qy qz qw [body FLU -> ENU]; {note}")
+    header = (
+        "gnssacc TUM trajectory: timestamp[s] x y z [m, local ENU tangent frame: x east, y north, z up] "
+        f"qx qy qz qw [body FLU -> ENU]; {note}"
+    )
     np.savetxt(path, np.column_stack([t, p_enu, quats]), fmt="%.6f", header=header)
 
 
 def _origin_note(run: RecordedRun) -> str:
     o = run.origin
-    return f"origin lat {np.degrees(o.lat0):.9f} deg, lon {np.degrees(o.lon0):.9f} deg, h {o.h0:.3f} m"
+    return (
+        f"origin lat {np.degrees(o.lat0):.9f} deg, lon {np.degrees(o.lon0):.9f} deg, h {o.h0:.3f} m"
+    )
 
 
 def write_tum(sol: NavSolution, run: RecordedRun, path: Path) -> None:
     """Write one solution in TUM format (see module docstring)."""
-    _write(Path(path), sol.t, run.origin.to_ned(sol.lat, sol.lon, sol.h), sol.rpy, _origin_note(run))
+    _write(
+        Path(path), sol.t, run.origin.to_ned(sol.lat, sol.lon, sol.h), sol.rpy, _origin_note(run)
+    )
 
 
 def truth_epochs(run: RecordedRun, sols: dict[str, NavSolution], window=None) -> np.ndarray:
@@ -71,8 +78,9 @@ def truth_epochs(run: RecordedRun, sols: dict[str, NavSolution], window=None) ->
     return np.unique(np.round(t, 6))
 
 
-def write_truth_tum(run: RecordedRun, folder: Path, sols: dict[str, NavSolution] | None = None,
-                    window=None) -> Path:
+def write_truth_tum(
+    run: RecordedRun, folder: Path, sols: dict[str, NavSolution] | None = None, window=None
+) -> Path:
     """Write the run's truth as ``truth.tum`` in ``folder``; return the file.
 
     The truth is written at :func:`truth_epochs`: its own epochs and, interpolated linearly as gnssacc
@@ -86,16 +94,21 @@ def write_truth_tum(run: RecordedRun, folder: Path, sols: dict[str, NavSolution]
     tr = run.truth
     path = Path(folder) / "truth.tum"
     t = truth_epochs(run, sols or {}, window)
-    note = _origin_note(run) + ("; the truth at its own epochs and, interpolated linearly, at the estimates' "
-                                "epochs (as gnssacc scores them)")
+    note = _origin_note(run) + (
+        "; the truth at its own epochs and, interpolated linearly, at the estimates' "
+        "epochs (as gnssacc scores them)"
+    )
     if window is not None:
         note += f", over the scored window t = {window[0]:.6f} .. {window[1]:.6f} s"
     rpy = None
     if tr.rpy is None:
         note += "; POSITIONS ONLY: the truth has no attitude, the quaternions are placeholders"
-        warn_data("truth.tum", "holds positions only (the truth has no attitude; its quaternions are placeholders, "
-                               "and its header says so): compare positions only (evo_ape ... --pose_relation "
-                               "trans_part); evo_rpe's figures would be meaningless")
+        warn_data(
+            "truth.tum",
+            "holds positions only (the truth has no attitude; its quaternions are placeholders, "
+            "and its header says so): compare positions only (evo_ape ... --pose_relation "
+            "trans_part); evo_rpe's figures would be meaningless",
+        )
     else:
         unwrapped = np.unwrap(tr.rpy, axis=0)
         rpy = np.column_stack([np.interp(t, tr.t, unwrapped[:, i]) for i in range(3)])

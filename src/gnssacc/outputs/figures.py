@@ -23,6 +23,7 @@
 (:func:`write_figures` says why in one line). Figures are saved at :data:`DPI` dots per inch, sized to be
 read at 100 % on a laptop screen.
 """
+
 from __future__ import annotations
 
 import math
@@ -36,11 +37,22 @@ from ..core.solution import NavSolution
 
 DPI = 100
 #: The figures of each ``--plots`` choice, in the report's order.
-PLOT_SETS = {"none": (), "basic": ("summary", "trajectory", "errors"),
-             "all": ("summary", "trajectory", "errors", "velocity_attitude", "nis", "biases", "sigmas")}
+PLOT_SETS = {
+    "none": (),
+    "basic": ("summary", "trajectory", "errors"),
+    "all": ("summary", "trajectory", "errors", "velocity_attitude", "nis", "biases", "sigmas"),
+}
 #: Fixed colours per method family, so that a method has the same colour in every figure and run.
-_COLOURS = {"ekf": "C0", "ekf-acc": "C1", "smoother": "C2", "smoother-acc": "C3", "ekf-accw": "C4",
-            "smoother-accw": "C5", "ekf-gm": "C6", "smoother-gm": "C8"}
+_COLOURS = {
+    "ekf": "C0",
+    "ekf-acc": "C1",
+    "smoother": "C2",
+    "smoother-acc": "C3",
+    "ekf-accw": "C4",
+    "smoother-accw": "C5",
+    "ekf-gm": "C6",
+    "smoother-gm": "C8",
+}
 #: Horizontal distance [m] under which the raw fixes' CDF is drawn (grey) in ``summary.png``.
 FIX_STYLE = {"color": "0.45", "ls": ":", "lw": 2.0}
 
@@ -48,7 +60,11 @@ FIX_STYLE = {"color": "0.45", "ls": ":", "lw": 2.0}
 def style(mid: str) -> dict:
     """Colour and line style of a method: an ``-online`` estimate dashed in its smoother's colour."""
     base = mid.removesuffix("-online")
-    return {"color": _COLOURS.get(base, "C7"), "ls": "--" if mid.endswith("-online") else "-", "lw": 1.4}
+    return {
+        "color": _COLOURS.get(base, "C7"),
+        "ls": "--" if mid.endswith("-online") else "-",
+        "lw": 1.4,
+    }
 
 
 def is_smoothed(mid: str) -> bool:
@@ -58,7 +74,8 @@ def is_smoothed(mid: str) -> bool:
 
 def _plt():
     import matplotlib
-    matplotlib.use("Agg")   # files only; never needs a display
+
+    matplotlib.use("Agg")  # files only; never needs a display
     import matplotlib.pyplot as plt
 
     return plt
@@ -89,18 +106,21 @@ def _families(sols: dict) -> list[tuple[str, list[str]]]:
 
 def best_methods(sols: dict, metrics: dict) -> list[str]:
     """The best filter and the best smoother (lowest PRMSE; without truth, NIS nearest 1)."""
+
     def key(mid):
         m = metrics["methods"].get(mid, {})
         if m.get("prmse_m") is not None:
             return m["prmse_m"]
         nis = ((metrics.get("consistency") or {}).get(mid) or {}).get("nis", {}).get("pos")
         return abs(math.log(nis)) if nis else math.inf
+
     return [min(ids, key=key) for _, ids in _families(sols)]
 
 
 # --------------------------------------------------------------------------------------------
 # summary.png
 # --------------------------------------------------------------------------------------------
+
 
 def _cdf(ax, d: np.ndarray, label: str, **kw) -> None:
     d = np.sort(d[np.isfinite(d)])
@@ -129,6 +149,7 @@ def plot_summary(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> Non
         _cdf(ax, d, mid, **style(mid))
     if truth:
         from ..analysis.metrics import truth_at
+
         p_true, ok = truth_at(run, run.gnss.t)
         f = run.origin.to_ned(run.gnss.lat, run.gnss.lon, run.gnss.h)
         _cdf(ax, np.hypot(*(f - p_true)[ok, 0:2].T), "raw fixes", **FIX_STYLE)
@@ -138,8 +159,11 @@ def plot_summary(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> Non
     ax.text(0.99 * ax.get_xlim()[1], 0.93, "95 %", ha="right", va="top", fontsize=8, color="0.4")
     ax.set_xlabel("horizontal error [m]" if truth else "horizontal distance to the raw fixes [m]")
     ax.set_ylabel("fraction of epochs")
-    ax.set_title("How good: horizontal error CDF (left and high is better)" if truth else
-                 "No truth: distance to the raw fixes (agreement, not accuracy)")
+    ax.set_title(
+        "How good: horizontal error CDF (left and high is better)"
+        if truth
+        else "No truth: distance to the raw fixes (agreement, not accuracy)"
+    )
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="lower right")
     _consistency_panel(bx, sols, metrics, truth)
@@ -154,7 +178,7 @@ def _plain_log_ticks(axis, lo: float, hi: float) -> None:
     minor tick in powers of ten, and the labels run into each other."""
     from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
 
-    steps = [m * 10.0 ** e for e in range(-4, 5) for m in (1.0, 2.0, 5.0)]
+    steps = [m * 10.0**e for e in range(-4, 5) for m in (1.0, 2.0, 5.0)]
     ticks = [v for v in steps if lo <= v <= hi]
     if len(ticks) < 2:
         ticks = sorted({float(f"{v:.2g}") for v in np.geomspace(lo, hi, 4)[1:-1]})
@@ -185,8 +209,16 @@ def _consistency_panel(ax, sols: dict, metrics: dict, truth: bool) -> None:
             y = k + (j - (len(items) - 1) / 2) * 0.22
             lo, hi = fig_["band"]
             ax.plot([lo, hi], [y, y], color="0.8", lw=6, solid_capstyle="butt", zorder=1)
-            ax.plot(fig_["value"], y, marker, color=style(mid)["color"], ms=7, zorder=3,
-                    label=label if k == 0 else None, mfc="white" if label == "NIS" else None)
+            ax.plot(
+                fig_["value"],
+                y,
+                marker,
+                color=style(mid)["color"],
+                ms=7,
+                zorder=3,
+                label=label if k == 0 else None,
+                mfc="white" if label == "NIS" else None,
+            )
     ax.set_xscale("log")
     _plain_log_ticks(ax.xaxis, *ax.get_xlim())
     ax.axvline(1.0, color="k", lw=0.8)
@@ -194,15 +226,20 @@ def _consistency_panel(ax, sols: dict, metrics: dict, truth: bool) -> None:
     ax.set_yticklabels(ids)
     ax.invert_yaxis()
     ax.set_xlabel("per dof, log scale (1 = consistent; grey: its band)")
-    ax.set_title("How sure: stated uncertainty vs actual errors" if truth else "How sure: NIS (no truth)")
+    ax.set_title(
+        "How sure: stated uncertainty vs actual errors" if truth else "How sure: NIS (no truth)"
+    )
     ax.grid(alpha=0.3, axis="x", which="both")
-    if ax.get_legend_handles_labels()[0]:   # below the axis: the dots may sit anywhere in it
-        ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=3, frameon=False)
+    if ax.get_legend_handles_labels()[0]:  # below the axis: the dots may sit anywhere in it
+        ax.legend(
+            fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=3, frameon=False
+        )
 
 
 # --------------------------------------------------------------------------------------------
 # trajectory.png
 # --------------------------------------------------------------------------------------------
+
 
 def plot_trajectory(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> None:
     """``trajectory.png``: the best filter's and smoother's tracks coloured by horizontal error."""
@@ -211,13 +248,21 @@ def plot_trajectory(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> 
 
     show = best_methods(sols, metrics)
     truth = run.truth is not None
-    fig, axes = plt.subplots(1, len(show), figsize=(6 * len(show) + 1.5, 6.5), squeeze=False, layout="constrained")
+    fig, axes = plt.subplots(
+        1, len(show), figsize=(6 * len(show) + 1.5, 6.5), squeeze=False, layout="constrained"
+    )
     fx = run.origin.to_ned(run.gnss.lat, run.gnss.lon, run.gnss.h)
     values = {}
     for mid in show:
         sol = sols[mid]
-        values[mid] = (np.hypot(*_errors(run, sol)[:, 0:2].T) if truth else np.hypot(sol.sigma[:, 0], sol.sigma[:, 1]))
-    vmax = max([np.nanpercentile(v, 98) for v in values.values() if np.any(np.isfinite(v))] + [1e-3])
+        values[mid] = (
+            np.hypot(*_errors(run, sol)[:, 0:2].T)
+            if truth
+            else np.hypot(sol.sigma[:, 0], sol.sigma[:, 1])
+        )
+    vmax = max(
+        [np.nanpercentile(v, 98) for v in values.values() if np.any(np.isfinite(v))] + [1e-3]
+    )
     for ax, mid in zip(axes[0], show):
         sol = sols[mid]
         p = run.origin.to_ned(sol.lat, sol.lon, sol.h)
@@ -225,14 +270,26 @@ def plot_trajectory(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> 
         if truth:
             tr = run.origin.to_ned(run.truth.lat, run.truth.lon, run.truth.h)
             ax.plot(tr[:, 1], tr[:, 0], "-", color="0.3", lw=0.8, label="truth", zorder=2)
-        seg = np.stack([np.column_stack([p[:-1, 1], p[:-1, 0]]), np.column_stack([p[1:, 1], p[1:, 0]])], axis=1)
-        lc = LineCollection(seg, array=values[mid][:-1], cmap="viridis", clim=(0, vmax), lw=2.5, zorder=3)
+        seg = np.stack(
+            [np.column_stack([p[:-1, 1], p[:-1, 0]]), np.column_stack([p[1:, 1], p[1:, 0]])], axis=1
+        )
+        lc = LineCollection(
+            seg, array=values[mid][:-1], cmap="viridis", clim=(0, vmax), lw=2.5, zorder=3
+        )
         ax.add_collection(lc)
         for a, b in run.outages:
             m = (sol.t - run.t_start >= a) & (sol.t - run.t_start <= b)
             if np.any(m):
-                ax.plot(p[m, 1], p[m, 0], "-", color="tab:red", lw=6, alpha=0.2, zorder=2,
-                        label="GNSS outage" if (a, b) == tuple(run.outages[0]) else None)
+                ax.plot(
+                    p[m, 1],
+                    p[m, 0],
+                    "-",
+                    color="tab:red",
+                    lw=6,
+                    alpha=0.2,
+                    zorder=2,
+                    label="GNSS outage" if (a, b) == tuple(run.outages[0]) else None,
+                )
         ax.plot(p[0, 1], p[0, 0], "^", color="tab:green", ms=11, mec="k", zorder=5, label="start")
         ax.plot(p[-1, 1], p[-1, 0], "s", color="tab:red", ms=10, mec="k", zorder=5, label="end")
         ax.set_aspect("equal", adjustable="datalim")
@@ -243,14 +300,17 @@ def plot_trajectory(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> 
     axes[0, 0].legend(fontsize=8, loc="best")
     cb = fig.colorbar(lc, ax=axes[0].tolist(), shrink=0.8)
     cb.set_label("horizontal error [m]" if truth else "stated horizontal 1-sigma [m] (no truth)")
-    fig.suptitle(f"{run.name}: track, x east / y north (origin {np.degrees(run.origin.lat0):.5f}, "
-                 f"{np.degrees(run.origin.lon0):.5f} deg)")
+    fig.suptitle(
+        f"{run.name}: track, x east / y north (origin {np.degrees(run.origin.lat0):.5f}, "
+        f"{np.degrees(run.origin.lon0):.5f} deg)"
+    )
     _save(fig, path)
 
 
 # --------------------------------------------------------------------------------------------
 # errors.png, velocity_attitude.png, biases.png
 # --------------------------------------------------------------------------------------------
+
 
 def _band_plot(ax, t, e, s, mid) -> None:
     st = style(mid)
@@ -272,8 +332,14 @@ def plot_errors(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> None
     and the 3-D error on a log scale (the outage view)."""
     plt = _plt()
     fams = _families(sols)
-    fig, axes = plt.subplots(4, len(fams), figsize=(7 * len(fams), 10), sharex=True, squeeze=False,
-                             gridspec_kw={"height_ratios": [1, 1, 1, 1.1]})
+    fig, axes = plt.subplots(
+        4,
+        len(fams),
+        figsize=(7 * len(fams), 10),
+        sharex=True,
+        squeeze=False,
+        gridspec_kw={"height_ratios": [1, 1, 1, 1.1]},
+    )
     for c, (title, ids) in enumerate(fams):
         seen = {i: [] for i in range(3)}
         for mid in ids:
@@ -295,7 +361,9 @@ def plot_errors(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> None
             _shade_outages(ax, run)
             ax.grid(alpha=0.3, which="both")
     note = " (grey: GNSS outages)" if run.outages else ""
-    fig.suptitle(f"{run.name}: position error{note}; axes cut at the 98th percentile, the log row shows all")
+    fig.suptitle(
+        f"{run.name}: position error{note}; axes cut at the 98th percentile, the log row shows all"
+    )
     fig.tight_layout()
     _save(fig, path)
 
@@ -318,7 +386,9 @@ def plot_velocity_attitude(run: RecordedRun, sols: dict, metrics: dict, path: Pa
                 k = sl.start + i
                 if np.any(np.isfinite(e[:, k])):
                     _band_plot(axes[i, c], t, e[:, k] * scale, sol.sigma[:, k] * scale, mid)
-    for c, (name, unit, labels) in enumerate((("velocity", "m/s", "NED"), ("attitude", "deg", ("roll", "pitch", "yaw")))):
+    for c, (name, unit, labels) in enumerate(
+        (("velocity", "m/s", "NED"), ("attitude", "deg", ("roll", "pitch", "yaw")))
+    ):
         for i, lab in enumerate(labels):
             ax = axes[i, c]
             ax.set_ylabel(f"{lab} error [{unit}]")
@@ -327,7 +397,9 @@ def plot_velocity_attitude(run: RecordedRun, sols: dict, metrics: dict, path: Pa
             lines = [ln.get_ydata() for ln in ax.get_lines()]
             _ylim(ax, [np.asarray(y, float) for y in lines])
             if not lines:
-                ax.text(0.5, 0.5, f"no {name} truth", transform=ax.transAxes, ha="center", color="0.5")
+                ax.text(
+                    0.5, 0.5, f"no {name} truth", transform=ax.transAxes, ha="center", color="0.5"
+                )
         axes[0, c].set_title(f"{name} error, shaded +-3 sigma")
         axes[2, c].set_xlabel("time since start [s]")
     axes[0, 0].legend(fontsize=8)
@@ -346,18 +418,30 @@ def plot_biases(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> None
     if run.sim is not None and run.sim.bias is not None and len(run.sim.bias) == len(run.imu.t):
         ref = sols[show[0]]
         true = (ref.t, run.sim.bias.at(ref.t, run.imu.t))
-    for r, (name, attr, sl) in enumerate((("accelerometer bias", "b_a", slice(9, 12)), ("gyro bias", "b_g", slice(12, 15)))):
+    for r, (name, attr, sl) in enumerate(
+        (("accelerometer bias", "b_a", slice(9, 12)), ("gyro bias", "b_g", slice(12, 15)))
+    ):
         unit = STATE_GROUPS[3 + r][2]
         for i, ax in enumerate(axes[r]):
             k = sl.start + i
             for mid in show:
                 sol = sols[mid]
-                t, b, s = sol.t - run.t_start, getattr(sol, attr)[:, i] * DISPLAY_SCALE[k], sol.sigma[:, k] * DISPLAY_SCALE[k]
+                t, b, s = (
+                    sol.t - run.t_start,
+                    getattr(sol, attr)[:, i] * DISPLAY_SCALE[k],
+                    sol.sigma[:, k] * DISPLAY_SCALE[k],
+                )
                 st = style(mid)
                 ax.fill_between(t, b - 3 * s, b + 3 * s, color=st["color"], alpha=0.12, lw=0)
                 ax.plot(t, b, label=mid, **st)
             if true is not None:
-                ax.plot(true[0] - run.t_start, true[1][r][:, i] * DISPLAY_SCALE[k], "k:", lw=1.2, label="true (simulator)")
+                ax.plot(
+                    true[0] - run.t_start,
+                    true[1][r][:, i] * DISPLAY_SCALE[k],
+                    "k:",
+                    lw=1.2,
+                    label="true (simulator)",
+                )
             ax.set_title(f"{name} {'xyz'[i]} [{unit}]")
             ax.grid(alpha=0.3)
             _shade_outages(ax, run)
@@ -373,11 +457,12 @@ def plot_biases(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> None
 # nis.png
 # --------------------------------------------------------------------------------------------
 
+
 def _moving_mean(x: np.ndarray, k: int) -> np.ndarray:
     k = max(1, min(k, len(x)))
     c = np.cumsum(np.insert(np.asarray(x, float), 0, 0.0))
     out = np.full(len(x), np.nan)
-    out[k - 1:] = (c[k:] - c[:-k]) / k
+    out[k - 1 :] = (c[k:] - c[:-k]) / k
     return out
 
 
@@ -401,7 +486,9 @@ def plot_nis(run: RecordedRun, sols: dict, metrics: dict, path: Path, window: in
     fig, (ax, bx) = plt.subplots(2, 1, figsize=(12, 8), sharex=True)
     k = 3 * window
     lo, hi = chi2.ppf(0.0015, k) / k, chi2.ppf(0.9985, k) / k
-    ax.axhspan(lo, hi, color="tab:green", alpha=0.12, zorder=0, label=f"99.7 % band of a mean of {window}")
+    ax.axhspan(
+        lo, hi, color="tab:green", alpha=0.12, zorder=0, label=f"99.7 % band of a mean of {window}"
+    )
     drawn = False
     for mid, sol in sols.items():
         t, nis = sol.stats.get("nis_pos_t"), sol.stats.get("nis_pos")
@@ -410,7 +497,14 @@ def plot_nis(run: RecordedRun, sols: dict, metrics: dict, path: Path, window: in
         ax.plot(np.asarray(t) - run.t_start, _moving_mean(nis, window), label=mid, **style(mid))
         drawn = True
     if not drawn:
-        ax.text(0.5, 0.5, "no EKF innovations in this run", transform=ax.transAxes, ha="center", color="0.5")
+        ax.text(
+            0.5,
+            0.5,
+            "no EKF innovations in this run",
+            transform=ax.transAxes,
+            ha="center",
+            color="0.5",
+        )
     ax.set_yscale("log")
     _plain_log_ticks(ax.yaxis, *ax.get_ylim())
     ax.axhline(1.0, color="k", lw=0.8)
@@ -422,12 +516,20 @@ def plot_nis(run: RecordedRun, sols: dict, metrics: dict, path: Path, window: in
         if len(t):
             bx.plot(t, np.sqrt(_moving_mean(d2, window)), label=mid, **style(mid))
     sig3 = float(np.median(np.linalg.norm(run.gnss.sigma_ned, axis=1)))
-    bx.axhline(sig3, color="0.3", lw=1.0, ls="--", label=f"the fixes' stated 3-D sigma (median {sig3:.2f} m)")
+    bx.axhline(
+        sig3,
+        color="0.3",
+        lw=1.0,
+        ls="--",
+        label=f"the fixes' stated 3-D sigma (median {sig3:.2f} m)",
+    )
     bx.set_yscale("log")
     _plain_log_ticks(bx.yaxis, *bx.get_ylim())
     bx.set_ylabel("RMS distance to the fixes [m]")
-    bx.set_title(f"Distance to the raw fixes (moving RMS of {window} fixes): an estimate that uses them lies "
-                 "within their noise")
+    bx.set_title(
+        f"Distance to the raw fixes (moving RMS of {window} fixes): an estimate that uses them lies "
+        "within their noise"
+    )
     bx.set_xlabel("time since start [s]")
     bx.legend(fontsize=8, ncol=3)
     for a in (ax, bx):
@@ -447,7 +549,9 @@ def plot_sigmas(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> None
             ax = axes[row, c]
             k = cols.start + c
             for mid, sol in sols.items():
-                ax.semilogy(sol.t - run.t_start, sol.sigma[:, k] * DISPLAY_SCALE[k], label=mid, **style(mid))
+                ax.semilogy(
+                    sol.t - run.t_start, sol.sigma[:, k] * DISPLAY_SCALE[k], label=mid, **style(mid)
+                )
             ax.set_title(f"{name} {label} [{unit}]", fontsize=9)
             ax.grid(alpha=0.3, which="both")
     for ax in axes[-1]:
@@ -459,14 +563,22 @@ def plot_sigmas(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> None
 
 
 #: Figure name -> drawing function ``(run, sols, metrics, path)``.
-FIGURES = {"summary": plot_summary, "trajectory": plot_trajectory, "errors": plot_errors,
-           "velocity_attitude": plot_velocity_attitude, "nis": plot_nis, "biases": plot_biases,
-           "sigmas": plot_sigmas}
+FIGURES = {
+    "summary": plot_summary,
+    "trajectory": plot_trajectory,
+    "errors": plot_errors,
+    "velocity_attitude": plot_velocity_attitude,
+    "nis": plot_nis,
+    "biases": plot_biases,
+    "sigmas": plot_sigmas,
+}
 #: Figures that need the truth.
 NEEDS_TRUTH = {"errors", "velocity_attitude"}
 
 
-def write_figures(folder: Path, run: RecordedRun, sols: dict, metrics: dict, which: str = "basic") -> dict:
+def write_figures(
+    folder: Path, run: RecordedRun, sols: dict, metrics: dict, which: str = "basic"
+) -> dict:
     """Draw the figures of ``--plots which`` into ``folder``.
 
     Returns

@@ -6,6 +6,7 @@ details: the evo-style statistics, consistency, noise identification, start, IMU
 observability. Each section is made on its own: one that fails is one line in its place, never the
 end of the run. Figures are separate PNG files and every path is relative (the source's too), so the
 folder can be moved or zipped as a whole."""
+
 from __future__ import annotations
 
 import html
@@ -28,15 +29,22 @@ def observability_html(run: RecordedRun, sols: dict[str, NavSolution], cfg, repl
     if ref is None:
         return ""
     fractions = classify_motion(run, ref).fractions()
-    motion = "".join(f"<tr><td>{html.escape(k)}</td><td>{100 * v:.1f}</td></tr>" for k, v in fractions.items())
+    motion = "".join(
+        f"<tr><td>{html.escape(k)}</td><td>{100 * v:.1f}</td></tr>" for k, v in fractions.items()
+    )
     summary = aiding_information(replay or replay_ekf(run, cfg, "ekf-acc")).summary()
-    rows = "".join(f"<tr><td>{n}</td><td>{100 * summary[n]['pos']:.2f}</td><td>{100 * summary[n]['pos_acc']:.2f}</td>"
-                   f"</tr>" for n in STATE_NAMES)
-    return (f"<h2>Observability</h2><p>Motion context (from the IMU and the {html.escape(ref.method)} velocity):</p>"
-            f"<table><tr><th>motion</th><th>share of epochs [%]</th></tr>{motion}</table>"
-            "<p>Mean share of each state's predicted variance removed at a GNSS epoch, by the position update alone "
-            "and by position + GNSS-derived acceleration (the EKF's own matrices, epochs with an acceleration):</p>"
-            f"<table><tr><th>state</th><th>position [%]</th><th>position + acceleration [%]</th></tr>{rows}</table>")
+    rows = "".join(
+        f"<tr><td>{n}</td><td>{100 * summary[n]['pos']:.2f}</td><td>{100 * summary[n]['pos_acc']:.2f}</td>"
+        f"</tr>"
+        for n in STATE_NAMES
+    )
+    return (
+        f"<h2>Observability</h2><p>Motion context (from the IMU and the {html.escape(ref.method)} velocity):</p>"
+        f"<table><tr><th>motion</th><th>share of epochs [%]</th></tr>{motion}</table>"
+        "<p>Mean share of each state's predicted variance removed at a GNSS epoch, by the position update alone "
+        "and by position + GNSS-derived acceleration (the EKF's own matrices, epochs with an acceleration):</p>"
+        f"<table><tr><th>state</th><th>position [%]</th><th>position + acceleration [%]</th></tr>{rows}</table>"
+    )
 
 
 def comparison_html(metrics: dict) -> str:
@@ -44,14 +52,24 @@ def comparison_html(metrics: dict) -> str:
     the scored window above it, a row per failed method with its reason, and the NIS legend."""
     head, rows = table_rows(metrics)
     above, below = table_notes(metrics)
-    cell = lambda c, i: (f'<td class="num{" warn" if c.endswith("!") else ""}">{html.escape(c)}</td>' if i
-                         else f"<td>{html.escape(c)}</td>")
+    cell = lambda c, i: (
+        f'<td class="num{" warn" if c.endswith("!") else ""}">{html.escape(c)}</td>'
+        if i
+        else f"<td>{html.escape(c)}</td>"
+    )
     body = "".join("<tr>" + "".join(cell(c, i) for i, c in enumerate(r)) + "</tr>" for r in rows)
-    body += "".join(f'<tr><td>{html.escape(m)}</td><td class="warn" colspan="{len(head) - 1}">failed: '
-                    f"{html.escape(r)}</td></tr>" for m, r in failed_methods(metrics).items())
-    return ("".join(f"<p>{html.escape(t)}</p>" for t in above) + "<table><tr>"
-            + "".join(f"<th>{html.escape(h)}</th>" for h in head) + f"</tr>{body}</table>"
-            + "".join(f'<p class="note">{html.escape(t)}</p>' for t in below))
+    body += "".join(
+        f'<tr><td>{html.escape(m)}</td><td class="warn" colspan="{len(head) - 1}">failed: '
+        f"{html.escape(r)}</td></tr>"
+        for m, r in failed_methods(metrics).items()
+    )
+    return (
+        "".join(f"<p>{html.escape(t)}</p>" for t in above)
+        + "<table><tr>"
+        + "".join(f"<th>{html.escape(h)}</th>" for h in head)
+        + f"</tr>{body}</table>"
+        + "".join(f'<p class="note">{html.escape(t)}</p>' for t in below)
+    )
 
 
 def _fmt(x, spec: str = ".2f") -> str:
@@ -64,14 +82,19 @@ def consistency_html(metrics: dict) -> str:
     if not cons:
         return "<p>No consistency figures.</p>"
     rows = "".join(
-        f"<tr><td>{html.escape(m)}</td>" + "".join(f"<td>{_fmt(c['nis'].get(k))}</td>" for k in ("pos", "acc", "zupt", "zaru"))
+        f"<tr><td>{html.escape(m)}</td>"
+        + "".join(f"<td>{_fmt(c['nis'].get(k))}</td>" for k in ("pos", "acc", "zupt", "zaru"))
         + f"<td>{_fmt(c.get('innovation_acf1'))}</td><td>{_fmt(c.get('fix_residual_ratio'))}</td>"
-        + f"<td>{'<br>'.join(html.escape(w) for w in c['warnings']) or 'none'}</td></tr>" for m, c in cons.items())
-    return ("<p>1 is consistent for every NIS figure (EKF: innovations; smoother: GNSS residuals against their "
-            "expectation); innovation autocorrelation near 0; fix residual ratio below 1.41 (an estimate as good as "
-            "the fixes and independent of them).</p><table><tr><th>method</th><th>NIS position</th>"
-            "<th>acceleration</th><th>zero velocity</th><th>zero rate</th><th>innovation autocorrelation</th>"
-            f"<th>fix residual ratio</th><th>warnings</th></tr>{rows}</table>")
+        + f"<td>{'<br>'.join(html.escape(w) for w in c['warnings']) or 'none'}</td></tr>"
+        for m, c in cons.items()
+    )
+    return (
+        "<p>1 is consistent for every NIS figure (EKF: innovations; smoother: GNSS residuals against their "
+        "expectation); innovation autocorrelation near 0; fix residual ratio below 1.41 (an estimate as good as "
+        "the fixes and independent of them).</p><table><tr><th>method</th><th>NIS position</th>"
+        "<th>acceleration</th><th>zero velocity</th><th>zero rate</th><th>innovation autocorrelation</th>"
+        f"<th>fix residual ratio</th><th>warnings</th></tr>{rows}</table>"
+    )
 
 
 def tuning_html(metrics: dict) -> str:
@@ -80,19 +103,25 @@ def tuning_html(metrics: dict) -> str:
     if not t:
         return "<p>The configuration was used as given (<code>--tune none</code>).</p>"
     back = set(t.get("from_stationary", {}).get("drawn_back", []))
-    rows = "".join(f"<tr><td>{html.escape(sec)}.{html.escape(k)}</td><td>{html.escape(str(t['start'].get(f'{sec}.{k}', '-')))}"
-                   f"</td><td>{html.escape(str(v))}{' (drawn back toward the start)' if f'{sec}.{k}' in back else ''}"
-                   f"</td></tr>" for sec, vals in t["values"].items() for k, v in vals.items())
-    return (f"<p>{t['n_evaluations']} EKF passes in {t['seconds']:.1f} s; position NIS per dof {_fmt(t['nis_before'])} "
-            f"at the start, {_fmt(t['nis_after'])} tuned. Kept from the configuration: "
-            f"{html.escape(', '.join(t['fixed']) or 'nothing')}. Written to <code>tuned.toml</code>.</p>"
-            f"<table><tr><th>key</th><th>start</th><th>identified</th></tr>{rows}</table>")
+    rows = "".join(
+        f"<tr><td>{html.escape(sec)}.{html.escape(k)}</td><td>{html.escape(str(t['start'].get(f'{sec}.{k}', '-')))}"
+        f"</td><td>{html.escape(str(v))}{' (drawn back toward the start)' if f'{sec}.{k}' in back else ''}"
+        f"</td></tr>"
+        for sec, vals in t["values"].items()
+        for k, v in vals.items()
+    )
+    return (
+        f"<p>{t['n_evaluations']} EKF passes in {t['seconds']:.1f} s; position NIS per dof {_fmt(t['nis_before'])} "
+        f"at the start, {_fmt(t['nis_after'])} tuned. Kept from the configuration: "
+        f"{html.escape(', '.join(t['fixed']) or 'nothing')}. Written to <code>tuned.toml</code>.</p>"
+        f"<table><tr><th>key</th><th>start</th><th>identified</th></tr>{rows}</table>"
+    )
 
 
 #: The figures in the report, with the question each one answers.
 CAPTIONS = {
     "trajectory": "Where: the track coloured by horizontal error (without truth: by the stated 1-sigma), x east, "
-                  "y north, start, end and outages marked",
+    "y north, start, end and outages marked",
     "errors": "How the position error evolves, per axis, against each method's +-3 sigma",
     "velocity_attitude": "Velocity and attitude errors against +-3 sigma",
     "nis": "Is each method consistent over time? NIS and distance to the fixes",
@@ -108,12 +137,12 @@ def shown_path(where: str, folder: Path) -> str:
     head, sep, tail = text.partition(" (")
     parts = Path(head).parts
     if "site-packages" in parts:
-        rest = Path(*parts[parts.index("site-packages") + 1:])
+        rest = Path(*parts[parts.index("site-packages") + 1 :])
         return f"{rest} (in the installed package){' (' + tail if sep else ''}"
     if os.path.isabs(head):
         try:
             return os.path.relpath(head, folder) + (f" ({tail}" if sep else "")
-        except ValueError:   # another drive
+        except ValueError:  # another drive
             return Path(head).name + (f" ({tail}" if sep else "")
     return text
 
@@ -126,8 +155,10 @@ def _section(title: str, make, anchor: str) -> str:
         body = make()
     except Exception as exc:
         raise_if_interrupted(exc)
-        body = (f'<p class="failed">This section could not be made ({html.escape(type(exc).__name__)}: '
-                f"{html.escape(' '.join(str(exc).split())[:200])}); the rest of the report is complete.</p>")
+        body = (
+            f'<p class="failed">This section could not be made ({html.escape(type(exc).__name__)}: '
+            f"{html.escape(' '.join(str(exc).split())[:200])}); the rest of the report is complete.</p>"
+        )
     return f'<h2 id="{anchor}">{html.escape(title)}</h2>\n{body}\n' if body else ""
 
 
@@ -138,20 +169,31 @@ def warnings_html(metrics: dict) -> str:
     failed = [(m, f"failed: {r}") for m, r in failed_methods(metrics).items()]
     if not items and not failed:
         return "<p>No warnings: every figure is within its band.</p>"
-    return "<ul class=\"warnings\">" + "".join(f"<li><b>{html.escape(who)}</b>: {html.escape(text)}</li>"
-                                             for who, text in items + failed) + "</ul>"
+    return (
+        '<ul class="warnings">'
+        + "".join(
+            f"<li><b>{html.escape(who)}</b>: {html.escape(text)}</li>"
+            for who, text in items + failed
+        )
+        + "</ul>"
+    )
 
 
 def _img(name: str, caption: str) -> str:
-    return (f'<figure><img src="{name}.png" alt="{html.escape(caption)}">'
-            f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+    return (
+        f'<figure><img src="{name}.png" alt="{html.escape(caption)}">'
+        f"<figcaption>{html.escape(caption)}</figcaption></figure>"
+    )
 
 
 def answer_html(metrics: dict, figures: dict) -> str:
     """The comparison, the warnings and ``summary.png``."""
     out = comparison_html(metrics) + "<h3>Warnings</h3>" + warnings_html(metrics)
     if figures.get("summary", "not drawn") is None:
-        out += _img("summary", "Which method, how good, how sure: horizontal error CDF and consistency per method")
+        out += _img(
+            "summary",
+            "Which method, how good, how sure: horizontal error CDF and consistency per method",
+        )
     return out
 
 
@@ -164,7 +206,9 @@ def figures_html(figures: dict) -> str:
         if figures[name] is None:
             parts.append(_img(name, caption))
         else:
-            parts.append(f"<p class=\"note\">{html.escape(name)}.png not drawn: {html.escape(figures[name])}</p>")
+            parts.append(
+                f'<p class="note">{html.escape(name)}.png not drawn: {html.escape(figures[name])}</p>'
+            )
     return "".join(parts) or "<p>No figures (<code>--plots none</code>).</p>"
 
 
@@ -180,37 +224,95 @@ def statistics_html(metrics: dict) -> str:
     ok = ok_methods(metrics)
     truth = any((m.get("errors") or {}).get("position") for m in ok.values())
     if not truth:
-        rows = "".join(f"<tr><td>{html.escape(mid)}</td>" + "".join(
-            f'<td class="num">{_stat(((m.get("errors") or {}).get("fix_residual") or {}).get(k))}</td>'
-            for k in ("rmse", "mean", "median", "std", "max")) + "</tr>" for mid, m in ok.items())
-        return ("<p>No truth: accuracy cannot be scored. Distance from each method to the raw fixes [m] "
-                "(agreement with them, not accuracy):</p><table><tr><th>method</th><th>RMS</th><th>mean</th>"
-                f"<th>median</th><th>std</th><th>max</th></tr>{rows}</table>")
-    head = ["method", "RMSE", "mean", "median", "std", "max", "CEP50", "CEP95", "N RMSE", "E RMSE", "D RMSE",
-            "vel RMSE [m/s]", "roll [deg]", "pitch [deg]", "yaw [deg]", "NEES pos", "NEES att"]
+        rows = "".join(
+            f"<tr><td>{html.escape(mid)}</td>"
+            + "".join(
+                f'<td class="num">{_stat(((m.get("errors") or {}).get("fix_residual") or {}).get(k))}</td>'
+                for k in ("rmse", "mean", "median", "std", "max")
+            )
+            + "</tr>"
+            for mid, m in ok.items()
+        )
+        return (
+            "<p>No truth: accuracy cannot be scored. Distance from each method to the raw fixes [m] "
+            "(agreement with them, not accuracy):</p><table><tr><th>method</th><th>RMS</th><th>mean</th>"
+            f"<th>median</th><th>std</th><th>max</th></tr>{rows}</table>"
+        )
+    head = [
+        "method",
+        "RMSE",
+        "mean",
+        "median",
+        "std",
+        "max",
+        "CEP50",
+        "CEP95",
+        "N RMSE",
+        "E RMSE",
+        "D RMSE",
+        "vel RMSE [m/s]",
+        "roll [deg]",
+        "pitch [deg]",
+        "yaw [deg]",
+        "NEES pos",
+        "NEES att",
+    ]
     rows = []
-    for mid, m in list(ok.items()) + [("gnss (raw fixes)", {"errors": metrics.get("gnss_errors") or {}})]:
+    for mid, m in list(ok.items()) + [
+        ("gnss (raw fixes)", {"errors": metrics.get("gnss_errors") or {}})
+    ]:
         e = m.get("errors") or {}
         p, h, ax = e.get("position") or {}, e.get("horizontal") or {}, e.get("position_axes") or {}
         att = e.get("attitude_axes") or {}
-        cells = [p.get("rmse"), p.get("mean"), p.get("median"), p.get("std"), p.get("max"), h.get("cep50"),
-                 h.get("cep95")] + [(ax.get(a) or {}).get("rmse") for a in "NED"] + [
-                 (e.get("velocity") or {}).get("rmse")] + [(att.get(a) or {}).get("rmse") for a in ("roll", "pitch", "yaw")] + [
-                 (e.get("nees_position") or {}).get("value"), (e.get("nees_attitude") or {}).get("value")]
-        rows.append(f"<tr><td>{html.escape(mid)}</td>" + "".join(f'<td class="num">{_stat(c)}</td>' for c in cells) + "</tr>")
-    return ("<p>Position error norm [m] over the scored epochs with evo's statistics (<code>evo_ape "
-            "--pose_relation trans_part</code>, no alignment), horizontal CEP50/CEP95 [m], per-axis RMSE [m], velocity "
-            "and attitude RMSE, NEES per dof (1 = consistent). The raw fixes are scored at their own epochs.</p>"
-            "<table><tr>" + "".join(f"<th>{html.escape(c)}</th>" for c in head) + "</tr>" + "".join(rows) + "</table>")
+        cells = (
+            [
+                p.get("rmse"),
+                p.get("mean"),
+                p.get("median"),
+                p.get("std"),
+                p.get("max"),
+                h.get("cep50"),
+                h.get("cep95"),
+            ]
+            + [(ax.get(a) or {}).get("rmse") for a in "NED"]
+            + [(e.get("velocity") or {}).get("rmse")]
+            + [(att.get(a) or {}).get("rmse") for a in ("roll", "pitch", "yaw")]
+            + [
+                (e.get("nees_position") or {}).get("value"),
+                (e.get("nees_attitude") or {}).get("value"),
+            ]
+        )
+        rows.append(
+            f"<tr><td>{html.escape(mid)}</td>"
+            + "".join(f'<td class="num">{_stat(c)}</td>' for c in cells)
+            + "</tr>"
+        )
+    return (
+        "<p>Position error norm [m] over the scored epochs with evo's statistics (<code>evo_ape "
+        "--pose_relation trans_part</code>, no alignment), horizontal CEP50/CEP95 [m], per-axis RMSE [m], velocity "
+        "and attitude RMSE, NEES per dof (1 = consistent). The raw fixes are scored at their own epochs.</p>"
+        "<table><tr>"
+        + "".join(f"<th>{html.escape(c)}</th>" for c in head)
+        + "</tr>"
+        + "".join(rows)
+        + "</table>"
+    )
 
 
 def _quality_html(metrics: dict, run: RecordedRun) -> str:
     spans = metrics.get("quality", {}).get("spans", [])
-    rows = "".join(f"<tr><td>{html.escape(s['kind'])}</td><td>{s['t_start'] - run.t_start:.2f}</td>"
-                   f"<td>{s['t_end'] - s['t_start']:.2f}</td><td>{html.escape(str(s['channels']))}</td>"
-                   f"<td>{html.escape(str(s['note']))}</td></tr>" for s in spans)
-    return (f"<table><tr><th>kind</th><th>start [s]</th><th>length [s]</th><th>channels</th><th>note</th></tr>"
-            f"{rows}</table>" if spans else "<p>No suspect IMU spans.</p>")
+    rows = "".join(
+        f"<tr><td>{html.escape(s['kind'])}</td><td>{s['t_start'] - run.t_start:.2f}</td>"
+        f"<td>{s['t_end'] - s['t_start']:.2f}</td><td>{html.escape(str(s['channels']))}</td>"
+        f"<td>{html.escape(str(s['note']))}</td></tr>"
+        for s in spans
+    )
+    return (
+        f"<table><tr><th>kind</th><th>start [s]</th><th>length [s]</th><th>channels</th><th>note</th></tr>"
+        f"{rows}</table>"
+        if spans
+        else "<p>No suspect IMU spans.</p>"
+    )
 
 
 def _init_html(metrics: dict) -> str:
@@ -226,8 +328,15 @@ td.warn{background:#fff3cd} p.note,figcaption{font-size:85%;color:#555} p.failed
 ul.warnings li{margin-bottom:0.3em;font-size:92%} figure{margin:1em 0} nav a{margin-right:1em}"""
 
 
-def write_html_report(folder: Path, run: RecordedRun, sols: dict[str, NavSolution], metrics: dict, cfg=None,
-                      replay=None, figures: dict | None = None) -> Path:
+def write_html_report(
+    folder: Path,
+    run: RecordedRun,
+    sols: dict[str, NavSolution],
+    metrics: dict,
+    cfg=None,
+    replay=None,
+    figures: dict | None = None,
+) -> Path:
     """Write ``report.html`` into ``folder``; returns the page's path.
 
     ``figures``: what :func:`gnssacc.outputs.figures.write_figures` drew (``{name: None or reason}``).
@@ -236,23 +345,27 @@ def write_html_report(folder: Path, run: RecordedRun, sols: dict[str, NavSolutio
     folder = Path(folder)
     figures = figures or {}
     where = shown_path(run.where, folder)
-    sections = [("Answer: which method, how good, how sure", lambda: answer_html(metrics, figures)),
-                ("Figures", lambda: figures_html(figures)),
-                ("Statistics", lambda: statistics_html(metrics)),
-                ("Consistency", lambda: consistency_html(metrics)),
-                ("Noise identification", lambda: tuning_html(metrics)),
-                ("Initialisation", lambda: _init_html(metrics)),
-                ("IMU data quality", lambda: _quality_html(metrics, run))]
+    sections = [
+        ("Answer: which method, how good, how sure", lambda: answer_html(metrics, figures)),
+        ("Figures", lambda: figures_html(figures)),
+        ("Statistics", lambda: statistics_html(metrics)),
+        ("Consistency", lambda: consistency_html(metrics)),
+        ("Noise identification", lambda: tuning_html(metrics)),
+        ("Initialisation", lambda: _init_html(metrics)),
+        ("IMU data quality", lambda: _quality_html(metrics, run)),
+    ]
     if cfg is not None:
         sections.append(("Observability", lambda: observability_html(run, sols, cfg, replay)))
     body = "".join(_section(t, f, f"s{i}") for i, (t, f) in enumerate(sections))
-    nav = "".join(f'<a href="#s{i}">{html.escape(t.split(":")[0])}</a>' for i, (t, _) in enumerate(sections))
+    nav = "".join(
+        f'<a href="#s{i}">{html.escape(t.split(":")[0])}</a>' for i, (t, _) in enumerate(sections)
+    )
     page = f"""<!doctype html>
 <html><head><meta charset="utf-8"><title>gnssacc report: {html.escape(run.name)}</title>
 <style>{_STYLE}</style></head><body>
 <h1>gnssacc report: {html.escape(run.name)}</h1>
 <p>Source: {html.escape(where)}; {run.duration_s:.1f} s, {len(run.imu)} IMU samples, {len(run.gnss)} GNSS fixes;
-configuration: {html.escape(', '.join(metrics.get('config_sources', [])))}.</p>
+configuration: {html.escape(", ".join(metrics.get("config_sources", [])))}.</p>
 <nav>{nav}</nav>
 {body}</body></html>
 """

@@ -13,6 +13,7 @@ truth without attitude has the identity orientation with -1 on its rotation diag
 compare positions only (``evo_ape ... --pose_relation trans_part``).
 Topic names are ``/gnssacc/<method>/odom`` with ``-`` written ``_`` (ROS names allow no ``-``).
 """
+
 from __future__ import annotations
 
 import heapq
@@ -38,8 +39,8 @@ def topic_of(method: str) -> str:
 def _covariances(R_enu_flu: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pose and twist covariances (6x6) of one epoch from the solution's 15 sigmas."""
     pose = np.zeros((6, 6))
-    pose[[0, 1, 2], [0, 1, 2]] = sigma[[1, 0, 2]] ** 2          # NED -> ENU: east, north, up
-    pose[[3, 4, 5], [3, 4, 5]] = sigma[6:9] ** 2                # roll, pitch, yaw
+    pose[[0, 1, 2], [0, 1, 2]] = sigma[[1, 0, 2]] ** 2  # NED -> ENU: east, north, up
+    pose[[3, 4, 5], [3, 4, 5]] = sigma[6:9] ** 2  # roll, pitch, yaw
     twist = np.diag([0.0, 0.0, 0.0, -1.0, -1.0, -1.0])
     c_enu = ENU_NED @ np.diag(sigma[3:6] ** 2) @ ENU_NED.T
     twist[:3, :3] = R_enu_flu.T @ c_enu @ R_enu_flu
@@ -51,8 +52,10 @@ def _stream(m: MessageTypes, key: str, t, p_ned, rpy, v_ned, sigma):
     for k in range(len(t)):
         R = R_nb_to_ros(euler_to_dcm(*rpy[k])) if rpy is not None else np.eye(3)
         v_flu = R.T @ (ENU_NED @ v_ned[k]) if v_ned is not None else np.zeros(3)
-        pose_cov, twist_cov = _covariances(R, sigma[k]) if sigma is not None else (np.zeros((6, 6)), np.zeros((6, 6)))
-        if rpy is None:   # a truth without attitude: identity orientation, marked unknown
+        pose_cov, twist_cov = (
+            _covariances(R, sigma[k]) if sigma is not None else (np.zeros((6, 6)), np.zeros((6, 6)))
+        )
+        if rpy is None:  # a truth without attitude: identity orientation, marked unknown
             pose_cov[[3, 4, 5], [3, 4, 5]] = -1.0
         msg = m.odometry(float(t[k]), ENU_NED @ p_ned[k], R, v_flu, pose_cov, twist_cov)
         yield ns(t[k]), key, m.serialize(msg, ODOMETRY_TYPE)
@@ -61,9 +64,14 @@ def _stream(m: MessageTypes, key: str, t, p_ned, rpy, v_ned, sigma):
 def _origin_msg(m: MessageTypes, run: RecordedRun):
     o = run.origin
     fix = m.T["sensor_msgs/msg/NavSatFix"](
-        header=m.header(run.t_start, "map"), status=m.T["sensor_msgs/msg/NavSatStatus"](status=0, service=1),
-        latitude=float(np.degrees(o.lat0)), longitude=float(np.degrees(o.lon0)), altitude=float(o.h0),
-        position_covariance=np.zeros(9), position_covariance_type=0)
+        header=m.header(run.t_start, "map"),
+        status=m.T["sensor_msgs/msg/NavSatStatus"](status=0, service=1),
+        latitude=float(np.degrees(o.lat0)),
+        longitude=float(np.degrees(o.lon0)),
+        altitude=float(o.h0),
+        position_covariance=np.zeros(9),
+        position_covariance_type=0,
+    )
     return ns(run.t_start), "origin", m.serialize(fix, "sensor_msgs/msg/NavSatFix")
 
 
@@ -77,21 +85,40 @@ def write_odometry_bag(sols: dict[str, NavSolution], run: RecordedRun, path: Pat
     m = MessageTypes(ros1)
     if ros1:
         from rosbags.rosbag1 import Writer
+
         writer = Writer(path)
     else:
         from rosbags.rosbag2 import StoragePlugin, Writer
+
         writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
-    streams, topics = [iter([_origin_msg(m, run)])], {"origin": (ORIGIN_TOPIC, "sensor_msgs/msg/NavSatFix")}
+    streams, topics = (
+        [iter([_origin_msg(m, run)])],
+        {"origin": (ORIGIN_TOPIC, "sensor_msgs/msg/NavSatFix")},
+    )
     for mid, sol in sols.items():
         topics[mid] = (topic_of(mid), ODOMETRY_TYPE)
-        streams.append(_stream(m, mid, sol.t, run.origin.to_ned(sol.lat, sol.lon, sol.h), sol.rpy, sol.v_n,
-                               sol.sigma))
+        streams.append(
+            _stream(
+                m,
+                mid,
+                sol.t,
+                run.origin.to_ned(sol.lat, sol.lon, sol.h),
+                sol.rpy,
+                sol.v_n,
+                sol.sigma,
+            )
+        )
     if run.truth is not None:
         tr = run.truth
         topics["truth"] = (topic_of("truth"), ODOMETRY_TYPE)
-        streams.append(_stream(m, "truth", tr.t, run.origin.to_ned(tr.lat, tr.lon, tr.h), tr.rpy, tr.v_n, None))
+        streams.append(
+            _stream(m, "truth", tr.t, run.origin.to_ned(tr.lat, tr.lon, tr.h), tr.rpy, tr.v_n, None)
+        )
     with writer:
-        conns = {key: writer.add_connection(topic, typ, typestore=m.ts) for key, (topic, typ) in topics.items()}
+        conns = {
+            key: writer.add_connection(topic, typ, typestore=m.ts)
+            for key, (topic, typ) in topics.items()
+        }
         for t_ns, key, data in heapq.merge(*streams, key=lambda x: x[0]):
             writer.write(conns[key], t_ns, data)
     return path

@@ -22,6 +22,7 @@ On-disk protocol, for an output folder ``<parent>/<name>``:
 SIGTERM unwinds like Ctrl-C (:func:`gnssacc.core.interrupts.signals_raise`); :meth:`ResultDir.kept`
 says what an interruption left.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -125,7 +126,7 @@ def clean_stale(parent: Path, own_name: str | None = None) -> list[Path]:
     done = []
     for entry in sorted(Path(parent).glob(".gnssacc-*-*")):
         prefix = next((p for p in (PARTIAL_PREFIX, TRASH_PREFIX) if entry.name.startswith(p)), None)
-        parts = entry.name[len(prefix):].rsplit("-", 1) if prefix else []
+        parts = entry.name[len(prefix) :].rsplit("-", 1) if prefix else []
         if len(parts) != 2 or not parts[0] or not entry.is_dir():
             continue
         lock = None if parts[0] == own_name else FolderLock(Path(parent) / parts[0])
@@ -189,17 +190,26 @@ class ResultDir:
         p = self.path
         for inner in self.keep_out + [Path.cwd()]:
             if inner == p or p in inner.parents:
-                raise InputError("--out", f"replacing {p} would delete {inner} (the run's input or the current "
-                                          f"folder); choose another output folder")
+                raise InputError(
+                    "--out",
+                    f"replacing {p} would delete {inner} (the run's input or the current "
+                    f"folder); choose another output folder",
+                )
         self.had_result = p.is_dir() and is_result(p)
         if self.overwrite or not os.path.lexists(p) or self.had_result:
             return
         if not p.is_dir() or p.is_symlink():
-            raise InputError("--out", f"{p} exists and is not a folder; choose another output folder, or "
-                                      f"--overwrite to replace it")
+            raise InputError(
+                "--out",
+                f"{p} exists and is not a folder; choose another output folder, or "
+                f"--overwrite to replace it",
+            )
         if any(p.iterdir()):
-            raise InputError("--out", f"{p} is a non-empty folder that is not a gnssacc result; choose another "
-                                      f"output folder, or --overwrite to replace it and everything in it")
+            raise InputError(
+                "--out",
+                f"{p} is a non-empty folder that is not a gnssacc result; choose another "
+                f"output folder, or --overwrite to replace it and everything in it",
+            )
 
     def kept(self) -> str:
         """What the folder holds now, for the interruption message."""
@@ -214,7 +224,9 @@ class ResultDir:
         if self.lock.fd is None:
             raise RuntimeError("ResultDir.replace outside its 'with' block")
         self.check()
-        tmp = Path(tempfile.mkdtemp(prefix=f"{PARTIAL_PREFIX}{self.path.name}-", dir=self.path.parent))
+        tmp = Path(
+            tempfile.mkdtemp(prefix=f"{PARTIAL_PREFIX}{self.path.name}-", dir=self.path.parent)
+        )
         try:
             fill(tmp)
             _write_marker(tmp)
@@ -222,7 +234,7 @@ class ResultDir:
             with signals_held():
                 self._swap(tmp)
         finally:
-            if tmp.exists():   # not swapped in: a partial result
+            if tmp.exists():  # not swapped in: a partial result
                 with signals_held():
                     shutil.rmtree(tmp, ignore_errors=True)
         return self.path
@@ -254,7 +266,9 @@ def signals_held():
     """
     caught = []
     try:
-        old = {s: signal.signal(s, lambda signum, frame: caught.append(signum)) for s in SWAP_SIGNALS}
+        old = {
+            s: signal.signal(s, lambda signum, frame: caught.append(signum)) for s in SWAP_SIGNALS
+        }
     except ValueError:
         old = None
     mask = signal.pthread_sigmask(signal.SIG_BLOCK, SWAP_SIGNALS) if old is not None else None
@@ -262,7 +276,9 @@ def signals_held():
         yield
     finally:
         if old is not None:
-            signal.pthread_sigmask(signal.SIG_SETMASK, mask)   # a blocked one now reaches the note-taker
+            signal.pthread_sigmask(
+                signal.SIG_SETMASK, mask
+            )  # a blocked one now reaches the note-taker
             for s, handler in old.items():
                 signal.signal(s, handler)
             if caught:
@@ -287,8 +303,11 @@ def _remove(path: Path) -> None:
 
 def _write_marker(folder: Path) -> None:
     files = sorted(f.relative_to(folder).as_posix() for f in folder.rglob("*") if f.is_file())
-    doc = {"gnssacc": __version__, "written": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-           "files": files}
+    doc = {
+        "gnssacc": __version__,
+        "written": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "files": files,
+    }
     (folder / MARKER).write_text(json.dumps(doc, indent=2) + "\n")
 
 

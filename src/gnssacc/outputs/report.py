@@ -1,5 +1,6 @@
 """Outputs a user can plot or feed to other tools: comparison table, metrics.json,
 per-method trajectory CSV, and the error / trajectory figures."""
+
 from __future__ import annotations
 
 import json
@@ -18,17 +19,38 @@ TRAJECTORY_COLUMNS = list(TRAJECTORY_COLUMNS)
 
 def trajectory_table(sol: NavSolution) -> np.ndarray:
     """The rows of ``trajectory_<id>.csv`` (see :data:`TRAJECTORY_COLUMNS`), in display units."""
-    return np.column_stack([sol.t, np.degrees(sol.lat), np.degrees(sol.lon), sol.h, sol.v_n, np.degrees(sol.rpy),
-                            sol.b_a * DISPLAY_SCALE[9:12], sol.b_g * DISPLAY_SCALE[12:15], sol.sigma * DISPLAY_SCALE])
+    return np.column_stack(
+        [
+            sol.t,
+            np.degrees(sol.lat),
+            np.degrees(sol.lon),
+            sol.h,
+            sol.v_n,
+            np.degrees(sol.rpy),
+            sol.b_a * DISPLAY_SCALE[9:12],
+            sol.b_g * DISPLAY_SCALE[12:15],
+            sol.sigma * DISPLAY_SCALE,
+        ]
+    )
 
 
 def write_trajectory_csv(sol: NavSolution, path: Path) -> None:
     """Write one solution as CSV with a header row (units in the column names)."""
     # 1e-9 deg ~ 0.1 mm; velocities to 1e-4 m/s; angles to 1e-5 deg; biases and sigmas 6 significant digits.
-    fmt = (["%.6f", "%.9f", "%.9f", "%.4f"] + ["%.4f"] * 3 + ["%.5f"] * 3
-           + ["%.6g"] * (len(TRAJECTORY_COLUMNS) - 10))
-    np.savetxt(path, trajectory_table(sol), delimiter=",", header=",".join(TRAJECTORY_COLUMNS), comments="",
-               fmt=fmt)
+    fmt = (
+        ["%.6f", "%.9f", "%.9f", "%.4f"]
+        + ["%.4f"] * 3
+        + ["%.5f"] * 3
+        + ["%.6g"] * (len(TRAJECTORY_COLUMNS) - 10)
+    )
+    np.savetxt(
+        path,
+        trajectory_table(sol),
+        delimiter=",",
+        header=",".join(TRAJECTORY_COLUMNS),
+        comments="",
+        fmt=fmt,
+    )
 
 
 #: The facts about a run that ``metrics.json`` keeps (under ``"run"``), from ``run.meta``: only
@@ -74,8 +96,14 @@ def run_facts(run: RecordedRun) -> dict:
     return facts
 
 
-def metrics_dict(run: RecordedRun, sols: dict[str, NavSolution], scores: dict[str, Score], gnss: Score,
-                 extra: dict, failed: dict[str, str] | None = None) -> dict:
+def metrics_dict(
+    run: RecordedRun,
+    sols: dict[str, NavSolution],
+    scores: dict[str, Score],
+    gnss: Score,
+    extra: dict,
+    failed: dict[str, str] | None = None,
+) -> dict:
     """The content of ``metrics.json``.
 
     Each entry of ``methods`` has ``status``: ``"ok"`` with the scores and statistics of a
@@ -88,20 +116,38 @@ def metrics_dict(run: RecordedRun, sols: dict[str, NavSolution], scores: dict[st
         base = BASELINES.get(mid)
         methods[mid] = {
             "status": "ok",
-            "prmse_m": sc.prmse_m, "hrmse_m": sc.hrmse_m, "prmse_outage_m": sc.prmse_outage_m,
-            "rpy_rmse_deg": sc.rpy_rmse_deg, "n_epochs": sc.n_epochs, **sc.truth, "errors": sc.errors,
-            "improvement_pct": improvement_pct(scores[base].prmse_m, sc.prmse_m) if base in scores else None,
+            "prmse_m": sc.prmse_m,
+            "hrmse_m": sc.hrmse_m,
+            "prmse_outage_m": sc.prmse_outage_m,
+            "rpy_rmse_deg": sc.rpy_rmse_deg,
+            "n_epochs": sc.n_epochs,
+            **sc.truth,
+            "errors": sc.errors,
+            "improvement_pct": improvement_pct(scores[base].prmse_m, sc.prmse_m)
+            if base in scores
+            else None,
             "runtime_s": sol.runtime_s,
             "realtime_factor": run.duration_s / sol.runtime_s if sol.runtime_s > 0 else None,
-            "stats": {k: v for k, v in sol.stats.items() if not isinstance(v, np.ndarray)},   # not per-update series
+            "stats": {
+                k: v for k, v in sol.stats.items() if not isinstance(v, np.ndarray)
+            },  # not per-update series
         }
     for mid, reason in (failed or {}).items():
         methods[mid] = {"status": "failed", "error": reason}
-    return {"source": run.name, "where": run.where, "duration_s": run.duration_s, "t_start": run.t_start,
-            "gnss_prmse_m": gnss.prmse_m, "gnss_hrmse_m": gnss.hrmse_m, "gnss_n_epochs": gnss.n_epochs,
-            "gnss_errors": gnss.errors,
-            "n_fixes": len(run.gnss),
-            "run": run_facts(run), "methods": methods, **extra}
+    return {
+        "source": run.name,
+        "where": run.where,
+        "duration_s": run.duration_s,
+        "t_start": run.t_start,
+        "gnss_prmse_m": gnss.prmse_m,
+        "gnss_hrmse_m": gnss.hrmse_m,
+        "gnss_n_epochs": gnss.n_epochs,
+        "gnss_errors": gnss.errors,
+        "n_fixes": len(run.gnss),
+        "run": run_facts(run),
+        "methods": methods,
+        **extra,
+    }
 
 
 def ok_methods(metrics: dict) -> dict:
@@ -111,7 +157,11 @@ def ok_methods(metrics: dict) -> dict:
 
 def failed_methods(metrics: dict) -> dict[str, str]:
     """``{method: one-line reason}`` of the methods that failed."""
-    return {mid: m.get("error", "") for mid, m in metrics["methods"].items() if m.get("status") == "failed"}
+    return {
+        mid: m.get("error", "")
+        for mid, m in metrics["methods"].items()
+        if m.get("status") == "failed"
+    }
 
 
 def write_json(data: dict, path: Path) -> None:
@@ -143,7 +193,7 @@ def _flagged(metrics: dict, mid: str, column: str) -> bool:
     """Whether a warning about ``mid`` concerns table column ``column`` (``nis``, ``fixes``, ``nees``)."""
     c = metrics.get("consistency", {}).get(mid) or {}
     flags = c.get("flags")
-    if flags is None:   # metrics.json of an older version: every warning was shown on the NIS
+    if flags is None:  # metrics.json of an older version: every warning was shown on the NIS
         return column == "nis" and bool(c.get("warnings"))
     return column in flags
 
@@ -159,33 +209,65 @@ def _columns(metrics: dict) -> list[tuple[str, object]]:
     cons = lambda mid, k: _get(metrics, "consistency", mid, "nis", k)
     cols = [("method", None)]
     if truth:
-        cols += [("PRMSE [m]", lambda mid, m: _fmt(m.get("prmse_m"), ".2f")),
-                 ("HRMSE [m]", lambda mid, m: _fmt(m.get("hrmse_m"), ".2f")),
-                 ("CEP95 [m]", lambda mid, m: _fmt(_get(m, "errors", "horizontal", "cep95"), ".2f")),
-                 ("PRMSE at fixes [m]", lambda mid, m: _cell(_get(m, "errors", "at_fixes", "prmse_m"), ".2f",
-                                                             _flagged(metrics, mid, "fixes")))]
+        cols += [
+            ("PRMSE [m]", lambda mid, m: _fmt(m.get("prmse_m"), ".2f")),
+            ("HRMSE [m]", lambda mid, m: _fmt(m.get("hrmse_m"), ".2f")),
+            ("CEP95 [m]", lambda mid, m: _fmt(_get(m, "errors", "horizontal", "cep95"), ".2f")),
+            (
+                "PRMSE at fixes [m]",
+                lambda mid, m: _cell(
+                    _get(m, "errors", "at_fixes", "prmse_m"), ".2f", _flagged(metrics, mid, "fixes")
+                ),
+            ),
+        ]
         if any(m.get("prmse_outage_m") is not None for m in ok.values()):
             cols.append(("outage PRMSE [m]", lambda mid, m: _fmt(m.get("prmse_outage_m"), ".2f")))
         if any(_get(m, "errors", "attitude_axes") for m in ok.values()):
-            cols.append(("yaw RMSE [deg]", lambda mid, m: _fmt(_get(m, "errors", "attitude_axes", "yaw", "rmse"), ".2f")))
-        cols.append(("NEES pos", lambda mid, m: _cell(_get(m, "errors", "nees_position", "value"), ".2f",
-                                                      _flagged(metrics, mid, "nees"))))
+            cols.append(
+                (
+                    "yaw RMSE [deg]",
+                    lambda mid, m: _fmt(_get(m, "errors", "attitude_axes", "yaw", "rmse"), ".2f"),
+                )
+            )
+        cols.append(
+            (
+                "NEES pos",
+                lambda mid, m: _cell(
+                    _get(m, "errors", "nees_position", "value"),
+                    ".2f",
+                    _flagged(metrics, mid, "nees"),
+                ),
+            )
+        )
     else:
-        cols.append(("fix residual [m]", lambda mid, m: _cell(_get(m, "errors", "fix_residual", "rmse"), ".2f",
-                                                             _flagged(metrics, mid, "fixes"))))
-    cols += [("NIS", lambda mid, m: _cell(cons(mid, "pos"), ".2f", _flagged(metrics, mid, "nis"))),
-             ("acc gain [%]", lambda mid, m: _fmt(m.get("improvement_pct"), "+.1f")),
-             ("wall [s]", lambda mid, m: f"{m['runtime_s']:.3f}"),
-             ("real-time x", lambda mid, m: _fmt(m.get("realtime_factor"), ".0f"))]
+        cols.append(
+            (
+                "fix residual [m]",
+                lambda mid, m: _cell(
+                    _get(m, "errors", "fix_residual", "rmse"),
+                    ".2f",
+                    _flagged(metrics, mid, "fixes"),
+                ),
+            )
+        )
+    cols += [
+        ("NIS", lambda mid, m: _cell(cons(mid, "pos"), ".2f", _flagged(metrics, mid, "nis"))),
+        ("acc gain [%]", lambda mid, m: _fmt(m.get("improvement_pct"), "+.1f")),
+        ("wall [s]", lambda mid, m: f"{m['runtime_s']:.3f}"),
+        ("real-time x", lambda mid, m: _fmt(m.get("realtime_factor"), ".0f")),
+    ]
     return cols
 
 
 def _fix_cells(metrics: dict, head: list[str]) -> list[str]:
     """The raw fixes' row: their own figures at their epochs (the like-for-like reference)."""
     g = metrics.get("gnss_errors") or {}
-    own = {"PRMSE [m]": _fmt(metrics.get("gnss_prmse_m"), ".2f"), "HRMSE [m]": _fmt(metrics.get("gnss_hrmse_m"), ".2f"),
-           "CEP95 [m]": _fmt(_get(g, "horizontal", "cep95"), ".2f"),
-           "PRMSE at fixes [m]": _fmt(metrics.get("gnss_prmse_m"), ".2f")}
+    own = {
+        "PRMSE [m]": _fmt(metrics.get("gnss_prmse_m"), ".2f"),
+        "HRMSE [m]": _fmt(metrics.get("gnss_hrmse_m"), ".2f"),
+        "CEP95 [m]": _fmt(_get(g, "horizontal", "cep95"), ".2f"),
+        "PRMSE at fixes [m]": _fmt(metrics.get("gnss_prmse_m"), ".2f"),
+    }
     return ["gnss (raw fixes)"] + [own.get(h, "-") for h in head[1:]]
 
 
@@ -216,7 +298,9 @@ def format_table(metrics: dict) -> str:
     first = len(lines[1].split("  ")[0])
     # A failed row is not cut into columns: its reason runs on after the method id.
     failed_rows = [f"{mid.ljust(first)}  failed: {reason}" for mid, reason in failed.items()]
-    return "\n".join(_window_lines(metrics) + lines + failed_rows + _start_lines(metrics) + _legend(metrics))
+    return "\n".join(
+        _window_lines(metrics) + lines + failed_rows + _start_lines(metrics) + _legend(metrics)
+    )
 
 
 def _start_lines(metrics: dict) -> list[str]:
@@ -224,8 +308,10 @@ def _start_lines(metrics: dict) -> list[str]:
     start = metrics.get("start") or {}
     if start.get("yaw_determined", True):
         return []
-    return [f"yaw undetermined (sigma {start['yaw_sigma_deg']:.0f} deg): {start.get('why', 'the motion never told it')};"
-            " heading and attitude figures of every method rest on that guess"]
+    return [
+        f"yaw undetermined (sigma {start['yaw_sigma_deg']:.0f} deg): {start.get('why', 'the motion never told it')};"
+        " heading and attitude figures of every method rest on that guess"
+    ]
 
 
 def _window_lines(metrics: dict) -> list[str]:
@@ -236,27 +322,40 @@ def _window_lines(metrics: dict) -> list[str]:
     frac = (w[1] - w[0]) / metrics["duration_s"] if metrics["duration_s"] > 0 else 1.0
     n = {m["n_epochs"] for m in ok_methods(metrics).values()}
     what = "scored" if metrics.get("gnss_prmse_m") is not None else "compared (no truth)"
-    return [f"{what} over t = {w[0] - t0:.1f} .. {w[1] - t0:.1f} s from the start ({100 * frac:.0f} % of the run), "
-            f"every row: {'/'.join(str(x) for x in sorted(n))} epochs per method, "
-            f"{metrics.get('gnss_n_epochs', '-')} raw fixes"]
+    return [
+        f"{what} over t = {w[0] - t0:.1f} .. {w[1] - t0:.1f} s from the start ({100 * frac:.0f} % of the run), "
+        f"every row: {'/'.join(str(x) for x in sorted(n))} epochs per method, "
+        f"{metrics.get('gnss_n_epochs', '-')} raw fixes"
+    ]
 
 
 def _legend(metrics: dict) -> list[str]:
-    if not metrics.get("consistency"):   # a table made by hand, not by a run
+    if not metrics.get("consistency"):  # a table made by hand, not by a run
         return []
     head = table_rows(metrics)[0]
     out = []
     if "PRMSE at fixes [m]" in head:
-        out.append("PRMSE at fixes: each method at the raw fixes' epochs, like for like with the fixes' own row"
-                   + (" (fixes exist outside outages only: this is the no-outage figure)"
-                      if "outage PRMSE [m]" in head else "")
-                   + "; CEP95: 95 % of the horizontal errors are below it")
-        out.append("NEES pos: mean (error / stated sigma)^2 per axis against the truth; 1 = consistent")
+        out.append(
+            "PRMSE at fixes: each method at the raw fixes' epochs, like for like with the fixes' own row"
+            + (
+                " (fixes exist outside outages only: this is the no-outage figure)"
+                if "outage PRMSE [m]" in head
+                else ""
+            )
+            + "; CEP95: 95 % of the horizontal errors are below it"
+        )
+        out.append(
+            "NEES pos: mean (error / stated sigma)^2 per axis against the truth; 1 = consistent"
+        )
     elif "fix residual [m]" in head:
-        out.append("no truth: accuracy cannot be scored; fix residual = RMS distance to the raw fixes (agreement "
-                   "with them, not accuracy), and the NIS")
-    out.append("NIS: mean normalised innovation (EKF) or GNSS residual (smoother) squared per dof; "
-               "1 = consistent; '!' = the figure a warning is about")
+        out.append(
+            "no truth: accuracy cannot be scored; fix residual = RMS distance to the raw fixes (agreement "
+            "with them, not accuracy), and the NIS"
+        )
+    out.append(
+        "NIS: mean normalised innovation (EKF) or GNSS residual (smoother) squared per dof; "
+        "1 = consistent; '!' = the figure a warning is about"
+    )
     return out
 
 
@@ -294,5 +393,8 @@ def quality_line(quality: dict) -> str:
     kinds: dict[str, list] = {}
     for s in spans:
         kinds.setdefault(s["kind"], []).append(s)
-    parts = [f"{len(v)} {k} ({sum(s['t_end'] - s['t_start'] for s in v):.1f} s)" for k, v in kinds.items()]
+    parts = [
+        f"{len(v)} {k} ({sum(s['t_end'] - s['t_start'] for s in v):.1f} s)"
+        for k, v in kinds.items()
+    ]
     return "IMU data quality: " + ", ".join(parts) + " - process noise inflated over these spans"

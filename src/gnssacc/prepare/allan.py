@@ -40,6 +40,7 @@ vibration leak there, and would otherwise take part of the white noise.
 :func:`bias_instability` follows the IEEE 952 convention ``B = min sigma / 0.664``, read only
 when the record shows the floor (see :data:`FLOOR_RULE`).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -53,11 +54,13 @@ FLOOR_FACTOR = float(np.sqrt(2.0 * np.log(2.0) / np.pi))
 #: minimum over many noisy points is biased low; with 32 clusters the error is ~10 %).
 MIN_CLUSTERS_FLOOR = 32
 #: The rule :func:`bias_instability` applies before it reads a floor.
-FLOOR_RULE = (f"over the taus with >= {MIN_CLUSTERS_FLOOR} clusters, the minimum of the Allan deviation must lie "
-              "at least half a decade after the first of them (the fall to the floor is seen), and there the "
-              "white-noise line N / sqrt(tau) of the fitted model must be at most half the deviation (white "
-              "noise then adds at most 25 % of the variance, B is overstated by at most 15 %); otherwise the "
-              "record is too short to show the floor and the answer is None")
+FLOOR_RULE = (
+    f"over the taus with >= {MIN_CLUSTERS_FLOOR} clusters, the minimum of the Allan deviation must lie "
+    "at least half a decade after the first of them (the fall to the floor is seen), and there the "
+    "white-noise line N / sqrt(tau) of the fitted model must be at most half the deviation (white "
+    "noise then adds at most 25 % of the variance, B is overstated by at most 15 %); otherwise the "
+    "record is too short to show the floor and the answer is None"
+)
 #: Relative model-error floor on each Allan variance point in the fit (see the module notes).
 MODEL_ERROR = 0.10
 #: The bias terms (B, K, R) are fitted only when the taus reach this far [s]: over shorter taus
@@ -118,7 +121,10 @@ def edf_white(n: int, m) -> np.ndarray:
     """
     m = np.asarray(m, float)
     big = n + 1.0
-    return np.maximum((3.0 * (big - 1.0) / (2.0 * m) - 2.0 * (big - 2.0) / big) * 4.0 * m**2 / (4.0 * m**2 + 5.0), 1.0)
+    return np.maximum(
+        (3.0 * (big - 1.0) / (2.0 * m) - 2.0 * (big - 2.0) / big) * 4.0 * m**2 / (4.0 * m**2 + 5.0),
+        1.0,
+    )
 
 
 def allan_sums(x: np.ndarray, ms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -146,7 +152,7 @@ def allan_sums(x: np.ndarray, ms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     for j, m in enumerate(np.asarray(ms, int)):
         if 2 * m >= len(theta):
             continue
-        d = theta[2 * m:] - 2.0 * theta[m:-m] + theta[:-2 * m]
+        d = theta[2 * m :] - 2.0 * theta[m:-m] + theta[: -2 * m]
         ss[j], count[j] = np.sum(d * d, axis=0), len(d)
     return ss, count
 
@@ -180,7 +186,9 @@ def allan_deviation(x, dt: float, taus=None) -> AllanDeviation:
     return allan_deviation_pooled([x], dt, taus)
 
 
-def allan_deviation_pooled(records, dt: float, taus=None, max_fraction: float = 0.25) -> AllanDeviation:
+def allan_deviation_pooled(
+    records, dt: float, taus=None, max_fraction: float = 0.25
+) -> AllanDeviation:
     """Allan deviation pooled over independent records of the same sensor (e.g. several stops).
 
     At each tau the squared differences of all records are summed and divided by their total
@@ -199,9 +207,18 @@ def allan_deviation_pooled(records, dt: float, taus=None, max_fraction: float = 
     """
     records = [np.asarray(r, float) for r in records]
     n_max = max(len(r) for r in records)
-    ms = default_cluster_sizes(n_max, max_fraction=max_fraction) if taus is None else _cluster_sizes(n_max, dt, taus)
+    ms = (
+        default_cluster_sizes(n_max, max_fraction=max_fraction)
+        if taus is None
+        else _cluster_sizes(n_max, dt, taus)
+    )
     shape = (len(ms),) + records[0].shape[1:]
-    ss, count, clusters, edf = np.zeros(shape), np.zeros(len(ms)), np.zeros(len(ms), int), np.zeros(len(ms))
+    ss, count, clusters, edf = (
+        np.zeros(shape),
+        np.zeros(len(ms)),
+        np.zeros(len(ms), int),
+        np.zeros(len(ms)),
+    )
     for r in records:
         use = ms <= max(int(max_fraction * len(r)), 1) if taus is None else 2 * ms < len(r) + 1
         s, c = allan_sums(r, ms[use])
@@ -250,7 +267,9 @@ def remove_spectral_lines(x, dt: float) -> np.ndarray:
     P_hann = np.abs(np.fft.rfft((x - mean) * hann, axis=0)[i0:]) ** 2 * n / np.sum(hann**2)
     P = np.abs(X[i0:]) ** 2
     chunk = np.minimum(np.arange(len(P)) // nb, len(P) // nb - 1)
-    level = np.stack([np.median(P_hann[chunk == c], axis=0) for c in range(chunk[-1] + 1)])[chunk] / np.log(2.0)
+    level = np.stack([np.median(P_hann[chunk == c], axis=0) for c in range(chunk[-1] + 1)])[
+        chunk
+    ] / np.log(2.0)
     line = _grow(P_hann > LINE_FACTOR * level, P > 3.0 * level)
     X[i0:][line] = 0.0
     return np.fft.irfft(X, n, axis=0) + mean
@@ -297,8 +316,13 @@ class NoiseTerms:
     def avar(self, taus) -> np.ndarray:
         """Model Allan variance at ``taus`` [s], shape (K,) or (K, C)."""
         tau = np.asarray(taus, float).reshape((-1,) + (1,) * np.ndim(self.white))
-        return (3.0 * self.quantization**2 / tau**2 + self.white**2 / tau + FLOOR_FACTOR**2 * self.bias_instability**2
-                + self.rate_random_walk**2 * tau / 3.0 + self.rate_ramp**2 * tau**2 / 2.0)
+        return (
+            3.0 * self.quantization**2 / tau**2
+            + self.white**2 / tau
+            + FLOOR_FACTOR**2 * self.bias_instability**2
+            + self.rate_random_walk**2 * tau / 3.0
+            + self.rate_ramp**2 * tau**2 / 2.0
+        )
 
 
 def _nnls(A: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -342,7 +366,13 @@ def fit_noise_terms(ad: AllanDeviation, iterations: int = 3) -> NoiseTerms:
             model = basis @ c
         coef[ch, :n_terms] = c
     q, n2, b2, k2, r2 = coef.T
-    out = (np.sqrt(q / 3.0), np.sqrt(n2), np.sqrt(b2) / FLOOR_FACTOR, np.sqrt(3.0 * k2), np.sqrt(2.0 * r2))
+    out = (
+        np.sqrt(q / 3.0),
+        np.sqrt(n2),
+        np.sqrt(b2) / FLOOR_FACTOR,
+        np.sqrt(3.0 * k2),
+        np.sqrt(2.0 * r2),
+    )
     if ad.adev.ndim == 1:
         out = tuple(float(v[0]) for v in out)
     return NoiseTerms(*out)

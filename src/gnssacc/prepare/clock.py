@@ -16,6 +16,7 @@ is jagged on a smaller scale).
 What is attainable depends on the fixes. Measured on a simulated 120 s car run (consumer IMU):
 1 Hz fixes with 5 cm white noise give a 1-sigma of ~4 ms, 0.5 m white ~17 ms, 3 m white ~70 ms.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -46,21 +47,41 @@ BRACKET_MIN_S, BRACKET_MAX_S = 0.5, 2.0
 LARGE_SHIFT_S = 0.5
 
 
-def state_at(run: RecordedRun, cfg: RunConfig, pieces: StartPieces, t: float, filter_pass: FilterPass) -> InitialState:
+def state_at(
+    run: RecordedRun, cfg: RunConfig, pieces: StartPieces, t: float, filter_pass: FilterPass
+) -> InitialState:
     """The as-given filter's state and sigmas at ``t`` [s] as a start (``pieces.init`` when ``t`` is
     its own time)."""
     init = pieces.init
     if t <= float(init.t) + 1e-9:
         return init
-    sol = filter_pass(scaled_gnss(run, float(cfg["gnss"]["sigma_scale"])), ungated(without_aids(cfg)), "ekf", init=init,
-                      quality=pieces.quality, output_times=np.array([t]), store_P=True)
+    sol = filter_pass(
+        scaled_gnss(run, float(cfg["gnss"]["sigma_scale"])),
+        ungated(without_aids(cfg)),
+        "ekf",
+        init=init,
+        quality=pieces.quality,
+        output_times=np.array([t]),
+        store_P=True,
+    )
     sig = sol.sigma[-1]
     att = np.sqrt(np.maximum(np.diag(sol.P[-1][6:9, 6:9]), 0.0)) if sol.P is not None else sig[6:9]
-    return InitialState(t=float(sol.t[-1]), lat=float(sol.lat[-1]), lon=float(sol.lon[-1]), h=float(sol.h[-1]),
-                        v_n=sol.v_n[-1].copy(), rpy=sol.rpy[-1].copy(), sigma_pos_m=sig[0:3].copy(),
-                        sigma_vel_mps=sig[3:6].copy(), sigma_att_rad=att, how=f"{init.how}; carried to t = {t:.2f} s",
-                        b_a=sol.b_a[-1].copy(), b_g=sol.b_g[-1].copy(), sigma_b_a=sig[9:12].copy(),
-                        sigma_b_g=sig[12:15].copy())
+    return InitialState(
+        t=float(sol.t[-1]),
+        lat=float(sol.lat[-1]),
+        lon=float(sol.lon[-1]),
+        h=float(sol.h[-1]),
+        v_n=sol.v_n[-1].copy(),
+        rpy=sol.rpy[-1].copy(),
+        sigma_pos_m=sig[0:3].copy(),
+        sigma_vel_mps=sig[3:6].copy(),
+        sigma_att_rad=att,
+        how=f"{init.how}; carried to t = {t:.2f} s",
+        b_a=sol.b_a[-1].copy(),
+        b_g=sol.b_g[-1].copy(),
+        sigma_b_a=sig[9:12].copy(),
+        sigma_b_g=sig[12:15].copy(),
+    )
 
 
 @dataclass
@@ -83,8 +104,14 @@ class _Shifts:
         if key not in self.cache:
             # Without stationary updates: the spans were found on the stamps as given, and a shifted
             # IMU meets them moving (the fixes are the measure of the shift).
-            self.cache[key] = innovations(shifted(self.run, float(d)), self.cfg, self.pieces, self.filter_pass,
-                                          init=self.start, stationary=False)
+            self.cache[key] = innovations(
+                shifted(self.run, float(d)),
+                self.cfg,
+                self.pieces,
+                self.filter_pass,
+                init=self.start,
+                stationary=False,
+            )
         return self.cache[key]
 
     def cost(self, d: float) -> float:
@@ -117,8 +144,9 @@ def _sigma(shifts: _Shifts, d: float, f0: float, half_width: float) -> float | N
     return max(float(1.0 / np.sqrt(curv)), 0.001) if curv > 0 and np.isfinite(curv) else None
 
 
-def evaluate_offset(run: RecordedRun, cfg: RunConfig, finding: Finding, base: StartPieces,
-                    filter_pass: FilterPass) -> tuple[Verdict, RecordedRun, OffsetEstimate | None]:
+def evaluate_offset(
+    run: RecordedRun, cfg: RunConfig, finding: Finding, base: StartPieces, filter_pass: FilterPass
+) -> tuple[Verdict, RecordedRun, OffsetEstimate | None]:
     """The best offset near stage 1 and the verdict on it against the stamps as given (module notes).
 
     Returns
@@ -137,16 +165,24 @@ def evaluate_offset(run: RecordedRun, cfg: RunConfig, finding: Finding, base: St
     centre = d1 if far else 0.0
     ref = shifted(run, centre) if far else run
     pieces = start_pieces(ref, cfg, filter_pass) if far else base
-    lo, hi = (-hw, hw) if far else (d1 - hw, d1 + hw)   # the search; the stamps as given (0) are scored too
+    lo, hi = (
+        (-hw, hw) if far else (d1 - hw, d1 + hw)
+    )  # the search; the stamps as given (0) are scored too
     t_start = max(float(pieces.init.t), ref.t_start + max(hi, 0.0) + 0.05)
     start = state_at(ref, cfg, pieces, t_start, filter_pass)
-    shifts = _Shifts(ref, cfg, pieces, start, filter_pass, t_start + BURN_IN_S, ref.t_end - max(-lo, 0.0) - 0.05)
+    shifts = _Shifts(
+        ref, cfg, pieces, start, filter_pass, t_start + BURN_IN_S, ref.t_end - max(-lo, 0.0) - 0.05
+    )
     res = minimize_scalar(shifts.cost, bounds=(lo, hi), method="bounded", options={"xatol": 0.002})
     d, f0 = float(res.x), float(res.fun)
     total = centre + d
-    if far:   # the stamps as given, from their own start
-        verdict = compare(innovations(run, cfg, base, filter_pass, stationary=False), shifts.at(d),
-                          t_from=shifts.t_from, t_to=shifts.t_to)
+    if far:  # the stamps as given, from their own start
+        verdict = compare(
+            innovations(run, cfg, base, filter_pass, stationary=False),
+            shifts.at(d),
+            t_from=shifts.t_from,
+            t_to=shifts.t_to,
+        )
     else:
         verdict = compare(shifts.at(0.0), shifts.at(d), t_from=shifts.t_from, t_to=shifts.t_to)
     sigma = _sigma(shifts, d, f0, hw) if np.isfinite(f0) else None

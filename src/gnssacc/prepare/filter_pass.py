@@ -7,6 +7,7 @@ This stage precedes the estimators, so it does not import them: the caller hands
 (:func:`gnssacc.estimators.ekf.run_ekf` from :mod:`gnssacc.pipeline`, or the EKF itself when it
 starts without a prepared recording). :class:`FilterPass` says what such a pass must do.
 """
+
 from __future__ import annotations
 
 from typing import Protocol
@@ -49,7 +50,18 @@ class FilterPass(Protocol):
         the NIS and, with ``record_innovations``, the series.
     """
 
-    def __call__(self, run: RecordedRun, cfg, method: str = "ekf", *, init: InitialState | None = None,
-                 quality=None, stationary=None, output_times: np.ndarray | None = None,
-                 record_innovations: bool = False, t_stop: float | None = None,
-                 cov_every: int = 1, store_P: bool = False) -> NavSolution: ...
+    def __call__(
+        self,
+        run: RecordedRun,
+        cfg,
+        method: str = "ekf",
+        *,
+        init: InitialState | None = None,
+        quality=None,
+        stationary=None,
+        output_times: np.ndarray | None = None,
+        record_innovations: bool = False,
+        t_stop: float | None = None,
+        cov_every: int = 1,
+        store_P: bool = False,
+    ) -> NavSolution: ...

@@ -10,6 +10,7 @@ default is replaced by what the fixes show: their scatter about quadratics over 
 own filter, multipath) is the noise identification's business (its Gauss-Markov stage), and the
 stationary test allows for fixes correlated in time (``[stationary] gnss_corr_s``).
 """
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -39,10 +40,14 @@ def with_measured_sigmas(run: RecordedRun) -> tuple[RecordedRun, Finding | None]
     s_v = max(fix_scatter(g.t, p[:, 2:3], w), MIN_SIGMA_M)
     old = np.median(g.sigma_ned, axis=0)
     sigma = np.tile([s_h, s_h, s_v], (len(g), 1))
-    note = Finding("gnss_sigma", run.where,
-                   f"the fixes state no sigmas: their scatter about local quadratics is {s_h:.3f} m horizontal, "
-                   f"{s_v:.3f} m vertical, used as their 1-sigma instead of gnss.default_sigma_m "
-                   f"{old[0]:g} / {old[1]:g} / {old[2]:g} m (the noise identification scales it)",
-                   action="noted", details={"sigma_h_m": s_h, "sigma_v_m": s_v})
+    note = Finding(
+        "gnss_sigma",
+        run.where,
+        f"the fixes state no sigmas: their scatter about local quadratics is {s_h:.3f} m horizontal, "
+        f"{s_v:.3f} m vertical, used as their 1-sigma instead of gnss.default_sigma_m "
+        f"{old[0]:g} / {old[1]:g} / {old[2]:g} m (the noise identification scales it)",
+        action="noted",
+        details={"sigma_h_m": s_h, "sigma_v_m": s_v},
+    )
     warn_data(note.where, note.problem)
     return run.with_gnss(replace(g, sigma_ned=sigma, sigma_stated=True)), note

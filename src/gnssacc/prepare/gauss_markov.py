@@ -17,6 +17,7 @@ Their parameters, first found wins (:func:`gm_setup`):
 The white part of a fix's sigma is then ``gnss.sigma_scale`` times its stated sigma (in case 3,
 the profile's white sigma over its total).
 """
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -49,28 +50,50 @@ def gm_setup(prep, *, filter_pass: FilterPass) -> tuple:
     cfg, how = prep.cfg, {}
     if np.any(cfg.gnss_gm_sigma > 0):
         out = prep
-        how["source"] = "config" if ("gnss", "gm_sigma_m") in cfg.explicit else "tuner (its Gauss-Markov stage)"
+        how["source"] = (
+            "config" if ("gnss", "gm_sigma_m") in cfg.explicit else "tuner (its Gauss-Markov stage)"
+        )
     elif prep.tuning is not None:
-        cfg, info = tune_gauss_markov(prep.run, cfg, prep.stationary, prep.quality, prep.init, filter_pass=filter_pass)
+        cfg, info = tune_gauss_markov(
+            prep.run, cfg, prep.stationary, prep.quality, prep.init, filter_pass=filter_pass
+        )
         out = replace(prep, cfg=cfg, run=scaled_gnss(prep.run, info["run_scale"]))
         how.update(source="tuner", loglik_gain=info["loglik_gain"], seconds=info["seconds"])
     else:
         out = _from_profile(prep)
         how["source"] = "noise profile"
-    how.update(gm_sigma_m=out.cfg.gnss_gm_sigma.tolist(), gm_tau_s=out.cfg.gnss_gm_tau.tolist(),
-               sigma_scale=float(out.cfg["gnss"]["sigma_scale"]))
+    how.update(
+        gm_sigma_m=out.cfg.gnss_gm_sigma.tolist(),
+        gm_tau_s=out.cfg.gnss_gm_tau.tolist(),
+        sigma_scale=float(out.cfg["gnss"]["sigma_scale"]),
+    )
     return out, how
 
 
 def _from_profile(prep):
     """Case 3 of the module notes (the known noise profile), else the InputError of case 4."""
     profile = PROFILES.get(prep.run.meta.get("noise"))
-    if profile is None or not np.any(profile["gm_sigma"] > 0) or ("gnss", "gm_sigma_m") in prep.cfg.explicit:
-        raise InputError("gnss.gm_sigma_m", "the -gm methods need the Gauss-Markov fix-error model: set [gnss] "
-                                            "gm_sigma_m (> 0) and gm_tau_s in the configuration, or use --tune auto")
+    if (
+        profile is None
+        or not np.any(profile["gm_sigma"] > 0)
+        or ("gnss", "gm_sigma_m") in prep.cfg.explicit
+    ):
+        raise InputError(
+            "gnss.gm_sigma_m",
+            "the -gm methods need the Gauss-Markov fix-error model: set [gnss] "
+            "gm_sigma_m (> 0) and gm_tau_s in the configuration, or use --tune auto",
+        )
     total = np.sqrt(profile["gm_sigma"] ** 2 + profile["white_sigma"] ** 2)
-    white_ratio = float(np.mean(profile["white_sigma"] / total))   # the fixes state the total sigma
+    white_ratio = float(np.mean(profile["white_sigma"] / total))  # the fixes state the total sigma
     scale = white_ratio * float(prep.cfg["gnss"]["sigma_scale"])
-    cfg = prep.cfg.with_values({"gnss": {"gm_sigma_m": profile["gm_sigma"].tolist(), "gm_tau_s": profile["tau_s"],
-                                         "sigma_scale": scale}}, f"noise profile {prep.run.meta['noise']}")
+    cfg = prep.cfg.with_values(
+        {
+            "gnss": {
+                "gm_sigma_m": profile["gm_sigma"].tolist(),
+                "gm_tau_s": profile["tau_s"],
+                "sigma_scale": scale,
+            }
+        },
+        f"noise profile {prep.run.meta['noise']}",
+    )
     return replace(prep, cfg=cfg, run=scaled_gnss(prep.run, white_ratio))

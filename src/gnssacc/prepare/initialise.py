@@ -15,6 +15,7 @@ does first (standing, creeping, reversing).
 Every sigma is derived from the fits and residuals and floored by the ``[init]`` minimums, so the
 filter starts honest rather than optimistic.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -49,8 +50,11 @@ def initial_sigmas(init: InitialState, over: dict) -> tuple[np.ndarray, np.ndarr
         att[:2] = over["roll_pitch"]
     if "yaw" in over:
         att[2] = over["yaw"]
-    return (np.asarray(over.get("pos", init.sigma_pos_m), float), np.asarray(over.get("vel", init.sigma_vel_mps), float),
-            att)
+    return (
+        np.asarray(over.get("pos", init.sigma_pos_m), float),
+        np.asarray(over.get("vel", init.sigma_vel_mps), float),
+        att,
+    )
 
 
 @dataclass
@@ -113,7 +117,7 @@ def _block_se(x: np.ndarray, block: int) -> np.ndarray:
     nb = len(x) // block
     if nb < 3:
         return np.std(x, axis=0) / np.sqrt(max(len(x), 1))
-    means = x[:nb * block].reshape(nb, block, 3).mean(axis=1)
+    means = x[: nb * block].reshape(nb, block, 3).mean(axis=1)
     return np.std(means, axis=0, ddof=1) / np.sqrt(nb)
 
 
@@ -122,7 +126,11 @@ def _static_start(run: RecordedRun, cfg: RunConfig, span) -> StartState:
     sl = slice(int(span.i_start), int(span.i_end))
     t0 = float(imu.t[0])
     inside = (gnss.t >= span.t_start - 0.5) & (gnss.t <= span.t_end)
-    k = np.flatnonzero(inside) if np.any(inside) else np.array([int(np.argmin(np.abs(gnss.t - span.t_end)))])
+    k = (
+        np.flatnonzero(inside)
+        if np.any(inside)
+        else np.array([int(np.argmin(np.abs(gnss.t - span.t_end)))])
+    )
     p_fix = run.origin.to_ned(gnss.lat[k], gnss.lon[k], gnss.h[k])
     w = 1.0 / gnss.sigma_ned[k] ** 2
     p0 = (w * p_fix).sum(axis=0) / w.sum(axis=0)
@@ -130,12 +138,23 @@ def _static_start(run: RecordedRun, cfg: RunConfig, span) -> StartState:
     # errors one fix's sigma is the honest floor.
     sig_p = np.median(gnss.sigma_ned[k], axis=0)
     block = max(int(round(1.0 / max(np.median(np.diff(imu.t[sl])), 1e-4))), 1)
-    return StartState(t0, p0, sig_p, np.zeros(3), np.full(3, _STATIC_VEL_SIGMA), np.zeros(3), np.zeros(3),
-                      imu.f_b[sl].mean(axis=0), _block_se(imu.f_b[sl], block), sl, imu.omega_ib_b[sl].mean(axis=0),
-                      _block_se(imu.omega_ib_b[sl], block),
-                      (float(gnss.t[k[0]]), float(gnss.t[k[-1]])),
-                      f"static start ({span.t_end - span.t_start:.1f} s): position from {len(k)} fixes, "
-                      f"roll/pitch by levelling, gyro bias measured")
+    return StartState(
+        t0,
+        p0,
+        sig_p,
+        np.zeros(3),
+        np.full(3, _STATIC_VEL_SIGMA),
+        np.zeros(3),
+        np.zeros(3),
+        imu.f_b[sl].mean(axis=0),
+        _block_se(imu.f_b[sl], block),
+        sl,
+        imu.omega_ib_b[sl].mean(axis=0),
+        _block_se(imu.omega_ib_b[sl], block),
+        (float(gnss.t[k[0]]), float(gnss.t[k[-1]])),
+        f"static start ({span.t_end - span.t_start:.1f} s): position from {len(k)} fixes, "
+        f"roll/pitch by levelling, gyro bias measured",
+    )
 
 
 def _moving_start(run: RecordedRun, cfg: RunConfig) -> StartState:
@@ -149,8 +168,11 @@ def _moving_start(run: RecordedRun, cfg: RunConfig) -> StartState:
     sel = slice(first, min(stop, len(gnss)))
     t_w = gnss.t[sel]
     if len(t_w) < 3 or t_w[-1] - t_w[0] <= 0:
-        raise InputError(run.where, f"cannot initialise: fewer than three GNSS fixes near the start "
-                                    f"({len(t_w)} in the first {win:g} s)")
+        raise InputError(
+            run.where,
+            f"cannot initialise: fewer than three GNSS fixes near the start "
+            f"({len(t_w)} in the first {win:g} s)",
+        )
     p_w = run.origin.to_ned(gnss.lat[sel], gnss.lon[sel], gnss.h[sel])
     p0, v0, sp, sv = _line_fit(t_w, p_w, gnss.sigma_ned[sel], t0)
     # A line fitted to accelerating motion is off by a dt^2/2 in position and a dt in velocity
@@ -162,13 +184,25 @@ def _moving_start(run: RecordedRun, cfg: RunConfig) -> StartState:
     a_fit, var_fit = B @ p_w, (B[:, None] ** 2 * gnss.sigma_ned[sel] ** 2).sum(axis=0)
     shrink = _ACCEL_PRIOR_SIGMA**2 / (_ACCEL_PRIOR_SIGMA**2 + var_fit)
     i0, i1 = np.searchsorted(imu.t, [t_w[0], t_w[-1]])
-    f_mean = imu.f_b[i0:max(i1, i0 + 1)].mean(axis=0)
+    f_mean = imu.f_b[i0 : max(i1, i0 + 1)].mean(axis=0)
     c = cfg["init"]
-    return StartState(t0, p0, np.maximum(np.hypot(sp, sp_model), np.median(gnss.sigma_ned[sel], axis=0)), v0,
-                      np.maximum(np.hypot(sv, sv_model), c["vel_sigma_min_mps"]), shrink * a_fit, shrink * var_fit,
-                      f_mean, np.zeros(3), None, None, None, (float(t_w[0]), float(t_w[-1])),
-                      f"moving start: position/velocity from a line fit over {len(t_w)} fixes "
-                      f"({t_w[-1] - t_w[0]:.1f} s), roll/pitch by levelling with the GNSS-fitted acceleration removed")
+    return StartState(
+        t0,
+        p0,
+        np.maximum(np.hypot(sp, sp_model), np.median(gnss.sigma_ned[sel], axis=0)),
+        v0,
+        np.maximum(np.hypot(sv, sv_model), c["vel_sigma_min_mps"]),
+        shrink * a_fit,
+        shrink * var_fit,
+        f_mean,
+        np.zeros(3),
+        None,
+        None,
+        None,
+        (float(t_w[0]), float(t_w[-1])),
+        f"moving start: position/velocity from a line fit over {len(t_w)} fixes "
+        f"({t_w[-1] - t_w[0]:.1f} s), roll/pitch by levelling with the GNSS-fitted acceleration removed",
+    )
 
 
 def start_state(run: RecordedRun, cfg: RunConfig, stationary=None) -> StartState:
@@ -200,14 +234,18 @@ def _level(f_b: np.ndarray, a_b: np.ndarray) -> tuple[float, float]:
     return float(roll), float(pitch)
 
 
-def hypothesis(run: RecordedRun, cfg: RunConfig, start: StartState, yaw: float, sigma_yaw: float) -> InitialState:
+def hypothesis(
+    run: RecordedRun, cfg: RunConfig, start: StartState, yaw: float, sigma_yaw: float
+) -> InitialState:
     """The initial state for one yaw [rad] (1-sigma ``sigma_yaw``): levelling and gyro bias follow it."""
     c = cfg["init"]
     lat, lon, h = run.origin.to_llh(start.p_n)
     g = float(gravity_n(lat, h)[2])
     cy, sy = np.cos(yaw), np.sin(yaw)
     a = start.a_n
-    roll, pitch = _level(start.f_mean_b, np.array([cy * a[0] + sy * a[1], -sy * a[0] + cy * a[1], a[2]]))
+    roll, pitch = _level(
+        start.f_mean_b, np.array([cy * a[0] + sy * a[1], -sy * a[0] + cy * a[1], a[2]])
+    )
     # Tilt error: the scatter of the levelling data and the fitted acceleration's noise. Levelling
     # cannot tell an accelerometer bias from a tilt: that part of the error is tied to the bias
     # state, and the estimators start with the correlation (``levelled``).
@@ -218,10 +256,22 @@ def hypothesis(run: RecordedRun, cfg: RunConfig, start: StartState, yaw: float, 
         # The still gyro reads its bias plus the earth rate in body axes (which needs the yaw).
         b_g = start.omega_mean_b - euler_to_dcm(roll, pitch, yaw).T @ earth_rate_n(lat)
         sigma_b_g = np.maximum(start.omega_se_b, 1.0 * DEG / 3600.0)
-    return InitialState(t=start.t, lat=float(lat), lon=float(lon), h=float(h), v_n=start.v_n.copy(),
-                        rpy=np.array([roll, pitch, yaw]), sigma_pos_m=start.sigma_p.copy(),
-                        sigma_vel_mps=start.sigma_v.copy(), sigma_att_rad=np.array([sigma_tilt, sigma_tilt, sigma_yaw]),
-                        how=start.how, b_g=b_g, sigma_b_g=sigma_b_g, fit_window=start.fit_window, levelled=True)
+    return InitialState(
+        t=start.t,
+        lat=float(lat),
+        lon=float(lon),
+        h=float(h),
+        v_n=start.v_n.copy(),
+        rpy=np.array([roll, pitch, yaw]),
+        sigma_pos_m=start.sigma_p.copy(),
+        sigma_vel_mps=start.sigma_v.copy(),
+        sigma_att_rad=np.array([sigma_tilt, sigma_tilt, sigma_yaw]),
+        how=start.how,
+        b_g=b_g,
+        sigma_b_g=sigma_b_g,
+        fit_window=start.fit_window,
+        levelled=True,
+    )
 
 
 def with_how(init: InitialState, how: str) -> InitialState:

@@ -31,6 +31,7 @@ forward axis (lateral and vertical body velocity within :data:`SLIP_SIGMA_MPS`, 
 constraint). Its Gaussian log-likelihood at every scored fix joins the innovations'
 (``vehicle=True``).
 """
+
 from __future__ import annotations
 
 import math
@@ -95,8 +96,15 @@ def _dcm(rpy: np.ndarray) -> np.ndarray:
     return np.stack([euler_to_dcm(*r) for r in rpy]) if len(rpy) else np.zeros((0, 3, 3))
 
 
-def innovations(run: RecordedRun, cfg: RunConfig, pieces: StartPieces, filter_pass: FilterPass,
-                init=None, stationary: bool = True, vehicle: bool = False) -> Innovations | None:
+def innovations(
+    run: RecordedRun,
+    cfg: RunConfig,
+    pieces: StartPieces,
+    filter_pass: FilterPass,
+    init=None,
+    stationary: bool = True,
+    vehicle: bool = False,
+) -> Innovations | None:
     """The position innovations of one EKF pass from ``init`` (default ``pieces.init``) with the
     configuration's noise (gates off: a gate hides what it rejects from the likelihood), with the
     stationary updates of ``pieces`` or without; with ``vehicle`` the ground-vehicle model's
@@ -107,16 +115,22 @@ def innovations(run: RecordedRun, cfg: RunConfig, pieces: StartPieces, filter_pa
         # after the checks (gnssacc.prepare.tuning, step 5), and a constraint with untuned axes biases
         # a verdict (KITTI's IMU is pitched 0.4 deg against the car: with the constraint, 3 of 40 KITTI
         # runs with outages measured a -0.13..-0.16 s clock offset, decisively, and were refused).
-        sol = filter_pass(scaled_gnss(run, float(cfg["gnss"]["sigma_scale"])), ungated(without_aids(cfg)), "ekf",
-                          init=init,
-                          quality=pieces.quality, stationary=pieces.stationary if stationary else None,
-                          output_times=run.gnss.t if vehicle else np.zeros(0), record_innovations=True)
+        sol = filter_pass(
+            scaled_gnss(run, float(cfg["gnss"]["sigma_scale"])),
+            ungated(without_aids(cfg)),
+            "ekf",
+            init=init,
+            quality=pieces.quality,
+            stationary=pieces.stationary if stationary else None,
+            output_times=run.gnss.t if vehicle else np.zeros(0),
+            record_innovations=True,
+        )
     except (ValueError, FloatingPointError, np.linalg.LinAlgError):
         return None
     st = sol.stats
     t, ll = np.asarray(st["nis_pos_t"], float), np.asarray(st["loglik_pos_series"], float)
     if vehicle and len(sol.t):
-        ll = ll + np.interp(t, sol.t, vehicle_loglik(sol))   # outputs at the fixes' epochs
+        ll = ll + np.interp(t, sol.t, vehicle_loglik(sol))  # outputs at the fixes' epochs
     return Innovations(t, ll, np.asarray(st["nis_pos"], float), float(init.t), float(run.t_end))
 
 
@@ -156,8 +170,11 @@ class Verdict:
 
     @property
     def decisive(self) -> bool:
-        consistent = (self.nis is None or self.nis <= NIS_MAX
-                      or (self.nis_given is not None and self.nis <= self.nis_given))
+        consistent = (
+            self.nis is None
+            or self.nis <= NIS_MAX
+            or (self.nis_given is not None and self.nis <= self.nis_given)
+        )
         return self.n_fixes >= MIN_FIXES and self.gain >= self.needed and consistent
 
     @property
@@ -176,20 +193,38 @@ class Verdict:
         rate = self.gain / self.minutes if self.minutes > 0 else float("nan")
         nis = f", NIS {self.nis:.2f} as corrected" if self.nis is not None else ""
         what = "position and ground-vehicle-model" if self.vehicle else "position"
-        both = (f"{self.loglik_given:.0f} as given, {self.loglik_given + self.gain:.0f} as corrected: "
-                if self.loglik_given is not None else "")
-        return (f"EKF {what} log-likelihood {both}{self.gain:+.0f} over {self.n_fixes} fixes "
-                f"({rate:+.1f} per minute{nis}; decisive needs {self.needed:+.0f})")
+        both = (
+            f"{self.loglik_given:.0f} as given, {self.loglik_given + self.gain:.0f} as corrected: "
+            if self.loglik_given is not None
+            else ""
+        )
+        return (
+            f"EKF {what} log-likelihood {both}{self.gain:+.0f} over {self.n_fixes} fixes "
+            f"({rate:+.1f} per minute{nis}; decisive needs {self.needed:+.0f})"
+        )
 
     def to_dict(self) -> dict:
-        return {"loglik_gain": self.gain if math.isfinite(self.gain) else str(self.gain), "n_fixes": self.n_fixes,
-                "minutes": round(self.minutes, 3), "nis_corrected": self.nis, "nis_given": self.nis_given,
-                "decisive": self.decisive,
-                "refuted": self.refuted, "needed": self.needed, "loglik_given": self.loglik_given}
+        return {
+            "loglik_gain": self.gain if math.isfinite(self.gain) else str(self.gain),
+            "n_fixes": self.n_fixes,
+            "minutes": round(self.minutes, 3),
+            "nis_corrected": self.nis,
+            "nis_given": self.nis_given,
+            "decisive": self.decisive,
+            "refuted": self.refuted,
+            "needed": self.needed,
+            "loglik_given": self.loglik_given,
+        }
 
 
-def compare(given: Innovations | None, corrected: Innovations | None, log_jacobian: float = 0.0,
-            t_from: float | None = None, t_to: float | None = None, vehicle: bool = False) -> Verdict:
+def compare(
+    given: Innovations | None,
+    corrected: Innovations | None,
+    log_jacobian: float = 0.0,
+    t_from: float | None = None,
+    t_to: float | None = None,
+    vehicle: bool = False,
+) -> Verdict:
     """The verdict over the fixes both passes score (module notes); ``t_from``, ``t_to``: score
     no earlier, no later [s]."""
     if corrected is None or given is None:
@@ -204,21 +239,38 @@ def compare(given: Innovations | None, corrected: Innovations | None, log_jacobi
     scored_g = given.t[(given.t >= t_lo) & (given.t <= t_hi)]
     scored_c = corrected.t[(corrected.t >= t_lo) & (corrected.t <= t_hi)]
     common = np.intersect1d(scored_g, scored_c)
-    if len(common) == 0:   # as given, the fixes meet no IMU data: nothing to estimate
+    if len(common) == 0:  # as given, the fixes meet no IMU data: nothing to estimate
         n = len(scored_c) if len(scored_g) == 0 else 0
         return Verdict(math.inf if n else 0.0, n, 0.0, None, vehicle)
     ig, ic = np.isin(given.t, common), np.isin(corrected.t, common)
     ll_given = float(given.loglik[ig].sum())
     gain = float(corrected.loglik[ic].sum()) - ll_given + float(log_jacobian) * len(common)
-    return Verdict(gain, len(common), float(common[-1] - common[0]) / 60.0, float(np.mean(corrected.nis[ic])), vehicle,
-                   float(np.mean(given.nis[ig])), ll_given)
+    return Verdict(
+        gain,
+        len(common),
+        float(common[-1] - common[0]) / 60.0,
+        float(np.mean(corrected.nis[ic])),
+        vehicle,
+        float(np.mean(given.nis[ig])),
+        ll_given,
+    )
 
 
-def judge(given: RecordedRun, corrected: RecordedRun, cfg: RunConfig, given_pieces: StartPieces,
-          corrected_pieces: StartPieces, filter_pass: FilterPass, log_jacobian: float = 0.0,
-          vehicle: bool = False) -> Verdict:
+def judge(
+    given: RecordedRun,
+    corrected: RecordedRun,
+    cfg: RunConfig,
+    given_pieces: StartPieces,
+    corrected_pieces: StartPieces,
+    filter_pass: FilterPass,
+    log_jacobian: float = 0.0,
+    vehicle: bool = False,
+) -> Verdict:
     """The verdict on ``corrected`` against ``given``, each from its own start (module notes;
     ``vehicle``: with the ground-vehicle model, for a correction of the axes)."""
-    return compare(innovations(given, cfg, given_pieces, filter_pass, vehicle=vehicle),
-                   innovations(corrected, cfg, corrected_pieces, filter_pass, vehicle=vehicle), log_jacobian,
-                   vehicle=vehicle)
+    return compare(
+        innovations(given, cfg, given_pieces, filter_pass, vehicle=vehicle),
+        innovations(corrected, cfg, corrected_pieces, filter_pass, vehicle=vehicle),
+        log_jacobian,
+        vehicle=vehicle,
+    )

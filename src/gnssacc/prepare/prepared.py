@@ -21,6 +21,7 @@ configuration and stationary spans, and the report reads it. The decisions that 
 innovation likelihood run through the filter pass the caller hands in
 (:class:`~gnssacc.prepare.filter_pass.FilterPass`).
 """
+
 from __future__ import annotations
 
 import time
@@ -103,15 +104,23 @@ def _tuned(run, cfg, stationary, quality, init, bank, noise, filter_pass):
     return est_run, cfg_t, result, init2, bank2
 
 
-def checked(run: RecordedRun, cfg: RunConfig, filter_pass: FilterPass) -> tuple[RecordedRun, RunConfig, list]:
+def checked(
+    run: RecordedRun, cfg: RunConfig, filter_pass: FilterPass
+) -> tuple[RecordedRun, RunConfig, list]:
     """Step 0 of the module notes: the input checks, their proposals settled by ``filter_pass``
     (:func:`gnssacc.prepare.settle.settled`)."""
     run, cfg, findings, _ = settled(run, cfg, filter_pass)
     return run, cfg, findings
 
 
-def prepare(run: RecordedRun, cfg: RunConfig, tune_mode: str | None = None, *, filter_pass: FilterPass,
-            gauss_markov: bool = False) -> Prepared:
+def prepare(
+    run: RecordedRun,
+    cfg: RunConfig,
+    tune_mode: str | None = None,
+    *,
+    filter_pass: FilterPass,
+    gauss_markov: bool = False,
+) -> Prepared:
     """Checks, quality, stationary spans, start state and (``tune_mode="auto"``) noise, in that order.
 
     Parameters
@@ -129,24 +138,28 @@ def prepare(run: RecordedRun, cfg: RunConfig, tune_mode: str | None = None, *, f
     tune_mode = tune_mode or cfg["tune"]["mode"]
     secs = {}
     t = time.perf_counter()
-    run, sigma_note = with_measured_sigmas(run)   # before any decision uses the fixes' noise
+    run, sigma_note = with_measured_sigmas(run)  # before any decision uses the fixes' noise
     run, cfg, checks, pieces = settled(run, cfg, filter_pass)
     checks = ([sigma_note] if sigma_note else []) + checks
-    release_free_memory()   # the checks' temporaries, before the next stage's
+    release_free_memory()  # the checks' temporaries, before the next stage's
     secs["input_checks_s"] = time.perf_counter() - t
     t = time.perf_counter()
-    pieces = pieces or start_pieces(run, cfg, filter_pass)   # made once: by a verdict, or here
+    pieces = pieces or start_pieces(run, cfg, filter_pass)  # made once: by a verdict, or here
     quality, stationary, init, bank = pieces.quality, pieces.stationary, pieces.init, pieces.bank
-    release_free_memory()   # before the estimators build on the heap
+    release_free_memory()  # before the estimators build on the heap
     secs["start_s"] = time.perf_counter() - t
     est_run = scaled_gnss(run, float(cfg["gnss"]["sigma_scale"]))
     result = None
     noise = noise_from_stationary(run.imu, stationary)
     if tune_mode == "auto":
         t = time.perf_counter()
-        est_run, cfg, result, init, bank = _tuned(run, cfg, stationary, quality, init, bank, noise, filter_pass)
+        est_run, cfg, result, init, bank = _tuned(
+            run, cfg, stationary, quality, init, bank, noise, filter_pass
+        )
         secs["tuning_s"] = time.perf_counter() - t
-    prep = Prepared(est_run, cfg, quality, stationary, init, noise, result, bank, tuple(checks), secs)
+    prep = Prepared(
+        est_run, cfg, quality, stationary, init, noise, result, bank, tuple(checks), secs
+    )
     if gauss_markov:
         from .gauss_markov import gm_setup
 

@@ -10,6 +10,7 @@ again on the run as it now is, until nothing more is proposed. A recording with 
 costs no EKF pass here, and the start made for a verdict (quality, stationary spans, yaw bank) is
 handed on, so the preparation makes none of them twice.
 """
+
 from __future__ import annotations
 
 from ..checks.corrections import offset_problem
@@ -43,7 +44,9 @@ def _fixes_in_imu_span(run: RecordedRun) -> int:
     return int(((run.gnss.t >= run.t_start) & (run.gnss.t <= run.t_end)).sum())
 
 
-def _evaluate(run, cfg, finding: Finding, base, filter_pass) -> tuple[Verdict, RecordedRun, StartPieces | None]:
+def _evaluate(
+    run, cfg, finding: Finding, base, filter_pass
+) -> tuple[Verdict, RecordedRun, StartPieces | None]:
     """The verdict on a proposal, the corrected run, and its start when one was made (``base``:
     a callable giving the start of ``run`` as given, made once)."""
     if not finding.details.get("estimable", True) or _fixes_in_imu_span(run) < MIN_FIXES:
@@ -56,16 +59,30 @@ def _evaluate(run, cfg, finding: Finding, base, filter_pass) -> tuple[Verdict, R
     if finding.check == "time_offset":
         verdict, corrected, est = evaluate_offset(run, cfg, finding, base, filter_pass)
         d = finding.details
-        if est is not None:   # the message tells the refined offset
+        if est is not None:  # the message tells the refined offset
             d["measured_s"], d["sigma_s"] = est.offset_s, est.sigma_s
             finding.problem = offset_problem(est, d["configured_s"], d["auto"])
             finding.fix = f'set [mounting] imu_time_offset_s = {d["configured_s"] + est.offset_s:.3f} (or "auto")'
-        d["offset_s"] = d.get("measured_s", d["stage1_s"]) if verdict.decisive else 0.0   # what is applied
+        d["offset_s"] = (
+            d.get("measured_s", d["stage1_s"]) if verdict.decisive else 0.0
+        )  # what is applied
         return verdict, corrected, None
     corrected = finding.repair(run)
     pieces = start_pieces(corrected, cfg, filter_pass)
-    return (judge(run, corrected, cfg, base, pieces, filter_pass, finding.details.get("log_jacobian_per_fix", 0.0),
-                  vehicle=finding.check == "mounting"), corrected, pieces)
+    return (
+        judge(
+            run,
+            corrected,
+            cfg,
+            base,
+            pieces,
+            filter_pass,
+            finding.details.get("log_jacobian_per_fix", 0.0),
+            vehicle=finding.check == "mounting",
+        ),
+        corrected,
+        pieces,
+    )
 
 
 def _allowed(finding: Finding, policy: Policy) -> bool:
@@ -81,17 +98,26 @@ def _applied_cfg(cfg: RunConfig, finding: Finding) -> RunConfig:
     """The configuration after an applied offset or mounting (the values now in effect)."""
     if finding.check == "time_offset":
         value = finding.details.get("measured_s", finding.details["stage1_s"])
-        return cfg.with_values({"mounting": {"imu_time_offset_s": round(float(value), 4)}}, "input checks")
+        return cfg.with_values(
+            {"mounting": {"imu_time_offset_s": round(float(value), 4)}}, "input checks"
+        )
     if finding.check == "mounting":
-        return cfg.with_values({"mounting": {"imu_to_body_rpy_deg": finding.details["rpy_deg"]}}, "input checks")
+        return cfg.with_values(
+            {"mounting": {"imu_to_body_rpy_deg": finding.details["rpy_deg"]}}, "input checks"
+        )
     return cfg
 
 
 def _refuse(finding: Finding, verdict: Verdict) -> InputError:
-    hint = (', or set [checks] repair = "auto" to let gnssacc do it'
-            if finding.repairable and finding.check not in ("time_offset", "mounting") else "")
-    return InputError(finding.where, f"{finding.problem}; {finding.fix}{hint}; the estimator confirms it: "
-                                     f"{verdict.text()}")
+    hint = (
+        ', or set [checks] repair = "auto" to let gnssacc do it'
+        if finding.repairable and finding.check not in ("time_offset", "mounting")
+        else ""
+    )
+    return InputError(
+        finding.where,
+        f"{finding.problem}; {finding.fix}{hint}; the estimator confirms it: {verdict.text()}",
+    )
 
 
 def _note_once(findings: list, seen: set, new: list) -> None:
@@ -105,8 +131,9 @@ def _note_once(findings: list, seen: set, new: list) -> None:
             findings.append(f)
 
 
-def settled(run: RecordedRun, cfg: RunConfig, filter_pass: FilterPass
-            ) -> tuple[RecordedRun, RunConfig, list, StartPieces | None]:
+def settled(
+    run: RecordedRun, cfg: RunConfig, filter_pass: FilterPass
+) -> tuple[RecordedRun, RunConfig, list, StartPieces | None]:
     """The run and configuration after the checks' proposals were settled (module notes).
 
     Returns
@@ -144,13 +171,20 @@ def settled(run: RecordedRun, cfg: RunConfig, filter_pass: FilterPass
             raise _refuse(f, verdict)
         if verdict.decisive:
             f.action = "applied" if f.check in ("time_offset", "mounting") else "repaired"
-            warn_data(f.where, f"{f.problem}; {f.repaired}, confirmed by the estimator: {verdict.text()}")
+            warn_data(
+                f.where, f"{f.problem}; {f.repaired}, confirmed by the estimator: {verdict.text()}"
+            )
             run, cfg, base = corrected, _applied_cfg(cfg, f), pieces
-        elif verdict.refuted:   # the stamps, units or axes as given are the likelier: nothing to warn of
+        elif (
+            verdict.refuted
+        ):  # the stamps, units or axes as given are the likelier: nothing to warn of
             f.action = "refuted"
         else:
             f.action = "not confirmed"
-            warn_data(f.where, f"{f.problem}, but the estimator does not confirm it: {verdict.text()}; the data are "
-                               f"used as given")
+            warn_data(
+                f.where,
+                f"{f.problem}, but the estimator does not confirm it: {verdict.text()}; the data are "
+                f"used as given",
+            )
         findings.append(f)
     return run, cfg, findings, base

@@ -10,6 +10,7 @@ comes from a magnetometer or from nothing: tens of degrees off near a vehicle's 
 (:mod:`gnssacc.prepare.yawbank`); the orientation's yaw is only kept when the vehicle never turns
 or accelerates enough, then with at least :data:`MAGNETOMETER_YAW_SIGMA_DEG`.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -49,8 +50,9 @@ class StartPieces:
     bank: BankResult | None
 
 
-def start_of(run: RecordedRun, cfg: RunConfig, stationary, quality, filter_pass: FilterPass
-             ) -> tuple[InitialState, BankResult | None]:
+def start_of(
+    run: RecordedRun, cfg: RunConfig, stationary, quality, filter_pass: FilterPass
+) -> tuple[InitialState, BankResult | None]:
     """The run's own start, else the yaw bank's (with ``cfg``'s noise; fix sigmas as in ``run``).
 
     A start whose yaw comes from the IMU's own orientation field is evidence, not truth (module
@@ -71,15 +73,25 @@ def _with_orientation(given: InitialState, bank: BankResult) -> InitialState:
     if bank.t_decided is not None:
         off = float(np.degrees(wrap_angle(bank.init.rpy[2] - given.rpy[2])))
         sig = float(np.degrees(bank.init.sigma_att_rad[2]))
-        word = ("agrees" if abs(off) <= max(3.0 * sig, MAGNETOMETER_YAW_SIGMA_DEG)
-                else "is magnetometer-grade: not used")
-        return replace(bank.init, how=f"{bank.init.how}; the IMU orientation field's yaw {stated:.0f} deg is "
-                                      f"{off:+.0f} deg off it ({word})")
+        word = (
+            "agrees"
+            if abs(off) <= max(3.0 * sig, MAGNETOMETER_YAW_SIGMA_DEG)
+            else "is magnetometer-grade: not used"
+        )
+        return replace(
+            bank.init,
+            how=f"{bank.init.how}; the IMU orientation field's yaw {stated:.0f} deg is "
+            f"{off:+.0f} deg off it ({word})",
+        )
     att = given.sigma_att_rad.copy()
     att[2] = max(float(att[2]), np.radians(MAGNETOMETER_YAW_SIGMA_DEG))
-    return replace(given, sigma_att_rad=att, yaw_evidence="undetermined",
-                   how=f"{given.how}; yaw {stated:.0f} deg from the IMU's orientation field, not confirmed by the "
-                       f"motion (magnetometer-grade: +-{np.degrees(att[2]):.0f} deg)")
+    return replace(
+        given,
+        sigma_att_rad=att,
+        yaw_evidence="undetermined",
+        how=f"{given.how}; yaw {stated:.0f} deg from the IMU's orientation field, not confirmed by the "
+        f"motion (magnetometer-grade: +-{np.degrees(att[2]):.0f} deg)",
+    )
 
 
 def start_pieces(run: RecordedRun, cfg: RunConfig, filter_pass: FilterPass) -> StartPieces:
@@ -87,12 +99,21 @@ def start_pieces(run: RecordedRun, cfg: RunConfig, filter_pass: FilterPass) -> S
     ``gnss.sigma_scale`` for the start, as the estimators see them)."""
     quality = check_imu(run.imu, cfg)
     stationary = detect_stationary(run.imu, run.gnss, run.origin, params_from_config(cfg))
-    init, bank = start_of(scaled_gnss(run, float(cfg["gnss"]["sigma_scale"])), cfg, stationary, quality, filter_pass)
+    init, bank = start_of(
+        scaled_gnss(run, float(cfg["gnss"]["sigma_scale"])), cfg, stationary, quality, filter_pass
+    )
     return StartPieces(quality, stationary, init, bank)
 
 
-def start_and_quality(run: RecordedRun, cfg: RunConfig, init=None, quality=None, stationary=None, *,
-                      filter_pass: FilterPass):
+def start_and_quality(
+    run: RecordedRun,
+    cfg: RunConfig,
+    init=None,
+    quality=None,
+    stationary=None,
+    *,
+    filter_pass: FilterPass,
+):
     """What every estimator starts from: the IMU data-quality findings (checked here when not
     given) and the initial state (``init``, else :func:`start_of`).
 
@@ -107,7 +128,9 @@ def start_and_quality(run: RecordedRun, cfg: RunConfig, init=None, quality=None,
     return init, quality
 
 
-def start_for(run: RecordedRun, settings, init=None, quality=None, stationary=None, *, filter_pass: FilterPass):
+def start_for(
+    run: RecordedRun, settings, init=None, quality=None, stationary=None, *, filter_pass: FilterPass
+):
     """The start and quality report of an estimator's pass: as given, else found here for this run
     alone (:func:`start_and_quality`), which needs a run configuration: an estimator's own settings
     cannot self-start.
@@ -121,6 +144,8 @@ def start_for(run: RecordedRun, settings, init=None, quality=None, stationary=No
         return start_and_quality(run, settings, init, quality, stationary, filter_pass=filter_pass)
     init = init if init is not None else run.init
     if init is None or quality is None:
-        raise ValueError("an estimator given its settings needs init= and quality= (gnssacc.pipeline.prepare gives "
-                         "both)")
+        raise ValueError(
+            "an estimator given its settings needs init= and quality= (gnssacc.pipeline.prepare gives "
+            "both)"
+        )
     return init, quality

@@ -58,6 +58,7 @@ seconds cannot be told from a stop by the fixes.
 Frames and units: body FRD, SI units and radians inside; the report's JSON uses the same units
 (angular rates in rad/s) and says so in its keys.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
@@ -67,8 +68,16 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from ..core.earth import LocalTangentFrame
 from ..core.recording import GnssFixes, ImuData
-from ..core.stationary_params import StationaryParams, params_from_config  # noqa: F401 (this stage's API)
-from .allan import allan_deviation_pooled, fit_noise_terms, floor_bias_instability, remove_spectral_lines
+from ..core.stationary_params import (  # noqa: F401 (this stage's API)
+    StationaryParams,
+    params_from_config,
+)
+from .allan import (
+    allan_deviation_pooled,
+    fit_noise_terms,
+    floor_bias_instability,
+    remove_spectral_lines,
+)
 
 DEG = np.pi / 180.0
 CHANNELS = ("ax", "ay", "az", "gx", "gy", "gz")
@@ -125,12 +134,22 @@ class StationarySpan:
     def to_dict(self) -> dict:
         r = lambda v, k=6: [round(float(x), k) for x in v]  # noqa: E731 - JSON rounding only
         opt = lambda v: None if v is None else round(float(v), 4)  # noqa: E731
-        return {"t_start": round(self.t_start, 3), "t_end": round(self.t_end, 3), "i_start": int(self.i_start),
-                "i_end": int(self.i_end), "f_mean_mps2": r(self.f_mean_b), "omega_mean_rps": r(self.omega_mean_b, 8),
-                "f_std_mps2": r(self.f_std_b), "omega_std_rps": r(self.omega_std_b, 8),
-                "f_se_mps2": r(self.f_se_b, 8), "omega_se_rps": r(self.omega_se_b, 9),
-                "gnss_checked": bool(self.gnss_checked), "gnss_speed_mps": opt(self.gnss_speed_mps),
-                "gnss_speed_sigma_mps": opt(self.gnss_speed_sigma_mps), "gnss_n_fixes": int(self.gnss_n_fixes)}
+        return {
+            "t_start": round(self.t_start, 3),
+            "t_end": round(self.t_end, 3),
+            "i_start": int(self.i_start),
+            "i_end": int(self.i_end),
+            "f_mean_mps2": r(self.f_mean_b),
+            "omega_mean_rps": r(self.omega_mean_b, 8),
+            "f_std_mps2": r(self.f_std_b),
+            "omega_std_rps": r(self.omega_std_b, 8),
+            "f_se_mps2": r(self.f_se_b, 8),
+            "omega_se_rps": r(self.omega_se_b, 9),
+            "gnss_checked": bool(self.gnss_checked),
+            "gnss_speed_mps": opt(self.gnss_speed_mps),
+            "gnss_speed_sigma_mps": opt(self.gnss_speed_sigma_mps),
+            "gnss_n_fixes": int(self.gnss_n_fixes),
+        }
 
 
 @dataclass
@@ -178,16 +197,24 @@ class StationaryReport:
 
     def summary(self) -> str:
         unchecked = sum(not s.gnss_checked for s in self.spans)
-        return (f"stationary: {len(self.spans)} spans, {self.total_s:.1f} s ({100 * self.fraction:.1f} % of the run)"
-                f", {unchecked} without GNSS check; {len(self.rejected)} IMU-still stretches rejected as moving")
+        return (
+            f"stationary: {len(self.spans)} spans, {self.total_s:.1f} s ({100 * self.fraction:.1f} % of the run)"
+            f", {unchecked} without GNSS check; {len(self.rejected)} IMU-still stretches rejected as moving"
+        )
 
     def to_dict(self) -> dict:
-        return {"n_spans": len(self.spans), "total_s": round(self.total_s, 3), "fraction": round(self.fraction, 5),
-                "spans": [s.to_dict() for s in self.spans], "rejected": self.rejected,
-                "params": {k: getattr(self.params, k) for k in self.params.__dataclass_fields__}}
+        return {
+            "n_spans": len(self.spans),
+            "total_s": round(self.total_s, 3),
+            "fraction": round(self.fraction, 5),
+            "spans": [s.to_dict() for s in self.spans],
+            "rejected": self.rejected,
+            "params": {k: getattr(self.params, k) for k in self.params.__dataclass_fields__},
+        }
 
 
 # --- IMU stillness ---------------------------------------------------------------------------
+
 
 def _median_interval(t: np.ndarray) -> float:
     """Median sampling interval [s] of at least two times, with one run-long work array."""
@@ -204,8 +231,8 @@ def _gap_cells(t: np.ndarray, c: int, J: int, longest: float) -> np.ndarray:
     out = np.empty(J, bool)
     for a in range(0, J, GAP_BLOCK_CELLS):
         b = min(a + GAP_BLOCK_CELLS, J)
-        lo = max(a * c - 1, 0)                       # the sample before the block's first interval
-        gap = np.diff(t[lo:b * c]) > longest
+        lo = max(a * c - 1, 0)  # the sample before the block's first interval
+        gap = np.diff(t[lo : b * c]) > longest
         if a == 0:
             gap = np.concatenate([[False], gap])
         out[a:b] = gap.reshape(b - a, c).any(axis=1)
@@ -218,7 +245,12 @@ def _cells(imu: ImuData, p: StationaryParams):
     c = max(int(round(p.cell_s / dt)), 1)
     J = len(imu) // c
     # Reshapes are views: no copy of a 10 h record.
-    M = np.hstack([imu.f_b[:J * c].reshape(J, c, 3).mean(axis=1), imu.omega_ib_b[:J * c].reshape(J, c, 3).mean(axis=1)])
+    M = np.hstack(
+        [
+            imu.f_b[: J * c].reshape(J, c, 3).mean(axis=1),
+            imu.omega_ib_b[: J * c].reshape(J, c, 3).mean(axis=1),
+        ]
+    )
     # A long interval means unseen motion may hide there.
     return M, c, _gap_cells(np.asarray(imu.t), c, J, p.gap_factor * dt), dt
 
@@ -234,7 +266,7 @@ def _running_median(x: np.ndarray, window: int) -> np.ndarray:
     out = np.empty((n_out,) + x.shape[1:])
     for a in range(0, n_out, MEDIAN_BLOCK_ROWS):
         b = min(a + MEDIAN_BLOCK_ROWS, n_out)
-        out[a:b] = np.median(sliding_window_view(x[a:b + window - 1], window, axis=0), axis=-1)
+        out[a:b] = np.median(sliding_window_view(x[a : b + window - 1], window, axis=0), axis=-1)
     return out
 
 
@@ -332,7 +364,10 @@ def _drop_drift(still, mu, se2, B: int, J: int, p: StationaryParams, passes: int
 
 # --- GNSS agreement and span statistics --------------------------------------------------------
 
-def gnss_speed(t: np.ndarray, p_n: np.ndarray, sigma_ned: np.ndarray, corr_s: float) -> tuple[float, float]:
+
+def gnss_speed(
+    t: np.ndarray, p_n: np.ndarray, sigma_ned: np.ndarray, corr_s: float
+) -> tuple[float, float]:
     """Horizontal speed of a weighted straight-line fit to fixes, and its 1-sigma per axis.
 
     Parameters
@@ -364,7 +399,9 @@ def gnss_speed(t: np.ndarray, p_n: np.ndarray, sigma_ned: np.ndarray, corr_s: fl
     return float(np.hypot(*v)), float(np.sqrt(inflate * var.mean()))
 
 
-def _excursion_bound(imu: ImuData, span: StationarySpan, idx: np.ndarray, p: StationaryParams, dt_med: float):
+def _excursion_bound(
+    imu: ImuData, span: StationarySpan, idx: np.ndarray, p: StationaryParams, dt_med: float
+):
     """How far the vehicle can have got from its stationary position, as a function of the time
     since (or until) the span, given what the IMU measured on one side of it.
 
@@ -391,8 +428,10 @@ def _excursion_bound(imu: ImuData, span: StationarySpan, idx: np.ndarray, p: Sta
         return np.zeros(1), np.zeros(1)
     theta = np.cumsum((imu.omega_ib_b[idx[:n], :2] - span.omega_mean_b[:2]) * dt[:n, None], axis=0)
     f_cell = imu.f_b[idx[:n]].reshape(-1, c, 3).mean(axis=1)
-    tilt = np.linalg.norm(theta[c - 1::c], axis=1)
-    alpha = np.linalg.norm(f_cell - span.f_mean_b, axis=1) + G_APPROX * tilt + p.excursion_floor_mps2
+    tilt = np.linalg.norm(theta[c - 1 :: c], axis=1)
+    alpha = (
+        np.linalg.norm(f_cell - span.f_mean_b, axis=1) + G_APPROX * tilt + p.excursion_floor_mps2
+    )
     width = dt[:n].reshape(-1, c).sum(axis=1)
     d_end = np.cumsum(width)
     u = d_end - 0.5 * width
@@ -400,22 +439,29 @@ def _excursion_bound(imu: ImuData, span: StationarySpan, idx: np.ndarray, p: Sta
     return np.concatenate([[0.0], d_end]), np.concatenate([[0.0], d_end * s1 - s2])
 
 
-def _side_indices(imu: ImuData, span: StationarySpan, before: bool, p: StationaryParams,
-                  dt_med: float) -> np.ndarray:
+def _side_indices(
+    imu: ImuData, span: StationarySpan, before: bool, p: StationaryParams, dt_med: float
+) -> np.ndarray:
     """IMU samples within ``gnss_margin_s`` of the span, outward from its edge, cut at an IMU gap."""
     t = imu.t
     if before:
-        idx = np.arange(span.i_start - 1, int(np.searchsorted(t, span.t_start - p.gnss_margin_s)) - 1, -1)
+        idx = np.arange(
+            span.i_start - 1, int(np.searchsorted(t, span.t_start - p.gnss_margin_s)) - 1, -1
+        )
     else:
-        idx = np.arange(span.i_end, int(np.searchsorted(t, span.t_end + p.gnss_margin_s, side="right")))
+        idx = np.arange(
+            span.i_end, int(np.searchsorted(t, span.t_end + p.gnss_margin_s, side="right"))
+        )
     idx = idx[(idx >= 0) & (idx < len(t))]
     if len(idx) > 1:
         gap = np.flatnonzero(np.abs(np.diff(t[idx])) > p.gap_factor * dt_med)
-        idx = idx[:gap[0] + 1] if gap.size else idx
+        idx = idx[: gap[0] + 1] if gap.size else idx
     return idx
 
 
-def _margin_fixes(imu: ImuData, span: StationarySpan, gnss: GnssFixes, p: StationaryParams, dt_med: float):
+def _margin_fixes(
+    imu: ImuData, span: StationarySpan, gnss: GnssFixes, p: StationaryParams, dt_med: float
+):
     """Fixes within ``gnss_margin_s`` outside the span and the IMU-bounded excursion at each [m]."""
     ks, bounds = [], []
     for before in (True, False):
@@ -424,7 +470,9 @@ def _margin_fixes(imu: ImuData, span: StationarySpan, gnss: GnssFixes, p: Statio
             continue
         edge = span.t_start if before else span.t_end
         reach = abs(edge - imu.t[idx[-1]])
-        k = np.flatnonzero((np.abs(gnss.t - edge) <= reach) & ((gnss.t < span.t_start) | (gnss.t > span.t_end)))
+        k = np.flatnonzero(
+            (np.abs(gnss.t - edge) <= reach) & ((gnss.t < span.t_start) | (gnss.t > span.t_end))
+        )
         if k.size:
             d_grid, D = _excursion_bound(imu, span, idx, p, dt_med)
             ks.append(k)
@@ -434,8 +482,14 @@ def _margin_fixes(imu: ImuData, span: StationarySpan, gnss: GnssFixes, p: Statio
     return np.concatenate(ks), np.concatenate(bounds)
 
 
-def _gnss_verdict(span: StationarySpan, imu: ImuData, gnss: GnssFixes, p_n: np.ndarray,
-                  p: StationaryParams, dt_med: float) -> bool:
+def _gnss_verdict(
+    span: StationarySpan,
+    imu: ImuData,
+    gnss: GnssFixes,
+    p_n: np.ndarray,
+    p: StationaryParams,
+    dt_med: float,
+) -> bool:
     """Fill the span's GNSS fields; False when the fixes show it moving (module notes, step 4).
 
     The straight line is fitted to the fixes inside the span and to those within
@@ -483,19 +537,32 @@ def _batch_se(x: np.ndarray, block: int) -> np.ndarray:
     nb = len(x) // block
     if nb < 2:
         return np.std(x, axis=0) / np.sqrt(len(x))
-    means = x[:nb * block].reshape(nb, block, -1).mean(axis=1)
+    means = x[: nb * block].reshape(nb, block, -1).mean(axis=1)
     return np.std(means, axis=0, ddof=1) / np.sqrt(nb)
 
 
 def _span(imu: ImuData, i0: int, i1: int, block: int) -> StationarySpan:
     f, w = imu.f_b[i0:i1], imu.omega_ib_b[i0:i1]
-    return StationarySpan(float(imu.t[i0]), float(imu.t[i1 - 1]), int(i0), int(i1), f.mean(axis=0), w.mean(axis=0),
-                          f.std(axis=0), w.std(axis=0), _batch_se(f, block), _batch_se(w, block))
+    return StationarySpan(
+        float(imu.t[i0]),
+        float(imu.t[i1 - 1]),
+        int(i0),
+        int(i1),
+        f.mean(axis=0),
+        w.mean(axis=0),
+        f.std(axis=0),
+        w.std(axis=0),
+        _batch_se(f, block),
+        _batch_se(w, block),
+    )
 
 
 # --- the detector -----------------------------------------------------------------------------
 
-def imu_still_stretches(imu: ImuData, params: StationaryParams | None = None) -> list[tuple[int, int]]:
+
+def imu_still_stretches(
+    imu: ImuData, params: StationaryParams | None = None
+) -> list[tuple[int, int]]:
     """IMU-still stretches as sample ranges ``[i_start, i_end)`` (steps 1-3 of the module notes)."""
     p = params or StationaryParams()
     if len(imu) < 2:
@@ -517,8 +584,14 @@ def imu_still_stretches(imu: ImuData, params: StationaryParams | None = None) ->
     return out
 
 
-def velocity_change(imu: ImuData, i0: int, i1: int, ref: StationarySpan, cross_axis: float = 0.01,
-                    g: float = G_APPROX) -> tuple[np.ndarray, float]:
+def velocity_change(
+    imu: ImuData,
+    i0: int,
+    i1: int,
+    ref: StationarySpan,
+    cross_axis: float = 0.01,
+    g: float = G_APPROX,
+) -> tuple[np.ndarray, float]:
     """Horizontal velocity change from sample ``i0`` to sample ``i1`` (the first of a stationary
     span ``ref``), by the IMU samples ``i0 + 1 .. i1``.
 
@@ -537,13 +610,13 @@ def velocity_change(imu: ImuData, i0: int, i1: int, ref: StationarySpan, cross_a
     budget : float
         The second-order tilt and cross-axis terms integrated over the interval [m/s].
     """
-    t = imu.t[i0:i1 + 1]
+    t = imu.t[i0 : i1 + 1]
     dt = np.diff(t)
-    w = (imu.omega_ib_b[i0 + 1:i1 + 1] - ref.omega_mean_b) * dt[:, None]
+    w = (imu.omega_ib_b[i0 + 1 : i1 + 1] - ref.omega_mean_b) * dt[:, None]
     # Rotation from the span back to each sample (small-angle sum, yaw kept whole).
     theta = -np.cumsum(w[::-1], axis=0)[::-1]
     tilt = theta * np.array([1.0, 1.0, 0.0])  # a turn about body z leaves gravity in place
-    f = imu.f_b[i0 + 1:i1 + 1] - ref.f_mean_b + np.cross(tilt, ref.f_mean_b)
+    f = imu.f_b[i0 + 1 : i1 + 1] - ref.f_mean_b + np.cross(tilt, ref.f_mean_b)
     c, s_ = np.cos(theta[:, 2]), np.sin(theta[:, 2])
     a_x, a_y = c * f[:, 0] - s_ * f[:, 1], s_ * f[:, 0] + c * f[:, 1]
     dv = np.array([np.sum(a_x * dt), np.sum(a_y * dt)])
@@ -552,19 +625,24 @@ def velocity_change(imu: ImuData, i0: int, i1: int, ref: StationarySpan, cross_a
     return dv, float(np.sum(err * dt))
 
 
-def _chain_link(imu: ImuData, a: StationarySpan, b: StationarySpan, p: StationaryParams,
-                dt_med: float) -> float | None:
+def _chain_link(
+    imu: ImuData, a: StationarySpan, b: StationarySpan, p: StationaryParams, dt_med: float
+) -> float | None:
     """Speed change [m/s] from span ``a`` to the next span ``b`` by the IMU: 0.0 when it is within
     the error budget (both may be at rest), None when there is no verdict (too far apart, or an
     IMU gap between them)."""
     if b.t_start - a.t_end > p.chain_max_gap_s:
         return None
-    gaps = np.diff(imu.t[a.i_end - 1:b.i_start + 1])
+    gaps = np.diff(imu.t[a.i_end - 1 : b.i_start + 1])
     if gaps.size == 0 or np.max(gaps) > p.gap_factor * dt_med:
         return None  # unseen motion in a data gap
     dv, budget = velocity_change(imu, a.i_end - 1, b.i_start, b, p.chain_cross_axis)
     u = float(np.hypot(*dv))
-    return u if u > p.chain_floor_mps + budget + p.excursion_floor_mps2 * (b.t_start - a.t_end) else 0.0
+    return (
+        u
+        if u > p.chain_floor_mps + budget + p.excursion_floor_mps2 * (b.t_start - a.t_end)
+        else 0.0
+    )
 
 
 def _log_i0(x: float) -> float:
@@ -588,7 +666,9 @@ def _misfit(group: list, speed: float) -> float:
     return out
 
 
-def _resolve_chain(imu: ImuData, spans: list, p: StationaryParams, rejected: list, dt_med: float) -> list:
+def _resolve_chain(
+    imu: ImuData, spans: list, p: StationaryParams, rejected: list, dt_med: float
+) -> list:
     """Drop spans the IMU velocity chain contradicts (module notes, step 5).
 
     Neighbouring spans whose velocity change is within its budget form a group (all at rest or
@@ -622,12 +702,18 @@ def _resolve_chain(imu: ImuData, spans: list, p: StationaryParams, rejected: lis
 
 def _rejection(span: StationarySpan, why: str) -> dict:
     opt = lambda v: None if v is None else round(float(v), 4)  # noqa: E731
-    return {"t_start": round(span.t_start, 3), "t_end": round(span.t_end, 3), "why": why,
-            "gnss_speed_mps": opt(span.gnss_speed_mps), "gnss_speed_sigma_mps": opt(span.gnss_speed_sigma_mps)}
+    return {
+        "t_start": round(span.t_start, 3),
+        "t_end": round(span.t_end, 3),
+        "why": why,
+        "gnss_speed_mps": opt(span.gnss_speed_mps),
+        "gnss_speed_sigma_mps": opt(span.gnss_speed_sigma_mps),
+    }
 
 
-def detect_stationary(imu: ImuData, gnss: GnssFixes, origin: LocalTangentFrame,
-                      params: StationaryParams | None = None) -> StationaryReport:
+def detect_stationary(
+    imu: ImuData, gnss: GnssFixes, origin: LocalTangentFrame, params: StationaryParams | None = None
+) -> StationaryReport:
     """Stationary spans of a ground vehicle from its IMU, checked against its GNSS fixes.
 
     Parameters
@@ -663,6 +749,7 @@ def detect_stationary(imu: ImuData, gnss: GnssFixes, origin: LocalTangentFrame,
 
 
 # --- noise identification from the stationary spans -------------------------------------------
+
 
 @dataclass
 class StationaryNoise:
@@ -718,16 +805,28 @@ class StationaryNoise:
     def to_dict(self) -> dict:
         dens = [None if not np.isfinite(v) else float(f"{v:.4g}") for v in self.white_density]
         bi = [None if v is None else float(f"{v:.4g}") for v in self.bias_instability]
-        return {"channels": list(self.channels),
-                "units": "accel m/s^2/sqrt(Hz) and m/s^2, gyro rad/s/sqrt(Hz) and rad/s",
-                "white_density": dens, "bias_instability": bi, "total_s": round(self.total_s, 2),
-                "n_spans": self.n_spans,
-                "turn_on": [{"t_start": round(d["t_start"], 3), "t_end": round(d["t_end"], 3),
-                             "omega_mean_rps": [float(f"{v:.6g}") for v in d["omega_mean_b"]],
-                             "omega_se_rps": [float(f"{v:.3g}") for v in d["omega_se_b"]]} for d in self.turn_on]}
+        return {
+            "channels": list(self.channels),
+            "units": "accel m/s^2/sqrt(Hz) and m/s^2, gyro rad/s/sqrt(Hz) and rad/s",
+            "white_density": dens,
+            "bias_instability": bi,
+            "total_s": round(self.total_s, 2),
+            "n_spans": self.n_spans,
+            "turn_on": [
+                {
+                    "t_start": round(d["t_start"], 3),
+                    "t_end": round(d["t_end"], 3),
+                    "omega_mean_rps": [float(f"{v:.6g}") for v in d["omega_mean_b"]],
+                    "omega_se_rps": [float(f"{v:.3g}") for v in d["omega_se_b"]],
+                }
+                for d in self.turn_on
+            ],
+        }
 
 
-def noise_from_stationary(imu: ImuData, report: StationaryReport, min_span_s: float = 10.0) -> StationaryNoise:
+def noise_from_stationary(
+    imu: ImuData, report: StationaryReport, min_span_s: float = 10.0
+) -> StationaryNoise:
     """White-noise densities, bias instability and turn-on bias evidence from the stationary spans.
 
     Each span of at least ``min_span_s`` has its narrow spectral lines (engine harmonics)
@@ -752,17 +851,28 @@ def noise_from_stationary(imu: ImuData, report: StationaryReport, min_span_s: fl
     StationaryNoise
     """
     dt = float(np.median(np.diff(imu.t)))
-    turn_on = [{"t_start": s.t_start, "t_end": s.t_end, "omega_mean_b": s.omega_mean_b.copy(),
-                "omega_se_b": s.omega_se_b.copy()} for s in report.spans]
+    turn_on = [
+        {
+            "t_start": s.t_start,
+            "t_end": s.t_end,
+            "omega_mean_b": s.omega_mean_b.copy(),
+            "omega_se_b": s.omega_se_b.copy(),
+        }
+        for s in report.spans
+    ]
     long = [s for s in report.spans if s.duration_s >= min_span_s]
     if not long:
         return StationaryNoise(np.full(6, np.nan), [None] * 6, turn_on, 0.0, 0)
     white, bias_inst, adevs = np.full(6, np.nan), [None] * 6, []
     for ch in range(6):  # one channel at a time keeps the memory of hours-long spans small
         src = imu.f_b if ch < 3 else imu.omega_ib_b
-        ad = allan_deviation_pooled([remove_spectral_lines(src[s.i_start:s.i_end, ch % 3], dt) for s in long], dt)
+        ad = allan_deviation_pooled(
+            [remove_spectral_lines(src[s.i_start : s.i_end, ch % 3], dt) for s in long], dt
+        )
         white[ch] = fit_noise_terms(ad).white
         bias_inst[ch] = floor_bias_instability(ad, white[ch])
         adevs.append(ad)
     pooled = replace(adevs[0], adev=np.column_stack([a.adev for a in adevs]))
-    return StationaryNoise(white, bias_inst, turn_on, float(sum(s.duration_s for s in long)), len(long), pooled)
+    return StationaryNoise(
+        white, bias_inst, turn_on, float(sum(s.duration_s for s in long)), len(long), pooled
+    )

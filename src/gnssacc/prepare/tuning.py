@@ -79,6 +79,7 @@ without truth, in five steps:
 The result is a :class:`TuneResult`: the tuned values in configuration units (a reusable
 ``tuned.toml``), the NIS before and after, and the time it took.
 """
+
 from __future__ import annotations
 
 import time
@@ -91,9 +92,15 @@ from ..core.errors import InputError
 from .filter_pass import FilterPass
 
 #: The identified parameters: (section, key), in the order of the search vector.
-PARAMETERS = (("imu", "gyro_arw_deg_rth"), ("imu", "accel_vrw_mps_rth"), ("imu", "gyro_bias_instability_deg_h"),
-              ("imu", "accel_bias_instability_mg"), ("imu", "gyro_bias_sigma0_deg_h"), ("imu", "accel_bias_sigma0_mg"),
-              ("gnss", "sigma_scale"))
+PARAMETERS = (
+    ("imu", "gyro_arw_deg_rth"),
+    ("imu", "accel_vrw_mps_rth"),
+    ("imu", "gyro_bias_instability_deg_h"),
+    ("imu", "accel_bias_instability_mg"),
+    ("imu", "gyro_bias_sigma0_deg_h"),
+    ("imu", "accel_bias_sigma0_mg"),
+    ("gnss", "sigma_scale"),
+)
 #: The ground-vehicle aids' noise, identified (after :data:`PARAMETERS`) when the aid is in use:
 #: the non-holonomic constraint's sigmas when ``[nhc] enabled``, the odometry's speed sigma when
 #: the run has wheel odometry and ``[odometry] enabled``; their innovations join the likelihood.
@@ -143,8 +150,8 @@ _BOUND_DECADES = 2.0
 #: to the sensor's noise. The floor sits this many decades below the measurement (1/1.25: the
 #: at-rest estimates scatter by +-11 % on simulated runs with 95-110 s at rest).
 REST_FLOOR_DECADES = float(np.log10(1.25))
-_RAD_S_TO_DEG_RTH = 180.0 / np.pi * 60.0     # rad/sqrt(s) -> deg/sqrt(h)
-_MPS2_RTHZ_TO_MPS_RTH = 60.0                 # m/s^2/sqrt(Hz) -> m/s/sqrt(h)
+_RAD_S_TO_DEG_RTH = 180.0 / np.pi * 60.0  # rad/sqrt(s) -> deg/sqrt(h)
+_MPS2_RTHZ_TO_MPS_RTH = 60.0  # m/s^2/sqrt(Hz) -> m/s/sqrt(h)
 
 
 @dataclass
@@ -183,30 +190,56 @@ class TuneResult:
     def line(self) -> str:
         """One line for the terminal."""
         parts = [f"{key}={_short(v)}" for sec in self.values.values() for key, v in sec.items()]
-        nis = (f"; position NIS/dof {self.nis_before:.2f} -> {self.nis_after:.2f}"
-               if self.nis_before is not None and self.nis_after is not None else "")
+        nis = (
+            f"; position NIS/dof {self.nis_before:.2f} -> {self.nis_after:.2f}"
+            if self.nis_before is not None and self.nis_after is not None
+            else ""
+        )
         back = [k.split(".")[-1] for k in self.from_stationary.get("drawn_back", [])]
-        return (f"tuned noise ({self.n_evaluations} EKF passes, {self.seconds:.1f} s): " + ", ".join(parts) + nis
-                + (f"; drawn back toward the start, as far as the likelihood allows: {', '.join(back)}" if back else "")
-                + (f"; kept from config: {', '.join(self.fixed)}" if self.fixed else ""))
+        return (
+            f"tuned noise ({self.n_evaluations} EKF passes, {self.seconds:.1f} s): "
+            + ", ".join(parts)
+            + nis
+            + (
+                f"; drawn back toward the start, as far as the likelihood allows: {', '.join(back)}"
+                if back
+                else ""
+            )
+            + (f"; kept from config: {', '.join(self.fixed)}" if self.fixed else "")
+        )
 
     def to_toml(self, cfg: RunConfig) -> str:
         """A reusable configuration file: every ``[imu]`` key and ``gnss.sigma_scale`` as tuned."""
-        lines = ["# Noise identified by gnssacc --tune auto from this recording (no truth used).",
-                 "# Reuse it with: gnssacc run ... --config tuned.toml --tune none", "", "[imu]"]
+        lines = [
+            "# Noise identified by gnssacc --tune auto from this recording (no truth used).",
+            "# Reuse it with: gnssacc run ... --config tuned.toml --tune none",
+            "",
+            "[imu]",
+        ]
         lines += [f"{k} = {toml_value(_plain(v))}" for k, v in cfg["imu"].items()]
-        lines += ["", "[gnss]"] + [f"{k} = {toml_value(_plain(cfg['gnss'][k]))}"
-                                    for k in ("sigma_scale", "gm_sigma_m", "gm_tau_s")]
-        for sec, key in NHC_PARAMETERS + ODOMETRY_PARAMETERS:   # the aids' noise, where identified
+        lines += ["", "[gnss]"] + [
+            f"{k} = {toml_value(_plain(cfg['gnss'][k]))}"
+            for k in ("sigma_scale", "gm_sigma_m", "gm_tau_s")
+        ]
+        for sec, key in NHC_PARAMETERS + ODOMETRY_PARAMETERS:  # the aids' noise, where identified
             if key in self.values.get(sec, {}):
                 lines += ["", f"[{sec}]"] if f"[{sec}]" not in lines else []
                 lines.append(f"{key} = {toml_value(_plain(cfg[sec][key]))}")
         return "\n".join(lines) + "\n"
 
     def to_dict(self) -> dict:
-        return {"values": self.values, "start": self.start, "fixed": self.fixed, "from_stationary": self.from_stationary,
-                "nis_before": self.nis_before, "nis_after": self.nis_after, "loglik_before": self.loglik_before,
-                "loglik_after": self.loglik_after, "n_evaluations": self.n_evaluations, "seconds": self.seconds}
+        return {
+            "values": self.values,
+            "start": self.start,
+            "fixed": self.fixed,
+            "from_stationary": self.from_stationary,
+            "nis_before": self.nis_before,
+            "nis_after": self.nis_after,
+            "loglik_before": self.loglik_before,
+            "loglik_after": self.loglik_after,
+            "n_evaluations": self.n_evaluations,
+            "seconds": self.seconds,
+        }
 
 
 def _plain(v):
@@ -224,7 +257,10 @@ def _short(v) -> str:
 
 def _prior_widths(cfg: RunConfig, params: list, info: dict) -> np.ndarray:
     """Prior 1-sigma per parameter [decades]: tighter where the stationary stretches measured it."""
-    wide, tight = float(cfg["tune"]["prior_decades"]), float(cfg["tune"]["stationary_prior_decades"])
+    wide, tight = (
+        float(cfg["tune"]["prior_decades"]),
+        float(cfg["tune"]["stationary_prior_decades"]),
+    )
     return np.array([tight if key in info else wide for _, key in params])
 
 
@@ -239,10 +275,17 @@ def _start_values(cfg: RunConfig, free: list, noise) -> tuple[dict, dict]:
     start = {p: np.atleast_1d(np.asarray(cfg[p[0]][p[1]], float)).copy() for p in free}
     info = {}
     if noise is not None:
-        dens = {("imu", "gyro_arw_deg_rth"): (noise.gyro_density, _RAD_S_TO_DEG_RTH),
-                ("imu", "accel_vrw_mps_rth"): (noise.accel_density, _MPS2_RTHZ_TO_MPS_RTH)}
+        dens = {
+            ("imu", "gyro_arw_deg_rth"): (noise.gyro_density, _RAD_S_TO_DEG_RTH),
+            ("imu", "accel_vrw_mps_rth"): (noise.accel_density, _MPS2_RTHZ_TO_MPS_RTH),
+        }
         for p, (d, scale) in dens.items():
-            if p in start and d is not None and np.all(np.isfinite(d)) and np.all(np.asarray(d) > 0):
+            if (
+                p in start
+                and d is not None
+                and np.all(np.isfinite(d))
+                and np.all(np.asarray(d) > 0)
+            ):
                 start[p] = np.asarray(d, float) * scale
                 info[p[1]] = _plain(start[p])
         info["stationary_s"] = float(noise.seconds)
@@ -252,11 +295,35 @@ def _start_values(cfg: RunConfig, free: list, noise) -> tuple[dict, dict]:
 class _Objective:
     """Negative innovation log-likelihood of one EKF pass at log10 scale factors ``theta``."""
 
-    def __init__(self, run, cfg, free, start, stationary, quality, init, method, kinds, filter_pass: FilterPass):
-        self.run, self.cfg, self.free, self.start, self.filter_pass = run, cfg, free, start, filter_pass
-        self.stationary, self.quality, self.init, self.method, self.kinds = stationary, quality, init, method, kinds
+    def __init__(
+        self,
+        run,
+        cfg,
+        free,
+        start,
+        stationary,
+        quality,
+        init,
+        method,
+        kinds,
+        filter_pass: FilterPass,
+    ):
+        self.run, self.cfg, self.free, self.start, self.filter_pass = (
+            run,
+            cfg,
+            free,
+            start,
+            filter_pass,
+        )
+        self.stationary, self.quality, self.init, self.method, self.kinds = (
+            stationary,
+            quality,
+            init,
+            method,
+            kinds,
+        )
         self.cov_every = int(cfg["tune"]["cov_every"])
-        self.init_scale = float(cfg["gnss"]["sigma_scale"])   # the scale the start was made with
+        self.init_scale = float(cfg["gnss"]["sigma_scale"])  # the scale the start was made with
         self.stats: dict = {}
 
     def config(self, theta) -> RunConfig:
@@ -276,15 +343,30 @@ class _Objective:
         run = scaled_gnss(self.run, scale)
         # The start's position sigma is that of the fixes it came from: it scales with them.
         init = replace(self.init, sigma_pos_m=self.init.sigma_pos_m * scale / self.init_scale)
-        sol = self.filter_pass(run, ungated(cfg), self.method, init=init, stationary=self.stationary, quality=self.quality,
-                      output_times=np.zeros(0), cov_every=self.cov_every)
+        sol = self.filter_pass(
+            run,
+            ungated(cfg),
+            self.method,
+            init=init,
+            stationary=self.stationary,
+            quality=self.quality,
+            output_times=np.zeros(0),
+            cov_every=self.cov_every,
+        )
         self.stats[tuple(np.round(theta, 12))] = sol.stats
         return -_loglik(sol.stats, self.kinds)
 
 
-def ml_search(negloglik, n: int, budget: int, prior_decades: float, step_decades: float = 0.5,
-              theta0: np.ndarray | None = None, probe_decades: float | None = 1.0,
-              lower: np.ndarray | None = None):
+def ml_search(
+    negloglik,
+    n: int,
+    budget: int,
+    prior_decades: float,
+    step_decades: float = 0.5,
+    theta0: np.ndarray | None = None,
+    probe_decades: float | None = 1.0,
+    lower: np.ndarray | None = None,
+):
     """Minimise ``negloglik(theta) + |theta|^2 / (2 d^2)`` over log10 scale factors ``theta``.
 
     The generic part of the tuner: first each coordinate in turn is probed at ``+-probe_decades``
@@ -321,7 +403,11 @@ def ml_search(negloglik, n: int, budget: int, prior_decades: float, step_decades
 
     best = [np.inf, np.zeros(n)]
     count = [0]
-    lo = np.full(n, -_BOUND_DECADES) if lower is None else np.maximum(np.asarray(lower, float), -_BOUND_DECADES)
+    lo = (
+        np.full(n, -_BOUND_DECADES)
+        if lower is None
+        else np.maximum(np.asarray(lower, float), -_BOUND_DECADES)
+    )
 
     def objective(theta):
         theta = np.clip(theta, lo, _BOUND_DECADES)
@@ -347,13 +433,18 @@ def ml_search(negloglik, n: int, budget: int, prior_decades: float, step_decades
     left = budget - count[0]
     if left > 1:
         simplex = x0 + np.vstack([np.zeros(n), step_decades * np.eye(n)])
-        minimize(objective, x0, method="Nelder-Mead",
-                 options={"maxfev": left, "initial_simplex": simplex, "xatol": 0.02, "fatol": 0.5})
+        minimize(
+            objective,
+            x0,
+            method="Nelder-Mead",
+            options={"maxfev": left, "initial_simplex": simplex, "xatol": 0.02, "fatol": 0.5},
+        )
     return best[1], best[0], count[0]
 
 
-def draw_back(negloglik, theta, prior_decades, eligible=None,
-              value: float | None = None) -> tuple[np.ndarray, int, list]:
+def draw_back(
+    negloglik, theta, prior_decades, eligible=None, value: float | None = None
+) -> tuple[np.ndarray, int, list]:
     """Step 4 of the module docstring: each eligible coordinate of ``theta`` drawn toward 0 (the
     starting values) while ``negloglik`` stays within :data:`SHRINK_TOLERANCE` of its value at
     ``theta`` (the tolerance is shared by all coordinates).
@@ -387,8 +478,8 @@ def draw_back(negloglik, theta, prior_decades, eligible=None,
     for i in order:
         if abs(theta[i]) < SHRINK_MIN_DECADES or (eligible is not None and not eligible[i]):
             continue
-        fails, keeps = 0.0, 1.0   # fractions of theta[i] kept: too little / enough for the data
-        for step in range(3):     # all the way back, then bisection: 0, 0.5, 0.25 or 0.75
+        fails, keeps = 0.0, 1.0  # fractions of theta[i] kept: too little / enough for the data
+        for step in range(3):  # all the way back, then bisection: 0, 0.5, 0.25 or 0.75
             frac = 0.5 * (fails + keeps) if step else 0.0
             trial = theta.copy()
             trial[i] *= frac
@@ -405,7 +496,9 @@ def draw_back(negloglik, theta, prior_decades, eligible=None,
     return theta, n, moved
 
 
-def _gauss_markov_stage(run, cfg, free, start, stats, stationary, quality, init, method, kinds, info, filter_pass):
+def _gauss_markov_stage(
+    run, cfg, free, start, stats, stationary, quality, init, method, kinds, info, filter_pass
+):
     """Step 3 of the module docstring; returns the configuration, its EKF stats, the passes made and
     whether the Gauss-Markov model was kept."""
     acf, n = stats.get("acf1_pos"), stats.get("n_pos_updates", 0)
@@ -422,8 +515,13 @@ def _gauss_markov_stage(run, cfg, free, start, stats, stationary, quality, init,
     start[("gnss", "gm_tau_s")] = np.atleast_1d(cfg.gnss_gm_tau.mean())
     params = list(free) + gm_free
     obj = _Objective(run, cfg, params, start, stationary, quality, init, method, kinds, filter_pass)
-    theta, j_best, n_eval = ml_search(obj, len(params), int(cfg["tune"]["max_evaluations"]),
-                                      _prior_widths(cfg, params, info), lower=_lower_bounds(params, info))
+    theta, j_best, n_eval = ml_search(
+        obj,
+        len(params),
+        int(cfg["tune"]["max_evaluations"]),
+        _prior_widths(cfg, params, info),
+        lower=_lower_bounds(params, info),
+    )
     gm_stats = obj.stats[tuple(np.round(theta, 12))]
     gain = _loglik(gm_stats, kinds) - _loglik(stats, kinds)
     info["gauss_markov_loglik_gain"] = float(gain)
@@ -440,7 +538,9 @@ def _draw_back(obj, theta, prior, kinds, info) -> tuple[np.ndarray, int]:
     if not eligible.any():
         info["drawn_back"] = []
         return np.asarray(theta), 0
-    theta, n, moved = draw_back(obj, theta, prior, eligible, -_loglik(obj.stats[tuple(np.round(theta, 12))], kinds))
+    theta, n, moved = draw_back(
+        obj, theta, prior, eligible, -_loglik(obj.stats[tuple(np.round(theta, 12))], kinds)
+    )
     info["drawn_back"] = [f"{obj.free[i][0]}.{obj.free[i][1]}" for i in moved]
     return theta, n
 
@@ -468,7 +568,9 @@ def without_aids(cfg: RunConfig) -> RunConfig:
     the yaw bank's (:func:`gnssacc.prepare.yawbank.select_yaw`)."""
     if not cfg["nhc"]["enabled"] and not cfg["odometry"]["enabled"]:
         return cfg
-    return cfg.with_values({"nhc": {"enabled": False}, "odometry": {"enabled": False}}, "tuning passes, aids off")
+    return cfg.with_values(
+        {"nhc": {"enabled": False}, "odometry": {"enabled": False}}, "tuning passes, aids off"
+    )
 
 
 def ungated(cfg: RunConfig) -> RunConfig:
@@ -491,8 +593,16 @@ def scaled_gnss(run, scale: float):
     return run.with_gnss(replace(run.gnss, sigma_ned=run.gnss.sigma_ned * scale))
 
 
-def tune(run, cfg: RunConfig, stationary=None, quality=None, init=None, noise=None, *,
-         filter_pass: FilterPass) -> tuple[RunConfig, TuneResult]:
+def tune(
+    run,
+    cfg: RunConfig,
+    stationary=None,
+    quality=None,
+    init=None,
+    noise=None,
+    *,
+    filter_pass: FilterPass,
+) -> tuple[RunConfig, TuneResult]:
     """Identify the free noise parameters (see the module docstring).
 
     Parameters
@@ -524,21 +634,52 @@ def tune(run, cfg: RunConfig, stationary=None, quality=None, init=None, noise=No
     method = "ekf-acc" if "acc" in kinds else "ekf"
     raw, n_eval, before, after = {}, 0, {}, {}
     if free:
-        raw, n_eval, before, after = _imu_stage(run, without_aids(cfg), free, start, stationary, quality, init,
-                                                method, kinds, info, filter_pass)
+        raw, n_eval, before, after = _imu_stage(
+            run,
+            without_aids(cfg),
+            free,
+            start,
+            stationary,
+            quality,
+            init,
+            method,
+            kinds,
+            info,
+            filter_pass,
+        )
     tuned = cfg.with_values(raw, "tuned") if raw else cfg
-    aid_raw, n_aid = _aids_stage(run, tuned, cfg, aid_params, aid_kinds, stationary, quality, init, method,
-                                 kinds, filter_pass, start)
+    aid_raw, n_aid = _aids_stage(
+        run,
+        tuned,
+        cfg,
+        aid_params,
+        aid_kinds,
+        stationary,
+        quality,
+        init,
+        method,
+        kinds,
+        filter_pass,
+        start,
+    )
     for sec, vals in aid_raw.items():
         raw.setdefault(sec, {}).update(vals)
     if not raw:
         return cfg, TuneResult({}, {}, fixed, info, seconds=time.perf_counter() - t0)
     tuned = cfg.with_values(raw, "tuned")
     values = {sec: {key: _plain(v) for key, v in vals.items()} for sec, vals in raw.items()}
-    result = TuneResult(values, {f"{s}.{k}": _plain(v) for (s, k), v in start.items()}, fixed, info,
-                        before.get("nis_pos_mean"), after.get("nis_pos_mean"),
-                        _loglik(before, kinds) if before else 0.0, _loglik(after, kinds) if after else 0.0,
-                        n_eval + n_aid, time.perf_counter() - t0)
+    result = TuneResult(
+        values,
+        {f"{s}.{k}": _plain(v) for (s, k), v in start.items()},
+        fixed,
+        info,
+        before.get("nis_pos_mean"),
+        after.get("nis_pos_mean"),
+        _loglik(before, kinds) if before else 0.0,
+        _loglik(after, kinds) if after else 0.0,
+        n_eval + n_aid,
+        time.perf_counter() - t0,
+    )
     return tuned, result
 
 
@@ -551,18 +692,23 @@ def _imu_stage(run, cfg, free, start, stationary, quality, init, method, kinds, 
     lower = _lower_bounds(free, info)
     theta, j_best, n_eval = ml_search(obj, len(free), min(CHECK_AFTER, budget), prior, lower=lower)
     if not np.isfinite(j_best):
-        raise InputError(run.where, "noise identification failed: the EKF diverged for every candidate; "
-                                    "set the IMU noise in a config file and use --tune none")
+        raise InputError(
+            run.where,
+            "noise identification failed: the EKF diverged for every candidate; "
+            "set the IMU noise in a config file and use --tune none",
+        )
     before, after = obj.stats[tuple(np.zeros(len(free)))], obj.stats[tuple(np.round(theta, 12))]
-    tuned, after_gm, n_gm, gm_kept = _gauss_markov_stage(run, cfg, free, start, after, stationary, quality, init,
-                                                         method, kinds, info, filter_pass)
+    tuned, after_gm, n_gm, gm_kept = _gauss_markov_stage(
+        run, cfg, free, start, after, stationary, quality, init, method, kinds, info, filter_pass
+    )
     if gm_kept:
         tuned, after = tuned, after_gm
-    else:   # white fixes: finish the white-noise search where it stood
+    else:  # white fixes: finish the white-noise search where it stood
         more = budget - n_eval
         if more > 1:
-            theta, _, n_more = ml_search(obj, len(free), more, prior, theta0=theta, probe_decades=None,
-                                         lower=lower)
+            theta, _, n_more = ml_search(
+                obj, len(free), more, prior, theta0=theta, probe_decades=None, lower=lower
+            )
             n_eval += n_more
         theta, n_back = _draw_back(obj, theta, prior, kinds, info)
         n_eval += n_back
@@ -573,8 +719,20 @@ def _imu_stage(run, cfg, free, start, stationary, quality, init, method, kinds, 
     return raw, n_eval + n_gm, before, after
 
 
-def _aids_stage(run, tuned, cfg, aid_params, aid_kinds, stationary, quality, init, method, kinds, filter_pass,
-                start: dict) -> tuple[dict, int]:
+def _aids_stage(
+    run,
+    tuned,
+    cfg,
+    aid_params,
+    aid_kinds,
+    stationary,
+    quality,
+    init,
+    method,
+    kinds,
+    filter_pass,
+    start: dict,
+) -> tuple[dict, int]:
     """Step 5 of the module docstring: the free aid parameters by maximum likelihood with the
     tuned IMU and GNSS noise held (``tuned``); ``cfg`` the configuration the start was made with.
     Returns the values (section -> key -> value) and the passes made; adds the starting values
@@ -584,9 +742,24 @@ def _aids_stage(run, tuned, cfg, aid_params, aid_kinds, stationary, quality, ini
         return {}, 0
     aid_start = {p: np.atleast_1d(np.asarray(cfg[p[0]][p[1]], float)) for p in free}
     start.update(aid_start)
-    obj = _Objective(run, tuned, free, aid_start, stationary, quality, init, method, kinds + aid_kinds, filter_pass)
-    obj.init_scale = float(cfg["gnss"]["sigma_scale"])   # the start was made with the fixes at this scale
-    theta, j_best, n_eval = ml_search(obj, len(free), AIDS_EVALUATIONS, _prior_widths(cfg, free, {}))
+    obj = _Objective(
+        run,
+        tuned,
+        free,
+        aid_start,
+        stationary,
+        quality,
+        init,
+        method,
+        kinds + aid_kinds,
+        filter_pass,
+    )
+    obj.init_scale = float(
+        cfg["gnss"]["sigma_scale"]
+    )  # the start was made with the fixes at this scale
+    theta, j_best, n_eval = ml_search(
+        obj, len(free), AIDS_EVALUATIONS, _prior_widths(cfg, free, {})
+    )
     if not np.isfinite(j_best):
         return {}, n_eval
     best = obj.config(theta)
@@ -610,7 +783,7 @@ def _significant_offsets(obj: "_Objective", theta: np.ndarray) -> tuple[np.ndarr
         if p not in ADDITIVE:
             continue
         trial = theta.copy()
-        trial[i] = -float(obj.start[p][0]) / ADDITIVE[p]   # the angle at zero
+        trial[i] = -float(obj.start[p][0]) / ADDITIVE[p]  # the angle at zero
         if trial[i] == theta[i]:
             continue
         n += 1
@@ -632,12 +805,16 @@ def _inflate(raw: dict, obj: "_Objective", theta: np.ndarray) -> bool:
     floor = float(obj.cfg["zupt"]["velocity_sigma_mps"])
     inflated = False
     for kind, sigmas in (("nhc", NHC_SIGMAS), ("odo", ODOMETRY_PARAMETERS)):
-        factor = correlation_inflation(stats.get(f"acf1_{kind}"), int(stats.get(f"n_{kind}_updates", 0) or 0))
+        factor = correlation_inflation(
+            stats.get(f"acf1_{kind}"), int(stats.get(f"n_{kind}_updates", 0) or 0)
+        )
         for p in sigmas:
             if p not in obj.free or factor <= 1.0:
                 continue
             value = float(raw[p[0]][p[1]])
-            if theta[obj.free.index(p)] <= -_BOUND_DECADES + 1e-9 or (p in NHC_SIGMAS and value <= floor * (1 + 1e-9)):
+            if theta[obj.free.index(p)] <= -_BOUND_DECADES + 1e-9 or (
+                p in NHC_SIGMAS and value <= floor * (1 + 1e-9)
+            ):
                 continue
             raw[p[0]][p[1]] = value * factor
             inflated = True
@@ -648,15 +825,36 @@ def _settle_offsets(obj: "_Objective", tuned, raw: dict, offsets: list, cfg, sea
     """The vehicle's axes ``offsets`` under the final sigmas (in ``raw``, held): searched again
     from their values in ``raw`` when the sigmas were inflated (``search``), then each kept only
     on :func:`_significant_offsets`' test; ``raw`` updated in place; returns the passes made."""
-    held = tuned.with_values({sec: {k: v for k, v in vals.items() if (sec, k) not in ADDITIVE}
-                              for sec, vals in raw.items()}, "tuned")
-    obj2 = _Objective(obj.run, held, offsets, {p: np.atleast_1d(float(raw[p[0]][p[1]])) for p in offsets},
-                      obj.stationary, obj.quality, obj.init, obj.method, obj.kinds, obj.filter_pass)
+    held = tuned.with_values(
+        {
+            sec: {k: v for k, v in vals.items() if (sec, k) not in ADDITIVE}
+            for sec, vals in raw.items()
+        },
+        "tuned",
+    )
+    obj2 = _Objective(
+        obj.run,
+        held,
+        offsets,
+        {p: np.atleast_1d(float(raw[p[0]][p[1]])) for p in offsets},
+        obj.stationary,
+        obj.quality,
+        obj.init,
+        obj.method,
+        obj.kinds,
+        obj.filter_pass,
+    )
     obj2.init_scale = obj.init_scale
     theta, n = np.zeros(len(offsets)), 0
     if search:
-        found, j, n = ml_search(obj2, len(offsets), OFFSET_EVALUATIONS, _prior_widths(cfg, offsets, {}),
-                                step_decades=0.2, probe_decades=None)
+        found, j, n = ml_search(
+            obj2,
+            len(offsets),
+            OFFSET_EVALUATIONS,
+            _prior_widths(cfg, offsets, {}),
+            step_decades=0.2,
+            probe_decades=None,
+        )
         theta = found if np.isfinite(j) else theta
     theta, n_test, dropped = _significant_offsets(obj2, theta)
     settled = obj2.config(theta)
@@ -682,8 +880,9 @@ def correlation_inflation(acf1: float | None, n: int) -> float:
     return float(np.sqrt((1.0 + rho) / (1.0 - rho)))
 
 
-def tune_gauss_markov(run, cfg: RunConfig, stationary=None, quality=None, init=None, *,
-                      filter_pass: FilterPass) -> tuple[RunConfig, dict]:
+def tune_gauss_markov(
+    run, cfg: RunConfig, stationary=None, quality=None, init=None, *, filter_pass: FilterPass
+) -> tuple[RunConfig, dict]:
     """Fit the Gauss-Markov fix-error model alone, the IMU noise of ``cfg`` held (the ``-gm`` methods
     on a run where :func:`tune` kept white fixes).
 
@@ -715,29 +914,61 @@ def tune_gauss_markov(run, cfg: RunConfig, stationary=None, quality=None, init=N
     """
     t0 = time.perf_counter()
     if ("gnss", "gm_sigma_m") in cfg.explicit:
-        raise InputError("gnss.gm_sigma_m", "is set to 0 (white fixes); a -gm method needs it > 0 or unset")
+        raise InputError(
+            "gnss.gm_sigma_m", "is set to 0 (white fixes); a -gm method needs it > 0 or unset"
+        )
     free_scale = ("gnss", "sigma_scale") not in cfg.explicit
-    base = cfg.with_values({"gnss": {"sigma_scale": 1.0}}, "sigma scale of the run") if free_scale else cfg
+    base = (
+        cfg.with_values({"gnss": {"sigma_scale": 1.0}}, "sigma scale of the run")
+        if free_scale
+        else cfg
+    )
     params = [p for p in GM_PARAMETERS if p not in cfg.explicit]
-    start = {("gnss", "sigma_scale"): np.atleast_1d(0.2),
-             ("gnss", "gm_sigma_m"): np.median(run.gnss.sigma_ned, axis=0),
-             ("gnss", "gm_tau_s"): np.atleast_1d(cfg.gnss_gm_tau.mean())}
+    start = {
+        ("gnss", "sigma_scale"): np.atleast_1d(0.2),
+        ("gnss", "gm_sigma_m"): np.median(run.gnss.sigma_ned, axis=0),
+        ("gnss", "gm_tau_s"): np.atleast_1d(cfg.gnss_gm_tau.mean()),
+    }
     start = {p: start[p] for p in params}
     kinds = ("pos", "zaru")
     obj = _Objective(run, base, params, start, stationary, quality, init, "ekf", kinds, filter_pass)
-    theta, _, n_eval = ml_search(obj, len(params), int(cfg["tune"]["max_evaluations"]),
-                                 _prior_widths(cfg, params, {}), lower=_lower_bounds(params, {}))
+    theta, _, n_eval = ml_search(
+        obj,
+        len(params),
+        int(cfg["tune"]["max_evaluations"]),
+        _prior_widths(cfg, params, {}),
+        lower=_lower_bounds(params, {}),
+    )
     white_stats = run_white_stats(run, cfg, stationary, quality, init, filter_pass=filter_pass)
     gain = _loglik(obj.stats[tuple(np.round(theta, 12))], kinds) - _loglik(white_stats, kinds)
     fitted = obj.config(theta)
     rel = float(fitted["gnss"]["sigma_scale"]) if free_scale else 1.0
-    out = fitted.with_values({"gnss": {"sigma_scale": rel * float(cfg["gnss"]["sigma_scale"])}}, "tuned") \
-        if free_scale else fitted
-    return out, {"loglik_gain": float(gain), "n_evaluations": n_eval + 1, "run_scale": rel,
-                 "seconds": time.perf_counter() - t0}
+    out = (
+        fitted.with_values(
+            {"gnss": {"sigma_scale": rel * float(cfg["gnss"]["sigma_scale"])}}, "tuned"
+        )
+        if free_scale
+        else fitted
+    )
+    return out, {
+        "loglik_gain": float(gain),
+        "n_evaluations": n_eval + 1,
+        "run_scale": rel,
+        "seconds": time.perf_counter() - t0,
+    }
 
 
-def run_white_stats(run, cfg: RunConfig, stationary=None, quality=None, init=None, *, filter_pass: FilterPass) -> dict:
+def run_white_stats(
+    run, cfg: RunConfig, stationary=None, quality=None, init=None, *, filter_pass: FilterPass
+) -> dict:
     """The innovation statistics of one EKF pass with ``cfg`` as it is on ``run`` (already scaled)."""
-    return filter_pass(run, ungated(cfg), "ekf", init=init, stationary=stationary, quality=quality,
-                   output_times=np.zeros(0), cov_every=int(cfg["tune"]["cov_every"])).stats
+    return filter_pass(
+        run,
+        ungated(cfg),
+        "ekf",
+        init=init,
+        stationary=stationary,
+        quality=quality,
+        output_times=np.zeros(0),
+        cov_every=int(cfg["tune"]["cov_every"]),
+    ).stats

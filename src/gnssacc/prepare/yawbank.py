@@ -22,6 +22,7 @@ turns), the best hypothesis is kept with a yaw sigma that covers the hypotheses 
 and the account says so; so does a recording in which the vehicle never moves (its yaw would
 show only through the earth rate, gyrocompassing, which this bank does not attempt).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -72,8 +73,18 @@ def _score(run, cfg, hyps, stationary, quality, t_h, filter_pass: FilterPass):
     grid = run.gnss.t[(run.gnss.t > hyps[0].t) & (run.gnss.t <= t_h)]
     L = np.zeros((len(hyps), len(grid)))
     for k, h in enumerate(hyps):
-        sol = filter_pass(run, cfg, "ekf", init=h, stationary=stationary, quality=quality, output_times=np.zeros(0),
-                      record_innovations=True, t_stop=t_h, cov_every=int(cfg["tune"]["cov_every"]))
+        sol = filter_pass(
+            run,
+            cfg,
+            "ekf",
+            init=h,
+            stationary=stationary,
+            quality=quality,
+            output_times=np.zeros(0),
+            record_innovations=True,
+            t_stop=t_h,
+            cov_every=int(cfg["tune"]["cov_every"]),
+        )
         st = sol.stats
         t = np.concatenate([st[f"nis_{kind}_t"] for kind in _SCORED])
         ll = np.concatenate([st[f"loglik_{kind}_series"] for kind in _SCORED])
@@ -113,8 +124,15 @@ def _refine(run, cfg, start, stationary, quality, yaw, spacing, t_h, filter_pass
     return replace(hyps[best], sigma_att_rad=att), float(P[best])
 
 
-def select_yaw(run: RecordedRun, cfg: RunConfig, stationary=None, quality=None,
-               start: StartState | None = None, *, filter_pass: FilterPass) -> BankResult:
+def select_yaw(
+    run: RecordedRun,
+    cfg: RunConfig,
+    stationary=None,
+    quality=None,
+    start: StartState | None = None,
+    *,
+    filter_pass: FilterPass,
+) -> BankResult:
     """Run the bank (see the module docstring) and return the chosen start.
 
     Parameters
@@ -143,7 +161,9 @@ def select_yaw(run: RecordedRun, cfg: RunConfig, stationary=None, quality=None,
     # spans the fixes confirmed are scored: an IMU-still stretch inside an outage may be a smooth
     # cruise, whose zero-velocity updates, ungated, would condemn the right yaw (the one that knows
     # its velocity best) and crown a wrong one.
-    ungated = cfg.with_values({"zupt": {"gate_nis": 0.0}, "ekf": {"position_gate_nis": 0.0}}, "yaw bank")
+    ungated = cfg.with_values(
+        {"zupt": {"gate_nis": 0.0}, "ekf": {"position_gate_nis": 0.0}}, "yaw bank"
+    )
     if stationary is not None:
         stationary = replace(stationary, spans=[s for s in stationary.spans if s.gnss_checked])
     t_move = start.t if start.static is None else float(run.imu.t[start.static.stop - 1])
@@ -160,13 +180,24 @@ def select_yaw(run: RecordedRun, cfg: RunConfig, stationary=None, quality=None,
         # A vehicle that never moves shows its yaw only through the earth rate (gyrocompassing),
         # which takes a navigation-grade gyro and minutes of data: not attempted here.
         return _undetermined(start, hyps, yaws, best, mass, post, t_h)
-    init, p_fine = _refine(run, ungated, start, stationary, quality, yaws[best], 2.0 * np.pi / n, t_h, filter_pass)
+    init, p_fine = _refine(
+        run, ungated, start, stationary, quality, yaws[best], 2.0 * np.pi / n, t_h, filter_pass
+    )
     t_dec = float(grid[min(first_ok, len(grid) - 1)])
-    how = (f"{start.how}; yaw from a bank of {n} hypotheses scored by innovation likelihood, sector found "
-           f"{max(t_dec - t_move, 0.0):.0f} s after the vehicle started to move (posterior {mass[-1]:.3f}), then "
-           f"refined at {np.degrees(2 * np.pi / n) / 4:.1f} deg: {np.degrees(init.rpy[2]) % 360:.1f} deg "
-           f"+- {np.degrees(init.sigma_att_rad[2]):.1f}")
-    return BankResult(replace(init, how=how, yaw_evidence="bank"), np.degrees(yaws), post, float(mass[-1]), t_dec, t_h)
+    how = (
+        f"{start.how}; yaw from a bank of {n} hypotheses scored by innovation likelihood, sector found "
+        f"{max(t_dec - t_move, 0.0):.0f} s after the vehicle started to move (posterior {mass[-1]:.3f}), then "
+        f"refined at {np.degrees(2 * np.pi / n) / 4:.1f} deg: {np.degrees(init.rpy[2]) % 360:.1f} deg "
+        f"+- {np.degrees(init.sigma_att_rad[2]):.1f}"
+    )
+    return BankResult(
+        replace(init, how=how, yaw_evidence="bank"),
+        np.degrees(yaws),
+        post,
+        float(mass[-1]),
+        t_dec,
+        t_h,
+    )
 
 
 def _undetermined(start, hyps, yaws, best, mass, post, t_h) -> BankResult:
@@ -176,11 +207,17 @@ def _undetermined(start, hyps, yaws, best, mass, post, t_h) -> BankResult:
     sigma = max(spread, float(chosen.sigma_att_rad[2]))
     att = chosen.sigma_att_rad.copy()
     att[2] = sigma
-    how = (f"{start.how}; yaw UNDETERMINED: a bank of {n} hypotheses could not tell them apart by the end of "
-           f"the run (best {np.degrees(yaws[best]):.0f} deg, posterior {post[best]:.2f}; yaw sigma set to "
-           f"{np.degrees(sigma):.0f} deg) - the vehicle never accelerated or turned enough")
+    how = (
+        f"{start.how}; yaw UNDETERMINED: a bank of {n} hypotheses could not tell them apart by the end of "
+        f"the run (best {np.degrees(yaws[best]):.0f} deg, posterior {post[best]:.2f}; yaw sigma set to "
+        f"{np.degrees(sigma):.0f} deg) - the vehicle never accelerated or turned enough"
+    )
     conf = float(mass[-1]) if len(mass) else 0.0
-    return BankResult(replace(chosen, sigma_att_rad=att, how=how, yaw_evidence="undetermined"), np.degrees(yaws), post,
-                      conf, None, t_h)
-
-
+    return BankResult(
+        replace(chosen, sigma_att_rad=att, how=how, yaw_evidence="undetermined"),
+        np.degrees(yaws),
+        post,
+        conf,
+        None,
+        t_h,
+    )

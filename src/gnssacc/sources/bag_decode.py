@@ -9,6 +9,7 @@ returned in NED/FRD (they need the message's quaternion).
 Only the messages of the chosen connections are deserialised (``reader.messages(connections=...)``),
 so image and other topics cost no decoding.
 """
+
 from __future__ import annotations
 
 from array import array
@@ -25,7 +26,11 @@ IMU_TYPE = "sensor_msgs/msg/Imu"
 NAVSATFIX_TYPE = "sensor_msgs/msg/NavSatFix"
 ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
 TWIST_TYPE = "geometry_msgs/msg/TwistStamped"
-POSE_TYPES = (ODOMETRY_TYPE, "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
+POSE_TYPES = (
+    ODOMETRY_TYPE,
+    "geometry_msgs/msg/PoseStamped",
+    "geometry_msgs/msg/PoseWithCovarianceStamped",
+)
 #: Types that may carry wheel odometry (a forward speed and a yaw rate).
 ODOM_TYPES = (ODOMETRY_TYPE, TWIST_TYPE)
 TF_TYPE = "tf2_msgs/msg/TFMessage"
@@ -42,15 +47,32 @@ BASE_FRAMES = ("base_link", "base_footprint")
 FIX_MAPPINGS: dict[str, dict] = {
     # ROOAD: ubxtranslator/hpposllh = ubxtranslator/llh llh + ubxtranslator/llh err, no header.
     "ubxtranslator/msg/hpposllh": {
-        "lat": "llh.lat", "lon": "llh.lon", "height": "llh.height",
-        "latlon_scale_deg": 1.0, "height_scale_m": 1.0,
-        "sigma_n": "err.lat", "sigma_e": "err.lon", "sigma_d": "err.height", "sigma_scale_m": 1.0,
-        "stamp": None, "status": None, "no_fix_values": [],
+        "lat": "llh.lat",
+        "lon": "llh.lon",
+        "height": "llh.height",
+        "latlon_scale_deg": 1.0,
+        "height_scale_m": 1.0,
+        "sigma_n": "err.lat",
+        "sigma_e": "err.lon",
+        "sigma_d": "err.height",
+        "sigma_scale_m": 1.0,
+        "stamp": None,
+        "status": None,
+        "no_fix_values": [],
     },
 }
 _MAPPING_KEYS = set(FIX_MAPPING_FIELDS)
-_MAPPING_DEFAULTS = {"latlon_scale_deg": 1.0, "height_scale_m": 1.0, "sigma_n": None, "sigma_e": None,
-                     "sigma_d": None, "sigma_scale_m": 1.0, "stamp": None, "status": None, "no_fix_values": []}
+_MAPPING_DEFAULTS = {
+    "latlon_scale_deg": 1.0,
+    "height_scale_m": 1.0,
+    "sigma_n": None,
+    "sigma_e": None,
+    "sigma_d": None,
+    "sigma_scale_m": 1.0,
+    "stamp": None,
+    "status": None,
+    "no_fix_values": [],
+}
 
 #: Columns of the rows: IMU ``t, f (3), omega (3), q (x, y, z, w), var(roll, pitch, yaw)``;
 #: fix ``t, lat, lon, h, sigma N, E, D``; pose ``t, p N, E, D, v N, E, D, roll, pitch, yaw``;
@@ -94,13 +116,18 @@ def merge_fix_mappings(user: dict | None) -> dict[str, dict]:
             raise InputError("fix mapping", f"the mapping for {typ} must be a dict of field paths")
         unknown = set(m) - _MAPPING_KEYS
         if unknown:
-            raise InputError("fix mapping", f"unknown key(s) {', '.join(sorted(unknown))} in the mapping for {typ} "
-                                            f"(known: {', '.join(sorted(_MAPPING_KEYS))})")
+            raise InputError(
+                "fix mapping",
+                f"unknown key(s) {', '.join(sorted(unknown))} in the mapping for {typ} "
+                f"(known: {', '.join(sorted(_MAPPING_KEYS))})",
+            )
         base = out.get(normalize_type(typ), {})
         merged = {**_MAPPING_DEFAULTS, **base, **m}
         missing = [k for k in ("lat", "lon", "height") if not merged.get(k)]
         if missing:
-            raise InputError("fix mapping", f"the mapping for {typ} needs field path(s) {', '.join(missing)}")
+            raise InputError(
+                "fix mapping", f"the mapping for {typ} needs field path(s) {', '.join(missing)}"
+            )
         out[normalize_type(typ)] = merged
     return out
 
@@ -116,11 +143,11 @@ class Collector:
         self.topic = topic
         self._buf = array("d")
         self.ncols = ncols
-        self.skipped_no_fix = 0         # fixes marked invalid (NO_FIX status)
-        self.zero_cov = 0               # fixes with an all-zero covariance (default sigma used)
-        self.total = 0                  # messages read
-        self.frame_id = ""              # header.frame_id of the first message
-        self.child_frame_id = ""        # child_frame_id of the first (Odometry) message
+        self.skipped_no_fix = 0  # fixes marked invalid (NO_FIX status)
+        self.zero_cov = 0  # fixes with an all-zero covariance (default sigma used)
+        self.total = 0  # messages read
+        self.frame_id = ""  # header.frame_id of the first message
+        self.child_frame_id = ""  # child_frame_id of the first (Odometry) message
 
     def add(self, row) -> None:
         self._buf.extend(row)
@@ -153,9 +180,22 @@ def imu_row(msg, t: float) -> tuple:
     q, w, a = msg.orientation, msg.angular_velocity, msg.linear_acceleration
     cov = msg.orientation_covariance
     has_q = float(cov[0]) != -1.0 and (q.x or q.y or q.z or q.w)
-    return (t, a.x, a.y, a.z, w.x, w.y, w.z,
-            q.x if has_q else np.nan, q.y if has_q else np.nan, q.z if has_q else np.nan, q.w if has_q else np.nan,
-            cov[0] if has_q else np.nan, cov[4] if has_q else np.nan, cov[8] if has_q else np.nan)
+    return (
+        t,
+        a.x,
+        a.y,
+        a.z,
+        w.x,
+        w.y,
+        w.z,
+        q.x if has_q else np.nan,
+        q.y if has_q else np.nan,
+        q.z if has_q else np.nan,
+        q.w if has_q else np.nan,
+        cov[0] if has_q else np.nan,
+        cov[4] if has_q else np.nan,
+        cov[8] if has_q else np.nan,
+    )
 
 
 def navsat_row(msg, t: float, col: Collector, default_sigma: np.ndarray) -> tuple | None:
@@ -164,7 +204,7 @@ def navsat_row(msg, t: float, col: Collector, default_sigma: np.ndarray) -> tupl
     NO_FIX messages are counted in ``col`` and skipped. The ENU covariance diagonal gives the
     sigmas; an unknown or all-zero covariance gives ``default_sigma`` (N, E, D [m]).
     """
-    if int(msg.status.status) < 0:       # STATUS_NO_FIX = -1
+    if int(msg.status.status) < 0:  # STATUS_NO_FIX = -1
         col.skipped_no_fix += 1
         return None
     cov = np.asarray(msg.position_covariance, float)
@@ -172,7 +212,7 @@ def navsat_row(msg, t: float, col: Collector, default_sigma: np.ndarray) -> tupl
     if ctype == 0:
         sig = default_sigma
     else:
-        diag = np.array([cov[4], cov[0], cov[8]])     # ENU diagonal -> N, E, D variances
+        diag = np.array([cov[4], cov[0], cov[8]])  # ENU diagonal -> N, E, D variances
         if not np.any(cov):
             col.zero_cov += 1
             sig = default_sigma
@@ -195,12 +235,25 @@ def _custom_fix_row(msg, t, col: Collector, m: dict, default_sigma: np.ndarray):
         col.zero_cov += 1
         sig = list(default_sigma)
     sig = [s if s > 0 else np.nan for s in sig]
-    return (t, float(_get(msg, m["lat"])) * sc, float(_get(msg, m["lon"])) * sc,
-            float(_get(msg, m["height"])) * float(m["height_scale_m"]), *sig)
+    return (
+        t,
+        float(_get(msg, m["lat"])) * sc,
+        float(_get(msg, m["lon"])) * sc,
+        float(_get(msg, m["height"])) * float(m["height_scale_m"]),
+        *sig,
+    )
 
 
-def mapped_fix_row(msg, t: float, col: Collector, m: dict, default_sigma: np.ndarray, where: str,
-                   topic: str, typ: str) -> tuple | None:
+def mapped_fix_row(
+    msg,
+    t: float,
+    col: Collector,
+    m: dict,
+    default_sigma: np.ndarray,
+    where: str,
+    topic: str,
+    typ: str,
+) -> tuple | None:
     """A custom fix type through its field mapping ``m`` (see :data:`FIX_MAPPINGS`).
 
     Returns the row of :func:`navsat_row` (the mapping's scales applied: degrees, metres), or
@@ -210,10 +263,12 @@ def mapped_fix_row(msg, t: float, col: Collector, m: dict, default_sigma: np.nda
     try:
         return _custom_fix_row(msg, t, col, m, default_sigma)
     except (AttributeError, TypeError, ValueError) as err:
-        raise InputError(where, f"topic {topic}: the field mapping of {typ} does not fit its messages: "
-                                f"{one_line(err)} (fields of the message: "
-                                f"{', '.join(k for k in getattr(msg, '__dataclass_fields__', {}) if not k.startswith('_'))})"
-                         ) from None
+        raise InputError(
+            where,
+            f"topic {topic}: the field mapping of {typ} does not fit its messages: "
+            f"{one_line(err)} (fields of the message: "
+            f"{', '.join(k for k in getattr(msg, '__dataclass_fields__', {}) if not k.startswith('_'))})",
+        ) from None
 
 
 def pose_row(msg, t: float, msgtype: str) -> tuple:
@@ -232,8 +287,11 @@ def pose_row(msg, t: float, msgtype: str) -> tuple:
     if q.x or q.y or q.z or q.w:
         R_enu_flu = quaternion_to_dcm(q.x, q.y, q.z, q.w)
         rpy = dcm_to_euler(ros_to_R_nb(R_enu_flu))
-        v = ENU_NED @ R_enu_flu @ np.array(
-            [twist.linear.x, twist.linear.y, twist.linear.z]) if twist is not None else (np.nan,) * 3
+        v = (
+            ENU_NED @ R_enu_flu @ np.array([twist.linear.x, twist.linear.y, twist.linear.z])
+            if twist is not None
+            else (np.nan,) * 3
+        )
     else:
         rpy, v = (np.nan,) * 3, (np.nan,) * 3
     return (t, p.y, p.x, -p.z, *v, *rpy)
@@ -296,22 +354,25 @@ class RowDecoder:
             return twist_row(msg, t)
         if typ in POSE_TYPES:
             return pose_row(msg, t, typ)
-        return mapped_fix_row(msg, t, col, self.mappings[typ], self.default_sigma, self.where, col.topic, typ)
+        return mapped_fix_row(
+            msg, t, col, self.mappings[typ], self.default_sigma, self.where, col.topic, typ
+        )
 
 
 def row_width(typ: str) -> int:
     """Columns of a row of message type ``typ``."""
     return {IMU_TYPE: IMU_COLS, ODOMETRY_TYPE: ODOM_COLS, TWIST_TYPE: 1 + TWIST_COLS}.get(
-        typ, POSE_COLS if typ in POSE_TYPES else FIX_COLS)
+        typ, POSE_COLS if typ in POSE_TYPES else FIX_COLS
+    )
 
 
 @dataclass
 class Decoded:
     """What :func:`decode_topics` read."""
 
-    cols: dict[str, Collector]       # topic -> rows
-    imu_frame_id: str                # header.frame_id of the first IMU message ("" if none)
-    damaged: str | None              # why reading stopped early, or None
+    cols: dict[str, Collector]  # topic -> rows
+    imu_frame_id: str  # header.frame_id of the first IMU message ("" if none)
+    damaged: str | None  # why reading stopped early, or None
 
 
 def decode_topics(reader, topics: dict[str, str], decoder: RowDecoder) -> Decoded:
@@ -348,7 +409,9 @@ def decode_topics(reader, topics: dict[str, str], decoder: RowDecoder) -> Decode
         try:
             msg = reader.deserialize(raw, typ)
         except Exception as err:
-            raise InputError(decoder.where, f"topic {topic}: cannot decode a {typ} message: {one_line(err)}") from None
+            raise InputError(
+                decoder.where, f"topic {topic}: cannot decode a {typ} message: {one_line(err)}"
+            ) from None
         if typ == IMU_TYPE and not imu_frame_id:
             imu_frame_id = msg.header.frame_id
         if col.total == 1 and hasattr(msg, "header"):
@@ -368,7 +431,11 @@ def tf_mounting(reader, imu_frame_id: str) -> tuple[np.ndarray, str] | None:
         ``R_bi`` (IMU FRD axes to body FRD axes, ``x_b = R_bi @ x_imu``) and a description of the
         transform; None without ``/tf_static``, IMU frame id or a matching transform.
     """
-    conns = [c for c in reader.connections if c.msgtype == TF_TYPE and c.topic in ("/tf_static", "tf_static")]
+    conns = [
+        c
+        for c in reader.connections
+        if c.msgtype == TF_TYPE and c.topic in ("/tf_static", "tf_static")
+    ]
     if not conns or not imu_frame_id:
         return None
     child = imu_frame_id.lstrip("/")
@@ -378,6 +445,6 @@ def tf_mounting(reader, imu_frame_id: str) -> tuple[np.ndarray, str] | None:
             parent = tr.header.frame_id.lstrip("/")
             if tr.child_frame_id.lstrip("/") == child and parent in BASE_FRAMES:
                 q = tr.transform.rotation
-                R_flu = quaternion_to_dcm(q.x, q.y, q.z, q.w)           # p_parent = R @ p_child
+                R_flu = quaternion_to_dcm(q.x, q.y, q.z, q.w)  # p_parent = R @ p_child
                 return FLU_FRD @ R_flu @ FLU_FRD, f"/tf_static {parent} -> {child}"
     return None

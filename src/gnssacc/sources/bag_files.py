@@ -3,6 +3,7 @@
 Checks names and magic bytes before rosbags sees the file, so a wrong file gets an error that
 says what it is; rosbags itself is imported only when a bag is opened.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -19,7 +20,9 @@ STORAGE_SUFFIXES = (".db3", ".mcap", ".zstd")
 
 def storage_files(folder: Path) -> list[str]:
     """Names of the ROS 2 storage files (``.db3``, ``.mcap``, compressed ``.zstd``) in a folder."""
-    return sorted(p.name for p in Path(folder).iterdir() if p.is_file() and p.name.endswith(STORAGE_SUFFIXES))
+    return sorted(
+        p.name for p in Path(folder).iterdir() if p.is_file() and p.name.endswith(STORAGE_SUFFIXES)
+    )
 
 
 def check_bag_path(path: Path) -> None:
@@ -36,14 +39,23 @@ def check_bag_path(path: Path) -> None:
         found = storage_files(path)
         if not (path / "metadata.yaml").is_file():
             if found:
-                raise InputError(where, f"looks like a ROS 2 bag without its metadata.yaml (holds {', '.join(found[:3])})"
-                                        f": rebuild it with 'ros2 bag reindex {path}', then try again")
+                raise InputError(
+                    where,
+                    f"looks like a ROS 2 bag without its metadata.yaml (holds {', '.join(found[:3])})"
+                    f": rebuild it with 'ros2 bag reindex {path}', then try again",
+                )
             raise InputError(where, "not a ROS 2 bag directory (no metadata.yaml)")
         if not found:
-            raise InputError(where, "a ROS 2 bag directory with metadata.yaml but no storage file (.db3 or .mcap)")
+            raise InputError(
+                where,
+                "a ROS 2 bag directory with metadata.yaml but no storage file (.db3 or .mcap)",
+            )
         return
     if path.suffix not in MAGIC:
-        raise InputError(where, f"not a ROS bag: expected .bag, .mcap, .db3 or a ROS 2 bag directory, got {path.name}")
+        raise InputError(
+            where,
+            f"not a ROS bag: expected .bag, .mcap, .db3 or a ROS 2 bag directory, got {path.name}",
+        )
     _check_magic(path, where)
 
 
@@ -56,14 +68,20 @@ def _check_magic(path: Path, where: str) -> None:
     magic = MAGIC[path.suffix]
     if head.startswith(magic):
         return
-    kind = {".bag": "a ROS 1 bag (format 2.0)", ".mcap": "an MCAP file", ".db3": "an sqlite3 database"}[path.suffix]
+    kind = {
+        ".bag": "a ROS 1 bag (format 2.0)",
+        ".mcap": "an MCAP file",
+        ".db3": "an sqlite3 database",
+    }[path.suffix]
     other = next((s for s, m in MAGIC.items() if head.startswith(m)), None)
     if other == ".mcap":
         hint = "; it is an MCAP file: rename it to .mcap"
     elif other == ".db3":
         hint = "; it is an sqlite3 database: rename it to .db3"
     elif head.startswith(b"#ROSBAG V"):
-        hint = f"; ROS 1 bag format {head[9:12].decode(errors='replace')} is not supported (only 2.0)"
+        hint = (
+            f"; ROS 1 bag format {head[9:12].decode(errors='replace')} is not supported (only 2.0)"
+        )
     else:
         hint = ""
     raise InputError(where, f"not {kind}: it starts with {head!r}, expected {magic!r}{hint}")
@@ -84,6 +102,7 @@ def open_reader(path: Path):
         Not a bag (:func:`check_bag_path`), or a bag that cannot be read at all.
     """
     from rosbags.highlevel import AnyReader
+
     where = str(path)
     check_bag_path(path)
     try:
@@ -96,9 +115,12 @@ def open_reader(path: Path):
         if path.is_file() and path.suffix == ".bag":
             salvage = Ros1Salvage(path)
             if salvage.message_count:
-                warn_data(where, f"the bag is damaged ({problem}); read sequentially up to the damage: "
-                                 f"{salvage.message_count} messages in {salvage.n_chunks} complete chunk(s), "
-                                 f"{salvage.good_bytes} of {salvage.file_bytes} bytes; the rest is lost")
+                warn_data(
+                    where,
+                    f"the bag is damaged ({problem}); read sequentially up to the damage: "
+                    f"{salvage.message_count} messages in {salvage.n_chunks} complete chunk(s), "
+                    f"{salvage.good_bytes} of {salvage.file_bytes} bytes; the rest is lost",
+                )
                 salvage.damaged = problem
                 return salvage
         raise InputError(where, f"cannot read the bag (truncated or corrupt?): {problem}") from None

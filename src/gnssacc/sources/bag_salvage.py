@@ -10,6 +10,7 @@ damaged or incomplete record. It offers the part of the AnyReader interface the 
 Record layout (ROS 1 bag format 2.0): ``<header_len: u32><header: fields><data_len: u32><data>``,
 a header field being ``<len: u32><name>=<value>``; ``op`` 5 is a chunk, 7 a connection, 2 a message.
 """
+
 from __future__ import annotations
 
 import bz2
@@ -35,10 +36,10 @@ def _fields(b: bytes) -> dict:
     """The ``name=value`` fields of a record header."""
     out, i = {}, 0
     while i < len(b):
-        n = int.from_bytes(b[i:i + 4], "little")
+        n = int.from_bytes(b[i : i + 4], "little")
         if n <= 0 or i + 4 + n > len(b):
             raise ValueError("bad header field")
-        key, _, val = b[i + 4:i + 4 + n].partition(b"=")
+        key, _, val = b[i + 4 : i + 4 + n].partition(b"=")
         out[key.decode()] = val
         i += 4 + n
     return out
@@ -72,13 +73,14 @@ class Ros1Salvage:
         self.connections: list[_SalvageConnection] = []
         self._conn_by_id: dict[int, _SalvageConnection] = {}
         self._counts: dict[int, int] = {}
-        self.chunks: list[tuple[int, int, str]] = []       # (data offset, size, compression)
+        self.chunks: list[tuple[int, int, str]] = []  # (data offset, size, compression)
         self.good_bytes = 0
         self.start_time, self.end_time = 2**63 - 1, 0
         self.damaged = None
         self._decomp = {"none": lambda b: b, "bz2": bz2.decompress}
         try:
             import lz4.frame
+
             self._decomp["lz4"] = lz4.frame.decompress
         except ImportError:  # pragma: no cover
             pass
@@ -119,6 +121,7 @@ class Ros1Salvage:
     def _typestore(self):
         """A typestore with the message definitions stored in the bag's connections."""
         from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
         typestore = get_typestore(Stores.EMPTY)
         types: dict = {}
         for c in self.connections:
@@ -166,11 +169,11 @@ class Ros1Salvage:
         ``count``, only count them (and their time span) and yield nothing."""
         i, n = 0, len(raw)
         while i + 8 <= n:
-            hlen = int.from_bytes(raw[i:i + 4], "little")
-            hdr = _fields(raw[i + 4:i + 4 + hlen])
+            hlen = int.from_bytes(raw[i : i + 4], "little")
+            hdr = _fields(raw[i + 4 : i + 4 + hlen])
             j = i + 4 + hlen
-            dlen = int.from_bytes(raw[j:j + 4], "little")
-            data = raw[j + 4:j + 4 + dlen]
+            dlen = int.from_bytes(raw[j : j + 4], "little")
+            data = raw[j + 4 : j + 4 + dlen]
             i = j + 4 + dlen
             op = hdr["op"][0]
             if op == OP_CONNECTION:
@@ -178,7 +181,9 @@ class Ros1Salvage:
             elif op == OP_MESSAGE:
                 cid = int.from_bytes(hdr["conn"], "little")
                 tb = hdr["time"]
-                t_ns = int.from_bytes(tb[:4], "little") * 1_000_000_000 + int.from_bytes(tb[4:8], "little")
+                t_ns = int.from_bytes(tb[:4], "little") * 1_000_000_000 + int.from_bytes(
+                    tb[4:8], "little"
+                )
                 if count:
                     self._counts[cid] = self._counts.get(cid, 0) + 1
                     self.start_time = min(self.start_time, t_ns)

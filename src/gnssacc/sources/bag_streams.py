@@ -6,6 +6,7 @@ Frames: the run's IMU samples (body FRD) are written FLU ``(x, -y, -z)`` (or FRD
 after a rotation into the IMU axes when a mounting is given; positions and orientations in ROS's
 ENU / FLU (REP-103); fix sigmas as diagonal ENU covariances or hpposllh ``err`` fields [m].
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -42,6 +43,7 @@ class MessageTypes:
 
     def __init__(self, ros1: bool):
         from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
         self.ros1 = ros1
         self.ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
         types = get_types_from_msg(LLH_MSG, "ubxtranslator/msg/llh")
@@ -67,20 +69,38 @@ class MessageTypes:
         """A ``geometry_msgs/Quaternion`` from ``(x, y, z, w)``."""
         return self.T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])
 
-    def odometry(self, t: float, p_enu, R_enu_flu, v_flu, pose_cov, twist_cov, frame_id: str = "map",
-                 w_flu=(0.0, 0.0, 0.0)):
+    def odometry(
+        self,
+        t: float,
+        p_enu,
+        R_enu_flu,
+        v_flu,
+        pose_cov,
+        twist_cov,
+        frame_id: str = "map",
+        w_flu=(0.0, 0.0, 0.0),
+    ):
         """A ``nav_msgs/Odometry`` stamped ``t`` [s] in ``frame_id`` (ENU, or a local ``odom``
         frame) of ``base_link`` (FLU): position [m], orientation frame <- FLU, body-axes velocity
         [m/s] and angular rate [rad/s], and the 6x6 pose and twist covariances."""
         T = self.T
         pose = T["geometry_msgs/msg/Pose"](
-            position=T["geometry_msgs/msg/Point"](x=float(p_enu[0]), y=float(p_enu[1]), z=float(p_enu[2])),
-            orientation=self.quat(dcm_to_quaternion(R_enu_flu)))
+            position=T["geometry_msgs/msg/Point"](
+                x=float(p_enu[0]), y=float(p_enu[1]), z=float(p_enu[2])
+            ),
+            orientation=self.quat(dcm_to_quaternion(R_enu_flu)),
+        )
         twist = T["geometry_msgs/msg/Twist"](linear=self.vec3(v_flu), angular=self.vec3(w_flu))
         return T[ODOMETRY_TYPE](
-            header=self.header(t, frame_id), child_frame_id="base_link",
-            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.ravel(pose_cov)),
-            twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=np.ravel(twist_cov)))
+            header=self.header(t, frame_id),
+            child_frame_id="base_link",
+            pose=T["geometry_msgs/msg/PoseWithCovariance"](
+                pose=pose, covariance=np.ravel(pose_cov)
+            ),
+            twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                twist=twist, covariance=np.ravel(twist_cov)
+            ),
+        )
 
 
 def imu_axes(imu_mount_rpy_deg) -> np.ndarray:
@@ -100,7 +120,7 @@ def imu_messages(ty: MessageTypes, run: RecordedRun, opts, key: str = "imu"):
     imu = run.imu
     R_ib = imu_axes(opts.imu_mount_rpy_deg)
     C = (FLU_FRD if opts.imu_frame == "flu" else np.eye(3)) @ R_ib
-    with np.errstate(invalid="ignore"):       # NaN rows (bad-input tests) stay NaN
+    with np.errstate(invalid="ignore"):  # NaN rows (bad-input tests) stay NaN
         f = imu.f_b @ C.T
         w = imu.omega_ib_b @ C.T
     t = imu.t + opts.time_offset_s
@@ -112,7 +132,9 @@ def imu_messages(ty: MessageTypes, run: RecordedRun, opts, key: str = "imu"):
     Imu = ty.T[IMU_TYPE]
     zero9 = np.zeros(9)
     noq = np.r_[-1.0, np.zeros(8)]
-    R_mag = euler_to_dcm(0.0, 0.0, np.radians(opts.orientation_yaw_error_deg))   # heading error, about down
+    R_mag = euler_to_dcm(
+        0.0, 0.0, np.radians(opts.orientation_yaw_error_deg)
+    )  # heading error, about down
     stated = np.diag(np.radians(opts.orientation_sigma_deg or ORIENTATION_SIGMA_DEG) ** 2).ravel()
     for k in range(len(t)):
         if opts.with_orientation and tr is not None and tr.rpy is not None:
@@ -122,24 +144,39 @@ def imu_messages(ty: MessageTypes, run: RecordedRun, opts, key: str = "imu"):
             qcov = stated
         else:
             q, qcov = ty.quat((0.0, 0.0, 0.0, 1.0)), noq
-        msg = Imu(header=ty.header(stamps[k], opts.imu_frame_id), orientation=q, orientation_covariance=qcov,
-                  angular_velocity=ty.vec3(w[k]), angular_velocity_covariance=zero9,
-                  linear_acceleration=ty.vec3(f[k]), linear_acceleration_covariance=zero9)
+        msg = Imu(
+            header=ty.header(stamps[k], opts.imu_frame_id),
+            orientation=q,
+            orientation_covariance=qcov,
+            angular_velocity=ty.vec3(w[k]),
+            angular_velocity_covariance=zero9,
+            linear_acceleration=ty.vec3(f[k]),
+            linear_acceleration_covariance=zero9,
+        )
         yield ns(t[k] + opts.receive_delay_s), key, ty.serialize(msg, IMU_TYPE)
 
 
-def _fix_message(ty: MessageTypes, typ: str, t: float, lat: float, lon: float, h: float, sig, status: int):
+def _fix_message(
+    ty: MessageTypes, typ: str, t: float, lat: float, lon: float, h: float, sig, status: int
+):
     T = ty.T
     if typ == NAVSATFIX_TYPE:
         cov = np.zeros(9)
-        cov[0], cov[4], cov[8] = sig[1] ** 2, sig[0] ** 2, sig[2] ** 2      # NED sigmas -> ENU diagonal
-        return T[typ](header=ty.header(t, "gnss"),
-                      status=T["sensor_msgs/msg/NavSatStatus"](status=int(status), service=1),
-                      latitude=float(np.degrees(lat)), longitude=float(np.degrees(lon)),
-                      altitude=float(h), position_covariance=cov, position_covariance_type=2)
+        cov[0], cov[4], cov[8] = sig[1] ** 2, sig[0] ** 2, sig[2] ** 2  # NED sigmas -> ENU diagonal
+        return T[typ](
+            header=ty.header(t, "gnss"),
+            status=T["sensor_msgs/msg/NavSatStatus"](status=int(status), service=1),
+            latitude=float(np.degrees(lat)),
+            longitude=float(np.degrees(lon)),
+            altitude=float(h),
+            position_covariance=cov,
+            position_covariance_type=2,
+        )
     llh = T["ubxtranslator/msg/llh"]
-    return T[typ](llh=llh(lat=float(np.degrees(lat)), lon=float(np.degrees(lon)), height=float(h)),
-                  err=llh(lat=float(sig[0]), lon=float(sig[1]), height=float(sig[2])))
+    return T[typ](
+        llh=llh(lat=float(np.degrees(lat)), lon=float(np.degrees(lon)), height=float(h)),
+        err=llh(lat=float(sig[0]), lon=float(sig[1]), height=float(sig[2])),
+    )
 
 
 def fix_messages(ty: MessageTypes, key: str, typ: str, tt, lat, lon, h, sig, opts, status=0):
@@ -156,12 +193,20 @@ def fix_messages(ty: MessageTypes, key: str, typ: str, tt, lat, lon, h, sig, opt
     """
     status = np.broadcast_to(np.asarray(status, int), (len(tt),))
     for k in range(len(tt)):
-        msg = _fix_message(ty, typ, tt[k] + opts.time_offset_s, lat[k], lon[k], h[k], sig[k], status[k])
+        msg = _fix_message(
+            ty, typ, tt[k] + opts.time_offset_s, lat[k], lon[k], h[k], sig[k], status[k]
+        )
         yield ns(tt[k] + opts.time_offset_s + opts.receive_delay_s), key, ty.serialize(msg, typ)
 
 
-def odometry_messages(ty: MessageTypes, run: RecordedRun, origin: LocalTangentFrame, opts, key: str = "truth",
-                      frame_id: str = "map"):
+def odometry_messages(
+    ty: MessageTypes,
+    run: RecordedRun,
+    origin: LocalTangentFrame,
+    opts,
+    key: str = "truth",
+    frame_id: str = "map",
+):
     """The truth as ``nav_msgs/Odometry`` in ``frame_id``: position ENU [m] about ``origin``, orientation
     ENU <- FLU (identity without ``truth.rpy``), twist in body FLU [m/s] (zero without ``truth.v_n``)."""
     tr = run.truth
@@ -170,8 +215,14 @@ def odometry_messages(ty: MessageTypes, run: RecordedRun, origin: LocalTangentFr
     for k in range(len(tr.t)):
         R = R_nb_to_ros(euler_to_dcm(*tr.rpy[k])) if tr.rpy is not None else np.eye(3)
         v_flu = R.T @ (ENU_NED @ tr.v_n[k]) if tr.v_n is not None else np.zeros(3)
-        msg = ty.odometry(tr.t[k] + opts.time_offset_s, ENU_NED @ p_n[k], R, v_flu, zero, zero, frame_id)
-        yield ns(tr.t[k] + opts.time_offset_s + opts.receive_delay_s), key, ty.serialize(msg, ODOMETRY_TYPE)
+        msg = ty.odometry(
+            tr.t[k] + opts.time_offset_s, ENU_NED @ p_n[k], R, v_flu, zero, zero, frame_id
+        )
+        yield (
+            ns(tr.t[k] + opts.time_offset_s + opts.receive_delay_s),
+            key,
+            ty.serialize(msg, ODOMETRY_TYPE),
+        )
 
 
 def wheel_odometry_messages(ty: MessageTypes, run: RecordedRun, opts, key: str = "odom"):
@@ -182,7 +233,7 @@ def wheel_odometry_messages(ty: MessageTypes, run: RecordedRun, opts, key: str =
     odo = run.odometry
     dt = np.diff(odo.t, prepend=odo.t[0])
     w_up = -(odo.yaw_rate if odo.yaw_rate is not None else np.zeros(len(odo.t)))
-    heading = np.cumsum(w_up * dt)                               # about z up, from x forward at the start
+    heading = np.cumsum(w_up * dt)  # about z up, from x forward at the start
     x = np.cumsum(odo.v_forward * np.cos(heading) * dt)
     y = np.cumsum(odo.v_forward * np.sin(heading) * dt)
     zero = np.zeros(36)
@@ -194,9 +245,21 @@ def wheel_odometry_messages(ty: MessageTypes, run: RecordedRun, opts, key: str =
             tw[0] = odo.sigma_v[k] ** 2
         if odo.sigma_yaw_rate is not None:
             tw[35] = odo.sigma_yaw_rate[k] ** 2
-        msg = ty.odometry(odo.t[k] + opts.time_offset_s, (x[k], y[k], 0.0), R, (odo.v_forward[k], 0.0, 0.0), zero, tw,
-                          frame_id="odom", w_flu=(0.0, 0.0, w_up[k]))
-        yield ns(odo.t[k] + opts.time_offset_s + opts.receive_delay_s), key, ty.serialize(msg, ODOMETRY_TYPE)
+        msg = ty.odometry(
+            odo.t[k] + opts.time_offset_s,
+            (x[k], y[k], 0.0),
+            R,
+            (odo.v_forward[k], 0.0, 0.0),
+            zero,
+            tw,
+            frame_id="odom",
+            w_flu=(0.0, 0.0, w_up[k]),
+        )
+        yield (
+            ns(odo.t[k] + opts.time_offset_s + opts.receive_delay_s),
+            key,
+            ty.serialize(msg, ODOMETRY_TYPE),
+        )
 
 
 def image_messages(ty: MessageTypes, run: RecordedRun, opts, key: str = "image"):
@@ -206,9 +269,18 @@ def image_messages(ty: MessageTypes, run: RecordedRun, opts, key: str = "image")
     t = np.arange(run.t_start, run.t_end, 1.0 / opts.image_rate_hz) + opts.time_offset_s
     data = np.zeros(n, np.uint8)
     Img = ty.T[IMAGE_TYPE]
-    for k in range(len(t)):       # one serialisation (one payload copy) per message: fine for a generator
-        msg = Img(header=ty.header(t[k], "camera"), height=1, width=n, encoding="mono8", is_bigendian=0,
-                  step=n, data=data)
+    for k in range(
+        len(t)
+    ):  # one serialisation (one payload copy) per message: fine for a generator
+        msg = Img(
+            header=ty.header(t[k], "camera"),
+            height=1,
+            width=n,
+            encoding="mono8",
+            is_bigendian=0,
+            step=n,
+            data=data,
+        )
         yield ns(t[k] + opts.receive_delay_s), key, ty.serialize(msg, IMAGE_TYPE)
 
 
@@ -217,7 +289,10 @@ def tf_static_messages(ty: MessageTypes, run: RecordedRun, opts, key: str = "tf"
     R_flu = FLU_FRD @ euler_to_dcm(*np.radians(np.asarray(opts.imu_mount_rpy_deg, float))) @ FLU_FRD
     t = run.t_start + opts.time_offset_s
     tf = ty.T["geometry_msgs/msg/TransformStamped"](
-        header=ty.header(t, "base_link"), child_frame_id=opts.imu_frame_id,
-        transform=ty.T["geometry_msgs/msg/Transform"](translation=ty.vec3(np.zeros(3)),
-                                                      rotation=ty.quat(dcm_to_quaternion(R_flu))))
+        header=ty.header(t, "base_link"),
+        child_frame_id=opts.imu_frame_id,
+        transform=ty.T["geometry_msgs/msg/Transform"](
+            translation=ty.vec3(np.zeros(3)), rotation=ty.quat(dcm_to_quaternion(R_flu))
+        ),
+    )
     yield ns(t), key, ty.serialize(ty.T[TF_TYPE](transforms=[tf]), TF_TYPE)

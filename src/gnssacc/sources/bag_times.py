@@ -5,6 +5,7 @@ twice. :func:`sorted_unique` sorts them by time and drops repeated stamps (count
 recorded in ``run.meta["time_fixes"]``); :func:`find_gaps` lists long pauses for
 ``run.meta["gaps"]``.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -53,10 +54,15 @@ def sorted_unique(tab: np.ndarray, where: str, what: str, meta: dict, key: str) 
         if exact:
             parts.append(f"{exact} exact duplicate message(s)")
         if conflicting:
-            parts.append(f"{conflicting} message(s) repeating a time stamp with different data (first kept)")
+            parts.append(
+                f"{conflicting} message(s) repeating a time stamp with different data (first kept)"
+            )
         warn_data(where, f"{what}: dropped " + " and ".join(parts))
-    meta.setdefault("time_fixes", {})[key] = {"backwards_steps": back, "exact_duplicates": exact,
-                                              "conflicting_duplicates": conflicting}
+    meta.setdefault("time_fixes", {})[key] = {
+        "backwards_steps": back,
+        "exact_duplicates": exact,
+        "conflicting_duplicates": conflicting,
+    }
     return tab
 
 
@@ -80,8 +86,11 @@ def find_gaps(t: np.ndarray, factor: float) -> dict:
     if len(t) < 3:
         return {"count": 0, "spans": []}
     idx, d, med = gap_indices(t, factor)
-    return {"nominal_dt_s": med, "count": int(idx.size),
-            "spans": [[float(t[k]), float(d[k])] for k in idx[:20]]}
+    return {
+        "nominal_dt_s": med,
+        "count": int(idx.size),
+        "spans": [[float(t[k]), float(d[k])] for k in idx[:20]],
+    }
 
 
 def subsample(t: np.ndarray, rate_hz: float) -> np.ndarray:

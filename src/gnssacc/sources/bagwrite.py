@@ -14,6 +14,7 @@ they are first rotated into the IMU axes (``x_imu = R_bi^T x_b``) and a ``/tf_st
 covariances (NavSatFix ``COVARIANCE_TYPE_DIAGONAL_KNOWN``) or as hpposllh ``err`` fields.
 The messages of each topic come from :mod:`gnssacc.sources.bag_streams`.
 """
+
 from __future__ import annotations
 
 import heapq
@@ -123,8 +124,9 @@ class BagOptions:
     odom_topic: str | None = None
 
 
-def write_bag(run: RecordedRun, path, kind: str = "ros2-sqlite3", options: BagOptions | None = None,
-              **changes) -> Path:
+def write_bag(
+    run: RecordedRun, path, kind: str = "ros2-sqlite3", options: BagOptions | None = None, **changes
+) -> Path:
     """Write ``run`` as a bag.
 
     Parameters
@@ -148,7 +150,9 @@ def write_bag(run: RecordedRun, path, kind: str = "ros2-sqlite3", options: BagOp
         raise InputError(str(path), f"unknown bag kind {kind!r} (known: {', '.join(KINDS)})")
     unknown = set(changes) - {f.name for f in fields(BagOptions)}
     if unknown:
-        raise TypeError(f"write_bag() got unexpected keyword argument(s) {', '.join(sorted(unknown))}")
+        raise TypeError(
+            f"write_bag() got unexpected keyword argument(s) {', '.join(sorted(unknown))}"
+        )
     opts = replace(options or BagOptions(), **changes)
     path = Path(path)
     if path.exists():
@@ -185,8 +189,10 @@ def _open_writer(path: Path, kind: str):
     """(rosbags writer, the path it writes): for ``mcap`` a scratch ROS 2 directory beside ``path``."""
     if kind == "ros1-rooad":
         from rosbags.rosbag1 import Writer
+
         return Writer(path), path
     from rosbags.rosbag2 import StoragePlugin, Writer
+
     target = path.with_suffix("") if kind == "mcap" else path
     if kind == "mcap" and target.exists():
         raise InputError(str(target), "exists already (scratch directory for the .mcap)")
@@ -197,24 +203,44 @@ def _open_writer(path: Path, kind: str):
 def _topics(ty: MessageTypes, run: RecordedRun, opts: BagOptions):
     """(key, topic, type, message stream) of each topic to write, in connection order."""
     imu_topic = opts.imu_topic or ("/vectornav/IMU" if ty.ros1 else "/imu/data")
-    gnss_topic = ("/UBX/hpposllh" if ty.ros1 else "/gnss/fix") if opts.gnss_topic == "default" else opts.gnss_topic
+    gnss_topic = (
+        ("/UBX/hpposllh" if ty.ros1 else "/gnss/fix")
+        if opts.gnss_topic == "default"
+        else opts.gnss_topic
+    )
     fix_type = HPPOSLLH_TYPE if ty.ros1 else NAVSATFIX_TYPE
     g, tr = run.gnss, run.truth
     yield "imu", imu_topic, IMU_TYPE, imu_messages(ty, run, opts)
     if gnss_topic:
-        yield "gnss", gnss_topic, fix_type, fix_messages(ty, "gnss", fix_type, g.t, g.lat, g.lon, g.h, g.sigma_ned,
-                                                         opts, opts.fix_status)
+        yield (
+            "gnss",
+            gnss_topic,
+            fix_type,
+            fix_messages(
+                ty, "gnss", fix_type, g.t, g.lat, g.lon, g.h, g.sigma_ned, opts, opts.fix_status
+            ),
+        )
     if opts.truth_topic and opts.truth_type == "odometry":
         origin = LocalTangentFrame(g.lat[0], g.lon[0], g.h[0]) if len(g) else run.origin
-        if np.any(opts.truth_offset_enu_m):   # the frame's origin elsewhere: positions shifted by -offset
+        if np.any(
+            opts.truth_offset_enu_m
+        ):  # the frame's origin elsewhere: positions shifted by -offset
             e, n, u = opts.truth_offset_enu_m
             origin = LocalTangentFrame(*origin.to_llh(np.array([-n, -e, u], float)))
-        yield "truth", opts.truth_topic, ODOMETRY_TYPE, odometry_messages(ty, run, origin, opts,
-                                                                          frame_id=opts.truth_frame_id)
+        yield (
+            "truth",
+            opts.truth_topic,
+            ODOMETRY_TYPE,
+            odometry_messages(ty, run, origin, opts, frame_id=opts.truth_frame_id),
+        )
     elif opts.truth_topic:
         sig = np.tile(TRUTH_FIX_SIGMA_M, (len(tr.t), 1))
-        yield "truth", opts.truth_topic, fix_type, fix_messages(ty, "truth", fix_type, tr.t, tr.lat, tr.lon, tr.h,
-                                                                sig, opts)
+        yield (
+            "truth",
+            opts.truth_topic,
+            fix_type,
+            fix_messages(ty, "truth", fix_type, tr.t, tr.lat, tr.lon, tr.h, sig, opts),
+        )
     if opts.odom_topic:
         yield "odom", opts.odom_topic, ODOMETRY_TYPE, wheel_odometry_messages(ty, run, opts)
     if opts.imu_mount_rpy_deg is not None and opts.write_tf:

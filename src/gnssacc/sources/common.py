@@ -3,6 +3,7 @@
 Every source must pass its IMU samples through :func:`apply_mounting` exactly once, so that the
 ``[mounting]`` configuration means the same thing whatever the data came from.
 """
+
 from __future__ import annotations
 
 from contextlib import contextmanager
@@ -40,9 +41,11 @@ def apply_mounting(imu: ImuData, cfg: RunConfig) -> ImuData:
     R_bi = cfg.R_bi
     offset_s = configured_time_offset_s(cfg)
     # Row vectors: x_b^T = x_imu^T R_bi^T.
-    return ImuData(np.asarray(imu.t, float) + offset_s,
-                   np.asarray(imu.f_b, float) @ R_bi.T,
-                   np.asarray(imu.omega_ib_b, float) @ R_bi.T)
+    return ImuData(
+        np.asarray(imu.t, float) + offset_s,
+        np.asarray(imu.f_b, float) @ R_bi.T,
+        np.asarray(imu.omega_ib_b, float) @ R_bi.T,
+    )
 
 
 def configured_time_offset_s(cfg: RunConfig) -> float:
@@ -52,7 +55,9 @@ def configured_time_offset_s(cfg: RunConfig) -> float:
     try:
         offset_s = 0.0 if value == "auto" else float(value)
     except (TypeError, ValueError):
-        raise InputError("config", '[mounting] imu_time_offset_s must be a number of seconds or "auto"') from None
+        raise InputError(
+            "config", '[mounting] imu_time_offset_s must be a number of seconds or "auto"'
+        ) from None
     if not np.isfinite(offset_s):
         raise InputError("config", "[mounting] imu_time_offset_s must be finite")
     return offset_s
@@ -86,7 +91,9 @@ def one_line(err: Exception) -> str:
     return " ".join(text.split())[:300]
 
 
-def check_degrees(lat_deg: np.ndarray, lon_deg: np.ndarray, t: np.ndarray, where: str, what: str) -> None:
+def check_degrees(
+    lat_deg: np.ndarray, lon_deg: np.ndarray, t: np.ndarray, where: str, what: str
+) -> None:
     """Raise :class:`InputError` if a latitude or longitude [deg] is out of range.
 
     ``|lat| <= 90`` and ``|lon| <= 360`` (longitudes in 0..360 are accepted). The message names
@@ -96,8 +103,11 @@ def check_degrees(lat_deg: np.ndarray, lon_deg: np.ndarray, t: np.ndarray, where
         bad = np.flatnonzero(np.abs(values) > limit)
         if bad.size:
             k = int(bad[0])
-            raise InputError(where, f"{what} {name} out of range: {values[k]:.6g} deg at t = {t[k]:.6f} s "
-                                    f"(|{name}| must be <= {limit:g} deg); {bad.size} such row(s)")
+            raise InputError(
+                where,
+                f"{what} {name} out of range: {values[k]:.6g} deg at t = {t[k]:.6f} s "
+                f"(|{name}| must be <= {limit:g} deg); {bad.size} such row(s)",
+            )
 
 
 def text_file_lines(path, kind: str) -> list[str]:
@@ -124,7 +134,9 @@ def text_file_lines(path, kind: str) -> list[str]:
         try:
             out.append(line.decode("utf-8"))
         except UnicodeDecodeError:
-            raise InputError(where, f"line {n} is not text (bytes that are not UTF-8): expected {kind}") from None
+            raise InputError(
+                where, f"line {n} is not text (bytes that are not UTF-8): expected {kind}"
+            ) from None
     return out
 
 
@@ -146,7 +158,9 @@ def _text_lines(path: Path):
     except IsADirectoryError:
         raise InputError(str(path), "is a directory, expected a CSV file") from None
     except UnicodeDecodeError:
-        raise InputError(str(path), "not a UTF-8 text file (expected comma-separated values)") from None
+        raise InputError(
+            str(path), "not a UTF-8 text file (expected comma-separated values)"
+        ) from None
 
 
 def _data_blocks(lines, first_line_no: int):
@@ -157,7 +171,7 @@ def _data_blocks(lines, first_line_no: int):
     for line in lines:
         n += 1
         if line.strip() and not line.lstrip().startswith("#"):
-            if len(block) == BLOCK_LINES:   # a full block is not the last: another row follows
+            if len(block) == BLOCK_LINES:  # a full block is not the last: another row follows
                 yield block, np.asarray(numbers, int), False
                 block, numbers = [], []
             block.append(line)
@@ -166,11 +180,12 @@ def _data_blocks(lines, first_line_no: int):
 
 
 def _header_names(line: str) -> list[str]:
-    return [c.strip().strip('"\'').strip().lower() for c in line.split(",")]
+    return [c.strip().strip("\"'").strip().lower() for c in line.split(",")]
 
 
-def _parse_slowly(data: list[str], line_no: np.ndarray, usecols: list[int], names: list[str],
-                  where: str) -> np.ndarray:
+def _parse_slowly(
+    data: list[str], line_no: np.ndarray, usecols: list[int], names: list[str], where: str
+) -> np.ndarray:
     """Cell-by-cell parse, only used when the fast parser refused the file.
 
     Empty cells become NaN (missing values, later dropped with a warning); any other
@@ -187,13 +202,16 @@ def _parse_slowly(data: list[str], line_no: np.ndarray, usecols: list[int], name
             try:
                 out[r, c] = float(cell)
             except ValueError:
-                raise InputError(where, f"non-numeric value {cell[:40]!r} in column '{names[j]}' at line "
-                                        f"{line_no[r]}") from None
+                raise InputError(
+                    where,
+                    f"non-numeric value {cell[:40]!r} in column '{names[j]}' at line {line_no[r]}",
+                ) from None
     return out
 
 
-def read_table(path, required: Sequence[str], optional: Sequence[str] = (),
-               max_bad_fraction: float = 0.01) -> dict[str, np.ndarray]:
+def read_table(
+    path, required: Sequence[str], optional: Sequence[str] = (), max_bad_fraction: float = 0.01
+) -> dict[str, np.ndarray]:
     """Read a comma-separated table with a header line into float columns.
 
     Header names are matched case-insensitively after stripping blanks and quotes; column order
@@ -234,7 +252,9 @@ def read_table(path, required: Sequence[str], optional: Sequence[str] = (),
     with _text_lines(path) as lines:
         header, n_header = _header_line(lines)
         if header is None:
-            raise InputError(where, f"empty file: no header line (expected columns {', '.join(required)})")
+            raise InputError(
+                where, f"empty file: no header line (expected columns {', '.join(required)})"
+            )
         names = _header_names(header)
         wanted, usecols = _columns(names, required, optional, where)
         parts = []
@@ -249,7 +269,7 @@ def read_table(path, required: Sequence[str], optional: Sequence[str] = (),
     np.concatenate(parts, axis=0, out=table)
     del parts
     table = np.asfortranarray(drop_nonfinite(table, where, path.stem, float(max_bad_fraction)))
-    return {c: table[:, k] for k, c in enumerate(wanted)}   # views: callers copy what they keep
+    return {c: table[:, k] for k, c in enumerate(wanted)}  # views: callers copy what they keep
 
 
 def _header_line(lines) -> tuple[str | None, int]:
@@ -265,15 +285,22 @@ def _columns(names: list[str], required, optional, where: str) -> tuple[list[str
     wanted = list(required) + [c for c in optional if c in names]
     missing = [c for c in required if c not in names]
     if missing:
-        raise InputError(where, f"missing required column(s) {', '.join(missing)}; header found: "
-                                f"{', '.join(names)} (the first non-comment line must be the header)")
+        raise InputError(
+            where,
+            f"missing required column(s) {', '.join(missing)}; header found: "
+            f"{', '.join(names)} (the first non-comment line must be the header)",
+        )
     repeated = sorted({c for c in wanted if names.count(c) > 1})
     if repeated:
-        raise InputError(where, f"column(s) {', '.join(repeated)} appear more than once in the header")
+        raise InputError(
+            where, f"column(s) {', '.join(repeated)} appear more than once in the header"
+        )
     return wanted, [names.index(c) for c in wanted]
 
 
-def _parse(data: list[str], line_no: np.ndarray, usecols: list[int], names: list[str], where: str) -> np.ndarray:
+def _parse(
+    data: list[str], line_no: np.ndarray, usecols: list[int], names: list[str], where: str
+) -> np.ndarray:
     """One block of rows: numpy's parser, or cell by cell when it refuses (empty or bad cells)."""
     try:
         return np.loadtxt(data, delimiter=",", usecols=usecols, ndmin=2, dtype=float, comments=None)
@@ -281,16 +308,24 @@ def _parse(data: list[str], line_no: np.ndarray, usecols: list[int], names: list
         return _parse_slowly(data, line_no, usecols, names, where)
 
 
-def _check_cell_counts(data: list[str], line_no: np.ndarray, n_cols: int, where: str, last: bool = True):
+def _check_cell_counts(
+    data: list[str], line_no: np.ndarray, n_cols: int, where: str, last: bool = True
+):
     """Every data row must have as many cells as the header (a truncated last row of the file,
     the last of its ``last`` block, is dropped)."""
     n_commas = np.fromiter((line.count(",") for line in data), int, len(data))
     bad = np.flatnonzero(n_commas != n_cols - 1)
     if last and bad.size == 1 and bad[0] == len(data) - 1 and n_commas[-1] < n_cols - 1:
-        warn_data(where, f"dropped the truncated last line {line_no[-1]} ({n_commas[-1] + 1} of {n_cols} cells)")
+        warn_data(
+            where,
+            f"dropped the truncated last line {line_no[-1]} ({n_commas[-1] + 1} of {n_cols} cells)",
+        )
         return data[:-1], line_no[:-1]
     if bad.size:
         k = int(bad[0])
-        raise InputError(where, f"line {line_no[k]} has {n_commas[k] + 1} cells but the header has {n_cols}; "
-                                f"{bad.size} such line(s)")
+        raise InputError(
+            where,
+            f"line {line_no[k]} has {n_commas[k] + 1} cells but the header has {n_cols}; "
+            f"{bad.size} such line(s)",
+        )
     return data, line_no

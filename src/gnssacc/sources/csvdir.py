@@ -38,6 +38,7 @@ In every CSV file header names are case-insensitive, column order is free, extra
 ignored, and lines starting with ``#`` are comments. All times are seconds; GNSS, truth and
 init times are on the GNSS clock, odometry times on the IMU's.
 """
+
 from __future__ import annotations
 
 import json
@@ -50,7 +51,14 @@ from ..core.config import DEG, RunConfig
 from ..core.earth import LocalTangentFrame
 from ..core.errors import InputError
 from ..core.memory import release_free_memory
-from ..core.recording import ImuData, InitialState, RecordedRun, Truth, WheelOdometry, check_increasing
+from ..core.recording import (
+    ImuData,
+    InitialState,
+    RecordedRun,
+    Truth,
+    WheelOdometry,
+    check_increasing,
+)
 from ..core.rotations import flu_to_frd
 from .common import apply_mounting, check_degrees, configured_time_offset_s, read_table
 from .gnssfile import (
@@ -84,6 +92,7 @@ INIT_BEFORE_START_TOLERANCE_S = 1.0
 
 
 # --- reading ------------------------------------------------------------------------------------------
+
 
 def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) -> RecordedRun:
     """Load a CSV run directory (format in the module docstring).
@@ -120,11 +129,15 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) 
     where = str(root)
     frame = str(imu_frame).lower()
     if frame not in IMU_FRAMES:
-        raise InputError(where, f"imu_frame must be one of {', '.join(IMU_FRAMES)}, got {imu_frame!r}")
+        raise InputError(
+            where, f"imu_frame must be one of {', '.join(IMU_FRAMES)}, got {imu_frame!r}"
+        )
     if not root.exists():
         raise InputError(where, "run directory not found")
     if not root.is_dir():
-        raise InputError(where, "not a directory: a CSV run is a directory holding imu.csv and gnss.csv")
+        raise InputError(
+            where, "not a directory: a CSV run is a directory holding imu.csv and gnss.csv"
+        )
     if (root / "imu.csv").is_dir():
         raise InputError(str(root / "imu.csv"), "is a directory, expected a CSV file")
     if not (root / "imu.csv").is_file():
@@ -134,28 +147,43 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) 
     imu = _read_imu(root / "imu.csv", frame, max_bad)
     meta = {"source": "csv", "imu_frame": frame}
     if gnss_file.name == "gnss.csv":
-        gnss, _ = apply_quality_policy(read_gnss_csv(gnss_file, cfg.default_sigma_ned, max_bad),
-                                       cfg["gnss"]["quality"], str(gnss_file))
+        gnss, _ = apply_quality_policy(
+            read_gnss_csv(gnss_file, cfg.default_sigma_ned, max_bad),
+            cfg["gnss"]["quality"],
+            str(gnss_file),
+        )
         # Stamps in ms/us/ns would never meet the fixes: found (and rescaled, or named) before the
         # overlap check, which could only say "different clocks?".
         if time_units is not None:
             imu = time_units(imu, gnss.t, str(root / "imu.csv"), cfg)
         imu = apply_mounting(imu, cfg)
-    else:   # absolute fix times are put on the IMU's clock, which must be absolute too
+    else:  # absolute fix times are put on the IMU's clock, which must be absolute too
         imu = apply_mounting(imu, cfg)
         gnss, read = load_gnss_file(gnss_file, cfg, imu.t)
         meta.update(read)
     truth = _read_truth(root / "truth.csv", max_bad) if (root / "truth.csv").exists() else None
-    init = _read_init(root / "init.json", gnss.sigma_ned[0]) if (root / "init.json").exists() else None
+    init = (
+        _read_init(root / "init.json", gnss.sigma_ned[0]) if (root / "init.json").exists() else None
+    )
     if init is not None:
         check_init_time(init.t, imu.t[0], imu.t[-1], str(root / "init.json"))
     odometry = None
     if (root / "odom.csv").exists():
-        odometry = read_odometry_csv(root / "odom.csv", max_bad).shifted(configured_time_offset_s(cfg))
-    run = RecordedRun(name=root.resolve().name, where=where, imu=imu, gnss=gnss,
-                      origin=LocalTangentFrame(gnss.lat[0], gnss.lon[0], gnss.h[0]),
-                      truth=truth, init=init, meta=meta, odometry=odometry)
-    release_free_memory()   # the parser's blocks
+        odometry = read_odometry_csv(root / "odom.csv", max_bad).shifted(
+            configured_time_offset_s(cfg)
+        )
+    run = RecordedRun(
+        name=root.resolve().name,
+        where=where,
+        imu=imu,
+        gnss=gnss,
+        origin=LocalTangentFrame(gnss.lat[0], gnss.lon[0], gnss.h[0]),
+        truth=truth,
+        init=init,
+        meta=meta,
+        odometry=odometry,
+    )
+    release_free_memory()  # the parser's blocks
     return run.validate()
 
 
@@ -163,11 +191,17 @@ def _gnss_file(root: Path) -> Path:
     """The one GNSS file of a run directory (:data:`GNSS_FILES`)."""
     found = [root / n for n in GNSS_FILES if (root / n).exists()]
     if not found:
-        raise InputError(str(root / "gnss.csv"), "file not found: a CSV run directory needs gnss.csv (or gnss.pos, "
-                                                 "an RTKLIB solution, or gnss.nmea, an NMEA log)")
+        raise InputError(
+            str(root / "gnss.csv"),
+            "file not found: a CSV run directory needs gnss.csv (or gnss.pos, "
+            "an RTKLIB solution, or gnss.nmea, an NMEA log)",
+        )
     if len(found) > 1:
-        raise InputError(str(root), f"holds {' and '.join(p.name for p in found)}: keep one GNSS file (or choose "
-                                    f"with --gnss FILE)")
+        raise InputError(
+            str(root),
+            f"holds {' and '.join(p.name for p in found)}: keep one GNSS file (or choose "
+            f"with --gnss FILE)",
+        )
     if found[0].is_dir():
         raise InputError(str(found[0]), "is a directory, expected a file of GNSS fixes")
     return found[0]
@@ -190,8 +224,14 @@ def read_odometry_csv(path: Path, max_bad: float) -> WheelOdometry:
             raise InputError(where, f"{name} must be positive; not so at t = {tab['t'][k]:.6f} s")
     if "sigma_yaw_rate" in tab and "yaw_rate" not in tab:
         raise InputError(where, "sigma_yaw_rate needs the yaw_rate column")
-    return WheelOdometry(tab["t"].copy(), tab["v_forward"].copy(), column("yaw_rate"), column("sigma_v"),
-                         column("sigma_yaw_rate"), frame=path.name)
+    return WheelOdometry(
+        tab["t"].copy(),
+        tab["v_forward"].copy(),
+        column("yaw_rate"),
+        column("sigma_v"),
+        column("sigma_yaw_rate"),
+        frame=path.name,
+    )
 
 
 def check_init_time(t: float, t_start: float, t_end: float, where: str) -> None:
@@ -201,8 +241,11 @@ def check_init_time(t: float, t_start: float, t_end: float, where: str) -> None:
     if t > t_end:
         raise InputError(where, f"time t = {t:.3f} s is after the run's end: {span}")
     if t < t_start - INIT_BEFORE_START_TOLERANCE_S:
-        raise InputError(where, f"time t = {t:.3f} s is {t_start - t:.3f} s before the run's start "
-                                f"(tolerance {INIT_BEFORE_START_TOLERANCE_S:g} s): {span}")
+        raise InputError(
+            where,
+            f"time t = {t:.3f} s is {t_start - t:.3f} s before the run's start "
+            f"(tolerance {INIT_BEFORE_START_TOLERANCE_S:g} s): {span}",
+        )
 
 
 def _columns(tab: dict, names) -> np.ndarray:
@@ -229,8 +272,14 @@ def _read_truth(path: Path, max_bad: float) -> Truth:
         raise InputError(str(path), "no data rows (delete the file if there is no truth)")
     v_n = optional_group(tab, VEL_COLUMNS, str(path))
     rpy_deg = optional_group(tab, RPY_COLUMNS, str(path))
-    return Truth(tab["t"], tab["lat_deg"] * DEG, tab["lon_deg"] * DEG, tab["h_m"], v_n,
-                 None if rpy_deg is None else rpy_deg * DEG)
+    return Truth(
+        tab["t"],
+        tab["lat_deg"] * DEG,
+        tab["lon_deg"] * DEG,
+        tab["h_m"],
+        v_n,
+        None if rpy_deg is None else rpy_deg * DEG,
+    )
 
 
 def _json_number(value, key: str, where: str) -> float:
@@ -243,7 +292,9 @@ def _json_vector(value, key: str, size: int, where: str) -> np.ndarray:
     """A number (same on all axes) or a list of ``size`` numbers, all positive."""
     items = value if isinstance(value, list) else [value]
     if len(items) not in (1, size):
-        raise InputError(where, f"'{key}' must be a number or a list of {size} numbers, got {value!r}")
+        raise InputError(
+            where, f"'{key}' must be a number or a list of {size} numbers, got {value!r}"
+        )
     arr = np.array([_json_number(v, key, where) for v in items])
     if np.any(arr <= 0):
         raise InputError(where, f"'{key}' must be positive, got {value!r}")
@@ -255,7 +306,9 @@ def _check_keys(obj, allowed, required, where: str, what: str) -> None:
         raise InputError(where, f"{what} must be a JSON object {{...}}")
     unknown = [k for k in obj if k not in allowed]
     if unknown:
-        raise InputError(where, f"unknown key(s) {', '.join(unknown)} in {what} (known: {', '.join(allowed)})")
+        raise InputError(
+            where, f"unknown key(s) {', '.join(unknown)} in {what} (known: {', '.join(allowed)})"
+        )
     missing = [k for k in required if k not in obj]
     if missing:
         raise InputError(where, f"missing key(s) {', '.join(missing)} in {what}")
@@ -271,30 +324,51 @@ def _read_init(path: Path, first_fix_sigma_ned: np.ndarray) -> InitialState:
         raise InputError(where, "not a UTF-8 text file") from None
     _check_keys(doc, INIT_KEYS + ("sigma",), INIT_KEYS, where, "init.json")
     v = {k: _json_number(doc[k], k, where) for k in INIT_KEYS}
-    check_degrees(np.array([v["lat_deg"]]), np.array([v["lon_deg"]]), np.array([v["t"]]), where, "initial")
+    check_degrees(
+        np.array([v["lat_deg"]]), np.array([v["lon_deg"]]), np.array([v["t"]]), where, "initial"
+    )
     sig = doc.get("sigma", {})
     _check_keys(sig, SIGMA_KEYS, (), where, "init.json 'sigma'")
-    pos = _json_vector(sig["pos_m"], "sigma.pos_m", 3, where) if "pos_m" in sig else first_fix_sigma_ned.copy()
+    pos = (
+        _json_vector(sig["pos_m"], "sigma.pos_m", 3, where)
+        if "pos_m" in sig
+        else first_fix_sigma_ned.copy()
+    )
     vel = _json_vector(sig.get("vel_mps", DEFAULT_SIGMA_VEL_MPS), "sigma.vel_mps", 3, where)
-    roll_pitch = _json_vector(sig.get("roll_pitch_deg", DEFAULT_SIGMA_ROLL_PITCH_DEG),
-                              "sigma.roll_pitch_deg", 2, where)
+    roll_pitch = _json_vector(
+        sig.get("roll_pitch_deg", DEFAULT_SIGMA_ROLL_PITCH_DEG), "sigma.roll_pitch_deg", 2, where
+    )
     yaw = _json_vector(sig.get("yaw_deg", DEFAULT_SIGMA_YAW_DEG), "sigma.yaw_deg", 1, where)
-    return InitialState(t=v["t"], lat=v["lat_deg"] * DEG, lon=v["lon_deg"] * DEG, h=v["h_m"],
-                        v_n=np.array([v["vn"], v["ve"], v["vd"]]),
-                        rpy=np.array([v["roll_deg"], v["pitch_deg"], v["yaw_deg"]]) * DEG,
-                        sigma_pos_m=pos, sigma_vel_mps=vel,
-                        # n-frame attitude-error sigma: [roll_pitch, roll_pitch, yaw] as the
-                        # level errors are taken equal to the roll/pitch sigmas.
-                        sigma_att_rad=np.concatenate([roll_pitch, yaw]) * DEG,
-                        how=f"given in {path.name}")
+    return InitialState(
+        t=v["t"],
+        lat=v["lat_deg"] * DEG,
+        lon=v["lon_deg"] * DEG,
+        h=v["h_m"],
+        v_n=np.array([v["vn"], v["ve"], v["vd"]]),
+        rpy=np.array([v["roll_deg"], v["pitch_deg"], v["yaw_deg"]]) * DEG,
+        sigma_pos_m=pos,
+        sigma_vel_mps=vel,
+        # n-frame attitude-error sigma: [roll_pitch, roll_pitch, yaw] as the
+        # level errors are taken equal to the roll/pitch sigmas.
+        sigma_att_rad=np.concatenate([roll_pitch, yaw]) * DEG,
+        how=f"given in {path.name}",
+    )
 
 
 # --- writing ------------------------------------------------------------------------------------------
 
+
 def _write_table(path: Path, names, columns, comment: str) -> None:
     table = np.column_stack([np.asarray(c, float) for c in columns])
     # %.17g round-trips every float64 exactly.
-    np.savetxt(path, table, fmt="%.17g", delimiter=",", header=f"{comment}\n" + ",".join(names), comments="")
+    np.savetxt(
+        path,
+        table,
+        fmt="%.17g",
+        delimiter=",",
+        header=f"{comment}\n" + ",".join(names),
+        comments="",
+    )
 
 
 def write_csv_run(run: RecordedRun, path, gnss_format: str = "csv") -> Path:
@@ -323,8 +397,12 @@ def write_csv_run(run: RecordedRun, path, gnss_format: str = "csv") -> Path:
     root.mkdir(parents=True, exist_ok=True)
     src = f"# gnssacc CSV run '{run.name}' written from {run.where}"
     imu = run.imu
-    _write_table(root / "imu.csv", IMU_COLUMNS, [imu.t, *imu.f_b.T, *imu.omega_ib_b.T],
-                 f"{src}\n# body frame FRD; t [s], specific force [m/s^2], angular rate [rad/s]")
+    _write_table(
+        root / "imu.csv",
+        IMU_COLUMNS,
+        [imu.t, *imu.f_b.T, *imu.omega_ib_b.T],
+        f"{src}\n# body frame FRD; t [s], specific force [m/s^2], angular rate [rad/s]",
+    )
     for stale in ("truth.csv", "init.json", "odom.csv") + GNSS_FILES:
         (root / stale).unlink(missing_ok=True)
     if gnss_format == "csv":
@@ -350,19 +428,31 @@ def write_gnss_csv(path: Path, g, src: str = "# gnssacc GNSS fixes") -> None:
     if g.quality is not None:
         names.append(QUALITY_COLUMN)
         cols.append(g.quality)
-    _write_table(path, names, cols, f"{src}\n# t [s], lat/lon [deg], h [m] ellipsoidal, 1-sigma N/E/D [m], "
-                                    f"correlations, quality code (1 fix .. 5 single)")
+    _write_table(
+        path,
+        names,
+        cols,
+        f"{src}\n# t [s], lat/lon [deg], h [m] ellipsoidal, 1-sigma N/E/D [m], "
+        f"correlations, quality code (1 fix .. 5 single)",
+    )
 
 
-def write_odometry_csv(path: Path, odo: WheelOdometry, src: str = "# gnssacc wheel odometry") -> None:
+def write_odometry_csv(
+    path: Path, odo: WheelOdometry, src: str = "# gnssacc wheel odometry"
+) -> None:
     """Wheel odometry as ``odom.csv`` (the columns it has)."""
     names, cols = list(ODOM_COLUMNS), [odo.t, odo.v_forward]
     for name in ODOM_OPTIONAL:
         if getattr(odo, name) is not None:
             names.append(name)
             cols.append(getattr(odo, name))
-    _write_table(path, names, cols, f"{src}\n# t [s] on the IMU clock, forward speed [m/s], yaw rate about the "
-                                    f"vehicle's down axis [rad/s] (positive turning right), 1-sigmas")
+    _write_table(
+        path,
+        names,
+        cols,
+        f"{src}\n# t [s] on the IMU clock, forward speed [m/s], yaw rate about the "
+        f"vehicle's down axis [rad/s] (positive turning right), 1-sigmas",
+    )
 
 
 def _write_truth(path: Path, tr: Truth, src: str) -> None:
@@ -374,19 +464,37 @@ def _write_truth(path: Path, tr: Truth, src: str) -> None:
     if tr.rpy is not None:
         names += RPY_COLUMNS
         cols += list(np.degrees(np.asarray(tr.rpy)).T)
-    _write_table(path, names, cols, f"{src}\n# t [s], lat/lon [deg], h [m], NED velocity [m/s], "
-                                    f"roll/pitch/yaw [deg]")
+    _write_table(
+        path,
+        names,
+        cols,
+        f"{src}\n# t [s], lat/lon [deg], h [m], NED velocity [m/s], roll/pitch/yaw [deg]",
+    )
 
 
 def _write_init(path: Path, init: InitialState) -> None:
     rpy_deg = np.degrees(init.rpy)
     att_deg = np.degrees(init.sigma_att_rad)
-    doc = {"t": float(init.t), "lat_deg": float(np.degrees(init.lat)), "lon_deg": float(np.degrees(init.lon)),
-           "h_m": float(init.h), "vn": float(init.v_n[0]), "ve": float(init.v_n[1]), "vd": float(init.v_n[2]),
-           "roll_deg": float(rpy_deg[0]), "pitch_deg": float(rpy_deg[1]), "yaw_deg": float(rpy_deg[2]),
-           "sigma": {"pos_m": [float(s) for s in init.sigma_pos_m],
-                     "vel_mps": [float(s) for s in init.sigma_vel_mps],
-                     "roll_pitch_deg": (float(att_deg[0]) if att_deg[0] == att_deg[1]
-                                        else [float(att_deg[0]), float(att_deg[1])]),
-                     "yaw_deg": float(att_deg[2])}}
+    doc = {
+        "t": float(init.t),
+        "lat_deg": float(np.degrees(init.lat)),
+        "lon_deg": float(np.degrees(init.lon)),
+        "h_m": float(init.h),
+        "vn": float(init.v_n[0]),
+        "ve": float(init.v_n[1]),
+        "vd": float(init.v_n[2]),
+        "roll_deg": float(rpy_deg[0]),
+        "pitch_deg": float(rpy_deg[1]),
+        "yaw_deg": float(rpy_deg[2]),
+        "sigma": {
+            "pos_m": [float(s) for s in init.sigma_pos_m],
+            "vel_mps": [float(s) for s in init.sigma_vel_mps],
+            "roll_pitch_deg": (
+                float(att_deg[0])
+                if att_deg[0] == att_deg[1]
+                else [float(att_deg[0]), float(att_deg[1])]
+            ),
+            "yaw_deg": float(att_deg[2]),
+        },
+    }
     path.write_text(json.dumps(doc, indent=2) + "\n")

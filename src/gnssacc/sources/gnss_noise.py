@@ -20,6 +20,7 @@ Profiles (1-sigma, metres, N/E/D):
 The sigma attached to each fix (what the estimators are told) is the profile's total
 stationary 1-sigma per axis.
 """
+
 from __future__ import annotations
 
 import math
@@ -32,12 +33,20 @@ from ..core.recording import GnssFixes, RecordedRun, Truth
 
 PROFILES = {
     "white": {"gm_sigma": np.zeros(3), "tau_s": 60.0, "white_sigma": np.array([3.0, 3.0, 5.0])},
-    "gm": {"gm_sigma": np.array([2.5, 2.5, 4.0]), "tau_s": 60.0, "white_sigma": np.array([0.5, 0.5, 0.8])},
+    "gm": {
+        "gm_sigma": np.array([2.5, 2.5, 4.0]),
+        "tau_s": 60.0,
+        "white_sigma": np.array([0.5, 0.5, 0.8]),
+    },
     "precise": {"gm_sigma": np.zeros(3), "tau_s": 60.0, "white_sigma": np.array([0.5, 0.5, 0.8])},
     "rtk": {"gm_sigma": np.zeros(3), "tau_s": 60.0, "white_sigma": np.array([0.02, 0.02, 0.04])},
     # A receiver whose own filter smooths its high-rate fixes: errors that wander (SBAS/DGPS-grade,
     # tens of seconds) with almost no scatter from one fix to the next; such logs rarely state sigmas.
-    "filtered": {"gm_sigma": np.array([0.6, 0.6, 1.0]), "tau_s": 30.0, "white_sigma": np.array([0.02, 0.02, 0.03])},
+    "filtered": {
+        "gm_sigma": np.array([0.6, 0.6, 1.0]),
+        "tau_s": 30.0,
+        "white_sigma": np.array([0.02, 0.02, 0.03]),
+    },
     "none": {"gm_sigma": np.zeros(3), "tau_s": 60.0, "white_sigma": np.zeros(3)},
 }
 
@@ -64,7 +73,9 @@ def noise_ned(t: np.ndarray, profile: str, seed: int) -> tuple[np.ndarray, np.nd
         Total stationary 1-sigma per axis [m].
     """
     if profile not in PROFILES:
-        raise InputError("--noise", f"unknown noise profile {profile!r} (known: {', '.join(PROFILES)})")
+        raise InputError(
+            "--noise", f"unknown noise profile {profile!r} (known: {', '.join(PROFILES)})"
+        )
     p = PROFILES[profile]
     rng = np.random.default_rng(seed)
     white = rng.standard_normal((len(t), 3)) * p["white_sigma"]
@@ -80,8 +91,9 @@ def noise_ned(t: np.ndarray, profile: str, seed: int) -> tuple[np.ndarray, np.nd
     return gm + white, sigma
 
 
-def fixes_from_truth(run: RecordedRun, truth: Truth, profile: str, seed: int,
-                     p_antenna_n: np.ndarray | None = None) -> GnssFixes:
+def fixes_from_truth(
+    run: RecordedRun, truth: Truth, profile: str, seed: int, p_antenna_n: np.ndarray | None = None
+) -> GnssFixes:
     """Make noisy fixes at the truth epochs.
 
     Parameters
@@ -111,7 +123,9 @@ MIN_OUTAGE_PERIOD_S = 1.0
 MAX_OUTAGES = 10_000
 
 
-def parse_outages(spec: str | None, every: str | None, duration_s: float | None) -> list[tuple[float, float]]:
+def parse_outages(
+    spec: str | None, every: str | None, duration_s: float | None
+) -> list[tuple[float, float]]:
     """Outage windows in seconds from the run start.
 
     Parameters
@@ -143,7 +157,9 @@ def parse_outages(spec: str | None, every: str | None, duration_s: float | None)
         if b <= a:
             raise InputError("--outage", f"outage length must be positive in '{a:g}:{b - a:g}'")
         if duration_s is not None and a >= duration_s:
-            raise InputError("--outage", f"the outage at {a:g} s starts after the run's end ({duration_s:.1f} s)")
+            raise InputError(
+                "--outage", f"the outage at {a:g} s starts after the run's end ({duration_s:.1f} s)"
+            )
     if every:
         spans += _periodic(every, duration_s)
     return sorted(spans)
@@ -160,7 +176,9 @@ def _read_span(text: str, flag: str) -> tuple[float, float]:
     if a is None:
         raise InputError(flag, f"cannot read {text.strip()!r}: expected {what} (seconds)")
     if not (math.isfinite(a) and math.isfinite(b)) or a < 0:
-        raise InputError(flag, f"{text.strip()!r}: the times must be finite and not negative ({what})")
+        raise InputError(
+            flag, f"{text.strip()!r}: the times must be finite and not negative ({what})"
+        )
     return (a, a + b) if flag == "--outage" else (a, b)
 
 
@@ -170,17 +188,29 @@ def _periodic(every: str, duration_s: float | None) -> list[tuple[float, float]]
     if not length > 0:
         raise InputError("--outage-every", f"outage length must be positive in {every.strip()!r}")
     if length >= period:
-        raise InputError("--outage-every", f"outage length {length:g} s must be shorter than the period {period:g} s")
+        raise InputError(
+            "--outage-every",
+            f"outage length {length:g} s must be shorter than the period {period:g} s",
+        )
     if period < MIN_OUTAGE_PERIOD_S:
-        raise InputError("--outage-every", f"period {period:g} s is shorter than the minimum "
-                                           f"{MIN_OUTAGE_PERIOD_S:g} s")
+        raise InputError(
+            "--outage-every",
+            f"period {period:g} s is shorter than the minimum {MIN_OUTAGE_PERIOD_S:g} s",
+        )
     if duration_s is None:
         return []
     n = int(math.floor((duration_s + length) / period)) + 1
     if n > MAX_OUTAGES:
-        raise InputError("--outage-every", f"{every.strip()!r} makes about {n} outages over the {duration_s:.0f} s "
-                                           f"run, more than {MAX_OUTAGES}: choose a longer period")
-    return [(k * period - length, k * period) for k in range(1, n + 1) if k * period - length < duration_s]
+        raise InputError(
+            "--outage-every",
+            f"{every.strip()!r} makes about {n} outages over the {duration_s:.0f} s "
+            f"run, more than {MAX_OUTAGES}: choose a longer period",
+        )
+    return [
+        (k * period - length, k * period)
+        for k in range(1, n + 1)
+        if k * period - length < duration_s
+    ]
 
 
 def in_spans(t_rel: np.ndarray, spans: list[tuple[float, float]]) -> np.ndarray:
@@ -198,10 +228,14 @@ def apply_outages(run: RecordedRun, spans: list[tuple[float, float]]) -> Recorde
     keep = ~in_spans(run.gnss.t - run.t_start, spans)
     if not np.any(keep):
         raise InputError(run.where, "the outages remove every GNSS fix")
-    return replace(run, gnss=run.gnss.select(keep), outages=tuple((float(a), float(b)) for a, b in spans))
+    return replace(
+        run, gnss=run.gnss.select(keep), outages=tuple((float(a), float(b)) for a, b in spans)
+    )
 
 
-def add_outliers(run: RecordedRun, fraction: float, sigma_m: float, seed: int) -> tuple[RecordedRun, np.ndarray]:
+def add_outliers(
+    run: RecordedRun, fraction: float, sigma_m: float, seed: int
+) -> tuple[RecordedRun, np.ndarray]:
     """``run`` with about ``fraction`` of its fixes moved by N(0, ``sigma_m``^2) per NED axis
     (multipath, jumps), their stated sigma unchanged: heavy-tailed fix errors for simulated runs.
 
@@ -212,10 +246,15 @@ def add_outliers(run: RecordedRun, fraction: float, sigma_m: float, seed: int) -
         Which fixes were moved.
     """
     if not (0.0 <= fraction <= 1.0 and sigma_m >= 0.0):
-        raise ValueError(f"add_outliers: fraction {fraction} must be in [0, 1] and sigma_m {sigma_m} >= 0")
+        raise ValueError(
+            f"add_outliers: fraction {fraction} must be in [0, 1] and sigma_m {sigma_m} >= 0"
+        )
     g = run.gnss
     rng = np.random.default_rng(seed)
     moved = rng.random(len(g.t)) < fraction
-    p_n = run.origin.to_ned(g.lat, g.lon, g.h) + rng.normal(0.0, sigma_m, (len(g.t), 3)) * moved[:, None]
+    p_n = (
+        run.origin.to_ned(g.lat, g.lon, g.h)
+        + rng.normal(0.0, sigma_m, (len(g.t), 3)) * moved[:, None]
+    )
     lat, lon, h = run.origin.to_llh(p_n)
     return run.with_gnss(replace(g, lat=lat, lon=lon, h=h)), moved

@@ -20,6 +20,7 @@ Clocks (:func:`place_on_clock`)
     be aligned with absolute fix times: that is an :class:`~gnssacc.core.errors.InputError`
     naming both spans, never a silent misalignment.
 """
+
 from __future__ import annotations
 
 import calendar
@@ -36,10 +37,24 @@ SECONDS_PER_WEEK = 604800.0
 SECONDS_PER_DAY = 86400.0
 #: (UTC date the value takes effect, GPS - UTC [s]) after each leap second (IERS Bulletin C).
 LEAP_SECONDS = (
-    ((1981, 7, 1), 1), ((1982, 7, 1), 2), ((1983, 7, 1), 3), ((1985, 7, 1), 4), ((1988, 1, 1), 5),
-    ((1990, 1, 1), 6), ((1991, 1, 1), 7), ((1992, 7, 1), 8), ((1993, 7, 1), 9), ((1994, 7, 1), 10),
-    ((1996, 1, 1), 11), ((1997, 7, 1), 12), ((1999, 1, 1), 13), ((2006, 1, 1), 14), ((2009, 1, 1), 15),
-    ((2012, 7, 1), 16), ((2015, 7, 1), 17), ((2017, 1, 1), 18),
+    ((1981, 7, 1), 1),
+    ((1982, 7, 1), 2),
+    ((1983, 7, 1), 3),
+    ((1985, 7, 1), 4),
+    ((1988, 1, 1), 5),
+    ((1990, 1, 1), 6),
+    ((1991, 1, 1), 7),
+    ((1992, 7, 1), 8),
+    ((1993, 7, 1), 9),
+    ((1994, 7, 1), 10),
+    ((1996, 1, 1), 11),
+    ((1997, 7, 1), 12),
+    ((1999, 1, 1), 13),
+    ((2006, 1, 1), 14),
+    ((2009, 1, 1), 15),
+    ((2012, 7, 1), 16),
+    ((2015, 7, 1), 17),
+    ((2017, 1, 1), 18),
 )
 _LEAP_UNIX = np.array([calendar.timegm((y, m, d, 0, 0, 0)) for (y, m, d), _ in LEAP_SECONDS], float)
 _LEAP_VALUE = np.array([v for _, v in LEAP_SECONDS], float)
@@ -82,14 +97,18 @@ def week_tow_to_gps_seconds(week, tow) -> np.ndarray:
     return np.asarray(week, float) * SECONDS_PER_WEEK + np.asarray(tow, float)
 
 
-def calendar_to_seconds(year: int, month: int, day: int, hour: int, minute: int, second: float) -> float:
+def calendar_to_seconds(
+    year: int, month: int, day: int, hour: int, minute: int, second: float
+) -> float:
     """A calendar date and time of day -> seconds since 1970-01-01 of the same time scale.
 
     Used for UTC (giving UNIX time) and for GPST calendar dates (then seconds since 1970 on the
     GPST scale, i.e. GPS seconds + 315964800). ``second`` may hold a fraction.
     """
     whole = int(np.floor(second))
-    return float(calendar.timegm((int(year), int(month), int(day), int(hour), int(minute), whole))) + (second - whole)
+    return float(
+        calendar.timegm((int(year), int(month), int(day), int(hour), int(minute), whole))
+    ) + (second - whole)
 
 
 def to_unix(t_scale: np.ndarray, system: str) -> np.ndarray:
@@ -166,24 +185,33 @@ def place_on_clock(times: FileTimes, imu_t: np.ndarray, where: str) -> tuple[np.
     imu_span = f"{imu_t[0]:.3f} .. {imu_t[-1]:.3f} s"
     if times.kind == "utc_time_of_day":
         if imu_t[0] < ABSOLUTE_CLOCK_MIN_S:
-            raise InputError(where, f"its fixes carry UTC times of day but no date (no RMC or ZDA sentence), and the "
-                                    f"IMU's time stamps ({imu_span}) are not UNIX time, so neither gives the day: add "
-                                    f"RMC sentences, or give the fixes as gnss.csv on the IMU's clock")
+            raise InputError(
+                where,
+                f"its fixes carry UTC times of day but no date (no RMC or ZDA sentence), and the "
+                f"IMU's time stamps ({imu_span}) are not UNIX time, so neither gives the day: add "
+                f"RMC sentences, or give the fixes as gnss.csv on the IMU's clock",
+            )
         return _time_of_day_on_unix(times.t, imu_t, where), "unix"
     t = times.t
     first, last = iso_utc(t[0]), iso_utc(t[-1])
     if imu_t[0] < ABSOLUTE_CLOCK_MIN_S:
-        raise InputError(where, f"its fix times are absolute {times.system} ({first} .. {last}) but the IMU's time "
-                                f"stamps are not ({imu_span}, a clock of its own): gnssacc cannot align them; stamp the "
-                                f"IMU in UNIX (UTC) or GPS seconds, or give the fixes as gnss.csv on the IMU's clock")
+        raise InputError(
+            where,
+            f"its fix times are absolute {times.system} ({first} .. {last}) but the IMU's time "
+            f"stamps are not ({imu_span}, a clock of its own): gnssacc cannot align them; stamp the "
+            f"IMU in UNIX (UTC) or GPS seconds, or give the fixes as gnss.csv on the IMU's clock",
+        )
     if _overlaps(t, imu_t):
         return t.copy(), "unix"
     t_gps = unix_to_gps_seconds(t)
     if _overlaps(t_gps, imu_t):
         return t_gps, "gps"
-    raise InputError(where, f"its fixes ({times.system} {first} .. {last}) do not meet the IMU's time stamps "
-                            f"({imu_span}: UNIX {iso_utc(imu_t[0])} .., or GPS seconds "
-                            f"{iso_utc(gps_seconds_to_unix(imu_t[0]))} ..) on either clock: a different recording?")
+    raise InputError(
+        where,
+        f"its fixes ({times.system} {first} .. {last}) do not meet the IMU's time stamps "
+        f"({imu_span}: UNIX {iso_utc(imu_t[0])} .., or GPS seconds "
+        f"{iso_utc(gps_seconds_to_unix(imu_t[0]))} ..) on either clock: a different recording?",
+    )
 
 
 def _time_of_day_on_unix(tod: np.ndarray, imu_t: np.ndarray, where: str) -> np.ndarray:
@@ -193,6 +221,9 @@ def _time_of_day_on_unix(tod: np.ndarray, imu_t: np.ndarray, where: str) -> np.n
         t = day0 + shift + tod
         if _overlaps(t, imu_t):
             return t
-    raise InputError(where, f"its UTC times of day ({tod[0]:.2f} .. {tod[-1]:.2f} s after midnight) do not meet "
-                            f"the IMU's UNIX time stamps ({iso_utc(imu_t[0])} .. {iso_utc(imu_t[-1])}) on that "
-                            f"day or the next or previous")
+    raise InputError(
+        where,
+        f"its UTC times of day ({tod[0]:.2f} .. {tod[-1]:.2f} s after midnight) do not meet "
+        f"the IMU's UNIX time stamps ({iso_utc(imu_t[0])} .. {iso_utc(imu_t[-1])}) on that "
+        f"day or the next or previous",
+    )

@@ -16,6 +16,7 @@ Conversions made here:
 The positions are the truth; the estimators' fixes are truth plus a seeded noise profile
 (:mod:`gnssacc.sources.gnss_noise`).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -76,6 +77,13 @@ def load_kitti(cfg: RunConfig, noise: str = "white", seed: int = 0) -> RecordedR
     lat, lon, h = origin.to_llh(p_n)
     truth = Truth(gps[:, 0], lat, lon, h)
     placeholder = GnssFixes(truth.t, lat, lon, h, np.full((len(lat), 3), 0.01))
-    run = RecordedRun(name="kitti", where=str(folder / GPS_FILE), imu=imu, gnss=placeholder, origin=origin,
-                      truth=truth, meta={"source": "kitti", "origin_llh_deg": list(ORIGIN_LLH_DEG)})
+    run = RecordedRun(
+        name="kitti",
+        where=str(folder / GPS_FILE),
+        imu=imu,
+        gnss=placeholder,
+        origin=origin,
+        truth=truth,
+        meta={"source": "kitti", "origin_llh_deg": list(ORIGIN_LLH_DEG)},
+    )
     return with_noisy_fixes(run, truth, noise, seed).validate()

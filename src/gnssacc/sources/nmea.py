@@ -28,6 +28,7 @@ Checks
     ``data.max_bad_fraction`` of the lines, refused with an :class:`~gnssacc.core.errors.InputError`
     naming the first bad line.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -44,12 +45,28 @@ from .gnss_time import SECONDS_PER_DAY, FileTimes, calendar_to_seconds
 KIND = "an NMEA 0183 log"
 KNOT_MPS = 1852.0 / 3600.0
 #: GGA fix quality -> gnssacc quality code; None: the fix is dropped.
-GGA_QUALITY = {0: None, 1: FIX_QUALITY["single"], 2: FIX_QUALITY["dgps"], 3: FIX_QUALITY["single"],
-               4: FIX_QUALITY["fix"], 5: FIX_QUALITY["float"], 6: FIX_QUALITY["estimated"], 7: None,
-               8: FIX_QUALITY["unknown"]}
+GGA_QUALITY = {
+    0: None,
+    1: FIX_QUALITY["single"],
+    2: FIX_QUALITY["dgps"],
+    3: FIX_QUALITY["single"],
+    4: FIX_QUALITY["fix"],
+    5: FIX_QUALITY["float"],
+    6: FIX_QUALITY["estimated"],
+    7: None,
+    8: FIX_QUALITY["unknown"],
+}
 #: gnssacc quality code -> GGA fix quality (for writing).
-QUALITY_GGA = {FIX_QUALITY["single"]: 1, FIX_QUALITY["dgps"]: 2, FIX_QUALITY["sbas"]: 2, FIX_QUALITY["fix"]: 4,
-               FIX_QUALITY["float"]: 5, FIX_QUALITY["estimated"]: 6, FIX_QUALITY["ppp"]: 5, FIX_QUALITY["unknown"]: 1}
+QUALITY_GGA = {
+    FIX_QUALITY["single"]: 1,
+    FIX_QUALITY["dgps"]: 2,
+    FIX_QUALITY["sbas"]: 2,
+    FIX_QUALITY["fix"]: 4,
+    FIX_QUALITY["float"]: 5,
+    FIX_QUALITY["estimated"]: 6,
+    FIX_QUALITY["ppp"]: 5,
+    FIX_QUALITY["unknown"]: 1,
+}
 #: Fields after the address that a sentence must have to be read.
 MIN_FIELDS = {"GGA": 11, "RMC": 9, "ZDA": 4, "GST": 8}
 #: Dates further than this from a GGA's time of day are a day away [s].
@@ -98,6 +115,7 @@ class NmeaFile:
 
 # --- sentences -----------------------------------------------------------------------------------------
 
+
 def checksum(body: str) -> int:
     """The NMEA checksum of the text between ``$`` and ``*``: the XOR of its bytes."""
     out = 0
@@ -122,7 +140,7 @@ def split_sentence(line: str) -> tuple[str, list[str]] | None:
     start = line.find("$")
     if start < 0:
         raise BadSentence("not a sentence")
-    text = line[start + 1:].strip()
+    text = line[start + 1 :].strip()
     body, star, given = text.partition("*")
     if not star:
         raise BadSentence("no checksum")
@@ -174,7 +192,9 @@ def _midnight(day: str, month: str, year: str) -> float:
     if y < 100:
         y += 2000 if y < 80 else 1900
     try:
-        return calendar_to_seconds(y, int(_number(month, "date")), int(_number(day, "date")), 0, 0, 0.0)
+        return calendar_to_seconds(
+            y, int(_number(month, "date")), int(_number(day, "date")), 0, 0, 0.0
+        )
     except (ValueError, OverflowError):
         raise BadSentence("unreadable date") from None
 
@@ -196,7 +216,17 @@ def _gga(f: list[str], index: int, line: int) -> _Gga | None:
     """A GGA fix (None when it has no position: quality 0 with empty fields)."""
     q = int(_number(f[5], "fix quality")) if f[5] else 0
     if q == 0 and not f[1]:
-        return _Gga(index, line, _time_of_day(f[0]) if f[0] else np.nan, np.nan, np.nan, 0, 0, np.nan, np.nan)
+        return _Gga(
+            index,
+            line,
+            _time_of_day(f[0]) if f[0] else np.nan,
+            np.nan,
+            np.nan,
+            0,
+            0,
+            np.nan,
+            np.nan,
+        )
     tod = _time_of_day(f[0])
     lat, lon = _angle(f[1], f[2], 2), _angle(f[3], f[4], 3)
     alt, sep = _number(f[8], "altitude"), (_number(f[10], "geoid separation") if f[10] else 0.0)
@@ -207,8 +237,14 @@ def _gga(f: list[str], index: int, line: int) -> _Gga | None:
 
 # --- reading -------------------------------------------------------------------------------------------
 
-def read_nmea(path, uere_m: dict, vertical_factor: float, default_sigma_ned: np.ndarray,
-              max_bad_fraction: float) -> NmeaFile:
+
+def read_nmea(
+    path,
+    uere_m: dict,
+    vertical_factor: float,
+    default_sigma_ned: np.ndarray,
+    max_bad_fraction: float,
+) -> NmeaFile:
     """Read an NMEA 0183 log (format and rules in the module docstring).
 
     Parameters
@@ -237,17 +273,34 @@ def read_nmea(path, uere_m: dict, vertical_factor: float, default_sigma_ned: np.
         if g not in kept:
             dropped[g.q] = dropped.get(g.q, 0) + 1
     if not kept:
-        raise InputError(where, f"no GGA sentence with a valid fix ({len(fixes)} GGA sentence(s), "
-                                f"{counts['sentences']} sentence(s) read)")
+        raise InputError(
+            where,
+            f"no GGA sentence with a valid fix ({len(fixes)} GGA sentence(s), "
+            f"{counts['sentences']} sentence(s) read)",
+        )
     times = _dated(kept, dates, where)
     sig, corr, sigma_from = _sigmas(kept, gst, uere_m, vertical_factor, default_sigma_ned)
     speed = np.array([rmc.get(round(g.tod * 100), (np.nan, np.nan))[0] for g in kept])
     course = np.array([rmc.get(round(g.tod * 100), (np.nan, np.nan))[1] for g in kept])
-    meta = {**counts, "dropped_quality": {str(k): v for k, v in dropped.items()}, "sigma_from": sigma_from}
-    return NmeaFile(times, np.radians([g.lat for g in kept]), np.radians([g.lon for g in kept]),
-                    np.array([g.h for g in kept]), sig, corr,
-                    np.array([GGA_QUALITY[g.q] for g in kept], int), np.array([g.n_sat for g in kept], int),
-                    np.array([g.hdop for g in kept]), speed, course, meta)
+    meta = {
+        **counts,
+        "dropped_quality": {str(k): v for k, v in dropped.items()},
+        "sigma_from": sigma_from,
+    }
+    return NmeaFile(
+        times,
+        np.radians([g.lat for g in kept]),
+        np.radians([g.lon for g in kept]),
+        np.array([g.h for g in kept]),
+        sig,
+        corr,
+        np.array([GGA_QUALITY[g.q] for g in kept], int),
+        np.array([g.n_sat for g in kept], int),
+        np.array([g.hdop for g in kept]),
+        speed,
+        course,
+        meta,
+    )
 
 
 def _scan(lines: list[str], where: str, max_bad_fraction: float):
@@ -277,14 +330,23 @@ def _scan(lines: list[str], where: str, max_bad_fraction: float):
             bad[reason] = bad.get(reason, 0) + 1
             first_bad = first_bad or (n, reason)
     n_bad = sum(bad.values())
-    counts = {"sentences": n_lines, "bad": bad, "first_bad_line": first_bad[0] if first_bad else None}
+    counts = {
+        "sentences": n_lines,
+        "bad": bad,
+        "first_bad_line": first_bad[0] if first_bad else None,
+    }
     if n_bad:
         listing = ", ".join(f"{v} {k}" for k, v in sorted(bad.items()))
-        text = f"{n_bad} of {n_lines} line(s) are not usable sentences ({listing}); first at line {first_bad[0]} " \
-               f"({first_bad[1]})"
+        text = (
+            f"{n_bad} of {n_lines} line(s) are not usable sentences ({listing}); first at line {first_bad[0]} "
+            f"({first_bad[1]})"
+        )
         if n_bad > max_bad_fraction * n_lines:
-            raise InputError(where, f"{text}: more than the allowed {100 * max_bad_fraction:.1f}% "
-                                    f"(data.max_bad_fraction)")
+            raise InputError(
+                where,
+                f"{text}: more than the allowed {100 * max_bad_fraction:.1f}% "
+                f"(data.max_bad_fraction)",
+            )
         warn_data(where, f"skipped {text}")
     return fixes, dates, gst, rmc, counts
 
@@ -336,13 +398,20 @@ def _dated(kept: list[_Gga], dates: list, where: str) -> FileTimes:
             continue
         before = np.flatnonzero(d_index < g.index)
         j = int(before[-1]) if before.size else int(np.argmin(d_index))
-        day = d_mid[j] + (SECONDS_PER_DAY if g.tod < d_tod[j] - HALF_DAY_S else
-                          -SECONDS_PER_DAY if g.tod > d_tod[j] + HALF_DAY_S else 0.0)
+        day = d_mid[j] + (
+            SECONDS_PER_DAY
+            if g.tod < d_tod[j] - HALF_DAY_S
+            else -SECONDS_PER_DAY
+            if g.tod > d_tod[j] + HALF_DAY_S
+            else 0.0
+        )
         out[k] = day + g.tod
     return FileTimes(out, "absolute", "UTC")
 
 
-def _sigmas(kept: list[_Gga], gst: dict, uere_m: dict, vertical_factor: float, default_sigma_ned: np.ndarray):
+def _sigmas(
+    kept: list[_Gga], gst: dict, uere_m: dict, vertical_factor: float, default_sigma_ned: np.ndarray
+):
     """NED sigmas [m] (GST, else HDOP x UERE, else the default), the NE correlation of GST's
     ellipse (None when no fix has one) and the counts of each source."""
     m = len(kept)
@@ -379,6 +448,7 @@ def _ellipse_correlation(e: tuple, sig_ned: np.ndarray) -> float:
 
 # --- writing -------------------------------------------------------------------------------------------
 
+
 def _sentence(body: str) -> str:
     return f"${body}*{checksum(body):02X}"
 
@@ -393,10 +463,26 @@ def _dm(deg: float, width: int, pos: str, neg: str) -> tuple[str, str]:
     return f"{d:0{width}d}{minutes:010.7f}", (neg if deg < 0 else pos)
 
 
-def write_nmea(path, t_unix: np.ndarray, lat: np.ndarray, lon: np.ndarray, h: np.ndarray, sigma_ned: np.ndarray,
-               corr_ned=None, quality=None, n_sat=None, *, uere_m: dict, vertical_factor: float,
-               speed_mps=None, course_deg=None, geoid_sep_m: float = 0.0, gst: bool = True, rmc: bool = True,
-               talker: str = "GP") -> Path:
+def write_nmea(
+    path,
+    t_unix: np.ndarray,
+    lat: np.ndarray,
+    lon: np.ndarray,
+    h: np.ndarray,
+    sigma_ned: np.ndarray,
+    corr_ned=None,
+    quality=None,
+    n_sat=None,
+    *,
+    uere_m: dict,
+    vertical_factor: float,
+    speed_mps=None,
+    course_deg=None,
+    geoid_sep_m: float = 0.0,
+    gst: bool = True,
+    rmc: bool = True,
+    talker: str = "GP",
+) -> Path:
     """Write fixes as NMEA 0183: per epoch RMC (date, speed, course), GGA and GST.
 
     Parameters
@@ -435,17 +521,35 @@ def write_nmea(path, t_unix: np.ndarray, lat: np.ndarray, lon: np.ndarray, h: np
         s_h = np.sqrt((s[0] ** 2 + s[1] ** 2) / 2.0)
         hdop = np.sqrt(2.0) * s_h / float(uere_m[int(quality[k])])
         if rmc:
-            sp = f"{speed_mps[k] / KNOT_MPS:.3f}" if speed_mps is not None and np.isfinite(speed_mps[k]) else ""
-            co = f"{course_deg[k] % 360.0:.2f}" if course_deg is not None and np.isfinite(course_deg[k]) else ""
-            out.append(_sentence(f"{talker}RMC,{hms},A,{la},{ns_},{lo},{ew},{sp},{co},{d:%d%m%y},,,A"))
-        out.append(_sentence(f"{talker}GGA,{hms},{la},{ns_},{lo},{ew},{QUALITY_GGA[int(quality[k])]},{n_sat[k]:02d},"
-                             f"{hdop:.2f},{h[k] - geoid_sep_m:.4f},M,{geoid_sep_m:.4f},M,,"))
+            sp = (
+                f"{speed_mps[k] / KNOT_MPS:.3f}"
+                if speed_mps is not None and np.isfinite(speed_mps[k])
+                else ""
+            )
+            co = (
+                f"{course_deg[k] % 360.0:.2f}"
+                if course_deg is not None and np.isfinite(course_deg[k])
+                else ""
+            )
+            out.append(
+                _sentence(f"{talker}RMC,{hms},A,{la},{ns_},{lo},{ew},{sp},{co},{d:%d%m%y},,,A")
+            )
+        out.append(
+            _sentence(
+                f"{talker}GGA,{hms},{la},{ns_},{lo},{ew},{QUALITY_GGA[int(quality[k])]},{n_sat[k]:02d},"
+                f"{hdop:.2f},{h[k] - geoid_sep_m:.4f},M,{geoid_sep_m:.4f},M,,"
+            )
+        )
         if gst:
             rho = 0.0 if corr_ned is None else float(corr_ned[k][0])
             a, b, theta = _ellipse(s[0], s[1], rho)
             rms = float(np.sqrt(s[0] ** 2 + s[1] ** 2))
-            out.append(_sentence(f"{talker}GST,{hms},{rms:.4f},{a:.4f},{b:.4f},{theta:.2f},{s[0]:.4f},{s[1]:.4f},"
-                                 f"{s[2]:.4f}"))
+            out.append(
+                _sentence(
+                    f"{talker}GST,{hms},{rms:.4f},{a:.4f},{b:.4f},{theta:.2f},{s[0]:.4f},{s[1]:.4f},"
+                    f"{s[2]:.4f}"
+                )
+            )
     path = Path(path)
     path.write_text("\r\n".join(out) + "\r\n")
     return path

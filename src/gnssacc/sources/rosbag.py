@@ -39,6 +39,7 @@ Modules
     selection), :mod:`.bag_decode` (messages to rows, fix mappings, ``/tf_static``) and
     :mod:`.bag_times` (time-stamp repair and gaps).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -69,8 +70,20 @@ from .bag_topics import Selection, TopicStat, select_topics, survey
 from .common import apply_mounting, configured_time_offset_s, one_line, with_noisy_fixes
 
 # The bag source's public names, wherever they are defined.
-__all__ = ["FIX_MAPPINGS", "MAGIC", "STORAGE_SUFFIXES", "Selection", "TopicStat", "check_bag_path",
-           "enu_flu_to_ned_frd", "inspect_bag", "load_bag_run", "normalize_type", "select_topics", "storage_files"]
+__all__ = [
+    "FIX_MAPPINGS",
+    "MAGIC",
+    "STORAGE_SUFFIXES",
+    "Selection",
+    "TopicStat",
+    "check_bag_path",
+    "enu_flu_to_ned_frd",
+    "inspect_bag",
+    "load_bag_run",
+    "normalize_type",
+    "select_topics",
+    "storage_files",
+]
 
 #: Initial-state sigmas when the IMU orientation has no (valid) covariance.
 INIT_SIGMA_ROLL_PITCH_DEG = 1.0
@@ -80,11 +93,21 @@ INIT_VEL_FIT_S = 3.0
 enu_flu_to_ned_frd = ros_to_R_nb  # name kept for callers of this module
 
 
-def load_bag_run(path, cfg: RunConfig, *, imu_topic: str | None = None, gnss_topic: str | None = None,
-                 truth_topic: str | None = None, time_source: str = "header",
-                 gnss_from_truth_hz: float | None = None, noise: str | None = None, seed: int = 0,
-                 fix_mappings: dict | None = None, truth_origin_llh_deg=None,
-                 odom_topic: str | None = None) -> RecordedRun:
+def load_bag_run(
+    path,
+    cfg: RunConfig,
+    *,
+    imu_topic: str | None = None,
+    gnss_topic: str | None = None,
+    truth_topic: str | None = None,
+    time_source: str = "header",
+    gnss_from_truth_hz: float | None = None,
+    noise: str | None = None,
+    seed: int = 0,
+    fix_mappings: dict | None = None,
+    truth_origin_llh_deg=None,
+    odom_topic: str | None = None,
+) -> RecordedRun:
     """Load a ROS 1 / ROS 2 bag as a :class:`RecordedRun`.
 
     Parameters
@@ -119,13 +142,23 @@ def load_bag_run(path, cfg: RunConfig, *, imu_topic: str | None = None, gnss_top
     path = Path(path)
     where = str(path)
     _check_options(where, time_source, noise, gnss_from_truth_hz)
-    mappings = merge_fix_mappings(cfg["bag"]["fix_mappings"] if fix_mappings is None else fix_mappings)
-    decoder = RowDecoder(mappings, time_source, cfg.default_sigma_ned,
-                         where)
+    mappings = merge_fix_mappings(
+        cfg["bag"]["fix_mappings"] if fix_mappings is None else fix_mappings
+    )
+    decoder = RowDecoder(mappings, time_source, cfg.default_sigma_ned, where)
     max_bad = float(cfg["data"]["max_bad_fraction"])
     meta: dict = {"source": "bag", "time_source": time_source}
-    sel, dec, tf = _read(path, cfg, decoder, meta, imu_topic=imu_topic, gnss_topic=gnss_topic,
-                         truth_topic=truth_topic, gnss_from_truth=gnss_from_truth_hz is not None, odom_topic=odom_topic)
+    sel, dec, tf = _read(
+        path,
+        cfg,
+        decoder,
+        meta,
+        imu_topic=imu_topic,
+        gnss_topic=gnss_topic,
+        truth_topic=truth_topic,
+        gnss_from_truth=gnss_from_truth_hz is not None,
+        odom_topic=odom_topic,
+    )
 
     itab, imu, R_bi_total = _imu(dec.cols[sel.imu.topic], tf, cfg, where, max_bad, meta)
     truth = None
@@ -136,20 +169,47 @@ def load_bag_run(path, cfg: RunConfig, *, imu_topic: str | None = None, gnss_top
         gnss = fixes_of(fix_table(dec.cols[sel.gnss.topic], where, "GNSS", max_bad, meta, "gnss"))
         origin = LocalTangentFrame(gnss.lat[0], gnss.lon[0], gnss.h[0])
     else:
-        gnss, origin = _gnss_from_truth(truth, imu, where, float(gnss_from_truth_hz), noise or "white", seed, meta)
+        gnss, origin = _gnss_from_truth(
+            truth, imu, where, float(gnss_from_truth_hz), noise or "white", seed, meta
+        )
     meta["gaps"]["gnss"] = find_gaps(gnss.t, float(cfg["quality"]["gap_factor"]))
     if sel.truth is not None and sel.truth_kind == "pose":
         porigin, meta["truth_origin"] = pose_origin(origin, truth_origin_llh_deg)
         truth = pose_truth(dec.cols[sel.truth.topic], porigin, where, max_bad, meta)
-    chosen = choose(sel, dec, Context(where, gnss, origin, truth_origin_llh_deg, float(np.linalg.norm(cfg.lever_arm_b)),
-                                      max_bad, meta), truth)
+    chosen = choose(
+        sel,
+        dec,
+        Context(
+            where,
+            gnss,
+            origin,
+            truth_origin_llh_deg,
+            float(np.linalg.norm(cfg.lever_arm_b)),
+            max_bad,
+            meta,
+        ),
+        truth,
+    )
     _record_choice(chosen, sel, meta, truth_origin_llh_deg, origin)
-    odometry = None if chosen.odometry is None else chosen.odometry.shifted(configured_time_offset_s(cfg))
+    odometry = (
+        None if chosen.odometry is None else chosen.odometry.shifted(configured_time_offset_s(cfg))
+    )
     good_q = np.isfinite(itab[:, 7:11]).all(axis=1)
-    init = _initial_state(itab, good_q, imu, gnss, R_bi_total, sel.imu.topic) if good_q.any() else None
-    run = RecordedRun(name=path.stem if path.is_file() else path.name, where=where, imu=imu, gnss=gnss,
-                      origin=origin, truth=chosen.truth, init=init, meta=meta, odometry=odometry)
-    release_free_memory()   # the decoded message columns
+    init = (
+        _initial_state(itab, good_q, imu, gnss, R_bi_total, sel.imu.topic) if good_q.any() else None
+    )
+    run = RecordedRun(
+        name=path.stem if path.is_file() else path.name,
+        where=where,
+        imu=imu,
+        gnss=gnss,
+        origin=origin,
+        truth=chosen.truth,
+        init=init,
+        meta=meta,
+        odometry=odometry,
+    )
+    release_free_memory()  # the decoded message columns
     return run.validate()
 
 
@@ -159,8 +219,12 @@ def _record_choice(chosen, sel: Selection, meta: dict, truth_origin_llh_deg, ori
     meta["selection"] = list(sel.reasons) + list(chosen.reasons)
     if chosen.checks:
         meta["truth_checks"] = chosen.checks
-    if chosen.truth_topic is not None and sel.truth_kind != "fix" and "truth_origin" not in meta \
-            and any(s.topic == chosen.truth_topic and k == "pose" for s, k in sel.truth_candidates):
+    if (
+        chosen.truth_topic is not None
+        and sel.truth_kind != "fix"
+        and "truth_origin" not in meta
+        and any(s.topic == chosen.truth_topic and k == "pose" for s, k in sel.truth_candidates)
+    ):
         meta["truth_origin"] = pose_origin(origin, truth_origin_llh_deg)[1]
     if chosen.odometry is not None:
         meta["odometry_frame"] = chosen.odometry.frame
@@ -169,12 +233,19 @@ def _record_choice(chosen, sel: Selection, meta: dict, truth_origin_llh_deg, ori
 def _check_options(where: str, time_source: str, noise: str | None, gnss_from_truth_hz) -> None:
     """:class:`InputError` for a time source, noise or ``--gnss-from-truth`` rate [Hz] that cannot be used."""
     if time_source not in TIME_SOURCES:
-        raise InputError(where, f"time_source must be one of {', '.join(TIME_SOURCES)}, got {time_source!r}")
+        raise InputError(
+            where, f"time_source must be one of {', '.join(TIME_SOURCES)}, got {time_source!r}"
+        )
     if noise is not None and gnss_from_truth_hz is None:
-        raise InputError(where, "--noise on a bag needs --gnss-from-truth RATE_HZ (without it the bag's own "
-                                "fixes are used as they are)")
+        raise InputError(
+            where,
+            "--noise on a bag needs --gnss-from-truth RATE_HZ (without it the bag's own "
+            "fixes are used as they are)",
+        )
     if gnss_from_truth_hz is not None and not float(gnss_from_truth_hz) > 0:
-        raise InputError(where, f"--gnss-from-truth must be a positive rate in Hz, got {gnss_from_truth_hz}")
+        raise InputError(
+            where, f"--gnss-from-truth must be a positive rate in Hz, got {gnss_from_truth_hz}"
+        )
 
 
 def _read(path: Path, cfg: RunConfig, decoder: RowDecoder, meta: dict, **choices) -> tuple:
@@ -185,19 +256,27 @@ def _read(path: Path, cfg: RunConfig, decoder: RowDecoder, meta: dict, **choices
     try:
         meta["bag_format"] = "ros2" if reader.is2 else "ros1"
         if getattr(reader, "damaged", None):
-            meta["damaged"] = f"{reader.damaged}; salvaged {reader.good_bytes} of {reader.file_bytes} bytes"
+            meta["damaged"] = (
+                f"{reader.damaged}; salvaged {reader.good_bytes} of {reader.file_bytes} bytes"
+            )
         sel = select_topics(survey(reader), where, mappings=decoder.mappings, **choices)
-        meta["topics"] = {"imu": sel.imu.topic, "gnss": sel.gnss.topic if sel.gnss else None,
-                          "truth": sel.truth.topic if sel.truth else None}
+        meta["topics"] = {
+            "imu": sel.imu.topic,
+            "gnss": sel.gnss.topic if sel.gnss else None,
+            "truth": sel.truth.topic if sel.truth else None,
+        }
         meta["selection"] = sel.reasons
         dec = decode_topics(reader, chosen_topics(sel), decoder)
         _check_damage(dec, where, meta)
         tf = None
-        if not np.any(cfg.imu_to_body_rpy_deg):      # a configured mounting wins over /tf_static
+        if not np.any(cfg.imu_to_body_rpy_deg):  # a configured mounting wins over /tf_static
             try:
                 tf = tf_mounting(reader, dec.imu_frame_id)
             except Exception as err:
-                warn_data(where, f"/tf_static could not be read ({one_line(err)}); IMU mounting from the config")
+                warn_data(
+                    where,
+                    f"/tf_static could not be read ({one_line(err)}); IMU mounting from the config",
+                )
     finally:
         reader.close()
     return sel, dec, tf
@@ -218,7 +297,9 @@ def _check_damage(dec: Decoded, where: str, meta: dict) -> None:
     n = sum(len(c) for c in dec.cols.values())
     if not n:
         raise InputError(where, f"cannot read the bag (truncated or corrupt?): {dec.damaged}")
-    warn_data(where, f"the bag is damaged ({dec.damaged}); using the {n} messages read before the damage")
+    warn_data(
+        where, f"the bag is damaged ({dec.damaged}); using the {n} messages read before the damage"
+    )
     meta["damaged"] = dec.damaged
 
 
@@ -232,36 +313,50 @@ def _imu(col: Collector, tf, cfg: RunConfig, where: str, max_bad: float, meta: d
     itab = clean_rows(col, 7, where, what, max_bad, meta, "imu")
     if len(itab) < 2:
         raise InputError(where, f"{what}: {len(itab)} usable message(s), need at least two")
-    f_imu = itab[:, 1:4] @ FLU_FRD          # FLU -> FRD (diagonal: same as T @ x per row)
+    f_imu = itab[:, 1:4] @ FLU_FRD  # FLU -> FRD (diagonal: same as T @ x per row)
     w_imu = itab[:, 4:7] @ FLU_FRD
     if tf is not None:
         R_bi_tf, what_tf = tf
         f_imu, w_imu = f_imu @ R_bi_tf.T, w_imu @ R_bi_tf.T
-        meta["imu_mounting"] = {"from": what_tf, "imu_to_body_rpy_deg": [float(np.degrees(a))
-                                                                        for a in dcm_to_euler(R_bi_tf)]}
+        meta["imu_mounting"] = {
+            "from": what_tf,
+            "imu_to_body_rpy_deg": [float(np.degrees(a)) for a in dcm_to_euler(R_bi_tf)],
+        }
         R_bi_total = cfg.R_bi @ R_bi_tf
     else:
-        meta["imu_mounting"] = {"from": "config [mounting] imu_to_body_rpy_deg",
-                                "imu_to_body_rpy_deg": [float(v) for v in cfg.imu_to_body_rpy_deg]}
+        meta["imu_mounting"] = {
+            "from": "config [mounting] imu_to_body_rpy_deg",
+            "imu_to_body_rpy_deg": [float(v) for v in cfg.imu_to_body_rpy_deg],
+        }
         R_bi_total = cfg.R_bi
     imu = apply_mounting(ImuData(itab[:, 0].copy(), f_imu, w_imu), cfg)
     meta["gaps"] = {"imu": find_gaps(imu.t, float(cfg["quality"]["gap_factor"]))}
     return itab, imu, R_bi_total
 
 
-def _gnss_from_truth(truth: Truth, imu: ImuData, where: str, rate_hz: float, noise: str, seed: int, meta: dict):
+def _gnss_from_truth(
+    truth: Truth, imu: ImuData, where: str, rate_hz: float, noise: str, seed: int, meta: dict
+):
     """(fixes, origin): the truth subsampled at ``rate_hz`` [Hz] plus ``noise``; origin at the first truth point."""
     origin = LocalTangentFrame(truth.lat[0], truth.lon[0], truth.h[0])
     sub = subsample(truth.t, rate_hz)
     sub_truth = Truth(truth.t[sub], truth.lat[sub], truth.lon[sub], truth.h[sub])
-    holder = RecordedRun("tmp", where, imu, GnssFixes(*(np.empty(0),) * 4, np.empty((0, 3))), origin)
+    holder = RecordedRun(
+        "tmp", where, imu, GnssFixes(*(np.empty(0),) * 4, np.empty((0, 3))), origin
+    )
     gnss = with_noisy_fixes(holder, sub_truth, noise, seed).gnss
     meta.update(gnss_from_truth_hz=rate_hz, noise=noise, seed=seed)
     return gnss, origin
 
 
-def _initial_state(itab: np.ndarray, good_q: np.ndarray, imu: ImuData, gnss: GnssFixes, R_bi: np.ndarray,
-                   topic: str) -> InitialState | None:
+def _initial_state(
+    itab: np.ndarray,
+    good_q: np.ndarray,
+    imu: ImuData,
+    gnss: GnssFixes,
+    R_bi: np.ndarray,
+    topic: str,
+) -> InitialState | None:
     """Initial state from the IMU orientation (ENU <- IMU FLU, rows of ``itab`` where ``good_q``)
     nearest the first fix inside the IMU span, and a line fitted to the fixes of the next
     :data:`INIT_VEL_FIT_S` seconds; None without a fix inside the IMU span. ``R_bi``: IMU FRD
@@ -277,8 +372,10 @@ def _initial_state(itab: np.ndarray, good_q: np.ndarray, imu: ImuData, gnss: Gns
     R_n_imu = enu_flu_to_ned_frd(quaternion_to_dcm(*q))
     R_nb = R_n_imu @ R_bi.T
     rpy = np.array(dcm_to_euler(R_nb))
-    cov = itab[j, 11:14]       # roll, pitch, yaw variances of the IMU orientation (FLU axes)
-    sig_att = np.array([INIT_SIGMA_ROLL_PITCH_DEG, INIT_SIGMA_ROLL_PITCH_DEG, INIT_SIGMA_YAW_DEG]) * DEG
+    cov = itab[j, 11:14]  # roll, pitch, yaw variances of the IMU orientation (FLU axes)
+    sig_att = (
+        np.array([INIT_SIGMA_ROLL_PITCH_DEG, INIT_SIGMA_ROLL_PITCH_DEG, INIT_SIGMA_YAW_DEG]) * DEG
+    )
     if np.all(np.isfinite(cov)) and np.all(cov > 0):
         sig_att = np.sqrt(cov)
     # velocity: straight-line fit over the fixes in [t0, t0 + 3 s]
@@ -293,21 +390,32 @@ def _initial_state(itab: np.ndarray, good_q: np.ndarray, imu: ImuData, gnss: Gns
         v_n = coef[1]
         span = max(float(dt[-1]), 1e-3)
         # slope sigma of a line fit (~sigma_p * sqrt(12 / n) / span) plus 0.3 m/s for acceleration in the window
-        sig_v = np.sqrt((gnss.sigma_ned[win].mean(axis=0) * np.sqrt(12.0 / win.size) / span) ** 2 + 0.3 ** 2)
+        sig_v = np.sqrt(
+            (gnss.sigma_ned[win].mean(axis=0) * np.sqrt(12.0 / win.size) / span) ** 2 + 0.3**2
+        )
         how_v = f"velocity fitted to {win.size} fixes over {span:.1f} s"
     else:
         v_n = np.zeros(3)
         sig_v = np.full(3, 5.0)
         how_v = "velocity unknown (one fix): 0 +- 5 m/s"
-    return InitialState(t=t0, lat=float(gnss.lat[k0]), lon=float(gnss.lon[k0]), h=float(gnss.h[k0]), v_n=v_n,
-                        rpy=rpy, sigma_pos_m=sig_p, sigma_vel_mps=sig_v, sigma_att_rad=sig_att,
-                        how=f"attitude from the orientation on {topic}, position from the first fix, {how_v}",
-                        yaw_evidence="orientation")
+    return InitialState(
+        t=t0,
+        lat=float(gnss.lat[k0]),
+        lon=float(gnss.lon[k0]),
+        h=float(gnss.h[k0]),
+        v_n=v_n,
+        rpy=rpy,
+        sigma_pos_m=sig_p,
+        sigma_vel_mps=sig_v,
+        sigma_att_rad=sig_att,
+        how=f"attitude from the orientation on {topic}, position from the first fix, {how_v}",
+        yaw_evidence="orientation",
+    )
 
 
-
-def inspect_bag(path, *, imu_topic=None, gnss_topic=None, truth_topic=None, odom_topic=None,
-                fix_mappings=None) -> str:
+def inspect_bag(
+    path, *, imu_topic=None, gnss_topic=None, truth_topic=None, odom_topic=None, fix_mappings=None
+) -> str:
     """A text summary of a bag: topics, types, counts, rates, time span, the topics gnssacc would
     use and why (the truth and wheel-odometry candidates decoded and decided as when loading)."""
     path = Path(path)
@@ -320,8 +428,11 @@ def inspect_bag(path, *, imu_topic=None, gnss_topic=None, truth_topic=None, odom
         kind = "ROS 2" if reader.is2 else "ROS 1"
     finally:
         reader.close()
-    lines = [f"{where}: {kind} bag, {sum(s.count for s in stats)} messages, {span:.2f} s "
-             f"(from {start:.3f} s receive time)", ""]
+    lines = [
+        f"{where}: {kind} bag, {sum(s.count for s in stats)} messages, {span:.2f} s "
+        f"(from {start:.3f} s receive time)",
+        "",
+    ]
     w = max([len(s.topic) for s in stats] + [5])
     wt = max([len(s.msgtype) for s in stats] + [4])
     lines.append(f"  {'topic':<{w}}  {'type':<{wt}}  {'count':>8}  {'~rate Hz':>9}")
@@ -330,8 +441,15 @@ def inspect_bag(path, *, imu_topic=None, gnss_topic=None, truth_topic=None, odom
     lines.append("")
     mappings = merge_fix_mappings(fix_mappings)
     try:
-        sel = select_topics(stats, where, imu_topic=imu_topic, gnss_topic=gnss_topic, truth_topic=truth_topic,
-                            mappings=mappings, odom_topic=odom_topic)
+        sel = select_topics(
+            stats,
+            where,
+            imu_topic=imu_topic,
+            gnss_topic=gnss_topic,
+            truth_topic=truth_topic,
+            mappings=mappings,
+            odom_topic=odom_topic,
+        )
         lines.append("gnssacc would use:")
         lines += [f"  {r}" for r in sel.reasons]
     except InputError as err:
@@ -350,7 +468,9 @@ def _decide_candidates(path: Path, sel: Selection, mappings: dict) -> list[str]:
 
     from ..core.config import load_config
 
-    if sel.gnss is None or not (sel.truth_candidates or sel.odom_candidates or sel.odom or sel.truth):
+    if sel.gnss is None or not (
+        sel.truth_candidates or sel.odom_candidates or sel.odom or sel.truth
+    ):
         return []
     cfg = load_config(None)
     where = str(path)
@@ -362,7 +482,7 @@ def _decide_candidates(path: Path, sel: Selection, mappings: dict) -> list[str]:
         reader.close()
     max_bad = float(cfg["data"]["max_bad_fraction"])
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")   # the decisions are listed as lines here
+        warnings.simplefilter("ignore")  # the decisions are listed as lines here
         gnss = fixes_of(fix_table(dec.cols[sel.gnss.topic], where, "GNSS", max_bad, {}, "gnss"))
         origin = LocalTangentFrame(gnss.lat[0], gnss.lon[0], gnss.h[0])
         given = None

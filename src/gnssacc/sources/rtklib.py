@@ -36,6 +36,7 @@ Bad input is one :class:`~gnssacc.core.errors.InputError` naming the file and li
 header, an unknown time system or column set, a line with the wrong number of fields or a field
 that is not a number. A truncated last line (a logger stopped mid-write) is dropped with a warning.
 """
+
 from __future__ import annotations
 
 import re
@@ -64,14 +65,26 @@ DEG = np.pi / 180.0
 KIND = "an RTKLIB .pos solution file"
 #: Position columns of each output form, and the covariance columns in the file's order.
 FORMS = {
-    "llh": (("latitude(deg)", "longitude(deg)", "height(m)"),
-            ("sdn(m)", "sde(m)", "sdu(m)"), ("sdne(m)", "sdeu(m)", "sdun(m)")),
-    "dms": (("latitude(d'\")", "longitude(d'\")", "height(m)"),
-            ("sdn(m)", "sde(m)", "sdu(m)"), ("sdne(m)", "sdeu(m)", "sdun(m)")),
-    "xyz": (("x-ecef(m)", "y-ecef(m)", "z-ecef(m)"),
-            ("sdx(m)", "sdy(m)", "sdz(m)"), ("sdxy(m)", "sdyz(m)", "sdzx(m)")),
-    "enu": (("e-baseline(m)", "n-baseline(m)", "u-baseline(m)"),
-            ("sde(m)", "sdn(m)", "sdu(m)"), ("sden(m)", "sdnu(m)", "sdue(m)")),
+    "llh": (
+        ("latitude(deg)", "longitude(deg)", "height(m)"),
+        ("sdn(m)", "sde(m)", "sdu(m)"),
+        ("sdne(m)", "sdeu(m)", "sdun(m)"),
+    ),
+    "dms": (
+        ("latitude(d'\")", "longitude(d'\")", "height(m)"),
+        ("sdn(m)", "sde(m)", "sdu(m)"),
+        ("sdne(m)", "sdeu(m)", "sdun(m)"),
+    ),
+    "xyz": (
+        ("x-ecef(m)", "y-ecef(m)", "z-ecef(m)"),
+        ("sdx(m)", "sdy(m)", "sdz(m)"),
+        ("sdxy(m)", "sdyz(m)", "sdzx(m)"),
+    ),
+    "enu": (
+        ("e-baseline(m)", "n-baseline(m)", "u-baseline(m)"),
+        ("sde(m)", "sdn(m)", "sdu(m)"),
+        ("sden(m)", "sdnu(m)", "sdue(m)"),
+    ),
 }
 #: NED <-> ENU axis swap (its own inverse).
 T_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -112,6 +125,7 @@ class PosFile:
 
 # --- reading -------------------------------------------------------------------------------------------
 
+
 def read_pos(path) -> PosFile:
     """Read an RTKLIB ``.pos`` file (format in the module docstring).
 
@@ -131,13 +145,19 @@ def read_pos(path) -> PosFile:
     values = _numbers(cells[:, 2:], numbers, where)
     col: dict = {}
     for k, name in enumerate(head.value_names):
-        col.setdefault(name, k)            # a d'" column's first of three fields
+        col.setdefault(name, k)  # a d'" column's first of three fields
     lat, lon, h, cov = _positions(values, col, head, where)
     quality = values[:, col["q"]].astype(int) if "q" in col else np.zeros(len(values), int)
     n_sat = values[:, col["ns"]].astype(int) if "ns" in col else None
     times = FileTimes(to_unix(t_scale, head.time_system), "absolute", head.time_system)
-    meta = {"form": head.form, "time_system": head.time_system, "time_format": head.time_format,
-            "height_kind": head.height_kind, "header_line": head.line_no, "program": head.program}
+    meta = {
+        "form": head.form,
+        "time_system": head.time_system,
+        "time_format": head.time_format,
+        "height_kind": head.height_kind,
+        "header_line": head.line_no,
+        "program": head.program,
+    }
     return PosFile(times, lat, lon, h, cov, quality, n_sat, meta)
 
 
@@ -147,12 +167,12 @@ class _Header:
 
     line_no: int
     time_system: str
-    names: list             # the column names after the time label, lower case
-    value_names: list       # one name per numeric field after the time (d'" columns take three)
+    names: list  # the column names after the time label, lower case
+    value_names: list  # one name per numeric field after the time (d'" columns take three)
     form: str
     time_format: str = "calendar"
     height_kind: str = "ellipsoidal"
-    ref_llh: tuple | None = None       # (lat [rad], lon [rad], h [m]) of "ref pos"
+    ref_llh: tuple | None = None  # (lat [rad], lon [rad], h [m]) of "ref pos"
     program: str = ""
 
     @classmethod
@@ -165,19 +185,27 @@ class _Header:
             if any(f[0][0] in text for f in FORMS.values()):
                 n_col, col_line = n, text
         if col_line is None:
-            raise InputError(where, "no RTKLIB column header (a '%' line naming latitude(deg), x-ecef(m) or "
-                                    "e-baseline(m) before the first solution line): gnssacc cannot tell the columns")
+            raise InputError(
+                where,
+                "no RTKLIB column header (a '%' line naming latitude(deg), x-ecef(m) or "
+                "e-baseline(m) before the first solution line): gnssacc cannot tell the columns",
+            )
         words = [w for w in _SPLIT.split(col_line.lstrip("%").strip()) if w]
         system = words[0].upper()
         if system not in TIME_SYSTEMS:
-            raise InputError(where, f"line {n_col}: unknown time system {words[0]!r} in the column header (known: "
-                                    f"{', '.join(TIME_SYSTEMS)})")
+            raise InputError(
+                where,
+                f"line {n_col}: unknown time system {words[0]!r} in the column header (known: "
+                f"{', '.join(TIME_SYSTEMS)})",
+            )
         names = [w.lower() for w in words[1:]]
         form = next(k for k, f in FORMS.items() if f[0][0] in names)
         value_names = []
         for name in names:
-            value_names += [name] * (3 if form == "dms" and name.startswith(("latitude", "longitude")) else 1)
-        if form == "dms" and "sdue(m)" in names:        # RTKLIB labels the d'" form's sdun "sdue"
+            value_names += [name] * (
+                3 if form == "dms" and name.startswith(("latitude", "longitude")) else 1
+            )
+        if form == "dms" and "sdue(m)" in names:  # RTKLIB labels the d'" form's sdun "sdue"
             value_names = ["sdun(m)" if v == "sdue(m)" else v for v in value_names]
         missing = [c for c in FORMS[form][0] if c not in names]
         if missing:
@@ -196,7 +224,9 @@ class _Header:
             if "lat/lon/height=" in low:
                 datum_height = low.split("lat/lon/height=")[1].split(",")[0]
                 if "tokyo" in datum_height:
-                    raise InputError(where, f"line {n}: the Tokyo datum; gnssacc needs WGS84 positions")
+                    raise InputError(
+                        where, f"line {n}: the Tokyo datum; gnssacc needs WGS84 positions"
+                    )
                 if "geodetic" in datum_height:
                     self.height_kind = "geodetic"
             if low.startswith("ref pos"):
@@ -209,7 +239,9 @@ def _ref_position(text: str, form: str, where: str, n: int) -> tuple:
     try:
         v = [float(w) for w in words]
     except ValueError:
-        raise InputError(where, f"line {n}: cannot read the reference position {text.strip()!r}") from None
+        raise InputError(
+            where, f"line {n}: cannot read the reference position {text.strip()!r}"
+        ) from None
     if len(v) == 7:
         return (_dms(words[0:3]) * DEG, _dms(words[3:6]) * DEG, v[6])
     if len(v) == 3 and form == "xyz":
@@ -217,7 +249,9 @@ def _ref_position(text: str, form: str, where: str, n: int) -> tuple:
         return float(lat), float(lon), float(h)
     if len(v) == 3:
         return v[0] * DEG, v[1] * DEG, v[2]
-    raise InputError(where, f"line {n}: the reference position {text.strip()!r} is not 3 or 7 numbers")
+    raise InputError(
+        where, f"line {n}: the reference position {text.strip()!r} is not 3 or 7 numbers"
+    )
 
 
 def _dms(words) -> float:
@@ -231,16 +265,25 @@ def _data_rows(lines: list[str], head: _Header, where: str) -> tuple[list, list]
     """The solution lines' fields (two time fields first) and line numbers; a truncated last line dropped."""
     expected = 2 + len(head.value_names)
     rows, numbers = [], []
-    body = [(n, line.strip()) for n, line in enumerate(lines, start=1)
-            if n > head.line_no and line.strip() and not line.strip().startswith("%")]
+    body = [
+        (n, line.strip())
+        for n, line in enumerate(lines, start=1)
+        if n > head.line_no and line.strip() and not line.strip().startswith("%")
+    ]
     for j, (n, text) in enumerate(body):
         words = [w for w in _SPLIT.split(text) if w]
         if len(words) != expected:
             if j == len(body) - 1 and len(words) < expected:
-                warn_data(where, f"dropped the truncated last line {n} ({len(words)} of {expected} fields)")
+                warn_data(
+                    where,
+                    f"dropped the truncated last line {n} ({len(words)} of {expected} fields)",
+                )
                 break
-            raise InputError(where, f"line {n} has {len(words)} fields, but the column header (line {head.line_no}) "
-                                    f"gives {expected} (time: 2, {', '.join(head.names)})")
+            raise InputError(
+                where,
+                f"line {n} has {len(words)} fields, but the column header (line {head.line_no}) "
+                f"gives {expected} (time: 2, {', '.join(head.names)})",
+            )
         rows.append(words)
         numbers.append(n)
     if rows:
@@ -258,14 +301,20 @@ def _times(cells: np.ndarray, numbers: list, head: _Header, where: str) -> np.nd
                 hh, mm, ss = b.split(":")
                 y += (2000 if y < 80 else 1900) if y < 100 else 0
                 out[k] = calendar_to_seconds(y, mo, d, int(hh), int(mm), float(ss))
-            else:   # RTKLIB writes UTC and JST times as the week and time of week of that scale too
+            else:  # RTKLIB writes UTC and JST times as the week and time of week of that scale too
                 week, tow = float(a), float(b)
                 if not (0 <= week <= 9999 and 0 <= tow < SECONDS_PER_WEEK):
                     raise ValueError
                 out[k] = week_tow_to_gps_seconds(week, tow) + GPS_EPOCH_UNIX
         except ValueError:
-            form = "yyyy/mm/dd hh:mm:ss.sss" if head.time_format == "calendar" else "GPS week and time of week"
-            raise InputError(where, f"line {numbers[k]}: cannot read the time {a} {b} (expected {form})") from None
+            form = (
+                "yyyy/mm/dd hh:mm:ss.sss"
+                if head.time_format == "calendar"
+                else "GPS week and time of week"
+            )
+            raise InputError(
+                where, f"line {numbers[k]}: cannot read the time {a} {b} (expected {form})"
+            ) from None
     return out
 
 
@@ -278,7 +327,9 @@ def _numbers(cells: np.ndarray, numbers: list, where: str) -> np.ndarray:
                 try:
                     float(word)
                 except ValueError:
-                    raise InputError(where, f"line {numbers[k]}: {word[:40]!r} is not a number") from None
+                    raise InputError(
+                        where, f"line {numbers[k]}: {word[:40]!r} is not a number"
+                    ) from None
         raise
 
 
@@ -289,15 +340,18 @@ def _positions(values: np.ndarray, col: dict, head: _Header, where: str):
         if head.form == "llh":
             lat, lon = values[:, col[pos_names[0]]] * DEG, values[:, col[pos_names[1]]] * DEG
         else:
-            k_lat, k_lon = col[pos_names[0]], col[pos_names[1]]   # the first of three fields each
-            lat = _dms_columns(values[:, k_lat:k_lat + 3]) * DEG
-            lon = _dms_columns(values[:, k_lon:k_lon + 3]) * DEG
+            k_lat, k_lon = col[pos_names[0]], col[pos_names[1]]  # the first of three fields each
+            lat = _dms_columns(values[:, k_lat : k_lat + 3]) * DEG
+            lon = _dms_columns(values[:, k_lon : k_lon + 3]) * DEG
         h = values[:, col[pos_names[2]]].copy()
     elif head.form == "xyz":
         lat, lon, h = ecef_to_llh(values[:, [col[c] for c in pos_names]])
     else:
         if head.ref_llh is None:
-            raise InputError(where, "e/n/u-baseline solutions need the '% ref pos :' header line (the base position)")
+            raise InputError(
+                where,
+                "e/n/u-baseline solutions need the '% ref pos :' header line (the base position)",
+            )
         enu = values[:, [col[c] for c in pos_names]]
         R_b = R_en_batch(np.array([head.ref_llh[0]]), np.array([head.ref_llh[1]]))[0]
         r_e = llh_to_ecef(*head.ref_llh) + (enu @ T_ENU_NED.T) @ R_b
@@ -321,17 +375,26 @@ def _file_covariance(values: np.ndarray, col: dict, sd_names, cross_names) -> np
     if not all(c in col for c in sd_names):
         return cov
     sd = values[:, [col[c] for c in sd_names]]
-    if sd_names[0] == "sdn(m)":            # llh/dms: sdn sde sdu -> E, N, U axes
+    if sd_names[0] == "sdn(m)":  # llh/dms: sdn sde sdu -> E, N, U axes
         sd = sd[:, [1, 0, 2]]
     for i in range(3):
         cov[:, i, i] = sd[:, i] ** 2
     if all(c in col for c in cross_names):
         cross = values[:, [col[c] for c in cross_names]]
-        signed = np.sign(cross) * cross ** 2          # RTKLIB's sqvar: c = sign(s) s^2
+        signed = np.sign(cross) * cross**2  # RTKLIB's sqvar: c = sign(s) s^2
         # llh/dms: sdne (E,N), sdeu (E,U), sdun (U,N); enu: sden (E,N), sdnu (N,U), sdue (U,E);
         # xyz: sdxy, sdyz, sdzx: in axis-index pairs:
-        pairs = {"sdne(m)": (0, 1), "sdeu(m)": (0, 2), "sdun(m)": (2, 1), "sden(m)": (0, 1), "sdnu(m)": (1, 2),
-                 "sdue(m)": (2, 0), "sdxy(m)": (0, 1), "sdyz(m)": (1, 2), "sdzx(m)": (2, 0)}
+        pairs = {
+            "sdne(m)": (0, 1),
+            "sdeu(m)": (0, 2),
+            "sdun(m)": (2, 1),
+            "sden(m)": (0, 1),
+            "sdnu(m)": (1, 2),
+            "sdue(m)": (2, 0),
+            "sdxy(m)": (0, 1),
+            "sdyz(m)": (1, 2),
+            "sdzx(m)": (2, 0),
+        }
         for j, name in enumerate(cross_names):
             a, b = pairs[name]
             cov[:, a, b] = cov[:, b, a] = signed[:, j]
@@ -340,22 +403,36 @@ def _file_covariance(values: np.ndarray, col: dict, sd_names, cross_names) -> np
 
 def _to_ned(cov: np.ndarray, head: _Header, lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
     """The file's covariance rotated into the NED frame at each fix."""
-    R_f = R_en_batch(lat, lon)                                 # ECEF -> NED at the fix
+    R_f = R_en_batch(lat, lon)  # ECEF -> NED at the fix
     if head.form == "xyz":
         return R_f @ cov @ R_f.transpose(0, 2, 1)
-    ned = T_ENU_NED @ cov @ T_ENU_NED.T                       # ENU -> NED axes
+    ned = T_ENU_NED @ cov @ T_ENU_NED.T  # ENU -> NED axes
     if head.form != "enu":
-        return ned                                             # already at the fix
+        return ned  # already at the fix
     R_b = R_en_batch(np.array([head.ref_llh[0]]), np.array([head.ref_llh[1]]))[0]
-    C = R_f @ R_b.T                                            # NED at the base -> NED at the fix
+    C = R_f @ R_b.T  # NED at the base -> NED at the fix
     return C @ ned @ C.transpose(0, 2, 1)
 
 
 # --- writing -------------------------------------------------------------------------------------------
 
-def write_pos(path, t_unix: np.ndarray, lat: np.ndarray, lon: np.ndarray, h: np.ndarray, cov_ned: np.ndarray,
-              quality=None, n_sat=None, *, form: str = "llh", time_system: str = "GPST",
-              time_format: str = "calendar", ref_llh=None, program: str = "gnssacc") -> Path:
+
+def write_pos(
+    path,
+    t_unix: np.ndarray,
+    lat: np.ndarray,
+    lon: np.ndarray,
+    h: np.ndarray,
+    cov_ned: np.ndarray,
+    quality=None,
+    n_sat=None,
+    *,
+    form: str = "llh",
+    time_system: str = "GPST",
+    time_format: str = "calendar",
+    ref_llh=None,
+    program: str = "gnssacc",
+) -> Path:
     """Write fixes as an RTKLIB ``.pos`` file, in RTKLIB's own layout and precision.
 
     Parameters
@@ -385,18 +462,32 @@ def write_pos(path, t_unix: np.ndarray, lat: np.ndarray, lon: np.ndarray, h: np.
     m = len(t_unix)
     quality = np.full(m, 5) if quality is None else np.asarray(quality, int)
     n_sat = np.full(m, 8) if n_sat is None else np.asarray(n_sat, int)
-    ref = (float(lat[0]), float(lon[0]), float(h[0])) if ref_llh is None else tuple(float(v) for v in ref_llh)
+    ref = (
+        (float(lat[0]), float(lon[0]), float(h[0]))
+        if ref_llh is None
+        else tuple(float(v) for v in ref_llh)
+    )
     lines = [f"% program   : {program}"]
     if form == "enu":
-        lines.append(f"% ref pos   :{np.degrees(ref[0]):13.9f} {np.degrees(ref[1]):14.9f} {ref[2]:10.4f}")
+        lines.append(
+            f"% ref pos   :{np.degrees(ref[0]):13.9f} {np.degrees(ref[1]):14.9f} {ref[2]:10.4f}"
+        )
     lines.append("%")
-    what = {"llh": "lat/lon/height=WGS84/ellipsoidal", "xyz": "x/y/z-ecef=WGS84", "enu": "e/n/u-baseline=WGS84"}[form]
+    what = {
+        "llh": "lat/lon/height=WGS84/ellipsoidal",
+        "xyz": "x/y/z-ecef=WGS84",
+        "enu": "e/n/u-baseline=WGS84",
+    }[form]
     lines.append(f"% ({what},Q=1:fix,2:float,3:sbas,4:dgps,5:single,6:ppp,ns=# of satellites)")
     label = f"{time_system:<{(16 if time_format == 'calendar' else 8) + 3 + 1}} "
     pos_names, sd_names, cross_names = FORMS[form]
     widths = (14, 14, 10) if form == "llh" else (14, 14, 14)
-    names = "".join(f"{n:>{w}} " for n, w in zip(pos_names, widths)) + f"{'Q':>3} {'ns':>3} " \
-        + " ".join(f"{n:>8}" for n in sd_names + cross_names) + f" {'age(s)':>6} {'ratio':>6}"
+    names = (
+        "".join(f"{n:>{w}} " for n, w in zip(pos_names, widths))
+        + f"{'Q':>3} {'ns':>3} "
+        + " ".join(f"{n:>8}" for n in sd_names + cross_names)
+        + f" {'age(s)':>6} {'ratio':>6}"
+    )
     lines.append(f"%  {label}{names}")
     stamps = _time_strings(np.asarray(t_unix, float), time_system, time_format)
     pos, sd, cross = _form_values(form, lat, lon, h, cov_ned, ref)
@@ -405,8 +496,11 @@ def write_pos(path, t_unix: np.ndarray, lat: np.ndarray, lon: np.ndarray, h: np.
             p = f"{pos[k, 0]:14.9f} {pos[k, 1]:14.9f} {pos[k, 2]:10.4f}"
         else:
             p = f"{pos[k, 0]:14.4f} {pos[k, 1]:14.4f} {pos[k, 2]:14.4f}"
-        lines.append(f"{stamps[k]} {p} {quality[k]:3d} {n_sat[k]:3d} "
-                     + " ".join(f"{v:8.4f}" for v in (*sd[k], *cross[k])) + f" {0.0:6.2f} {0.0:6.1f}")
+        lines.append(
+            f"{stamps[k]} {p} {quality[k]:3d} {n_sat[k]:3d} "
+            + " ".join(f"{v:8.4f}" for v in (*sd[k], *cross[k]))
+            + f" {0.0:6.2f} {0.0:6.1f}"
+        )
     path = Path(path)
     path.write_text("\n".join(lines) + "\n")
     return path
@@ -415,12 +509,12 @@ def write_pos(path, t_unix: np.ndarray, lat: np.ndarray, lon: np.ndarray, h: np.
 def _time_strings(t_unix: np.ndarray, system: str, time_format: str) -> list[str]:
     """RTKLIB's time fields: ``yyyy/mm/dd hh:mm:ss.sss`` or ``wwww ssssss.sss`` on ``system``'s scale."""
     if system == "GPST":
-        t_scale = unix_to_gps_seconds(t_unix)                 # GPS seconds since 1980-01-06
+        t_scale = unix_to_gps_seconds(t_unix)  # GPS seconds since 1980-01-06
     elif system == "UTC":
-        t_scale = t_unix - GPS_EPOCH_UNIX                      # seconds since 1980-01-06, UTC scale
+        t_scale = t_unix - GPS_EPOCH_UNIX  # seconds since 1980-01-06, UTC scale
     else:
         t_scale = t_unix + JST_OFFSET_S - GPS_EPOCH_UNIX
-    ms = np.rint(t_scale * 1000.0).astype(np.int64)           # to the millisecond, as RTKLIB's timeu = 3
+    ms = np.rint(t_scale * 1000.0).astype(np.int64)  # to the millisecond, as RTKLIB's timeu = 3
     out = []
     for v in ms:
         if time_format == "week":
@@ -437,19 +531,19 @@ def _form_values(form: str, lat, lon, h, cov_ned, ref):
     """Positions, standard deviations and signed-root cross terms in the form's axes and order."""
     R_f = R_en_batch(lat, lon)
     if form == "llh":
-        cov = T_ENU_NED @ cov_ned @ T_ENU_NED.T                                    # ENU at the fix
+        cov = T_ENU_NED @ cov_ned @ T_ENU_NED.T  # ENU at the fix
         pos = np.column_stack([np.degrees(lat), np.degrees(lon), h])
-        order, pairs = [1, 0, 2], [(0, 1), (0, 2), (2, 1)]                         # sdn sde sdu; ne eu un
+        order, pairs = [1, 0, 2], [(0, 1), (0, 2), (2, 1)]  # sdn sde sdu; ne eu un
     elif form == "xyz":
-        cov = R_f.transpose(0, 2, 1) @ cov_ned @ R_f                               # ECEF
+        cov = R_f.transpose(0, 2, 1) @ cov_ned @ R_f  # ECEF
         pos = llh_to_ecef(lat, lon, h)
         order, pairs = [0, 1, 2], [(0, 1), (1, 2), (2, 0)]
     else:
         R_b = R_en_batch(np.array([ref[0]]), np.array([ref[1]]))[0]
-        C = R_b @ R_f.transpose(0, 2, 1)                                            # NED at fix -> at base
+        C = R_b @ R_f.transpose(0, 2, 1)  # NED at fix -> at base
         cov = T_ENU_NED @ (C @ cov_ned @ C.transpose(0, 2, 1)) @ T_ENU_NED.T
         pos = ((llh_to_ecef(lat, lon, h) - llh_to_ecef(*ref)) @ R_b.T) @ T_ENU_NED.T
-        order, pairs = [0, 1, 2], [(0, 1), (1, 2), (2, 0)]                          # sde sdn sdu; en nu ue
+        order, pairs = [0, 1, 2], [(0, 1), (1, 2), (2, 0)]  # sde sdn sdu; en nu ue
     sd = np.sqrt(np.maximum(np.diagonal(cov, axis1=1, axis2=2), 0.0))[:, order]
     cross = np.column_stack([cov[:, a, b] for a, b in pairs])
     return pos, sd, np.sign(cross) * np.sqrt(np.abs(cross))

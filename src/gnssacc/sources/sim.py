@@ -41,6 +41,7 @@ Conventions
   ``(I + S + M) true + bias + white noise + vibration`` (:mod:`.sim_imu_errors`); the vibration
   is itself averaged over each interval (:mod:`.sim_vibration`).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -83,9 +84,23 @@ from .sim_path import (  # noqa: F401 (re-exported)
     sample_times,
     sweep_imu,
 )
-from .sim_scenarios import SCENARIOS, Kinematics, Pulse, R_nb_batch, Scenario, make_scenario, reversing_spans  # noqa: F401 (re-exported)
+from .sim_scenarios import (  # noqa: F401 (re-exported)
+    SCENARIOS,
+    Kinematics,
+    Pulse,
+    R_nb_batch,
+    Scenario,
+    make_scenario,
+    reversing_spans,
+)
 from .sim_true_bias import TrueBias  # noqa: F401 (re-exported)
-from .sim_vibration import EngineVibration, band_limited_columns, engine_vibration, road_scale, road_vibration  # noqa: F401
+from .sim_vibration import (  # noqa: F401
+    EngineVibration,
+    band_limited_columns,
+    engine_vibration,
+    road_scale,
+    road_vibration,
+)
 
 DEG = np.pi / 180.0
 WHERE = "simulator"
@@ -93,10 +108,17 @@ WHERE = "simulator"
 
 def _initial_state(truth0: TruthSamples) -> InitialState:
     return InitialState(
-        t=float(truth0.t[0]), lat=float(truth0.lat[0]), lon=float(truth0.lon[0]), h=float(truth0.h[0]),
-        v_n=truth0.v_n[0].copy(), rpy=truth0.rpy[0].copy(),
-        sigma_pos_m=np.array([1.0, 1.0, 1.5]), sigma_vel_mps=np.array([0.1, 0.1, 0.1]),
-        sigma_att_rad=np.array([1.0, 1.0, 2.0]) * DEG, how="simulator truth (sigmas 1 m, 0.1 m/s, 1-2 deg)")
+        t=float(truth0.t[0]),
+        lat=float(truth0.lat[0]),
+        lon=float(truth0.lon[0]),
+        h=float(truth0.h[0]),
+        v_n=truth0.v_n[0].copy(),
+        rpy=truth0.rpy[0].copy(),
+        sigma_pos_m=np.array([1.0, 1.0, 1.5]),
+        sigma_vel_mps=np.array([0.1, 0.1, 0.1]),
+        sigma_att_rad=np.array([1.0, 1.0, 2.0]) * DEG,
+        how="simulator truth (sigmas 1 m, 0.1 m/s, 1-2 deg)",
+    )
 
 
 def _nonzero(model: dict, *keys: str) -> bool:
@@ -155,20 +177,38 @@ def unmodelled_errors(model: dict, n: int, dt: float, t_span: float, seed: int) 
     -------
     UnmodelledErrors
     """
-    draws = {"accel_scale_factor": np.zeros(3), "gyro_scale_factor": np.zeros(3),
-             "accel_cross_axis": np.zeros((3, 3)), "gyro_cross_axis": np.zeros((3, 3)),
-             "accel_warmup": np.zeros(3), "gyro_warmup": np.zeros(3)}
+    draws = {
+        "accel_scale_factor": np.zeros(3),
+        "gyro_scale_factor": np.zeros(3),
+        "accel_cross_axis": np.zeros((3, 3)),
+        "gyro_cross_axis": np.zeros((3, 3)),
+        "accel_warmup": np.zeros(3),
+        "gyro_warmup": np.zeros(3),
+    }
     stream = [np.random.default_rng([seed, 3, i]) for i in range(4)]
     out = UnmodelledErrors(None, None, None, None, None, draws)
-    if _nonzero(model, "accel_scale_factor_ppm", "gyro_scale_factor_ppm", "accel_cross_axis_ppm",
-                "gyro_cross_axis_ppm"):
+    if _nonzero(
+        model,
+        "accel_scale_factor_ppm",
+        "gyro_scale_factor_ppm",
+        "accel_cross_axis_ppm",
+        "gyro_cross_axis_ppm",
+    ):
         m = sensor_matrices(model, stream[0])
         out.K_a, out.K_g = m.pop("K_a"), m.pop("K_g")
         draws.update(m)
-    if _nonzero(model, "accel_warmup_mg", "gyro_warmup_deg_h", "accel_bias_rw_mg_rth", "gyro_bias_rw_deg_h_rth"):
+    if _nonzero(
+        model,
+        "accel_warmup_mg",
+        "gyro_warmup_deg_h",
+        "accel_bias_rw_mg_rth",
+        "gyro_bias_rw_deg_h_rth",
+    ):
         out.drift = BiasDrift(t_span, model, stream[1])
         draws.update(accel_warmup=out.drift.warm_a, gyro_warmup=out.drift.warm_g)
-    if _nonzero(model, "vib_engine_accel_mps2", "vib_engine_gyro_dps") and _nonzero(model, "vib_engine_harmonics"):
+    if _nonzero(model, "vib_engine_accel_mps2", "vib_engine_gyro_dps") and _nonzero(
+        model, "vib_engine_harmonics"
+    ):
         out.engine = EngineVibration(n, dt, model, stream[2])
         draws.update(out.engine.draws)
     if _nonzero(model, "vib_road_accel_mps2", "vib_road_gyro_dps"):
@@ -184,8 +224,9 @@ def _measure(true: np.ndarray, K, bias: np.ndarray, noise: np.ndarray, vib) -> n
     return out
 
 
-def simulate_imu(traj: Trajectory, t: np.ndarray, model: dict, seed: int,
-                 truth_times=()) -> tuple[ImuData, dict, list]:
+def simulate_imu(
+    traj: Trajectory, t: np.ndarray, model: dict, seed: int, truth_times=()
+) -> tuple[ImuData, dict, list]:
     """The measured IMU of a run: perfect interval averages plus every error of ``model``, in one sweep.
 
     Parameters
@@ -239,15 +280,36 @@ def simulate_imu(traj: Trajectory, t: np.ndarray, model: dict, seed: int,
         omega_ib_b[k0:k1] = _measure(omega_true, extra.K_g, bg, err["noise_g"], vib_g)
 
     positions = sweep_imu(traj, n, finish, truth_times)
-    draws = {"accel_turn_on_bias": basic.turn_on_a, "gyro_turn_on_bias": basic.turn_on_g, **extra.draws}
-    return ImuData(t, f_b, omega_ib_b), {"true_bias": true_bias, "imu_error_draws": draws}, positions
+    draws = {
+        "accel_turn_on_bias": basic.turn_on_a,
+        "gyro_turn_on_bias": basic.turn_on_g,
+        **extra.draws,
+    }
+    return (
+        ImuData(t, f_b, omega_ib_b),
+        {"true_bias": true_bias, "imu_error_draws": draws},
+        positions,
+    )
 
 
-def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_grade: str = "industrial",
-             imu_rate_hz: float = 100.0, gnss_rate_hz: float = 1.0, noise: str = "white", seed: int = 0,
-             origin_llh_deg=(32.0, 34.8, 50.0), initial_yaw_deg: float = 30.0, lever_arm_b=(0.0, 0.0, 0.0),
-             give_init: bool = False, imu_overrides: dict | None = None, truth_rate_hz: float | None = None,
-             t_start_s: float = 0.0, odom_hz: float | None = None, odom_kind: str | None = None) -> RecordedRun:
+def simulate(
+    scenario: str | Scenario = "car",
+    duration_s: float = 300.0,
+    imu_grade: str = "industrial",
+    imu_rate_hz: float = 100.0,
+    gnss_rate_hz: float = 1.0,
+    noise: str = "white",
+    seed: int = 0,
+    origin_llh_deg=(32.0, 34.8, 50.0),
+    initial_yaw_deg: float = 30.0,
+    lever_arm_b=(0.0, 0.0, 0.0),
+    give_init: bool = False,
+    imu_overrides: dict | None = None,
+    truth_rate_hz: float | None = None,
+    t_start_s: float = 0.0,
+    odom_hz: float | None = None,
+    odom_kind: str | None = None,
+) -> RecordedRun:
     """Simulate a ground-vehicle run with known truth.
 
     Parameters
@@ -305,10 +367,22 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
         ``true_bias_a`` [m/s^2] and ``true_bias_g`` [rad/s], shape (N, 3), drawn on each access)
         and the scenario ``segments`` (times absolute; ``reverse`` marks reversing).
     """
-    args = dict(scenario=scenario, duration_s=duration_s, imu_grade=imu_grade, imu_rate_hz=imu_rate_hz,
-                gnss_rate_hz=gnss_rate_hz, noise=noise, seed=seed, origin_llh_deg=list(origin_llh_deg),
-                initial_yaw_deg=initial_yaw_deg, lever_arm_b=list(lever_arm_b), give_init=give_init,
-                imu_overrides=dict(imu_overrides or {}), truth_rate_hz=truth_rate_hz, t_start_s=t_start_s)
+    args = dict(
+        scenario=scenario,
+        duration_s=duration_s,
+        imu_grade=imu_grade,
+        imu_rate_hz=imu_rate_hz,
+        gnss_rate_hz=gnss_rate_hz,
+        noise=noise,
+        seed=seed,
+        origin_llh_deg=list(origin_llh_deg),
+        initial_yaw_deg=initial_yaw_deg,
+        lever_arm_b=list(lever_arm_b),
+        give_init=give_init,
+        imu_overrides=dict(imu_overrides or {}),
+        truth_rate_hz=truth_rate_hz,
+        t_start_s=t_start_s,
+    )
     if odom_hz is not None:
         args.update(odom_hz=odom_hz, odom_kind=odom_kind)
     name = scenario if isinstance(scenario, str) else scenario.name
@@ -316,32 +390,60 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
     where = f"simulator({name}, seed={seed})"
     model = imu_error_model(imu_grade, imu_overrides)
     if noise not in PROFILES:
-        raise InputError(where, f"unknown GNSS noise profile {noise!r} (known: {', '.join(PROFILES)})")
+        raise InputError(
+            where, f"unknown GNSS noise profile {noise!r} (known: {', '.join(PROFILES)})"
+        )
     if not 0 < gnss_rate_hz <= imu_rate_hz:
-        raise InputError(where, f"gnss_rate_hz must be positive and at most the IMU rate, got {gnss_rate_hz}")
+        raise InputError(
+            where, f"gnss_rate_hz must be positive and at most the IMU rate, got {gnss_rate_hz}"
+        )
     lever_b = np.asarray(lever_arm_b, float).reshape(3)
     if odom_hz is not None and not 0 < odom_hz <= imu_rate_hz:
         raise InputError(where, f"odom_hz must be positive and at most the IMU rate, got {odom_hz}")
     if odom_kind is not None and odom_kind not in ODOMETRY_KINDS:
-        raise InputError(where, f"unknown odometry kind {odom_kind!r} (known: {', '.join(ODOMETRY_KINDS)})")
+        raise InputError(
+            where, f"unknown odometry kind {odom_kind!r} (known: {', '.join(ODOMETRY_KINDS)})"
+        )
 
-    traj = build_trajectory(scenario, duration_s, imu_rate_hz, origin_llh_deg, initial_yaw_deg, t_start_s)
+    traj = build_trajectory(
+        scenario, duration_s, imu_rate_hz, origin_llh_deg, initial_yaw_deg, t_start_s
+    )
     t_gnss = sample_times(t_start_s, duration_s, gnss_rate_hz)
     t_truth = None if truth_rate_hz is None else sample_times(t_start_s, duration_s, truth_rate_hz)
-    imu, imu_info, positions = simulate_imu(traj, sample_times(t_start_s, duration_s, imu_rate_hz), model, seed,
-                                            [t_gnss] + ([] if t_truth is None else [t_truth]))
-    release_free_memory()   # the sweep's temporaries
+    imu, imu_info, positions = simulate_imu(
+        traj,
+        sample_times(t_start_s, duration_s, imu_rate_hz),
+        model,
+        seed,
+        [t_gnss] + ([] if t_truth is None else [t_truth]),
+    )
+    release_free_memory()  # the sweep's temporaries
 
     truth_gnss = traj.at(t_gnss, positions[0])
     truth = truth_gnss if t_truth is None else traj.at(t_truth, positions[1])
-    origin = LocalTangentFrame(*(np.array(origin_llh_deg[:2], float) * DEG), float(origin_llh_deg[2]))
+    origin = LocalTangentFrame(
+        *(np.array(origin_llh_deg[:2], float) * DEG), float(origin_llh_deg[2])
+    )
     gnss_seed = int(np.random.SeedSequence([seed, 2]).generate_state(1)[0])
-    meta = {**args, "source": "simulator", "imu_sample_convention": "sample k = average over (t[k-1], t[k]]",
-            "gnss_seed": gnss_seed}
+    meta = {
+        **args,
+        "source": "simulator",
+        "imu_sample_convention": "sample k = average over (t[k-1], t[k]]",
+        "gnss_seed": gnss_seed,
+    }
     truths = _sim_truth(traj, imu_info, model, duration_s, t_start_s)
     empty = GnssFixes(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, 3)))
-    run = RecordedRun(name=f"sim-{name}", where=where, imu=imu, gnss=empty, origin=origin,
-                      truth=truth.to_truth(), init=_initial_state(truth) if give_init else None, sim=truths, meta=meta)
+    run = RecordedRun(
+        name=f"sim-{name}",
+        where=where,
+        imu=imu,
+        gnss=empty,
+        origin=origin,
+        truth=truth.to_truth(),
+        init=_initial_state(truth) if give_init else None,
+        sim=truths,
+        meta=meta,
+    )
     p_antenna_n = truth_gnss.R_nb @ lever_b
     fixes = fixes_from_truth(run, truth_gnss.to_truth(), noise, gnss_seed, p_antenna_n)
     fixes.quality = np.full(len(fixes), PROFILE_QUALITY[noise])
@@ -350,14 +452,25 @@ def simulate(scenario: str | Scenario = "car", duration_s: float = 300.0, imu_gr
         return run
     t_odo = sample_times(t_start_s, duration_s, odom_hz)
     kin = traj.kinematics(t_odo)
-    odo, draws = simulate_odometry(t_odo, kin.speed, kin.accel, kin.omega_nb_b[:, 2],
-                                   odom_kind or odometry_kind(name), seed)
+    odo, draws = simulate_odometry(
+        t_odo, kin.speed, kin.accel, kin.omega_nb_b[:, 2], odom_kind or odometry_kind(name), seed
+    )
     return replace(run, odometry=odo, sim=replace(run.sim, odometry=draws))
 
 
-def _sim_truth(traj: Trajectory, imu_info: dict, model: dict, duration_s: float, t_start_s: float) -> SimTruth:
+def _sim_truth(
+    traj: Trajectory, imu_info: dict, model: dict, duration_s: float, t_start_s: float
+) -> SimTruth:
     """The run's :class:`SimTruth`: true biases and draws (:func:`simulate_imu`), the scenario log
     with absolute times, the grade's filter-visible parameters and the full error model."""
-    segments = [{**s, "t0": s["t0"] + t_start_s, "t1": s["t1"] + t_start_s} for s in traj.scenario.segments_until(duration_s)]
-    return SimTruth(imu_info["true_bias"], segments, imu_info["imu_error_draws"],
-                    {k: model[k] for k in GRADE_KEYS}, model)
+    segments = [
+        {**s, "t0": s["t0"] + t_start_s, "t1": s["t1"] + t_start_s}
+        for s in traj.scenario.segments_until(duration_s)
+    ]
+    return SimTruth(
+        imu_info["true_bias"],
+        segments,
+        imu_info["imu_error_draws"],
+        {k: model[k] for k in GRADE_KEYS},
+        model,
+    )

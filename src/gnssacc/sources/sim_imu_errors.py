@@ -34,6 +34,7 @@ tactical    15           0.12 / 0.12 / 0.05  0.04 / 0.04 / 0.07
 For comparison, the datasheet white noise alone gives 0.10 deg/s and 0.033 m/s^2 per sample for
 ``consumer``: vibration dominates the scatter of a vehicle IMU by far.
 """
+
 from __future__ import annotations
 
 import copy
@@ -53,9 +54,15 @@ GRADE_KEYS = tuple(DEFAULTS["imu"])
 
 
 def _grade(arw, vrw, gbi, abi, g0, a0, tau=300.0) -> dict:
-    return {"gyro_arw_deg_rth": arw, "accel_vrw_mps_rth": vrw, "gyro_bias_instability_deg_h": gbi,
-            "accel_bias_instability_mg": abi, "bias_correlation_time_s": tau,
-            "gyro_bias_sigma0_deg_h": g0, "accel_bias_sigma0_mg": a0}
+    return {
+        "gyro_arw_deg_rth": arw,
+        "accel_vrw_mps_rth": vrw,
+        "gyro_bias_instability_deg_h": gbi,
+        "accel_bias_instability_mg": abi,
+        "bias_correlation_time_s": tau,
+        "gyro_bias_sigma0_deg_h": g0,
+        "accel_bias_sigma0_mg": a0,
+    }
 
 
 #: Filter-visible parameters of each grade, in the units of ``gnssacc.core.config.DEFAULTS["imu"]``:
@@ -77,32 +84,48 @@ IMU_GRADES: dict[str, dict] = {
 #: The vibration environment of a car-like vehicle (shared by every grade; the grades differ in
 #: the amplitudes, i.e. in the mount and the sensor's sensitivity).
 VIBRATION_ENVIRONMENT = {
-    "vib_engine_harmonics": (1.0, 0.5, 0.25),   # relative amplitudes of harmonics 1, 2, 3 [-]
-    "vib_engine_idle_hz": 27.0,                 # fundamental at rest (engine idling) [Hz]
-    "vib_engine_hz_per_mps": 2.5,               # rise of the fundamental with speed [Hz / (m/s)]
-    "vib_engine_max_hz": 70.0,                  # highest fundamental [Hz]
-    "vib_engine_wander": 0.03,                  # 1-sigma relative wander of the fundamental [-]
-    "vib_engine_wander_time_s": 3.0,            # correlation time of the wander [s]
-    "vib_road_band_hz": (5.0, 100.0),           # flat band of the road vibration [Hz]
-    "vib_road_ref_speed_mps": 10.0,             # speed at which the road RMS applies [m/s]
-    "vib_road_speed_exponent": 1.0,             # road RMS ~ (|v| / ref) ** exponent [-]
+    "vib_engine_harmonics": (1.0, 0.5, 0.25),  # relative amplitudes of harmonics 1, 2, 3 [-]
+    "vib_engine_idle_hz": 27.0,  # fundamental at rest (engine idling) [Hz]
+    "vib_engine_hz_per_mps": 2.5,  # rise of the fundamental with speed [Hz / (m/s)]
+    "vib_engine_max_hz": 70.0,  # highest fundamental [Hz]
+    "vib_engine_wander": 0.03,  # 1-sigma relative wander of the fundamental [-]
+    "vib_engine_wander_time_s": 3.0,  # correlation time of the wander [s]
+    "vib_road_band_hz": (5.0, 100.0),  # flat band of the road vibration [Hz]
+    "vib_road_ref_speed_mps": 10.0,  # speed at which the road RMS applies [m/s]
+    "vib_road_speed_exponent": 1.0,  # road RMS ~ (|v| / ref) ** exponent [-]
 }
 
 
 def _extra(sf, cross, warm_g, warm_a, warm_tau, rw_g, rw_a, eng_g, eng_a, road_g, road_a) -> dict:
-    eng_g, eng_a, road_g, road_a = (tuple(float(x) for x in v) for v in (eng_g, eng_a, road_g, road_a))
-    return {"gyro_scale_factor_ppm": sf, "accel_scale_factor_ppm": sf,
-            "gyro_cross_axis_ppm": cross, "accel_cross_axis_ppm": cross,
-            "gyro_warmup_deg_h": warm_g, "accel_warmup_mg": warm_a, "warmup_time_s": warm_tau,
-            "gyro_bias_rw_deg_h_rth": rw_g, "accel_bias_rw_mg_rth": rw_a,
-            "vib_engine_gyro_dps": eng_g, "vib_engine_accel_mps2": eng_a,
-            "vib_road_gyro_dps": road_g, "vib_road_accel_mps2": road_a, **VIBRATION_ENVIRONMENT}
+    eng_g, eng_a, road_g, road_a = (
+        tuple(float(x) for x in v) for v in (eng_g, eng_a, road_g, road_a)
+    )
+    return {
+        "gyro_scale_factor_ppm": sf,
+        "accel_scale_factor_ppm": sf,
+        "gyro_cross_axis_ppm": cross,
+        "accel_cross_axis_ppm": cross,
+        "gyro_warmup_deg_h": warm_g,
+        "accel_warmup_mg": warm_a,
+        "warmup_time_s": warm_tau,
+        "gyro_bias_rw_deg_h_rth": rw_g,
+        "accel_bias_rw_mg_rth": rw_a,
+        "vib_engine_gyro_dps": eng_g,
+        "vib_engine_accel_mps2": eng_a,
+        "vib_road_gyro_dps": road_g,
+        "vib_road_accel_mps2": road_a,
+        **VIBRATION_ENVIRONMENT,
+    }
 
 
 #: Consumer vibration amplitudes, per axis x, y, z: engine fundamental (peak) gyro [deg/s] and
 #: accelerometer [m/s^2], road RMS at the reference speed, gyro [deg/s] and accelerometer [m/s^2].
-_CONSUMER_VIBRATION = (np.array([3.6, 3.6, 1.2]), np.array([0.9, 1.05, 1.35]),
-                       np.array([3.5, 3.5, 1.5]), np.array([1.2, 1.2, 2.0]))
+_CONSUMER_VIBRATION = (
+    np.array([3.6, 3.6, 1.2]),
+    np.array([0.9, 1.05, 1.35]),
+    np.array([3.5, 3.5, 1.5]),
+    np.array([1.2, 1.2, 2.0]),
+)
 
 _NONE = _extra(0.0, 0.0, 0.0, 0.0, 300.0, 0.0, 0.0, *(np.zeros(3),) * 4)
 
@@ -113,14 +136,21 @@ _NONE = _extra(0.0, 0.0, 0.0, 0.0, 300.0, 0.0, 0.0, *(np.zeros(3),) * 4)
 #: [m/s^2] per axis, road vibration continuous-time RMS at the reference speed [deg/s] / [m/s^2]
 #: per axis, and the :data:`VIBRATION_ENVIRONMENT`.
 IMU_EXTRA_ERRORS: dict[str, dict] = {
-    "perfect": _NONE, "consumer-basic": _NONE, "industrial-basic": _NONE, "tactical-basic": _NONE,
+    "perfect": _NONE,
+    "consumer-basic": _NONE,
+    "industrial-basic": _NONE,
+    "tactical-basic": _NONE,
     # Rigid mount in a car. Engine: 2.4 deg/s gyro x/y and 0.6-0.9 m/s^2 scatter per 100 Hz
     # sample at idle, as in a real car; road: 2.3 deg/s and 0.8-1.3 m/s^2 per sample at 10 m/s.
     "consumer": _extra(10000.0, 7000.0, 30.0, 0.5, 300.0, 10.0, 0.1, *_CONSUMER_VIBRATION),
     # Isolated mount: vibration 8 times less.
-    "industrial": _extra(750.0, 500.0, 5.0, 0.04, 300.0, 1.0, 0.01, *(v / 8.0 for v in _CONSUMER_VIBRATION)),
+    "industrial": _extra(
+        750.0, 500.0, 5.0, 0.04, 300.0, 1.0, 0.01, *(v / 8.0 for v in _CONSUMER_VIBRATION)
+    ),
     # Isolated mount, less vibration-sensitive sensors: 30 times less.
-    "tactical": _extra(100.0, 100.0, 0.5, 0.02, 600.0, 0.1, 0.005, *(v / 30.0 for v in _CONSUMER_VIBRATION)),
+    "tactical": _extra(
+        100.0, 100.0, 0.5, 0.02, 600.0, 0.1, 0.005, *(v / 30.0 for v in _CONSUMER_VIBRATION)
+    ),
 }
 
 #: Every key of a full error description (:func:`imu_error_model`).
@@ -171,7 +201,9 @@ def grade_config(grade: str, overrides: dict | None = None) -> dict:
     params = dict(IMU_GRADES[grade])
     for key, value in (overrides or {}).items():
         if key not in params:
-            raise InputError(WHERE, f"unknown IMU parameter {key!r} (known: {', '.join(GRADE_KEYS)})")
+            raise InputError(
+                WHERE, f"unknown IMU parameter {key!r} (known: {', '.join(GRADE_KEYS)})"
+            )
         params[key] = value
     if float(params["bias_correlation_time_s"]) <= 0:
         raise InputError(WHERE, "bias_correlation_time_s must be positive")
@@ -210,15 +242,21 @@ def imu_error_model(grade: str, overrides: dict | None = None) -> dict:
     """
     _check_grade(grade)
     extra = {k: v for k, v in (overrides or {}).items() if k not in GRADE_KEYS}
-    model = {**grade_config(grade, {k: v for k, v in (overrides or {}).items() if k in GRADE_KEYS}),
-             **IMU_EXTRA_ERRORS[grade]}
+    model = {
+        **grade_config(grade, {k: v for k, v in (overrides or {}).items() if k in GRADE_KEYS}),
+        **IMU_EXTRA_ERRORS[grade],
+    }
     for key, value in extra.items():
         if key not in model:
-            raise InputError(WHERE, f"unknown IMU error parameter {key!r} (known: {', '.join(MODEL_KEYS)})")
+            raise InputError(
+                WHERE, f"unknown IMU error parameter {key!r} (known: {', '.join(MODEL_KEYS)})"
+            )
         model[key] = value
     lo, hi = (float(x) for x in model["vib_road_band_hz"])
     if not 0.0 <= lo < hi:
-        raise InputError(WHERE, f"vib_road_band_hz must be (lo, hi) with 0 <= lo < hi, got {(lo, hi)}")
+        raise InputError(
+            WHERE, f"vib_road_band_hz must be (lo, hi) with 0 <= lo < hi, got {(lo, hi)}"
+        )
     for key in ("warmup_time_s", "vib_engine_wander_time_s", "vib_road_ref_speed_mps"):
         if not float(model[key]) > 0:
             raise InputError(WHERE, f"{key} must be positive")
@@ -306,15 +344,18 @@ class GaussMarkovStream:
         if m and self.k == 0:
             out[0], j, self.k = self.x0, 1, 1
         while j < m:
-            if self._off == len(self._p):   # a new block starts at sample k - 1
+            if self._off == len(self._p):  # a new block starts at sample k - 1
                 self._p = self.a ** np.arange(1, min(self.block, self.n - self.k) + 1)
                 self._off, self._cum = 0, None
             q = min(m - j, len(self._p) - self._off)
-            p = self._p[self._off:self._off + q, None]
+            p = self._p[self._off : self._off + q, None]
             steps = self.rng.standard_normal((q, len(self.x0))) * self.scale / p
-            cum = (np.cumsum(steps, axis=0) if self._cum is None
-                   else np.cumsum(np.concatenate([self._cum[None], steps]), axis=0)[1:])
-            out[j:j + q] = p * (self._xs + cum)
+            cum = (
+                np.cumsum(steps, axis=0)
+                if self._cum is None
+                else np.cumsum(np.concatenate([self._cum[None], steps]), axis=0)[1:]
+            )
+            out[j : j + q] = p * (self._xs + cum)
             self._cum, self._off, j, self.k = cum[-1], self._off + q, j + q, self.k + q
             if self._off == len(self._p):
                 self._xs = out[j - 1].copy()
@@ -361,8 +402,10 @@ class BiasSeed:
 
     def streams(self) -> tuple["GaussMarkovStream", "GaussMarkovStream"]:
         """Fresh Gauss-Markov streams (accelerometer, gyro) from the first sample."""
-        return (GaussMarkovStream(self.n, self.dt, self.tau, self.sigma_a, copy.deepcopy(self.rng_a)),
-                GaussMarkovStream(self.n, self.dt, self.tau, self.sigma_g, copy.deepcopy(self.rng_g)))
+        return (
+            GaussMarkovStream(self.n, self.dt, self.tau, self.sigma_a, copy.deepcopy(self.rng_a)),
+            GaussMarkovStream(self.n, self.dt, self.tau, self.sigma_g, copy.deepcopy(self.rng_g)),
+        )
 
 
 class ImuErrorStream:
@@ -389,16 +432,32 @@ class ImuErrorStream:
         for _ in range(4):
             starts.append(copy.deepcopy(rng))
             skip_normals(rng, 3 * n)
-        self.bias_seed = BiasSeed(n, dt, si["tau"], si["accel_bi"], si["gyro_bi"], self.turn_on_a,
-                                  self.turn_on_g, starts[0], starts[1])
+        self.bias_seed = BiasSeed(
+            n,
+            dt,
+            si["tau"],
+            si["accel_bi"],
+            si["gyro_bi"],
+            self.turn_on_a,
+            self.turn_on_g,
+            starts[0],
+            starts[1],
+        )
         self._gm_a, self._gm_g = self.bias_seed.streams()
-        self._noise = ((starts[2], si["accel_density"] / np.sqrt(dt)), (starts[3], si["gyro_density"] / np.sqrt(dt)))
+        self._noise = (
+            (starts[2], si["accel_density"] / np.sqrt(dt)),
+            (starts[3], si["gyro_density"] / np.sqrt(dt)),
+        )
 
     def take(self, m: int) -> dict:
         """The next ``m`` samples: ``bias_a``, ``bias_g``, ``noise_a``, ``noise_g`` of :func:`imu_errors`."""
         (rng_a, scale_a), (rng_g, scale_g) = self._noise
-        return {"bias_a": self.turn_on_a + self._gm_a.take(m), "bias_g": self.turn_on_g + self._gm_g.take(m),
-                "noise_a": rng_a.standard_normal((m, 3)) * scale_a, "noise_g": rng_g.standard_normal((m, 3)) * scale_g}
+        return {
+            "bias_a": self.turn_on_a + self._gm_a.take(m),
+            "bias_g": self.turn_on_g + self._gm_g.take(m),
+            "noise_a": rng_a.standard_normal((m, 3)) * scale_a,
+            "noise_g": rng_g.standard_normal((m, 3)) * scale_g,
+        }
 
 
 def imu_errors(n: int, dt: float, params: dict, rng: np.random.Generator) -> dict:
@@ -445,14 +504,20 @@ def sensor_matrices(model: dict, rng: np.random.Generator) -> dict:
     out = {}
     for sensor in ("accel", "gyro"):
         s = rng.standard_normal(3) * per_axis(model[f"{sensor}_scale_factor_ppm"]) * 1e-6
-        m = rng.standard_normal((3, 3)) * per_axis(model[f"{sensor}_cross_axis_ppm"])[:, None] * 1e-6
+        m = (
+            rng.standard_normal((3, 3))
+            * per_axis(model[f"{sensor}_cross_axis_ppm"])[:, None]
+            * 1e-6
+        )
         np.fill_diagonal(m, 0.0)
         out[f"{sensor}_scale_factor"], out[f"{sensor}_cross_axis"] = s, m
         out[f"K_{sensor[0]}"] = np.eye(3) + np.diag(s) + m
     return out
 
 
-def bias_drift(t_rel: np.ndarray, model: dict, rng: np.random.Generator, rw_step_s: float = 1.0) -> dict:
+def bias_drift(
+    t_rel: np.ndarray, model: dict, rng: np.random.Generator, rw_step_s: float = 1.0
+) -> dict:
     """Draw the slow bias drift of one run: warm-up exponential plus random walk, zero at ``t_rel = 0``.
 
     Parameters
@@ -474,7 +539,12 @@ def bias_drift(t_rel: np.ndarray, model: dict, rng: np.random.Generator, rw_step
     """
     drift = BiasDrift(float(t_rel[-1]), model, rng, rw_step_s)
     drift_a, drift_g = drift.at(t_rel)
-    return {"drift_a": drift_a, "drift_g": drift_g, "accel_warmup": drift.warm_a, "gyro_warmup": drift.warm_g}
+    return {
+        "drift_a": drift_a,
+        "drift_g": drift_g,
+        "accel_warmup": drift.warm_a,
+        "gyro_warmup": drift.warm_g,
+    }
 
 
 class BiasDrift:
@@ -492,8 +562,12 @@ class BiasDrift:
         self.warm_a = rng.standard_normal(3) * per_axis(model["accel_warmup_mg"]) * MG
         self.warm_g = rng.standard_normal(3) * per_axis(model["gyro_warmup_deg_h"]) * DEG / 3600.0
         # Random-walk densities in SI: [mg/sqrt(h)] -> [m/s^2/sqrt(s)], [deg/h/sqrt(h)] -> [rad/s/sqrt(s)].
-        k = np.concatenate([per_axis(model["accel_bias_rw_mg_rth"]) * MG / 60.0,
-                            per_axis(model["gyro_bias_rw_deg_h_rth"]) * DEG / 3600.0 / 60.0])
+        k = np.concatenate(
+            [
+                per_axis(model["accel_bias_rw_mg_rth"]) * MG / 60.0,
+                per_axis(model["gyro_bias_rw_deg_h_rth"]) * DEG / 3600.0 / 60.0,
+            ]
+        )
         m = int(np.ceil(t_end / rw_step_s)) + 1
         steps = rng.standard_normal((m - 1, 6)) * (k * np.sqrt(rw_step_s))
         self._walk = np.vstack([np.zeros((1, 6)), np.cumsum(steps, axis=0)])

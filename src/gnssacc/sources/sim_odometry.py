@@ -30,6 +30,7 @@ true turn rate ``w`` about the body down axis [rad/s], ``g`` the standard gravit
 Every draw comes from the stream ``numpy.random.default_rng([seed, 4])``, independent of the IMU
 errors' and the GNSS noise's, so asking for odometry leaves the rest of a run unchanged.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -62,8 +63,14 @@ def odometry_kind(scenario_name: str) -> str:
     return "skid" if scenario_name in SKID_SCENARIOS else "car"
 
 
-def simulate_odometry(t: np.ndarray, speed: np.ndarray, accel: np.ndarray, yaw_rate_b: np.ndarray, kind: str,
-                      seed: int) -> tuple[WheelOdometry, dict]:
+def simulate_odometry(
+    t: np.ndarray,
+    speed: np.ndarray,
+    accel: np.ndarray,
+    yaw_rate_b: np.ndarray,
+    kind: str,
+    seed: int,
+) -> tuple[WheelOdometry, dict]:
     """Wheel odometry at times ``t`` from the true kinematics there (model in the module docstring).
 
     Parameters
@@ -93,13 +100,28 @@ def simulate_odometry(t: np.ndarray, speed: np.ndarray, accel: np.ndarray, yaw_r
     n = len(t)
     v = (1.0 + s) * (1.0 + accel / (SLIP_STIFFNESS * STANDARD_GRAVITY)) * speed
     if kind == "skid":
-        v = v + SKID_TURN_SLIP * np.abs(yaw_rate_b) * SKID_TRACK_M / 2.0 * _gauss_markov(t, SKID_SLIP_TAU_S, rng)
+        v = v + SKID_TURN_SLIP * np.abs(yaw_rate_b) * SKID_TRACK_M / 2.0 * _gauss_markov(
+            t, SKID_SLIP_TAU_S, rng
+        )
     v = v + rng.normal(0.0, NOISE_V_MPS, n)
     w = (1.0 + s) * chi * yaw_rate_b + rng.normal(0.0, NOISE_W_RADPS, n)
-    odo = WheelOdometry(np.asarray(t, float).copy(), v, w, np.full(n, NOISE_V_MPS), np.full(n, NOISE_W_RADPS),
-                        frame=f"simulator ({kind})")
-    draws = {"kind": kind, "scale_factor": s, "chi": chi, "yaw_factor": (1.0 + s) * chi,
-             "slip_stiffness": SLIP_STIFFNESS, "noise_v_mps": NOISE_V_MPS, "noise_w_radps": NOISE_W_RADPS}
+    odo = WheelOdometry(
+        np.asarray(t, float).copy(),
+        v,
+        w,
+        np.full(n, NOISE_V_MPS),
+        np.full(n, NOISE_W_RADPS),
+        frame=f"simulator ({kind})",
+    )
+    draws = {
+        "kind": kind,
+        "scale_factor": s,
+        "chi": chi,
+        "yaw_factor": (1.0 + s) * chi,
+        "slip_stiffness": SLIP_STIFFNESS,
+        "noise_v_mps": NOISE_V_MPS,
+        "noise_w_radps": NOISE_W_RADPS,
+    }
     return odo, draws
 
 

@@ -6,6 +6,7 @@ rate, swept in blocks of nodes: nothing of the size of the run is kept, and ever
 same, bit for bit, as in one pass over the whole grid (the cumulative sums carry from block to
 block; :func:`perfect_imu` and :meth:`Trajectory.position` read each block as it passes).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -32,7 +33,9 @@ def _rotvec_batch(R) -> np.ndarray:
     Uses atan2(|sin|, cos) rather than arccos so that tiny angles (earth rate over 10 ms is
     7e-7 rad) keep full relative precision.
     """
-    w = 0.5 * np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], -1)
+    w = 0.5 * np.stack(
+        [R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], -1
+    )
     s = np.linalg.norm(w, axis=1)
     angle = np.arctan2(s, 0.5 * (np.trace(R, axis1=1, axis2=2) - 1.0))
     scale = np.where(s > 1e-300, angle / np.where(s > 1e-300, s, 1.0), 1.0)
@@ -45,7 +48,9 @@ def _earth_rate_batch(lat) -> np.ndarray:
 
 def _transport_rate_batch(lat, h, v_n) -> np.ndarray:
     R_M, R_N = radii(lat)
-    return np.stack([v_n[:, 1] / (R_N + h), -v_n[:, 0] / (R_M + h), -v_n[:, 1] * np.tan(lat) / (R_N + h)], -1)
+    return np.stack(
+        [v_n[:, 1] / (R_N + h), -v_n[:, 0] / (R_M + h), -v_n[:, 1] * np.tan(lat) / (R_N + h)], -1
+    )
 
 
 def _cumulative(rate, rate_dot, h, start=None):
@@ -61,8 +66,12 @@ def _cumulative(rate, rate_dot, h, start=None):
 def _hermite(u, h, y0, ydot0, y1, ydot1):
     """Cubic Hermite interpolation at ``u`` in [0, 1] between nodes 0 and 1, ``h`` apart."""
     u2, u3 = u * u, u * u * u
-    return ((2 * u3 - 3 * u2 + 1) * y0 + (u3 - 2 * u2 + u) * h * ydot0
-            + (-2 * u3 + 3 * u2) * y1 + (u3 - u2) * h * ydot1)
+    return (
+        (2 * u3 - 3 * u2 + 1) * y0
+        + (u3 - 2 * u2 + u) * h * ydot0
+        + (-2 * u3 + 3 * u2) * y1
+        + (u3 - u2) * h * ydot1
+    )
 
 
 @dataclass
@@ -108,8 +117,14 @@ class TruthSamples:
 
     def to_truth(self) -> Truth:
         """As a :class:`gnssacc.core.recording.Truth`."""
-        return Truth(self.t.copy(), self.lat.copy(), self.lon.copy(), self.h.copy(),
-                     self.v_n.copy(), self.rpy.copy())
+        return Truth(
+            self.t.copy(),
+            self.lat.copy(),
+            self.lon.copy(),
+            self.h.copy(),
+            self.v_n.copy(),
+            self.rpy.copy(),
+        )
 
 
 @dataclass
@@ -166,8 +181,16 @@ class Trajectory:
         Grid step [s].
     """
 
-    def __init__(self, scenario: Scenario, origin_llh, yaw0: float, t_start: float,
-                 t_lo: float, t_hi: float, step: float):
+    def __init__(
+        self,
+        scenario: Scenario,
+        origin_llh,
+        yaw0: float,
+        t_start: float,
+        t_lo: float,
+        t_hi: float,
+        step: float,
+    ):
         self.scenario, self.yaw0, self.t_start = scenario, float(yaw0), float(t_start)
         self.lat0, self.lon0, self.h0 = (float(x) for x in origin_llh)
         #: Number of grid nodes; node j is at ``grid_t0 + step * j`` [s].
@@ -224,8 +247,11 @@ class Trajectory:
         lat_dot = v_N / (R_M + h)
         cl = np.cos(lat)
         lon_dot = v_E / ((R_N + h) * cl)
-        lon_ddot = (a_E / ((R_N + h) * cl) + v_E * v_D / ((R_N + h) ** 2 * cl)
-                    + v_E * np.sin(lat) * lat_dot / ((R_N + h) * cl * cl))
+        lon_ddot = (
+            a_E / ((R_N + h) * cl)
+            + v_E * v_D / ((R_N + h) ** 2 * cl)
+            + v_E * np.sin(lat) * lat_dot / ((R_N + h) * cl * cl)
+        )
         lon = anchored("lon", lon_dot, lon_ddot, self.lon0)
         return (lat, lon, h, lat_dot, lon_dot, -v_D), nxt
 
@@ -260,11 +286,14 @@ class Trajectory:
                 on_block(block)
             g1 = block.g0 + len(block.t) - 1
             for (i, u, order), res in zip(plans, out):
-                a, b = np.searchsorted(i, [block.g0, g1])   # node pairs (i, i + 1) inside the block
+                a, b = np.searchsorted(i, [block.g0, g1])  # node pairs (i, i + 1) inside the block
                 j = i[a:b] - block.g0
-                for row, (y, yd) in enumerate(((block.lat, block.lat_dot), (block.lon, block.lon_dot),
-                                               (block.h, block.h_dot))):
-                    res[row, order[a:b]] = _hermite(u[a:b], self.step, y[j], yd[j], y[j + 1], yd[j + 1])
+                for row, (y, yd) in enumerate(
+                    ((block.lat, block.lat_dot), (block.lon, block.lon_dot), (block.h, block.h_dot))
+                ):
+                    res[row, order[a:b]] = _hermite(
+                        u[a:b], self.step, y[j], yd[j], y[j + 1], yd[j + 1]
+                    )
             if on_block is None and g1 > last:
                 break
         return [tuple(r) for r in out]
@@ -272,8 +301,11 @@ class Trajectory:
     def _check_span(self, t) -> None:
         t_last = self.grid_t0 + self.step * float(self.n_grid - 1)
         if t.min() < self.grid_t0 - 1e-9 or t.max() > t_last + 1e-9:
-            raise InputError(WHERE, f"truth requested at {t.min():.3f}..{t.max():.3f} s, outside the simulated "
-                                    f"span {self.grid_t0:.3f}..{t_last:.3f} s")
+            raise InputError(
+                WHERE,
+                f"truth requested at {t.min():.3f}..{t.max():.3f} s, outside the simulated "
+                f"span {self.grid_t0:.3f}..{t_last:.3f} s",
+            )
 
     def kinematics(self, t) -> Kinematics:
         """Analytic path kinematics at absolute times ``t`` [s] (sorted)."""
@@ -336,7 +368,7 @@ def sweep_imu(traj: Trajectory, n: int, on_samples: Callable, queries=()) -> lis
         k0, k1 = block.g0 // 2, min((block.g0 + len(block.t) - 1) // 2, n)
         if k1 > k0:
             f_b, omega_ib_b = _perfect_imu_block(block, 2 * (k1 - k0) + 1, 2.0 * traj.step)
-            on_samples(k0, k1, f_b, omega_ib_b, block.kin.speed[1:2 * (k1 - k0):2])
+            on_samples(k0, k1, f_b, omega_ib_b, block.kin.speed[1 : 2 * (k1 - k0) : 2])
             done[0] = k1
 
     positions = traj.sweep(queries, on_block)
@@ -397,9 +429,14 @@ def _perfect_imu_block(block: GridBlock, m: int, dt: float) -> tuple[np.ndarray,
     return f_b, omega_ib_b
 
 
-def build_trajectory(scenario: str | Scenario = "car", duration_s: float = 300.0, rate_hz: float = 100.0,
-                     origin_llh_deg=(32.0, 34.8, 50.0), initial_yaw_deg: float = 30.0,
-                     t_start_s: float = 0.0) -> Trajectory:
+def build_trajectory(
+    scenario: str | Scenario = "car",
+    duration_s: float = 300.0,
+    rate_hz: float = 100.0,
+    origin_llh_deg=(32.0, 34.8, 50.0),
+    initial_yaw_deg: float = 30.0,
+    t_start_s: float = 0.0,
+) -> Trajectory:
     """Place a scenario on the ellipsoid, integrated on a grid of step ``1 / (2 rate_hz)``.
 
     The grid spans ``[t_start_s - 1/rate_hz, t_start_s + duration_s]`` so that interval averages
@@ -429,13 +466,25 @@ def build_trajectory(scenario: str | Scenario = "car", duration_s: float = 300.0
     scen = make_scenario(scenario, duration_s) if isinstance(scenario, str) else scenario
     dt = 1.0 / rate_hz
     lat, lon, h = origin_llh_deg
-    return Trajectory(scen, (lat * DEG, lon * DEG, float(h)), initial_yaw_deg * DEG, t_start_s,
-                      t_start_s - dt, t_start_s + duration_s, dt / 2.0)
+    return Trajectory(
+        scen,
+        (lat * DEG, lon * DEG, float(h)),
+        initial_yaw_deg * DEG,
+        t_start_s,
+        t_start_s - dt,
+        t_start_s + duration_s,
+        dt / 2.0,
+    )
 
 
-def dense_truth(scenario: str | Scenario = "car", duration_s: float = 300.0, rate_hz: float = 100.0,
-                origin_llh_deg=(32.0, 34.8, 50.0), initial_yaw_deg: float = 30.0,
-                t_start_s: float = 0.0) -> TruthSamples:
+def dense_truth(
+    scenario: str | Scenario = "car",
+    duration_s: float = 300.0,
+    rate_hz: float = 100.0,
+    origin_llh_deg=(32.0, 34.8, 50.0),
+    initial_yaw_deg: float = 30.0,
+    t_start_s: float = 0.0,
+) -> TruthSamples:
     """The true trajectory sampled at ``rate_hz``, with instantaneous true ``f_b`` and ``omega_ib_b``.
 
     Parameters are those of :func:`build_trajectory`. Samples are at
@@ -447,5 +496,7 @@ def dense_truth(scenario: str | Scenario = "car", duration_s: float = 300.0, rat
         Position, NED velocity, acceleration, attitude and the instantaneous (not interval
         averaged) specific force and angular rate.
     """
-    traj = build_trajectory(scenario, duration_s, rate_hz, origin_llh_deg, initial_yaw_deg, t_start_s)
+    traj = build_trajectory(
+        scenario, duration_s, rate_hz, origin_llh_deg, initial_yaw_deg, t_start_s
+    )
     return traj.at(sample_times(t_start_s, duration_s, rate_hz))

@@ -7,6 +7,7 @@ Conventions: body frame FRD, navigation frame NED, ``R_nb`` maps body to nav, SI
 radians. The vehicle has no side slip: ``v_n = speed * (body x axis in n)``. The speed is signed:
 a negative speed drives backwards (body x points opposite to the velocity). Roll is zero.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -20,6 +21,7 @@ WHERE = "simulator"
 
 # Smooth pulses: the building block of every kinematic channel
 
+
 def _step(x):
     """Quintic smoothstep S(x) on [0, 1] (C2: zero first and second derivative at both ends)."""
     return x * x * x * (10.0 - 15.0 * x + 6.0 * x * x)
@@ -32,7 +34,7 @@ def _step_d(x):
 
 def _step_int(x):
     """Integral of S from 0 to x, for x in [0, 1] (equals 1/2 at x = 1)."""
-    return x ** 4 * (2.5 - 3.0 * x + x * x)
+    return x**4 * (2.5 - 3.0 * x + x * x)
 
 
 @dataclass(frozen=True)
@@ -85,7 +87,9 @@ def _channel(pulses: list[Pulse], t: np.ndarray, kind: str) -> np.ndarray:
     return out
 
 
-def _integral(pulses: list[Pulse], t: np.ndarray, ended: float | None = None) -> tuple[np.ndarray, float]:
+def _integral(
+    pulses: list[Pulse], t: np.ndarray, ended: float | None = None
+) -> tuple[np.ndarray, float]:
     """Integral of the pulses from -inf to the sorted times ``t``, evaluable block by block.
 
     ``ended`` is the summed area of the pulses that ended before ``t[0]`` as the previous block
@@ -117,6 +121,7 @@ def _integral(pulses: list[Pulse], t: np.ndarray, ended: float | None = None) ->
 
 
 # Scenarios
+
 
 @dataclass
 class Kinematics:
@@ -158,14 +163,21 @@ class Kinematics:
         u = np.stack([cp * cy, cp * sy, -sp], axis=1)
         du_dpitch = np.stack([-sp * cy, -sp * sy, -cp], axis=1)
         du_dyaw = np.stack([-cp * sy, cp * cy, np.zeros_like(cp)], axis=1)
-        return (self.accel[:, None] * u + self.speed[:, None]
-                * (self.pitch_rate[:, None] * du_dpitch + self.yaw_rate[:, None] * du_dyaw))
+        return self.accel[:, None] * u + self.speed[:, None] * (
+            self.pitch_rate[:, None] * du_dpitch + self.yaw_rate[:, None] * du_dyaw
+        )
 
     @property
     def omega_nb_b(self) -> np.ndarray:
         """Body rate w.r.t. the navigation frame, body axes [rad/s] (Z-Y-X rates, roll 0)."""
-        return np.stack([-self.yaw_rate * np.sin(self.pitch), self.pitch_rate,
-                         self.yaw_rate * np.cos(self.pitch)], axis=1)
+        return np.stack(
+            [
+                -self.yaw_rate * np.sin(self.pitch),
+                self.pitch_rate,
+                self.yaw_rate * np.cos(self.pitch),
+            ],
+            axis=1,
+        )
 
 
 class Scenario:
@@ -203,13 +215,20 @@ class Scenario:
         self._accel: list[Pulse] = []
         self._yaw_rate: list[Pulse] = []
         self._pitch: list[Pulse] = []
-        self._spans: dict[int, tuple] = {}   # start and end times of each pulse list, for sweeps
+        self._spans: dict[int, tuple] = {}  # start and end times of each pulse list, for sweeps
 
     def _log(self, kind: str, duration: float, reverse: bool | None = None, **info) -> "Scenario":
         info = {k: float(v) for k, v in info.items()}
         reverse = self.speed < 0.0 if reverse is None else reverse
-        self.segments.append({"kind": kind, "t0": self.t_end, "t1": self.t_end + float(duration),
-                              "reverse": bool(reverse), **info})
+        self.segments.append(
+            {
+                "kind": kind,
+                "t0": self.t_end,
+                "t1": self.t_end + float(duration),
+                "reverse": bool(reverse),
+                **info,
+            }
+        )
         self.t_end += float(duration)
         return self
 
@@ -220,7 +239,9 @@ class Scenario:
     def hold(self, duration_s: float) -> "Scenario":
         """Stand still for ``duration_s`` [s] (the speed must already be 0)."""
         if self.speed != 0.0:
-            raise InputError(WHERE, f"{self.name}: hold() needs speed 0, the vehicle moves at {self.speed} m/s")
+            raise InputError(
+                WHERE, f"{self.name}: hold() needs speed 0, the vehicle moves at {self.speed} m/s"
+            )
         return self._log("hold", duration_s, speed=0.0)
 
     def speed_to(self, speed_mps: float, duration_s: float, ramp_s: float = 1.0) -> "Scenario":
@@ -238,8 +259,13 @@ class Scenario:
         self.speed = float(speed_mps)
         return self._log("speed", duration_s, reverse=reverse, **info)
 
-    def turn(self, angle_deg: float, radius_m: float | None = None, rate_dps: float | None = None,
-             ramp_s: float = 1.0) -> "Scenario":
+    def turn(
+        self,
+        angle_deg: float,
+        radius_m: float | None = None,
+        rate_dps: float | None = None,
+        ramp_s: float = 1.0,
+    ) -> "Scenario":
         """Change the yaw by ``angle_deg`` [deg] (positive = clockwise seen from above) at constant speed.
 
         Give either the ``radius_m`` [m] (needs a moving vehicle; the yaw rate is |speed| / radius,
@@ -250,10 +276,15 @@ class Scenario:
         (as a car steered left while backing up).
         """
         if (radius_m is None) == (rate_dps is None):
-            raise InputError(WHERE, f"{self.name}: turn() needs exactly one of radius_m and rate_dps")
+            raise InputError(
+                WHERE, f"{self.name}: turn() needs exactly one of radius_m and rate_dps"
+            )
         if radius_m is not None:
             if self.speed == 0.0 or not radius_m > 0:
-                raise InputError(WHERE, f"{self.name}: a turn with a radius needs a moving vehicle and radius > 0")
+                raise InputError(
+                    WHERE,
+                    f"{self.name}: a turn with a radius needs a moving vehicle and radius > 0",
+                )
             rate = abs(self.speed) / radius_m
         else:
             rate = abs(rate_dps) * DEG
@@ -262,11 +293,13 @@ class Scenario:
         ramp = min(ramp_s, abs(angle) / rate)
         duration = abs(angle) / rate + ramp
         self._yaw_rate.append(Pulse(self.t_end, duration, ramp, np.sign(angle) * rate))
-        return self._log("turn", duration, angle_deg=angle_deg, yaw_rate=np.sign(angle) * rate,
-                         speed=self.speed)
+        return self._log(
+            "turn", duration, angle_deg=angle_deg, yaw_rate=np.sign(angle) * rate, speed=self.speed
+        )
 
-    def hill(self, height_m: float, slope_deg: float = 5.0, top_s: float = 0.0,
-             ramp_s: float = 2.0) -> "Scenario":
+    def hill(
+        self, height_m: float, slope_deg: float = 5.0, top_s: float = 0.0, ramp_s: float = 2.0
+    ) -> "Scenario":
         """Drive over a hill: climb about ``height_m`` [m] at ``slope_deg``, cruise ``top_s`` [s], descend.
 
         Pitch follows the slope (smooth ramps of ``ramp_s`` [s]). At constant speed the descent
@@ -284,14 +317,17 @@ class Scenario:
         t0 = self.t_end
         self._pitch.append(Pulse(t0, climb, ramp, sign * slope))
         self._pitch.append(Pulse(t0 + climb + top_s, climb, ramp, -sign * slope))
-        return self._log("hill", 2.0 * climb + top_s, height_m=height_m, slope_deg=slope_deg,
-                         speed=self.speed)
+        return self._log(
+            "hill", 2.0 * climb + top_s, height_m=height_m, slope_deg=slope_deg, speed=self.speed
+        )
 
     def kinematics(self, t_rel: np.ndarray, yaw0: float) -> Kinematics:
         """Evaluate the path at sorted times ``t_rel`` [s] relative to the start; ``yaw0`` [rad]."""
         return self.kinematics_block(t_rel, yaw0)[0]
 
-    def kinematics_block(self, t_rel: np.ndarray, yaw0: float, ended=None) -> tuple[Kinematics, tuple]:
+    def kinematics_block(
+        self, t_rel: np.ndarray, yaw0: float, ended=None
+    ) -> tuple[Kinematics, tuple]:
         """:meth:`kinematics` of one block of a sweep over sorted times, bit for bit the one-pass values.
 
         ``ended`` is what the previous block returned (``None`` for the first); consecutive blocks
@@ -300,8 +336,10 @@ class Scenario:
         t_rel = np.atleast_1d(np.asarray(t_rel, float))
         # Within a sweep only the pulses overlapping the block count (the areas of those that
         # ended before it arrive in ``ended``): the cost per block does not grow with the run.
-        accel, yaw_rate, pitch = (self._overlapping(p, t_rel) if ended is not None and len(t_rel) else p
-                                  for p in (self._accel, self._yaw_rate, self._pitch))
+        accel, yaw_rate, pitch = (
+            self._overlapping(p, t_rel) if ended is not None and len(t_rel) else p
+            for p in (self._accel, self._yaw_rate, self._pitch)
+        )
         speed_int, speed_end = _integral(accel, t_rel, None if ended is None else ended[0])
         yaw_int, yaw_end = _integral(yaw_rate, t_rel, None if ended is None else ended[1])
         speed = self.speed0 + speed_int
@@ -321,7 +359,10 @@ class Scenario:
         """The pulses (in list order) that end at or after ``t[0]`` and start before ``t[-1]``."""
         spans = self._spans.get(id(pulses))
         if spans is None or len(spans[0]) != len(pulses):
-            spans = (np.array([p.t0 for p in pulses]), np.array([p.t0 + p.duration for p in pulses]))
+            spans = (
+                np.array([p.t0 for p in pulses]),
+                np.array([p.t0 + p.duration for p in pulses]),
+            )
             self._spans[id(pulses)] = spans
         return [pulses[i] for i in np.flatnonzero((spans[1] >= t[0]) & (spans[0] < t[-1]))]
 
@@ -490,4 +531,3 @@ def R_nb_batch(pitch, yaw) -> np.ndarray:
     R[:, 1, 0], R[:, 1, 1], R[:, 1, 2] = sy * cp, cy, sy * sp
     R[:, 2, 0], R[:, 2, 1], R[:, 2, 2] = -sp, 0.0, cp
     return R
-

@@ -6,6 +6,7 @@ estimated biases at the solution epochs. :class:`TrueBias` keeps what draws them
 starts, the turn-on biases and the drift, a few hundred bytes plus the drift's one-second walk)
 and draws them again, block by block, bit for bit the numbers the simulator added to the IMU.
 """
+
 from __future__ import annotations
 
 from typing import Iterator
@@ -40,10 +41,15 @@ class TrueBias:
     @property
     def nbytes(self) -> int:
         """Bytes of the arrays it holds beyond the run's sample times (the draws, the drift's walk)."""
-        held = [*vars(self.seed).values(), *(vars(self.drift).values() if self.drift is not None else ())]
+        held = [
+            *vars(self.seed).values(),
+            *(vars(self.drift).values() if self.drift is not None else ()),
+        ]
         return sum(v.nbytes for v in held if isinstance(v, np.ndarray))
 
-    def with_drift(self, bias_a: np.ndarray, bias_g: np.ndarray, rows) -> tuple[np.ndarray, np.ndarray]:
+    def with_drift(
+        self, bias_a: np.ndarray, bias_g: np.ndarray, rows
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The turn-on + Gauss-Markov biases of samples ``rows`` (a slice or indices) plus the
         drift: the one sum the simulator's sweep, :meth:`blocks` and :meth:`at` make, so their
         numbers agree bit for bit (each term is per sample)."""
@@ -60,8 +66,9 @@ class TrueBias:
         s = self.seed
         for k0 in range(0, s.n, size):
             k1 = min(k0 + size, s.n)
-            yield (k0, k1) + self.with_drift(s.turn_on_a + gm_a.take(k1 - k0), s.turn_on_g + gm_g.take(k1 - k0),
-                                             slice(k0, k1))
+            yield (k0, k1) + self.with_drift(
+                s.turn_on_a + gm_a.take(k1 - k0), s.turn_on_g + gm_g.take(k1 - k0), slice(k0, k1)
+            )
 
     def samples(self) -> tuple[np.ndarray, np.ndarray]:
         """Every sample's biases: accelerometer [m/s^2] and gyro [rad/s], shape (n, 3) each (drawn on each call)."""
@@ -70,7 +77,9 @@ class TrueBias:
             out_a[k0:k1], out_g[k0:k1] = b_a, b_g
         return out_a, out_g
 
-    def at(self, t: np.ndarray, t_samples: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def at(
+        self, t: np.ndarray, t_samples: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The biases interpolated linearly at times ``t`` [s], held constant outside the samples.
 
         Equal bit for bit to ``np.interp(t, t_samples, samples()[.][:, i])`` per axis, with
@@ -96,11 +105,20 @@ class TrueBias:
         need = np.unique(np.concatenate([j, np.minimum(j + 1, n - 1)]))
         b_a, b_g = np.empty((len(need), 3)), np.empty((len(need), 3))
         gm_a, gm_g = self.seed.streams()
-        for k0 in range(0, n, sim_path.IMU_BLOCK):   # the Gauss-Markov recursion passes every sample
+        for k0 in range(0, n, sim_path.IMU_BLOCK):  # the Gauss-Markov recursion passes every sample
             k1 = min(k0 + sim_path.IMU_BLOCK, n)
             lo, hi = np.searchsorted(need, (k0, k1))
-            b_a[lo:hi], b_g[lo:hi] = gm_a.take(k1 - k0)[need[lo:hi] - k0], gm_g.take(k1 - k0)[need[lo:hi] - k0]
-        b_a, b_g = self.with_drift(self.seed.turn_on_a + b_a, self.seed.turn_on_g + b_g, need)   # the drift: only there
+            b_a[lo:hi], b_g[lo:hi] = (
+                gm_a.take(k1 - k0)[need[lo:hi] - k0],
+                gm_g.take(k1 - k0)[need[lo:hi] - k0],
+            )
+        b_a, b_g = self.with_drift(
+            self.seed.turn_on_a + b_a, self.seed.turn_on_g + b_g, need
+        )  # the drift: only there
         tn = t_samples[need]
-        return tuple(np.column_stack([np.interp(t, tn, b[:, i]) for i in range(3)]) if len(t) else np.zeros((0, 3))
-                     for b in (b_a, b_g))
+        return tuple(
+            np.column_stack([np.interp(t, tn, b[:, i]) for i in range(3)])
+            if len(t)
+            else np.zeros((0, 3))
+            for b in (b_a, b_g)
+        )

@@ -18,6 +18,7 @@ degree) is not put into the truth. The simulated IMU integrates: sample k is the
   which gives exactly the second-order statistics of the interval means without a finer
   internal rate. The speed is taken at each interval's midpoint (it changes slowly over dt).
 """
+
 from __future__ import annotations
 
 import copy
@@ -54,18 +55,27 @@ def harmonic_interval_mean(phase_edges: np.ndarray, order: int, offset=0.0) -> n
     return s[:, None] * np.cos(off) + c[:, None] * np.sin(off)
 
 
-def engine_frequency(speed_mid: np.ndarray, dt: float, model: dict, rng: np.random.Generator,
-                     wander_step_s: float = 0.05) -> np.ndarray:
+def engine_frequency(
+    speed_mid: np.ndarray,
+    dt: float,
+    model: dict,
+    rng: np.random.Generator,
+    wander_step_s: float = 0.05,
+) -> np.ndarray:
     """Engine fundamental over each sample interval [Hz].
 
     ``min(idle + slope |v|, max) (1 + w)``: ``v`` the speed at the interval midpoints [m/s],
     ``w`` a Gauss-Markov wander (relative 1-sigma ``vib_engine_wander``, correlation time
     ``vib_engine_wander_time_s``) drawn on a ``wander_step_s`` grid and interpolated linearly.
     """
-    return EngineVibration(len(speed_mid), dt, model, rng, wander_step_s, phases=False).frequency(speed_mid)
+    return EngineVibration(len(speed_mid), dt, model, rng, wander_step_s, phases=False).frequency(
+        speed_mid
+    )
 
 
-def engine_vibration(speed_mid: np.ndarray, dt: float, model: dict, rng: np.random.Generator) -> dict:
+def engine_vibration(
+    speed_mid: np.ndarray, dt: float, model: dict, rng: np.random.Generator
+) -> dict:
     """Interval means of the engine vibration of one run.
 
     Parameters
@@ -104,28 +114,46 @@ class EngineVibration:
         ``engine_phase0``, ``engine_harmonic_phase`` (see :func:`engine_vibration`).
     """
 
-    def __init__(self, n: int, dt: float, model: dict, rng: np.random.Generator, wander_step_s: float = 0.05,
-                 phases: bool = True):
+    def __init__(
+        self,
+        n: int,
+        dt: float,
+        model: dict,
+        rng: np.random.Generator,
+        wander_step_s: float = 0.05,
+        phases: bool = True,
+    ):
         self.dt, self.model, self.k = dt, model, 0
         m = int(np.ceil(n * dt / wander_step_s)) + 1
-        self._wander = gauss_markov(m, wander_step_s, float(model["vib_engine_wander_time_s"]),
-                                    np.array([float(model["vib_engine_wander"])]), rng)[:, 0]
+        self._wander = gauss_markov(
+            m,
+            wander_step_s,
+            float(model["vib_engine_wander_time_s"]),
+            np.array([float(model["vib_engine_wander"])]),
+            rng,
+        )[:, 0]
         self._wander_t = wander_step_s * np.arange(m)
         self._rel = np.atleast_1d(np.asarray(model["vib_engine_harmonics"], float))
         if phases:
             phase0 = rng.uniform(0.0, 2.0 * np.pi)
             theta = rng.uniform(0.0, 2.0 * np.pi, size=(2, len(self._rel), 3))
             self.draws = {"engine_phase0": phase0, "engine_harmonic_phase": theta}
-        self._amp = np.concatenate([per_axis(model["vib_engine_accel_mps2"]),
-                                    per_axis(model["vib_engine_gyro_dps"]) * DEG])
-        self._cycles = None   # cumulative sum of the frequencies up to the next chunk's first edge
+        self._amp = np.concatenate(
+            [per_axis(model["vib_engine_accel_mps2"]), per_axis(model["vib_engine_gyro_dps"]) * DEG]
+        )
+        self._cycles = None  # cumulative sum of the frequencies up to the next chunk's first edge
 
     def frequency(self, speed_mid: np.ndarray) -> np.ndarray:
         """Engine fundamental [Hz] over the next ``len(speed_mid)`` intervals (does not advance)."""
         model, k0 = self.model, self.k
-        f_nom = np.minimum(float(model["vib_engine_idle_hz"]) + float(model["vib_engine_hz_per_mps"])
-                           * np.abs(speed_mid), float(model["vib_engine_max_hz"]))
-        w_mid = np.interp((np.arange(k0, k0 + len(speed_mid)) + 0.5) * self.dt, self._wander_t, self._wander)
+        f_nom = np.minimum(
+            float(model["vib_engine_idle_hz"])
+            + float(model["vib_engine_hz_per_mps"]) * np.abs(speed_mid),
+            float(model["vib_engine_max_hz"]),
+        )
+        w_mid = np.interp(
+            (np.arange(k0, k0 + len(speed_mid)) + 0.5) * self.dt, self._wander_t, self._wander
+        )
         return np.maximum(f_nom * (1.0 + w_mid), 0.0)
 
     def take(self, speed_mid: np.ndarray) -> np.ndarray:
@@ -142,7 +170,9 @@ class EngineVibration:
         vib = np.zeros((len(f), 6))
         for h, r in enumerate(self._rel, start=1):
             if r != 0.0:
-                vib += (r * self._amp) * harmonic_interval_mean(edges, h, theta[:, h - 1].reshape(6))
+                vib += (r * self._amp) * harmonic_interval_mean(
+                    edges, h, theta[:, h - 1].reshape(6)
+                )
         return vib
 
 
@@ -160,8 +190,9 @@ def _fast_len(n: int) -> int:
     return best
 
 
-def band_limited_interval_means(n: int, dt: float, band_hz, rng: np.random.Generator,
-                                channels: int = 3) -> np.ndarray:
+def band_limited_interval_means(
+    n: int, dt: float, band_hz, rng: np.random.Generator, channels: int = 3
+) -> np.ndarray:
     """Interval means of unit-RMS band-limited Gaussian noise, sampled every ``dt``.
 
     The continuous process has a flat two-sided PSD ``S = 1 / (2 (hi - lo))`` on
@@ -233,8 +264,12 @@ def band_limited_columns(n: int, dt: float, band_hz, rng: np.random.Generator, c
 def road_scale(speed_mid: np.ndarray, model: dict) -> np.ndarray:
     """Road vibration RMS per interval and channel: accelerometers [m/s^2] in columns 0-2, gyros
     [rad/s] in 3-5, shape (n, 6) (``(|v| / v_ref) ** p`` times the RMS at the reference speed)."""
-    gain = (np.abs(speed_mid) / float(model["vib_road_ref_speed_mps"])) ** float(model["vib_road_speed_exponent"])
-    rms = np.concatenate([per_axis(model["vib_road_accel_mps2"]), per_axis(model["vib_road_gyro_dps"]) * DEG])
+    gain = (np.abs(speed_mid) / float(model["vib_road_ref_speed_mps"])) ** float(
+        model["vib_road_speed_exponent"]
+    )
+    rms = np.concatenate(
+        [per_axis(model["vib_road_accel_mps2"]), per_axis(model["vib_road_gyro_dps"]) * DEG]
+    )
     return gain[:, None] * rms
 
 

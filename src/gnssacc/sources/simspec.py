@@ -27,6 +27,7 @@ parameters (:attr:`gnssacc.core.recording.SimTruth.imu_params`) for every ``[imu
 configuration does not set explicitly (:func:`known_noise_config`): the IMU noise is then known,
 not guessed from the defaults. With ``--tune auto`` the tuner identifies them as for any recording.
 """
+
 from __future__ import annotations
 
 from ..core.config import RunConfig
@@ -49,9 +50,14 @@ SIM_MAX_SAMPLES = 2_000_000
 #: What starts a simulated source spec.
 PREFIX = "sim:"
 #: Defaults of the spec's keys (``simulate`` keyword, value).
-DEFAULTS = {"imu": ("imu_grade", "industrial"), "gnss_hz": ("gnss_rate_hz", 1.0), "imu_hz": ("imu_rate_hz", 100.0),
-            "duration": ("duration_s", 300.0), "lever_arm": ("lever_arm_b", (0.0, 0.0, 0.0)),
-            "odom_hz": ("odom_hz", None)}
+DEFAULTS = {
+    "imu": ("imu_grade", "industrial"),
+    "gnss_hz": ("gnss_rate_hz", 1.0),
+    "imu_hz": ("imu_rate_hz", 100.0),
+    "duration": ("duration_s", 300.0),
+    "lever_arm": ("lever_arm_b", (0.0, 0.0, 0.0)),
+    "odom_hz": ("odom_hz", None),
+}
 _LEVER_ARM_M = Bound(-100.0, 100.0)
 
 
@@ -72,7 +78,7 @@ def parse_sim_spec(spec: str) -> dict:
     from .sim_imu_errors import IMU_GRADES
     from .sim_scenarios import SCENARIOS
 
-    scenario, *pairs = spec[len(PREFIX):].split(",")
+    scenario, *pairs = spec[len(PREFIX) :].split(",")
     if scenario not in SCENARIOS:
         raise InputError(spec, f"unknown scenario {scenario!r} (known: {', '.join(SCENARIOS)})")
     given: dict = {}
@@ -98,10 +104,17 @@ def _value(spec: str, key: str, text: str, grades):
         return text
     parts = text.split(":") if key == "lever_arm" else [text]
     if len(parts) != (3 if key == "lever_arm" else 1):
-        raise InputError(spec, f"lever_arm={text}: expected three numbers X:Y:Z (body FRD) in metres, e.g. 0.5:0:-1")
-    bound = {"gnss_hz": Bound(0.0, SIM_MAX_GNSS_RATE_HZ, lo_open=True), "imu_hz": SIM_IMU_RATE_HZ,
-             "duration": SIM_DURATION_S, "lever_arm": _LEVER_ARM_M,
-             "odom_hz": Bound(0.0, SIM_IMU_RATE_HZ.hi, lo_open=True)}[key]
+        raise InputError(
+            spec,
+            f"lever_arm={text}: expected three numbers X:Y:Z (body FRD) in metres, e.g. 0.5:0:-1",
+        )
+    bound = {
+        "gnss_hz": Bound(0.0, SIM_MAX_GNSS_RATE_HZ, lo_open=True),
+        "imu_hz": SIM_IMU_RATE_HZ,
+        "duration": SIM_DURATION_S,
+        "lever_arm": _LEVER_ARM_M,
+        "odom_hz": Bound(0.0, SIM_IMU_RATE_HZ.hi, lo_open=True),
+    }[key]
     values = []
     for p in parts:
         try:
@@ -117,15 +130,23 @@ def _value(spec: str, key: str, text: str, grades):
 
 def _check_size(spec: str, kw: dict) -> None:
     if kw["gnss_rate_hz"] > kw["imu_rate_hz"]:
-        raise InputError(spec, f"gnss_hz={kw['gnss_rate_hz']:g} is above imu_hz={kw['imu_rate_hz']:g}")
+        raise InputError(
+            spec, f"gnss_hz={kw['gnss_rate_hz']:g} is above imu_hz={kw['imu_rate_hz']:g}"
+        )
     if kw["odom_hz"] is not None and kw["odom_hz"] > kw["imu_rate_hz"]:
         raise InputError(spec, f"odom_hz={kw['odom_hz']:g} is above imu_hz={kw['imu_rate_hz']:g}")
     if kw["duration_s"] * kw["gnss_rate_hz"] < 1.0:
-        raise InputError(spec, f"duration={kw['duration_s']:g} s at gnss_hz={kw['gnss_rate_hz']:g} gives fewer than "
-                               f"two GNSS fixes")
+        raise InputError(
+            spec,
+            f"duration={kw['duration_s']:g} s at gnss_hz={kw['gnss_rate_hz']:g} gives fewer than "
+            f"two GNSS fixes",
+        )
     if kw["duration_s"] * kw["imu_rate_hz"] > SIM_MAX_SAMPLES:
-        raise InputError(spec, f"duration={kw['duration_s']:g} s at imu_hz={kw['imu_rate_hz']:g} makes more than "
-                               f"{SIM_MAX_SAMPLES} IMU samples")
+        raise InputError(
+            spec,
+            f"duration={kw['duration_s']:g} s at imu_hz={kw['imu_rate_hz']:g} makes more than "
+            f"{SIM_MAX_SAMPLES} IMU samples",
+        )
 
 
 def load_sim(spec: str, noise: str | None, seed: int):
@@ -146,7 +167,13 @@ def load_sim(spec: str, noise: str | None, seed: int):
 
 def folder_name(spec: str) -> str:
     """A folder name for a spec: ``sim:ugv-slow,imu=consumer`` -> ``sim-ugv-slow-imu_consumer``."""
-    return spec.replace(":", "-", 1).replace(",", "-").replace("=", "_").replace(":", "_").replace("/", "_")
+    return (
+        spec.replace(":", "-", 1)
+        .replace(",", "-")
+        .replace("=", "_")
+        .replace(":", "_")
+        .replace("/", "_")
+    )
 
 
 def known_noise_config(cfg: RunConfig, run, tune: str | None) -> RunConfig:

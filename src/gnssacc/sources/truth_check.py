@@ -19,6 +19,7 @@ would be scoring against another estimate. So a candidate is the truth only when
 (the noise tuner's ``gnss.sigma_scale`` finds factors of that order); the median keeps a few
 outlying fixes from deciding.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -41,8 +42,10 @@ def is_local_frame(frame_id: str) -> bool:
     """Whether ``frame_id`` names a local odometry frame: ``odom`` or ending in ``odom``
     (``wheel_odom``, ``base_odom``) or ``odom_combined`` (REP-105's continuous, drifting frame)."""
     f = frame_id.strip().lstrip("/").lower()
-    return any(f == name or f.endswith("_" + name) or f.endswith("/" + name) or f.startswith(name + "_")
-               for name in LOCAL_FRAMES)
+    return any(
+        f == name or f.endswith("_" + name) or f.endswith("/" + name) or f.startswith(name + "_")
+        for name in LOCAL_FRAMES
+    )
 
 
 @dataclass
@@ -69,12 +72,20 @@ class Agreement:
     def describe(self) -> str:
         if self.n < MIN_FIXES:
             return f"only {self.n} fix(es) inside its span to compare (need {MIN_FIXES})"
-        return (f"{self.rms_m:.2f} m RMS from the fixes, {self.ratio:.1f} fix sigmas (median-based; a truth is "
-                f"within {MAX_SIGMA_RATIO:g})")
+        return (
+            f"{self.rms_m:.2f} m RMS from the fixes, {self.ratio:.1f} fix sigmas (median-based; a truth is "
+            f"within {MAX_SIGMA_RATIO:g})"
+        )
 
 
-def agreement(t_truth: np.ndarray, p_truth_n: np.ndarray, t_fix: np.ndarray, p_fix_n: np.ndarray,
-              sigma_ned: np.ndarray, lever_m: float = 0.0) -> Agreement:
+def agreement(
+    t_truth: np.ndarray,
+    p_truth_n: np.ndarray,
+    t_fix: np.ndarray,
+    p_fix_n: np.ndarray,
+    sigma_ned: np.ndarray,
+    lever_m: float = 0.0,
+) -> Agreement:
     """Compare a candidate trajectory with the fixes (module notes).
 
     Parameters
@@ -108,8 +119,8 @@ def agreement(t_truth: np.ndarray, p_truth_n: np.ndarray, t_fix: np.ndarray, p_f
         return Agreement(0, float("nan"), float("nan"), False)
     p = np.column_stack([np.interp(t_fix[inside], t_truth, p_truth_n[:, i]) for i in range(3)])
     d = p - p_fix_n[inside]
-    s2 = sigma_ned[inside] ** 2 + lever_m ** 2
-    q = np.sum(d ** 2 / s2, axis=1)
+    s2 = sigma_ned[inside] ** 2 + lever_m**2
+    q = np.sum(d**2 / s2, axis=1)
     ratio = float(np.sqrt(np.median(q) / CHI2_3_MEDIAN))
-    rms = float(np.sqrt(np.mean(np.sum(d ** 2, axis=1))))
+    rms = float(np.sqrt(np.mean(np.sum(d**2, axis=1))))
     return Agreement(n, rms, ratio, n >= MIN_FIXES and ratio <= MAX_SIGMA_RATIO)
