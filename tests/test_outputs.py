@@ -140,16 +140,6 @@ def test_cep_of_a_circular_gaussian_is_its_closed_form():
     assert h["cep95"] == pytest.approx(s * np.sqrt(-2 * np.log(0.05)), rel=0.01)
 
 
-def test_effective_count_of_an_ar1_series():
-    rng = np.random.default_rng(1)
-    n, r = 20_000, 0.9
-    z = np.zeros(n)
-    for k in range(1, n):
-        z[k] = r * z[k - 1] + rng.normal()
-    assert errorstats.effective_count(z) == pytest.approx(n * (1 - r) / (1 + r), rel=0.1)
-    assert errorstats.effective_count(rng.normal(size=n)) == pytest.approx(n, rel=0.05)
-
-
 def test_nees_inside_its_band_when_the_sigma_is_right_and_named_per_axis_when_not():
     rng = np.random.default_rng(2)
     s = np.tile([1.0, 2.0, 0.5], (3000, 1))

@@ -85,28 +85,59 @@ def horizontal(e_ne: np.ndarray) -> dict | None:
 
 
 def effective_count(z: np.ndarray) -> float:
-    """Independent samples a series of ``n`` normalised errors is worth: ``n (1 - r) / (1 + r)`` with
-    ``r`` its lag-1 autocorrelation (an AR(1) process; clipped to [1, n]). Estimation errors are
-    correlated in time, so the epochs are far from independent."""
+    """Independent epochs the mean of squares of normalised errors ``z`` (n,) or (n, m) is worth.
+
+    For jointly Gaussian errors the squares of two terms of correlation ``rho`` correlate by
+    ``rho^2``, so the mean of ``z^2`` over ``n`` epochs and ``m`` axes has the variance of a mean
+    of ``n_eff m`` independent chi-square(1) terms with
+
+        n_eff = n m / sum_ij c_ij^2 sqrt(tau_i tau_j),   tau_i = 1 + 2 sum_{k=1..K_i} rho_i(k)^2
+
+    (``n (1 - r^2) / (1 + r^2)`` for one AR(1) axis of lag-1 correlation ``r``): ``rho_i(k)`` is
+    axis ``i``'s autocorrelation at lag ``k`` epochs, summed up to Geyer's cut ``K_i`` (the first
+    pair ``rho(2k) + rho(2k + 1)`` that is not positive: beyond it the estimate is noise), and
+    ``c_ij`` the correlation of axes ``i`` and ``j`` at the same epoch (their lagged
+    cross-correlations taken to decay as the autocorrelations). The correlations are those of a
+    consistent estimator's errors, whose mean is zero: they are estimated about zero, not about
+    the sample mean (which would hide a correlation as long as the run and make the band too
+    narrow); an offset the estimator does not know of therefore counts as correlated, and only a
+    large one is told from chance in a single run. Clipped to ``[1, n]``.
+    """
     z = np.asarray(z, float)
-    n = len(z)
-    if n < 3 or not np.any(z != z[0]):
+    z = z.reshape(len(z), -1)
+    n, m = z.shape
+    power = np.sum(z**2, axis=0)
+    if n < 3 or not np.all(power > 0):
         return float(max(n, 1))
-    zc = z - z.mean()
-    r = float(np.dot(zc[:-1], zc[1:]) / np.dot(zc, zc))
-    r = min(max(r, 0.0), 0.999)
-    return float(min(max(n * (1.0 - r) / (1.0 + r), 1.0), n))
+    z = z / np.sqrt(power / n)
+    rho = np.fft.irfft(np.abs(np.fft.rfft(z, 2 * n, axis=0)) ** 2, 2 * n, axis=0)[:n] / n
+    tau = np.empty(m)
+    for i in range(m):
+        pairs = rho[0 : 2 * ((n - 1) // 2) : 2, i] + rho[1 : 2 * ((n - 1) // 2) + 1 : 2, i]
+        stop = np.flatnonzero(pairs <= 0.0)
+        cut = 2 * stop[0] if len(stop) else n - 1
+        tau[i] = 1.0 + 2.0 * np.sum(rho[1 : cut + 1, i] ** 2)
+    c = (z.T @ z) / n
+    total = np.sum(c**2 * np.sqrt(np.outer(tau, tau)))
+    return float(min(max(n * m / total, 1.0), n))
 
 
-def nees_band(n_eff: float, dof: int) -> tuple[float, float]:
-    """The band a consistent mean NEES per dof lies in: the chi-square interval of probability
-    ``1 - NEES_ALPHA`` for ``n_eff`` independent samples of ``dof`` each, widened to at least
-    :data:`gnssacc.analysis.consistency.NIS_BAND` (stated sigmas right within ``sqrt(2)``)."""
+def chi2_band(n_eff: float, dof: int, alpha: float = NEES_ALPHA) -> tuple[float, float]:
+    """The chi-square interval of probability ``1 - alpha`` of a mean NEES per dof over ``n_eff``
+    independent epochs of ``dof`` each (``n_eff dof`` degrees of freedom; with correlated epochs,
+    :func:`effective_count`, the scaled chi-square of the same variance)."""
     from scipy.stats import chi2
 
     k = max(n_eff * dof, 1.0)
-    lo, hi = chi2.ppf(NEES_ALPHA / 2, k) / k, chi2.ppf(1.0 - NEES_ALPHA / 2, k) / k
-    return float(min(lo, NIS_BAND[0])), float(max(hi, NIS_BAND[1]))
+    return float(chi2.ppf(alpha / 2, k) / k), float(chi2.ppf(1.0 - alpha / 2, k) / k)
+
+
+def nees_band(n_eff: float, dof: int) -> tuple[float, float]:
+    """The band a consistent mean NEES per dof lies in: :func:`chi2_band` of probability
+    ``1 - NEES_ALPHA``, widened to at least :data:`gnssacc.analysis.consistency.NIS_BAND` (stated
+    sigmas right within ``sqrt(2)``)."""
+    lo, hi = chi2_band(n_eff, dof)
+    return min(lo, NIS_BAND[0]), max(hi, NIS_BAND[1])
 
 
 def nees(e: np.ndarray, s: np.ndarray, names) -> dict | None:
@@ -124,7 +155,7 @@ def nees(e: np.ndarray, s: np.ndarray, names) -> dict | None:
         axes[name] = {"value": value, "band": list(band)}
         if not band[0] <= value <= band[1]:
             outside.append(name)
-    n_eff = float(np.mean([effective_count(z[:, i]) for i in range(z.shape[1])]))
+    n_eff = effective_count(z)
     value = float(np.mean(z**2))
     band = nees_band(n_eff, z.shape[1])
     return {
