@@ -19,7 +19,8 @@ Figures (per method, all "per degree of freedom", 1 for a consistent estimator):
 Warnings (``gnssacc: warning: <method>: ...``) are raised when
 
 * a NIS figure leaves the band :data:`NIS_BAND`, widened by three standard deviations of the
-  mean of the updates actually made (``sqrt(2 / (m N))``): outside it the stated 1-sigma is off
+  mean of the updates actually made (``sqrt(2 / (m N))``, ``N`` the effective number of updates
+  when the innovations are correlated in time, :func:`band`): outside it the stated 1-sigma is off
   by more than a factor ``sqrt(2)`` (too small above the band: the errors are larger than the
   method thinks; too large below it: it discards information);
 * the innovations are correlated in time (lag-1 autocorrelation above :data:`ACF_MAX`);
@@ -208,7 +209,7 @@ class ModelCheck:
         """The model-level findings, worded for any method that uses the model."""
         out = []
         if self.nis is not None and self.n:
-            lo, hi = band(self.n)
+            lo, hi = band(self.n, acf1=self.acf1)
             if not lo <= self.nis <= hi:
                 out.append(
                     f"the noise model does not fit this recording: the EKF's position NIS per dof with it is "
@@ -281,9 +282,16 @@ def rest_noise_findings(measured: np.ndarray, configured: np.ndarray, seconds: f
     return out
 
 
-def band(n_updates: int, dof: int = 3) -> tuple[float, float]:
-    """The consistent band for a mean NIS per dof over ``n_updates`` updates of ``dof`` each."""
-    spread = 3.0 * math.sqrt(2.0 / (dof * max(n_updates, 1)))
+def band(n_updates: int, dof: int = 3, acf1: float | None = None) -> tuple[float, float]:
+    """The consistent band for a mean NIS per dof over ``n_updates`` updates of ``dof`` each.
+
+    ``acf1``: the lag-1 autocorrelation of the whitened innovations when known. Correlated
+    innovations (a model that misses a slowly varying error) are worth fewer independent
+    updates: their squares correlate by ``acf1^2``, which for an AR(1) sequence leaves
+    ``n (1 - acf1^2) / (1 + acf1^2)`` (:func:`gnssacc.analysis.errorstats.effective_count`)."""
+    r2 = 0.0 if acf1 is None or not math.isfinite(acf1) else min(max(acf1, 0.0), 0.999) ** 2
+    n_eff = max(n_updates, 1) * (1.0 - r2) / (1.0 + r2)
+    spread = 3.0 * math.sqrt(2.0 / (dof * max(n_eff, 1.0)))
     return min(NIS_BAND[0], 1.0 - spread), max(NIS_BAND[1], 1.0 + spread)
 
 
@@ -385,7 +393,7 @@ def assess(
     for kind, value in nis.items():
         if value is None or n[kind] == 0:
             continue
-        lo, hi = band(n[kind], _DOF[kind])
+        lo, hi = band(n[kind], _DOF[kind], c.acf1 if kind == "pos" else None)
         if kind in ("zupt", "zaru", "nhc"):
             lo = 0.0  # pseudo-measurements: a conservative noise (the constraint's default) loses no trust
         if not lo <= value <= hi:

@@ -203,7 +203,9 @@ def _consistency_panel(ax, sols: dict, metrics: dict, truth: bool) -> None:
             items.append(("s", err["nees_attitude"], "attitude NEES"))
         nis = (cons.get("nis") or {}).get("pos")
         if nis is not None:
-            lo, hi = band(int((cons.get("n") or {}).get("pos") or 1))
+            lo, hi = band(
+                int((cons.get("n") or {}).get("pos") or 1), acf1=cons.get("innovation_acf1")
+            )
             items.append(("D", {"value": nis, "band": [lo, hi]}, "NIS"))
         for j, (marker, fig_, label) in enumerate(items):
             y = k + (j - (len(items) - 1) / 2) * 0.22
