@@ -78,8 +78,9 @@ REST_FACTOR = 2.0
 #: Heavy tails are reported when the count beyond the bound has a binomial tail probability
 #: below this under Gaussian errors (and at least 3 are beyond): a false alarm once in 10,000 runs.
 TAIL_ALARM = 1e-4
-#: Table columns a warning can be about: the NIS, the comparison with the raw fixes, the NEES.
-COLUMNS = ("nis", "fixes", "nees")
+#: Table columns a warning can be about: the NIS, the comparison with the raw fixes, the position
+#: NEES and the attitude NEES.
+COLUMNS = ("nis", "fixes", "nees", "nees_att")
 #: Update kinds and their names in messages.
 KIND_NAMES = {
     "pos": "position",
@@ -452,8 +453,9 @@ def assess(
             f"the fixes on this recording",
             "fixes",
         )
-    for text in nees_warnings(errors or {}):
-        c.add(text, "nees")
+    for key, column in (("nees_position", "nees"), ("nees_attitude", "nees_att")):
+        for text in nees_warnings({key: (errors or {}).get(key)}):
+            c.add(text, column)
     return c
 
 

@@ -190,7 +190,8 @@ def _get(d: dict | None, *keys):
 
 
 def _flagged(metrics: dict, mid: str, column: str) -> bool:
-    """Whether a warning about ``mid`` concerns table column ``column`` (``nis``, ``fixes``, ``nees``)."""
+    """Whether a warning about ``mid`` concerns table column ``column`` (:data:`COLUMNS` of
+    :mod:`gnssacc.analysis.consistency`)."""
     c = metrics.get("consistency", {}).get(mid) or {}
     flags = c.get("flags")
     if flags is None:  # metrics.json of an older version: every warning was shown on the NIS
@@ -239,6 +240,17 @@ def _columns(metrics: dict) -> list[tuple[str, object]]:
                 ),
             )
         )
+        if any(_get(m, "errors", "nees_attitude") for m in ok.values()):
+            cols.append(
+                (
+                    "NEES att",
+                    lambda mid, m: _cell(
+                        _get(m, "errors", "nees_attitude", "value"),
+                        ".2f",
+                        _flagged(metrics, mid, "nees_att"),
+                    ),
+                )
+            )
     else:
         cols.append(
             (
@@ -275,7 +287,8 @@ def table_rows(metrics: dict) -> tuple[list[str], list[list[str]]]:
     """The comparison table's header and rows (text cells), the raw fixes last; the failed
     methods are :func:`failed_methods`. A warned figure carries ``!`` in its own column: the NIS
     (innovations, noise model), ``PRMSE at fixes`` / ``fix residual`` (no better than the fixes),
-    ``NEES pos`` (errors against the truth beyond the stated sigma)."""
+    ``NEES pos`` / ``NEES att`` (position / attitude errors against the truth beyond the stated
+    sigma; the attitude column where the truth has attitude)."""
     cols = _columns(metrics)
     head = [h for h, _ in cols]
     rows = [[mid] + [f(mid, m) for _, f in cols[1:]] for mid, m in ok_methods(metrics).items()]
@@ -345,7 +358,9 @@ def _legend(metrics: dict) -> list[str]:
             + "; CEP95: 95 % of the horizontal errors are below it"
         )
         out.append(
-            "NEES pos: mean (error / stated sigma)^2 per axis against the truth; 1 = consistent"
+            "NEES pos"
+            + (" / att" if "NEES att" in head else "")
+            + ": mean (error / stated sigma)^2 per axis against the truth; 1 = consistent"
         )
     elif "fix residual [m]" in head:
         out.append(
