@@ -58,7 +58,8 @@ def ugv_slow(seed: int) -> str:
     return _row(f"ugv-slow seed {seed}", res, time.perf_counter() - t)
 
 
-def sideways(folder: Path) -> list[str]:
+def write_sideways_bag(folder: Path, seed: int = 0):
+    """The simulated run and the sideways-IMU bag written from it (``folder/sideways.bag``)."""
     run = simulate(
         "ugv",
         240.0,
@@ -66,7 +67,7 @@ def sideways(folder: Path) -> list[str]:
         imu_rate_hz=30.0,
         gnss_rate_hz=2.5,
         noise="white",
-        seed=0,
+        seed=seed,
         odom_hz=10.0,
     )
     bag = folder / "sideways.bag"
@@ -81,6 +82,11 @@ def sideways(folder: Path) -> list[str]:
         odom_topic="/odom",
         write_tf=False,
     )
+    return run, bag
+
+
+def sideways(folder: Path) -> list[str]:
+    run, bag = write_sideways_bag(folder)
     rows = []
     t = time.perf_counter()
     try:

@@ -32,7 +32,7 @@ from gnssacc.sources.csvdir import write_csv_run
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
-def _ned_rotation(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
+def ned_rotation(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
     sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
     z = np.zeros_like(lat)
     return np.stack(
@@ -56,7 +56,7 @@ def comma(root: Path) -> RecordedRun:
     sigma = np.tile([3.0, 3.0, 5.0], (len(t_fix), 1))
     fixes = GnssFixes(t_fix, np.radians(ub[:, 0]), np.radians(ub[:, 1]), ub[:, 4], sigma)
     lat, lon, h = ecef_to_llh(arr("global_pose/frame_positions"))
-    v_n = np.einsum("kij,kj->ki", _ned_rotation(lat, lon), arr("global_pose/frame_velocities"))
+    v_n = np.einsum("kij,kj->ki", ned_rotation(lat, lon), arr("global_pose/frame_velocities"))
     truth = Truth(arr("global_pose/frame_times"), lat, lon, h, v_n=v_n)
     imu = ImuData(
         t_imu, arr("processed_log/IMU/accelerometer/value"), arr("processed_log/IMU/gyro/value")
