@@ -23,8 +23,9 @@ Cases:
 * ``vn310-lckf`` / ``vn310-tckf``: the static VN-310E logs; no position truth, attitude against the
   unit's own dual-antenna solution (a reference, not a truth: its own sigma is not accounted for).
 
-``--quick`` runs every case with one seed (~5 min on two loaded cores); the default runs
-``--seeds`` seeds of each simulated case (default 3, the median shown; KITTI always seeds 0-4).
+``--quick`` runs every case with one seed (5-10 min on two loaded cores); the default runs
+``--seeds`` seeds of each simulated case (default 3, the median shown; ~25 min; KITTI always
+seeds 0-4).
 
     python bench/bench_consistency.py [--quick] [--seeds 3] [--only car-city] [--json out.json]
 """
