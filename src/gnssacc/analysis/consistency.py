@@ -394,7 +394,7 @@ def assess(
     for kind, value in nis.items():
         if value is None or n[kind] == 0:
             continue
-        lo, hi = band(n[kind], _DOF[kind], c.acf1 if kind == "pos" else None)
+        lo, hi = band(n[kind], _DOF[kind], st.get(f"acf1_{kind}"))
         if kind in ("zupt", "zaru", "nhc"):
             lo = 0.0  # pseudo-measurements: a conservative noise (the constraint's default) loses no trust
         if not lo <= value <= hi:
