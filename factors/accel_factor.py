@@ -28,6 +28,7 @@ import gtsam
 import numpy as np
 
 from gnssacc.estimators.gnss_accel import H_a_blocks, predicted_acceleration
+from gnssacc.estimators.layout import B_ACC, X_ROT
 
 
 def smoother_jacobians_from_H_a(R_nb: np.ndarray, f_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -42,9 +43,9 @@ def smoother_jacobians_from_H_a(R_nb: np.ndarray, f_b: np.ndarray) -> tuple[np.n
     """
     H_phi, H_ba = H_a_blocks(R_nb, f_b)
     J_pose = np.zeros((3, 6))
-    J_pose[:, 0:3] = H_phi @ R_nb
+    J_pose[:, X_ROT] = H_phi @ R_nb
     J_bias = np.zeros((3, 6))
-    J_bias[:, 0:3] = -H_ba
+    J_bias[:, B_ACC] = -H_ba
     return J_pose, J_bias
 
 
@@ -92,8 +93,8 @@ def gnss_accel_factor(
         f_corr = f_b - values.atConstantBias(bias_key).accelerometer()
         if H is not None:
             H_phi, H_ba = H_a_blocks(R_nb, f_corr)  # smoother_jacobians_from_H_a, same numbers
-            np.matmul(H_phi, R_nb, out=J_pose[:, 0:3])
-            np.negative(H_ba, out=J_bias[:, 0:3])
+            np.matmul(H_phi, R_nb, out=J_pose[:, X_ROT])
+            np.negative(H_ba, out=J_bias[:, B_ACC])
             H[0], H[1] = J_pose, J_bias
         return R_nb @ f_corr + g_minus_a  # predicted_acceleration(R_nb, f_corr, g_n) - a_n
 

@@ -31,6 +31,7 @@ import gtsam
 import numpy as np
 
 from gnssacc.core.rotations import skew
+from gnssacc.estimators.layout import X_ROT, X_TRANS
 
 
 def window_accel_error(
@@ -76,8 +77,8 @@ def window_accel_factor(
             e = e + b * (pose.translation() + R @ lever_b if has_arm else pose.translation())
             if H is not None:
                 if has_arm:
-                    np.multiply(R @ L, -b, out=J[j][:, 0:3])
-                np.multiply(R, b, out=J[j][:, 3:6])
+                    np.multiply(R @ L, -b, out=J[j][:, X_ROT])
+                np.multiply(R, b, out=J[j][:, X_TRANS])
                 H[j] = J[j]
         return e
 

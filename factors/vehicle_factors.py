@@ -33,6 +33,7 @@ import gtsam
 import numpy as np
 
 from gnssacc.core.rotations import cross3, skew
+from gnssacc.estimators.layout import B_GYRO, X_ROT
 
 
 def vehicle_velocity(
@@ -49,12 +50,12 @@ def vehicle_velocity(
     u = Rt @ v_n
     J_pose, J_bias = np.zeros((3, 6)), np.zeros((3, 6))
     if not lever_b.any():  # no lever-arm terms (iSAM2 calls this a few times per factor)
-        J_pose[:, 0:3] = skew(u)
+        J_pose[:, X_ROT] = skew(u)
         return u, J_pose, Rt, J_bias
     w = Rt @ w_ie_n
     L = skew(lever_b)
-    J_pose[:, 0:3] = skew(u) + L @ skew(w)
-    J_bias[:, 3:6] = L
+    J_pose[:, X_ROT] = skew(u) + L @ skew(w)
+    J_bias[:, B_GYRO] = L
     return u + cross3(omega_b - b_g - w, lever_b), J_pose, Rt, J_bias
 
 

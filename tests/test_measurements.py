@@ -14,6 +14,7 @@ from gtsam.symbol_shorthand import G, X
 from gnssacc.core.earth import earth_rate_n, radii
 from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm
 from gnssacc.estimators import measurements as mm
+from gnssacc.estimators.layout import GNSS_ERROR, MarkovBlock, StateLayout
 from gnssacc.estimators.mechanization import Propagator
 
 LAT, LON, H = np.radians(47.3), np.radians(8.5), 420.0
@@ -35,7 +36,7 @@ def _state(err: np.ndarray, n: int = 15, gm_true=np.zeros(3)):
         b_g=B_TRUE - err[12:15],
         gm=gm,
         P=np.eye(n),
-        n_gm=3 if n > 15 else 0,
+        layout=StateLayout.build([MarkovBlock(GNSS_ERROR, np.ones(3), np.ones(3))] if n > 15 else []),
     )
 
 
@@ -184,8 +185,7 @@ def test_gauss_markov_covariance_propagation_matches_its_closed_form():
         z3,
         z3,
         (seg, seg, np.zeros((0, 3)), np.zeros((0, 3))),
-        gm_tau_s=tau,
-        gm_sigma_m=sigma,
+        layout=StateLayout.build([MarkovBlock(GNSS_ERROR, tau, sigma)]),
     )
     P = np.eye(18)
     P[0:3, 15:18] = P[15:18, 0:3] = -0.5 * np.eye(3)

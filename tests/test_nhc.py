@@ -19,6 +19,7 @@ from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm, skew
 from gnssacc.estimators import measurements as mm
 from gnssacc.estimators import nhc
 from gnssacc.estimators.ekf import FilterState
+from gnssacc.estimators.layout import ODOMETRY_SCALE, MarkovBlock, StateLayout
 
 LAT, LON, H = np.radians(47.3), np.radians(8.5), 420.0
 R_TRUE = euler_to_dcm(0.04, -0.03, 2.1)
@@ -42,7 +43,7 @@ def _state(err: np.ndarray) -> FilterState:
         B_G - err[12:15],
         np.eye(16),
         np.array([K_TRUE + err[15]]),
-        0,
+        StateLayout.build([MarkovBlock(ODOMETRY_SCALE, np.ones(1), np.ones(1))]),
     )
 
 

@@ -20,6 +20,7 @@ from scipy.linalg import expm
 
 from gnssacc.core.earth import earth_rate_n, normal_gravity
 from gnssacc.core.rotations import euler_to_dcm
+from gnssacc.estimators.layout import GNSS_ERROR, N_NAV, MarkovBlock, StateLayout
 from gnssacc.estimators.mechanization import Propagator, system_matrix
 
 LAT, LON, H = np.radians(52.0), np.radians(4.4), 30.0
@@ -44,7 +45,8 @@ def _still_imu(rate_hz: float):
 def _kernel_q(rate_hz: float, n_states: int, order: int) -> np.ndarray:
     t, f, w, _ = _still_imu(rate_hz)
     z3, seg = np.zeros(3), np.zeros(0, np.int64)
-    gm = dict(gm_tau_s=GM_TAU, gm_sigma_m=GM_SIGMA) if n_states > 15 else {}
+    blocks = [MarkovBlock(GNSS_ERROR, GM_TAU, GM_SIGMA)] if n_states > N_NAV else []
+    gm = dict(layout=StateLayout.build(blocks))
     prop = Propagator(
         t, f, w, Q_A, Q_G, Q_BA, Q_BG, (seg, seg, np.zeros((0, 3)), np.zeros((0, 3))), order, **gm
     )

@@ -43,6 +43,17 @@ from . import nhc as nhc_rules
 from . import odometry as odo_rules
 from .gnss_accel import AccelWindow, measured_specific_force, window_samples
 from .kalman import joseph_update
+from .layout import (
+    ATT,
+    BA,
+    GNSS_ERROR,
+    N_NAV,
+    NAV,
+    ODOMETRY_SCALE,
+    POS,
+    MarkovBlock,
+    StateLayout,
+)
 from .mechanization import Propagator, apply_correction, kernel_force_integrals
 from .nhc import NhcEpochs
 from .nhc import epochs_for as nhc_epochs_for
@@ -66,10 +77,10 @@ _LOG_2PI = math.log(2.0 * math.pi)
 class FilterState:
     """Nominal state and error covariance (updated in place by the loop).
 
-    The state vector has the paper's 15 states, then, when modelled, the GNSS fix error's three
-    Gauss-Markov states (``gnss.gm_sigma_m > 0``), then, when the recording has wheel odometry,
-    its scale factor: 15 to 19 states. Without either it is the paper's 15-state filter, with
-    the same arithmetic.
+    The state vector has the paper's 15 navigation states, then the run's Gauss-Markov states
+    (:class:`gnssacc.estimators.layout.StateLayout`: the GNSS fix error's three when modelled,
+    the odometry scale factor with wheel odometry). Without them it is the paper's 15-state
+    filter, with the same arithmetic.
 
     Attributes
     ----------
@@ -81,12 +92,10 @@ class FilterState:
     b_a, b_g : ndarray (3,)
         Accumulated bias estimates, body [m/s^2], [rad/s].
     P : ndarray (n, n)
-        Error covariance, order ``[dp, dv, phi, b_a, b_g (, x_g) (, dk)]``.
+        Error covariance, in the order of :attr:`layout`.
     x_e : ndarray (n - 15,)
-        Nominal values of the states after the fifteenth, in that order: the Gauss-Markov part
-        of the GNSS fix error [m, NED] (:attr:`gm`), the odometry scale factor [-] (:attr:`scale`).
-    n_gm : int
-        3 with the GNSS error states, else 0.
+        Nominal values of the states after the navigation ones, in the order of :attr:`layout`.
+    layout : StateLayout
     """
 
     pos: np.ndarray
@@ -96,22 +105,39 @@ class FilterState:
     b_g: np.ndarray
     P: np.ndarray
     x_e: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    n_gm: int = 0
+    layout: StateLayout = field(default_factory=StateLayout)
+
+    def extra(self, name: str) -> np.ndarray:
+        """The nominal values of block ``name`` (a view into :attr:`x_e`; empty without it)."""
+        return self.x_e[self.layout.extra_block(name)]
 
     @property
     def gm(self) -> np.ndarray:
         """Estimated GNSS fix error [m, NED] (a view into :attr:`x_e`; zeros without that model)."""
-        return self.x_e[:3] if self.n_gm else np.zeros(3)
+        return self.extra(GNSS_ERROR) if self.layout.has(GNSS_ERROR) else np.zeros(3)
 
     @property
     def i_scale(self) -> int:
         """Index of the odometry scale-factor state, -1 without it."""
-        return 15 + self.n_gm if len(self.x_e) > self.n_gm else -1
+        return self.layout.offset(ODOMETRY_SCALE)
 
     @property
     def scale(self) -> float:
         """Estimated odometry scale-factor error ``k`` (the odometry reads ``(1 + k)`` times the speed)."""
-        return float(self.x_e[self.n_gm]) if len(self.x_e) > self.n_gm else 0.0
+        k = self.extra(ODOMETRY_SCALE)
+        return float(k[0]) if len(k) else 0.0
+
+
+def state_layout(settings, odometry: bool = False) -> StateLayout:
+    """The error state of a pass with ``settings`` (either estimator's): the GNSS error states
+    when modelled, the odometry scale factor with ``odometry``."""
+    blocks = []
+    if settings.gnss.gauss_markov:
+        blocks.append(MarkovBlock(GNSS_ERROR, settings.gnss.gm_tau, settings.gnss.gm_sigma))
+    if odometry:
+        odo = settings.odometry
+        blocks.append(MarkovBlock(ODOMETRY_SCALE, np.array([odo.scale_tau_s]), np.array([odo.scale_sigma])))
+    return StateLayout.build(blocks)
 
 
 def initial_state(init: InitialState, settings, odometry: bool = False) -> FilterState:
@@ -129,20 +155,19 @@ def initial_state(init: InitialState, settings, odometry: bool = False) -> Filte
         if init.sigma_b_g is None
         else np.asarray(init.sigma_b_g, float)
     )
-    gm = settings.gnss.gm_sigma
-    n_gm = 3 if np.any(gm > 0) else 0
-    sig_k = [[settings.odometry.scale_sigma]] if odometry else []
+    layout = state_layout(settings, odometry)
     P = np.diag(
-        np.concatenate([sig_p, sig_v, sig_att, sig_ba, sig_bg] + ([gm] if n_gm else []) + sig_k)
+        np.concatenate([sig_p, sig_v, sig_att, sig_ba, sig_bg] + [b.sigma for b in layout.markov])
         ** 2
     )
     if init.levelled:
         _tie_tilt_to_accel_bias(P, init)
-    if np.any(gm > 0) and init.fit_window is not None:
+    if layout.has(GNSS_ERROR) and init.fit_window is not None:
         # A start taken from the fixes carries their correlated error x_g: dp = x_g while the
         # x_g state starts at zero (dx_g = -x_g), so the two are known only in sum.
-        P[0:3, 0:3] += np.diag(gm**2)
-        P[0:3, 15:18] = P[15:18, 0:3] = -np.diag(gm**2)
+        g, var = layout.block(GNSS_ERROR), np.diag(settings.gnss.gm_sigma**2)
+        P[POS, POS] += var
+        P[POS, g] = P[g, POS] = -var
     return FilterState(
         np.array([init.lat, init.lon, init.h]),
         np.array(init.v_n, float).copy(),
@@ -150,8 +175,8 @@ def initial_state(init: InitialState, settings, odometry: bool = False) -> Filte
         np.array(init.b_a, float).copy(),
         np.array(init.b_g, float).copy(),
         P,
-        np.zeros(n_gm + len(sig_k)),
-        n_gm,
+        np.zeros(layout.n - layout.nav),
+        layout,
     )
 
 
@@ -162,10 +187,10 @@ def _tie_tilt_to_accel_bias(P: np.ndarray, init: InitialState) -> None:
     matters for navigation, ``g phi - R b_a``, from the start."""
     g = float(gravity_n(init.lat, init.h)[2])
     M = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]) @ init.R_nb / g
-    MP = M @ P[9:12, 9:12]
-    P[6:9, 6:9] += MP @ M.T
-    P[6:9, 9:12] = MP
-    P[9:12, 6:9] = MP.T
+    MP = M @ P[BA, BA]
+    P[ATT, ATT] += MP @ M.T
+    P[ATT, BA] = MP
+    P[BA, ATT] = MP.T
 
 
 def correct(s: FilterState, dx: np.ndarray) -> None:
@@ -215,19 +240,19 @@ class _Recorder:
         self.R_nb = np.empty((n, 3, 3))
         self.b_a = np.empty((n, 3))
         self.b_g = np.empty((n, 3))
-        self.var = np.empty((n, 15))
+        self.var = np.empty((n, N_NAV))
         self.P_att = np.empty((n, 3, 3))
-        self.P = np.empty((n, 15, 15)) if store_P else None
+        self.P = np.empty((n, N_NAV, N_NAV)) if store_P else None
         self.n = 0
 
     def add(self, t: float, s: FilterState) -> None:
         i = self.n
         self.t[i], self.pos[i], self.v_n[i], self.R_nb[i] = t, s.pos, s.v_n, s.R_nb
         self.b_a[i], self.b_g[i] = s.b_a, s.b_g
-        self.var[i] = s.P.diagonal()[:15]
-        self.P_att[i] = s.P[6:9, 6:9]
+        self.var[i] = s.P.diagonal()[NAV]
+        self.P_att[i] = s.P[ATT, ATT]
         if self.P is not None:
-            self.P[i] = s.P[:15, :15]
+            self.P[i] = s.P[NAV, NAV]
         self.n += 1
 
     def solution(self, method: str, runtime_s: float, stats: dict) -> NavSolution:
@@ -235,7 +260,7 @@ class _Recorder:
         rpy = np.column_stack(dcm_to_euler(self.R_nb[:n]))
         sigma = np.sqrt(np.maximum(self.var[:n], 0.0))
         J = euler_error_jacobian(rpy[:, 0], rpy[:, 1], rpy[:, 2])
-        sigma[:, 6:9] = np.sqrt(np.maximum(np.einsum("nij,njk,nik->ni", J, self.P_att[:n], J), 0.0))
+        sigma[:, ATT] = np.sqrt(np.maximum(np.einsum("nij,njk,nik->ni", J, self.P_att[:n], J), 0.0))
         return NavSolution(
             method,
             self.t[:n],
@@ -373,10 +398,7 @@ def prepare(
         segments,
         settings.phi_order,
         cov_every,
-        gm_tau_s=gnss_model.gm_tau,
-        gm_sigma_m=gnss_model.gm_sigma,
-        scale_tau_s=odo.scale_tau_s if with_odo else None,
-        scale_sigma=odo.scale_sigma if with_odo else None,
+        layout=state_layout(settings, with_odo),
     )
     epochs = epochs_for(run, z, imu.gyro_psd, stationary)
     gnss = run.gnss
@@ -384,8 +406,8 @@ def prepare(
         init,
         initial_state(init, settings, with_odo),
         prop,
-        segments[0],
-        segments[1],
+        segments.i0,
+        segments.i1,
         settings.position_gate_nis,
         gnss_model.lever_arm_b,
         acc.specific_force_avg_s,

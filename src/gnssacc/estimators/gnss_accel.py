@@ -93,6 +93,7 @@ from ..core.gnss_fit import (  # noqa: F401
     window_accelerations,
 )
 from ..core.rotations import euler_to_dcm, skew
+from .layout import ATT, BA, N_NAV
 from .mechanization import kernel_force_integrals
 
 
@@ -264,9 +265,9 @@ def H_a_blocks(R_nb: np.ndarray, f_b: np.ndarray) -> tuple[np.ndarray, np.ndarra
 def H_a(R_nb: np.ndarray, f_b: np.ndarray) -> np.ndarray:
     """Full 3x15 acceleration measurement matrix ``[0, 0, d_phi, d_ba, 0]``."""
     d_phi, d_ba = H_a_blocks(R_nb, f_b)
-    H = np.zeros((3, 15))
-    H[:, 6:9] = d_phi
-    H[:, 9:12] = d_ba
+    H = np.zeros((3, N_NAV))
+    H[:, ATT] = d_phi
+    H[:, BA] = d_ba
     return H
 
 

@@ -55,6 +55,7 @@ import numpy as np
 from ..core.earth import radii
 from ..core.rotations import cross3, skew
 from .gnss_accel import H_a_blocks, H_w_blocks, predicted_acceleration
+from .layout import ATT, BA, BG, GNSS_ERROR, POS, VEL
 
 #: Update kinds, in the order they are reported.
 KINDS = ("pos", "acc", "zupt", "zaru", "nhc", "odo")
@@ -122,11 +123,11 @@ def position(
         + l_n
     )
     H = _H(s, 3)
-    H[:, 0:3] = np.eye(3)
-    H[:, 6:9] = -skew(l_n)
-    if s.n_gm:
+    H[:, POS] = np.eye(3)
+    H[:, ATT] = -skew(l_n)
+    if s.layout.has(GNSS_ERROR):
         dz += s.gm
-        H[:, 15:18] = np.eye(3)
+        H[:, s.layout.block(GNSS_ERROR)] = np.eye(3)
     R = (
         np.diag(np.asarray(sigma_ned, float) ** 2)
         if cov_ned is None
@@ -149,8 +150,8 @@ def acceleration(
     a_pred = predicted_acceleration(s.R_nb, f_b, g_n)
     d_phi, d_ba = H_a_blocks(s.R_nb, f_b)
     H = _H(s, 3)
-    H[:, 6:9] = d_phi
-    H[:, 9:12] = d_ba
+    H[:, ATT] = d_phi
+    H[:, BA] = d_ba
     return Measurement("acc", a_pred - a_n, H, cov)
 
 
@@ -169,16 +170,16 @@ def window_acceleration(
     update epoch)."""
     d_phi, d_ba, d_bg = H_w_blocks(s.R_nb, F_b, M, G)
     H = _H(s, 3)
-    H[:, 6:9] = d_phi
-    H[:, 9:12] = d_ba
-    H[:, 12:15] = d_bg
+    H[:, ATT] = d_phi
+    H[:, BA] = d_ba
+    H[:, BG] = d_bg
     return Measurement("acc", predicted_acceleration(s.R_nb, F_b, g_n) - a_n, H, cov)
 
 
 def zero_velocity(s, sigma_mps: float, gate: float = 0.0) -> Measurement:
     """The vehicle stands still: NED velocity zero within ``sigma_mps`` [m/s]."""
     H = _H(s, 3)
-    H[:, 3:6] = np.eye(3)
+    H[:, VEL] = np.eye(3)
     return Measurement("zupt", s.v_n.copy(), H, np.eye(3) * sigma_mps**2, gate)
 
 
@@ -190,8 +191,8 @@ def zero_rate(
     ``w_ie_n`` [rad/s, NED]."""
     dz = (omega_mean_b - s.b_g) - s.R_nb.T @ w_ie_n
     H = _H(s, 3)
-    H[:, 6:9] = -s.R_nb.T @ skew(w_ie_n)
-    H[:, 12:15] = np.eye(3)
+    H[:, ATT] = -s.R_nb.T @ skew(w_ie_n)
+    H[:, BG] = np.eye(3)
     return Measurement("zaru", dz, H, np.diag(var_b), gate)
 
 
@@ -220,18 +221,18 @@ def vehicle_velocity(
     Rt = s.R_nb.T
     u = Rt @ s.v_n
     H = _H(s, 3)
-    H[:, 3:6] = Rt
+    H[:, VEL] = Rt
     # R^T [v x] = [(R^T v) x] R^T; the lever-arm terms only with a lever arm (the filter's
     # per-update cost is mostly these small products).
     if lever_b.any():
         w_ie_b = Rt @ w_ie_n
         L = skew(lever_b)
         v_b = u + cross3(omega_meas_b - s.b_g - w_ie_b, lever_b)
-        H[:, 6:9] = (skew(u) + L @ skew(w_ie_b)) @ Rt
-        H[:, 12:15] = -L
+        H[:, ATT] = (skew(u) + L @ skew(w_ie_b)) @ Rt
+        H[:, BG] = -L
     else:
         v_b = u
-        H[:, 6:9] = skew(u) @ Rt
+        H[:, ATT] = skew(u) @ Rt
     if R_vb is None:
         return v_b, H
     return R_vb @ v_b, R_vb @ H

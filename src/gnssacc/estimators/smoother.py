@@ -71,6 +71,26 @@ from ..prepare.start import start_for
 from .ekf import initial_state, run_ekf
 from .fixed_lag import FixedLagISAM2
 from .gnss_accel import acceleration_row, measured_specific_force, window_accelerations
+from .layout import (
+    ATT,
+    B_ACC,
+    B_GYRO,
+    BIASES,
+    GNSS_ERROR,
+    NAVSTATE_VEL,
+    NODE_B,
+    NODE_G,
+    NODE_V,
+    NODE_X,
+    POS,
+    PRIOR_BIAS,
+    PRIOR_G,
+    PRIOR_POSE,
+    VEL,
+    X_ROT,
+    X_TRANS,
+    NodeLayout,
+)
 from .settings import SmootherSettings
 from .smoother_aids import NhcFactors, OdometryFactors
 from .window_marginals import NotAChain, WindowMarginals
@@ -184,20 +204,22 @@ def initial_prior(init: InitialState, settings: SmootherSettings) -> tuple[np.nd
     c_vel : ndarray (3, 3)
         Velocity covariance (uncorrelated with the rest at the start).
     """
-    P = initial_state(init, settings).P
+    s = initial_state(init, settings)
+    P, layout = s.P, s.layout
     n = P.shape[0]
     R = init.R_nb
     T = np.zeros((n - 3, n))  # smoother offsets <- EKF error state (velocity dropped)
-    T[0:3, 6:9] = -R.T
-    T[3:6, 0:3] = -R.T
-    T[6:12, 9:15] = np.eye(6)
-    if n > 15:
-        T[12:15, 15:18] = -np.eye(3)
+    pose = T[PRIOR_POSE]
+    pose[X_ROT, ATT] = -R.T
+    pose[X_TRANS, POS] = -R.T
+    T[PRIOR_BIAS, BIASES] = np.eye(6)
+    if layout.has(GNSS_ERROR):
+        T[PRIOR_G, layout.block(GNSS_ERROR)] = -np.eye(3)
     cov = T @ P @ T.T
-    cov[6:12, 6:12] += np.diag(
+    cov[PRIOR_BIAS, PRIOR_BIAS] += np.diag(
         np.r_[np.full(3, ACCEL_BIAS_RW_FLOOR), np.full(3, GYRO_BIAS_RW_FLOOR)] ** 2
     )
-    return cov, P[3:6, 3:6]
+    return cov, P[VEL, VEL]
 
 
 class _Record:
@@ -236,13 +258,13 @@ class _Record:
         self.bias[i] = bias.vector()
         self.g[i], self.k[i] = g, k
         self.cov_pose[i], self.cov_vel[i], self.cov_bias[i] = (
-            cov[0:6, 0:6],
-            cov[6:9, 6:9],
-            cov[9:15, 9:15],
+            cov[NODE_X, NODE_X],
+            cov[NODE_V, NODE_V],
+            cov[NODE_B, NODE_B],
         )
         if self.gm:
-            self.cov_xg[i], self.cov_g[i] = cov[0:6, 15:18], cov[15:18, 15:18]
-        if cov.shape[0] in (16, 19):  # the scale factor is the last variable
+            self.cov_xg[i], self.cov_g[i] = cov[NODE_X, NODE_G], cov[NODE_G, NODE_G]
+        if cov.shape[0] == NodeLayout(self.gm, True).b:  # the scale factor is the last variable
             self.var_k[i] = cov[-1, -1]
         self.done[i] = True
 
@@ -269,8 +291,8 @@ class _Record:
         """1-sigma in the NavSolution layout (NED position, velocity, roll/pitch/yaw, biases)."""
         R = self.R
         # Tangent (body) -> NED: position R C R^T; the attitude error phi = -R xi has the same form.
-        c_pos = R @ self.cov_pose[:, 3:6, 3:6] @ R.transpose(0, 2, 1)
-        c_att = R @ self.cov_pose[:, 0:3, 0:3] @ R.transpose(0, 2, 1)
+        c_pos = R @ self.cov_pose[:, X_TRANS, X_TRANS] @ R.transpose(0, 2, 1)
+        c_att = R @ self.cov_pose[:, X_ROT, X_ROT] @ R.transpose(0, 2, 1)
         roll, pitch, yaw = dcm_to_euler(R)
         J = euler_error_jacobian(roll, pitch, yaw)
         c_eul = J @ c_att @ J.transpose(0, 2, 1)
@@ -293,8 +315,8 @@ class _Record:
             h,
             self.v_n[ok],
             rpy,
-            self.bias[ok, 0:3],
-            self.bias[ok, 3:6],
+            self.bias[ok, B_ACC],
+            self.bias[ok, B_GYRO],
             self.sigmas()[ok],
             runtime,
             dict(stats),
@@ -382,10 +404,10 @@ class _Smoother:
         isam = self.isam.getISAM2()
         if not self.gm:
             # iSAM2's per-key marginals cost a third of its joint query (measured, smoother-accw).
-            full = np.zeros((15 + self.scale, 15 + self.scale))
-            blocks = ((X(i), slice(0, 6)), (V(i), slice(6, 9)), (B(i), slice(9, 15)))
-            for key, sl in blocks + (((K(i), slice(15, 16)),) if self.scale else ()):
-                full[sl, sl] = isam.marginalCovariance(key)
+            layout = NodeLayout(False, self.scale)
+            full = np.zeros((layout.b, layout.b))
+            for c, sl in layout.blocks():
+                full[sl, sl] = isam.marginalCovariance(gtsam.symbol(c, i))
             return full
         keys = self.keys(i)
         info, _ = isam.joint(keys, gtsam.EliminateQR).hessian(gtsam.Ordering(keys))
@@ -930,7 +952,7 @@ class _Loop:
         """Covariance of node ``i``'s predicted NED velocity [m^2/s^2]: node ``i - 1``'s online
         marginal plus the preintegrated velocity noise (rotated from body ``i - 1`` into NED)."""
         R = self.online.R[i - 1]
-        c_pim = np.asarray(pim.preintMeasCov())[6:9, 6:9]
+        c_pim = np.asarray(pim.preintMeasCov())[NAVSTATE_VEL, NAVSTATE_VEL]
         return self.online.cov_vel[i - 1] + R @ c_pim @ R.T
 
     def _record(self, i: int, t_next: float):
@@ -1048,7 +1070,7 @@ def _reinitialise(loop: _Loop, i: int, graph, values) -> int:
         loop.stats["factorization_switched_to_qr"] = True
     p = i - 1
     pose = gtsam.Pose3(gtsam.Rot3(online.R[p]), online.p_n[p])
-    bias = gtsam.imuBias.ConstantBias(online.bias[p, 0:3], online.bias[p, 3:6])
+    bias = gtsam.imuBias.ConstantBias(online.bias[p, B_ACC], online.bias[p, B_GYRO])
     p_graph, p_values = loop.priors(
         p,
         pose,

@@ -46,10 +46,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from .layout import D_B, D_G, D_K, D_V, D_X, I_B, I_G, I_V, I_X, SYM_B, SYM_G, SYM_K, SYM_V, SYM_X
+from .layout import NodeLayout
+
 if TYPE_CHECKING:  # the kernels compile without gtsam (at install time, kernels.compile_groups)
     import gtsam
 
 _INDEX_MASK = (1 << 56) - 1
+#: Rows of a node without the optional variables (pose, velocity, bias).
+N_NODE = I_B + D_B
 
 
 def symbol_key(char: str, index: int) -> int:
@@ -144,21 +149,25 @@ def _inverse(A):
     return _gram(Li, s)
 
 
+_CHAR_X, _CHAR_V, _CHAR_B, _CHAR_G, _CHAR_K = (ord(c) for c in (SYM_X, SYM_V, SYM_B, SYM_G, SYM_K))
+
+
 @njit(cache=True)
-def _layout(key, b=15):
+def _layout(key, b=N_NODE):
     """Offset and dimension of a variable in its node's block of ``b`` rows, from the GTSAM symbol
-    character (the odometry scale factor ``k``, when nodes carry one, is the block's last row)."""
+    character (:class:`gnssacc.estimators.layout.NodeLayout`: the odometry scale factor ``k``,
+    when nodes carry one, is the block's last row)."""
     c = key >> 56
-    if c == 120:  # 'x': Pose3
-        return 0, 6
-    if c == 118:  # 'v': velocity
-        return 6, 3
-    if c == 98:  # 'b': IMU bias
-        return 9, 6
-    if c == 103:  # 'g': GNSS error
-        return 15, 3
-    if c == 107 and b in (16, 19):  # 'k': odometry scale factor
-        return b - 1, 1
+    if c == _CHAR_X:
+        return I_X, D_X
+    if c == _CHAR_V:
+        return I_V, D_V
+    if c == _CHAR_B:
+        return I_B, D_B
+    if c == _CHAR_G:
+        return I_G, D_G
+    if c == _CHAR_K and b in (N_NODE + D_K, N_NODE + D_G + D_K):
+        return b - D_K, D_K
     return -1, 0
 
 
@@ -398,7 +407,7 @@ class WindowMarginals:
     """
 
     def __init__(self, gm: bool, bandwidth: int = 1, scale: bool = False):
-        self.b = (18 if gm else 15) + int(scale)
+        self.b = NodeLayout(gm, scale).b
         self.w = int(bandwidth)
         self.clear()
 
