@@ -9,7 +9,8 @@ from stat_bounds import CALIBRATION, nis_band
 
 from gnssacc.core.config import load_config
 from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm
-from gnssacc.estimators.ekf import FilterState, run_ekf
+from gnssacc.estimators.state import FilterState
+from gnssacc.prepare.passes import run_ekf
 from gnssacc.estimators.gnss_accel import (
     acceleration_row,
     model_errors,

@@ -12,7 +12,7 @@ from gnssacc.analysis.metrics import gnss_score, score
 from gnssacc.core.config import load_config
 from gnssacc.core.rotations import euler_to_dcm
 from gnssacc.estimators.gnss_accel import acceleration_row
-from gnssacc.estimators.smoother import run_smoother
+from gnssacc.prepare.passes import run_smoother
 from gnssacc.sources.sim import grade_config, simulate
 
 POSES = [

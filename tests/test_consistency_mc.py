@@ -44,7 +44,7 @@ from gnssacc.core.config import load_config
 from gnssacc.core.earth import radii
 from gnssacc.core.recording import InitialState
 from gnssacc.core.rotations import dcm_to_euler, dcm_to_rotvec, euler_to_dcm, rotvec_to_dcm
-from gnssacc.estimators.ekf import run_ekf
+from gnssacc.prepare.passes import run_ekf
 from gnssacc.sources.sim import grade_config, simulate
 from gnssacc.sources.sim_imu_errors import UNMODELLED_KEYS, imu_sigmas_si
 
@@ -254,7 +254,7 @@ def smoother_z2(runs: int = RUNS) -> tuple[dict[str, np.ndarray], dict[str, np.n
     """Squared position and velocity errors over the smoother's marginal sigmas, per method
     (``smoother`` fixed-lag, ``smoother-online``): arrays (runs, epochs, 6); and each run's GNSS
     residual ratio (``nis_pos_mean``: the fixes' whitened squared residuals over their expectation)."""
-    from gnssacc.estimators.smoother import run_smoother
+    from gnssacc.prepare.passes import run_smoother
 
     grade = grade_config(GRADE)
     cfg, grade_si = load_config(overrides={"imu": grade}), imu_sigmas_si(grade)

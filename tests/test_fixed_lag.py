@@ -124,7 +124,7 @@ def test_biases_far_from_their_linearisation_point_are_relinearised_before_margi
     1 Hz nodes in a 10 s lag: without the guard the fixed-lag estimate drifted to 10.3 m where the
     EKF holds 2.2 m (the biases' factors marginalised at their first linearisation point)."""
     from gnssacc.analysis.metrics import score
-    from gnssacc.estimators.ekf import run_ekf
+    from gnssacc.prepare.passes import run_ekf
     from gnssacc.pipeline import prepare
 
     run = simulate("ugv", 180.0, imu_grade="consumer", noise="white", seed=2)

@@ -5,7 +5,7 @@ import pytest
 
 from gnssacc.core.earth import radii
 from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm
-from gnssacc.estimators.ekf import FilterState
+from gnssacc.estimators.state import FilterState
 from gnssacc.estimators.gnss_accel import (
     AccelWindow,
     H_a,

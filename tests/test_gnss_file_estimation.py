@@ -12,7 +12,8 @@ import pytest
 import gnssacc
 from gnssacc.core.config import load_config
 from gnssacc.core.errors import DataWarning, InputError
-from gnssacc.estimators.ekf import EkfObserver, run_ekf
+from gnssacc.estimators.ekf import EkfObserver
+from gnssacc.prepare.passes import run_ekf
 from gnssacc.pipeline import prepare
 from gnssacc.sources.csvdir import load_csv_run, write_csv_run
 from gnssacc.sources.sim import simulate
@@ -116,7 +117,9 @@ def test_smoother_gnss_factors_use_the_full_covariance(tmp_path):
 
     from gnssacc.factors.gnss_error_factors import gnss_position_gm_factor
 
-    from gnssacc.estimators.smoother import residual_chi2, run_smoother
+    from gnssacc.estimators.smoother import residual_chi2
+
+    from gnssacc.prepare.passes import run_smoother
 
     cov = np.array([[4.0, 1.2, -0.5], [1.2, 2.0, 0.3], [-0.5, 0.3, 9.0]])
     p_fix, lever = np.array([1.0, -2.0, 0.5]), np.array([0.3, 0.1, -0.2])

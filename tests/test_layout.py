@@ -2,7 +2,7 @@
 nothing private crosses a module boundary.
 
 Stages, lowest first (a module may import from its own stage, a lower one, or ``core``):
-``core`` < ``sources`` < ``checks`` < ``prepare`` < ``estimators`` (with ``gnssacc.factors``)
+``core`` < ``sources`` < ``checks`` < ``estimators`` (with ``gnssacc.factors``) < ``prepare``
 < ``analysis`` < ``outputs`` < ``pipeline`` (one run, end to end) < ``campaign`` (many runs)
 < the public face (``api``, ``cli`` and its argument checks ``argcheck``, ``campaign_args``,
 ``__main__``, the package ``__init__``). Every import counts, also one made inside a
@@ -22,8 +22,8 @@ STAGES = (
     "core",
     "sources",
     "checks",
-    "prepare",
     "estimators",
+    "prepare",
     "analysis",
     "outputs",
     "pipeline",

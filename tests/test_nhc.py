@@ -18,7 +18,7 @@ from gnssacc.core.earth import earth_rate_n, radii
 from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm, skew
 from gnssacc.estimators import measurements as mm
 from gnssacc.estimators import nhc
-from gnssacc.estimators.ekf import FilterState
+from gnssacc.estimators.state import FilterState
 from gnssacc.estimators.layout import ODOMETRY_SCALE, MarkovBlock, StateLayout
 
 LAT, LON, H = np.radians(47.3), np.radians(8.5), 420.0

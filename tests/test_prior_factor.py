@@ -18,7 +18,7 @@ from gnssacc.core.config import load_config
 from gnssacc.core.earth import LocalTangentFrame, radii
 from gnssacc.core.recording import InitialState
 from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm
-from gnssacc.estimators.ekf import initial_state
+from gnssacc.estimators.state import initial_state
 from gnssacc.estimators.settings import SmootherSettings
 from gnssacc.estimators.smoother import initial_prior
 

@@ -30,7 +30,7 @@ from gnssacc.core.config import load_config
 from gnssacc.core.earth import LocalTangentFrame, ecef_to_llh
 from gnssacc.core.recording import GnssFixes, ImuData, InitialState, RecordedRun, Truth
 from gnssacc.core.rotations import wrap_angle
-from gnssacc.estimators.ekf import run_ekf
+from gnssacc.prepare.passes import run_ekf
 from gnssacc.prepare.stationary import detect_stationary
 from gnssacc.prepare.yawbank import select_yaw
 

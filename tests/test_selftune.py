@@ -12,7 +12,7 @@ from stat_bounds import CALIBRATION, nees_band, nis_band
 from gnssacc.analysis.consistency import check_model
 from gnssacc.analysis.metrics import score, truth_at
 from gnssacc.core.config import load_config
-from gnssacc.estimators.ekf import run_ekf
+from gnssacc.prepare.passes import run_ekf
 from gnssacc.pipeline import compare, prepare
 from gnssacc.prepare.tuning import SHRINK_TOLERANCE, draw_back, ml_search, tune
 from gnssacc.sources.gnss_noise import add_outliers
@@ -203,7 +203,7 @@ def test_gauss_markov_gnss_errors_are_found_and_make_the_estimators_honest():
     st = ekf_a.stats
     lo_nis, hi_nis = nis_band(st["n_pos_updates"], 3, st["acf1_pos"], CALIBRATION)
     assert abs(st["acf1_pos"]) < 0.15 and lo_nis < st["nis_pos_mean"] < hi_nis, st["nis_pos_mean"]
-    from gnssacc.estimators.smoother import run_smoother
+    from gnssacc.prepare.passes import run_smoother
 
     sm = run_smoother(
         auto.run,

@@ -10,9 +10,10 @@ from stat_bounds import CALIBRATION, nis_band, paired_not_worse
 from gnssacc.analysis.metrics import gnss_score, score
 from gnssacc.core.config import load_config
 from gnssacc.core.rotations import euler_to_dcm
-from gnssacc.estimators.ekf import run_ekf
+from gnssacc.prepare.passes import run_ekf
 from gnssacc.estimators.gnss_accel import H_a_blocks, paper_H_a_blocks
-from gnssacc.estimators.smoother import MIN_NODE_DT, node_times, run_smoother
+from gnssacc.estimators.smoother import MIN_NODE_DT, node_times
+from gnssacc.prepare.passes import run_smoother
 from gnssacc.pipeline import with_outages
 from gnssacc.sources.sim import grade_config, simulate
 

@@ -68,8 +68,9 @@ from ..core.recording import RecordedRun
 from ..core.rotations import dcm_to_euler, euler_error_jacobian
 from ..core.solution import NavSolution
 from ..core.states import ATT, N_NAV, NAV
-from ..estimators.ekf import EkfObserver, run_ekf
+from ..estimators.ekf import EkfObserver
 from ..estimators.kalman import joseph_update
+from ..prepare.passes import run_ekf
 from .metrics import state_errors, truth_at  # noqa: F401 (state_errors: part of this module's API)
 
 #: SI units per state (the display names and units are :mod:`gnssacc.core.display`'s).

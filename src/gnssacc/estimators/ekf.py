@@ -36,30 +36,19 @@ from ..core.progress import progress
 from ..core.recording import InitialState, RecordedRun
 from ..core.rotations import dcm_to_euler, euler_error_jacobian
 from ..core.solution import NavSolution
-from ..prepare.initialise import initial_sigmas
-from ..prepare.start import start_for
 from . import measurements as meas_models
 from . import nhc as nhc_rules
 from . import odometry as odo_rules
 from .gnss_accel import AccelWindow, measured_specific_force, window_samples
 from .kalman import joseph_update
-from .layout import (
-    ATT,
-    BA,
-    GNSS_ERROR,
-    N_NAV,
-    NAV,
-    ODOMETRY_SCALE,
-    POS,
-    MarkovBlock,
-    StateLayout,
-)
+from .layout import ATT, N_NAV, NAV
 from .mechanization import Propagator, apply_correction, kernel_force_integrals
 from .nhc import NhcEpochs
 from .nhc import epochs_for as nhc_epochs_for
 from .odometry import OdometryEpochs
 from .odometry import epochs_for as odometry_epochs_for
 from .settings import EkfSettings, NhcSettings, OdometrySettings
+from .state import FilterState, correct, initial_state, start_of_pass, state_layout
 from .zupt import StationaryEpochs, epochs_for
 
 #: The acceleration update each method applies (``None``: none; see :func:`acceleration_model`).
@@ -71,131 +60,6 @@ NHC, ODOMETRY, GNSS, STATIONARY, OUTPUT = 0, 1, 2, 3, 4
 #: Name of each update event kind, as the observer sees it.
 EVENT_NAMES = {GNSS: "gnss", STATIONARY: "stationary", NHC: "nhc", ODOMETRY: "odometry"}
 _LOG_2PI = math.log(2.0 * math.pi)
-
-
-@dataclass
-class FilterState:
-    """Nominal state and error covariance (updated in place by the loop).
-
-    The state vector has the paper's 15 navigation states, then the run's Gauss-Markov states
-    (:class:`gnssacc.estimators.layout.StateLayout`: the GNSS fix error's three when modelled,
-    the odometry scale factor with wheel odometry). Without them it is the paper's 15-state
-    filter, with the same arithmetic.
-
-    Attributes
-    ----------
-    pos : ndarray (3,)
-        lat, lon [rad], h [m].
-    v_n : ndarray (3,)
-        NED velocity [m/s].
-    R_nb : ndarray (3, 3)
-    b_a, b_g : ndarray (3,)
-        Accumulated bias estimates, body [m/s^2], [rad/s].
-    P : ndarray (n, n)
-        Error covariance, in the order of :attr:`layout`.
-    x_e : ndarray (n - 15,)
-        Nominal values of the states after the navigation ones, in the order of :attr:`layout`.
-    layout : StateLayout
-    """
-
-    pos: np.ndarray
-    v_n: np.ndarray
-    R_nb: np.ndarray
-    b_a: np.ndarray
-    b_g: np.ndarray
-    P: np.ndarray
-    x_e: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    layout: StateLayout = field(default_factory=StateLayout)
-
-    def extra(self, name: str) -> np.ndarray:
-        """The nominal values of block ``name`` (a view into :attr:`x_e`; empty without it)."""
-        return self.x_e[self.layout.extra_block(name)]
-
-    @property
-    def gm(self) -> np.ndarray:
-        """Estimated GNSS fix error [m, NED] (a view into :attr:`x_e`; zeros without that model)."""
-        return self.extra(GNSS_ERROR) if self.layout.has(GNSS_ERROR) else np.zeros(3)
-
-    @property
-    def i_scale(self) -> int:
-        """Index of the odometry scale-factor state, -1 without it."""
-        return self.layout.offset(ODOMETRY_SCALE)
-
-    @property
-    def scale(self) -> float:
-        """Estimated odometry scale-factor error ``k`` (the odometry reads ``(1 + k)`` times the speed)."""
-        k = self.extra(ODOMETRY_SCALE)
-        return float(k[0]) if len(k) else 0.0
-
-
-def state_layout(settings, odometry: bool = False) -> StateLayout:
-    """The error state of a pass with ``settings`` (either estimator's): the GNSS error states
-    when modelled, the odometry scale factor with ``odometry``."""
-    blocks = []
-    if settings.gnss.gauss_markov:
-        blocks.append(MarkovBlock(GNSS_ERROR, settings.gnss.gm_tau, settings.gnss.gm_sigma))
-    if odometry:
-        odo = settings.odometry
-        blocks.append(MarkovBlock(ODOMETRY_SCALE, np.array([odo.scale_tau_s]), np.array([odo.scale_sigma])))
-    return StateLayout.build(blocks)
-
-
-def initial_state(init: InitialState, settings, odometry: bool = False) -> FilterState:
-    """The filter state at ``init.t``: the initial state, its sigmas and the bias priors
-    (``settings``: either estimator's settings, :mod:`gnssacc.estimators.settings`); with
-    ``odometry`` the scale-factor state too (``[odometry] scale_sigma``, zero at the start)."""
-    sig_p, sig_v, sig_att = initial_sigmas(init, settings.start_sigmas)
-    sig_ba = (
-        settings.imu.accel_bias_sigma0
-        if init.sigma_b_a is None
-        else np.asarray(init.sigma_b_a, float)
-    )
-    sig_bg = (
-        settings.imu.gyro_bias_sigma0
-        if init.sigma_b_g is None
-        else np.asarray(init.sigma_b_g, float)
-    )
-    layout = state_layout(settings, odometry)
-    P = np.diag(
-        np.concatenate([sig_p, sig_v, sig_att, sig_ba, sig_bg] + [b.sigma for b in layout.markov])
-        ** 2
-    )
-    if init.levelled:
-        _tie_tilt_to_accel_bias(P, init)
-    if layout.has(GNSS_ERROR) and init.fit_window is not None:
-        # A start taken from the fixes carries their correlated error x_g: dp = x_g while the
-        # x_g state starts at zero (dx_g = -x_g), so the two are known only in sum.
-        g, var = layout.block(GNSS_ERROR), np.diag(settings.gnss.gm_sigma**2)
-        P[POS, POS] += var
-        P[POS, g] = P[g, POS] = -var
-    return FilterState(
-        np.array([init.lat, init.lon, init.h]),
-        np.array(init.v_n, float).copy(),
-        init.R_nb.copy(),
-        np.array(init.b_a, float).copy(),
-        np.array(init.b_g, float).copy(),
-        P,
-        np.zeros(layout.n - layout.nav),
-        layout,
-    )
-
-
-def _tie_tilt_to_accel_bias(P: np.ndarray, init: InitialState) -> None:
-    """Levelling makes ``-R_est^T g = f_mean = -R^T g + b_a``, so the tilt error is ``phi = M b_a``
-    with ``M = [[0, -1, 0], [1, 0, 0], [0, 0, 0]] R / g``: add that part of the tilt covariance and
-    its cross-covariance with the bias (in place), so the filter knows the combination that
-    matters for navigation, ``g phi - R b_a``, from the start."""
-    g = float(gravity_n(init.lat, init.h)[2])
-    M = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]) @ init.R_nb / g
-    MP = M @ P[BA, BA]
-    P[ATT, ATT] += MP @ M.T
-    P[ATT, BA] = MP
-    P[BA, ATT] = MP.T
-
-
-def correct(s: FilterState, dx: np.ndarray) -> None:
-    """Closed-loop feedback of an estimated error (estimate minus truth) into the nominal state."""
-    apply_correction(s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, s.x_e, dx)
 
 
 def kalman_update(
@@ -606,9 +470,8 @@ def run_ekf(
         spans get inflated process noise.
     init : InitialState, optional
         The start (what :func:`gnssacc.prepare.prepared.prepare` found, ``Prepared.init``); when
-        omitted, the run's own (``run.init``), else the start the preparation stage finds for
-        this run alone (:func:`gnssacc.prepare.yawbank.start_and_quality`, with this filter as
-        its filter pass).
+        omitted, the run's own (``run.init``), as it is. An estimator never looks for a start:
+        :func:`gnssacc.prepare.passes.run_ekf` finds one for a run alone.
     stationary : gnssacc.prepare.stationary.StationaryReport, optional
         Where the vehicle stands still (zero-velocity and zero-rate updates there).
     store_P : bool
@@ -637,8 +500,10 @@ def run_ekf(
         raise ValueError(f"unknown EKF method {method!r}; known: {', '.join(METHODS)}")
     use_acc = METHODS[method]
     wall0 = time.perf_counter()
-    init, quality = start_for(run, settings, init, quality, stationary, filter_pass=run_ekf)
-    setup = prepare(run, EkfSettings.of(settings), init, quality, stationary, cov_every)
+    init, quality = start_of_pass(run, settings, init, quality)
+    settings = EkfSettings.of(settings)
+    run = run.with_gnss(settings.gnss.fixes(run.gnss))
+    setup = prepare(run, settings, init, quality, stationary, cov_every)
     s, prop, t0, k = setup.state, setup.prop, setup.t0, setup.k
     t_end = prop.t[-1] if t_stop is None else min(float(t_stop), prop.t[-1])
     out_t = default_output_times(run) if output_times is None else np.asarray(output_times, float)

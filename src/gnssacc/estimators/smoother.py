@@ -67,8 +67,6 @@ from ..factors import (
     preintegrated_position_factor,
     window_accel_factor,
 )
-from ..prepare.start import start_for
-from .ekf import initial_state, run_ekf
 from .fixed_lag import FixedLagISAM2
 from .gnss_accel import acceleration_row, measured_specific_force, window_accelerations
 from .layout import (
@@ -93,6 +91,7 @@ from .layout import (
 )
 from .settings import SmootherSettings
 from .smoother_aids import NhcFactors, OdometryFactors
+from .state import initial_state, start_of_pass
 from .window_marginals import NotAChain, WindowMarginals
 from .zupt import StationaryEpochs, epochs_for
 
@@ -748,8 +747,9 @@ def run_smoother(
     if method not in METHODS:
         raise ValueError(f"unknown smoother method {method!r}; known: {', '.join(METHODS)}")
     wall0 = time.perf_counter()
-    init, quality = start_for(run, settings, init, quality, stationary, filter_pass=run_ekf)
+    init, quality = start_of_pass(run, settings, init, quality)
     settings = SmootherSettings.of(settings)
+    run = run.with_gnss(settings.gnss.fixes(run.gnss))
     z = settings.zupt
     st = epochs_for(run, z, settings.imu.gyro_psd, stationary)
     is_node_fix = node_fixes(run.gnss.t, settings.min_node_spacing_s)

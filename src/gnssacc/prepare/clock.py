@@ -31,7 +31,7 @@ from ..core.states import ATT, BA, BG, POS, VEL
 from .filter_pass import FilterPass
 from .judge import BURN_IN_S, Innovations, Verdict, compare, innovations
 from .start import StartPieces, start_pieces
-from .tuning import scaled_gnss, ungated, without_aids
+from .tuning import ungated, without_aids
 
 #: Stage 2's uncertainty is the curvature of the log-likelihood over a step that lowers it by this
 #: much on average (a 2-sigma step), from a parabola through five points. On a smaller scale the
@@ -57,7 +57,7 @@ def state_at(
     if t <= float(init.t) + 1e-9:
         return init
     sol = filter_pass(
-        scaled_gnss(run, float(cfg["gnss"]["sigma_scale"])),
+        run,
         ungated(without_aids(cfg)),
         "ekf",
         init=init,

@@ -28,6 +28,7 @@ from ..core.errors import InputError
 from ..core.gnss_fit import acceleration_row
 from ..core.recording import InitialState, RecordedRun
 from ..core.rotations import euler_to_dcm
+from ..estimators.settings import GnssModel
 
 #: Prior 1-sigma of a ground vehicle's mean acceleration over a fit window [m/s^2], used to
 #: shrink the (noisy) GNSS-fitted acceleration towards zero and to budget a line fit's model error.
@@ -36,25 +37,6 @@ _ACCEL_PRIOR_SIGMA = 1.0
 _STATIC_START_TOL_S = 1.0
 #: Velocity 1-sigma assumed at a static start [m/s] (the zero-velocity updates refine it).
 _STATIC_VEL_SIGMA = 0.05
-
-
-def initial_sigmas(init: InitialState, over: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Initial 1-sigma of position [m], velocity [m/s] and attitude error (n frame) [rad].
-
-    The initial state's own sigmas, replaced by any ``[init]`` overrides of the configuration
-    (``over``: :meth:`gnssacc.core.config.RunConfig.initial_sigma_overrides`); both estimators start
-    from these.
-    """
-    att = np.array(init.sigma_att_rad, float)
-    if "roll_pitch" in over:
-        att[:2] = over["roll_pitch"]
-    if "yaw" in over:
-        att[2] = over["yaw"]
-    return (
-        np.asarray(over.get("pos", init.sigma_pos_m), float),
-        np.asarray(over.get("vel", init.sigma_vel_mps), float),
-        att,
-    )
 
 
 @dataclass
@@ -206,11 +188,14 @@ def _moving_start(run: RecordedRun, cfg: RunConfig) -> StartState:
 
 
 def start_state(run: RecordedRun, cfg: RunConfig, stationary=None) -> StartState:
-    """The start of the recording as the data describe it (see the module docstring).
+    """The start of the recording as the data describe it (see the module docstring), the fixes
+    weighted with their noise as the estimators model it (:class:`gnssacc.estimators.settings.
+    GnssModel`: the stated sigmas times ``[gnss] sigma_scale``).
 
     Parameters
     ----------
     run : RecordedRun
+        As read (the fixes' sigmas as stated).
     cfg : RunConfig
     stationary : gnssacc.prepare.stationary.StationaryReport, optional
         Stationary spans; a span at the first IMU sample makes a static start.
@@ -220,6 +205,7 @@ def start_state(run: RecordedRun, cfg: RunConfig, stationary=None) -> StartState
     InputError
         When there are not enough GNSS fixes near the start.
     """
+    run = run.with_gnss(GnssModel.from_config(cfg).fixes(run.gnss))
     spans = [] if stationary is None else stationary.spans
     if spans and spans[0].t_start - run.t_start <= _STATIC_START_TOL_S:
         return _static_start(run, cfg, spans[0])

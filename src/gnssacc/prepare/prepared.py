@@ -33,12 +33,13 @@ from ..checks.quality import QualityReport
 from ..core.config import RunConfig
 from ..core.memory import release_free_memory
 from ..core.recording import InitialState, RecordedRun
+from ..estimators.settings import GnssModel
 from .filter_pass import FilterPass
 from .fix_noise import with_measured_sigmas
 from .settle import settled
 from .start import start_of, start_pieces
 from .stationary import StationaryNoise, StationaryReport, noise_from_stationary
-from .tuning import TuneResult, scaled_gnss, tune
+from .tuning import TuneResult, tune
 from .yawbank import BankResult
 
 
@@ -49,8 +50,9 @@ class Prepared:
     Attributes
     ----------
     run : RecordedRun
-        The run as the estimators see it: the input checks' repairs and measured offsets applied,
-        fix sigmas times ``gnss.sigma_scale``.
+        The run the estimators read: the input checks' repairs and measured offsets applied, the
+        fixes' sigmas as stated (the estimators apply the noise model of ``cfg``:
+        :attr:`modelled_run`).
     cfg : RunConfig
         The configuration they use (tuned where allowed); estimators read their own settings
         from it (:mod:`gnssacc.estimators.settings`).
@@ -83,6 +85,13 @@ class Prepared:
     seconds: dict = field(default_factory=dict)
     gauss_markov: tuple | None = None
 
+    @property
+    def modelled_run(self) -> RecordedRun:
+        """:attr:`run` with the fixes' noise as the estimators model it under :attr:`cfg` (their
+        sigmas times ``[gnss] sigma_scale``: :meth:`gnssacc.estimators.settings.GnssModel.fixes`),
+        for a figure that compares an estimate with that noise."""
+        return self.run.with_gnss(GnssModel.from_config(self.cfg).fixes(self.run.gnss))
+
 
 def _other_heading(a: InitialState, b: InitialState) -> bool:
     """Whether two starts differ in yaw by more than 3 sigma (neighbouring hypotheses converge to the
@@ -92,16 +101,14 @@ def _other_heading(a: InitialState, b: InitialState) -> bool:
 
 
 def _tuned(run, cfg, stationary, quality, init, bank, noise, filter_pass):
-    """Step 4 of the module notes: the tuned configuration and result, the start and bank under it,
-    and the estimators' run (fix sigmas scaled)."""
+    """Step 4 of the module notes: the tuned configuration and result, and the start and bank
+    under it."""
     cfg_t, result = tune(run, cfg, stationary, quality, init, noise, filter_pass=filter_pass)
-    est_run = scaled_gnss(run, float(cfg_t["gnss"]["sigma_scale"]))
-    init2, bank2 = start_of(est_run, cfg_t, stationary, quality, filter_pass)
+    init2, bank2 = start_of(run, cfg_t, stationary, quality, filter_pass)
     if bank is not None and _other_heading(init, bank2.init):
         cfg_t, result = tune(run, cfg, stationary, quality, init2, noise, filter_pass=filter_pass)
-        est_run = scaled_gnss(run, float(cfg_t["gnss"]["sigma_scale"]))
-        init2, bank2 = start_of(est_run, cfg_t, stationary, quality, filter_pass)
-    return est_run, cfg_t, result, init2, bank2
+        init2, bank2 = start_of(run, cfg_t, stationary, quality, filter_pass)
+    return cfg_t, result, init2, bank2
 
 
 def checked(
@@ -148,17 +155,16 @@ def prepare(
     quality, stationary, init, bank = pieces.quality, pieces.stationary, pieces.init, pieces.bank
     release_free_memory()  # before the estimators build on the heap
     secs["start_s"] = time.perf_counter() - t
-    est_run = scaled_gnss(run, float(cfg["gnss"]["sigma_scale"]))
     result = None
     noise = noise_from_stationary(run.imu, stationary)
     if tune_mode == "auto":
         t = time.perf_counter()
-        est_run, cfg, result, init, bank = _tuned(
+        cfg, result, init, bank = _tuned(
             run, cfg, stationary, quality, init, bank, noise, filter_pass
         )
         secs["tuning_s"] = time.perf_counter() - t
     prep = Prepared(
-        est_run, cfg, quality, stationary, init, noise, result, bank, tuple(checks), secs
+        run, cfg, quality, stationary, init, noise, result, bank, tuple(checks), secs
     )
     if gauss_markov:
         from .gauss_markov import gm_setup

@@ -23,7 +23,6 @@ from ..core.recording import InitialState, RecordedRun
 from ..core.rotations import wrap_angle
 from .filter_pass import FilterPass
 from .stationary import StationaryReport, detect_stationary, params_from_config
-from .tuning import scaled_gnss
 from .yawbank import BankResult, select_yaw
 
 #: 1-sigma of a yaw from an IMU's orientation field the motion did not confirm [deg]: a magnetometer
@@ -95,13 +94,11 @@ def _with_orientation(given: InitialState, bank: BankResult) -> InitialState:
 
 
 def start_pieces(run: RecordedRun, cfg: RunConfig, filter_pass: FilterPass) -> StartPieces:
-    """Quality, stationary spans and the start of ``run`` under ``cfg`` (fix sigmas times
-    ``gnss.sigma_scale`` for the start, as the estimators see them)."""
+    """Quality, stationary spans and the start of ``run`` under ``cfg`` (its fixes' noise as the
+    estimators model it: :mod:`gnssacc.prepare.initialise`)."""
     quality = check_imu(run.imu, cfg)
     stationary = detect_stationary(run.imu, run.gnss, run.origin, params_from_config(cfg))
-    init, bank = start_of(
-        scaled_gnss(run, float(cfg["gnss"]["sigma_scale"])), cfg, stationary, quality, filter_pass
-    )
+    init, bank = start_of(run, cfg, stationary, quality, filter_pass)
     return StartPieces(quality, stationary, init, bank)
 
 

@@ -89,6 +89,7 @@ import numpy as np
 
 from ..core.config import RunConfig, toml_value
 from ..core.errors import InputError
+from ..estimators.settings import GnssModel
 from .filter_pass import FilterPass
 
 #: The identified parameters: (section, key), in the order of the search vector.
@@ -340,11 +341,10 @@ class _Objective:
     def __call__(self, theta) -> float:
         cfg = self.config(theta)
         scale = float(cfg["gnss"]["sigma_scale"])
-        run = scaled_gnss(self.run, scale)
         # The start's position sigma is that of the fixes it came from: it scales with them.
         init = replace(self.init, sigma_pos_m=self.init.sigma_pos_m * scale / self.init_scale)
         sol = self.filter_pass(
-            run,
+            self.run,
             ungated(cfg),
             self.method,
             init=init,
@@ -584,13 +584,6 @@ def ungated(cfg: RunConfig) -> RunConfig:
     if float(cfg["ekf"]["position_gate_nis"]) == 0.0:
         return cfg
     return cfg.with_values({"ekf": {"position_gate_nis": 0.0}}, "tuning passes, ungated")
-
-
-def scaled_gnss(run, scale: float):
-    """The run with every fix's sigma multiplied by ``scale``."""
-    if scale == 1.0:
-        return run
-    return run.with_gnss(replace(run.gnss, sigma_ned=run.gnss.sigma_ned * scale))
 
 
 def tune(
@@ -893,7 +886,8 @@ def tune_gauss_markov(
     Parameters
     ----------
     run : RecordedRun
-        As the estimators see it (fix sigmas already times ``cfg``'s ``gnss.sigma_scale``).
+        As the estimators read it (the fixes' sigmas as stated; ``cfg``'s ``gnss.sigma_scale``
+        is their noise model).
     cfg : RunConfig
     stationary, quality, init, filter_pass
         As for :func:`tune`.
@@ -901,11 +895,12 @@ def tune_gauss_markov(
     Returns
     -------
     cfg : RunConfig
-        With ``gnss.gm_sigma_m``, ``gnss.gm_tau_s`` and ``gnss.sigma_scale`` (relative to the raw
-        fixes, as :func:`tune` gives it) as fitted.
+        With ``gnss.gm_sigma_m``, ``gnss.gm_tau_s`` and ``gnss.sigma_scale`` (relative to the
+        fixes as read, as :func:`tune` gives it) as fitted.
     info : dict
         ``loglik_gain`` over the white model, ``n_evaluations``, ``seconds``, ``run_scale`` (the
-        factor to apply to ``run``'s fix sigmas: the white part of the fitted model).
+        white part of the fitted model relative to ``cfg``'s: the new ``gnss.sigma_scale`` over
+        the old).
 
     Raises
     ------
@@ -918,20 +913,24 @@ def tune_gauss_markov(
             "gnss.gm_sigma_m", "is set to 0 (white fixes); a -gm method needs it > 0 or unset"
         )
     free_scale = ("gnss", "sigma_scale") not in cfg.explicit
-    base = (
-        cfg.with_values({"gnss": {"sigma_scale": 1.0}}, "sigma scale of the run")
+    fixes = GnssModel.from_config(cfg).fixes(run.gnss)  # the fixes' noise under cfg
+    # A free scale is searched relative to that noise: on the fixes with it, from 1.
+    searched, base = (
+        (run.with_gnss(fixes), cfg.with_values({"gnss": {"sigma_scale": 1.0}}, "sigma scale of the run"))
         if free_scale
-        else cfg
+        else (run, cfg)
     )
     params = [p for p in GM_PARAMETERS if p not in cfg.explicit]
     start = {
         ("gnss", "sigma_scale"): np.atleast_1d(0.2),
-        ("gnss", "gm_sigma_m"): np.median(run.gnss.sigma_ned, axis=0),
+        ("gnss", "gm_sigma_m"): np.median(fixes.sigma_ned, axis=0),
         ("gnss", "gm_tau_s"): np.atleast_1d(cfg.gnss_gm_tau.mean()),
     }
     start = {p: start[p] for p in params}
     kinds = ("pos", "zaru")
-    obj = _Objective(run, base, params, start, stationary, quality, init, "ekf", kinds, filter_pass)
+    obj = _Objective(
+        searched, base, params, start, stationary, quality, init, "ekf", kinds, filter_pass
+    )
     theta, _, n_eval = ml_search(
         obj,
         len(params),
