@@ -5,7 +5,7 @@ Error (NED, m/s^2)::
 
     e = sum_j B_j p_ant(X_j) - a~^n,      p_ant(X) = t + R l_b
 
-with ``B`` the least-squares row of :func:`gnssacc.estimators.gnss_accel.acceleration_row` for the window's
+with ``B`` the least-squares row of :func:`gnssacc.estimators.aids.accel_model.acceleration_row` for the window's
 fix times and ``a~^n = sum_j B_j p_fix_j``. The operator that made the measurement from the fixes
 is applied to the antenna positions the estimate predicts at the same times, so a noise-free
 window gives zero error whatever the vehicle does between the fixes (the paper's factor compares

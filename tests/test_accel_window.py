@@ -11,7 +11,7 @@ from gnssacc.core.config import load_config
 from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm
 from gnssacc.estimators.state import FilterState
 from gnssacc.prepare.passes import run_ekf
-from gnssacc.estimators.gnss_accel import (
+from gnssacc.estimators.aids.accel_model import (
     acceleration_row,
     model_errors,
     peano_kernel,
@@ -210,7 +210,7 @@ def test_windows_touching_a_suspect_imu_span_are_skipped():
 def test_H_w_reduces_to_the_paper_H_a_without_rotation():
     """No rotation over the window and a constant specific force: F_b = f, M = I, and H_w's
     attitude and accelerometer-bias blocks are the paper's H_a (same sign convention)."""
-    from gnssacc.estimators.gnss_accel import H_a_blocks, H_w_blocks
+    from gnssacc.estimators.aids.accel_model import H_a_blocks, H_w_blocks
 
     t_imu = np.arange(-0.1, 2.2, 0.01)
     k0, k1, h, w = window_samples(t_imu, np.array([0.0, 1.0, 2.0]))

@@ -11,7 +11,7 @@ from gnssacc.analysis.aiding_theory import FgChain, fg_departure, fg_draw, fg_po
 from gnssacc.analysis.metrics import gnss_score, score
 from gnssacc.core.config import load_config
 from gnssacc.core.rotations import euler_to_dcm
-from gnssacc.estimators.gnss_accel import acceleration_row
+from gnssacc.estimators.aids.accel_model import acceleration_row
 from gnssacc.prepare.passes import run_smoother
 from gnssacc.sources.sim import grade_config, simulate
 

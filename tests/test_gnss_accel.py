@@ -6,7 +6,7 @@ import pytest
 from gnssacc.core.earth import radii
 from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm
 from gnssacc.estimators.state import FilterState
-from gnssacc.estimators.gnss_accel import (
+from gnssacc.estimators.aids.accel_model import (
     AccelWindow,
     H_a,
     H_a_blocks,
@@ -170,7 +170,7 @@ def test_H_p_with_lever_arm_by_finite_differences():
 @pytest.mark.parametrize("override", [None, np.array([0.1, 0.2, 0.3])])
 def test_window_accelerations_equal_the_sliding_window(override):
     """The vectorised accelerations (the smoother's) equal AccelWindow's, gaps and resets included."""
-    from gnssacc.estimators.gnss_accel import AccelWindow, window_accelerations
+    from gnssacc.estimators.aids.accel_model import AccelWindow, window_accelerations
 
     rng = np.random.default_rng(5)
     t = np.cumsum(rng.choice([0.2, 1.0, 1.0, 3.0], size=80))  # 3 s steps exceed the gap

@@ -11,7 +11,7 @@ from gnssacc.analysis.metrics import gnss_score, score
 from gnssacc.core.config import load_config
 from gnssacc.core.rotations import euler_to_dcm
 from gnssacc.prepare.passes import run_ekf
-from gnssacc.estimators.gnss_accel import H_a_blocks, paper_H_a_blocks
+from gnssacc.estimators.aids.accel_model import H_a_blocks, paper_H_a_blocks
 from gnssacc.estimators.smoother import MIN_NODE_DT, node_times
 from gnssacc.prepare.passes import run_smoother
 from gnssacc.pipeline import with_outages

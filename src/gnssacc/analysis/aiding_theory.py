@@ -10,7 +10,7 @@ One axis, state ``x = [p, v, a]`` (position [m], velocity [m/s], acceleration [m
 white jerk of PSD ``q`` [m^2/s^5] (the IMU's role: a random-walk acceleration), position fixes
 ``z_k = p_k + n_k``, ``n_k ~ N(0, R)`` white, at uniform times ``t_k = k dt``, and the paper's
 least-squares acceleration of the last three fixes, ``a~_k = B [z_{k-2}, z_{k-1}, z_k]``,
-``B = [1, -2, 1] / dt^2`` (:func:`gnssacc.estimators.gnss_accel.acceleration_row`). Three filters share one
+``B = [1, -2, 1] / dt^2`` (:func:`gnssacc.estimators.aids.accel_model.acceleration_row`). Three filters share one
 8-state layout ``[p, v, a, p_{k-1}, p_{k-2}, n_k, n_{k-1}, n_{k-2}]``: before each epoch the
 position is cloned (stochastic cloning, ``p_{k-1} <- p``) and the noise slots shift, the newest
 drawn from its prior ``N(0, R)``. Window-consistent: ``a~`` is predicted from the clones,
@@ -64,7 +64,7 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 
-from ..estimators.gnss_accel import acceleration_row
+from ..estimators.aids.accel_model import acceleration_row
 
 #: Filter variants of :func:`kf_filter`.
 KF_VARIANTS = ("position", "paper", "paper-epoch", "cloned")

@@ -166,7 +166,7 @@ DEFAULTS: dict[str, dict] = {
     "nhc": {
         # Non-holonomic constraint: while the vehicle rolls, its velocity at the reference point
         # below has no lateral and no vertical component in the body frame (EKF updates, smoother
-        # factors; gnssacc.estimators.nhc says when it is applied). false: IMU-only bridging of outages.
+        # factors; gnssacc.estimators.aids.nhc says when it is applied). false: IMU-only bridging of outages.
         "enabled": True,
         # One constraint every this many seconds while rolling [s] (EKF update, smoother factor
         # on the node nearest each epoch).
@@ -187,7 +187,7 @@ DEFAULTS: dict[str, dict] = {
         "yaw_offset_deg": 0.0,
         # How far along the vehicle the centre of a turn on the spot may lie from that point [m]:
         # a turn whose yaw rate times this exceeds the forward speed is not rolling, and gets
-        # no constraint (see gnssacc.estimators.nhc).
+        # no constraint (see gnssacc.estimators.aids.nhc).
         "pivot_offset_m": 0.5,
     },
     "odometry": {

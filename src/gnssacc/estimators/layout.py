@@ -162,32 +162,56 @@ PRIOR_POSE, PRIOR_BIAS, PRIOR_G = slice(0, 6), slice(6, 12), slice(12, 15)
 NAVSTATE_POSE, NAVSTATE_VEL = slice(0, 6), slice(6, 9)
 
 
-@dataclass(frozen=True)
-class NodeLayout:
-    """The variables of every node of one smoother run (module notes): ``gm`` with the GNSS
-    error, ``scale`` with the odometry scale factor."""
+#: The node variable of each Gauss-Markov block (its GTSAM symbol character).
+NODE_SYMBOL = {GNSS_ERROR: SYM_G, ODOMETRY_SCALE: SYM_K}
 
-    gm: bool = False
-    scale: bool = False
+
+def node_size(gm: bool, scale: bool) -> int:
+    """Rows of a node's joint marginal with (``gm``) the GNSS error and (``scale``) the odometry
+    scale factor."""
+    return I_B + D_B + (D_G if gm else 0) + (D_K if scale else 0)
+
+
+@dataclass(frozen=True, eq=False)
+class NodeLayout:
+    """The variables of every node of one smoother run (module notes): pose, velocity, bias, then
+    the Gauss-Markov blocks :attr:`markov` in the order of :data:`MARKOV_ORDER` (the GNSS error
+    ``G``, the odometry scale factor ``K``)."""
+
+    markov: tuple[MarkovBlock, ...] = ()
+
+    @classmethod
+    def build(cls, blocks) -> "NodeLayout":
+        return cls(StateLayout.build(blocks).markov)
+
+    def has(self, name: str) -> bool:
+        return any(b.name == name for b in self.markov)
+
+    @property
+    def gm(self) -> bool:
+        return self.has(GNSS_ERROR)
+
+    @property
+    def scale(self) -> bool:
+        return self.has(ODOMETRY_SCALE)
 
     @property
     def b(self) -> int:
         """Rows of a node's joint marginal."""
-        return I_B + D_B + (D_G if self.gm else 0) + (D_K if self.scale else 0)
+        return node_size(self.gm, self.scale)
 
-    @property
-    def k(self) -> int:
-        """Row of the scale factor, -1 without it."""
-        return self.b - 1 if self.scale else -1
+    def markov_blocks(self) -> list[tuple[str, slice, MarkovBlock]]:
+        """``(symbol character, rows, block)`` of each Gauss-Markov variable, in order."""
+        out, i = [], I_B + D_B
+        for blk in self.markov:
+            out.append((NODE_SYMBOL[blk.name], slice(i, i + blk.dim), blk))
+            i += blk.dim
+        return out
 
     def blocks(self) -> list[tuple[str, slice]]:
         """``(symbol character, rows)`` of each variable, in order."""
         out = [(SYM_X, NODE_X), (SYM_V, NODE_V), (SYM_B, NODE_B)]
-        if self.gm:
-            out.append((SYM_G, NODE_G))
-        if self.scale:
-            out.append((SYM_K, slice(self.k, self.k + D_K)))
-        return out
+        return out + [(c, sl) for c, sl, _ in self.markov_blocks()]
 
     @property
     def symbols(self) -> str:

@@ -147,7 +147,7 @@ def kernel_force_integrals(f_b, omega_b, h, w, b_a, b_g):
 
     Walks the samples backward from the window's end ``t_k``, integrating the body rotation
     ``R_{b_k b_s}`` from the bias-corrected gyro (earth rate neglected: see
-    :mod:`gnssacc.estimators.gnss_accel`), each sample taken at the midpoint of its overlap.
+    :mod:`gnssacc.estimators.aids.accel_model`), each sample taken at the midpoint of its overlap.
 
     Parameters
     ----------
@@ -156,7 +156,7 @@ def kernel_force_integrals(f_b, omega_b, h, w, b_a, b_g):
     h : ndarray (n,)
         Each sample's overlap with the window [s].
     w : ndarray (n,)
-        Its kernel weight ``int K`` [-] (:func:`gnssacc.estimators.gnss_accel.window_samples`).
+        Its kernel weight ``int K`` [-] (:func:`gnssacc.estimators.aids.accel_model.window_samples`).
     b_a, b_g : ndarray (3,)
         Bias estimates [m/s^2], [rad/s].
 

@@ -154,7 +154,7 @@ class ZuptSettings:
 
 @dataclass(frozen=True, eq=False)
 class NhcSettings:
-    """The non-holonomic constraint (``[nhc]``; :mod:`gnssacc.estimators.nhc`).
+    """The non-holonomic constraint (``[nhc]``; :mod:`gnssacc.estimators.aids.nhc`).
 
     Attributes
     ----------
@@ -202,7 +202,7 @@ class NhcSettings:
 
 @dataclass(frozen=True, eq=False)
 class OdometrySettings:
-    """The wheel odometry (``[odometry]``; :mod:`gnssacc.estimators.odometry`).
+    """The wheel odometry (``[odometry]``; :mod:`gnssacc.estimators.aids.odometry`).
 
     Attributes
     ----------

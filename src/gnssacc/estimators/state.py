@@ -16,7 +16,7 @@ from ..checks.quality import QualityReport, check_imu
 from ..core.config import RunConfig
 from ..core.earth import gravity_n
 from ..core.recording import InitialState, RecordedRun
-from .layout import ATT, BA, GNSS_ERROR, ODOMETRY_SCALE, POS, MarkovBlock, StateLayout
+from .layout import ATT, BA, GNSS_ERROR, ODOMETRY_SCALE, POS, StateLayout
 from .mechanization import apply_correction
 
 
@@ -102,22 +102,12 @@ class FilterState:
         return float(k[0]) if len(k) else 0.0
 
 
-def state_layout(settings, odometry: bool = False) -> StateLayout:
-    """The error state of a pass with ``settings`` (either estimator's): the GNSS error states
-    when modelled, the odometry scale factor with ``odometry``."""
-    blocks = []
-    if settings.gnss.gauss_markov:
-        blocks.append(MarkovBlock(GNSS_ERROR, settings.gnss.gm_tau, settings.gnss.gm_sigma))
-    if odometry:
-        odo = settings.odometry
-        blocks.append(MarkovBlock(ODOMETRY_SCALE, np.array([odo.scale_tau_s]), np.array([odo.scale_sigma])))
-    return StateLayout.build(blocks)
-
-
-def initial_state(init: InitialState, settings, odometry: bool = False) -> FilterState:
+def initial_state(
+    init: InitialState, settings, layout: StateLayout | None = None
+) -> FilterState:
     """The filter state at ``init.t``: the initial state, its sigmas and the bias priors
-    (``settings``: either estimator's settings, :mod:`gnssacc.estimators.settings`); with
-    ``odometry`` the scale-factor state too (``[odometry] scale_sigma``, zero at the start)."""
+    (``settings``: either estimator's settings, :mod:`gnssacc.estimators.settings`), and the
+    Gauss-Markov states of ``layout`` at zero with their stationary sigmas (default: none)."""
     sig_p, sig_v, sig_att = initial_sigmas(init, settings.start_sigmas)
     sig_ba = (
         settings.imu.accel_bias_sigma0
@@ -129,7 +119,7 @@ def initial_state(init: InitialState, settings, odometry: bool = False) -> Filte
         if init.sigma_b_g is None
         else np.asarray(init.sigma_b_g, float)
     )
-    layout = state_layout(settings, odometry)
+    layout = layout or StateLayout()
     P = np.diag(
         np.concatenate([sig_p, sig_v, sig_att, sig_ba, sig_bg] + [b.sigma for b in layout.markov])
         ** 2
@@ -139,7 +129,8 @@ def initial_state(init: InitialState, settings, odometry: bool = False) -> Filte
     if layout.has(GNSS_ERROR) and init.fit_window is not None:
         # A start taken from the fixes carries their correlated error x_g: dp = x_g while the
         # x_g state starts at zero (dx_g = -x_g), so the two are known only in sum.
-        g, var = layout.block(GNSS_ERROR), np.diag(settings.gnss.gm_sigma**2)
+        g = layout.block(GNSS_ERROR)
+        var = np.diag(next(b.sigma for b in layout.markov if b.name == GNSS_ERROR) ** 2)
         P[POS, POS] += var
         P[POS, g] = P[g, POS] = -var
     return FilterState(

@@ -47,7 +47,7 @@ import numpy as np
 from numba import njit
 
 from .layout import D_B, D_G, D_K, D_V, D_X, I_B, I_G, I_V, I_X, SYM_B, SYM_G, SYM_K, SYM_V, SYM_X
-from .layout import NodeLayout
+from .layout import node_size
 
 if TYPE_CHECKING:  # the kernels compile without gtsam (at install time, kernels.compile_groups)
     import gtsam
@@ -407,7 +407,7 @@ class WindowMarginals:
     """
 
     def __init__(self, gm: bool, bandwidth: int = 1, scale: bool = False):
-        self.b = NodeLayout(gm, scale).b
+        self.b = node_size(gm, scale)
         self.w = int(bandwidth)
         self.clear()
 

@@ -89,28 +89,34 @@ import numpy as np
 
 from ..core.config import RunConfig, toml_value
 from ..core.errors import InputError
+from ..estimators.aids import REGISTRY
 from ..estimators.settings import GnssModel
 from .filter_pass import FilterPass
 
-#: The identified parameters: (section, key), in the order of the search vector.
-PARAMETERS = (
+#: The IMU noise parameters: (section, key).
+IMU_PARAMETERS = (
     ("imu", "gyro_arw_deg_rth"),
     ("imu", "accel_vrw_mps_rth"),
     ("imu", "gyro_bias_instability_deg_h"),
     ("imu", "accel_bias_instability_mg"),
     ("imu", "gyro_bias_sigma0_deg_h"),
     ("imu", "accel_bias_sigma0_mg"),
-    ("gnss", "sigma_scale"),
 )
-#: The ground-vehicle aids' noise, identified (after :data:`PARAMETERS`) when the aid is in use:
-#: the non-holonomic constraint's sigmas when ``[nhc] enabled``, the odometry's speed sigma when
-#: the run has wheel odometry and ``[odometry] enabled``; their innovations join the likelihood.
-NHC_SIGMAS = (("nhc", "sigma_lateral_mps"), ("nhc", "sigma_vertical_mps"))
-NHC_PARAMETERS = NHC_SIGMAS + (("nhc", "pitch_offset_deg"), ("nhc", "yaw_offset_deg"))
-ODOMETRY_PARAMETERS = (("odometry", "speed_sigma_mps"),)
+#: The parameters identified together (steps 2-4), in the order of the search vector: the IMU
+#: noise, then the noise of the aids identified with it (the GNSS fixes' ``gnss.sigma_scale``).
+PARAMETERS = IMU_PARAMETERS + tuple(
+    key for spec in REGISTRY if spec.stage == "imu" for key in spec.noise_keys
+)
+#: The ground vehicle's aids (step 5), identified after :data:`PARAMETERS` when in use
+#: (:func:`aids`; their innovations join the likelihood): the non-holonomic constraint's sigmas
+#: and axes, the wheel odometry's speed sigma.
+VEHICLE_AIDS = tuple(spec for spec in REGISTRY if spec.stage == "vehicle")
 #: Parameters searched additively, ``start + theta * step`` (signed angles near zero), with their
 #: step per unit of ``theta`` (the others: ``start * 10**theta``, ``theta`` in decades).
-ADDITIVE = {("nhc", "pitch_offset_deg"): 1.5, ("nhc", "yaw_offset_deg"): 1.5}
+ADDITIVE = {key: step for spec in VEHICLE_AIDS for key, step in spec.additive_keys.items()}
+#: Sigmas floored by another key's value: ``{key: floor key}`` (the constraint's sigmas by the
+#: zero-velocity sigma).
+FLOORED = {key: spec.floor_key for spec in VEHICLE_AIDS for key in spec.floored_keys}
 #: The Gauss-Markov GNSS error model, identified in a second stage (see the module docstring).
 GM_PARAMETERS = (("gnss", "sigma_scale"), ("gnss", "gm_sigma_m"), ("gnss", "gm_tau_s"))
 #: Lag-1 autocorrelation of the whitened position innovations above which the fix errors are
@@ -222,7 +228,7 @@ class TuneResult:
             f"{k} = {toml_value(_plain(cfg['gnss'][k]))}"
             for k in ("sigma_scale", "gm_sigma_m", "gm_tau_s")
         ]
-        for sec, key in NHC_PARAMETERS + ODOMETRY_PARAMETERS:  # the aids' noise, where identified
+        for sec, key in (k for spec in VEHICLE_AIDS for k in spec.noise_keys):  # where identified
             if key in self.values.get(sec, {}):
                 lines += ["", f"[{sec}]"] if f"[{sec}]" not in lines else []
                 lines.append(f"{key} = {toml_value(_plain(cfg[sec][key]))}")
@@ -333,8 +339,8 @@ class _Objective:
             v = self.start[p] + th * ADDITIVE[p] if p in ADDITIVE else self.start[p] * 10.0**th
             if p == ("gnss", "sigma_scale"):
                 v = np.maximum(v, MIN_WHITE_SIGMA_M / float(np.median(self.run.gnss.sigma_ned)))
-            elif p in NHC_SIGMAS:
-                v = np.maximum(v, float(self.cfg["zupt"]["velocity_sigma_mps"]))
+            elif p in FLOORED:
+                v = np.maximum(v, float(self.cfg[FLOORED[p][0]][FLOORED[p][1]]))
             upd.setdefault(p[0], {})[p[1]] = v.tolist() if v.size > 1 else float(v[0])
         return self.cfg.with_values(upd, "tuned")
 
@@ -551,26 +557,27 @@ def _loglik(stats: dict, kinds) -> float:
 
 def aids(run, cfg: RunConfig) -> tuple[tuple, tuple]:
     """The aid parameters :func:`tune` identifies on ``run`` with ``cfg`` (the user's explicit keys
-    included: they are left alone) and the update kinds they add to the likelihood."""
+    included: they are left alone) and the update kinds they add to the likelihood: those of the
+    ground vehicle's aids (:data:`VEHICLE_AIDS`) enabled and in use."""
     params, kinds = (), ()
-    if cfg["nhc"]["enabled"]:
-        params += NHC_PARAMETERS
-        kinds += ("nhc",)
-    odo = getattr(run, "odometry", None)
-    if cfg["odometry"]["enabled"] and odo is not None and len(odo.t):
-        params += ODOMETRY_PARAMETERS
-        kinds += ("odo",)
+    for spec in VEHICLE_AIDS:
+        section, key = spec.enabled_key
+        if cfg[section][key] and spec.in_use(run, cfg):
+            params += spec.noise_keys
+            kinds += spec.kinds
     return params, kinds
 
 
 def without_aids(cfg: RunConfig) -> RunConfig:
-    """``cfg`` with the ground-vehicle aids off, for the IMU and GNSS noise's passes (step 5) and
-    the yaw bank's (:func:`gnssacc.prepare.yawbank.select_yaw`)."""
-    if not cfg["nhc"]["enabled"] and not cfg["odometry"]["enabled"]:
+    """``cfg`` with the ground vehicle's aids off, for the IMU and GNSS noise's passes (step 5)
+    and the yaw bank's (:func:`gnssacc.prepare.yawbank.select_yaw`)."""
+    keys = [spec.enabled_key for spec in VEHICLE_AIDS]
+    if not any(cfg[section][key] for section, key in keys):
         return cfg
-    return cfg.with_values(
-        {"nhc": {"enabled": False}, "odometry": {"enabled": False}}, "tuning passes, aids off"
-    )
+    off: dict = {}
+    for section, key in keys:
+        off.setdefault(section, {})[key] = False
+    return cfg.with_values(off, "tuning passes, aids off")
 
 
 def ungated(cfg: RunConfig) -> RunConfig:
@@ -795,18 +802,18 @@ def _inflate(raw: dict, obj: "_Objective", theta: np.ndarray) -> bool:
     filter that under-weights a measurement leaves its innovations correlated too (an exact
     simulated constraint gave a lag-1 autocorrelation of 0.7 at the floor)."""
     stats = obj.stats[tuple(np.round(theta, 12))]
-    floor = float(obj.cfg["zupt"]["velocity_sigma_mps"])
     inflated = False
-    for kind, sigmas in (("nhc", NHC_SIGMAS), ("odo", ODOMETRY_PARAMETERS)):
+    for spec in VEHICLE_AIDS:
+        (kind,) = spec.kinds
         factor = correlation_inflation(
             stats.get(f"acf1_{kind}"), int(stats.get(f"n_{kind}_updates", 0) or 0)
         )
-        for p in sigmas:
+        for p in spec.inflated_keys:
             if p not in obj.free or factor <= 1.0:
                 continue
             value = float(raw[p[0]][p[1]])
             if theta[obj.free.index(p)] <= -_BOUND_DECADES + 1e-9 or (
-                p in NHC_SIGMAS and value <= floor * (1 + 1e-9)
+                p in FLOORED and value <= float(obj.cfg[FLOORED[p][0]][FLOORED[p][1]]) * (1 + 1e-9)
             ):
                 continue
             raw[p[0]][p[1]] = value * factor

@@ -84,17 +84,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..checks.quality import touches_segments
-from ..core.earth import gravity_n
-from ..core.gnss_fit import (  # noqa: F401
+from ...checks.quality import touches_segments
+from ...core.earth import gravity_n
+from ...core.gnss_fit import (  # noqa: F401
     acceleration_row,
     design_matrix,
     ls_acceleration,
     window_accelerations,
 )
-from ..core.rotations import euler_to_dcm, skew
-from .layout import ATT, BA, N_NAV
-from .mechanization import kernel_force_integrals
+from ...core.rotations import euler_to_dcm, skew
+from ..layout import ATT, BA, N_NAV
+from ..mechanization import kernel_force_integrals
 
 
 @dataclass
