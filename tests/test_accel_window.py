@@ -17,7 +17,7 @@ from gnssacc.estimators.aids.accel_model import (
     peano_kernel,
     window_samples,
 )
-from gnssacc.estimators.measurements import window_acceleration
+from gnssacc.estimators.aids.gnss_accel import window_acceleration
 from gnssacc.estimators.mechanization import kernel_force_integrals
 from gnssacc.sources.sim import grade_config, simulate
 

@@ -16,7 +16,7 @@ from gnssacc.estimators.aids.accel_model import (
     paper_H_a_blocks,
     predicted_acceleration,
 )
-from gnssacc.estimators.measurements import position
+from gnssacc.estimators.aids.gnss_position import position
 
 
 @pytest.mark.parametrize("dt", [1.0, 0.2, 0.1])

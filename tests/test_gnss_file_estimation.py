@@ -117,7 +117,7 @@ def test_smoother_gnss_factors_use_the_full_covariance(tmp_path):
 
     from gnssacc.factors.gnss_error_factors import gnss_position_gm_factor
 
-    from gnssacc.estimators.smoother import residual_chi2
+    from gnssacc.estimators.aids.gnss_position import residual_chi2
 
     from gnssacc.prepare.passes import run_smoother
 
@@ -132,15 +132,9 @@ def test_smoother_gnss_factors_use_the_full_covariance(tmp_path):
     e = pose.translation() + pose.rotation().matrix() @ lever + g - p_fix
     assert f.error(values) == pytest.approx(0.5 * e @ np.linalg.solve(cov, e), rel=1e-9)
     R = pose.rotation().matrix()
-    rec = SimpleNamespace(
-        R=R[None],
-        p_n=np.array([pose.translation()]),
-        g=g[None],
-        cov_xg=np.zeros((1, 6, 3)),
-        cov_pose=np.zeros((1, 6, 6)),
-        cov_g=np.zeros((1, 3, 3)),
-    )
-    chi2, expected = residual_chi2(rec, np.array([0]), p_fix[None], cov[None], lever)
+    rec = SimpleNamespace(R=R[None], p_n=np.array([pose.translation()]), cov_pose=np.zeros((1, 6, 6)))
+    gm = (g[None], np.zeros((1, 3, 3)), np.zeros((1, 6, 3)))
+    chi2, expected = residual_chi2(rec, np.array([0]), p_fix[None], cov[None], lever, gm)
     assert chi2[0] == pytest.approx(e @ np.linalg.solve(cov, e)) and expected[0] == pytest.approx(
         3.0
     )

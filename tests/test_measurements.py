@@ -13,7 +13,7 @@ from gtsam.symbol_shorthand import G, X
 
 from gnssacc.core.earth import earth_rate_n, radii
 from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm
-from gnssacc.estimators import measurements as mm
+from gnssacc.estimators.aids import gnss_position, zupt
 from gnssacc.estimators.layout import GNSS_ERROR, MarkovBlock, StateLayout
 from gnssacc.estimators.mechanization import Propagator
 
@@ -51,16 +51,16 @@ def _check(dz, H, n, steps, atol):
 
 def test_zero_rate_jacobian_by_finite_differences():
     omega_mean = R_TRUE.T @ W_IE + B_TRUE  # what a still gyro reads
-    dz = lambda e: mm.zero_rate(_state(e), omega_mean, np.ones(3), W_IE).dz  # noqa: E731
-    H = mm.zero_rate(_state(np.zeros(15)), omega_mean, np.ones(3), W_IE).H
+    dz = lambda e: zupt.zero_rate(_state(e), omega_mean, np.ones(3), W_IE).dz  # noqa: E731
+    H = zupt.zero_rate(_state(np.zeros(15)), omega_mean, np.ones(3), W_IE).H
     _check(dz, H, 15, {**{j: 1e-4 for j in range(6, 9)}, **{j: 1e-6 for j in range(12, 15)}}, 1e-9)
     # Nothing else enters.
     assert np.all(H[:, 0:6] == 0) and np.all(H[:, 9:12] == 0)
 
 
 def test_zero_velocity_jacobian_by_finite_differences():
-    dz = lambda e: mm.zero_velocity(_state(e), 0.02).dz  # noqa: E731
-    H = mm.zero_velocity(_state(np.zeros(15)), 0.02).H
+    dz = lambda e: zupt.zero_velocity(_state(e), 0.02).dz  # noqa: E731
+    H = zupt.zero_velocity(_state(np.zeros(15)), 0.02).H
     _check(dz, H, 15, {j: 1e-3 for j in range(3, 6)}, 1e-12)
 
 
@@ -72,9 +72,9 @@ def test_position_jacobian_with_gauss_markov_states():
     fix = (LAT + ant[0] / (R_M + H), LON + ant[1] / ((R_N + H) * np.cos(LAT)), H - ant[2])
 
     def dz(e):
-        return mm.position(_state(e, 18, gm_true), *fix, np.ones(3), lever).dz
+        return gnss_position.position(_state(e, 18, gm_true), *fix, np.ones(3), lever).dz
 
-    H_ = mm.position(_state(np.zeros(18), 18, gm_true), *fix, np.ones(3), lever).H
+    H_ = gnss_position.position(_state(np.zeros(18), 18, gm_true), *fix, np.ones(3), lever).H
     _check(
         dz,
         H_,
@@ -94,7 +94,7 @@ def test_position_jacobian_has_no_velocity_or_bias_columns(n):
     """A fix sees position, attitude (through the lever arm) and the GNSS error only: H_p's
     velocity and bias columns are exactly zero (finite differences cannot show an exact zero)."""
     lever = np.array([0.8, -0.3, -1.1])
-    H_ = mm.position(_state(np.zeros(n), n), LAT, LON, H, np.ones(3), lever).H
+    H_ = gnss_position.position(_state(np.zeros(n), n), LAT, LON, H, np.ones(3), lever).H
     assert H_.shape == (3, n)
     assert np.all(H_[:, 3:6] == 0.0) and np.all(H_[:, 9:15] == 0.0)
     assert np.all(np.any(H_[:, 0:3] != 0.0, axis=0)) and np.all(np.any(H_[:, 6:9] != 0.0, axis=0))

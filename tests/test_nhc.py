@@ -16,8 +16,8 @@ from gtsam.symbol_shorthand import B, K, V, X
 from gnssacc.core.config import load_config
 from gnssacc.core.earth import earth_rate_n, radii
 from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm, skew
-from gnssacc.estimators import measurements as mm
-from gnssacc.estimators import nhc
+from gnssacc.estimators.aids import nhc, vehicle
+from gnssacc.estimators.aids import odometry as odo
 from gnssacc.estimators.state import FilterState
 from gnssacc.estimators.layout import ODOMETRY_SCALE, MarkovBlock, StateLayout
 
@@ -74,8 +74,8 @@ R_VB = euler_to_dcm(0.0, 0.012, -0.008)  # a small misalignment of the vehicle's
 @pytest.mark.parametrize("lever, R_vb", [(LEVER, None), (np.zeros(3), None), (LEVER, R_VB)])
 def test_nhc_jacobian_by_finite_differences(lever, R_vb):
     z = (_v_true(lever) if R_vb is None else R_vb @ _v_true(lever))[1:3]
-    dz = lambda e: mm.non_holonomic(_state(e), OMEGA, lever, W_IE, np.ones(2), R_vb).dz - z  # noqa: E731
-    m = mm.non_holonomic(_state(np.zeros(16)), OMEGA, lever, W_IE, np.array([0.1, 0.2]), R_vb)
+    dz = lambda e: nhc.non_holonomic(_state(e), OMEGA, lever, W_IE, np.ones(2), R_vb).dz - z  # noqa: E731
+    m = nhc.non_holonomic(_state(np.zeros(16)), OMEGA, lever, W_IE, np.array([0.1, 0.2]), R_vb)
     _check(dz, m.H, STEPS, 1e-7)
     assert m.kind == "nhc" and np.allclose(m.R, np.diag([0.01, 0.04]))
     assert np.all(m.H[:, 0:3] == 0) and np.all(m.H[:, 9:12] == 0) and np.all(m.H[:, 15] == 0)
@@ -88,8 +88,8 @@ def test_nhc_jacobian_by_finite_differences(lever, R_vb):
 def test_odometry_jacobian_by_finite_differences(lever, R_vb):
     v_x = (_v_true(lever) if R_vb is None else R_vb @ _v_true(lever))[0]
     v_odo = (1 + K_TRUE) * v_x  # what a noise-free odometry reads
-    dz = lambda e: mm.odometry(_state(e), v_odo, 0.1, OMEGA, lever, W_IE, R_vb).dz  # noqa: E731
-    m = mm.odometry(_state(np.zeros(16)), v_odo, 0.1, OMEGA, lever, W_IE, R_vb)
+    dz = lambda e: odo.odometry(_state(e), v_odo, 0.1, OMEGA, lever, W_IE, R_vb).dz  # noqa: E731
+    m = odo.odometry(_state(np.zeros(16)), v_odo, 0.1, OMEGA, lever, W_IE, R_vb)
     _check(dz, m.H, STEPS, 1e-7)
     assert m.H[0, 15] == pytest.approx(v_x)  # the scale column is the speed itself
 
@@ -156,7 +156,7 @@ def test_factor_jacobians_are_the_ekf_ones_through_the_conventions():
     """xi = R^T phi (right perturbation vs the EKF's left one), db = -db_EKF."""
     R = POSE.rotation().matrix()
     s = FilterState(np.array([LAT, LON, H]), V_TRUE, R, np.zeros(3), BIAS.gyroscope(), np.eye(15))
-    v_ekf, H_ekf = mm.vehicle_velocity(s, OMEGA, LEVER, W_IE)
+    v_ekf, H_ekf = vehicle.vehicle_velocity(s, OMEGA, LEVER, W_IE)
     v_f, J_pose, J_vel, J_bias = vehicle_velocity(
         POSE, V_TRUE, BIAS.gyroscope(), OMEGA, LEVER, W_IE
     )
@@ -245,7 +245,7 @@ def test_never_at_rest_or_on_the_spot_on_a_skid_steer_run(ugv_run):
 
 
 def test_smoother_attaches_one_epoch_per_node():
-    from gnssacc.estimators.smoother_aids import nearest_nodes
+    from gnssacc.estimators.aids.base import nearest_nodes
 
     times = np.array([0.0, 0.1, 0.2, 0.3, 1.0, 1.5, 2.0, 3.9, 5.0])
     # Epoch 1.0 -> node 4; 2.0 -> node 6; 3.0 has none within 0.5 s; 4.0 -> node 7; 5.0 -> node 8.

@@ -379,7 +379,7 @@ def _binomial_sf(k: int, n: int, p: float) -> float:
 
 def test_heavy_tail_check_against_its_closed_form():
     from gnssacc.analysis.consistency import TAIL_ALARM, heavy_tails
-    from gnssacc.estimators.measurements import TAIL_P, tail_bound
+    from gnssacc.estimators.aids import TAIL_P, tail_bound
 
     assert tail_bound(3) == pytest.approx(16.2662, abs=1e-3)  # chi-square table, 3 dof, 0.1 %
     for n in (50, 579, 5000):

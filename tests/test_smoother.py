@@ -12,7 +12,7 @@ from gnssacc.core.config import load_config
 from gnssacc.core.rotations import euler_to_dcm
 from gnssacc.prepare.passes import run_ekf
 from gnssacc.estimators.aids.accel_model import H_a_blocks, paper_H_a_blocks
-from gnssacc.estimators.smoother import MIN_NODE_DT, node_times
+from gnssacc.estimators.smoother_graph import MIN_NODE_DT, node_times
 from gnssacc.prepare.passes import run_smoother
 from gnssacc.pipeline import with_outages
 from gnssacc.sources.sim import grade_config, simulate
@@ -80,11 +80,11 @@ def test_preintegration_reproduces_a_perfect_imu_in_turns():
     leaves out (earth curvature v^2 / R ~ 2e-5 m/s^2)."""
     from gnssacc.core.earth import earth_rate_n, normal_gravity
     from gnssacc.estimators.settings import SmootherSettings
-    from gnssacc.estimators.smoother import _ImuModel, _preintegrate
+    from gnssacc.estimators.smoother_graph import ImuModel, preintegrate
 
     run = simulate("turns", 40.0, imu_grade="perfect", noise="none", seed=0, truth_rate_hz=100.0)
     tr, imu, o = run.truth, run.imu, run.origin
-    model = _ImuModel(
+    model = ImuModel(
         SmootherSettings.from_config(load_config()),
         normal_gravity(o.lat0, o.h0),
         earth_rate_n(o.lat0),
@@ -95,7 +95,7 @@ def test_preintegration_reproduces_a_perfect_imu_in_turns():
         i0, i1 = (int(np.argmin(np.abs(tr.t - t))) for t in (t0, t0 + 1.0))
         j0 = int(np.searchsorted(imu.t, t0, side="right"))
         k1 = int(np.searchsorted(imu.t, t0 + 1.0, side="left")) + 1
-        pim = _preintegrate(imu, model, bias, t0, t0 + 1.0, j0, k1, (None, None), dt_all)
+        pim = preintegrate(imu, model, bias, t0, t0 + 1.0, j0, k1, (None, None), dt_all)
         start = gtsam.NavState(
             gtsam.Pose3(
                 gtsam.Rot3(euler_to_dcm(*tr.rpy[i0])), o.to_ned(tr.lat[i0], tr.lon[i0], tr.h[i0])
@@ -169,13 +169,13 @@ def test_ill_posed_updates_are_recovered_and_counted():
 def test_injected_failure_mid_run_is_recovered(monkeypatch, method, dropped):
     """Two ill-posed updates are recovered by a restart; a restart keeps nodes i-1 and i only, so
     ``smoother-accw`` drops (and counts) its window factor on node i-2 each time."""
-    import gnssacc.estimators.smoother as S
+    import gnssacc.estimators.smoother_graph as S
 
     cfg = load_config(overrides={"imu": grade_config("industrial")})
     run = simulate("car", duration_s=90.0, imu_grade="industrial", noise="white", seed=2)
     ref = run_smoother(run, cfg, method)[method]
     calls = {"n": 0}
-    real_update = S._Smoother.update
+    real_update = S.WindowSmoother.update
 
     def flaky(self, graph, values, stamps):
         calls["n"] += 1
@@ -183,7 +183,7 @@ def test_injected_failure_mid_run_is_recovered(monkeypatch, method, dropped):
             raise RuntimeError("Indeterminant linear system detected while working near variable x")
         return real_update(self, graph, values, stamps)
 
-    monkeypatch.setattr(S._Smoother, "update", flaky)
+    monkeypatch.setattr(S.WindowSmoother, "update", flaky)
     sol = run_smoother(run, cfg, method)[method]
     assert sol.stats["n_ill_posed_recovered"] == 2
     assert sol.stats.get("n_factors_dropped_at_restart", 0) == dropped

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import gnssacc.estimators.smoother as S
+import gnssacc.estimators.smoother_graph as G
 import gnssacc.estimators.window_marginals as W
 from gnssacc.core.config import load_config
 from gnssacc.pipeline import with_outages
@@ -75,7 +76,7 @@ def test_recorded_covariances_equal_full_marginals(monkeypatch, method, override
         stats["fast"] += len(nodes)
         return out
 
-    orig = S._Smoother.covariances
+    orig = G.WindowSmoother.covariances
 
     def checked(self, nodes):
         covs = orig(self, nodes)
@@ -91,7 +92,7 @@ def test_recorded_covariances_equal_full_marginals(monkeypatch, method, override
         return covs
 
     monkeypatch.setattr(W.WindowMarginals, "covariances", counted)
-    monkeypatch.setattr(S._Smoother, "covariances", checked)
+    monkeypatch.setattr(G.WindowSmoother, "covariances", checked)
     sols = S.run_smoother(run, cfg, method)
     n = sols[method].stats["n_nodes"]
     # Every node: online and fixed-lag; the last node is both at the end (one query).

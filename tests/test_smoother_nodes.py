@@ -17,7 +17,8 @@ from gnssacc.core.config import load_config
 from gnssacc.core.earth import earth_rate_n, normal_gravity
 from gnssacc.core.rotations import euler_to_dcm
 from gnssacc.estimators.settings import SmootherSettings
-from gnssacc.estimators.smoother import estimate, node_fixes
+from gnssacc.estimators.aids.gnss_position import node_fixes
+from gnssacc.estimators.smoother import estimate
 from gnssacc.sources.sim import simulate
 
 LEVER = np.array([0.8, -0.3, -1.2])
