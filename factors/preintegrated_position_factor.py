@@ -101,7 +101,7 @@ def preintegrated_position_factor(
         return e + bridge[0] * values.atVector(keys[3]) + bridge[1] * values.atVector(keys[4])
 
     J_p = np.hstack([-R_f @ L, R_f])
-    cov = np.asarray(cov_fix, float) + J_p @ np.asarray(pim.preintMeasCov())[0:6, 0:6] @ J_p.T
+    cov = np.asarray(cov_fix, float) + J_p @ np.asarray(pim.preintMeasCov())[NAVSTATE_POSE, NAVSTATE_POSE] @ J_p.T
     if bridge is not None:
         J_gi, J_gj = np.diag(bridge[0]), np.diag(bridge[1])
         cov = cov + np.diag(bridge[2])

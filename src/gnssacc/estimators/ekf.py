@@ -92,7 +92,7 @@ def make_setup(
     init: InitialState,
     quality: QualityReport,
     stationary=None,
-    accel_form: str | None = None,
+    variant: str | None = None,
     observed: bool = False,
     cov_every: int = 1,
 ) -> EkfSetup:
@@ -100,7 +100,7 @@ def make_setup(
     initial covariance, and the IMU propagator with the noise and the inflation of suspect spans
     (``stationary``: a :class:`gnssacc.prepare.stationary.StationaryReport` or ``None``)."""
     segments = inflation_segments(run.imu, quality, settings.suspect)
-    ctx = EkfContext(run, settings, init, stationary, accel_form, observed, segments)
+    ctx = EkfContext(run, settings, init, stationary, variant, observed, segments)
     aids = ekf_aids(ctx)
     layout = StateLayout.build(b for a in aids for b in a.states)
     imu = settings.imu

@@ -37,6 +37,10 @@ def topic_of(method: str) -> str:
     return f"/gnssacc/{method.replace('-', '_')}/odom"
 
 
+#: The linear velocity's block of a ROS twist covariance (linear, then angular).
+LINEAR = slice(0, 3)
+
+
 def _covariances(R_enu_flu: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pose and twist covariances (6x6) of one epoch from the solution's 15 sigmas."""
     pose = np.zeros((6, 6))
@@ -44,7 +48,7 @@ def _covariances(R_enu_flu: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, 
     pose[[3, 4, 5], [3, 4, 5]] = sigma[ATT] ** 2  # roll, pitch, yaw
     twist = np.diag([0.0, 0.0, 0.0, -1.0, -1.0, -1.0])
     c_enu = ENU_NED @ np.diag(sigma[VEL] ** 2) @ ENU_NED.T
-    twist[:3, :3] = R_enu_flu.T @ c_enu @ R_enu_flu
+    twist[LINEAR, LINEAR] = R_enu_flu.T @ c_enu @ R_enu_flu
     return pose, twist
 
 

@@ -41,21 +41,33 @@ REGISTRY: tuple[AidSpec, ...] = (
 )
 #: Update kinds, in the order they are reported.
 KINDS = tuple(k for spec in REGISTRY for k in spec.kinds)
-#: Method ids of each estimator and the acceleration form each applies (``None``: none;
-#: :data:`gnssacc.estimators.aids.gnss_accel.FORMS`).
+#: Method ids of each estimator and the variant of the aids each runs: the acceleration form it
+#: applies (``None``: none; :data:`gnssacc.estimators.aids.gnss_accel.FORMS`).
 EKF_METHODS = {"ekf": None} | {f"ekf-{s}": f for s, f in gnss_accel.FORMS.items()}
 SMOOTHER_METHODS = {"smoother": None} | {f"smoother-{s}": f for s, f in gnss_accel.FORMS.items()}
 
 
 def ekf_aids(ctx: EkfContext) -> list[EkfAid]:
-    """The aids of an EKF pass (those the run and the settings have)."""
-    return [a for a in (spec.ekf(ctx) for spec in REGISTRY) if a is not None]
+    """The aids of an EKF pass (those the run and the settings have), named by their spec."""
+    out = []
+    for spec in REGISTRY:
+        aid = spec.ekf(ctx)
+        if aid is not None:
+            aid.name = spec.name
+            out.append(aid)
+    return out
 
 
 def smoother_aids(ctx: SmootherContext) -> list[SmootherAid]:
-    """The aids of a smoother run, in the order their factors are added at a node."""
-    aids = [a for a in (spec.smoother(ctx) for spec in REGISTRY) if a is not None]
-    return sorted(aids, key=lambda a: a.order)
+    """The aids of a smoother run, named by their spec, in the order their factors are added at
+    a node."""
+    out = []
+    for spec in REGISTRY:
+        aid = spec.smoother(ctx)
+        if aid is not None:
+            aid.name = spec.name
+            out.append(aid)
+    return sorted(out, key=lambda a: a.order)
 
 
 def ekf_counts() -> dict:

@@ -88,6 +88,8 @@ class EkfAid:
 
     Attributes
     ----------
+    name : str
+        Its spec's name (set by :func:`gnssacc.estimators.aids.ekf_aids`).
     order : int
         Its place among the events at equal times (lower first; the outputs come last).
     epoch : str
@@ -99,6 +101,7 @@ class EkfAid:
         The states it adds to the filter.
     """
 
+    name: str = ""
     order: int = 0
     epoch: str = ""
     t: np.ndarray = np.zeros(0)
@@ -174,6 +177,8 @@ class SmootherAid:
 
     Attributes
     ----------
+    name : str
+        Its spec's name (set by :func:`gnssacc.estimators.aids.smoother_aids`).
     order : int
         The order its factors are added at a node (lower first).
     states : tuple of MarkovBlock
@@ -182,6 +187,7 @@ class SmootherAid:
         How many nodes apart its factors reach (1: consecutive nodes at most).
     """
 
+    name: str = ""
     order: int = 0
     states: tuple[MarkovBlock, ...] = ()
     bandwidth: int = 1
@@ -266,15 +272,16 @@ class AidSpec:
 @dataclass
 class EkfContext:
     """What an EKF aid is built from: the run (fixes as read), the filter's settings, the start,
-    the stationary spans (or ``None``), the acceleration form the method applies (``None``:
-    none), whether an observer watches (then the forms not applied are evaluated for it), and the
-    inflation segments of the suspect IMU spans."""
+    the stationary spans (or ``None``), the method's variant of the aids (the acceleration form
+    it applies, :data:`gnssacc.estimators.aids.EKF_METHODS`; ``None``: none), whether an
+    observer watches (then a form not applied is evaluated for it), and the inflation segments
+    of the suspect IMU spans."""
 
     run: Any
     settings: Any
     init: Any
     stationary: Any
-    accel_form: str | None
+    variant: str | None
     observed: bool
     segments: Any
 
@@ -286,12 +293,13 @@ class EkfContext:
 @dataclass
 class SmootherContext:
     """What a smoother aid is built from: the run (fixes as read), the smoother's settings, the
-    start, the stationary spans (or ``None``), the acceleration form (``None``: none) and the
-    run's ``stats`` (an aid adds its counters to them)."""
+    start, the stationary spans (or ``None``), the method's variant of the aids (the acceleration
+    form, :data:`gnssacc.estimators.aids.SMOOTHER_METHODS`; ``None``: none) and the run's
+    ``stats`` (an aid adds its counters to them)."""
 
     run: Any
     settings: Any
     init: Any
     stationary: Any
-    accel_form: str | None
+    variant: str | None
     stats: dict

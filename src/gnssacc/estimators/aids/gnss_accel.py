@@ -95,8 +95,8 @@ class EkfAccel(EkfAid):
         self.t, self.sigma = fixes.t, fixes.sigma_ned
         self.p_fix = run.origin.to_ned(fixes.lat, fixes.lon, fixes.h)
         self.window = AccelWindow(acc.window, acc.max_gap_s, acc.sigma_override)
-        self.apply = ctx.accel_form is not None
-        self.form = ctx.accel_form or "paper"
+        self.apply = ctx.variant is not None
+        self.form = ctx.variant or "paper"
         self.imu, self.f_avg_s, self.segments = run.imu, acc.specific_force_avg_s, ctx.segments
         self.current = None  # the window's acceleration at the last fix seen
 
@@ -143,7 +143,7 @@ class EkfAccel(EkfAid):
 
 def _ekf(ctx) -> EkfAccel | None:
     """The aid when the method applies a form, or an observer watches (the paper's, evaluated)."""
-    return EkfAccel(ctx) if ctx.accel_form is not None or ctx.observed else None
+    return EkfAccel(ctx) if ctx.variant is not None or ctx.observed else None
 
 
 def bandwidth(settings) -> int:
@@ -162,7 +162,7 @@ class SmootherAccel(SmootherAid):
 
     def __init__(self, ctx):
         run, settings = ctx.run, ctx.settings
-        self.stats, self.form, self.imu = ctx.stats, ctx.accel_form, run.imu
+        self.stats, self.form, self.imu = ctx.stats, ctx.variant, run.imu
         self.fixes = settings.gnss.fixes(run.gnss)
         self.p_fix = run.origin.to_ned(self.fixes.lat, self.fixes.lon, self.fixes.h)
         self.fix_at = {float(t): i for i, t in enumerate(self.fixes.t)}
@@ -259,7 +259,7 @@ class SmootherAccel(SmootherAid):
 
 
 def _smoother(ctx) -> SmootherAccel | None:
-    return SmootherAccel(ctx) if ctx.accel_form is not None else None
+    return SmootherAccel(ctx) if ctx.variant is not None else None
 
 
 AID = AidSpec(
