@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from gnssacc.core.units import DEG
 from gnssacc.prepare.allan import (
     allan_deviation,
     allan_deviation_pooled,
@@ -20,7 +21,6 @@ from gnssacc.prepare.allan import (
     white_noise_density,
 )
 
-DEG = np.pi / 180.0
 
 
 def _white(n, dt, N, rng):

@@ -12,8 +12,8 @@ import pytest
 
 from gnssacc.core.errors import InputError
 from gnssacc.sources import sim
+from gnssacc.core.units import DEG
 
-DEG = np.pi / 180.0
 
 
 def _spans(mask: np.ndarray, t: np.ndarray) -> list[tuple[float, float]]:

@@ -10,6 +10,7 @@ import numpy as np
 from ..core.recording import RecordedRun
 from ..core.rotations import wrap_angle
 from ..core.solution import NavSolution
+from ..core.units import DEG_H, MG
 from ..core.states import ATT, BA, BG, MOTION, N_NAV, POS, TILT, VEL, YAW
 from ..sources.gnss_noise import in_spans
 
@@ -162,8 +163,6 @@ TRUTH_FIGURES = (
     "nees_pos",
     "nees_att",
 )
-_MG = 9.80665e-3  # m/s^2 per milli-g
-_DEG_H = np.pi / 180.0 / 3600.0  # rad/s per deg/h
 
 
 def truth_figures(run: RecordedRun, sol: NavSolution, window: tuple | None = None) -> dict:
@@ -191,8 +190,8 @@ def truth_figures(run: RecordedRun, sol: NavSolution, window: tuple | None = Non
     return {
         "tilt_rms_deg": _rms_rows(err[:, TILT], deg),
         "yaw_rms_deg": _rms_rows(err[:, YAW], deg),
-        "bias_a_rms_mg": _rms_rows(err[:, BA], 1.0 / _MG),
-        "bias_g_rms_deg_h": _rms_rows(err[:, BG], 1.0 / _DEG_H),
+        "bias_a_rms_mg": _rms_rows(err[:, BA], 1.0 / MG),
+        "bias_g_rms_deg_h": _rms_rows(err[:, BG], 1.0 / DEG_H),
         "nees_pos": _nees(err[:, POS], sig[:, POS]),
         "nees_att": _nees(err[:, ATT], sig[:, ATT]),
     }

@@ -25,9 +25,8 @@ from .config_check import check_value, show
 from .errors import InputError
 from .rotations import euler_to_dcm
 from .stationary_params import StationaryParams
+from .units import DEG, G0  # noqa: F401 (re-exported: the configuration's units)
 
-G0 = 9.80665  # standard gravity, for milli-g [m/s^2]
-DEG = np.pi / 180.0
 
 #: Built-in defaults. Comments double as the documentation of each key.
 DEFAULTS: dict[str, dict] = {

@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from .states import ATT, BA, BG, BIASES, POS, VEL
+from .units import G0
 
-G0 = 9.80665  # standard gravity [m/s^2], for milli-g
 RAD2DEG = 180.0 / np.pi
 RPS2DPH = RAD2DEG * 3600.0  # rad/s -> deg/h
 MPS2_TO_MG = 1e3 / G0  # m/s^2 -> milli-g

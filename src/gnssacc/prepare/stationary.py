@@ -72,6 +72,7 @@ from ..core.stationary_params import (  # noqa: F401 (this stage's API)
     StationaryParams,
     params_from_config,
 )
+from ..core.units import DEG
 from .allan import (
     allan_deviation_pooled,
     fit_noise_terms,
@@ -79,7 +80,6 @@ from .allan import (
     remove_spectral_lines,
 )
 
-DEG = np.pi / 180.0
 CHANNELS = ("ax", "ay", "az", "gx", "gy", "gz")
 ACCEL_CHANNELS, GYRO_CHANNELS = slice(0, 3), slice(3, 6)
 #: Gravity for error budgets only [m/s^2] (2 % accuracy is plenty there).
