@@ -35,9 +35,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-ALL_METHODS = (
-    "ekf,ekf-acc,ekf-accw,smoother,smoother-acc,smoother-accw,ekf-gm,smoother-gm"
-)
+ALL_METHODS = "ekf,ekf-acc,ekf-accw,smoother,smoother-acc,smoother-accw,ekf-gm,smoother-gm"
 #: metrics.json keys that are wall-clock measurements (compared for presence only).
 TIMING_KEYS = {"runtime_s", "realtime_factor", "jit_compile_s", "identify_s", "seconds"}
 #: Table columns that are wall-clock measurements.

@@ -22,7 +22,6 @@ from gnssacc.prepare.allan import (
 )
 
 
-
 def _white(n, dt, N, rng):
     """White rate noise of density N [unit/sqrt(Hz)]: per-sample sigma N / sqrt(dt)."""
     return rng.standard_normal(n) * N / np.sqrt(dt)

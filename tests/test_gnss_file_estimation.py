@@ -132,7 +132,9 @@ def test_smoother_gnss_factors_use_the_full_covariance(tmp_path):
     e = pose.translation() + pose.rotation().matrix() @ lever + g - p_fix
     assert f.error(values) == pytest.approx(0.5 * e @ np.linalg.solve(cov, e), rel=1e-9)
     R = pose.rotation().matrix()
-    rec = SimpleNamespace(R=R[None], p_n=np.array([pose.translation()]), cov_pose=np.zeros((1, 6, 6)))
+    rec = SimpleNamespace(
+        R=R[None], p_n=np.array([pose.translation()]), cov_pose=np.zeros((1, 6, 6))
+    )
     gm = (g[None], np.zeros((1, 3, 3)), np.zeros((1, 6, 3)))
     chi2, expected = residual_chi2(rec, np.array([0]), p_fix[None], cov[None], lever, gm)
     assert chi2[0] == pytest.approx(e @ np.linalg.solve(cov, e)) and expected[0] == pytest.approx(

@@ -236,7 +236,9 @@ def aid_names_in(source: str, vocabulary: set[str], allowed: set[str]) -> list[s
             names = [node.module or ""]
         elif isinstance(node, ast.keyword):
             names = [node.arg or ""]
-        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docs:
+        elif (
+            isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docs
+        ):
             names = [node.value]
         words = vocabulary | (KIND_WORDS if isinstance(node, ast.Constant) else set())
         for name in names:
@@ -272,7 +274,10 @@ def literal_state_indices(source: str) -> list[str]:
             if not isinstance(part, ast.Slice) or part.step is not None:
                 continue
             lo, hi = part.lower, part.upper
-            if not all(b is None or (isinstance(b, ast.Constant) and type(b.value) is int) for b in (lo, hi)):
+            if not all(
+                b is None or (isinstance(b, ast.Constant) and type(b.value) is int)
+                for b in (lo, hi)
+            ):
                 continue
             a = 0 if lo is None else lo.value
             b = None if hi is None else hi.value
@@ -317,7 +322,9 @@ def test_the_checks_catch_what_they_are_for():
     assert aid_names_in("def f(s):\n    return s.nhc_epochs\n", vocabulary, set())
     assert aid_names_in("x = stats['n_acc_updates']\n", vocabulary, set())
     assert aid_names_in("from .aids.zupt import EkfZupt\n", vocabulary, set())
-    assert not aid_names_in('def f(s):\n    """GNSS and odometry."""\n    return s.P\n', vocabulary, set())
+    assert not aid_names_in(
+        'def f(s):\n    """GNSS and odometry."""\n    return s.P\n', vocabulary, set()
+    )
     assert not aid_names_in("x = GNSS_ERROR\n", vocabulary, {"GNSS_ERROR"})
     assert literal_state_indices("H[:, 6:9] = d\n") and literal_state_indices("v = P[:15, :15]\n")
     assert literal_state_indices("g = x[15:]\n")

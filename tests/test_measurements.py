@@ -36,7 +36,9 @@ def _state(err: np.ndarray, n: int = 15, gm_true=np.zeros(3)):
         b_g=B_TRUE - err[12:15],
         gm=gm,
         P=np.eye(n),
-        layout=StateLayout.build([MarkovBlock(GNSS_ERROR, np.ones(3), np.ones(3))] if n > 15 else []),
+        layout=StateLayout.build(
+            [MarkovBlock(GNSS_ERROR, np.ones(3), np.ones(3))] if n > 15 else []
+        ),
     )
 
 

@@ -15,7 +15,6 @@ from gnssacc.sources import sim
 from gnssacc.core.units import DEG
 
 
-
 def _spans(mask: np.ndarray, t: np.ndarray) -> list[tuple[float, float]]:
     """(first, last) times of each run of True in ``mask``."""
     edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))

@@ -348,6 +348,7 @@ def _base_graph(m: FgChain, stacked: bool) -> gtsam.GaussianFactorGraph:
         for k in range(m.n - 1):
             g.add(gtsam.JacobianFactor(k, -Wq @ m.F, k + 1, Wq, np.zeros(3), unit))
         return g
+
     def epoch(k: int) -> slice:  # the stacked state's block of epoch k
         return slice(3 * k, 3 * k + 3)
 

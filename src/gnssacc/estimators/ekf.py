@@ -125,7 +125,7 @@ def _events(aids: list[EkfAid], out_t: np.ndarray):
     """Event times, sources (index into ``aids``; ``len(aids)``: an output) and indices in time
     order. At equal times: by epoch kind (in the order of its first aid), then by index (the
     aids of one kind interleave epoch by epoch), then by aid; the outputs last."""
-    first = {}
+    first: dict[str, int] = {}
     for a in sorted(aids, key=lambda a: a.order):
         first.setdefault(a.epoch, a.order)
     times = [a.t for a in aids] + [out_t]

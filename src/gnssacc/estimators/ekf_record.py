@@ -3,6 +3,8 @@ update kind (:class:`Tally`)."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from ..core.rotations import dcm_to_euler, euler_error_jacobian
@@ -68,7 +70,7 @@ class Tally:
 
     def __init__(self, keep: bool):
         self.keep = keep
-        self.prev = {k: None for k in KINDS}
+        self.prev: dict[str, np.ndarray | None] = {k: None for k in KINDS}
         self.lag1 = {k: np.zeros(2) for k in KINDS}  # sum w_k w_(k-1), sum w_k^2
         self.n = {k: 0 for k in KINDS}
         self.rejected = {k: 0 for k in KINDS}
@@ -76,11 +78,10 @@ class Tally:
         self.dof = {k: 0 for k in KINDS}
         self.loglik = {k: 0.0 for k in KINDS}
         self.beyond = {k: 0 for k in KINDS}  # NIS beyond the chi-square tail bound
-        self.series = {k: ([], [], []) for k in KINDS}  # t, NIS per dof, log-likelihood
+        # t, NIS per dof, log-likelihood
+        self.series: dict[str, tuple[list, list, list]] = {k: ([], [], []) for k in KINDS}
 
-    def add(
-        self, t: float, m: Measurement, nis: float, loglik: float, used: bool, wz
-    ) -> None:
+    def add(self, t: float, m: Measurement, nis: float, loglik: float, used: bool, wz) -> None:
         k = m.kind
         if not used:
             self.rejected[k] += 1
@@ -98,7 +99,7 @@ class Tally:
                 lst.append(v)
 
     def stats(self) -> dict:
-        out = {}
+        out: dict[str, Any] = {}
         for k in KINDS:
             out[f"n_{k}_updates"] = self.n[k]
             out[f"n_{k}_rejected"] = self.rejected[k]

@@ -66,7 +66,7 @@ class FixedLagISAM2:
         self._threshold = float(relinearize_threshold)
         self._count = 0  # updates so far (iSAM2's own count)
         self._nodes: deque = deque()  # (t, [keys]) per node, oldest first
-        self._result = None
+        self._result: gtsam.ISAM2Result | None = None
         self._unordered = False  # the last update may have broken the time order
         self.unordered_updates = 0  # how often (diagnostics)
 

@@ -217,6 +217,7 @@ class BackgroundWarmUp:
         self._done.wait()
         if self.error is not None:
             raise self.error
+        assert self.seconds is not None  # set before the event
         return float(self.seconds)
 
 

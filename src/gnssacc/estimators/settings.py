@@ -178,7 +178,7 @@ class NhcSettings:
     sigma_mps: np.ndarray
     lever_arm_b: np.ndarray
     pivot_offset_m: float
-    R_vb: np.ndarray
+    R_vb: np.ndarray | None
 
     @classmethod
     def from_config(cls, cfg: RunConfig) -> "NhcSettings":

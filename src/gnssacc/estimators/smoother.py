@@ -30,6 +30,7 @@ is counted in ``stats``.
 from __future__ import annotations
 
 import time
+from functools import partial
 
 import gtsam
 import numpy as np
@@ -220,7 +221,9 @@ class _Loop:
         values.insert(v, est.v_n)
         values.insert(b, est.bias)
         for c, _, blk in self.layout.markov_blocks():
-            self._markov_prior(graph, values, c, i, blk, est.markov[blk.name], rec.cov_markov[blk.name][p])
+            self._markov_prior(
+                graph, values, c, i, blk, est.markov[blk.name], rec.cov_markov[blk.name][p]
+            )
         return graph, values
 
     @staticmethod
@@ -233,10 +236,14 @@ class _Loop:
             var = float(cov[0, 0]) if cov is not None and cov[0, 0] > 0 else None
             var = var if var is not None else float(blk.sigma[0]) ** 2
             value = np.array([float(np.asarray(value).ravel()[0])])
-            noise = gtsam.noiseModel.Isotropic.Sigma(1, np.sqrt(var))
+            graph.add(
+                gtsam.PriorFactorVector(
+                    key, value, gtsam.noiseModel.Isotropic.Sigma(1, np.sqrt(var))
+                )
+            )
         else:
             noise = gtsam.noiseModel.Gaussian.Covariance(cov + 1e-12 * np.eye(blk.dim))
-        graph.add(gtsam.PriorFactorVector(key, value, noise))
+            graph.add(gtsam.PriorFactorVector(key, value, noise))
         values.insert(key, value)
 
     def _start(self, init):
@@ -249,7 +256,7 @@ class _Loop:
             gtsam.imuBias.ConstantBias(np.asarray(init.b_a, float), np.asarray(init.b_g, float)),
             markov,
         )
-        gm = self.layout.gm  # the GNSS error starts tied to the pose: in the joint prior
+        # The GNSS error starts tied to the pose: in the joint prior.
         joint = StateLayout.build(b for b in self.layout.markov if b.name == GNSS_ERROR)
         cov, c_vel = initial_prior(init, self.settings, joint)
         x, v, b, g = (gtsam.symbol(c, 0) for c in (SYM_X, SYM_V, SYM_B, SYM_G))
@@ -258,16 +265,15 @@ class _Loop:
         g0 = markov.get(GNSS_ERROR)
         graph.add(
             joint_prior_factor(
-                x, b, g if gm else None, prev.pose, prev.bias.vector(), g0 if gm else None, cov
+                x, b, g if g0 is not None else None, prev.pose, prev.bias.vector(), g0, cov
             )
         )
-        graph.add(
-            gtsam.PriorFactorVector(v, prev.v_n, gtsam.noiseModel.Gaussian.Covariance(c_vel))
-        )
-        for key, value in ((x, prev.pose), (v, prev.v_n), (b, prev.bias)) + (
-            ((g, g0),) if gm else ()
-        ):
-            values.insert(key, value)
+        graph.add(gtsam.PriorFactorVector(v, prev.v_n, gtsam.noiseModel.Gaussian.Covariance(c_vel)))
+        values.insert(x, prev.pose)
+        values.insert(v, prev.v_n)
+        values.insert(b, prev.bias)
+        if g0 is not None:
+            values.insert(g, g0)
         for c, _, blk in self.layout.markov_blocks():
             if blk.name != GNSS_ERROR:
                 self._markov_prior(graph, values, c, 0, blk, markov[blk.name], None)
@@ -357,7 +363,7 @@ class _Loop:
                 prev.bias,
                 prev.markov,
                 False,
-                lambda i=i, pim=pim: self._predicted_velocity_cov(i, pim),
+                partial(self._predicted_velocity_cov, i, pim),
             )
             self._node_factors(graph, i, t, pred)
             try:

@@ -375,7 +375,9 @@ def mid_interval_force(f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray) -> 
     return Rotation.from_rotvec(0.5 * omega_b * dt[:, None]).apply(f_b)
 
 
-def touches(first: np.ndarray, last: np.ndarray, seg_i0: np.ndarray, seg_i1: np.ndarray) -> np.ndarray:
+def touches(
+    first: np.ndarray, last: np.ndarray, seg_i0: np.ndarray, seg_i1: np.ndarray
+) -> np.ndarray:
     """Per node interval, whether samples ``[first[i-1], last[i])`` overlap a suspect segment
     (segments sorted and disjoint, :func:`gnssacc.checks.quality.inflation_segments`)."""
     out = np.zeros(len(first), bool)

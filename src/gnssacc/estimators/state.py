@@ -102,9 +102,7 @@ class FilterState:
         return float(k[0]) if len(k) else 0.0
 
 
-def initial_state(
-    init: InitialState, settings, layout: StateLayout | None = None
-) -> FilterState:
+def initial_state(init: InitialState, settings, layout: StateLayout | None = None) -> FilterState:
     """The filter state at ``init.t``: the initial state, its sigmas and the bias priors
     (``settings``: either estimator's settings, :mod:`gnssacc.estimators.settings`), and the
     Gauss-Markov states of ``layout`` at zero with their stationary sigmas (default: none)."""

@@ -41,7 +41,7 @@ numba, which also keeps these small dense operations off the BLAS thread pool.
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import njit
@@ -413,7 +413,7 @@ class WindowMarginals:
 
     def clear(self) -> None:
         """Forget the system (the next :meth:`sync` rebuilds it)."""
-        self.first = None  # node index of the oldest node held
+        self.first: Any = None  # node index of the oldest node held (int; None: nothing held)
         self.n = 0  # nodes held
         self.start = 0  # storage row of the oldest node
         self.f_valid = -1  # storage rows <= this have a valid forward sweep F

@@ -163,9 +163,7 @@ def prepare(
             run, cfg, stationary, quality, init, bank, noise, filter_pass
         )
         secs["tuning_s"] = time.perf_counter() - t
-    prep = Prepared(
-        run, cfg, quality, stationary, init, noise, result, bank, tuple(checks), secs
-    )
+    prep = Prepared(run, cfg, quality, stationary, init, noise, result, bank, tuple(checks), secs)
     if gauss_markov:
         from .gauss_markov import gm_setup
 

@@ -923,7 +923,10 @@ def tune_gauss_markov(
     fixes = GnssModel.from_config(cfg).fixes(run.gnss)  # the fixes' noise under cfg
     # A free scale is searched relative to that noise: on the fixes with it, from 1.
     searched, base = (
-        (run.with_gnss(fixes), cfg.with_values({"gnss": {"sigma_scale": 1.0}}, "sigma scale of the run"))
+        (
+            run.with_gnss(fixes),
+            cfg.with_values({"gnss": {"sigma_scale": 1.0}}, "sigma scale of the run"),
+        )
         if free_scale
         else (run, cfg)
     )

@@ -340,6 +340,7 @@ def model_errors(
             run.imu.f_b[k0:k1], run.imu.omega_ib_b[k0:k1], h, w, z3, z3
         )
         f = measured_specific_force(run.imu, g.t[j], 0.0, no, no)
+        assert f is not None  # no suspect segments given
         rows.append(
             (
                 g.t[j],

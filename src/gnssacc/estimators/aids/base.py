@@ -115,9 +115,7 @@ class EkfAid:
         """Its measurements at epoch ``j`` linearised at ``s``, whatever its decision rule."""
         raise NotImplementedError
 
-    def updates(
-        self, s: "FilterState", j: int, stats: dict
-    ) -> Iterator[tuple[Measurement, bool]]:
+    def updates(self, s: "FilterState", j: int, stats: dict) -> Iterator[tuple[Measurement, bool]]:
         """Its updates at epoch ``j``, each built at the state the previous one left, with whether
         it is applied (``False``: evaluated for an observer only); what it decides not to use it
         counts in ``stats``. Default: every model, applied."""

@@ -108,6 +108,7 @@ class EkfAccel(EkfAid):
         force it needs comes from a suspect IMU span or, for the ``window`` form, the IMU does
         not cover the window."""
         acc = self.current
+        assert acc is not None  # a full window (models and updates ask only then)
         g_n = gravity_n(s.pos[0], s.pos[2])
         if self.form == "window":
             win = window_samples(self.imu.t, acc.t_window)
@@ -192,9 +193,7 @@ class SmootherAccel(SmootherAid):
         self.acc_fixes = {
             int(k): pushed[j - m + 1 : j + 1] for j, k in enumerate(pushed) if full[j]
         }
-        self.node_of = {
-            self.fix_at[t]: i for i, t in enumerate(times.tolist()) if t in self.fix_at
-        }
+        self.node_of = {self.fix_at[t]: i for i, t in enumerate(times.tolist()) if t in self.fix_at}
 
     def node(self, graph, ctx, i: int, t: float, pred) -> None:
         k = self.fix_at.get(float(t))
@@ -248,7 +247,7 @@ class SmootherAccel(SmootherAid):
         B_row = acceleration_row(self.fixes.t[fixes])
         graph.add(
             window_accel_factor(
-                [gtsam.symbol(SYM_X, n) for n in nodes],
+                [gtsam.symbol(SYM_X, n) for n in nodes if n is not None],
                 B_row,
                 meas[0],
                 self.lever,

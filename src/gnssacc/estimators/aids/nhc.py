@@ -193,7 +193,9 @@ class EkfNhc(EkfAid):
     def models(self, s, j: int) -> list[Measurement]:
         cfg = self.cfg
         w_ie = earth_rate_n(s.pos[0])
-        return [non_holonomic(s, self.ep.omega_b[j], cfg.lever_arm_b, w_ie, cfg.sigma_mps, cfg.R_vb)]
+        return [
+            non_holonomic(s, self.ep.omega_b[j], cfg.lever_arm_b, w_ie, cfg.sigma_mps, cfg.R_vb)
+        ]
 
     def updates(self, s, j: int, stats: dict):
         ep, nhc = self.ep, self.cfg
@@ -271,9 +273,7 @@ class SmootherNhc(SmootherAid):
             self.stats[SKIPPED[why]] += 1
             return
         keys = (gtsam.symbol(c, i) for c in (SYM_X, SYM_V, SYM_B))
-        graph.add(
-            nhc_factor(*keys, omega, cfg.lever_arm_b, self.w_ie, cfg.sigma_mps, cfg.R_vb)
-        )
+        graph.add(nhc_factor(*keys, omega, cfg.lever_arm_b, self.w_ie, cfg.sigma_mps, cfg.R_vb))
         self.stats["n_nhc_factors"] += 1
 
 

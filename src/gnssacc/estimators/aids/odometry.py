@@ -173,9 +173,7 @@ class EkfOdometry(EkfAid):
         ep = self.ep
         w_ie = earth_rate_n(s.pos[0])
         return [
-            odometry(
-                s, ep.v[j], ep.sigma[j], ep.omega_b[j], self.cfg.lever_arm_b, w_ie, self.R_vb
-            )
+            odometry(s, ep.v[j], ep.sigma[j], ep.omega_b[j], self.cfg.lever_arm_b, w_ie, self.R_vb)
         ]
 
     def updates(self, s, j: int, stats: dict):

@@ -229,9 +229,7 @@ class SmootherZupt(SmootherAid):
         z, st = ctx.settings.zupt, ctx.stationary
         self.stats, self.ep, self.interval_s = ctx.stats, epochs, z.interval_s
         # Per epoch: whether its span was vetted by the fixes.
-        self.vetted = np.array(
-            [vetted_by_fixes(st.spans[j], st.params) for j in epochs.span], bool
-        )
+        self.vetted = np.array([vetted_by_fixes(st.spans[j], st.params) for j in epochs.span], bool)
         self.noise = gtsam.noiseModel.Isotropic.Sigma(3, z.velocity_sigma_mps)
         self.var, self.gate = z.velocity_sigma_mps**2, z.gate_nis
         self.w_ie = earth_rate_n(ctx.run.origin.lat0)
