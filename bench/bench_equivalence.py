@@ -191,7 +191,7 @@ def main() -> int:
         for line in other[:20]:
             print(f"    {line}")
         if not printed_same:
-            for x, y in zip(printed["before"], printed["after"]):
+            for x, y in zip(printed["before"], printed["after"], strict=False):
                 if x != y:
                     print(f"    before: {x}\n    after:  {y}")
     return 1 if failed else 0

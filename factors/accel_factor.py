@@ -4,10 +4,12 @@ Error (NED, m/s^2)::
 
     e = R(X_k) (f~_b - b_a) + g^n - a~^n
 
-with ``a~^n`` the least-squares GNSS acceleration of :mod:`gnssacc.estimators.aids.accel_model` (same window,
+with ``a~^n`` the least-squares GNSS acceleration of :mod:`gnssacc.estimators.aids.accel_model`
+(same window,
 same noise propagation as the EKF) and ``f~_b`` the specific force at the node time.
 
-Jacobians, from the EKF's H_a blocks (one implementation, :func:`gnssacc.estimators.aids.accel_model.H_a_blocks`)
+Jacobians, from the EKF's H_a blocks (one implementation,
+:func:`gnssacc.estimators.aids.accel_model.H_a_blocks`)
 -------------------------------------------------------------------------------------------------
 GTSAM perturbs a pose on the right, ``R = R_hat Exp(xi)`` (``xi`` body-frame rotation, first three
 of the Pose3 tangent), and a bias additively, ``b = b_hat + db`` (accelerometer first). The EKF

@@ -1,4 +1,5 @@
-r"""A joint Gaussian prior on the first node: pose, IMU bias and (when modelled) GNSS error together.
+r"""A joint Gaussian prior on the first node: pose, IMU bias and (when modelled) GNSS error
+together.
 
 Separate priors cannot state that two variables are correlated, and the self-initialised start is
 correlated twice over: levelling ties the tilt to the accelerometer bias, and a position taken

@@ -10,7 +10,8 @@ The velocity of the point ``l_b`` [m, body] from the IMU, relative to the earth,
 right, ``R = R_hat Exp(xi)`` (``xi`` the first three of the Pose3 tangent), the velocity and the
 bias additively. With ``u = R_hat^T v`` and ``w = R_hat^T omega_ie^n``:
 
-    dv_l/dxi  = [u x] + [l x][w x]      (R^T a = (I - [xi x]) R_hat^T a = R_hat^T a + [R_hat^T a x] xi)
+    dv_l/dxi  = [u x] + [l x][w x]
+                (R^T a = (I - [xi x]) R_hat^T a = R_hat^T a + [R_hat^T a x] xi)
     dv_l/dv   = R_hat^T
     dv_l/db_g = [l x]                    (d(omega x l)/d omega = -[l x], omega = omega~ - b_g)
 
@@ -137,7 +138,8 @@ def odometry_factor(
     sigma_mps: float,
     R_vb: np.ndarray | None = None,
 ) -> gtsam.CustomFactor:
-    """Wheel odometry's forward speed ``v_odo`` [m/s] (1-sigma ``sigma_mps``) of the point ``lever_b``
+    """Wheel odometry's forward speed ``v_odo`` [m/s] (1-sigma ``sigma_mps``) of the point
+    ``lever_b``
     [m, body] along the vehicle's x axis, read with the scale-factor error held by ``scale_key`` (a
     1-vector); ``omega_b``, ``w_ie_n``, ``R_vb`` as for :func:`nhc_factor`."""
     omega_b, lever_b, w_ie_n = (np.asarray(a, float).copy() for a in (omega_b, lever_b, w_ie_n))

@@ -135,8 +135,8 @@ def _events(aids: list[EkfAid], out_t: np.ndarray):
     ev_t = np.concatenate(times)
     ev_src = np.concatenate([np.full(len(t), i) for i, t in enumerate(times)])
     ev_idx = np.concatenate([np.arange(len(t)) for t in times])
-    ev_group = np.concatenate([np.full(len(t), g) for g, t in zip(group, times)])
-    ev_order = np.concatenate([np.full(len(t), o) for o, t in zip(order, times)])
+    ev_group = np.concatenate([np.full(len(t), g) for g, t in zip(group, times, strict=True)])
+    ev_order = np.concatenate([np.full(len(t), o) for o, t in zip(order, times, strict=True)])
     idx_key = np.where(ev_src < len(aids), ev_idx, 0)
     sort = np.lexsort((ev_order, idx_key, ev_group, ev_t))
     return ev_t[sort], ev_src[sort], ev_idx[sort]

@@ -95,7 +95,7 @@ class Tally:
         self.loglik[k] += loglik
         self.beyond[k] += nis > tail_bound(len(m.dz))
         if self.keep:
-            for lst, v in zip(self.series[k], (t, nis / len(m.dz), loglik)):
+            for lst, v in zip(self.series[k], (t, nis / len(m.dz), loglik), strict=True):
                 lst.append(v)
 
     def stats(self) -> dict:

@@ -50,7 +50,8 @@ class FixedLagISAM2:
     ``relinearize_threshold``: the threshold set in it). Every node (time stamp) must hold at
     least two variables (the ordering groups' bound, :func:`_older_groups`).
 
-    Offers the part of ``IncrementalFixedLagSmoother``'s interface :mod:`gnssacc.estimators.smoother` uses.
+    Offers the part of ``IncrementalFixedLagSmoother``'s interface
+    :mod:`gnssacc.estimators.smoother` uses.
     """
 
     def __init__(

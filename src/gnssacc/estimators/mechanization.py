@@ -70,7 +70,8 @@ def _mm(A, B):
 
 @njit(cache=True)
 def _exp_so3_into(p0, p1, p2, out):
-    """``out = Exp([p x])`` by Rodrigues' formula, ``I + a K + b (p p^T - |p|^2 I)``, no allocation."""
+    """``out = Exp([p x])`` by Rodrigues' formula, ``I + a K + b (p p^T - |p|^2 I)``, no
+    allocation."""
     th2 = p0 * p0 + p1 * p1 + p2 * p2
     if th2 < 1e-16:
         a, b = 1.0, 0.5
@@ -156,7 +157,8 @@ def kernel_force_integrals(f_b, omega_b, h, w, b_a, b_g):
     h : ndarray (n,)
         Each sample's overlap with the window [s].
     w : ndarray (n,)
-        Its kernel weight ``int K`` [-] (:func:`gnssacc.estimators.aids.accel_model.window_samples`).
+        Its kernel weight ``int K`` [-]
+        (:func:`gnssacc.estimators.aids.accel_model.window_samples`).
     b_a, b_g : ndarray (3,)
         Bias estimates [m/s^2], [rad/s].
 
@@ -304,7 +306,8 @@ def _system_matrix_into(F, pos, v_n, R_nb, f_b, w_ie_sign):
     # drho_dv has [0, 1] = 1/rn, [1, 0] = -1/rm, [2, 1] = -tl/rn.
     rho_lat2 = -vE / (rn * cl * cl)  # d(w_en_D)/dlat
     dh0, dh1, dh2 = -vE / rn**2, vN / rm**2, vE * tl / rn**2
-    # Velocity rows: dv_dot = -[(2 w_ie + w_en) x] dv + [v x] d(2 w_ie + w_en) + dg - [(R f) x] phi + R b_a.
+    # Velocity rows: dv_dot = -[(2 w_ie + w_en) x] dv + [v x] d(2 w_ie + w_en) + dg - [(R f) x] phi
+    # + R b_a.
     c0, c1, c2 = 2.0 * wie0 + wen0, wen1, 2.0 * wie2 + wen2
     # -[c x] + [v x] drho_dv, column by column ([v x] e_k = v x e_k).
     x0, x1, x2 = _cross(vN, vE, vD, 0.0, -1.0 / rm, 0.0)
@@ -673,7 +676,8 @@ def _cov_step(
     gm_var,
 ):
     """One covariance (and transition-matrix) step over ``dt_acc`` [s] with the noise integrated
-    over it (``qa_int``, ``qg_int``: PSD x time, reset to zero here; ``qa_k``, ``qg_k``: scratch)."""
+    over it (``qa_int``, ``qg_int``: PSD x time, reset to zero here; ``qa_k``, ``qg_k``:
+    scratch)."""
     _system_matrix_into(F, pos, v_n, R_nb, f, w_ie_sign)
     for i in range(3):
         qa_k[i] = qa_int[i] / dt_acc

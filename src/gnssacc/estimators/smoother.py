@@ -310,7 +310,7 @@ class _Loop:
         covs = self.smoother.covariances(nodes)
         est = self.smoother.estimate(i)
         self.online.put(i, est, covs[-1])
-        for m, cov in zip(leaving, covs):
+        for m, cov in zip(leaving, covs, strict=False):  # covs may end with node i's
             self.fixed.put(m, est if m == i else self.smoother.estimate(m), cov)
         return est
 

@@ -130,7 +130,8 @@ def initial_prior(
     """The EKF's initial covariance (:func:`gnssacc.estimators.state.initial_state`, with the
     Gauss-Markov GNSS error of ``layout`` when it has it) in the smoother's variables.
 
-    EKF errors are estimate minus truth with ``R_est = (I + [phi x]) R``; the prior factor's error is
+    EKF errors are estimate minus truth with ``R_est = (I + [phi x]) R``; the prior factor's error
+    is
     the truth's offset from the prior: rotation ``xi = -R^T phi``, translation ``tau = -R^T dp``,
     biases ``+db`` (the residual bias adds to the estimate), GNSS error ``-dx_g``.
 
@@ -265,7 +266,8 @@ class WindowSmoother:
         self.marginals = WindowMarginals(layout.gm, bandwidth, layout.scale)
 
     def reset(self, robust: bool = False) -> bool:
-        """A new, empty smoother; ``robust`` switches to QR factorization (returns whether it did)."""
+        """A new, empty smoother; ``robust`` switches to QR factorization (returns whether it
+        did)."""
         switched = robust and self.params.getFactorization() != "QR"
         if switched:
             self.params.setFactorization("QR")
@@ -361,7 +363,8 @@ def preintegrate(imu, model, bias, t_prev, t, j_start, k_end, inflation, dt_all)
         keep = [k for k, dt in enumerate(dts) if dt > 0.0]
         f_b, w_b, dts = f_b[keep], w_b[keep], [dts[k] for k in keep]
     f_b = mid_interval_force(f_b, w_b - bias.gyroscope(), np.asarray(dts))
-    # map() drives the C++ calls without a Python loop body (the samples are most of the run's calls).
+    # map() drives the C++ calls without a Python loop body (the samples are most of the run's
+    # calls).
     deque(map(pim.integrateMeasurement, f_b, w_b, dts), maxlen=0)
     return pim
 

@@ -97,7 +97,8 @@ class FilterState:
 
     @property
     def scale(self) -> float:
-        """Estimated odometry scale-factor error ``k`` (the odometry reads ``(1 + k)`` times the speed)."""
+        """Estimated odometry scale-factor error ``k`` (the odometry reads ``(1 + k)`` times the
+        speed)."""
         k = self.extra(ODOMETRY_SCALE)
         return float(k[0]) if len(k) else 0.0
 

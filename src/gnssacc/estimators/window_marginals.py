@@ -90,7 +90,8 @@ def _gram(W, scale):
 
 @njit(cache=True)
 def _chol(A):
-    """Lower Cholesky factor of ``S A S`` and ``s`` (``S = diag(s)``, unit diagonal), or a NaN factor."""
+    """Lower Cholesky factor of ``S A S`` and ``s`` (``S = diag(s)``, unit diagonal), or a NaN
+    factor."""
     b = A.shape[0]
     s = np.empty(b)
     for i in range(b):
@@ -124,9 +125,9 @@ def _schur(A, C, transpose):
         for j in range(b):
             W[i, j] = (C[j, i] if transpose else C[i, j]) * s[i]
         for k in range(i):
-            l = L[i, k]
+            l_ik = L[i, k]
             for j in range(b):
-                W[i, j] -= l * W[k, j]
+                W[i, j] -= l_ik * W[k, j]
         d = 1.0 / L[i, i]
         for j in range(b):
             W[i, j] *= d
@@ -172,7 +173,7 @@ def _layout(key, b=N_NODE):
 
 
 @njit(cache=True)
-def _scatter(D, O, Ox, info, keys, first, start):
+def _scatter(D, Od, Ox, info, keys, first, start):
     """Add the information ``info`` of linear factors over ``keys`` (in that order) to the blocks.
 
     ``info`` may be the joint information of several factors (a graph's dense Hessian): blocks
@@ -202,7 +203,7 @@ def _scatter(D, O, Ox, info, keys, first, start):
         for q in range(nk):
             a, c = rows[p], rows[q]
             if a <= c <= a + w:
-                T = D[a] if a == c else _coupling(O, Ox, a, c - a)
+                T = D[a] if a == c else _coupling(Od, Ox, a, c - a)
                 for r in range(dims[p]):
                     for t in range(dims[q]):
                         T[offs[p] + r, offs[q] + t] += info[pos[p] + r, pos[q] + t]
@@ -233,7 +234,7 @@ def _copy_into(out, A):
 
 
 @njit(cache=True)
-def _node_covariances(D, O, F, start, f_valid, rows, last):
+def _node_covariances(D, Od, F, start, f_valid, rows, last):
     """Covariances of storage ``rows`` (ascending); extends the forward sweep ``F`` (valid up to
     ``f_valid``) to ``last``, and one backward sweep serves every row.
 
@@ -243,7 +244,7 @@ def _node_covariances(D, O, F, start, f_valid, rows, last):
         _copy_into(F[start], D[start])
         f_valid = start
     for k in range(f_valid, last):  # F_{k+1} = D_{k+1} - O_k^T F_k^-1 O_k
-        _diff_into(F[k + 1], D[k + 1], _schur(F[k], O[k], False))
+        _diff_into(F[k + 1], D[k + 1], _schur(F[k], Od[k], False))
     f_valid = max(f_valid, last)
     b = D.shape[1]
     out = np.empty((len(rows), b, b))
@@ -255,9 +256,9 @@ def _node_covariances(D, O, F, start, f_valid, rows, last):
         j = rows[m]
         while k > j + 1:  # G_k = D_k - O_k G_{k+1}^-1 O_k^T
             k -= 1
-            _diff_into(G, D[k], _schur(G, O[k], True))
+            _diff_into(G, D[k], _schur(G, Od[k], True))
         if j < last:  # less the newer nodes' Schur complement
-            _diff_into(info, F[j], _schur(G, O[j], True))
+            _diff_into(info, F[j], _schur(G, Od[j], True))
         else:
             _copy_into(info, F[j])
         _copy_into(out[m], _inverse(info))
@@ -268,16 +269,16 @@ def _node_covariances(D, O, F, start, f_valid, rows, last):
 
 
 @njit(cache=True)
-def _marginalize(D, O, F, start, count, f_valid):
+def _marginalize(D, Od, F, start, count, f_valid):
     """Schur complements of the ``count`` oldest nodes onto their successors; drops them.
 
     Returns the new storage row of the oldest node and the new ``f_valid``.
     """
     for _ in range(count):
         k = start
-        _diff_into(D[k + 1], D[k + 1], _schur(D[k], O[k], False))
+        _diff_into(D[k + 1], D[k + 1], _schur(D[k], Od[k], False))
         D[k] = 0.0
-        O[k] = 0.0
+        Od[k] = 0.0
         start += 1
         if f_valid < start:  # F of the oldest node is its D (kept if already valid)
             _copy_into(F[start], D[start])
@@ -286,9 +287,10 @@ def _marginalize(D, O, F, start, count, f_valid):
 
 
 @njit(cache=True)
-def _coupling(O, Ox, a, d):
-    """The block ``H[a, a + d]`` (``1 <= d``): ``O`` holds ``d = 1``, ``Ox`` ``d = 2 ..``."""
-    return O[a] if d == 1 else Ox[a, d - 2]
+def _coupling(Od, Ox, a, d):
+    """The block ``H[a, a + d]`` (``1 <= d``): ``Od`` (the ``O_k``) holds ``d = 1``, ``Ox`` ``d = 2
+    ..``."""
+    return Od[a] if d == 1 else Ox[a, d - 2]
 
 
 @njit(cache=True)
@@ -300,27 +302,30 @@ def _nonzero(A):
 
 
 @njit(cache=True)
-def _eliminate(D, O, Ox, k, lo, hi):
+def _eliminate(D, Od, Ox, k, lo, hi):
     """Eliminate storage row ``k`` of a block-banded ``H``: subtract its Schur complement from the
-    blocks of its neighbours among rows ``[lo, hi]`` (``k`` excluded; bandwidth ``1 + Ox.shape[1]``).
+    blocks of its neighbours among rows ``[lo, hi]`` (``k`` excluded; bandwidth ``1 +
+    Ox.shape[1]``).
     Row ``k``'s own blocks are left as they were."""
     b, w = D.shape[1], Ox.shape[1] + 1
     nbr = np.empty(2 * w, np.int64)
     m = 0
     for r in range(max(lo, k - w), min(hi, k + w) + 1):
-        if r != k and _nonzero(_coupling(O, Ox, k, r - k) if r > k else _coupling(O, Ox, r, k - r)):
+        if r != k and _nonzero(
+            _coupling(Od, Ox, k, r - k) if r > k else _coupling(Od, Ox, r, k - r)
+        ):
             nbr[m] = r  # (a wide band costs only where factors actually reach)
             m += 1
     C = np.empty((b, m * b))  # H[k, neighbours]
     for p in range(m):
         r = nbr[p]
         if r > k:
-            blk = _coupling(O, Ox, k, r - k)
+            blk = _coupling(Od, Ox, k, r - k)
             for i in range(b):
                 for j in range(b):
                     C[i, p * b + j] = blk[i, j]
         else:
-            blk = _coupling(O, Ox, r, k - r)
+            blk = _coupling(Od, Ox, r, k - r)
             for i in range(b):
                 for j in range(b):
                     C[i, p * b + j] = blk[j, i]
@@ -329,23 +334,23 @@ def _eliminate(D, O, Ox, k, lo, hi):
         for j in range(m * b):
             C[i, j] *= s[i]
         for q in range(i):
-            l = L[i, q]
+            l_ik = L[i, q]
             for j in range(m * b):
-                C[i, j] -= l * C[q, j]
+                C[i, j] -= l_ik * C[q, j]
         d = 1.0 / L[i, i]
         for j in range(m * b):
             C[i, j] *= d
     S = _gram(C, np.ones(m * b))
     for p in range(m):
         for q in range(p, m):
-            T = D[nbr[p]] if p == q else _coupling(O, Ox, nbr[p], nbr[q] - nbr[p])
+            T = D[nbr[p]] if p == q else _coupling(Od, Ox, nbr[p], nbr[q] - nbr[p])
             for i in range(b):
                 for j in range(b):
                     T[i, j] -= S[p * b + i, q * b + j]
 
 
 @njit(cache=True)
-def _band_covariances(D, O, Ox, Dc, Oc, Oxc, start, fe, rows, last):
+def _band_covariances(D, Od, Ox, Dc, Oc, Oxc, start, fe, rows, last):
     """Covariances of storage ``rows`` of a block-banded ``H`` (rows ``start .. last``): per row,
     on a copy, eliminate the older rows oldest first and the newer rows newest first, and invert
     what is left of the row. ``Dc, Oc, Oxc`` hold ``H`` with rows ``start .. fe - 1`` already
@@ -360,7 +365,7 @@ def _band_covariances(D, O, Ox, Dc, Oc, Oxc, start, fe, rows, last):
         if s == fe:
             D2, O2, Ox2 = Dc[s : last + 1].copy(), Oc[s : last + 1].copy(), Oxc[s : last + 1].copy()
         else:
-            D2, O2, Ox2 = D[s : last + 1].copy(), O[s : last + 1].copy(), Ox[s : last + 1].copy()
+            D2, O2, Ox2 = D[s : last + 1].copy(), Od[s : last + 1].copy(), Ox[s : last + 1].copy()
         for k in range(j):
             _eliminate(D2, O2, Ox2, k, k + 1, n)
         for k in range(n, j, -1):
@@ -378,13 +383,13 @@ def _band_advance(Dc, Oc, Oxc, fe, target, last):
 
 
 @njit(cache=True)
-def _band_marginalize(D, O, Ox, start, count, last):
+def _band_marginalize(D, Od, Ox, start, count, last):
     """Schur complements of the ``count`` oldest rows onto their successors; drops them. Returns
     the new storage row of the oldest node."""
     for _ in range(count):
-        _eliminate(D, O, Ox, start, start + 1, last)
+        _eliminate(D, Od, Ox, start, start + 1, last)
         D[start] = 0.0
-        O[start] = 0.0
+        Od[start] = 0.0
         Ox[start] = 0.0
         start += 1
     return start
@@ -424,7 +429,8 @@ class WindowMarginals:
     def sync(self, isam, new_factors: gtsam.NonlinearFactorGraph) -> None:
         """Bring the blocks to the smoother's state right after an update with ``new_factors``.
 
-        ``isam`` is the :class:`gnssacc.estimators.fixed_lag.FixedLagISAM2`. Rebuilt from all its factors after a
+        ``isam`` is the :class:`gnssacc.estimators.fixed_lag.FixedLagISAM2`. Rebuilt from all its
+        factors after a
         relinearisation or when nothing is held, else updated incrementally.
         """
         theta = isam.getLinearizationPoint()
@@ -509,7 +515,7 @@ class WindowMarginals:
         if not (
             self.start <= rows[0]
             and rows[-1] <= last
-            and all(a < b for a, b in zip(rows, rows[1:]))
+            and all(a < b for a, b in zip(rows, rows[1:], strict=False))
         ):
             raise KeyError(f"nodes {list(nodes)} are not ascending nodes of the window")
         if self.w == 1:
@@ -555,16 +561,18 @@ class WindowMarginals:
         """Hold nodes up to ``last``; moves the window to the front of storage when it runs out."""
         n = last - self.first + 1
         if self.start + n > len(self.D):
-            D, O, Ox, F, s, m = self.D, self.O, self.Ox, self.F, self.start, self.n
+            D, Od, Ox, F, s, m = self.D, self.O, self.Ox, self.F, self.start, self.n
             kept = (self.Dc, self.Oc, self.Oxc) if self.w > 1 else ()
             self._alloc(max(2 * n, 64))
             self.D[:m], self.O[:m], self.Ox[:m], self.F[:m] = (
                 D[s : s + m],
-                O[s : s + m],
+                Od[s : s + m],
                 Ox[s : s + m],
                 F[s : s + m],
             )
-            for new, old in zip((self.Dc, self.Oc, self.Oxc) if self.w > 1 else (), kept):
+            for new, old in zip(
+                (self.Dc, self.Oc, self.Oxc) if self.w > 1 else (), kept, strict=False
+            ):
                 new[:m] = old[s : s + m]
             self.f_valid -= s
             self.fe = self.fe - s if self.fe >= s else -1

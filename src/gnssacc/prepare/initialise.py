@@ -95,7 +95,8 @@ def _line_fit(t: np.ndarray, p: np.ndarray, sigma: np.ndarray, t_ref: float):
 
 
 def _block_se(x: np.ndarray, block: int) -> np.ndarray:
-    """Standard error of the mean of ``x`` (N, 3) from the scatter of block means (vibration-aware)."""
+    """Standard error of the mean of ``x`` (N, 3) from the scatter of block means
+    (vibration-aware)."""
     nb = len(x) // block
     if nb < 3:
         return np.std(x, axis=0) / np.sqrt(max(len(x), 1))
@@ -183,7 +184,8 @@ def _moving_start(run: RecordedRun, cfg: RunConfig) -> StartState:
         None,
         (float(t_w[0]), float(t_w[-1])),
         f"moving start: position/velocity from a line fit over {len(t_w)} fixes "
-        f"({t_w[-1] - t_w[0]:.1f} s), roll/pitch by levelling with the GNSS-fitted acceleration removed",
+        f"({t_w[-1] - t_w[0]:.1f} s), roll/pitch by levelling with the GNSS-fitted acceleration "
+        "removed",
     )
 
 
@@ -223,7 +225,8 @@ def _level(f_b: np.ndarray, a_b: np.ndarray) -> tuple[float, float]:
 def hypothesis(
     run: RecordedRun, cfg: RunConfig, start: StartState, yaw: float, sigma_yaw: float
 ) -> InitialState:
-    """The initial state for one yaw [rad] (1-sigma ``sigma_yaw``): levelling and gyro bias follow it."""
+    """The initial state for one yaw [rad] (1-sigma ``sigma_yaw``): levelling and gyro bias follow
+    it."""
     c = cfg["init"]
     lat, lon, h = run.origin.to_llh(start.p_n)
     g = float(gravity_n(lat, h)[2])

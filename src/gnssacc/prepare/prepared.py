@@ -2,7 +2,8 @@
 
 :func:`prepare` runs, in order,
 
-0. fix sigmas the recording does not state, from the fixes' scatter (:mod:`gnssacc.prepare.fix_noise`);
+0. fix sigmas the recording does not state, from the fixes' scatter
+(:mod:`gnssacc.prepare.fix_noise`);
    then the input checks (:mod:`gnssacc.checks.plausibility`): units, clocks, coordinates and
    mounting checked against the data themselves, their proposals settled by the estimator
    (:mod:`gnssacc.prepare.settle`), so every later step and estimator sees the corrected run;
@@ -65,7 +66,8 @@ class Prepared:
     bank : BankResult or None
         ``None`` when the source gave the initial state.
     checks : tuple of gnssacc.checks.findings.Finding
-        What the input checks repaired or applied, with their evidence (they raise on anything else).
+        What the input checks repaired or applied, with their evidence (they raise on anything
+        else).
     seconds : dict
         Time spent per step [s].
     gauss_markov : tuple or None
@@ -94,8 +96,10 @@ class Prepared:
 
 
 def _other_heading(a: InitialState, b: InitialState) -> bool:
-    """Whether two starts differ in yaw by more than 3 sigma (neighbouring hypotheses converge to the
-    same heading; a different heading means the noise the tuner saw came from another trajectory)."""
+    """Whether two starts differ in yaw by more than 3 sigma (neighbouring hypotheses converge to
+    the
+    same heading; a different heading means the noise the tuner saw came from another
+    trajectory)."""
     d = abs((a.rpy[2] - b.rpy[2] + np.pi) % (2 * np.pi) - np.pi)
     return d > 3.0 * max(a.sigma_att_rad[2], b.sigma_att_rad[2])
 
@@ -128,7 +132,8 @@ def prepare(
     filter_pass: FilterPass,
     gauss_markov: bool = False,
 ) -> Prepared:
-    """Checks, quality, stationary spans, start state and (``tune_mode="auto"``) noise, in that order.
+    """Checks, quality, stationary spans, start state and (``tune_mode="auto"``) noise, in that
+    order.
 
     Parameters
     ----------

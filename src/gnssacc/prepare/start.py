@@ -67,7 +67,8 @@ def start_of(
 
 
 def _with_orientation(given: InitialState, bank: BankResult) -> InitialState:
-    """The bank's start, or the orientation's when the motion never decided the yaw (module notes)."""
+    """The bank's start, or the orientation's when the motion never decided the yaw (module
+    notes)."""
     stated = float(np.degrees(given.rpy[2]))
     if bank.t_decided is not None:
         off = float(np.degrees(wrap_angle(bank.init.rpy[2] - given.rpy[2])))
@@ -88,7 +89,8 @@ def _with_orientation(given: InitialState, bank: BankResult) -> InitialState:
         given,
         sigma_att_rad=att,
         yaw_evidence="undetermined",
-        how=f"{given.how}; yaw {stated:.0f} deg from the IMU's orientation field, not confirmed by the "
+        how=f"{given.how}; yaw {stated:.0f} deg from the IMU's orientation field, not confirmed "
+        "by the "
         f"motion (magnetometer-grade: +-{np.degrees(att[2]):.0f} deg)",
     )
 
@@ -142,7 +144,8 @@ def start_for(
     init = init if init is not None else run.init
     if init is None or quality is None:
         raise ValueError(
-            "an estimator given its settings needs init= and quality= (gnssacc.pipeline.prepare gives "
+            "an estimator given its settings needs init= and quality= (gnssacc.pipeline.prepare "
+            "gives "
             "both)"
         )
     return init, quality

@@ -5,7 +5,8 @@ ground-vehicle aids' noise when they are in use: ``nhc.sigma_lateral_mps``,
 ``nhc.sigma_vertical_mps``, ``odometry.speed_sigma_mps``, :func:`aids`) is identified
 without truth, in five steps:
 
-1. **Stationary stretches** (:mod:`gnssacc.prepare.stationary`): the white-noise densities of the gyros
+1. **Stationary stretches** (:mod:`gnssacc.prepare.stationary`): the white-noise densities of the
+gyros
    and accelerometers per axis, read from the Allan deviation in its white-noise region (robust
    to engine vibration), become the starting values of ARW and VRW.
 2. **Maximum likelihood of the EKF's innovations.** With ``theta`` the log10 scale factors of
@@ -25,7 +26,8 @@ without truth, in five steps:
    also a floor: the search stays above 1/1.25 of it, :data:`REST_FLOOR_DECADES`): it keeps the
    parameters the data barely inform from wandering (the one-step position innovations of 1 Hz
    metre-level fixes say little about the white noise, and will trade it for unmodelled errors
-   such as scale factors) and costs a well-informed parameter nothing. ``J`` is minimised by Nelder-Mead (scipy) within
+   such as scale factors) and costs a well-informed parameter nothing. ``J`` is minimised by
+   Nelder-Mead (scipy) within
    ``[tune] max_evaluations`` EKF passes (after a probe of each parameter at +-1 decade,
    :func:`ml_search`), each bounded to +-2 decades; the passes propagate the covariance every
    ``[tune] cov_every`` samples for speed.
@@ -50,7 +52,8 @@ without truth, in five steps:
    drifted to 10.3 m against the EKF's 2.2 m). So a turn-on sigma that ended above its start is
    drawn back toward it by bisection (at most three passes) to the smallest value whose
    log-likelihood stays within :data:`SHRINK_TOLERANCE` of the search's best, shared by both
-   sigmas (:func:`draw_back`). The noise densities and the GNSS scale are left at the optimum: a value too
+   sigmas (:func:`draw_back`). The noise densities and the GNSS scale are left at the optimum: a
+   value too
    large widens every innovation, so the likelihood bounds them on both sides, and drawing them
    toward a default would trade accuracy for a prior that is no better informed.
 
@@ -129,7 +132,8 @@ GM_MIN_GAIN = 9.2
 #: coordinate probe of 7 parameters takes 15): a search that cannot fit correlated errors is
 #: abandoned then for the Gauss-Markov one.
 CHECK_AFTER = 20
-#: Budget of EKF passes of the aids' search (step 5; its coordinate probe of four parameters takes 9).
+# : Budget of EKF passes of the aids' search (step 5; its coordinate probe of four parameters takes
+# 9).
 AIDS_EVALUATIONS = 25
 #: ... and of the search of the vehicle's axes again once the sigmas were inflated.
 OFFSET_EVALUATIONS = 12
@@ -149,7 +153,8 @@ TURN_ON_SIGMAS = (("imu", "gyro_bias_sigma0_deg_h"), ("imu", "accel_bias_sigma0_
 #: Log-likelihood the tuned point may give up, in all, when the turn-on sigmas are drawn back
 #: toward their starting values (step 4): half the 95 % quantile of chi-square with 1 dof.
 SHRINK_TOLERANCE = 1.92
-#: A parameter closer than this to its starting value [decades] is not drawn back (not worth passes).
+# : A parameter closer than this to its starting value [decades] is not drawn back (not worth
+# passes).
 SHRINK_MIN_DECADES = 0.1
 #: Each parameter stays within this many decades of its starting value.
 _BOUND_DECADES = 2.0
@@ -278,7 +283,8 @@ def _lower_bounds(params: list, info: dict) -> np.ndarray:
 
 
 def _start_values(cfg: RunConfig, free: list, noise) -> tuple[dict, dict]:
-    """Starting value per free parameter (numpy arrays), from the configuration or the stationary noise."""
+    """Starting value per free parameter (numpy arrays), from the configuration or the stationary
+    noise."""
     start = {p: np.atleast_1d(np.asarray(cfg[p[0]][p[1]], float)).copy() for p in free}
     info = {}
     if noise is not None:
@@ -335,7 +341,7 @@ class _Objective:
 
     def config(self, theta) -> RunConfig:
         upd: dict = {}
-        for p, th in zip(self.free, theta):
+        for p, th in zip(self.free, theta, strict=True):
             v = self.start[p] + th * ADDITIVE[p] if p in ADDITIVE else self.start[p] * 10.0**th
             if p == ("gnss", "sigma_scale"):
                 v = np.maximum(v, MIN_WHITE_SIGMA_M / float(np.median(self.run.gnss.sigma_ned)))
@@ -883,12 +889,14 @@ def correlation_inflation(acf1: float | None, n: int) -> float:
 def tune_gauss_markov(
     run, cfg: RunConfig, stationary=None, quality=None, init=None, *, filter_pass: FilterPass
 ) -> tuple[RunConfig, dict]:
-    """Fit the Gauss-Markov fix-error model alone, the IMU noise of ``cfg`` held (the ``-gm`` methods
+    """Fit the Gauss-Markov fix-error model alone, the IMU noise of ``cfg`` held (the ``-gm``
+    methods
     on a run where :func:`tune` kept white fixes).
 
     The free keys of :data:`GM_PARAMETERS` (not in ``cfg.explicit``) are searched by maximum
     likelihood of one EKF pass's position and zero-rate innovations, from the start of step 3 of
-    the module docstring: the stated sigmas as the correlated part, a fifth of them as the white part.
+    the module docstring: the stated sigmas as the correlated part, a fifth of them as the white
+    part.
 
     Parameters
     ----------
@@ -970,7 +978,8 @@ def tune_gauss_markov(
 def run_white_stats(
     run, cfg: RunConfig, stationary=None, quality=None, init=None, *, filter_pass: FilterPass
 ) -> dict:
-    """The innovation statistics of one EKF pass with ``cfg`` as it is on ``run`` (already scaled)."""
+    """The innovation statistics of one EKF pass with ``cfg`` as it is on ``run`` (already
+    scaled)."""
     return filter_pass(
         run,
         ungated(cfg),

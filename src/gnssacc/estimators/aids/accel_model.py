@@ -54,7 +54,8 @@ The window-consistent prediction applies the same operator to what the INS says:
 ``t_k`` integrated from the bias-corrected gyros. IMU sample ``i`` holds over
 ``(t_{i-1}, t_i]``, so it enters with weight ``w_i = int K`` over that interval (clipped to the
 window), exact because ``K`` is piecewise linear (:func:`peano_weights`), and with the rotation at
-the interval's midpoint (:func:`gnssacc.estimators.mechanization.kernel_force_integrals`). Neglected, as in
+the interval's midpoint (:func:`gnssacc.estimators.mechanization.kernel_force_integrals`).
+Neglected, as in
 the paper's model: the earth rate in the relative rotation (7.3e-5 rad/s, < 2e-4 rad over a
 2 s window), the transport rate and Coriolis acceleration (``2 omega_ie x v`` < 5e-3 m/s^2 at
 30 m/s), the change of ``g^n`` over the window, and the IMU noise over the window. The attitude
@@ -73,7 +74,8 @@ Correlations (all variants)
 ``a~`` is a deterministic linear function of fixes the filter also uses as position updates.
 Both ``ekf-acc`` and ``ekf-accw`` treat it as an independent measurement, so the same fix noise
 is counted twice. An exact treatment (stochastic cloning with the fix noises carried as states,
-:mod:`gnssacc.analysis.aiding_theory`) reproduces the position-only filter in the linear-Gaussian case:
+:mod:`gnssacc.analysis.aiding_theory`) reproduces the position-only filter in the linear-Gaussian
+case:
 the acceleration then carries no information of its own.
 """
 
@@ -282,7 +284,8 @@ def H_w_blocks(
         Estimated body-to-NED rotation at the update epoch ``t_k``.
     F_b, M, G : ndarray (3,), (3, 3), (3, 3)
         Kernel integrals ``int K u``, ``int K R_{b_k b_s}``, ``int K [u x] Gamma`` (body frame at
-        ``t_k``; [m/s^2], [-], [m/s]) from :func:`gnssacc.estimators.mechanization.kernel_force_integrals`.
+        ``t_k``; [m/s^2], [-], [m/s]) from
+        :func:`gnssacc.estimators.mechanization.kernel_force_integrals`.
 
     Returns
     -------

@@ -126,7 +126,9 @@ def folded_by_node(times: np.ndarray, fix_t: np.ndarray, is_node_fix: np.ndarray
     k = np.flatnonzero(~is_node_fix & (fix_t > times[0]) & (fix_t < times[-1]))
     k = k[~np.isin(fix_t[k], times)]
     out: dict = {}
-    for kk, i in zip(k.tolist(), np.searchsorted(times, fix_t[k], side="right").tolist()):
+    for kk, i in zip(
+        k.tolist(), np.searchsorted(times, fix_t[k], side="right").tolist(), strict=True
+    ):
         out.setdefault(i, []).append(kk)
     return out
 

@@ -241,9 +241,9 @@ class SmootherNhc(SmootherAid):
         node_t = times[nodes]
         st = self.stationary
         rest = st.mask(node_t) if st is not None else np.zeros(len(nodes), bool)
-        self.rest = dict(zip(nodes.tolist(), rest.tolist()))
+        self.rest = dict(zip(nodes.tolist(), rest.tolist(), strict=True))
         omega = np.asarray(run.imu.omega_ib_b)[held_samples(run.imu.t, node_t)]
-        self.omega_b = dict(zip(nodes.tolist(), omega))
+        self.omega_b = dict(zip(nodes.tolist(), omega, strict=True))
 
     def node(self, graph, ctx, i: int, t: float, pred) -> None:
         """The constraint on node ``i`` when it has an epoch and :func:`decide` applies it, on the

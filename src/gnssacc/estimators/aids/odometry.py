@@ -89,7 +89,8 @@ class OdometryEpochs:
 def odometry_epochs(
     imu, odo, t0: float, t_end: float, interval_s: float, sigma_mps: float
 ) -> OdometryEpochs:
-    """The samples of ``odo`` (:class:`gnssacc.core.recording.WheelOdometry`) in ``(t0, t_end]`` [s],
+    """The samples of ``odo`` (:class:`gnssacc.core.recording.WheelOdometry`) in ``(t0, t_end]``
+    [s],
     at most one per ``interval_s`` [s], with the 1-sigma ``max(sigma_mps, stated)`` [m/s] and
     the gyro reading held at each (``imu``: :class:`gnssacc.core.recording.ImuData`)."""
     t = np.asarray(odo.t, float)
@@ -216,9 +217,9 @@ class SmootherOdometry(SmootherAid):
         spacing = float(np.median(np.diff(ep.t))) if len(ep) > 1 else self.cfg.interval_s
         reach = max(self.cfg.interval_s, spacing)
         nodes = nearest_nodes(times, ep.t, reach)
-        self.sample = dict(zip(nodes.tolist(), nearest(ep.t, times[nodes]).tolist()))
+        self.sample = dict(zip(nodes.tolist(), nearest(ep.t, times[nodes]).tolist(), strict=True))
         omega = np.asarray(run.imu.omega_ib_b)[held_samples(run.imu.t, times[nodes])]
-        self.omega_b = dict(zip(nodes.tolist(), omega))
+        self.omega_b = dict(zip(nodes.tolist(), omega, strict=True))
 
     def node(self, graph, ctx, i: int, t: float, pred) -> None:
         """The odometry factor of node ``i`` unless its sample's sign contradicts the node's

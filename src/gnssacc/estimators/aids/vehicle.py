@@ -27,7 +27,8 @@ K_SIGMA = 3.0
 
 
 def held_samples(imu_t: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Index of the IMU sample held at each time ``t`` (sample ``k`` holds over ``(t[k-1], t[k]]``)."""
+    """Index of the IMU sample held at each time ``t`` (sample ``k`` holds over ``(t[k-1],
+    t[k]]``)."""
     return np.minimum(np.searchsorted(imu_t, t, side="left"), len(imu_t) - 1)
 
 
@@ -40,7 +41,8 @@ def vehicle_velocity(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Velocity of the point ``lever_b`` [m, body] from the IMU, relative to the earth, in the body
     frame [m/s], and its Jacobian ``H_v`` (3 x states) w.r.t. the error state (module notes);
-    with ``R_vb`` (body to vehicle axes, a constant), in the vehicle's axes: ``R_vb v``, ``R_vb H_v``.
+    with ``R_vb`` (body to vehicle axes, a constant), in the vehicle's axes: ``R_vb v``, ``R_vb
+    H_v``.
 
     Parameters
     ----------

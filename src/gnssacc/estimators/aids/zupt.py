@@ -70,7 +70,8 @@ class StationaryEpochs:
 
 
 def _block_means(imu: ImuData, edges: np.ndarray) -> np.ndarray:
-    """Mean gyro over the samples stamped in each ``(edges[j], edges[j+1]]``; NaN for an empty block.
+    """Mean gyro over the samples stamped in each ``(edges[j], edges[j+1]]``; NaN for an empty
+    block.
 
     Only the samples between the first and last edge are summed (memory in the span, not the run).
     """
@@ -114,7 +115,8 @@ def stationary_epochs(
         n = len(m)
         if n < 1:
             continue
-        # Scatter of consecutive block means, half the squared difference (insensitive to a slow drift).
+        # Scatter of consecutive block means, half the squared difference (insensitive to a slow
+        # drift).
         v = 0.5 * np.mean(np.diff(m, axis=0) ** 2, axis=0) if n >= 3 else np.full(3, np.inf)
         v = np.where(np.isfinite(v), np.maximum(v, floor), 4.0 * floor)
         ts.append(edges[1:])
