@@ -87,7 +87,6 @@ def test_smoother_accw_runs_end_to_end_on_a_simulated_run():
 
 
 def test_smoother_accw_recorded_covariances_equal_isam2_joint_marginals(monkeypatch):
-    import gnssacc.estimators.smoother as S
     import gnssacc.estimators.smoother_graph as G
 
     cfg = load_config(overrides={"imu": grade_config("industrial")})
@@ -108,7 +107,7 @@ def test_smoother_accw_recorded_covariances_equal_isam2_joint_marginals(monkeypa
         return covs
 
     monkeypatch.setattr(G.WindowSmoother, "covariances", checked)
-    sols = S.run_smoother(run, cfg, "smoother-accw")
+    sols = run_smoother(run, cfg, "smoother-accw")
     # every node online and fixed-lag; the last node is both at the end (one query)
     assert calls[0] == 2 * sols["smoother-accw"].stats["n_nodes"] - 1 and worst[0] < 1e-6, worst
 

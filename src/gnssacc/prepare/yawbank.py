@@ -1,8 +1,9 @@
 r"""Yaw at the start of a recording from a bank of hypotheses scored by innovation likelihood.
 
 The start state (:func:`gnssacc.prepare.initialise.start_state`) fixes position, velocity and
-roll/pitch; the yaw is unknown. ``[init] yaw_hypotheses`` = n filters start with yaws ``2 pi k / n`` and a
-1-sigma of half the spacing, and run the EKF (position and stationary updates) from the start.
+roll/pitch; the yaw is unknown. ``[init] yaw_hypotheses`` = n filters start with yaws
+``2 pi k / n`` and a 1-sigma of half the spacing, and run the EKF (position and stationary
+updates) from the start.
 Each hypothesis k accumulates the Gaussian log-likelihood of its innovations, ``L_k(t)``; with
 equal prior weights its posterior probability is ``p_k = exp(L_k) / sum_j exp(L_j)``.
 
