@@ -146,12 +146,10 @@ def select_yaw(
     start : StartState, optional
         Computed with :func:`gnssacc.prepare.initialise.start_state` when omitted.
     filter_pass : FilterPass
-        The EKF pass that scores the hypotheses (handed in: this stage precedes the estimators).
+        The EKF pass that scores the hypotheses (:func:`gnssacc.prepare.passes.filter_pass`).
     """
-    # The hypotheses start tens of degrees off in yaw, far outside the linearisation of the
-    # ground-vehicle aids' models (the constraint would force the velocity along a wrong heading
-    # at once): the bank scores the IMU and GNSS model alone. On a simulated UGV with correlated
-    # fix errors the bank with the constraint on chose a yaw 15 deg off (3 sigma).
+    # The hypotheses start far outside the vehicle aids' linearisation: the bank scores the IMU
+    # and GNSS model alone (docs/estimators.md, "Its noise and the vehicle's axes").
     cfg = without_aids(cfg)
     c = cfg["init"]
     start = start or start_state(run, cfg, stationary)
