@@ -143,7 +143,8 @@ def prepare(
     tune_mode : {"auto", "none"}, optional
         Default: ``[tune] mode`` of the configuration.
     filter_pass : FilterPass
-        The EKF pass the likelihood-based decisions use (:func:`gnssacc.prepare.passes.filter_pass`).
+        The EKF pass the likelihood-based decisions use
+        (:func:`gnssacc.prepare.passes.filter_pass`).
     gauss_markov : bool
         Also set up the ``-gm`` methods' Gauss-Markov model (:attr:`Prepared.gauss_markov`).
     """
