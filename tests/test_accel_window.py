@@ -20,6 +20,7 @@ from gnssacc.estimators.aids.accel_model import (
 from gnssacc.estimators.aids.gnss_accel import window_acceleration
 from gnssacc.estimators.mechanization import kernel_force_integrals
 from gnssacc.sources.sim import grade_config, simulate
+from gnssacc.estimators.layout import ATT, BA, BG
 
 WINDOWS = [
     100.0 + np.arange(3.0),
@@ -68,7 +69,7 @@ def test_sample_weights_are_exact_for_piecewise_constant_acceleration(t):
 
     def p(x):
         # Exact double integral of the piecewise-constant acceleration from t_imu[0].
-        pos, vel, total = 0.0, 0.0, 0.0
+        vel, total = 0.0, 0.0
         for i in range(1, len(t_imu)):
             dt = min(x, t_imu[i]) - t_imu[i - 1]
             if dt <= 0:
@@ -132,7 +133,7 @@ def test_H_w_by_finite_differences():
         e = np.zeros(15)
         e[j] = eps
         dz = [
-            _window_dz(rotvec_to_dcm(x[6:9]) @ R, b_a - x[9:12], b_g - x[12:15], *args).dz
+            _window_dz(rotvec_to_dcm(x[ATT]) @ R, b_a - x[BA], b_g - x[BG], *args).dz
             for x in (e, -e)
         ]
         num = (dz[0] - dz[1]) / (2 * eps)
@@ -141,7 +142,7 @@ def test_H_w_by_finite_differences():
         rel = 1e-8 if j < 12 else 1e-4
         np.testing.assert_allclose(m0.H[:, j], num, atol=rel * np.abs(num).max())
     # The gyro-bias block is the smallest but not negligible over 2 s: ~ |f| T^2 / 2.
-    assert 1.0 < np.abs(m0.H[:, 12:15]).max() < 30.0
+    assert 1.0 < np.abs(m0.H[:, BG]).max() < 30.0
 
 
 def test_window_model_error_is_far_below_the_paper_model_on_noise_free_data():

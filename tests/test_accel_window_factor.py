@@ -12,7 +12,7 @@ from gnssacc.analysis.metrics import gnss_score, score
 from gnssacc.core.config import load_config
 from gnssacc.core.rotations import euler_to_dcm
 from gnssacc.estimators.aids.accel_model import acceleration_row
-from gnssacc.estimators.layout import NODE_B, NODE_V, NODE_X
+from gnssacc.estimators.layout import NODE_B, NODE_V, NODE_X, POS
 from gnssacc.prepare.passes import run_smoother
 from gnssacc.sources.sim import grade_config, simulate
 
@@ -78,7 +78,7 @@ def test_smoother_accw_runs_end_to_end_on_a_simulated_run():
     sol = sols["smoother-accw"]
     assert set(sols) == {"smoother-accw", "smoother-accw-online"}
     assert sol.stats["n_acc_factors"] > 100
-    assert np.all(np.isfinite(sol.sigma)) and np.all(sol.sigma[:, 0:3] > 0)
+    assert np.all(np.isfinite(sol.sigma)) and np.all(sol.sigma[:, POS] > 0)
     prmse = score(run, sol).prmse_m
     assert prmse < gnss_score(run).prmse_m / 2 and prmse < 1.3 * score(run, ref).prmse_m
     # 3 m fixes at 1 Hz give 7 m/s^2 accelerations: little (double-counted) information, so the

@@ -47,6 +47,7 @@ from gnssacc.core.rotations import dcm_to_euler, dcm_to_rotvec, euler_to_dcm, ro
 from gnssacc.prepare.passes import run_ekf
 from gnssacc.sources.sim import grade_config, simulate
 from gnssacc.sources.sim_imu_errors import UNMODELLED_KEYS, imu_sigmas_si
+from gnssacc.estimators.layout import ATT, BA, BG, VEL
 
 GRADE = "tactical"
 RUNS = 100
@@ -106,10 +107,10 @@ def _error(run, sol, i: int, bias_a: np.ndarray, bias_g: np.ndarray) -> np.ndarr
     e[0] = (sol.lat[i] - tr.lat[j]) * (R_M + tr.h[j])
     e[1] = (sol.lon[i] - tr.lon[j]) * (R_N + tr.h[j]) * np.cos(tr.lat[j])
     e[2] = tr.h[j] - sol.h[i]
-    e[3:6] = sol.v_n[i] - tr.v_n[j]
-    e[6:9] = dcm_to_rotvec(euler_to_dcm(*sol.rpy[i]) @ euler_to_dcm(*tr.rpy[j]).T)
-    e[9:12] = bias_a - sol.b_a[i]
-    e[12:15] = bias_g - sol.b_g[i]
+    e[VEL] = sol.v_n[i] - tr.v_n[j]
+    e[ATT] = dcm_to_rotvec(euler_to_dcm(*sol.rpy[i]) @ euler_to_dcm(*tr.rpy[j]).T)
+    e[BA] = bias_a - sol.b_a[i]
+    e[BG] = bias_g - sol.b_g[i]
     return e
 
 

@@ -19,7 +19,20 @@ from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm, skew
 from gnssacc.estimators.aids import nhc, vehicle
 from gnssacc.estimators.aids import odometry as odo
 from gnssacc.estimators.state import FilterState
-from gnssacc.estimators.layout import ODOMETRY_SCALE, MarkovBlock, StateLayout
+from gnssacc.estimators.layout import (
+    ATT,
+    BA,
+    BG,
+    B_ACC,
+    B_GYRO,
+    ODOMETRY_SCALE,
+    POS,
+    VEL,
+    X_ROT,
+    X_TRANS,
+    MarkovBlock,
+    StateLayout,
+)
 
 LAT, LON, H = np.radians(47.3), np.radians(8.5), 420.0
 R_TRUE = euler_to_dcm(0.04, -0.03, 2.1)
@@ -37,10 +50,10 @@ def _state(err: np.ndarray) -> FilterState:
     pos = np.array([LAT + err[0] / (R_M + H), LON + err[1] / ((R_N + H) * np.cos(LAT)), H - err[2]])
     return FilterState(
         pos,
-        V_TRUE + err[3:6],
-        rotvec_to_dcm(err[6:9]) @ R_TRUE,
+        V_TRUE + err[VEL],
+        rotvec_to_dcm(err[ATT]) @ R_TRUE,
         np.zeros(3),
-        B_G - err[12:15],
+        B_G - err[BG],
         np.eye(16),
         np.array([K_TRUE + err[15]]),
         StateLayout.build([MarkovBlock(ODOMETRY_SCALE, np.ones(1), np.ones(1))]),
@@ -78,8 +91,8 @@ def test_nhc_jacobian_by_finite_differences(lever, R_vb):
     m = nhc.non_holonomic(_state(np.zeros(16)), OMEGA, lever, W_IE, np.array([0.1, 0.2]), R_vb)
     _check(dz, m.H, STEPS, 1e-7)
     assert m.kind == "nhc" and np.allclose(m.R, np.diag([0.01, 0.04]))
-    assert np.all(m.H[:, 0:3] == 0) and np.all(m.H[:, 9:12] == 0) and np.all(m.H[:, 15] == 0)
-    assert np.any(m.H[:, 12:15] != 0) == bool(
+    assert np.all(m.H[:, POS] == 0) and np.all(m.H[:, BA] == 0) and np.all(m.H[:, 15] == 0)
+    assert np.any(m.H[:, BG] != 0) == bool(
         np.any(lever)
     )  # the gyro bias enters through the lever arm
 
@@ -161,11 +174,11 @@ def test_factor_jacobians_are_the_ekf_ones_through_the_conventions():
         POSE, V_TRUE, BIAS.gyroscope(), OMEGA, LEVER, W_IE
     )
     np.testing.assert_allclose(v_f, v_ekf, atol=1e-12)
-    np.testing.assert_allclose(J_pose[:, 0:3], H_ekf[:, 6:9] @ R, atol=1e-12)
-    np.testing.assert_allclose(J_vel, H_ekf[:, 3:6], atol=1e-12)
-    np.testing.assert_allclose(J_bias[:, 3:6], -H_ekf[:, 12:15], atol=1e-12)
-    assert np.all(J_pose[:, 3:6] == 0) and np.all(J_bias[:, 0:3] == 0)
-    np.testing.assert_allclose(J_bias[:, 3:6], skew(LEVER))
+    np.testing.assert_allclose(J_pose[:, X_ROT], H_ekf[:, ATT] @ R, atol=1e-12)
+    np.testing.assert_allclose(J_vel, H_ekf[:, VEL], atol=1e-12)
+    np.testing.assert_allclose(J_bias[:, B_GYRO], -H_ekf[:, BG], atol=1e-12)
+    assert np.all(J_pose[:, X_TRANS] == 0) and np.all(J_bias[:, B_ACC] == 0)
+    np.testing.assert_allclose(J_bias[:, B_GYRO], skew(LEVER))
 
 
 @pytest.mark.parametrize(

@@ -17,6 +17,7 @@ from gnssacc.pipeline import compare, prepare
 from gnssacc.prepare.tuning import SHRINK_TOLERANCE, draw_back, ml_search, tune
 from gnssacc.sources.gnss_noise import add_outliers
 from gnssacc.sources.sim import grade_config, simulate
+from gnssacc.estimators.layout import POS
 
 pytestmark = pytest.mark.filterwarnings("ignore::gnssacc.core.errors.DataWarning")
 
@@ -169,7 +170,7 @@ def test_tuner_never_overrides_keys_the_user_set(consumer_car):
 def _nees_pos(run, sol) -> tuple[float, int]:
     """Time-averaged position NEES per dof (axes' own sigmas) and the number of epochs."""
     p_true, valid = truth_at(run, sol.t)
-    e = (run.origin.to_ned(sol.lat, sol.lon, sol.h) - p_true)[valid] / sol.sigma[valid, 0:3]
+    e = (run.origin.to_ned(sol.lat, sol.lon, sol.h) - p_true)[valid] / sol.sigma[valid, POS]
     return float(np.mean(e**2)), int(valid.sum())
 
 

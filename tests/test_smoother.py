@@ -16,6 +16,7 @@ from gnssacc.estimators.smoother_graph import MIN_NODE_DT, node_times
 from gnssacc.prepare.passes import run_smoother
 from gnssacc.pipeline import with_outages
 from gnssacc.sources.sim import grade_config, simulate
+from gnssacc.estimators.layout import B_ACC, B_GYRO, POS, VEL, X_ROT, X_TRANS
 
 POSE = gtsam.Pose3(gtsam.Rot3(euler_to_dcm(0.1, -0.2, 2.5)), np.array([10.0, -4.0, 1.0]))
 BIAS = gtsam.imuBias.ConstantBias(np.array([0.05, -0.02, 0.1]), np.array([1e-3, -2e-3, 5e-4]))
@@ -52,7 +53,7 @@ def test_factor_jacobians_by_finite_differences_on_the_manifold():
             - accel_error(POSE, BIAS.retract(-d), F_B, A_N, G_N)
         ) / (2 * eps)
         np.testing.assert_allclose(J_bias[:, k], num_b, atol=1e-6)
-    assert np.all(J_pose[:, 3:6] == 0) and np.all(J_bias[:, 3:6] == 0)
+    assert np.all(J_pose[:, X_TRANS] == 0) and np.all(J_bias[:, B_GYRO] == 0)
 
 
 def test_factor_jacobians_equal_the_ekf_H_a_under_the_convention_mapping():
@@ -61,12 +62,12 @@ def test_factor_jacobians_equal_the_ekf_H_a_under_the_convention_mapping():
     J_pose, J_bias, _ = _factor_jacobians(POSE, BIAS)
     H_phi, H_ba = H_a_blocks(R, f)
     # xi = -R^T phi (right perturbation vs. n-frame estimate-minus-truth), db_a = b_a residual:
-    np.testing.assert_allclose(J_pose[:, 0:3] @ R.T, H_phi, atol=1e-12)
-    np.testing.assert_allclose(-J_bias[:, 0:3], H_ba, atol=1e-12)
+    np.testing.assert_allclose(J_pose[:, X_ROT] @ R.T, H_phi, atol=1e-12)
+    np.testing.assert_allclose(-J_bias[:, B_ACC], H_ba, atol=1e-12)
     # and with the paper's printed form (body-frame phi, measured-minus-predicted): J_xi = -(paper).
     p_phi, p_ba = paper_H_a_blocks(R, f)
-    np.testing.assert_allclose(J_pose[:, 0:3], -p_phi, atol=1e-12)
-    np.testing.assert_allclose(J_bias[:, 0:3], p_ba, atol=1e-12)
+    np.testing.assert_allclose(J_pose[:, X_ROT], -p_phi, atol=1e-12)
+    np.testing.assert_allclose(J_bias[:, B_ACC], p_ba, atol=1e-12)
     np.testing.assert_allclose(smoother_jacobians_from_H_a(R, f)[0], J_pose, atol=1e-12)
 
 
@@ -292,7 +293,7 @@ def _gm_exact_model_errors(seeds=range(12)):
         row = {}
         for m, sol in res.solutions.items():
             e = state_errors(res.run, sol)[sol.t >= sol.t[0] + 10.0]
-            row[m] = (rms(e[:, 0:3]), rms(e[:, 3:6]))
+            row[m] = (rms(e[:, POS]), rms(e[:, VEL]))
         out.append(row)
     return out
 

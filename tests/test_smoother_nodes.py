@@ -13,6 +13,7 @@ from gtsam.symbol_shorthand import B, G, V, X
 
 from gnssacc import pipeline
 from gnssacc.analysis.metrics import truth_at
+from gnssacc.estimators.layout import POS
 from gnssacc.core.config import load_config
 from gnssacc.core.earth import earth_rate_n, normal_gravity
 from gnssacc.core.rotations import euler_to_dcm
@@ -260,7 +261,7 @@ def test_folded_smoother_sigmas_are_consistent_with_its_errors():
         zs.append(
             (
                 (prep.run.origin.to_ned(sol.lat, sol.lon, sol.h) - p_true)[valid]
-                / sol.sigma[valid, 0:3]
+                / sol.sigma[valid, POS]
             )[60:]
         )
     msq = np.mean(np.concatenate(zs) ** 2, axis=0)
