@@ -17,7 +17,7 @@ import argparse
 
 import numpy as np
 
-from gnssacc.estimators.gnss_accel import model_errors
+from gnssacc.estimators.aids.accel_model import model_errors
 from gnssacc.sources.sim import simulate
 
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from gnssacc.core.config import load_config
 from gnssacc.estimators import mechanization
-from gnssacc.estimators.ekf import run_ekf
+from gnssacc.prepare.passes import run_ekf
 from gnssacc.pipeline import load_source
 from gnssacc.pipeline import prepare as identify
 from gnssacc.sources.sim import grade_config, simulate

@@ -22,6 +22,7 @@ import time
 import numpy as np
 
 import gnssacc.estimators.smoother as S
+import gnssacc.estimators.smoother_graph as G
 from gnssacc.analysis.metrics import score
 from gnssacc.core.config import load_config
 from gnssacc.estimators.fixed_lag import FixedLagISAM2, GtsamFixedLag
@@ -42,7 +43,7 @@ def _counting(cls, count: list):
 def _pass(ident, method: str, cls):
     """One smoother pass with ``cls``: solutions, CPU seconds, re-eliminated variables per update."""
     count = [0, 0]
-    S.FixedLagISAM2 = _counting(cls, count)
+    G.FixedLagISAM2 = _counting(cls, count)
     try:
         t0 = time.process_time()
         sols = S.run_smoother(
@@ -55,7 +56,7 @@ def _pass(ident, method: str, cls):
         )
         return sols, time.process_time() - t0, count[0] / max(count[1], 1)
     finally:
-        S.FixedLagISAM2 = FixedLagISAM2
+        G.FixedLagISAM2 = FixedLagISAM2
 
 
 def _apart(run, a, b) -> str:

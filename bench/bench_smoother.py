@@ -209,7 +209,7 @@ def _memory_child(duration: float) -> None:
 
     from gnssacc.checks.quality import check_imu
     from gnssacc.core.config import load_config
-    from gnssacc.estimators.smoother import run_smoother
+    from gnssacc.prepare.passes import run_smoother
     from gnssacc.sources.sim import grade_config, simulate
 
     cfg = load_config(overrides={"imu": grade_config("industrial")})
@@ -267,7 +267,7 @@ def main():
         return
 
     from gnssacc.core.config import load_config
-    from gnssacc.estimators.smoother import run_smoother
+    from gnssacc.prepare.passes import run_smoother
     from gnssacc.pipeline import load_source
     from gnssacc.pipeline import prepare as identify
 

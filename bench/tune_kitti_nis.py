@@ -50,7 +50,7 @@ def _overrides(c):
 def _evaluate(args):
     cand, seeds = args
     from gnssacc.core.config import load_config
-    from gnssacc.estimators.ekf import run_ekf
+    from gnssacc.prepare.passes import run_ekf
     from gnssacc.pipeline import load_source, with_outages
 
     cfg = load_config(overrides=_overrides(cand))

@@ -4,10 +4,12 @@ Error (NED, m/s^2)::
 
     e = R(X_k) (f~_b - b_a) + g^n - a~^n
 
-with ``a~^n`` the least-squares GNSS acceleration of :mod:`gnssacc.estimators.gnss_accel` (same window,
+with ``a~^n`` the least-squares GNSS acceleration of :mod:`gnssacc.estimators.aids.accel_model`
+(same window,
 same noise propagation as the EKF) and ``f~_b`` the specific force at the node time.
 
-Jacobians, from the EKF's H_a blocks (one implementation, :func:`gnssacc.estimators.gnss_accel.H_a_blocks`)
+Jacobians, from the EKF's H_a blocks (one implementation,
+:func:`gnssacc.estimators.aids.accel_model.H_a_blocks`)
 -------------------------------------------------------------------------------------------------
 GTSAM perturbs a pose on the right, ``R = R_hat Exp(xi)`` (``xi`` body-frame rotation, first three
 of the Pose3 tangent), and a bias additively, ``b = b_hat + db`` (accelerometer first). The EKF
@@ -27,7 +29,8 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from gnssacc.estimators.gnss_accel import H_a_blocks, predicted_acceleration
+from gnssacc.estimators.aids.accel_model import H_a_blocks, predicted_acceleration
+from gnssacc.estimators.layout import B_ACC, X_ROT
 
 
 def smoother_jacobians_from_H_a(R_nb: np.ndarray, f_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -42,9 +45,9 @@ def smoother_jacobians_from_H_a(R_nb: np.ndarray, f_b: np.ndarray) -> tuple[np.n
     """
     H_phi, H_ba = H_a_blocks(R_nb, f_b)
     J_pose = np.zeros((3, 6))
-    J_pose[:, 0:3] = H_phi @ R_nb
+    J_pose[:, X_ROT] = H_phi @ R_nb
     J_bias = np.zeros((3, 6))
-    J_bias[:, 0:3] = -H_ba
+    J_bias[:, B_ACC] = -H_ba
     return J_pose, J_bias
 
 
@@ -92,8 +95,8 @@ def gnss_accel_factor(
         f_corr = f_b - values.atConstantBias(bias_key).accelerometer()
         if H is not None:
             H_phi, H_ba = H_a_blocks(R_nb, f_corr)  # smoother_jacobians_from_H_a, same numbers
-            np.matmul(H_phi, R_nb, out=J_pose[:, 0:3])
-            np.negative(H_ba, out=J_bias[:, 0:3])
+            np.matmul(H_phi, R_nb, out=J_pose[:, X_ROT])
+            np.negative(H_ba, out=J_bias[:, B_ACC])
             H[0], H[1] = J_pose, J_bias
         return R_nb @ f_corr + g_minus_a  # predicted_acceleration(R_nb, f_corr, g_n) - a_n
 

@@ -5,7 +5,8 @@ Error (NED, m/s^2)::
 
     e = sum_j B_j p_ant(X_j) - a~^n,      p_ant(X) = t + R l_b
 
-with ``B`` the least-squares row of :func:`gnssacc.estimators.gnss_accel.acceleration_row` for the window's
+with ``B`` the least-squares row of :func:`gnssacc.estimators.aids.accel_model.acceleration_row`
+for the window's
 fix times and ``a~^n = sum_j B_j p_fix_j``. The operator that made the measurement from the fixes
 is applied to the antenna positions the estimate predicts at the same times, so a noise-free
 window gives zero error whatever the vehicle does between the fixes (the paper's factor compares
@@ -17,7 +18,8 @@ Jacobians on GTSAM's Pose3 tangent (rotation ``xi`` first, then translation ``ta
     de/dxi_j = -B_j R_j [l_b x],     de/dtau_j = B_j R_j
 
 The error is linear in the positions but not in the Pose3 tangent (``tau`` is body-frame), so a
-linear GTSAM factor is not exact here: it is a CustomFactor (its cost is in ``bench/bench_smoother.py``).
+linear GTSAM factor is not exact here: it is a CustomFactor (its cost is in
+``bench/bench_smoother.py``).
 Noise: the propagated ``sum_j B_j^2 Sigma_j`` (fixes independent) or a fixed sigma, as for the
 paper's factor. It is not correlated with the position factors of the same fixes: like the
 paper's factor it counts their information twice (:mod:`gnssacc.analysis.aiding_theory`). With the
@@ -31,12 +33,14 @@ import gtsam
 import numpy as np
 
 from gnssacc.core.rotations import skew
+from gnssacc.estimators.layout import X_ROT, X_TRANS
 
 
 def window_accel_error(
     poses: list, B_row: np.ndarray, lever_b: np.ndarray, a_n: np.ndarray
 ) -> np.ndarray:
-    """``sum_j B_j (t_j + R_j l_b) - a_n`` [m/s^2] for ``gtsam.Pose3`` ``poses`` (body in local NED)."""
+    """``sum_j B_j (t_j + R_j l_b) - a_n`` [m/s^2] for ``gtsam.Pose3`` ``poses`` (body in local
+    NED)."""
     ant = [p.translation() + p.rotation().matrix() @ lever_b for p in poses]
     return np.asarray(B_row, float) @ np.asarray(ant) - a_n
 
@@ -70,14 +74,14 @@ def window_accel_factor(
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
         e = -a_n
-        for j, (key, b) in enumerate(zip(keys, B_row)):
+        for j, (key, b) in enumerate(zip(keys, B_row, strict=True)):
             pose = values.atPose3(key)
             R = pose.rotation().matrix()
             e = e + b * (pose.translation() + R @ lever_b if has_arm else pose.translation())
             if H is not None:
                 if has_arm:
-                    np.multiply(R @ L, -b, out=J[j][:, 0:3])
-                np.multiply(R, b, out=J[j][:, 3:6])
+                    np.multiply(R @ L, -b, out=J[j][:, X_ROT])
+                np.multiply(R, b, out=J[j][:, X_TRANS])
                 H[j] = J[j]
         return e
 

@@ -15,6 +15,7 @@ import gtsam
 import numpy as np
 
 from gnssacc.core.rotations import skew
+from gnssacc.estimators.layout import X_ROT, X_TRANS
 
 
 def gnss_position_gm_factor(
@@ -38,8 +39,8 @@ def gnss_position_gm_factor(
         pose = values.atPose3(keys[0])
         R = pose.rotation().matrix()
         if H is not None:
-            np.matmul(R, minus_L, out=J_pose[:, 0:3])
-            J_pose[:, 3:6] = R
+            np.matmul(R, minus_L, out=J_pose[:, X_ROT])
+            J_pose[:, X_TRANS] = R
             H[0], H[1] = J_pose, J_g
         return pose.translation() + R @ lever_b + values.atVector(keys[1]) - p_fix
 

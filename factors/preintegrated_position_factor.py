@@ -42,6 +42,7 @@ import gtsam
 import numpy as np
 
 from gnssacc.core.rotations import skew
+from gnssacc.estimators.layout import NAVSTATE_POSE, NAVSTATE_VEL, X_ROT, X_TRANS
 
 
 def preintegrated_position_factor(
@@ -88,10 +89,14 @@ def preintegrated_position_factor(
         pred = pim.predict(state, bias, J_s, J_b) if H is not None else pim.predict(state, bias)
         R = pred.attitude().matrix()
         if H is not None:
-            np.matmul(-R, L, out=D[:, 0:3])
-            D[:, 3:6] = R
+            np.matmul(-R, L, out=D[:, X_ROT])
+            D[:, X_TRANS] = R
             A = D @ J_s
-            H[0], H[1], H[2] = A[:, 0:6], A[:, 6:9] @ pose.rotation().matrix().T, D @ J_b
+            H[0], H[1], H[2] = (
+                A[:, NAVSTATE_POSE],
+                A[:, NAVSTATE_VEL] @ pose.rotation().matrix().T,
+                D @ J_b,
+            )
             if bridge is not None:
                 H[3], H[4] = J_gi, J_gj
         e = pred.position() + R @ lever_b - p_fix
@@ -100,7 +105,10 @@ def preintegrated_position_factor(
         return e + bridge[0] * values.atVector(keys[3]) + bridge[1] * values.atVector(keys[4])
 
     J_p = np.hstack([-R_f @ L, R_f])
-    cov = np.asarray(cov_fix, float) + J_p @ np.asarray(pim.preintMeasCov())[0:6, 0:6] @ J_p.T
+    cov = (
+        np.asarray(cov_fix, float)
+        + J_p @ np.asarray(pim.preintMeasCov())[NAVSTATE_POSE, NAVSTATE_POSE] @ J_p.T
+    )
     if bridge is not None:
         J_gi, J_gj = np.diag(bridge[0]), np.diag(bridge[1])
         cov = cov + np.diag(bridge[2])

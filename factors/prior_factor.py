@@ -1,4 +1,5 @@
-r"""A joint Gaussian prior on the first node: pose, IMU bias and (when modelled) GNSS error together.
+r"""A joint Gaussian prior on the first node: pose, IMU bias and (when modelled) GNSS error
+together.
 
 Separate priors cannot state that two variables are correlated, and the self-initialised start is
 correlated twice over: levelling ties the tilt to the accelerometer bias, and a position taken
@@ -14,6 +15,8 @@ from __future__ import annotations
 
 import gtsam
 import numpy as np
+
+from gnssacc.estimators.layout import PRIOR_BIAS, PRIOR_G, PRIOR_POSE
 
 
 def joint_prior_factor(
@@ -43,23 +46,23 @@ def joint_prior_factor(
     bias0 = np.asarray(bias0, float).copy()
     g0 = None if g0 is None else np.asarray(g0, float).copy()
     keys = [pose_key, bias_key] + ([gm_key] if gm_key is not None else [])
-    m = 12 if gm_key is None else 15
+    m = PRIOR_BIAS.stop if gm_key is None else PRIOR_G.stop
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
         rel = pose0.between(values.atPose3(keys[0]))
         e = np.zeros(m)
-        e[0:6] = gtsam.Pose3.Logmap(rel)
-        e[6:12] = values.atConstantBias(keys[1]).vector() - bias0
+        e[PRIOR_POSE] = gtsam.Pose3.Logmap(rel)
+        e[PRIOR_BIAS] = values.atConstantBias(keys[1]).vector() - bias0
         if gm_key is not None:
-            e[12:15] = values.atVector(keys[2]) - g0
+            e[PRIOR_G] = values.atVector(keys[2]) - g0
         if H is not None:
             H[0] = np.zeros((m, 6))
-            H[0][0:6] = gtsam.Pose3.LogmapDerivative(rel)
+            H[0][PRIOR_POSE] = gtsam.Pose3.LogmapDerivative(rel)
             H[1] = np.zeros((m, 6))
-            H[1][6:12] = np.eye(6)
+            H[1][PRIOR_BIAS] = np.eye(6)
             if gm_key is not None:
                 H[2] = np.zeros((m, 3))
-                H[2][12:15] = np.eye(3)
+                H[2][PRIOR_G] = np.eye(3)
         return e
 
     return gtsam.CustomFactor(

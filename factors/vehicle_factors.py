@@ -10,7 +10,8 @@ The velocity of the point ``l_b`` [m, body] from the IMU, relative to the earth,
 right, ``R = R_hat Exp(xi)`` (``xi`` the first three of the Pose3 tangent), the velocity and the
 bias additively. With ``u = R_hat^T v`` and ``w = R_hat^T omega_ie^n``:
 
-    dv_l/dxi  = [u x] + [l x][w x]      (R^T a = (I - [xi x]) R_hat^T a = R_hat^T a + [R_hat^T a x] xi)
+    dv_l/dxi  = [u x] + [l x][w x]
+                (R^T a = (I - [xi x]) R_hat^T a = R_hat^T a + [R_hat^T a x] xi)
     dv_l/dv   = R_hat^T
     dv_l/db_g = [l x]                    (d(omega x l)/d omega = -[l x], omega = omega~ - b_g)
 
@@ -33,6 +34,7 @@ import gtsam
 import numpy as np
 
 from gnssacc.core.rotations import cross3, skew
+from gnssacc.estimators.layout import B_GYRO, X_ROT
 
 
 def vehicle_velocity(
@@ -49,12 +51,12 @@ def vehicle_velocity(
     u = Rt @ v_n
     J_pose, J_bias = np.zeros((3, 6)), np.zeros((3, 6))
     if not lever_b.any():  # no lever-arm terms (iSAM2 calls this a few times per factor)
-        J_pose[:, 0:3] = skew(u)
+        J_pose[:, X_ROT] = skew(u)
         return u, J_pose, Rt, J_bias
     w = Rt @ w_ie_n
     L = skew(lever_b)
-    J_pose[:, 0:3] = skew(u) + L @ skew(w)
-    J_bias[:, 3:6] = L
+    J_pose[:, X_ROT] = skew(u) + L @ skew(w)
+    J_bias[:, B_GYRO] = L
     return u + cross3(omega_b - b_g - w, lever_b), J_pose, Rt, J_bias
 
 
@@ -136,7 +138,8 @@ def odometry_factor(
     sigma_mps: float,
     R_vb: np.ndarray | None = None,
 ) -> gtsam.CustomFactor:
-    """Wheel odometry's forward speed ``v_odo`` [m/s] (1-sigma ``sigma_mps``) of the point ``lever_b``
+    """Wheel odometry's forward speed ``v_odo`` [m/s] (1-sigma ``sigma_mps``) of the point
+    ``lever_b``
     [m, body] along the vehicle's x axis, read with the scale-factor error held by ``scale_key`` (a
     1-vector); ``omega_b``, ``w_ie_n``, ``R_vb`` as for :func:`nhc_factor`."""
     omega_b, lever_b, w_ie_n = (np.asarray(a, float).copy() for a in (omega_b, lever_b, w_ie_n))

@@ -9,16 +9,18 @@ from stat_bounds import CALIBRATION, nis_band
 
 from gnssacc.core.config import load_config
 from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm
-from gnssacc.estimators.ekf import FilterState, run_ekf
-from gnssacc.estimators.gnss_accel import (
+from gnssacc.estimators.state import FilterState
+from gnssacc.prepare.passes import run_ekf
+from gnssacc.estimators.aids.accel_model import (
     acceleration_row,
     model_errors,
     peano_kernel,
     window_samples,
 )
-from gnssacc.estimators.measurements import window_acceleration
+from gnssacc.estimators.aids.gnss_accel import window_acceleration
 from gnssacc.estimators.mechanization import kernel_force_integrals
 from gnssacc.sources.sim import grade_config, simulate
+from gnssacc.estimators.layout import ATT, BA, BG
 
 WINDOWS = [
     100.0 + np.arange(3.0),
@@ -67,7 +69,7 @@ def test_sample_weights_are_exact_for_piecewise_constant_acceleration(t):
 
     def p(x):
         # Exact double integral of the piecewise-constant acceleration from t_imu[0].
-        pos, vel, total = 0.0, 0.0, 0.0
+        vel, total = 0.0, 0.0
         for i in range(1, len(t_imu)):
             dt = min(x, t_imu[i]) - t_imu[i - 1]
             if dt <= 0:
@@ -131,7 +133,7 @@ def test_H_w_by_finite_differences():
         e = np.zeros(15)
         e[j] = eps
         dz = [
-            _window_dz(rotvec_to_dcm(x[6:9]) @ R, b_a - x[9:12], b_g - x[12:15], *args).dz
+            _window_dz(rotvec_to_dcm(x[ATT]) @ R, b_a - x[BA], b_g - x[BG], *args).dz
             for x in (e, -e)
         ]
         num = (dz[0] - dz[1]) / (2 * eps)
@@ -140,7 +142,7 @@ def test_H_w_by_finite_differences():
         rel = 1e-8 if j < 12 else 1e-4
         np.testing.assert_allclose(m0.H[:, j], num, atol=rel * np.abs(num).max())
     # The gyro-bias block is the smallest but not negligible over 2 s: ~ |f| T^2 / 2.
-    assert 1.0 < np.abs(m0.H[:, 12:15]).max() < 30.0
+    assert 1.0 < np.abs(m0.H[:, BG]).max() < 30.0
 
 
 def test_window_model_error_is_far_below_the_paper_model_on_noise_free_data():
@@ -209,7 +211,7 @@ def test_windows_touching_a_suspect_imu_span_are_skipped():
 def test_H_w_reduces_to_the_paper_H_a_without_rotation():
     """No rotation over the window and a constant specific force: F_b = f, M = I, and H_w's
     attitude and accelerometer-bias blocks are the paper's H_a (same sign convention)."""
-    from gnssacc.estimators.gnss_accel import H_a_blocks, H_w_blocks
+    from gnssacc.estimators.aids.accel_model import H_a_blocks, H_w_blocks
 
     t_imu = np.arange(-0.1, 2.2, 0.01)
     k0, k1, h, w = window_samples(t_imu, np.array([0.0, 1.0, 2.0]))

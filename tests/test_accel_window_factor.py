@@ -11,8 +11,9 @@ from gnssacc.analysis.aiding_theory import FgChain, fg_departure, fg_draw, fg_po
 from gnssacc.analysis.metrics import gnss_score, score
 from gnssacc.core.config import load_config
 from gnssacc.core.rotations import euler_to_dcm
-from gnssacc.estimators.gnss_accel import acceleration_row
-from gnssacc.estimators.smoother import run_smoother
+from gnssacc.estimators.aids.accel_model import acceleration_row
+from gnssacc.estimators.layout import NODE_B, NODE_V, NODE_X, POS
+from gnssacc.prepare.passes import run_smoother
 from gnssacc.sources.sim import grade_config, simulate
 
 POSES = [
@@ -77,7 +78,7 @@ def test_smoother_accw_runs_end_to_end_on_a_simulated_run():
     sol = sols["smoother-accw"]
     assert set(sols) == {"smoother-accw", "smoother-accw-online"}
     assert sol.stats["n_acc_factors"] > 100
-    assert np.all(np.isfinite(sol.sigma)) and np.all(sol.sigma[:, 0:3] > 0)
+    assert np.all(np.isfinite(sol.sigma)) and np.all(sol.sigma[:, POS] > 0)
     prmse = score(run, sol).prmse_m
     assert prmse < gnss_score(run).prmse_m / 2 and prmse < 1.3 * score(run, ref).prmse_m
     # 3 m fixes at 1 Hz give 7 m/s^2 accelerations: little (double-counted) information, so the
@@ -86,27 +87,27 @@ def test_smoother_accw_runs_end_to_end_on_a_simulated_run():
 
 
 def test_smoother_accw_recorded_covariances_equal_isam2_joint_marginals(monkeypatch):
-    import gnssacc.estimators.smoother as S
+    import gnssacc.estimators.smoother_graph as G
 
     cfg = load_config(overrides={"imu": grade_config("industrial")})
     run = simulate("car", duration_s=40.0, imu_grade="industrial", noise="white", seed=4)
     worst, calls = [0.0], [0]
-    orig = S._Smoother.covariances
+    orig = G.WindowSmoother.covariances
 
     def checked(self, nodes):
         covs = orig(self, nodes)
         for i, cov in zip(nodes, covs):
             keys = self.keys(i)
             ref = self.isam.getISAM2().jointMarginalCovariance(keys).fullMatrix()
-            for sl in (slice(0, 6), slice(6, 9), slice(9, 15)):  # the blocks it records
+            for sl in (NODE_X, NODE_V, NODE_B):  # the blocks it records
                 C = cov[sl, sl]
                 d = np.sqrt(np.diag(ref[sl, sl]))
                 worst[0] = max(worst[0], float(np.max(np.abs(C - ref[sl, sl]) / np.outer(d, d))))
             calls[0] += 1
         return covs
 
-    monkeypatch.setattr(S._Smoother, "covariances", checked)
-    sols = S.run_smoother(run, cfg, "smoother-accw")
+    monkeypatch.setattr(G.WindowSmoother, "covariances", checked)
+    sols = run_smoother(run, cfg, "smoother-accw")
     # every node online and fixed-lag; the last node is both at the end (one query)
     assert calls[0] == 2 * sols["smoother-accw"].stats["n_nodes"] - 1 and worst[0] < 1e-6, worst
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from gnssacc.core.units import DEG
 from gnssacc.prepare.allan import (
     allan_deviation,
     allan_deviation_pooled,
@@ -19,8 +20,6 @@ from gnssacc.prepare.allan import (
     remove_spectral_lines,
     white_noise_density,
 )
-
-DEG = np.pi / 180.0
 
 
 def _white(n, dt, N, rng):

@@ -44,9 +44,10 @@ from gnssacc.core.config import load_config
 from gnssacc.core.earth import radii
 from gnssacc.core.recording import InitialState
 from gnssacc.core.rotations import dcm_to_euler, dcm_to_rotvec, euler_to_dcm, rotvec_to_dcm
-from gnssacc.estimators.ekf import run_ekf
+from gnssacc.prepare.passes import run_ekf
 from gnssacc.sources.sim import grade_config, simulate
 from gnssacc.sources.sim_imu_errors import UNMODELLED_KEYS, imu_sigmas_si
+from gnssacc.estimators.layout import ATT, BA, BG, VEL
 
 GRADE = "tactical"
 RUNS = 100
@@ -106,10 +107,10 @@ def _error(run, sol, i: int, bias_a: np.ndarray, bias_g: np.ndarray) -> np.ndarr
     e[0] = (sol.lat[i] - tr.lat[j]) * (R_M + tr.h[j])
     e[1] = (sol.lon[i] - tr.lon[j]) * (R_N + tr.h[j]) * np.cos(tr.lat[j])
     e[2] = tr.h[j] - sol.h[i]
-    e[3:6] = sol.v_n[i] - tr.v_n[j]
-    e[6:9] = dcm_to_rotvec(euler_to_dcm(*sol.rpy[i]) @ euler_to_dcm(*tr.rpy[j]).T)
-    e[9:12] = bias_a - sol.b_a[i]
-    e[12:15] = bias_g - sol.b_g[i]
+    e[VEL] = sol.v_n[i] - tr.v_n[j]
+    e[ATT] = dcm_to_rotvec(euler_to_dcm(*sol.rpy[i]) @ euler_to_dcm(*tr.rpy[j]).T)
+    e[BA] = bias_a - sol.b_a[i]
+    e[BG] = bias_g - sol.b_g[i]
     return e
 
 
@@ -254,7 +255,7 @@ def smoother_z2(runs: int = RUNS) -> tuple[dict[str, np.ndarray], dict[str, np.n
     """Squared position and velocity errors over the smoother's marginal sigmas, per method
     (``smoother`` fixed-lag, ``smoother-online``): arrays (runs, epochs, 6); and each run's GNSS
     residual ratio (``nis_pos_mean``: the fixes' whitened squared residuals over their expectation)."""
-    from gnssacc.estimators.smoother import run_smoother
+    from gnssacc.prepare.passes import run_smoother
 
     grade = grade_config(GRADE)
     cfg, grade_si = load_config(overrides={"imu": grade}), imu_sigmas_si(grade)

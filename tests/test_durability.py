@@ -625,7 +625,7 @@ def test_truth_shorter_than_the_run_leaves_full_outputs(run_dir, tmp_path, capsy
 
 def test_output_epochs_do_not_depend_on_the_truth(run_dir, tmp_path):
     from gnssacc.core.config import load_config
-    from gnssacc.estimators.ekf import default_output_times
+    from gnssacc.estimators.epochs import default_output_times
     from gnssacc.pipeline import with_outages
     from gnssacc.sources.csvdir import load_csv_run
 

@@ -11,7 +11,7 @@ from gnssacc.core import earth
 from gnssacc.core.config import load_config
 from gnssacc.core.rotations import euler_to_dcm
 from gnssacc.estimators import mechanization as mech
-from gnssacc.estimators.ekf import run_ekf
+from gnssacc.prepare.passes import run_ekf
 from gnssacc.sources.sim import grade_config, simulate
 
 

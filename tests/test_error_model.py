@@ -6,6 +6,7 @@ import pytest
 from gnssacc.core import earth
 from gnssacc.core.rotations import dcm_to_rotvec, euler_to_dcm, rotvec_to_dcm
 from gnssacc.estimators.mechanization import strapdown_step, system_matrix
+from gnssacc.estimators.layout import ATT, BA, BG, POS, VEL
 
 
 def _error(est, true):
@@ -33,7 +34,7 @@ def _perturb(true, e):
             pos[2] - e[2],
         ]
     )
-    return pos_e, v + e[3:6], rotvec_to_dcm(e[6:9]) @ R, ba + e[9:12], bg + e[12:15]
+    return pos_e, v + e[VEL], rotvec_to_dcm(e[ATT]) @ R, ba + e[BA], bg + e[BG]
 
 
 def _step(state, f_true, w_true, dt):
@@ -79,19 +80,19 @@ def test_F_matches_finite_differences(lat_deg, v_n):
     # F_pp and F_vp neglect the ellipticity terms d(R_M, R_N, g)/d(lat), which are ~0.3 % of
     # entries that are themselves ~1e-6.
     atol = np.full((15, 15), 1e-9)
-    atol[0:3, 6:15] = 5e-6
-    atol[0:3, 0:6] = 3e-8
-    atol[3:6, 0:3] = 2e-8
+    atol[POS, 6:15] = 5e-6
+    atol[POS, 0:6] = 3e-8
+    atol[VEL, POS] = 2e-8
     err = np.abs(F - F_num)
     tol = atol + 5e-3 * np.abs(F_num)
     bad = np.argwhere(err > tol)
     assert bad.size == 0, "\n".join(
-        f"F[{i},{j}] = {F[i, j]:.6e}, numeric {F_num[i, j]:.6e}" for i, j in bad
+        f"F[{i}, {j}] = {F[i, j]:.6e}, numeric {F_num[i, j]:.6e}" for i, j in bad
     )
     # The blocks the paper names explicitly are exact.
-    np.testing.assert_allclose(F[0:3, 3:6], np.eye(3))
-    np.testing.assert_allclose(F[3:6, 9:12], R)
-    np.testing.assert_allclose(F[6:9, 12:15], R)
+    np.testing.assert_allclose(F[POS, VEL], np.eye(3))
+    np.testing.assert_allclose(F[VEL, BA], R)
+    np.testing.assert_allclose(F[ATT, BG], R)
 
 
 @pytest.mark.parametrize("order", [1, 2])

@@ -15,7 +15,8 @@ import pytest
 from gtsam.symbol_shorthand import X
 from stat_bounds import CALIBRATION, nis_band
 
-import gnssacc.estimators.smoother as S
+import gnssacc.estimators.smoother_graph as G
+from gnssacc.prepare.passes import run_smoother
 from gnssacc.core.config import load_config
 from gnssacc.estimators.fixed_lag import FixedLagISAM2, GtsamFixedLag
 from gnssacc.pipeline import with_outages
@@ -80,8 +81,8 @@ def _run(monkeypatch, cls, run, cfg, method):
             super().update(graph, values, stamps)
             count[0] += self.getISAM2Result().getVariablesReeliminated()
 
-    monkeypatch.setattr(S, "FixedLagISAM2", Counted)
-    return S.run_smoother(run, cfg, method), count[0]
+    monkeypatch.setattr(G, "FixedLagISAM2", Counted)
+    return run_smoother(run, cfg, method), count[0]
 
 
 @pytest.mark.parametrize(
@@ -124,7 +125,7 @@ def test_biases_far_from_their_linearisation_point_are_relinearised_before_margi
     1 Hz nodes in a 10 s lag: without the guard the fixed-lag estimate drifted to 10.3 m where the
     EKF holds 2.2 m (the biases' factors marginalised at their first linearisation point)."""
     from gnssacc.analysis.metrics import score
-    from gnssacc.estimators.ekf import run_ekf
+    from gnssacc.prepare.passes import run_ekf
     from gnssacc.pipeline import prepare
 
     run = simulate("ugv", 180.0, imu_grade="consumer", noise="white", seed=2)
@@ -143,7 +144,7 @@ def test_biases_far_from_their_linearisation_point_are_relinearised_before_margi
     ident = prepare(run, cfg, "none")
     kw = dict(init=ident.init, stationary=ident.stationary, quality=ident.quality)
     ekf = score(run, run_ekf(ident.run, ident.cfg, "ekf", **kw)).prmse_m
-    sm = S.run_smoother(ident.run, ident.cfg, "smoother", **kw)
+    sm = run_smoother(ident.run, ident.cfg, "smoother", **kw)
     assert score(run, sm["smoother"]).prmse_m < ekf
     # The fixes' residual chi-square (fewer than 3 dof per fix: 1 dof gives a wider band than the
     # true one at 1e-3), widened by the stated calibration: this configuration is hand-set.

@@ -5,8 +5,8 @@ import pytest
 
 from gnssacc.core.earth import radii
 from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm
-from gnssacc.estimators.ekf import FilterState
-from gnssacc.estimators.gnss_accel import (
+from gnssacc.estimators.state import FilterState
+from gnssacc.estimators.aids.accel_model import (
     AccelWindow,
     H_a,
     H_a_blocks,
@@ -16,7 +16,8 @@ from gnssacc.estimators.gnss_accel import (
     paper_H_a_blocks,
     predicted_acceleration,
 )
-from gnssacc.estimators.measurements import position
+from gnssacc.estimators.aids.gnss_position import position
+from gnssacc.estimators.layout import ATT, POS
 
 
 @pytest.mark.parametrize("dt", [1.0, 0.2, 0.1])
@@ -144,7 +145,7 @@ def test_H_p_with_lever_arm_by_finite_differences():
                 [lat + err[0] / (R_M + h), lon + err[1] / ((R_N + h) * np.cos(lat)), h - err[2]]
             ),
             np.zeros(3),
-            rotvec_to_dcm(err[6:9]) @ R,
+            rotvec_to_dcm(err[ATT]) @ R,
             np.zeros(3),
             np.zeros(3),
             np.eye(15),
@@ -163,14 +164,14 @@ def test_H_p_with_lever_arm_by_finite_differences():
         e[j] = eps[j]
         num = (dz(e)[0] - dz(-e)[0]) / (2 * eps[j])
         np.testing.assert_allclose(H[:, j], num, atol=2e-6)
-    np.testing.assert_allclose(H[:, 0:3], np.eye(3))
+    np.testing.assert_allclose(H[:, POS], np.eye(3))
     np.testing.assert_allclose(dz(np.zeros(15))[0], 0.0, atol=1e-6)
 
 
 @pytest.mark.parametrize("override", [None, np.array([0.1, 0.2, 0.3])])
 def test_window_accelerations_equal_the_sliding_window(override):
     """The vectorised accelerations (the smoother's) equal AccelWindow's, gaps and resets included."""
-    from gnssacc.estimators.gnss_accel import AccelWindow, window_accelerations
+    from gnssacc.estimators.aids.accel_model import AccelWindow, window_accelerations
 
     rng = np.random.default_rng(5)
     t = np.cumsum(rng.choice([0.2, 1.0, 1.0, 3.0], size=80))  # 3 s steps exceed the gap

@@ -13,7 +13,18 @@ from gtsam.symbol_shorthand import G, X
 
 from gnssacc.core.earth import earth_rate_n, radii
 from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm
-from gnssacc.estimators import measurements as mm
+from gnssacc.estimators.aids import gnss_position, zupt
+from gnssacc.estimators.layout import (
+    ATT,
+    BA,
+    BG,
+    BIASES,
+    GNSS_ERROR,
+    POS,
+    VEL,
+    MarkovBlock,
+    StateLayout,
+)
 from gnssacc.estimators.mechanization import Propagator
 
 LAT, LON, H = np.radians(47.3), np.radians(8.5), 420.0
@@ -29,13 +40,15 @@ def _state(err: np.ndarray, n: int = 15, gm_true=np.zeros(3)):
     gm = gm_true + (err[15:18] if n > 15 else 0.0)
     return SimpleNamespace(
         pos=pos,
-        v_n=err[3:6].copy(),
-        R_nb=rotvec_to_dcm(err[6:9]) @ R_TRUE,
+        v_n=err[VEL].copy(),
+        R_nb=rotvec_to_dcm(err[ATT]) @ R_TRUE,
         b_a=np.zeros(3),
-        b_g=B_TRUE - err[12:15],
+        b_g=B_TRUE - err[BG],
         gm=gm,
         P=np.eye(n),
-        n_gm=3 if n > 15 else 0,
+        layout=StateLayout.build(
+            [MarkovBlock(GNSS_ERROR, np.ones(3), np.ones(3))] if n > 15 else []
+        ),
     )
 
 
@@ -50,16 +63,16 @@ def _check(dz, H, n, steps, atol):
 
 def test_zero_rate_jacobian_by_finite_differences():
     omega_mean = R_TRUE.T @ W_IE + B_TRUE  # what a still gyro reads
-    dz = lambda e: mm.zero_rate(_state(e), omega_mean, np.ones(3), W_IE).dz  # noqa: E731
-    H = mm.zero_rate(_state(np.zeros(15)), omega_mean, np.ones(3), W_IE).H
+    dz = lambda e: zupt.zero_rate(_state(e), omega_mean, np.ones(3), W_IE).dz  # noqa: E731
+    H = zupt.zero_rate(_state(np.zeros(15)), omega_mean, np.ones(3), W_IE).H
     _check(dz, H, 15, {**{j: 1e-4 for j in range(6, 9)}, **{j: 1e-6 for j in range(12, 15)}}, 1e-9)
     # Nothing else enters.
-    assert np.all(H[:, 0:6] == 0) and np.all(H[:, 9:12] == 0)
+    assert np.all(H[:, 0:6] == 0) and np.all(H[:, BA] == 0)
 
 
 def test_zero_velocity_jacobian_by_finite_differences():
-    dz = lambda e: mm.zero_velocity(_state(e), 0.02).dz  # noqa: E731
-    H = mm.zero_velocity(_state(np.zeros(15)), 0.02).H
+    dz = lambda e: zupt.zero_velocity(_state(e), 0.02).dz  # noqa: E731
+    H = zupt.zero_velocity(_state(np.zeros(15)), 0.02).H
     _check(dz, H, 15, {j: 1e-3 for j in range(3, 6)}, 1e-12)
 
 
@@ -71,9 +84,9 @@ def test_position_jacobian_with_gauss_markov_states():
     fix = (LAT + ant[0] / (R_M + H), LON + ant[1] / ((R_N + H) * np.cos(LAT)), H - ant[2])
 
     def dz(e):
-        return mm.position(_state(e, 18, gm_true), *fix, np.ones(3), lever).dz
+        return gnss_position.position(_state(e, 18, gm_true), *fix, np.ones(3), lever).dz
 
-    H_ = mm.position(_state(np.zeros(18), 18, gm_true), *fix, np.ones(3), lever).H
+    H_ = gnss_position.position(_state(np.zeros(18), 18, gm_true), *fix, np.ones(3), lever).H
     _check(
         dz,
         H_,
@@ -93,10 +106,10 @@ def test_position_jacobian_has_no_velocity_or_bias_columns(n):
     """A fix sees position, attitude (through the lever arm) and the GNSS error only: H_p's
     velocity and bias columns are exactly zero (finite differences cannot show an exact zero)."""
     lever = np.array([0.8, -0.3, -1.1])
-    H_ = mm.position(_state(np.zeros(n), n), LAT, LON, H, np.ones(3), lever).H
+    H_ = gnss_position.position(_state(np.zeros(n), n), LAT, LON, H, np.ones(3), lever).H
     assert H_.shape == (3, n)
-    assert np.all(H_[:, 3:6] == 0.0) and np.all(H_[:, 9:15] == 0.0)
-    assert np.all(np.any(H_[:, 0:3] != 0.0, axis=0)) and np.all(np.any(H_[:, 6:9] != 0.0, axis=0))
+    assert np.all(H_[:, VEL] == 0.0) and np.all(H_[:, BIASES] == 0.0)
+    assert np.all(np.any(H_[:, POS] != 0.0, axis=0)) and np.all(np.any(H_[:, ATT] != 0.0, axis=0))
 
 
 POSE = gtsam.Pose3(gtsam.Rot3(euler_to_dcm(0.1, -0.05, 0.9)), np.array([10.0, -4.0, 2.0]))
@@ -184,8 +197,7 @@ def test_gauss_markov_covariance_propagation_matches_its_closed_form():
         z3,
         z3,
         (seg, seg, np.zeros((0, 3)), np.zeros((0, 3))),
-        gm_tau_s=tau,
-        gm_sigma_m=sigma,
+        layout=StateLayout.build([MarkovBlock(GNSS_ERROR, tau, sigma)]),
     )
     P = np.eye(18)
     P[0:3, 15:18] = P[15:18, 0:3] = -0.5 * np.eye(3)
@@ -200,5 +212,5 @@ def test_gauss_markov_covariance_propagation_matches_its_closed_form():
     prop.advance(s, 1, 0.0, 10.0)
     a = np.exp(-10.0 / tau)
     np.testing.assert_allclose(np.diag(s.P)[15:18], a**2 + sigma**2 * (1 - a**2), rtol=1e-9)
-    np.testing.assert_allclose(np.diag(s.P[0:3, 15:18]), -0.5 * a, rtol=1e-3)
+    np.testing.assert_allclose(np.diag(s.P[POS, 15:18]), -0.5 * a, rtol=1e-3)
     np.testing.assert_allclose(s.P, s.P.T, atol=1e-12)

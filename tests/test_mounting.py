@@ -7,7 +7,7 @@ from gnssacc.analysis.metrics import score
 from gnssacc.core.config import load_config
 from gnssacc.core.recording import ImuData
 from gnssacc.core.rotations import euler_to_dcm
-from gnssacc.estimators.ekf import run_ekf
+from gnssacc.prepare.passes import run_ekf
 from gnssacc.sources.csvdir import load_csv_run, write_csv_run
 from gnssacc.sources.sim import grade_config, simulate
 

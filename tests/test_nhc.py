@@ -16,9 +16,23 @@ from gtsam.symbol_shorthand import B, K, V, X
 from gnssacc.core.config import load_config
 from gnssacc.core.earth import earth_rate_n, radii
 from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm, skew
-from gnssacc.estimators import measurements as mm
-from gnssacc.estimators import nhc
-from gnssacc.estimators.ekf import FilterState
+from gnssacc.estimators.aids import nhc, vehicle
+from gnssacc.estimators.aids import odometry as odo
+from gnssacc.estimators.state import FilterState
+from gnssacc.estimators.layout import (
+    ATT,
+    BA,
+    BG,
+    B_ACC,
+    B_GYRO,
+    ODOMETRY_SCALE,
+    POS,
+    VEL,
+    X_ROT,
+    X_TRANS,
+    MarkovBlock,
+    StateLayout,
+)
 
 LAT, LON, H = np.radians(47.3), np.radians(8.5), 420.0
 R_TRUE = euler_to_dcm(0.04, -0.03, 2.1)
@@ -36,13 +50,13 @@ def _state(err: np.ndarray) -> FilterState:
     pos = np.array([LAT + err[0] / (R_M + H), LON + err[1] / ((R_N + H) * np.cos(LAT)), H - err[2]])
     return FilterState(
         pos,
-        V_TRUE + err[3:6],
-        rotvec_to_dcm(err[6:9]) @ R_TRUE,
+        V_TRUE + err[VEL],
+        rotvec_to_dcm(err[ATT]) @ R_TRUE,
         np.zeros(3),
-        B_G - err[12:15],
+        B_G - err[BG],
         np.eye(16),
         np.array([K_TRUE + err[15]]),
-        0,
+        StateLayout.build([MarkovBlock(ODOMETRY_SCALE, np.ones(1), np.ones(1))]),
     )
 
 
@@ -73,12 +87,12 @@ R_VB = euler_to_dcm(0.0, 0.012, -0.008)  # a small misalignment of the vehicle's
 @pytest.mark.parametrize("lever, R_vb", [(LEVER, None), (np.zeros(3), None), (LEVER, R_VB)])
 def test_nhc_jacobian_by_finite_differences(lever, R_vb):
     z = (_v_true(lever) if R_vb is None else R_vb @ _v_true(lever))[1:3]
-    dz = lambda e: mm.non_holonomic(_state(e), OMEGA, lever, W_IE, np.ones(2), R_vb).dz - z  # noqa: E731
-    m = mm.non_holonomic(_state(np.zeros(16)), OMEGA, lever, W_IE, np.array([0.1, 0.2]), R_vb)
+    dz = lambda e: nhc.non_holonomic(_state(e), OMEGA, lever, W_IE, np.ones(2), R_vb).dz - z  # noqa: E731
+    m = nhc.non_holonomic(_state(np.zeros(16)), OMEGA, lever, W_IE, np.array([0.1, 0.2]), R_vb)
     _check(dz, m.H, STEPS, 1e-7)
     assert m.kind == "nhc" and np.allclose(m.R, np.diag([0.01, 0.04]))
-    assert np.all(m.H[:, 0:3] == 0) and np.all(m.H[:, 9:12] == 0) and np.all(m.H[:, 15] == 0)
-    assert np.any(m.H[:, 12:15] != 0) == bool(
+    assert np.all(m.H[:, POS] == 0) and np.all(m.H[:, BA] == 0) and np.all(m.H[:, 15] == 0)
+    assert np.any(m.H[:, BG] != 0) == bool(
         np.any(lever)
     )  # the gyro bias enters through the lever arm
 
@@ -87,8 +101,8 @@ def test_nhc_jacobian_by_finite_differences(lever, R_vb):
 def test_odometry_jacobian_by_finite_differences(lever, R_vb):
     v_x = (_v_true(lever) if R_vb is None else R_vb @ _v_true(lever))[0]
     v_odo = (1 + K_TRUE) * v_x  # what a noise-free odometry reads
-    dz = lambda e: mm.odometry(_state(e), v_odo, 0.1, OMEGA, lever, W_IE, R_vb).dz  # noqa: E731
-    m = mm.odometry(_state(np.zeros(16)), v_odo, 0.1, OMEGA, lever, W_IE, R_vb)
+    dz = lambda e: odo.odometry(_state(e), v_odo, 0.1, OMEGA, lever, W_IE, R_vb).dz  # noqa: E731
+    m = odo.odometry(_state(np.zeros(16)), v_odo, 0.1, OMEGA, lever, W_IE, R_vb)
     _check(dz, m.H, STEPS, 1e-7)
     assert m.H[0, 15] == pytest.approx(v_x)  # the scale column is the speed itself
 
@@ -155,16 +169,16 @@ def test_factor_jacobians_are_the_ekf_ones_through_the_conventions():
     """xi = R^T phi (right perturbation vs the EKF's left one), db = -db_EKF."""
     R = POSE.rotation().matrix()
     s = FilterState(np.array([LAT, LON, H]), V_TRUE, R, np.zeros(3), BIAS.gyroscope(), np.eye(15))
-    v_ekf, H_ekf = mm.vehicle_velocity(s, OMEGA, LEVER, W_IE)
+    v_ekf, H_ekf = vehicle.vehicle_velocity(s, OMEGA, LEVER, W_IE)
     v_f, J_pose, J_vel, J_bias = vehicle_velocity(
         POSE, V_TRUE, BIAS.gyroscope(), OMEGA, LEVER, W_IE
     )
     np.testing.assert_allclose(v_f, v_ekf, atol=1e-12)
-    np.testing.assert_allclose(J_pose[:, 0:3], H_ekf[:, 6:9] @ R, atol=1e-12)
-    np.testing.assert_allclose(J_vel, H_ekf[:, 3:6], atol=1e-12)
-    np.testing.assert_allclose(J_bias[:, 3:6], -H_ekf[:, 12:15], atol=1e-12)
-    assert np.all(J_pose[:, 3:6] == 0) and np.all(J_bias[:, 0:3] == 0)
-    np.testing.assert_allclose(J_bias[:, 3:6], skew(LEVER))
+    np.testing.assert_allclose(J_pose[:, X_ROT], H_ekf[:, ATT] @ R, atol=1e-12)
+    np.testing.assert_allclose(J_vel, H_ekf[:, VEL], atol=1e-12)
+    np.testing.assert_allclose(J_bias[:, B_GYRO], -H_ekf[:, BG], atol=1e-12)
+    assert np.all(J_pose[:, X_TRANS] == 0) and np.all(J_bias[:, B_ACC] == 0)
+    np.testing.assert_allclose(J_bias[:, B_GYRO], skew(LEVER))
 
 
 @pytest.mark.parametrize(
@@ -244,7 +258,7 @@ def test_never_at_rest_or_on_the_spot_on_a_skid_steer_run(ugv_run):
 
 
 def test_smoother_attaches_one_epoch_per_node():
-    from gnssacc.estimators.smoother_aids import nearest_nodes
+    from gnssacc.estimators.aids.base import nearest_nodes
 
     times = np.array([0.0, 0.1, 0.2, 0.3, 1.0, 1.5, 2.0, 3.9, 5.0])
     # Epoch 1.0 -> node 4; 2.0 -> node 6; 3.0 has none within 0.5 s; 4.0 -> node 7; 5.0 -> node 8.

@@ -8,7 +8,7 @@ import pytest
 from gnssacc.analysis import motion
 from gnssacc.analysis import observability as ob
 from gnssacc.core.config import load_config
-from gnssacc.estimators.ekf import run_ekf
+from gnssacc.prepare.passes import run_ekf
 from gnssacc.sources.sim import grade_config, simulate
 
 G = 9.80665

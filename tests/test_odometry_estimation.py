@@ -57,7 +57,7 @@ def test_odometry_bridges_outages_at_a_quarter_of_the_imu_only_error():
 def test_without_odometry_the_filter_is_the_fifteen_state_one(car):
     """No odometry (none recorded, or switched off): no scale-factor state, the same numbers."""
     from gnssacc.core.config import load_config
-    from gnssacc.estimators.ekf import run_ekf
+    from gnssacc.prepare.passes import run_ekf
     from gnssacc.pipeline import prepare
 
     plain = replace(car, odometry=None)

@@ -18,9 +18,11 @@ from gnssacc.core.config import load_config
 from gnssacc.core.earth import LocalTangentFrame, radii
 from gnssacc.core.recording import InitialState
 from gnssacc.core.rotations import euler_to_dcm, rotvec_to_dcm
-from gnssacc.estimators.ekf import initial_state
+from gnssacc.estimators.state import initial_state
 from gnssacc.estimators.settings import SmootherSettings
-from gnssacc.estimators.smoother import initial_prior
+from gnssacc.estimators.aids.gnss_position import gnss_error_states
+from gnssacc.estimators.layout import StateLayout
+from gnssacc.estimators.smoother_graph import initial_prior
 
 POSE0 = gtsam.Pose3(gtsam.Rot3(euler_to_dcm(0.1, -0.2, 2.4)), np.array([12.0, -3.0, 1.5]))
 BIAS0 = np.array([0.02, -0.01, 0.03, 1e-3, -2e-3, 5e-4])
@@ -142,11 +144,12 @@ def _lr_statistic(samples: np.ndarray, C: np.ndarray) -> tuple[float, int]:
 def test_initial_prior_covariance_matches_the_sampled_nonlinear_transform(with_gm):
     init, cfg = _start(with_gm)
     cfg = SmootherSettings.from_config(cfg)
-    P = initial_state(init, cfg).P
+    layout = StateLayout.build(gnss_error_states(cfg))
+    P = initial_state(init, cfg, layout).P
     assert P.shape[0] == (18 if with_gm else 15)
     origin = LocalTangentFrame(LAT + 1e-5, LON - 2e-5, H - 3.0)  # the run's origin, near the start
     pose0 = gtsam.Pose3(gtsam.Rot3(init.R_nb), origin.to_ned(init.lat, init.lon, init.h))
-    cov, c_vel = initial_prior(init, cfg)
+    cov, c_vel = initial_prior(init, cfg, layout)
     m = cov.shape[0]
     C = np.zeros((m + 3, m + 3))
     C[:m, :m], C[m:, m:] = cov, c_vel  # velocity: uncorrelated with the rest

@@ -20,6 +20,17 @@ from scipy.linalg import expm
 
 from gnssacc.core.earth import earth_rate_n, normal_gravity
 from gnssacc.core.rotations import euler_to_dcm
+from gnssacc.estimators.layout import (
+    ATT,
+    BA,
+    BG,
+    GNSS_ERROR,
+    NAV,
+    N_NAV,
+    VEL,
+    MarkovBlock,
+    StateLayout,
+)
 from gnssacc.estimators.mechanization import Propagator, system_matrix
 
 LAT, LON, H = np.radians(52.0), np.radians(4.4), 30.0
@@ -44,7 +55,8 @@ def _still_imu(rate_hz: float):
 def _kernel_q(rate_hz: float, n_states: int, order: int) -> np.ndarray:
     t, f, w, _ = _still_imu(rate_hz)
     z3, seg = np.zeros(3), np.zeros(0, np.int64)
-    gm = dict(gm_tau_s=GM_TAU, gm_sigma_m=GM_SIGMA) if n_states > 15 else {}
+    blocks = [MarkovBlock(GNSS_ERROR, GM_TAU, GM_SIGMA)] if n_states > N_NAV else []
+    gm = dict(layout=StateLayout.build(blocks))
     prop = Propagator(
         t, f, w, Q_A, Q_G, Q_BA, Q_BG, (seg, seg, np.zeros((0, 3)), np.zeros((0, 3))), order, **gm
     )
@@ -67,12 +79,12 @@ def _van_loan(n_states: int) -> np.ndarray:
     """``Q_d(T)`` from ``expm([[-F, G Qc G^T], [0, F^T]] T)`` (Van Loan 1978)."""
     _, _, _, f_b = _still_imu(100.0)
     F = np.zeros((n_states, n_states))
-    F[:15, :15] = system_matrix(np.array([LAT, LON, H]), np.zeros(3), R_NB, f_b)
+    F[NAV, NAV] = system_matrix(np.array([LAT, LON, H]), np.zeros(3), R_NB, f_b)
     GQG = np.zeros((n_states, n_states))
-    GQG[3:6, 3:6] = R_NB @ np.diag(Q_A) @ R_NB.T
-    GQG[6:9, 6:9] = R_NB @ np.diag(Q_G) @ R_NB.T
-    GQG[9:12, 9:12] = np.diag(Q_BA)
-    GQG[12:15, 12:15] = np.diag(Q_BG)
+    GQG[VEL, VEL] = R_NB @ np.diag(Q_A) @ R_NB.T
+    GQG[ATT, ATT] = R_NB @ np.diag(Q_G) @ R_NB.T
+    GQG[BA, BA] = np.diag(Q_BA)
+    GQG[BG, BG] = np.diag(Q_BG)
     if n_states > 15:  # first-order Gauss-Markov: dx/dt = -x / tau + w, PSD 2 sigma^2 / tau
         F[15:, 15:] = -np.diag(1.0 / GM_TAU)
         GQG[15:, 15:] = np.diag(2.0 * GM_SIGMA**2 / GM_TAU)

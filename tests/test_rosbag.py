@@ -19,7 +19,7 @@ from gnssacc.core.config_docs import resolved_toml  # noqa: E402
 from gnssacc.core.earth import LocalTangentFrame  # noqa: E402
 from gnssacc.core.errors import DataWarning, InputError  # noqa: E402
 from gnssacc.core.rotations import euler_to_dcm  # noqa: E402
-from gnssacc.estimators.ekf import run_ekf  # noqa: E402
+from gnssacc.prepare.passes import run_ekf  # noqa: E402
 from gnssacc.sources.bagwrite import ned_frd_to_enu_flu, write_bag  # noqa: E402
 from gnssacc.sources.csvdir import load_csv_run, write_csv_run  # noqa: E402
 from gnssacc.sources.rosbag import enu_flu_to_ned_frd, inspect_bag, load_bag_run  # noqa: E402

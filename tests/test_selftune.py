@@ -12,11 +12,12 @@ from stat_bounds import CALIBRATION, nees_band, nis_band
 from gnssacc.analysis.consistency import check_model
 from gnssacc.analysis.metrics import score, truth_at
 from gnssacc.core.config import load_config
-from gnssacc.estimators.ekf import run_ekf
+from gnssacc.prepare.passes import run_ekf
 from gnssacc.pipeline import compare, prepare
 from gnssacc.prepare.tuning import SHRINK_TOLERANCE, draw_back, ml_search, tune
 from gnssacc.sources.gnss_noise import add_outliers
 from gnssacc.sources.sim import grade_config, simulate
+from gnssacc.estimators.layout import POS
 
 pytestmark = pytest.mark.filterwarnings("ignore::gnssacc.core.errors.DataWarning")
 
@@ -169,7 +170,7 @@ def test_tuner_never_overrides_keys_the_user_set(consumer_car):
 def _nees_pos(run, sol) -> tuple[float, int]:
     """Time-averaged position NEES per dof (axes' own sigmas) and the number of epochs."""
     p_true, valid = truth_at(run, sol.t)
-    e = (run.origin.to_ned(sol.lat, sol.lon, sol.h) - p_true)[valid] / sol.sigma[valid, 0:3]
+    e = (run.origin.to_ned(sol.lat, sol.lon, sol.h) - p_true)[valid] / sol.sigma[valid, POS]
     return float(np.mean(e**2)), int(valid.sum())
 
 
@@ -203,7 +204,7 @@ def test_gauss_markov_gnss_errors_are_found_and_make_the_estimators_honest():
     st = ekf_a.stats
     lo_nis, hi_nis = nis_band(st["n_pos_updates"], 3, st["acf1_pos"], CALIBRATION)
     assert abs(st["acf1_pos"]) < 0.15 and lo_nis < st["nis_pos_mean"] < hi_nis, st["nis_pos_mean"]
-    from gnssacc.estimators.smoother import run_smoother
+    from gnssacc.prepare.passes import run_smoother
 
     sm = run_smoother(
         auto.run,
@@ -379,7 +380,7 @@ def _binomial_sf(k: int, n: int, p: float) -> float:
 
 def test_heavy_tail_check_against_its_closed_form():
     from gnssacc.analysis.consistency import TAIL_ALARM, heavy_tails
-    from gnssacc.estimators.measurements import TAIL_P, tail_bound
+    from gnssacc.estimators.aids import TAIL_P, tail_bound
 
     assert tail_bound(3) == pytest.approx(16.2662, abs=1e-3)  # chi-square table, 3 dof, 0.1 %
     for n in (50, 579, 5000):

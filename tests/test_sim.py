@@ -16,8 +16,7 @@ from gnssacc.core.earth import earth_rate_n, gravity_n, radii, transport_rate_n
 from gnssacc.core.errors import InputError
 from gnssacc.core.rotations import dcm_to_euler, euler_to_dcm, rotvec_to_dcm, wrap_angle
 from gnssacc.sources import sim
-
-DEG = np.pi / 180.0
+from gnssacc.core.units import DEG
 
 
 # ----------------------------------------------------------------------------------------------

@@ -18,8 +18,8 @@ from gnssacc.core.config import G0
 from gnssacc.core.errors import InputError
 from gnssacc.outputs.report import _json_default
 from gnssacc.sources import sim
+from gnssacc.core.units import DEG
 
-DEG = np.pi / 180.0
 
 #: The original grade table (before the realistic grades), in configuration units.
 ORIGINAL_GRADES = {

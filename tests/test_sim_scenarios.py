@@ -12,8 +12,7 @@ import pytest
 
 from gnssacc.core.errors import InputError
 from gnssacc.sources import sim
-
-DEG = np.pi / 180.0
+from gnssacc.core.units import DEG
 
 
 def _spans(mask: np.ndarray, t: np.ndarray) -> list[tuple[float, float]]:

@@ -22,6 +22,7 @@ from gnssacc.analysis.observability import state_errors
 from gnssacc.core.solution import NavSolution
 from gnssacc.sources import sim, sim_path
 from gnssacc.sources.sim_true_bias import TrueBias
+from gnssacc.estimators.layout import BA, BG
 
 FULL = dict(
     imu_grade="consumer",
@@ -126,8 +127,8 @@ def test_scored_bias_errors_are_estimate_minus_interpolated_truth():
         {},
     )
     err = state_errors(run, sol)
-    np.testing.assert_array_equal(err[:, 9:12], b_a - _interp(t, run.imu.t, run.sim.true_bias_a))
-    np.testing.assert_array_equal(err[:, 12:15], b_g - _interp(t, run.imu.t, run.sim.true_bias_g))
+    np.testing.assert_array_equal(err[:, BA], b_a - _interp(t, run.imu.t, run.sim.true_bias_a))
+    np.testing.assert_array_equal(err[:, BG], b_g - _interp(t, run.imu.t, run.sim.true_bias_g))
     # Another IMU record (e.g. samples dropped) is not the one the biases belong to: not scored.
     cut = run.imu.select(slice(1, None))
     assert np.all(np.isnan(state_errors(replace(run, imu=cut), sol)[:, 9:15]))

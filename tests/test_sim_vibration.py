@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from gnssacc.sources import sim, sim_vibration
+from gnssacc.core.units import DEG
 
-DEG = np.pi / 180.0
 DT = 0.01
 
 #: Every error source off; tests switch on the one they look at.

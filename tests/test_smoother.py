@@ -10,11 +10,13 @@ from stat_bounds import CALIBRATION, nis_band, paired_not_worse
 from gnssacc.analysis.metrics import gnss_score, score
 from gnssacc.core.config import load_config
 from gnssacc.core.rotations import euler_to_dcm
-from gnssacc.estimators.ekf import run_ekf
-from gnssacc.estimators.gnss_accel import H_a_blocks, paper_H_a_blocks
-from gnssacc.estimators.smoother import MIN_NODE_DT, node_times, run_smoother
+from gnssacc.prepare.passes import run_ekf
+from gnssacc.estimators.aids.accel_model import H_a_blocks, paper_H_a_blocks
+from gnssacc.estimators.smoother_graph import MIN_NODE_DT, node_times
+from gnssacc.prepare.passes import run_smoother
 from gnssacc.pipeline import with_outages
 from gnssacc.sources.sim import grade_config, simulate
+from gnssacc.estimators.layout import B_ACC, B_GYRO, POS, VEL, X_ROT, X_TRANS
 
 POSE = gtsam.Pose3(gtsam.Rot3(euler_to_dcm(0.1, -0.2, 2.5)), np.array([10.0, -4.0, 1.0]))
 BIAS = gtsam.imuBias.ConstantBias(np.array([0.05, -0.02, 0.1]), np.array([1e-3, -2e-3, 5e-4]))
@@ -51,7 +53,7 @@ def test_factor_jacobians_by_finite_differences_on_the_manifold():
             - accel_error(POSE, BIAS.retract(-d), F_B, A_N, G_N)
         ) / (2 * eps)
         np.testing.assert_allclose(J_bias[:, k], num_b, atol=1e-6)
-    assert np.all(J_pose[:, 3:6] == 0) and np.all(J_bias[:, 3:6] == 0)
+    assert np.all(J_pose[:, X_TRANS] == 0) and np.all(J_bias[:, B_GYRO] == 0)
 
 
 def test_factor_jacobians_equal_the_ekf_H_a_under_the_convention_mapping():
@@ -60,12 +62,12 @@ def test_factor_jacobians_equal_the_ekf_H_a_under_the_convention_mapping():
     J_pose, J_bias, _ = _factor_jacobians(POSE, BIAS)
     H_phi, H_ba = H_a_blocks(R, f)
     # xi = -R^T phi (right perturbation vs. n-frame estimate-minus-truth), db_a = b_a residual:
-    np.testing.assert_allclose(J_pose[:, 0:3] @ R.T, H_phi, atol=1e-12)
-    np.testing.assert_allclose(-J_bias[:, 0:3], H_ba, atol=1e-12)
+    np.testing.assert_allclose(J_pose[:, X_ROT] @ R.T, H_phi, atol=1e-12)
+    np.testing.assert_allclose(-J_bias[:, B_ACC], H_ba, atol=1e-12)
     # and with the paper's printed form (body-frame phi, measured-minus-predicted): J_xi = -(paper).
     p_phi, p_ba = paper_H_a_blocks(R, f)
-    np.testing.assert_allclose(J_pose[:, 0:3], -p_phi, atol=1e-12)
-    np.testing.assert_allclose(J_bias[:, 0:3], p_ba, atol=1e-12)
+    np.testing.assert_allclose(J_pose[:, X_ROT], -p_phi, atol=1e-12)
+    np.testing.assert_allclose(J_bias[:, B_ACC], p_ba, atol=1e-12)
     np.testing.assert_allclose(smoother_jacobians_from_H_a(R, f)[0], J_pose, atol=1e-12)
 
 
@@ -79,11 +81,11 @@ def test_preintegration_reproduces_a_perfect_imu_in_turns():
     leaves out (earth curvature v^2 / R ~ 2e-5 m/s^2)."""
     from gnssacc.core.earth import earth_rate_n, normal_gravity
     from gnssacc.estimators.settings import SmootherSettings
-    from gnssacc.estimators.smoother import _ImuModel, _preintegrate
+    from gnssacc.estimators.smoother_graph import ImuModel, preintegrate
 
     run = simulate("turns", 40.0, imu_grade="perfect", noise="none", seed=0, truth_rate_hz=100.0)
     tr, imu, o = run.truth, run.imu, run.origin
-    model = _ImuModel(
+    model = ImuModel(
         SmootherSettings.from_config(load_config()),
         normal_gravity(o.lat0, o.h0),
         earth_rate_n(o.lat0),
@@ -94,7 +96,7 @@ def test_preintegration_reproduces_a_perfect_imu_in_turns():
         i0, i1 = (int(np.argmin(np.abs(tr.t - t))) for t in (t0, t0 + 1.0))
         j0 = int(np.searchsorted(imu.t, t0, side="right"))
         k1 = int(np.searchsorted(imu.t, t0 + 1.0, side="left")) + 1
-        pim = _preintegrate(imu, model, bias, t0, t0 + 1.0, j0, k1, (None, None), dt_all)
+        pim = preintegrate(imu, model, bias, t0, t0 + 1.0, j0, k1, (None, None), dt_all)
         start = gtsam.NavState(
             gtsam.Pose3(
                 gtsam.Rot3(euler_to_dcm(*tr.rpy[i0])), o.to_ned(tr.lat[i0], tr.lon[i0], tr.h[i0])
@@ -168,13 +170,13 @@ def test_ill_posed_updates_are_recovered_and_counted():
 def test_injected_failure_mid_run_is_recovered(monkeypatch, method, dropped):
     """Two ill-posed updates are recovered by a restart; a restart keeps nodes i-1 and i only, so
     ``smoother-accw`` drops (and counts) its window factor on node i-2 each time."""
-    import gnssacc.estimators.smoother as S
+    import gnssacc.estimators.smoother_graph as S
 
     cfg = load_config(overrides={"imu": grade_config("industrial")})
     run = simulate("car", duration_s=90.0, imu_grade="industrial", noise="white", seed=2)
     ref = run_smoother(run, cfg, method)[method]
     calls = {"n": 0}
-    real_update = S._Smoother.update
+    real_update = S.WindowSmoother.update
 
     def flaky(self, graph, values, stamps):
         calls["n"] += 1
@@ -182,7 +184,7 @@ def test_injected_failure_mid_run_is_recovered(monkeypatch, method, dropped):
             raise RuntimeError("Indeterminant linear system detected while working near variable x")
         return real_update(self, graph, values, stamps)
 
-    monkeypatch.setattr(S._Smoother, "update", flaky)
+    monkeypatch.setattr(S.WindowSmoother, "update", flaky)
     sol = run_smoother(run, cfg, method)[method]
     assert sol.stats["n_ill_posed_recovered"] == 2
     assert sol.stats.get("n_factors_dropped_at_restart", 0) == dropped
@@ -291,7 +293,7 @@ def _gm_exact_model_errors(seeds=range(12)):
         row = {}
         for m, sol in res.solutions.items():
             e = state_errors(res.run, sol)[sol.t >= sol.t[0] + 10.0]
-            row[m] = (rms(e[:, 0:3]), rms(e[:, 3:6]))
+            row[m] = (rms(e[:, POS]), rms(e[:, VEL]))
         out.append(row)
     return out
 

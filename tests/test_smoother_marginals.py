@@ -11,7 +11,10 @@ import gtsam
 import numpy as np
 import pytest
 
-import gnssacc.estimators.smoother as S
+from gnssacc.estimators.aids import gnss_accel
+from gnssacc.estimators.layout import NODE_B, NODE_V, NODE_X
+from gnssacc.prepare.passes import run_smoother
+import gnssacc.estimators.smoother_graph as G
 import gnssacc.estimators.window_marginals as W
 from gnssacc.core.config import load_config
 from gnssacc.pipeline import with_outages
@@ -40,7 +43,7 @@ def _worst(C, ref):
 def _diagonal_blocks(C):
     """The per-variable blocks (pose, velocity, bias) only: iSAM2's fallback gives no others."""
     out = np.full_like(C, np.nan)
-    for sl in (slice(0, 6), slice(6, 9), slice(9, 15)):
+    for sl in (NODE_X, NODE_V, NODE_B):
         out[sl, sl] = C[sl, sl]
     return out
 
@@ -65,7 +68,7 @@ def test_recorded_covariances_equal_full_marginals(monkeypatch, method, override
     run = simulate("car", duration_s=70.0, imu_grade="industrial", noise="white", seed=4)
     run = with_outages(run, "30:6", None)  # fill nodes, then a window without fixes
     if band is not None:
-        monkeypatch.setattr(S, "_bandwidth", lambda cfg: band)
+        monkeypatch.setattr(gnss_accel, "bandwidth", lambda cfg: band)
     part = _diagonal_blocks if band is not None else (lambda C: C)
     stats = {"calls": 0, "fast": 0, "isam": 0.0, "batch": 0.0, "n_batch": 0}
     fast = W.WindowMarginals.covariances
@@ -75,7 +78,7 @@ def test_recorded_covariances_equal_full_marginals(monkeypatch, method, override
         stats["fast"] += len(nodes)
         return out
 
-    orig = S._Smoother.covariances
+    orig = G.WindowSmoother.covariances
 
     def checked(self, nodes):
         covs = orig(self, nodes)
@@ -91,8 +94,8 @@ def test_recorded_covariances_equal_full_marginals(monkeypatch, method, override
         return covs
 
     monkeypatch.setattr(W.WindowMarginals, "covariances", counted)
-    monkeypatch.setattr(S._Smoother, "covariances", checked)
-    sols = S.run_smoother(run, cfg, method)
+    monkeypatch.setattr(G.WindowSmoother, "covariances", checked)
+    sols = run_smoother(run, cfg, method)
     n = sols[method].stats["n_nodes"]
     # Every node: online and fixed-lag; the last node is both at the end (one query).
     assert stats["calls"] == 2 * n - 1

@@ -13,11 +13,13 @@ from gtsam.symbol_shorthand import B, G, V, X
 
 from gnssacc import pipeline
 from gnssacc.analysis.metrics import truth_at
+from gnssacc.estimators.layout import POS
 from gnssacc.core.config import load_config
 from gnssacc.core.earth import earth_rate_n, normal_gravity
 from gnssacc.core.rotations import euler_to_dcm
 from gnssacc.estimators.settings import SmootherSettings
-from gnssacc.estimators.smoother import estimate, node_fixes
+from gnssacc.estimators.aids.gnss_position import node_fixes
+from gnssacc.estimators.smoother import estimate
 from gnssacc.sources.sim import simulate
 
 LEVER = np.array([0.8, -0.3, -1.2])
@@ -259,7 +261,7 @@ def test_folded_smoother_sigmas_are_consistent_with_its_errors():
         zs.append(
             (
                 (prep.run.origin.to_ned(sol.lat, sol.lon, sol.h) - p_true)[valid]
-                / sol.sigma[valid, 0:3]
+                / sol.sigma[valid, POS]
             )[60:]
         )
     msq = np.mean(np.concatenate(zs) ** 2, axis=0)

@@ -12,6 +12,7 @@ import pytest
 
 from gnssacc.core.config import load_config
 from gnssacc.estimators import smoother
+from gnssacc.estimators.aids import zupt
 from gnssacc.estimators.settings import SmootherSettings
 from gnssacc.pipeline import prepare
 from gnssacc.sources.gnss_noise import apply_outages
@@ -52,9 +53,9 @@ def prepared():
 def test_a_span_checked_only_from_outside_is_not_vetted(prepared):
     params = prepared.stationary.params
     fake = [s for s in prepared.stationary.spans if s.t_start == FAKE[0]][0]
-    assert not smoother.vetted_by_fixes(fake, params)
-    assert smoother.vetted_by_fixes(replace(fake, gnss_n_fixes=5), params)
-    assert not smoother.vetted_by_fixes(replace(fake, gnss_n_fixes=5, gnss_checked=False), params)
+    assert not zupt.vetted_by_fixes(fake, params)
+    assert zupt.vetted_by_fixes(replace(fake, gnss_n_fixes=5), params)
+    assert not zupt.vetted_by_fixes(replace(fake, gnss_n_fixes=5, gnss_checked=False), params)
 
 
 def test_unvetted_span_in_an_outage_does_not_stop_the_smoother(prepared):

@@ -35,8 +35,8 @@ from gnssacc.prepare.stationary import (
     params_from_config,
 )
 from gnssacc.sources import sim
+from gnssacc.core.units import DEG
 
-DEG = np.pi / 180.0
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 #: Consumer white noise: 0.2 m/s/sqrt(h) and 0.6 deg/sqrt(h) as densities [m/s^2/sqrt(Hz)], [rad/s/sqrt(Hz)].
 NA, NG = 0.2 / 60.0, 0.6 / 60.0 * DEG

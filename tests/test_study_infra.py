@@ -330,7 +330,7 @@ def test_gm_setup_is_made_once_per_preparation(monkeypatch):
     # copy with another configuration) gets its own.
     import gnssacc.prepare.gauss_markov as gv
     from gnssacc.core.config import load_config
-    from gnssacc.estimators.ekf import run_ekf
+    from gnssacc.prepare.passes import run_ekf
     from gnssacc.pipeline import prepare
 
     calls = []

@@ -25,7 +25,6 @@ from .core.recording import RecordedRun
 from .core.solution import NavSolution
 from .estimators import kernels
 from .estimators.ekf import estimate as estimate_ekf
-from .estimators.ekf import run_ekf
 from .estimators.settings import EkfSettings
 from .outputs.figures import PLOT_SETS, write_figures
 from .outputs.outdir import ResultDir
@@ -37,6 +36,7 @@ from .outputs.report import (
     write_json,
     write_trajectory_csv,
 )
+from .prepare.passes import filter_pass
 from .prepare.prepared import Prepared, checked
 from .prepare.prepared import prepare as prepare_recording
 from .sources.gnss_noise import apply_outages, parse_outages
@@ -73,17 +73,10 @@ def _gm(prep: Prepared, method: str, show_progress: bool) -> dict[str, NavSoluti
     return run_gm(prep, method, show_progress, METHODS[BASE_OF[method]])
 
 
-def _filter_pass(*args, **kwargs) -> NavSolution:
-    """The EKF pass the preparation stage decides with, once the kernels are ready (compiled or
-    loaded in the background: a first run waits here, the input checks before it do not)."""
-    kernels.warm_up()
-    return run_ekf(*args, **kwargs)
-
-
 def check_input(run: RecordedRun, cfg: RunConfig) -> tuple[RecordedRun, RunConfig, list]:
     """The input checks (:func:`gnssacc.checks.plausibility.check_run`) with the EKF as the clock
     offset's likelihood stage, as :func:`prepare` runs them first."""
-    return checked(run, cfg, _filter_pass)
+    return checked(run, cfg, filter_pass)
 
 
 def prepare(run: RecordedRun, cfg: RunConfig, tune: str | None = None, methods=()) -> Prepared:
@@ -93,7 +86,7 @@ def prepare(run: RecordedRun, cfg: RunConfig, tune: str | None = None, methods=(
         run,
         cfg,
         tune,
-        filter_pass=_filter_pass,
+        filter_pass=filter_pass,
         gauss_markov=any(METHODS.get(m) is _gm for m in methods),
     )
 
@@ -487,7 +480,7 @@ def compare(
             fixes = scores[m].errors.get("at_fixes") or {}
             judged, model = _noise_model_of(prep, m, sols, models)
             cons[m] = assess(
-                judged.run,
+                judged.modelled_run,  # the fixes' noise the estimate was made with
                 s,
                 fixes.get("prmse_m"),
                 fixes.get("gnss_prmse_m"),

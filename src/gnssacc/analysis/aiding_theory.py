@@ -10,7 +10,7 @@ One axis, state ``x = [p, v, a]`` (position [m], velocity [m/s], acceleration [m
 white jerk of PSD ``q`` [m^2/s^5] (the IMU's role: a random-walk acceleration), position fixes
 ``z_k = p_k + n_k``, ``n_k ~ N(0, R)`` white, at uniform times ``t_k = k dt``, and the paper's
 least-squares acceleration of the last three fixes, ``a~_k = B [z_{k-2}, z_{k-1}, z_k]``,
-``B = [1, -2, 1] / dt^2`` (:func:`gnssacc.estimators.gnss_accel.acceleration_row`). Three filters share one
+``B = [1, -2, 1] / dt^2`` (:func:`gnssacc.estimators.aids.accel_model.acceleration_row`). Three filters share one
 8-state layout ``[p, v, a, p_{k-1}, p_{k-2}, n_k, n_{k-1}, n_{k-2}]``: before each epoch the
 position is cloned (stochastic cloning, ``p_{k-1} <- p``) and the noise slots shift, the newest
 drawn from its prior ``N(0, R)``. Window-consistent: ``a~`` is predicted from the clones,
@@ -64,11 +64,12 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 
-from ..estimators.gnss_accel import acceleration_row
+from ..estimators.aids.accel_model import acceleration_row
 
 #: Filter variants of :func:`kf_filter`.
 KF_VARIANTS = ("position", "paper", "paper-epoch", "cloned")
 _N = 8  # [p, v, a, p_{k-1}, p_{k-2}, n_k, n_{k-1}, n_{k-2}]
+_PVA = slice(0, 3)  # [p, v, a]
 
 
 def kf_model(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
@@ -134,12 +135,12 @@ def _update(x, P, H, r, y, rel_tol=1e-10):
 def _shift(x, P, F, Q, R):
     """Clone the position and shift the noise slots (newest from its prior), then predict ``dt``."""
     T = np.zeros((_N, _N))
-    T[:3, :3] = F
+    T[_PVA, _PVA] = F
     T[3, 0] = T[4, 3] = 1.0  # p_{k-1} <- p (before the prediction), p_{k-2} <- p_{k-1}
     T[6, 5] = T[7, 6] = 1.0  # n_{k-1} <- n_k, n_{k-2} <- n_{k-1}; n_k fresh
     x[:] = T @ x
     P[:] = T @ P @ T.T
-    P[:3, :3] += Q
+    P[_PVA, _PVA] += Q
     P[5, 5] = R
 
 
@@ -173,7 +174,7 @@ def kf_filter(
     B = acceleration_row(dt * np.arange(3.0))
     exact = variant == "cloned"
     x, P = np.zeros(_N), np.zeros((_N, _N))
-    x[:3], P[:3, :3], P[5, 5] = x0, P0, R
+    x[_PVA], P[_PVA, _PVA], P[5, 5] = x0, P0, R
     h_pos = np.zeros(_N)
     h_pos[0] = 1.0
     h_pos[5] = 1.0 if exact else 0.0
@@ -198,7 +199,7 @@ def kf_filter(
                 _update(x, P, h_pos, r_pos, y)
             else:
                 out.s_acc[k] = _update(x, P, h_acc, r_acc, y)
-        out.x[k], out.P[k] = x[:3], P[:3, :3]
+        out.x[k], out.P[k] = x[_PVA], P[_PVA, _PVA]
     return out
 
 
@@ -347,12 +348,16 @@ def _base_graph(m: FgChain, stacked: bool) -> gtsam.GaussianFactorGraph:
         for k in range(m.n - 1):
             g.add(gtsam.JacobianFactor(k, -Wq @ m.F, k + 1, Wq, np.zeros(3), unit))
         return g
+
+    def epoch(k: int) -> slice:  # the stacked state's block of epoch k
+        return slice(3 * k, 3 * k + 3)
+
     A = np.zeros((3, 3 * m.n))
-    A[:, 0:3] = Wp
+    A[:, epoch(0)] = Wp
     g.add(gtsam.JacobianFactor(0, A, np.zeros(3), unit))
     for k in range(m.n - 1):
         A = np.zeros((3, 3 * m.n))
-        A[:, 3 * k : 3 * k + 3], A[:, 3 * k + 3 : 3 * k + 6] = -Wq @ m.F, Wq
+        A[:, epoch(k)], A[:, epoch(k + 1)] = -Wq @ m.F, Wq
         g.add(gtsam.JacobianFactor(0, A, np.zeros(3), unit))
     return g
 

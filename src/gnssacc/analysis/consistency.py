@@ -7,7 +7,7 @@ Figures (per method, all "per degree of freedom", 1 for a consistent estimator):
 * **Normalised GNSS residual** (smoother, both estimates): the whitened residuals of the GNSS
   factors at the estimate, ``sum r^T Sigma^-1 r``, against their expectation for a consistent
   estimate, ``sum tr(Sigma^-1 C_r)`` with ``C_r = Sigma - J P J^T`` the covariance of the
-  residual of a measurement the estimate includes (:func:`gnssacc.estimators.smoother.residual_chi2`).
+  residual of a measurement the estimate includes (:func:`gnssacc.estimators.aids.gnss_position.residual_chi2`).
 * **Innovation autocorrelation** (EKF): the lag-1 autocorrelation of the whitened position
   innovations. A correct model gives white innovations (~0); a slowly varying error the model
   misses (IMU noise set too low, time-correlated GNSS errors not modelled) makes it positive.
@@ -25,7 +25,7 @@ Warnings (``gnssacc: warning: <method>: ...``) are raised when
   method thinks; too large below it: it discards information);
 * the innovations are correlated in time (lag-1 autocorrelation above :data:`ACF_MAX`);
 * the position innovations have heavy tails: more of them beyond the chi-square bound of tail
-  probability 0.1 % (:func:`gnssacc.estimators.measurements.tail_bound`) than Gaussian errors would give
+  probability 0.1 % (:func:`gnssacc.estimators.aids.tail_bound`) than Gaussian errors would give
   (binomial tail probability below :data:`TAIL_ALARM`; white innovations only): the fixes carry
   outliers (multipath, jumps) that the noise model does not cover, and the stated uncertainty
   averages over them;
@@ -57,7 +57,7 @@ import numpy as np
 
 from ..core.solution import NavSolution
 from ..estimators.ekf import run_ekf
-from ..estimators.measurements import TAIL_P, tail_bound
+from ..estimators.aids import TAIL_P, tail_bound
 
 #: Consistent band of a mean NIS per degree of freedom: the stated sigmas right within sqrt(2).
 NIS_BAND = (0.5, 2.0)

@@ -30,6 +30,7 @@ import numpy as np
 
 from ..core.recording import RecordedRun
 from ..core.solution import NavSolution
+from ..core.states import ATT, POS, VEL
 from ..sources.gnss_noise import in_spans
 from .consistency import NIS_BAND
 
@@ -235,7 +236,7 @@ def error_statistics(run: RecordedRun, sol: NavSolution, window=None) -> dict:
     err = state_errors(run, sol)[keep]
     sig = np.asarray(sol.sigma, float)[keep]
     t = sol.t[keep] - run.t_start
-    dp = err[:, 0:3]
+    dp = err[:, POS]
     out = {
         "position": summary(np.linalg.norm(dp, axis=1)),
         "horizontal": horizontal(dp[:, :2]),
@@ -243,11 +244,11 @@ def error_statistics(run: RecordedRun, sol: NavSolution, window=None) -> dict:
         "no_outage": None,
         "outage": None,
         "at_fixes": at_fixes(run, sol, window),
-        "velocity": summary(np.linalg.norm(err[:, 3:6], axis=1)),
-        "velocity_axes": per_axis(err[:, 3:6], AXES_NED),
-        "attitude_axes": per_axis(err[:, 6:9], AXES_RPY, math.degrees(1.0)),
-        "nees_position": nees(dp, sig[:, 0:3], AXES_NED),
-        "nees_attitude": nees(err[:, 6:9], sig[:, 6:9], AXES_RPY),
+        "velocity": summary(np.linalg.norm(err[:, VEL], axis=1)),
+        "velocity_axes": per_axis(err[:, VEL], AXES_NED),
+        "attitude_axes": per_axis(err[:, ATT], AXES_RPY, math.degrees(1.0)),
+        "nees_position": nees(dp, sig[:, POS], AXES_NED),
+        "nees_attitude": nees(err[:, ATT], sig[:, ATT], AXES_RPY),
         "fix_residual": fix_residuals(run, sol, window),
     }
     if run.outages:

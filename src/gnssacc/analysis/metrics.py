@@ -10,6 +10,8 @@ import numpy as np
 from ..core.recording import RecordedRun
 from ..core.rotations import wrap_angle
 from ..core.solution import NavSolution
+from ..core.units import DEG_H, MG
+from ..core.states import ATT, BA, BG, MOTION, N_NAV, POS, TILT, VEL, YAW
 from ..sources.gnss_noise import in_spans
 
 #: Baseline of each aided method, for the improvement column.
@@ -85,21 +87,21 @@ def state_errors(run: RecordedRun, sol: NavSolution) -> np.ndarray:
     ndarray, shape (K, 15)
     """
     t = np.asarray(sol.t, float)
-    err = np.full((len(t), 15), np.nan)
+    err = np.full((len(t), N_NAV), np.nan)
     tr = run.truth
     if tr is not None:
         p_true, inside = truth_at(run, t)
-        err[:, 0:3] = run.origin.to_ned(sol.lat, sol.lon, sol.h) - p_true
+        err[:, POS] = run.origin.to_ned(sol.lat, sol.lon, sol.h) - p_true
         if tr.v_n is not None:
-            err[:, 3:6] = sol.v_n - interp_columns(t, tr.t, tr.v_n)
+            err[:, VEL] = sol.v_n - interp_columns(t, tr.t, tr.v_n)
         if tr.rpy is not None:
             ref = interp_columns(t, tr.t, np.unwrap(tr.rpy, axis=0))
-            err[:, 6:9] = wrap_angle(sol.rpy - ref)
-        err[~inside, :9] = np.nan
+            err[:, ATT] = wrap_angle(sol.rpy - ref)
+        err[~inside, MOTION] = np.nan
     bias = run.sim.bias if run.sim is not None else None
     if bias is not None and len(bias) == len(run.imu.t):
         b_a, b_g = bias.at(t, run.imu.t)  # drawn again, at these epochs only
-        err[:, 9:12], err[:, 12:15] = sol.b_a - b_a, sol.b_g - b_g
+        err[:, BA], err[:, BG] = sol.b_a - b_a, sol.b_g - b_g
     return err
 
 
@@ -161,8 +163,6 @@ TRUTH_FIGURES = (
     "nees_pos",
     "nees_att",
 )
-_MG = 9.80665e-3  # m/s^2 per milli-g
-_DEG_H = np.pi / 180.0 / 3600.0  # rad/s per deg/h
 
 
 def truth_figures(run: RecordedRun, sol: NavSolution, window: tuple | None = None) -> dict:
@@ -184,16 +184,16 @@ def truth_figures(run: RecordedRun, sol: NavSolution, window: tuple | None = Non
     """
 
     keep = _in_window(sol.t, window)
-    err = state_errors(run, sol)[keep] if run.truth is not None else np.full((0, 15), np.nan)
-    sig = np.asarray(sol.sigma, float)[keep] if len(err) else np.zeros((0, 15))
+    err = state_errors(run, sol)[keep] if run.truth is not None else np.full((0, N_NAV), np.nan)
+    sig = np.asarray(sol.sigma, float)[keep] if len(err) else np.zeros((0, N_NAV))
     deg = np.degrees(1.0)
     return {
-        "tilt_rms_deg": _rms_rows(err[:, 6:8], deg),
-        "yaw_rms_deg": _rms_rows(err[:, 8:9], deg),
-        "bias_a_rms_mg": _rms_rows(err[:, 9:12], 1.0 / _MG),
-        "bias_g_rms_deg_h": _rms_rows(err[:, 12:15], 1.0 / _DEG_H),
-        "nees_pos": _nees(err[:, 0:3], sig[:, 0:3]),
-        "nees_att": _nees(err[:, 6:9], sig[:, 6:9]),
+        "tilt_rms_deg": _rms_rows(err[:, TILT], deg),
+        "yaw_rms_deg": _rms_rows(err[:, YAW], deg),
+        "bias_a_rms_mg": _rms_rows(err[:, BA], 1.0 / MG),
+        "bias_g_rms_deg_h": _rms_rows(err[:, BG], 1.0 / DEG_H),
+        "nees_pos": _nees(err[:, POS], sig[:, POS]),
+        "nees_att": _nees(err[:, ATT], sig[:, ATT]),
     }
 
 

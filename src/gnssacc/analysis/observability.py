@@ -67,13 +67,14 @@ from ..core.display import (  # noqa: F401 (part of this module's API)
 from ..core.recording import RecordedRun
 from ..core.rotations import dcm_to_euler, euler_error_jacobian
 from ..core.solution import NavSolution
-from ..estimators.ekf import EkfObserver, run_ekf
+from ..core.states import ATT, N_NAV, NAV
+from ..estimators.ekf import EkfObserver
 from ..estimators.kalman import joseph_update
+from ..prepare.passes import run_ekf
 from .metrics import state_errors, truth_at  # noqa: F401 (state_errors: part of this module's API)
 
 #: SI units per state (the display names and units are :mod:`gnssacc.core.display`'s).
 STATE_UNITS = ("m",) * 3 + ("m/s",) * 3 + ("rad",) * 3 + ("m/s^2",) * 3 + ("rad/s",) * 3
-ATT = slice(6, 9)
 
 
 def state_index(name: str) -> int:
@@ -156,7 +157,7 @@ class Consistency:
 
     def rows(self, display_units: bool = True) -> list[dict]:
         """One dict per state with truth (for a table)."""
-        k = DISPLAY_SCALE if display_units else np.ones(15)
+        k = DISPLAY_SCALE if display_units else np.ones(N_NAV)
         units = DISPLAY_UNITS if display_units else STATE_UNITS
         return [
             {
@@ -168,7 +169,7 @@ class Consistency:
                 "within_3sigma": self.within_3sigma[i],
                 "nees": self.nees[i],
             }
-            for i in range(15)
+            for i in range(N_NAV)
             if self.n[i] > 0
         ]
 
@@ -189,8 +190,8 @@ def consistency(run: RecordedRun, sol: NavSolution, t_min: float | None = None) 
         err, sig = err[keep], sig[keep]
     ok = np.isfinite(err) & (sig > 0)
     n = ok.sum(axis=0)
-    out = {k: np.full(15, np.nan) for k in ("rms", "rms_s", "w1", "w3", "nees")}
-    for i in range(15):
+    out = {k: np.full(N_NAV, np.nan) for k in ("rms", "rms_s", "w1", "w3", "nees")}
+    for i in range(N_NAV):
         if n[i] == 0:
             continue
         e, s = err[ok[:, i], i], sig[ok[:, i], i]
@@ -282,7 +283,7 @@ def _cov_update(P: np.ndarray, H: np.ndarray, R: np.ndarray) -> np.ndarray:
 
 def _euler_T(J: np.ndarray) -> np.ndarray:
     """Map from the reported error state (Euler angles) to the filter's (phi): ``dx_phi = T dx_euler``."""
-    T = np.eye(15)
+    T = np.eye(N_NAV)
     T[ATT, ATT] = np.linalg.inv(J)
     return T
 
@@ -290,7 +291,7 @@ def _euler_T(J: np.ndarray) -> np.ndarray:
 def _euler_var(P: np.ndarray, J: np.ndarray) -> np.ndarray:
     """Diagonal of P's 15 reported states (a filter with the three Gauss-Markov GNSS error states
     has 18; those come after them and are left out), the attitude block mapped to Euler-angle errors."""
-    d = np.diag(P)[:15].copy()
+    d = np.diag(P)[NAV].copy()
     d[ATT] = np.diag(J @ P[ATT, ATT] @ J.T)
     return np.maximum(d, 0.0)
 
@@ -504,7 +505,7 @@ def aiding_information(replay: EkfReplay) -> AidingInformation:
     trajectory itself is that of ``replay.method``.
     """
     n = len(replay.epochs)
-    vp, v1, v2 = np.empty((n, 15)), np.empty((n, 15)), np.empty((n, 15))
+    vp, v1, v2 = np.empty((n, N_NAV)), np.empty((n, N_NAV)), np.empty((n, N_NAV))
     has = np.zeros(n, bool)
     for j, e in enumerate(replay.epochs):
         P1 = _cov_update(e.P_minus, e.H_p, e.R_p)
@@ -563,7 +564,7 @@ class Gramian:
     @property
     def normalised_covariance(self) -> np.ndarray:
         """Ham & Brown's normalised covariance ``(I + W_bar)^-1``."""
-        return np.linalg.inv(np.eye(15) + self.W_bar)
+        return np.linalg.inv(np.eye(N_NAV) + self.W_bar)
 
     def degree_of(self, name: str) -> float:
         return float(self.degree[state_index(name)])
@@ -635,8 +636,8 @@ def gramian(
         )
     # Reference: the state just before the first epoch's update, attitude as Euler errors there.
     T0 = _euler_T(eps[0].J)
-    W = np.zeros((15, 15))
-    Phi = np.eye(15)
+    W = np.zeros((N_NAV, N_NAV))
+    Phi = np.eye(N_NAV)
     n_pos = n_acc = 0
     for j, e in enumerate(eps):
         if j > 0:
@@ -653,7 +654,7 @@ def gramian(
     S = prior_scale(replay) if scale is None else np.asarray(scale, float)
     W_bar = S[:, None] * W * S[None, :]
     lam, V = np.linalg.eigh(W_bar)
-    degree = 1.0 - np.diag(np.linalg.inv(np.eye(15) + W_bar))
+    degree = 1.0 - np.diag(np.linalg.inv(np.eye(N_NAV) + W_bar))
     return Gramian(
         eps[0].t, eps[-1].t, aiding, W, S, W_bar, lam, V, np.clip(degree, 0.0, 1.0), n_pos, n_acc
     )
@@ -708,7 +709,7 @@ def sliding_gramian(
         aiding,
         float(window_s),
         np.array(cen),
-        np.array(deg).reshape(-1, 15),
+        np.array(deg).reshape(-1, N_NAV),
         np.array(mins),
         np.array(weak, int),
     )

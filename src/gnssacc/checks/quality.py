@@ -30,6 +30,7 @@ Everything is vectorised over the samples: a 47k-sample file is checked in a few
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -370,10 +371,10 @@ def inflation_psd(
     q_accel_extra : ndarray, shape (N, 3)
         Additive accelerometer white-noise PSD per body axis [(m/s^2)^2/s].
     """
-    i0, i1, seg_g, seg_a = inflation_segments(imu, report, suspect)
+    seg = inflation_segments(imu, report, suspect)
     q_gyro = np.zeros((len(imu), 3))
     q_accel = np.zeros((len(imu), 3))
-    for a, b, qg, qa in zip(i0, i1, seg_g, seg_a):
+    for a, b, qg, qa in zip(seg.i0, seg.i1, seg.q_gyro, seg.q_accel):
         q_gyro[a:b] = qg
         q_accel[a:b] = qa
     return q_gyro, q_accel
@@ -422,18 +423,34 @@ def _span_sigmas(
     )
 
 
-def inflation_segments(imu: ImuData, report: QualityReport, suspect: SuspectNoise):
-    """The inflation of :func:`inflation_psd` as non-overlapping sample segments.
+class InflationSegments(NamedTuple):
+    """Suspect IMU spans as sorted, disjoint sample segments with their extra noise.
 
-    Memory is proportional to the number of suspect spans, not to the run length; this is
-    what the estimators use.
-
-    Returns
-    -------
+    Attributes
+    ----------
     i0, i1 : ndarray of int, shape (S,)
         Segment sample ranges ``[i0, i1)``, sorted and disjoint.
     q_gyro, q_accel : ndarray, shape (S, 3)
         Additive PSDs per body axis on each segment [rad^2/s], [(m/s^2)^2/s].
+    """
+
+    i0: np.ndarray
+    i1: np.ndarray
+    q_gyro: np.ndarray
+    q_accel: np.ndarray
+
+    def touch(self, k0: int, k1: int) -> bool:
+        """Whether samples ``[k0, k1)`` overlap a segment (:func:`touches_segments`)."""
+        return touches_segments(k0, k1, self.i0, self.i1)
+
+
+def inflation_segments(
+    imu: ImuData, report: QualityReport, suspect: SuspectNoise
+) -> InflationSegments:
+    """The inflation of :func:`inflation_psd` as non-overlapping sample segments.
+
+    Memory is proportional to the number of suspect spans, not to the run length; this is
+    what the estimators use.
     """
     n = len(imu)
     clean = ~report.suspect_mask(n) if report.spans else np.ones(n, bool)
@@ -460,8 +477,12 @@ def inflation_segments(imu: ImuData, report: QualityReport, suspect: SuspectNois
             q_g.append(np.max([c[0] for c in cover], axis=0))
             q_a.append(np.max([c[1] for c in cover], axis=0))
     if not i0:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3))
-    return np.array(i0, np.int64), np.array(i1, np.int64), np.array(q_g), np.array(q_a)
+        return InflationSegments(
+            np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3))
+        )
+    return InflationSegments(
+        np.array(i0, np.int64), np.array(i1, np.int64), np.array(q_g), np.array(q_a)
+    )
 
 
 def touches_segments(k0: int, k1: int, seg_i0: np.ndarray, seg_i1: np.ndarray) -> bool:

@@ -25,9 +25,8 @@ from .config_check import check_value, show
 from .errors import InputError
 from .rotations import euler_to_dcm
 from .stationary_params import StationaryParams
+from .units import DEG, G0  # noqa: F401 (re-exported: the configuration's units)
 
-G0 = 9.80665  # standard gravity, for milli-g [m/s^2]
-DEG = np.pi / 180.0
 
 #: Built-in defaults. Comments double as the documentation of each key.
 DEFAULTS: dict[str, dict] = {
@@ -166,7 +165,7 @@ DEFAULTS: dict[str, dict] = {
     "nhc": {
         # Non-holonomic constraint: while the vehicle rolls, its velocity at the reference point
         # below has no lateral and no vertical component in the body frame (EKF updates, smoother
-        # factors; gnssacc.estimators.nhc says when it is applied). false: IMU-only bridging of outages.
+        # factors; gnssacc.estimators.aids.nhc says when it is applied). false: IMU-only bridging of outages.
         "enabled": True,
         # One constraint every this many seconds while rolling [s] (EKF update, smoother factor
         # on the node nearest each epoch).
@@ -187,7 +186,7 @@ DEFAULTS: dict[str, dict] = {
         "yaw_offset_deg": 0.0,
         # How far along the vehicle the centre of a turn on the spot may lie from that point [m]:
         # a turn whose yaw rate times this exceeds the forward speed is not rolling, and gets
-        # no constraint (see gnssacc.estimators.nhc).
+        # no constraint (see gnssacc.estimators.aids.nhc).
         "pivot_offset_m": 0.5,
     },
     "odometry": {

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-G0 = 9.80665  # standard gravity [m/s^2], for milli-g
+from .states import ATT, BA, BG, BIASES, POS, VEL
+from .units import G0
+
 RAD2DEG = 180.0 / np.pi
 RPS2DPH = RAD2DEG * 3600.0  # rad/s -> deg/h
 MPS2_TO_MG = 1e3 / G0  # m/s^2 -> milli-g
@@ -54,14 +56,14 @@ TRAJECTORY_HEAD = [
     "pitch_deg",
     "yaw_deg",
 ]
-TRAJECTORY_COLUMNS = TRAJECTORY_HEAD + [s[1] for s in STATES[9:]] + list(SIGMA_COLUMNS)
+TRAJECTORY_COLUMNS = TRAJECTORY_HEAD + [s[1] for s in STATES[BIASES]] + list(SIGMA_COLUMNS)
 #: Groups of three states for figures: (title, slice of the state vector, unit, axis labels).
 STATE_GROUPS = (
-    ("position", slice(0, 3), "m", ("N", "E", "D")),
-    ("velocity", slice(3, 6), "m/s", ("N", "E", "D")),
-    ("attitude", slice(6, 9), "deg", ("roll", "pitch", "yaw")),
-    ("accelerometer bias", slice(9, 12), "mg", ("x", "y", "z")),
-    ("gyro bias", slice(12, 15), "deg/h", ("x", "y", "z")),
+    ("position", POS, "m", ("N", "E", "D")),
+    ("velocity", VEL, "m/s", ("N", "E", "D")),
+    ("attitude", ATT, "deg", ("roll", "pitch", "yaw")),
+    ("accelerometer bias", BA, "mg", ("x", "y", "z")),
+    ("gyro bias", BG, "deg/h", ("x", "y", "z")),
 )
 
 

@@ -3,7 +3,7 @@ acceleration ``a~ = B p`` and covariance (Versano & Klein, the design matrix ``A
 
 One implementation, used wherever a GNSS-derived acceleration is needed: the start's levelling
 (:mod:`gnssacc.prepare.initialise`), the EKF's acceleration update and the smoother's factor
-(:mod:`gnssacc.estimators.gnss_accel`, :mod:`gnssacc.factors`), and the aiding theory
+(:mod:`gnssacc.estimators.aids.accel_model`, :mod:`gnssacc.factors`), and the aiding theory
 (:mod:`gnssacc.analysis.aiding_theory`).
 """
 

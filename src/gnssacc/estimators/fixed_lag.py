@@ -50,7 +50,8 @@ class FixedLagISAM2:
     ``relinearize_threshold``: the threshold set in it). Every node (time stamp) must hold at
     least two variables (the ordering groups' bound, :func:`_older_groups`).
 
-    Offers the part of ``IncrementalFixedLagSmoother``'s interface :mod:`gnssacc.estimators.smoother` uses.
+    Offers the part of ``IncrementalFixedLagSmoother``'s interface
+    :mod:`gnssacc.estimators.smoother` uses.
     """
 
     def __init__(
@@ -66,7 +67,7 @@ class FixedLagISAM2:
         self._threshold = float(relinearize_threshold)
         self._count = 0  # updates so far (iSAM2's own count)
         self._nodes: deque = deque()  # (t, [keys]) per node, oldest first
-        self._result = None
+        self._result: gtsam.ISAM2Result | None = None
         self._unordered = False  # the last update may have broken the time order
         self.unordered_updates = 0  # how often (diagnostics)
 
@@ -117,10 +118,8 @@ class FixedLagISAM2:
         update (stamped before ``t_cut`` [s]) has a pending update at the threshold.
 
         Marginalising it would freeze its factors' linearisation at a point that far off, for
-        good. IMU factors hold their preintegration's bias correction to first order about the
-        bias's linearisation point: with a loose turn-on bias sigma (300-500 mg) and 1 Hz nodes
-        in a 10 s lag (one relinearisation turn in a node's life), the smoother drifted to 5-10 m
-        where the EKF stays at 2 m.
+        good: IMU factors hold their preintegration's bias correction to first order about the
+        bias's linearisation point (docs/estimators.md: what it cost without this guard).
         """
         if not self.guard or not self._skip or not self._nodes or self._nodes[0][0] >= t_cut:
             return False

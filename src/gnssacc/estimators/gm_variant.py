@@ -1,5 +1,6 @@
 """The ``-gm`` methods: ``ekf`` and ``smoother`` run on the Gauss-Markov setup of the prepared
-recording (:mod:`gnssacc.prepare.gauss_markov`, :attr:`gnssacc.prepare.prepared.Prepared.gauss_markov`),
+recording (:mod:`gnssacc.prepare.gauss_markov`,
+:attr:`gnssacc.prepare.prepared.Prepared.gauss_markov`),
 their solutions renamed."""
 
 from __future__ import annotations

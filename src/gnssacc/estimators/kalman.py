@@ -129,7 +129,8 @@ def _joseph(P, K, H, R):
 
 @njit(cache=True)
 def joseph_update(P, H, R, dz, gate):
-    """Kalman update of ``P`` (n x n, in place) with ``H`` (m x n), ``R`` (m x m), innovation ``dz``.
+    """Kalman update of ``P`` (n x n, in place) with ``H`` (m x n), ``R`` (m x m), innovation
+    ``dz``.
 
     Returns
     -------

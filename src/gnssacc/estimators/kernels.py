@@ -160,7 +160,8 @@ class BackgroundWarmUp:
         self._thread = threading.Thread(target=self._run, name="gnssacc-jit", daemon=True)
         if notice is not None and self.compiling:
             print(
-                f"gnssacc: first run: compiling the numba kernels it needs (once, several seconds; cache: "
+                "gnssacc: first run: compiling the numba kernels it needs (once, several seconds; "
+                "cache: "
                 f"{cache_folder()}) while the data loads",
                 file=notice,
                 flush=True,
@@ -184,7 +185,8 @@ class BackgroundWarmUp:
                 proc.terminate()
 
     def _wait_children(self, groups) -> None:
-        """Wait for the children compiling any of ``groups``; compile here what a failed one left."""
+        """Wait for the children compiling any of ``groups``; compile here what a failed one
+        left."""
         for part, proc in self._children.items():
             if set(part) & set(groups) and not _compiled_by(proc):
                 compile_groups(part)
@@ -213,10 +215,12 @@ class BackgroundWarmUp:
         return self.wait()
 
     def wait(self) -> float:
-        """Block until the EKF's kernels are ready; their compile (or load) time [s], imports included."""
+        """Block until the EKF's kernels are ready; their compile (or load) time [s], imports
+        included."""
         self._done.wait()
         if self.error is not None:
             raise self.error
+        assert self.seconds is not None  # set before the event
         return float(self.seconds)
 
 

@@ -28,6 +28,8 @@ import numpy as np
 from numba import njit
 
 from ..core import earth
+from ..checks.quality import InflationSegments
+from .layout import I_ATT, I_BA, I_BG, I_POS, I_VEL, N_NAV, POS, StateLayout
 
 _A, _E2, _W, _F = earth.A, earth.E2, earth.OMEGA_IE, earth.F
 _GE, _K, _M = earth.GAMMA_E, earth.SOMIGLIANA_K, earth.M_RATIO
@@ -68,7 +70,8 @@ def _mm(A, B):
 
 @njit(cache=True)
 def _exp_so3_into(p0, p1, p2, out):
-    """``out = Exp([p x])`` by Rodrigues' formula, ``I + a K + b (p p^T - |p|^2 I)``, no allocation."""
+    """``out = Exp([p x])`` by Rodrigues' formula, ``I + a K + b (p p^T - |p|^2 I)``, no
+    allocation."""
     th2 = p0 * p0 + p1 * p1 + p2 * p2
     if th2 < 1e-16:
         a, b = 1.0, 0.5
@@ -145,7 +148,7 @@ def kernel_force_integrals(f_b, omega_b, h, w, b_a, b_g):
 
     Walks the samples backward from the window's end ``t_k``, integrating the body rotation
     ``R_{b_k b_s}`` from the bias-corrected gyro (earth rate neglected: see
-    :mod:`gnssacc.estimators.gnss_accel`), each sample taken at the midpoint of its overlap.
+    :mod:`gnssacc.estimators.aids.accel_model`), each sample taken at the midpoint of its overlap.
 
     Parameters
     ----------
@@ -154,7 +157,8 @@ def kernel_force_integrals(f_b, omega_b, h, w, b_a, b_g):
     h : ndarray (n,)
         Each sample's overlap with the window [s].
     w : ndarray (n,)
-        Its kernel weight ``int K`` [-] (:func:`gnssacc.estimators.gnss_accel.window_samples`).
+        Its kernel weight ``int K`` [-]
+        (:func:`gnssacc.estimators.aids.accel_model.window_samples`).
     b_a, b_g : ndarray (3,)
         Bias estimates [m/s^2], [rad/s].
 
@@ -224,16 +228,16 @@ def apply_correction(pos, v_n, R_nb, b_a, b_g, extra, dx):
     pos[2] += dx[2]
     E = np.empty((3, 3))
     T = np.empty((3, 3))
-    _exp_so3_into(-dx[6], -dx[7], -dx[8], E)
+    _exp_so3_into(-dx[I_ATT], -dx[I_ATT + 1], -dx[I_ATT + 2], E)
     _mm3_into(E, R_nb, T)
     for i in range(3):
-        v_n[i] -= dx[3 + i]
-        b_a[i] += dx[9 + i]
-        b_g[i] += dx[12 + i]
+        v_n[i] -= dx[I_VEL + i]
+        b_a[i] += dx[I_BA + i]
+        b_g[i] += dx[I_BG + i]
         for j in range(3):
             R_nb[i, j] = T[i, j]
-    for i in range(dx.shape[0] - 15):
-        extra[i] -= dx[15 + i]
+    for i in range(dx.shape[0] - N_NAV):
+        extra[i] -= dx[N_NAV + i]
 
 
 @njit(cache=True)
@@ -264,7 +268,7 @@ def system_matrix(pos, v_n, R_nb, f_b, w_ie_sign=1.0):
     w_ie_sign : float
         +1, or -1 for a time-reversed recording.
     """
-    F = np.zeros((15, 15))
+    F = np.zeros((N_NAV, N_NAV))
     _system_matrix_into(F, pos, v_n, R_nb, f_b, w_ie_sign)
     return F
 
@@ -289,45 +293,47 @@ def _system_matrix_into(F, pos, v_n, R_nb, f_b, w_ie_sign):
     tl, cl, sl = np.tan(lat), np.cos(lat), np.sin(lat)
     wie0, wie2 = W * cl, -W * sl  # earth rate, NED (east component 0)
     wen0, wen1, wen2 = vE / rn, -vN / rm, -vE * tl / rn  # transport rate
+    p, v, a = I_POS, I_VEL, I_ATT  # block offsets (numba constants)
     # Position rows (metres): d(dp)/dt = F_pp dp + dv.
-    F[0, 0] = -vD / rm
-    F[0, 2] = vN / rm
-    F[1, 0] = vE * tl / rm
-    F[1, 1] = -(vD / rn + vN * tl / rm)
-    F[1, 2] = vE / rn
+    F[p, p] = -vD / rm
+    F[p, p + 2] = vN / rm
+    F[p + 1, p] = vE * tl / rm
+    F[p + 1, p + 1] = -(vD / rn + vN * tl / rm)
+    F[p + 1, p + 2] = vE / rn
     for i in range(3):
-        F[i, 3 + i] = 1.0
+        F[p + i, v + i] = 1.0
     # Sensitivities of omega_ie + omega_en (d/dlat, d/dh) and of omega_en (d/dv):
     # drho_dv has [0, 1] = 1/rn, [1, 0] = -1/rm, [2, 1] = -tl/rn.
     rho_lat2 = -vE / (rn * cl * cl)  # d(w_en_D)/dlat
     dh0, dh1, dh2 = -vE / rn**2, vN / rm**2, vE * tl / rn**2
-    # Velocity rows: dv_dot = -[(2 w_ie + w_en) x] dv + [v x] d(2 w_ie + w_en) + dg - [(R f) x] phi + R b_a.
+    # Velocity rows: dv_dot = -[(2 w_ie + w_en) x] dv + [v x] d(2 w_ie + w_en) + dg - [(R f) x] phi
+    # + R b_a.
     c0, c1, c2 = 2.0 * wie0 + wen0, wen1, 2.0 * wie2 + wen2
     # -[c x] + [v x] drho_dv, column by column ([v x] e_k = v x e_k).
     x0, x1, x2 = _cross(vN, vE, vD, 0.0, -1.0 / rm, 0.0)
-    F[3, 3], F[4, 3], F[5, 3] = x0, -c2 + x1, c1 + x2
+    F[v, v], F[v + 1, v], F[v + 2, v] = x0, -c2 + x1, c1 + x2
     y0, y1, y2 = _cross(vN, vE, vD, 1.0 / rn, 0.0, -tl / rn)
-    F[3, 4], F[4, 4], F[5, 4] = c2 + y0, y1, -c0 + y2
-    F[3, 5], F[4, 5], F[5, 5] = -c1, c0, 0.0
+    F[v, v + 1], F[v + 1, v + 1], F[v + 2, v + 1] = c2 + y0, y1, -c0 + y2
+    F[v, v + 2], F[v + 1, v + 2], F[v + 2, v + 2] = -c1, c0, 0.0
     n0, n1, n2 = _cross(vN, vE, vD, 2.0 * (-W * sl), 0.0, 2.0 * (-W * cl) + rho_lat2)
     d0, d1, d2 = _cross(vN, vE, vD, dh0, dh1, dh2)
-    F[3, 0], F[4, 0], F[5, 0] = n0 / rm, n1 / rm, n2 / rm
-    F[3, 2], F[4, 2], F[5, 2] = -d0, -d1, -d2 - dg_dh  # dp_D = -dh and g_D = g(h)
+    F[v, p], F[v + 1, p], F[v + 2, p] = n0 / rm, n1 / rm, n2 / rm
+    F[v, p + 2], F[v + 1, p + 2], F[v + 2, p + 2] = -d0, -d1, -d2 - dg_dh  # dp_D = -dh, g_D = g(h)
     a0 = R_nb[0, 0] * f_b[0] + R_nb[0, 1] * f_b[1] + R_nb[0, 2] * f_b[2]
     a1 = R_nb[1, 0] * f_b[0] + R_nb[1, 1] * f_b[1] + R_nb[1, 2] * f_b[2]
     a2 = R_nb[2, 0] * f_b[0] + R_nb[2, 1] * f_b[1] + R_nb[2, 2] * f_b[2]
-    _neg_skew_into(F, 3, 6, a0, a1, a2)
+    _neg_skew_into(F, v, a, a0, a1, a2)
     # Attitude rows: phi_dot = -[w_in x] phi - d(w_in) + R b_g.
-    F[6, 0], F[7, 0], F[8, 0] = W * sl / rm, 0.0, (W * cl - rho_lat2) / rm
-    F[6, 2], F[7, 2], F[8, 2] = dh0, dh1, dh2
-    F[6, 3], F[6, 4], F[6, 5] = 0.0, -1.0 / rn, 0.0
-    F[7, 3], F[7, 4], F[7, 5] = 1.0 / rm, 0.0, 0.0
-    F[8, 3], F[8, 4], F[8, 5] = 0.0, tl / rn, 0.0
-    _neg_skew_into(F, 6, 6, wie0 + wen0, wen1, wie2 + wen2)
+    F[a, p], F[a + 1, p], F[a + 2, p] = W * sl / rm, 0.0, (W * cl - rho_lat2) / rm
+    F[a, p + 2], F[a + 1, p + 2], F[a + 2, p + 2] = dh0, dh1, dh2
+    F[a, v], F[a, v + 1], F[a, v + 2] = 0.0, -1.0 / rn, 0.0
+    F[a + 1, v], F[a + 1, v + 1], F[a + 1, v + 2] = 1.0 / rm, 0.0, 0.0
+    F[a + 2, v], F[a + 2, v + 1], F[a + 2, v + 2] = 0.0, tl / rn, 0.0
+    _neg_skew_into(F, a, a, wie0 + wen0, wen1, wie2 + wen2)
     for i in range(3):
         for j in range(3):
-            F[3 + i, 9 + j] = R_nb[i, j]
-            F[6 + i, 12 + j] = R_nb[i, j]
+            F[v + i, I_BA + j] = R_nb[i, j]
+            F[a + i, I_BG + j] = R_nb[i, j]
 
 
 @njit(cache=True)
@@ -338,9 +344,11 @@ def _neg_skew_into(F, r, c, a0, a1, a2):
     F[r + 2, c], F[r + 2, c + 1], F[r + 2, c + 2] = a1, -a0, 0.0
 
 
-# Column ranges of the non-zero entries of F, per block row (rows 9..14 of F are zero).
-_NZ_P = (0, 6)  # position rows: dp, dv
-_NZ_V = (0, 12)  # velocity rows: dp, dv, phi, b_a
+# Column ranges of the non-zero entries of F, per block row (the bias rows of F are zero).
+_NZ_P = (I_POS, I_ATT)  # position rows: dp, dv
+_NZ_V = (I_POS, I_BG)  # velocity rows: dp, dv, phi, b_a
+#: Rows of F that are not zero: position, velocity, attitude.
+_N_MOVING = I_BA
 
 
 @njit(cache=True)
@@ -348,46 +356,48 @@ def _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order):
     """P <- Phi P Phi^T + Q with Phi = I + F dt (+ (F dt)^2 / 2) and Q = G Qc G^T dt.
 
     For the first-order case ``Phi P Phi^T = P + dt (F P + P F^T) + dt^2 F P F^T`` is evaluated
-    with F's sparsity (only rows 0..8 are non-zero), about 4x fewer operations than dense.
-    ``A`` is a (9, 15) work array. Only ``P[:15, :15]`` is touched, so ``P`` may carry more
-    states (passing the whole array, not a view, keeps one compiled version of this kernel).
+    with F's sparsity (only the position, velocity and attitude rows are non-zero), about 4x fewer
+    operations than dense. ``A`` is a (9, 15) work array. Only the navigation block of ``P`` is
+    touched, so ``P`` may carry more states (passing the whole array, not a view, keeps one
+    compiled version of this kernel).
     """
+    n = N_NAV
     if phi_order == 2:
         Phi = _transition(F, dt, phi_order)
-        Pn = np.empty((15, 15))
-        PhiT = np.empty((15, 15))
-        for i in range(15):
-            for j in range(15):
+        Pn = np.empty((n, n))
+        PhiT = np.empty((n, n))
+        for i in range(n):
+            for j in range(n):
                 Pn[i, j] = P[i, j]
                 PhiT[i, j] = Phi[j, i]
         Pn = _mm(_mm(Phi, Pn), PhiT)
-        for i in range(15):
-            for j in range(15):
+        for i in range(n):
+            for j in range(n):
                 P[i, j] = Pn[i, j]
     else:
         # A = F P over the non-zero columns of each row of F.
-        for i in range(9):
-            for j in range(15):
+        for i in range(_N_MOVING):
+            for j in range(n):
                 acc = 0.0
-                if i < 3:
+                if i < I_VEL:
                     for k in range(_NZ_P[0], _NZ_P[1]):
                         acc += F[i, k] * P[k, j]
-                elif i < 6:
+                elif i < I_ATT:
                     for k in range(_NZ_V[0], _NZ_V[1]):
                         acc += F[i, k] * P[k, j]
                 else:
-                    for k in range(9):
+                    for k in range(I_BA):
                         acc += F[i, k] * P[k, j]
-                    for k in range(12, 15):
+                    for k in range(I_BG, I_BG + 3):
                         acc += F[i, k] * P[k, j]
                 A[i, j] = acc
         dt2 = dt * dt
-        for i in range(9):
-            for j in range(i, 15):
-                if j < 9:
+        for i in range(_N_MOVING):
+            for j in range(i, n):
+                if j < _N_MOVING:
                     # (F P F^T)[i, j] = sum_k A[i, k] F[j, k]
                     fpf = 0.0
-                    for k in range(15):
+                    for k in range(n):
                         fpf += A[i, k] * F[j, k]
                     v = P[i, j] + dt * (A[i, j] + A[j, i]) + dt2 * fpf
                 else:
@@ -402,44 +412,44 @@ def _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order):
             for k in range(3):
                 sa += R_nb[i, k] * q_a[k] * R_nb[j, k]
                 sg += R_nb[i, k] * q_g[k] * R_nb[j, k]
-            P[3 + i, 3 + j] += sa * dt
-            P[6 + i, 6 + j] += sg * dt
-        P[9 + i, 9 + i] += q_ba[i] * dt
-        P[12 + i, 12 + i] += q_bg[i] * dt
+            P[I_VEL + i, I_VEL + j] += sa * dt
+            P[I_ATT + i, I_ATT + j] += sg * dt
+        P[I_BA + i, I_BA + i] += q_ba[i] * dt
+        P[I_BG + i, I_BG + i] += q_bg[i] * dt
 
 
 @njit(cache=True)
 def _propagate_gm(P, F, dt, gm_tau, gm_var):
-    """The first-order Gauss-Markov states after the fifteenth (rows/columns 15.. of P: the GNSS
-    fix error, the odometry scale factor), ``x' = a x + w``, ``a = exp(-dt / tau)``, stationary
-    variance ``gm_var`` (``gm_tau``, ``gm_var``: one entry per such state). Their
-    cross-covariance with the navigation states follows ``P_xg' = (I + F dt) P_xg a``; nothing
-    couples them in F."""
-    n = P.shape[0]
-    for c in range(15, n):
-        a = np.exp(-dt / gm_tau[c - 15])
-        col = np.empty(15)
-        for i in range(15):
+    """The first-order Gauss-Markov states after the navigation states (:class:`gnssacc.estimators.
+    layout.StateLayout`: the GNSS fix error, the odometry scale factor), ``x' = a x + w``,
+    ``a = exp(-dt / tau)``, stationary variance ``gm_var`` (``gm_tau``, ``gm_var``: one entry per
+    such state). Their cross-covariance with the navigation states follows
+    ``P_xg' = (I + F dt) P_xg a``; nothing couples them in F."""
+    n, m = P.shape[0], N_NAV
+    for c in range(m, n):
+        a = np.exp(-dt / gm_tau[c - m])
+        col = np.empty(m)
+        for i in range(m):
             v = P[i, c]
-            if i < 9:
-                for k in range(15):
+            if i < _N_MOVING:
+                for k in range(m):
                     v += dt * F[i, k] * P[k, c]
             col[i] = a * v
-        for i in range(15):
+        for i in range(m):
             P[i, c] = col[i]
             P[c, i] = col[i]
-        for d in range(15, n):
-            P[c, d] *= a * np.exp(-dt / gm_tau[d - 15])
-        P[c, c] += gm_var[c - 15] * (1.0 - a * a)
-    for c in range(15, n):
+        for d in range(m, n):
+            P[c, d] *= a * np.exp(-dt / gm_tau[d - m])
+        P[c, c] += gm_var[c - m] * (1.0 - a * a)
+    for c in range(m, n):
         for d in range(c + 1, n):
             P[d, c] = P[c, d]
 
 
 @njit(cache=True)
 def _propagate_all(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order, gm_tau, gm_var):
-    """The 15 navigation states, then the Gauss-Markov states when P has them."""
-    if P.shape[0] > 15:
+    """The navigation states, then the Gauss-Markov states when P has them."""
+    if P.shape[0] > N_NAV:
         _propagate_gm(P, F, dt, gm_tau, gm_var)  # needs only P_xg and F: order-independent
     _propagate_cov(P, F, A, R_nb, dt, q_a, q_g, q_ba, q_bg, phi_order)
 
@@ -463,16 +473,16 @@ def _segment_index(k, seg_i0, seg_i1):
 def _transition(F, dt, phi_order):
     """``I + F dt (+ (F dt)^2 / 2)``, the error-state transition over one step. Explicit loops:
     numba's array expressions (``F * dt``) cost seconds of compilation each."""
-    S = np.empty((15, 15))
-    for i in range(15):
-        for j in range(15):
+    S = np.empty((N_NAV, N_NAV))
+    for i in range(N_NAV):
+        for j in range(N_NAV):
             S[i, j] = F[i, j] * dt
     if phi_order == 2:
         S2 = _mm(S, S)
-        for i in range(15):
-            for j in range(15):
+        for i in range(N_NAV):
+            for j in range(N_NAV):
                 S[i, j] = S[i, j] + 0.5 * S2[i, j]
-    for i in range(15):
+    for i in range(N_NAV):
         S[i, i] += 1.0
     return S
 
@@ -481,8 +491,8 @@ def _transition(F, dt, phi_order):
 def _step_phi(Phi, F, dt, phi_order):
     """Phi <- (I + F dt (+ (F dt)^2 / 2)) Phi: the error-state transition over one step."""
     C = _mm(_transition(F, dt, phi_order), Phi)
-    for i in range(15):
-        for j in range(15):
+    for i in range(N_NAV):
+        for j in range(N_NAV):
             Phi[i, j] = C[i, j]
 
 
@@ -560,12 +570,12 @@ def propagate(
         Updated sample index and time (``t_cur == t_to`` unless the IMU data ended first).
     """
     n = t_imu.shape[0]
-    if with_phi and P.shape[0] > 15:
+    if with_phi and P.shape[0] > N_NAV:
         with_phi = False  # the transition-matrix accumulator covers the 15 navigation states only
     f = np.empty(3)
     w = np.empty(3)
-    A = np.empty((9, 15))
-    F = np.zeros((15, 15))
+    A = np.empty((_N_MOVING, N_NAV))
+    F = np.zeros((N_NAV, N_NAV))
     work = np.empty((3, 3, 3))
     qa_k = np.empty(3)
     qg_k = np.empty(3)
@@ -666,7 +676,8 @@ def _cov_step(
     gm_var,
 ):
     """One covariance (and transition-matrix) step over ``dt_acc`` [s] with the noise integrated
-    over it (``qa_int``, ``qg_int``: PSD x time, reset to zero here; ``qa_k``, ``qg_k``: scratch)."""
+    over it (``qa_int``, ``qg_int``: PSD x time, reset to zero here; ``qa_k``, ``qg_k``:
+    scratch)."""
     _system_matrix_into(F, pos, v_n, R_nb, f, w_ie_sign)
     for i in range(3):
         qa_k[i] = qa_int[i] / dt_acc
@@ -695,19 +706,17 @@ class Propagator:
         IMU times [s] (N,), specific force [m/s^2] and angular rate [rad/s] (N, 3), body frame.
     q_a, q_g, q_ba, q_bg : ndarray (3,)
         White-noise and bias random-walk PSDs (see :func:`propagate`).
-    segments : tuple
-        ``(seg_i0, seg_i1, seg_qg, seg_qa)`` from :func:`gnssacc.checks.quality.inflation_segments`.
+    segments : gnssacc.checks.quality.InflationSegments
+        The extra noise over suspect IMU spans (:func:`gnssacc.checks.quality.inflation_segments`).
     phi_order : int
         1 or 2.
     cov_every : int
         Covariance propagated every this many samples (1: every sample).
     w_ie_sign : float
         +1, or -1 for a time-reversed recording.
-    gm_tau_s, gm_sigma_m : ndarray (3,), optional
-        GNSS Gauss-Markov error model (correlation time [s], 1-sigma [m], zeros: not modelled).
-    scale_tau_s, scale_sigma : float, optional
-        The odometry scale factor's Gauss-Markov model (correlation time [s], 1-sigma [-]),
-        when the filter has that state (after the GNSS error states).
+    layout : gnssacc.estimators.layout.StateLayout, optional
+        The states the filter carries: the Gauss-Markov ones after the navigation states are
+        propagated with their correlation times and variances (default: none).
     """
 
     def __init__(
@@ -719,50 +728,36 @@ class Propagator:
         q_g,
         q_ba,
         q_bg,
-        segments,
+        segments: InflationSegments,
         phi_order: int = 1,
         cov_every: int = 1,
         w_ie_sign: float = 1.0,
-        gm_tau_s=None,
-        gm_sigma_m=None,
-        scale_tau_s: float | None = None,
-        scale_sigma: float | None = None,
+        layout: StateLayout | None = None,
     ):
         self.t, self.f, self.w = (kernel_array(x, float) for x in (t, f_b, omega_ib_b))
         self.q = tuple(np.array(q, float) for q in (q_a, q_g, q_ba, q_bg))
-        seg_i0, seg_i1, seg_qg, seg_qa = segments
+        segments = InflationSegments._make(segments)
+        # In the kernel's argument order: sample ranges, accelerometer, gyro.
         self.segments = (
-            np.array(seg_i0, np.int64),
-            np.array(seg_i1, np.int64),
-            np.array(seg_qa, float).reshape(-1, 3),
-            np.array(seg_qg, float).reshape(-1, 3),
+            np.array(segments.i0, np.int64),
+            np.array(segments.i1, np.int64),
+            np.array(segments.q_accel, float).reshape(-1, 3),
+            np.array(segments.q_gyro, float).reshape(-1, 3),
         )
         self.phi_order, self.cov_every, self.w_ie_sign = (
             int(phi_order),
             max(int(cov_every), 1),
             float(w_ie_sign),
         )
-        self.gm_tau = np.array(np.broadcast_to(60.0 if gm_tau_s is None else gm_tau_s, (3,)), float)
-        self.gm_var = (
-            np.array(np.broadcast_to(0.0 if gm_sigma_m is None else gm_sigma_m, (3,)), float) ** 2
-        )
-        #: Correlation times and variances of the states after the fifteenth, in their order.
-        gm_on = bool(np.any(self.gm_var > 0))
-        self.extra_tau = np.array(
-            ([*self.gm_tau] if gm_on else []) + ([] if scale_tau_s is None else [scale_tau_s]),
-            float,
-        )
-        self.extra_var = np.array(
-            ([*self.gm_var] if gm_on else [])
-            + ([] if scale_sigma is None else [float(scale_sigma) ** 2]),
-            float,
-        )
+        layout = layout or StateLayout()
+        #: Correlation times and variances of the states after the navigation ones, in order.
+        self.extra_tau, self.extra_var = layout.markov_tau, layout.markov_var
         #: Transition-matrix accumulator (used when ``with_phi``); reset it with :meth:`reset_phi`.
-        self.Phi = np.eye(15)
+        self.Phi = np.eye(N_NAV)
         self.with_phi = False
 
     def reset_phi(self) -> None:
-        self.Phi[:, :] = np.eye(15)
+        self.Phi[:, :] = np.eye(N_NAV)
 
     def advance(
         self, s, k: int, t_cur: float, t_to: float, with_cov: bool = True
@@ -818,7 +813,7 @@ def warm_up(propagation: bool = True, update: bool = True) -> float:
         R_nb=np.eye(3),
         b_a=z3.copy(),
         b_g=z3.copy(),
-        P=np.eye(15),
+        P=np.eye(N_NAV),
     )
     if propagation:
         seg_i = np.zeros(1, np.int64)
@@ -830,12 +825,12 @@ def warm_up(propagation: bool = True, update: bool = True) -> float:
             z3,
             z3,
             z3,
-            (seg_i, seg_i + 1, np.zeros((1, 3)), np.zeros((1, 3))),
+            InflationSegments(seg_i, seg_i + 1, np.zeros((1, 3)), np.zeros((1, 3))),
         )
         prop.advance(s, 1, 0.0, 0.015)
     if update:
-        H = np.zeros((3, 15))
-        H[:, :3] = np.eye(3)
+        H = np.zeros((3, N_NAV))
+        H[:, POS] = np.eye(3)
         dx = joseph_update(s.P, H, np.eye(3), np.ones(3), 0.0)[0]
         apply_correction(s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, np.zeros(0), dx)
     return time.perf_counter() - t0

@@ -12,12 +12,13 @@ configuration; the estimators see the result through a new settings object.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..checks.quality import SuspectNoise
 from ..core.config import RunConfig, vec3
+from ..core.recording import GnssFixes
 from ..core.rotations import euler_to_dcm
 
 
@@ -56,7 +57,7 @@ class ImuNoise:
 
 @dataclass(frozen=True, eq=False)
 class GnssModel:
-    """The fixes' model beyond their stated sigmas.
+    """The fixes' noise model: their stated sigmas times a scale, and what they do not state.
 
     Attributes
     ----------
@@ -65,20 +66,37 @@ class GnssModel:
     gm_sigma, gm_tau : ndarray (3,)
         First-order Gauss-Markov fix error per N, E, D: 1-sigma [m] (zeros: not modelled) and
         correlation time [s].
+    sigma_scale : float
+        The white fix noise is the stated sigma times this (``[gnss] sigma_scale``, which the
+        noise tuner identifies); applied by :meth:`fixes`, where the estimators build the fixes'
+        noise, and nowhere else.
     """
 
     lever_arm_b: np.ndarray
     gm_sigma: np.ndarray
     gm_tau: np.ndarray
+    sigma_scale: float = 1.0
 
     @property
     def gauss_markov(self) -> bool:
         """Whether the Gauss-Markov error states are on."""
         return bool(np.any(self.gm_sigma > 0))
 
+    def fixes(self, gnss: GnssFixes) -> GnssFixes:
+        """The fixes ``gnss`` (as read) with this model's white noise: every sigma times
+        :attr:`sigma_scale` (their correlations, when stated, unchanged)."""
+        if self.sigma_scale == 1.0:
+            return gnss
+        return replace(gnss, sigma_ned=gnss.sigma_ned * self.sigma_scale)
+
     @classmethod
     def from_config(cls, cfg: RunConfig) -> "GnssModel":
-        return cls(cfg.lever_arm_b, cfg.gnss_gm_sigma, cfg.gnss_gm_tau)
+        return cls(
+            cfg.lever_arm_b,
+            cfg.gnss_gm_sigma,
+            cfg.gnss_gm_tau,
+            float(cfg["gnss"]["sigma_scale"]),
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,7 +154,7 @@ class ZuptSettings:
 
 @dataclass(frozen=True, eq=False)
 class NhcSettings:
-    """The non-holonomic constraint (``[nhc]``; :mod:`gnssacc.estimators.nhc`).
+    """The non-holonomic constraint (``[nhc]``; :mod:`gnssacc.estimators.aids.nhc`).
 
     Attributes
     ----------
@@ -160,7 +178,7 @@ class NhcSettings:
     sigma_mps: np.ndarray
     lever_arm_b: np.ndarray
     pivot_offset_m: float
-    R_vb: np.ndarray
+    R_vb: np.ndarray | None
 
     @classmethod
     def from_config(cls, cfg: RunConfig) -> "NhcSettings":
@@ -184,7 +202,7 @@ class NhcSettings:
 
 @dataclass(frozen=True, eq=False)
 class OdometrySettings:
-    """The wheel odometry (``[odometry]``; :mod:`gnssacc.estimators.odometry`).
+    """The wheel odometry (``[odometry]``; :mod:`gnssacc.estimators.aids.odometry`).
 
     Attributes
     ----------

@@ -41,15 +41,20 @@ numba, which also keeps these small dense operations off the BLAS thread pool.
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import njit
+
+from .layout import D_B, D_G, D_K, D_V, D_X, I_B, I_G, I_V, I_X, SYM_B, SYM_G, SYM_K, SYM_V, SYM_X
+from .layout import node_size
 
 if TYPE_CHECKING:  # the kernels compile without gtsam (at install time, kernels.compile_groups)
     import gtsam
 
 _INDEX_MASK = (1 << 56) - 1
+#: Rows of a node without the optional variables (pose, velocity, bias).
+N_NODE = I_B + D_B
 
 
 def symbol_key(char: str, index: int) -> int:
@@ -85,7 +90,8 @@ def _gram(W, scale):
 
 @njit(cache=True)
 def _chol(A):
-    """Lower Cholesky factor of ``S A S`` and ``s`` (``S = diag(s)``, unit diagonal), or a NaN factor."""
+    """Lower Cholesky factor of ``S A S`` and ``s`` (``S = diag(s)``, unit diagonal), or a NaN
+    factor."""
     b = A.shape[0]
     s = np.empty(b)
     for i in range(b):
@@ -119,9 +125,9 @@ def _schur(A, C, transpose):
         for j in range(b):
             W[i, j] = (C[j, i] if transpose else C[i, j]) * s[i]
         for k in range(i):
-            l = L[i, k]
+            l_ik = L[i, k]
             for j in range(b):
-                W[i, j] -= l * W[k, j]
+                W[i, j] -= l_ik * W[k, j]
         d = 1.0 / L[i, i]
         for j in range(b):
             W[i, j] *= d
@@ -144,26 +150,30 @@ def _inverse(A):
     return _gram(Li, s)
 
 
+_CHAR_X, _CHAR_V, _CHAR_B, _CHAR_G, _CHAR_K = (ord(c) for c in (SYM_X, SYM_V, SYM_B, SYM_G, SYM_K))
+
+
 @njit(cache=True)
-def _layout(key, b=15):
+def _layout(key, b=N_NODE):
     """Offset and dimension of a variable in its node's block of ``b`` rows, from the GTSAM symbol
-    character (the odometry scale factor ``k``, when nodes carry one, is the block's last row)."""
+    character (:class:`gnssacc.estimators.layout.NodeLayout`: the odometry scale factor ``k``,
+    when nodes carry one, is the block's last row)."""
     c = key >> 56
-    if c == 120:  # 'x': Pose3
-        return 0, 6
-    if c == 118:  # 'v': velocity
-        return 6, 3
-    if c == 98:  # 'b': IMU bias
-        return 9, 6
-    if c == 103:  # 'g': GNSS error
-        return 15, 3
-    if c == 107 and b in (16, 19):  # 'k': odometry scale factor
-        return b - 1, 1
+    if c == _CHAR_X:
+        return I_X, D_X
+    if c == _CHAR_V:
+        return I_V, D_V
+    if c == _CHAR_B:
+        return I_B, D_B
+    if c == _CHAR_G:
+        return I_G, D_G
+    if c == _CHAR_K and b in (N_NODE + D_K, N_NODE + D_G + D_K):
+        return b - D_K, D_K
     return -1, 0
 
 
 @njit(cache=True)
-def _scatter(D, O, Ox, info, keys, first, start):
+def _scatter(D, Od, Ox, info, keys, first, start):
     """Add the information ``info`` of linear factors over ``keys`` (in that order) to the blocks.
 
     ``info`` may be the joint information of several factors (a graph's dense Hessian): blocks
@@ -193,7 +203,7 @@ def _scatter(D, O, Ox, info, keys, first, start):
         for q in range(nk):
             a, c = rows[p], rows[q]
             if a <= c <= a + w:
-                T = D[a] if a == c else _coupling(O, Ox, a, c - a)
+                T = D[a] if a == c else _coupling(Od, Ox, a, c - a)
                 for r in range(dims[p]):
                     for t in range(dims[q]):
                         T[offs[p] + r, offs[q] + t] += info[pos[p] + r, pos[q] + t]
@@ -224,7 +234,7 @@ def _copy_into(out, A):
 
 
 @njit(cache=True)
-def _node_covariances(D, O, F, start, f_valid, rows, last):
+def _node_covariances(D, Od, F, start, f_valid, rows, last):
     """Covariances of storage ``rows`` (ascending); extends the forward sweep ``F`` (valid up to
     ``f_valid``) to ``last``, and one backward sweep serves every row.
 
@@ -234,7 +244,7 @@ def _node_covariances(D, O, F, start, f_valid, rows, last):
         _copy_into(F[start], D[start])
         f_valid = start
     for k in range(f_valid, last):  # F_{k+1} = D_{k+1} - O_k^T F_k^-1 O_k
-        _diff_into(F[k + 1], D[k + 1], _schur(F[k], O[k], False))
+        _diff_into(F[k + 1], D[k + 1], _schur(F[k], Od[k], False))
     f_valid = max(f_valid, last)
     b = D.shape[1]
     out = np.empty((len(rows), b, b))
@@ -246,9 +256,9 @@ def _node_covariances(D, O, F, start, f_valid, rows, last):
         j = rows[m]
         while k > j + 1:  # G_k = D_k - O_k G_{k+1}^-1 O_k^T
             k -= 1
-            _diff_into(G, D[k], _schur(G, O[k], True))
+            _diff_into(G, D[k], _schur(G, Od[k], True))
         if j < last:  # less the newer nodes' Schur complement
-            _diff_into(info, F[j], _schur(G, O[j], True))
+            _diff_into(info, F[j], _schur(G, Od[j], True))
         else:
             _copy_into(info, F[j])
         _copy_into(out[m], _inverse(info))
@@ -259,16 +269,16 @@ def _node_covariances(D, O, F, start, f_valid, rows, last):
 
 
 @njit(cache=True)
-def _marginalize(D, O, F, start, count, f_valid):
+def _marginalize(D, Od, F, start, count, f_valid):
     """Schur complements of the ``count`` oldest nodes onto their successors; drops them.
 
     Returns the new storage row of the oldest node and the new ``f_valid``.
     """
     for _ in range(count):
         k = start
-        _diff_into(D[k + 1], D[k + 1], _schur(D[k], O[k], False))
+        _diff_into(D[k + 1], D[k + 1], _schur(D[k], Od[k], False))
         D[k] = 0.0
-        O[k] = 0.0
+        Od[k] = 0.0
         start += 1
         if f_valid < start:  # F of the oldest node is its D (kept if already valid)
             _copy_into(F[start], D[start])
@@ -277,9 +287,10 @@ def _marginalize(D, O, F, start, count, f_valid):
 
 
 @njit(cache=True)
-def _coupling(O, Ox, a, d):
-    """The block ``H[a, a + d]`` (``1 <= d``): ``O`` holds ``d = 1``, ``Ox`` ``d = 2 ..``."""
-    return O[a] if d == 1 else Ox[a, d - 2]
+def _coupling(Od, Ox, a, d):
+    """The block ``H[a, a + d]`` (``1 <= d``): ``Od`` (the ``O_k``) holds ``d = 1``, ``Ox`` ``d = 2
+    ..``."""
+    return Od[a] if d == 1 else Ox[a, d - 2]
 
 
 @njit(cache=True)
@@ -291,27 +302,30 @@ def _nonzero(A):
 
 
 @njit(cache=True)
-def _eliminate(D, O, Ox, k, lo, hi):
+def _eliminate(D, Od, Ox, k, lo, hi):
     """Eliminate storage row ``k`` of a block-banded ``H``: subtract its Schur complement from the
-    blocks of its neighbours among rows ``[lo, hi]`` (``k`` excluded; bandwidth ``1 + Ox.shape[1]``).
+    blocks of its neighbours among rows ``[lo, hi]`` (``k`` excluded; bandwidth ``1 +
+    Ox.shape[1]``).
     Row ``k``'s own blocks are left as they were."""
     b, w = D.shape[1], Ox.shape[1] + 1
     nbr = np.empty(2 * w, np.int64)
     m = 0
     for r in range(max(lo, k - w), min(hi, k + w) + 1):
-        if r != k and _nonzero(_coupling(O, Ox, k, r - k) if r > k else _coupling(O, Ox, r, k - r)):
+        if r != k and _nonzero(
+            _coupling(Od, Ox, k, r - k) if r > k else _coupling(Od, Ox, r, k - r)
+        ):
             nbr[m] = r  # (a wide band costs only where factors actually reach)
             m += 1
     C = np.empty((b, m * b))  # H[k, neighbours]
     for p in range(m):
         r = nbr[p]
         if r > k:
-            blk = _coupling(O, Ox, k, r - k)
+            blk = _coupling(Od, Ox, k, r - k)
             for i in range(b):
                 for j in range(b):
                     C[i, p * b + j] = blk[i, j]
         else:
-            blk = _coupling(O, Ox, r, k - r)
+            blk = _coupling(Od, Ox, r, k - r)
             for i in range(b):
                 for j in range(b):
                     C[i, p * b + j] = blk[j, i]
@@ -320,23 +334,23 @@ def _eliminate(D, O, Ox, k, lo, hi):
         for j in range(m * b):
             C[i, j] *= s[i]
         for q in range(i):
-            l = L[i, q]
+            l_ik = L[i, q]
             for j in range(m * b):
-                C[i, j] -= l * C[q, j]
+                C[i, j] -= l_ik * C[q, j]
         d = 1.0 / L[i, i]
         for j in range(m * b):
             C[i, j] *= d
     S = _gram(C, np.ones(m * b))
     for p in range(m):
         for q in range(p, m):
-            T = D[nbr[p]] if p == q else _coupling(O, Ox, nbr[p], nbr[q] - nbr[p])
+            T = D[nbr[p]] if p == q else _coupling(Od, Ox, nbr[p], nbr[q] - nbr[p])
             for i in range(b):
                 for j in range(b):
                     T[i, j] -= S[p * b + i, q * b + j]
 
 
 @njit(cache=True)
-def _band_covariances(D, O, Ox, Dc, Oc, Oxc, start, fe, rows, last):
+def _band_covariances(D, Od, Ox, Dc, Oc, Oxc, start, fe, rows, last):
     """Covariances of storage ``rows`` of a block-banded ``H`` (rows ``start .. last``): per row,
     on a copy, eliminate the older rows oldest first and the newer rows newest first, and invert
     what is left of the row. ``Dc, Oc, Oxc`` hold ``H`` with rows ``start .. fe - 1`` already
@@ -351,7 +365,7 @@ def _band_covariances(D, O, Ox, Dc, Oc, Oxc, start, fe, rows, last):
         if s == fe:
             D2, O2, Ox2 = Dc[s : last + 1].copy(), Oc[s : last + 1].copy(), Oxc[s : last + 1].copy()
         else:
-            D2, O2, Ox2 = D[s : last + 1].copy(), O[s : last + 1].copy(), Ox[s : last + 1].copy()
+            D2, O2, Ox2 = D[s : last + 1].copy(), Od[s : last + 1].copy(), Ox[s : last + 1].copy()
         for k in range(j):
             _eliminate(D2, O2, Ox2, k, k + 1, n)
         for k in range(n, j, -1):
@@ -369,13 +383,13 @@ def _band_advance(Dc, Oc, Oxc, fe, target, last):
 
 
 @njit(cache=True)
-def _band_marginalize(D, O, Ox, start, count, last):
+def _band_marginalize(D, Od, Ox, start, count, last):
     """Schur complements of the ``count`` oldest rows onto their successors; drops them. Returns
     the new storage row of the oldest node."""
     for _ in range(count):
-        _eliminate(D, O, Ox, start, start + 1, last)
+        _eliminate(D, Od, Ox, start, start + 1, last)
         D[start] = 0.0
-        O[start] = 0.0
+        Od[start] = 0.0
         Ox[start] = 0.0
         start += 1
     return start
@@ -398,13 +412,13 @@ class WindowMarginals:
     """
 
     def __init__(self, gm: bool, bandwidth: int = 1, scale: bool = False):
-        self.b = (18 if gm else 15) + int(scale)
+        self.b = node_size(gm, scale)
         self.w = int(bandwidth)
         self.clear()
 
     def clear(self) -> None:
         """Forget the system (the next :meth:`sync` rebuilds it)."""
-        self.first = None  # node index of the oldest node held
+        self.first: Any = None  # node index of the oldest node held (int; None: nothing held)
         self.n = 0  # nodes held
         self.start = 0  # storage row of the oldest node
         self.f_valid = -1  # storage rows <= this have a valid forward sweep F
@@ -415,7 +429,8 @@ class WindowMarginals:
     def sync(self, isam, new_factors: gtsam.NonlinearFactorGraph) -> None:
         """Bring the blocks to the smoother's state right after an update with ``new_factors``.
 
-        ``isam`` is the :class:`gnssacc.estimators.fixed_lag.FixedLagISAM2`. Rebuilt from all its factors after a
+        ``isam`` is the :class:`gnssacc.estimators.fixed_lag.FixedLagISAM2`. Rebuilt from all its
+        factors after a
         relinearisation or when nothing is held, else updated incrementally.
         """
         theta = isam.getLinearizationPoint()
@@ -500,7 +515,7 @@ class WindowMarginals:
         if not (
             self.start <= rows[0]
             and rows[-1] <= last
-            and all(a < b for a, b in zip(rows, rows[1:]))
+            and all(a < b for a, b in zip(rows, rows[1:], strict=False))
         ):
             raise KeyError(f"nodes {list(nodes)} are not ascending nodes of the window")
         if self.w == 1:
@@ -546,16 +561,18 @@ class WindowMarginals:
         """Hold nodes up to ``last``; moves the window to the front of storage when it runs out."""
         n = last - self.first + 1
         if self.start + n > len(self.D):
-            D, O, Ox, F, s, m = self.D, self.O, self.Ox, self.F, self.start, self.n
+            D, Od, Ox, F, s, m = self.D, self.O, self.Ox, self.F, self.start, self.n
             kept = (self.Dc, self.Oc, self.Oxc) if self.w > 1 else ()
             self._alloc(max(2 * n, 64))
             self.D[:m], self.O[:m], self.Ox[:m], self.F[:m] = (
                 D[s : s + m],
-                O[s : s + m],
+                Od[s : s + m],
                 Ox[s : s + m],
                 F[s : s + m],
             )
-            for new, old in zip((self.Dc, self.Oc, self.Oxc) if self.w > 1 else (), kept):
+            for new, old in zip(
+                (self.Dc, self.Oc, self.Oxc) if self.w > 1 else (), kept, strict=False
+            ):
                 new[:m] = old[s : s + m]
             self.f_valid -= s
             self.fe = self.fe - s if self.fe >= s else -1

@@ -1,6 +1,6 @@
 """One line on the ground-vehicle aids of a run: where the non-holonomic constraint was applied and
 why not elsewhere, and how the wheel odometry was used (from the methods' ``stats`` in the
-metrics, :mod:`gnssacc.estimators.nhc`, :mod:`gnssacc.estimators.odometry`)."""
+metrics, :mod:`gnssacc.estimators.aids.nhc`, :mod:`gnssacc.estimators.aids.odometry`)."""
 
 from __future__ import annotations
 

@@ -34,6 +34,7 @@ import numpy as np
 from ..core.display import DISPLAY_SCALE, STATE_GROUPS
 from ..core.recording import RecordedRun
 from ..core.solution import NavSolution
+from ..core.states import BA, BG, POS
 
 DPI = 100
 #: The figures of each ``--plots`` choice, in the report's order.
@@ -346,7 +347,7 @@ def plot_errors(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> None
         seen = {i: [] for i in range(3)}
         for mid in ids:
             sol = sols[mid]
-            e = _errors(run, sol)[:, 0:3]
+            e = _errors(run, sol)[:, POS]
             t = sol.t - run.t_start
             for i in range(3):
                 _band_plot(axes[i, c], t, e[:, i], sol.sigma[:, i], mid)
@@ -421,7 +422,7 @@ def plot_biases(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> None
         ref = sols[show[0]]
         true = (ref.t, run.sim.bias.at(ref.t, run.imu.t))
     for r, (name, attr, sl) in enumerate(
-        (("accelerometer bias", "b_a", slice(9, 12)), ("gyro bias", "b_g", slice(12, 15)))
+        (("accelerometer bias", "b_a", BA), ("gyro bias", "b_g", BG))
     ):
         unit = STATE_GROUPS[3 + r][2]
         for i, ax in enumerate(axes[r]):

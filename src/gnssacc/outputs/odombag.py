@@ -24,6 +24,7 @@ import numpy as np
 from ..core.recording import RecordedRun
 from ..core.rotations import ENU_NED, R_nb_to_ros, euler_to_dcm
 from ..core.solution import NavSolution
+from ..core.states import ATT, VEL
 from ..sources.bag_streams import ODOMETRY_TYPE, MessageTypes, ns
 
 #: ``--export`` kinds and the file each writes in the result folder.
@@ -36,14 +37,18 @@ def topic_of(method: str) -> str:
     return f"/gnssacc/{method.replace('-', '_')}/odom"
 
 
+#: The linear velocity's block of a ROS twist covariance (linear, then angular).
+LINEAR = slice(0, 3)
+
+
 def _covariances(R_enu_flu: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pose and twist covariances (6x6) of one epoch from the solution's 15 sigmas."""
     pose = np.zeros((6, 6))
     pose[[0, 1, 2], [0, 1, 2]] = sigma[[1, 0, 2]] ** 2  # NED -> ENU: east, north, up
-    pose[[3, 4, 5], [3, 4, 5]] = sigma[6:9] ** 2  # roll, pitch, yaw
+    pose[[3, 4, 5], [3, 4, 5]] = sigma[ATT] ** 2  # roll, pitch, yaw
     twist = np.diag([0.0, 0.0, 0.0, -1.0, -1.0, -1.0])
-    c_enu = ENU_NED @ np.diag(sigma[3:6] ** 2) @ ENU_NED.T
-    twist[:3, :3] = R_enu_flu.T @ c_enu @ R_enu_flu
+    c_enu = ENU_NED @ np.diag(sigma[VEL] ** 2) @ ENU_NED.T
+    twist[LINEAR, LINEAR] = R_enu_flu.T @ c_enu @ R_enu_flu
     return pose, twist
 
 

@@ -12,6 +12,7 @@ from ..analysis.metrics import BASELINES, Score, improvement_pct
 from ..core.display import DISPLAY_SCALE, TRAJECTORY_COLUMNS, text_table
 from ..core.recording import RecordedRun
 from ..core.solution import NavSolution
+from ..core.states import BA, BG
 
 #: Columns of ``trajectory_<id>.csv`` (display units, :mod:`gnssacc.core.display`).
 TRAJECTORY_COLUMNS = list(TRAJECTORY_COLUMNS)
@@ -27,8 +28,8 @@ def trajectory_table(sol: NavSolution) -> np.ndarray:
             sol.h,
             sol.v_n,
             np.degrees(sol.rpy),
-            sol.b_a * DISPLAY_SCALE[9:12],
-            sol.b_g * DISPLAY_SCALE[12:15],
+            sol.b_a * DISPLAY_SCALE[BA],
+            sol.b_g * DISPLAY_SCALE[BG],
             sol.sigma * DISPLAY_SCALE,
         ]
     )

@@ -27,10 +27,11 @@ from ..checks.findings import Finding
 from ..checks.timeoffset import OffsetEstimate, shifted
 from ..core.config import RunConfig
 from ..core.recording import InitialState, RecordedRun
+from ..core.states import ATT, BA, BG, POS, VEL
 from .filter_pass import FilterPass
 from .judge import BURN_IN_S, Innovations, Verdict, compare, innovations
 from .start import StartPieces, start_pieces
-from .tuning import scaled_gnss, ungated, without_aids
+from .tuning import ungated, without_aids
 
 #: Stage 2's uncertainty is the curvature of the log-likelihood over a step that lowers it by this
 #: much on average (a 2-sigma step), from a parabola through five points. On a smaller scale the
@@ -56,7 +57,7 @@ def state_at(
     if t <= float(init.t) + 1e-9:
         return init
     sol = filter_pass(
-        scaled_gnss(run, float(cfg["gnss"]["sigma_scale"])),
+        run,
         ungated(without_aids(cfg)),
         "ekf",
         init=init,
@@ -65,7 +66,7 @@ def state_at(
         store_P=True,
     )
     sig = sol.sigma[-1]
-    att = np.sqrt(np.maximum(np.diag(sol.P[-1][6:9, 6:9]), 0.0)) if sol.P is not None else sig[6:9]
+    att = np.sqrt(np.maximum(np.diag(sol.P[-1][ATT, ATT]), 0.0)) if sol.P is not None else sig[ATT]
     return InitialState(
         t=float(sol.t[-1]),
         lat=float(sol.lat[-1]),
@@ -73,14 +74,14 @@ def state_at(
         h=float(sol.h[-1]),
         v_n=sol.v_n[-1].copy(),
         rpy=sol.rpy[-1].copy(),
-        sigma_pos_m=sig[0:3].copy(),
-        sigma_vel_mps=sig[3:6].copy(),
+        sigma_pos_m=sig[POS].copy(),
+        sigma_vel_mps=sig[VEL].copy(),
         sigma_att_rad=att,
         how=f"{init.how}; carried to t = {t:.2f} s",
         b_a=sol.b_a[-1].copy(),
         b_g=sol.b_g[-1].copy(),
-        sigma_b_a=sig[9:12].copy(),
-        sigma_b_g=sig[12:15].copy(),
+        sigma_b_a=sig[BA].copy(),
+        sigma_b_g=sig[BG].copy(),
     )
 
 

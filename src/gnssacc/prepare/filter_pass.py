@@ -3,9 +3,9 @@
 Several decisions before estimation need an estimator's verdict: the yaw bank scores start
 hypotheses, the noise identification maximises an innovation likelihood, a proposed correction
 (clock offset, units, mounting) is kept only when the corrected data are decisively more likely.
-This stage precedes the estimators, so it does not import them: the caller hands in the pass
-(:func:`gnssacc.estimators.ekf.run_ekf` from :mod:`gnssacc.pipeline`, or the EKF itself when it
-starts without a prepared recording). :class:`FilterPass` says what such a pass must do.
+They take the pass as an argument (:func:`gnssacc.prepare.passes.filter_pass`, the EKF, from
+:mod:`gnssacc.pipeline`), so that each decision can be tested with any pass (one that counts its
+calls, or a cheaper one). :class:`FilterPass` says what such a pass must do.
 """
 
 from __future__ import annotations

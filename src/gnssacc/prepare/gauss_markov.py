@@ -27,7 +27,7 @@ import numpy as np
 from ..core.errors import InputError
 from ..sources.gnss_noise import PROFILES
 from .filter_pass import FilterPass
-from .tuning import scaled_gnss, tune_gauss_markov
+from .tuning import tune_gauss_markov
 
 
 def gm_setup(prep, *, filter_pass: FilterPass) -> tuple:
@@ -42,7 +42,8 @@ def gm_setup(prep, *, filter_pass: FilterPass) -> tuple:
     Returns
     -------
     prep : Prepared
-        A copy with ``cfg`` holding ``gm_sigma_m > 0`` and ``run``'s fix sigmas the white part.
+        A copy with ``cfg`` holding ``gm_sigma_m > 0`` and a ``gnss.sigma_scale`` that makes the
+        fixes' stated sigmas the white part.
     how : dict
         ``source`` (``config``, ``tuner (its Gauss-Markov stage)``, ``tuner``, ``noise profile``),
         ``gm_sigma_m`` [m], ``gm_tau_s`` [s], ``sigma_scale`` and, for the tuner, ``loglik_gain``.
@@ -57,7 +58,7 @@ def gm_setup(prep, *, filter_pass: FilterPass) -> tuple:
         cfg, info = tune_gauss_markov(
             prep.run, cfg, prep.stationary, prep.quality, prep.init, filter_pass=filter_pass
         )
-        out = replace(prep, cfg=cfg, run=scaled_gnss(prep.run, info["run_scale"]))
+        out = replace(prep, cfg=cfg)
         how.update(source="tuner", loglik_gain=info["loglik_gain"], seconds=info["seconds"])
     else:
         out = _from_profile(prep)
@@ -96,4 +97,4 @@ def _from_profile(prep):
         },
         f"noise profile {prep.run.meta['noise']}",
     )
-    return replace(prep, cfg=cfg, run=scaled_gnss(prep.run, white_ratio))
+    return replace(prep, cfg=cfg)

@@ -28,6 +28,7 @@ from ..core.errors import InputError
 from ..core.gnss_fit import acceleration_row
 from ..core.recording import InitialState, RecordedRun
 from ..core.rotations import euler_to_dcm
+from ..estimators.settings import GnssModel
 
 #: Prior 1-sigma of a ground vehicle's mean acceleration over a fit window [m/s^2], used to
 #: shrink the (noisy) GNSS-fitted acceleration towards zero and to budget a line fit's model error.
@@ -36,25 +37,6 @@ _ACCEL_PRIOR_SIGMA = 1.0
 _STATIC_START_TOL_S = 1.0
 #: Velocity 1-sigma assumed at a static start [m/s] (the zero-velocity updates refine it).
 _STATIC_VEL_SIGMA = 0.05
-
-
-def initial_sigmas(init: InitialState, over: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Initial 1-sigma of position [m], velocity [m/s] and attitude error (n frame) [rad].
-
-    The initial state's own sigmas, replaced by any ``[init]`` overrides of the configuration
-    (``over``: :meth:`gnssacc.core.config.RunConfig.initial_sigma_overrides`); both estimators start
-    from these.
-    """
-    att = np.array(init.sigma_att_rad, float)
-    if "roll_pitch" in over:
-        att[:2] = over["roll_pitch"]
-    if "yaw" in over:
-        att[2] = over["yaw"]
-    return (
-        np.asarray(over.get("pos", init.sigma_pos_m), float),
-        np.asarray(over.get("vel", init.sigma_vel_mps), float),
-        att,
-    )
 
 
 @dataclass
@@ -113,7 +95,8 @@ def _line_fit(t: np.ndarray, p: np.ndarray, sigma: np.ndarray, t_ref: float):
 
 
 def _block_se(x: np.ndarray, block: int) -> np.ndarray:
-    """Standard error of the mean of ``x`` (N, 3) from the scatter of block means (vibration-aware)."""
+    """Standard error of the mean of ``x`` (N, 3) from the scatter of block means
+    (vibration-aware)."""
     nb = len(x) // block
     if nb < 3:
         return np.std(x, axis=0) / np.sqrt(max(len(x), 1))
@@ -201,16 +184,20 @@ def _moving_start(run: RecordedRun, cfg: RunConfig) -> StartState:
         None,
         (float(t_w[0]), float(t_w[-1])),
         f"moving start: position/velocity from a line fit over {len(t_w)} fixes "
-        f"({t_w[-1] - t_w[0]:.1f} s), roll/pitch by levelling with the GNSS-fitted acceleration removed",
+        f"({t_w[-1] - t_w[0]:.1f} s), roll/pitch by levelling with the GNSS-fitted acceleration "
+        "removed",
     )
 
 
 def start_state(run: RecordedRun, cfg: RunConfig, stationary=None) -> StartState:
-    """The start of the recording as the data describe it (see the module docstring).
+    """The start of the recording as the data describe it (see the module docstring), the fixes
+    weighted with their noise as the estimators model it (:class:`gnssacc.estimators.settings.
+    GnssModel`: the stated sigmas times ``[gnss] sigma_scale``).
 
     Parameters
     ----------
     run : RecordedRun
+        As read (the fixes' sigmas as stated).
     cfg : RunConfig
     stationary : gnssacc.prepare.stationary.StationaryReport, optional
         Stationary spans; a span at the first IMU sample makes a static start.
@@ -220,6 +207,7 @@ def start_state(run: RecordedRun, cfg: RunConfig, stationary=None) -> StartState
     InputError
         When there are not enough GNSS fixes near the start.
     """
+    run = run.with_gnss(GnssModel.from_config(cfg).fixes(run.gnss))
     spans = [] if stationary is None else stationary.spans
     if spans and spans[0].t_start - run.t_start <= _STATIC_START_TOL_S:
         return _static_start(run, cfg, spans[0])
@@ -237,7 +225,8 @@ def _level(f_b: np.ndarray, a_b: np.ndarray) -> tuple[float, float]:
 def hypothesis(
     run: RecordedRun, cfg: RunConfig, start: StartState, yaw: float, sigma_yaw: float
 ) -> InitialState:
-    """The initial state for one yaw [rad] (1-sigma ``sigma_yaw``): levelling and gyro bias follow it."""
+    """The initial state for one yaw [rad] (1-sigma ``sigma_yaw``): levelling and gyro bias follow
+    it."""
     c = cfg["init"]
     lat, lon, h = run.origin.to_llh(start.p_n)
     g = float(gravity_n(lat, h)[2])

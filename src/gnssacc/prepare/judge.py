@@ -43,7 +43,7 @@ from ..core.config import RunConfig
 from ..core.recording import RecordedRun
 from .filter_pass import FilterPass
 from .start import StartPieces
-from .tuning import scaled_gnss, ungated, without_aids
+from .tuning import ungated, without_aids
 
 #: Position innovations this soon after a pass's start are not scored: the start's own errors
 #: settle there [s].
@@ -116,7 +116,7 @@ def innovations(
         # a verdict (KITTI's IMU is pitched 0.4 deg against the car: with the constraint, 3 of 40 KITTI
         # runs with outages measured a -0.13..-0.16 s clock offset, decisively, and were refused).
         sol = filter_pass(
-            scaled_gnss(run, float(cfg["gnss"]["sigma_scale"])),
+            run,
             ungated(without_aids(cfg)),
             "ekf",
             init=init,

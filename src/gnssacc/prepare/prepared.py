@@ -2,7 +2,8 @@
 
 :func:`prepare` runs, in order,
 
-0. fix sigmas the recording does not state, from the fixes' scatter (:mod:`gnssacc.prepare.fix_noise`);
+0. fix sigmas the recording does not state, from the fixes' scatter
+(:mod:`gnssacc.prepare.fix_noise`);
    then the input checks (:mod:`gnssacc.checks.plausibility`): units, clocks, coordinates and
    mounting checked against the data themselves, their proposals settled by the estimator
    (:mod:`gnssacc.prepare.settle`), so every later step and estimator sees the corrected run;
@@ -33,12 +34,13 @@ from ..checks.quality import QualityReport
 from ..core.config import RunConfig
 from ..core.memory import release_free_memory
 from ..core.recording import InitialState, RecordedRun
+from ..estimators.settings import GnssModel
 from .filter_pass import FilterPass
 from .fix_noise import with_measured_sigmas
 from .settle import settled
 from .start import start_of, start_pieces
 from .stationary import StationaryNoise, StationaryReport, noise_from_stationary
-from .tuning import TuneResult, scaled_gnss, tune
+from .tuning import TuneResult, tune
 from .yawbank import BankResult
 
 
@@ -49,8 +51,9 @@ class Prepared:
     Attributes
     ----------
     run : RecordedRun
-        The run as the estimators see it: the input checks' repairs and measured offsets applied,
-        fix sigmas times ``gnss.sigma_scale``.
+        The run the estimators read: the input checks' repairs and measured offsets applied, the
+        fixes' sigmas as stated (the estimators apply the noise model of ``cfg``:
+        :attr:`modelled_run`).
     cfg : RunConfig
         The configuration they use (tuned where allowed); estimators read their own settings
         from it (:mod:`gnssacc.estimators.settings`).
@@ -63,7 +66,8 @@ class Prepared:
     bank : BankResult or None
         ``None`` when the source gave the initial state.
     checks : tuple of gnssacc.checks.findings.Finding
-        What the input checks repaired or applied, with their evidence (they raise on anything else).
+        What the input checks repaired or applied, with their evidence (they raise on anything
+        else).
     seconds : dict
         Time spent per step [s].
     gauss_markov : tuple or None
@@ -83,25 +87,32 @@ class Prepared:
     seconds: dict = field(default_factory=dict)
     gauss_markov: tuple | None = None
 
+    @property
+    def modelled_run(self) -> RecordedRun:
+        """:attr:`run` with the fixes' noise as the estimators model it under :attr:`cfg` (their
+        sigmas times ``[gnss] sigma_scale``: :meth:`gnssacc.estimators.settings.GnssModel.fixes`),
+        for a figure that compares an estimate with that noise."""
+        return self.run.with_gnss(GnssModel.from_config(self.cfg).fixes(self.run.gnss))
+
 
 def _other_heading(a: InitialState, b: InitialState) -> bool:
-    """Whether two starts differ in yaw by more than 3 sigma (neighbouring hypotheses converge to the
-    same heading; a different heading means the noise the tuner saw came from another trajectory)."""
+    """Whether two starts differ in yaw by more than 3 sigma (neighbouring hypotheses converge to
+    the
+    same heading; a different heading means the noise the tuner saw came from another
+    trajectory)."""
     d = abs((a.rpy[2] - b.rpy[2] + np.pi) % (2 * np.pi) - np.pi)
     return d > 3.0 * max(a.sigma_att_rad[2], b.sigma_att_rad[2])
 
 
 def _tuned(run, cfg, stationary, quality, init, bank, noise, filter_pass):
-    """Step 4 of the module notes: the tuned configuration and result, the start and bank under it,
-    and the estimators' run (fix sigmas scaled)."""
+    """Step 4 of the module notes: the tuned configuration and result, and the start and bank
+    under it."""
     cfg_t, result = tune(run, cfg, stationary, quality, init, noise, filter_pass=filter_pass)
-    est_run = scaled_gnss(run, float(cfg_t["gnss"]["sigma_scale"]))
-    init2, bank2 = start_of(est_run, cfg_t, stationary, quality, filter_pass)
+    init2, bank2 = start_of(run, cfg_t, stationary, quality, filter_pass)
     if bank is not None and _other_heading(init, bank2.init):
         cfg_t, result = tune(run, cfg, stationary, quality, init2, noise, filter_pass=filter_pass)
-        est_run = scaled_gnss(run, float(cfg_t["gnss"]["sigma_scale"]))
-        init2, bank2 = start_of(est_run, cfg_t, stationary, quality, filter_pass)
-    return est_run, cfg_t, result, init2, bank2
+        init2, bank2 = start_of(run, cfg_t, stationary, quality, filter_pass)
+    return cfg_t, result, init2, bank2
 
 
 def checked(
@@ -121,7 +132,8 @@ def prepare(
     filter_pass: FilterPass,
     gauss_markov: bool = False,
 ) -> Prepared:
-    """Checks, quality, stationary spans, start state and (``tune_mode="auto"``) noise, in that order.
+    """Checks, quality, stationary spans, start state and (``tune_mode="auto"``) noise, in that
+    order.
 
     Parameters
     ----------
@@ -131,7 +143,8 @@ def prepare(
     tune_mode : {"auto", "none"}, optional
         Default: ``[tune] mode`` of the configuration.
     filter_pass : FilterPass
-        The EKF pass the likelihood-based decisions use (:func:`gnssacc.estimators.ekf.run_ekf`).
+        The EKF pass the likelihood-based decisions use
+        (:func:`gnssacc.prepare.passes.filter_pass`).
     gauss_markov : bool
         Also set up the ``-gm`` methods' Gauss-Markov model (:attr:`Prepared.gauss_markov`).
     """
@@ -148,18 +161,15 @@ def prepare(
     quality, stationary, init, bank = pieces.quality, pieces.stationary, pieces.init, pieces.bank
     release_free_memory()  # before the estimators build on the heap
     secs["start_s"] = time.perf_counter() - t
-    est_run = scaled_gnss(run, float(cfg["gnss"]["sigma_scale"]))
     result = None
     noise = noise_from_stationary(run.imu, stationary)
     if tune_mode == "auto":
         t = time.perf_counter()
-        est_run, cfg, result, init, bank = _tuned(
+        cfg, result, init, bank = _tuned(
             run, cfg, stationary, quality, init, bank, noise, filter_pass
         )
         secs["tuning_s"] = time.perf_counter() - t
-    prep = Prepared(
-        est_run, cfg, quality, stationary, init, noise, result, bank, tuple(checks), secs
-    )
+    prep = Prepared(run, cfg, quality, stationary, init, noise, result, bank, tuple(checks), secs)
     if gauss_markov:
         from .gauss_markov import gm_setup
 

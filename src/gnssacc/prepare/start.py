@@ -23,7 +23,6 @@ from ..core.recording import InitialState, RecordedRun
 from ..core.rotations import wrap_angle
 from .filter_pass import FilterPass
 from .stationary import StationaryReport, detect_stationary, params_from_config
-from .tuning import scaled_gnss
 from .yawbank import BankResult, select_yaw
 
 #: 1-sigma of a yaw from an IMU's orientation field the motion did not confirm [deg]: a magnetometer
@@ -68,7 +67,8 @@ def start_of(
 
 
 def _with_orientation(given: InitialState, bank: BankResult) -> InitialState:
-    """The bank's start, or the orientation's when the motion never decided the yaw (module notes)."""
+    """The bank's start, or the orientation's when the motion never decided the yaw (module
+    notes)."""
     stated = float(np.degrees(given.rpy[2]))
     if bank.t_decided is not None:
         off = float(np.degrees(wrap_angle(bank.init.rpy[2] - given.rpy[2])))
@@ -89,19 +89,18 @@ def _with_orientation(given: InitialState, bank: BankResult) -> InitialState:
         given,
         sigma_att_rad=att,
         yaw_evidence="undetermined",
-        how=f"{given.how}; yaw {stated:.0f} deg from the IMU's orientation field, not confirmed by the "
+        how=f"{given.how}; yaw {stated:.0f} deg from the IMU's orientation field, not confirmed "
+        "by the "
         f"motion (magnetometer-grade: +-{np.degrees(att[2]):.0f} deg)",
     )
 
 
 def start_pieces(run: RecordedRun, cfg: RunConfig, filter_pass: FilterPass) -> StartPieces:
-    """Quality, stationary spans and the start of ``run`` under ``cfg`` (fix sigmas times
-    ``gnss.sigma_scale`` for the start, as the estimators see them)."""
+    """Quality, stationary spans and the start of ``run`` under ``cfg`` (its fixes' noise as the
+    estimators model it: :mod:`gnssacc.prepare.initialise`)."""
     quality = check_imu(run.imu, cfg)
     stationary = detect_stationary(run.imu, run.gnss, run.origin, params_from_config(cfg))
-    init, bank = start_of(
-        scaled_gnss(run, float(cfg["gnss"]["sigma_scale"])), cfg, stationary, quality, filter_pass
-    )
+    init, bank = start_of(run, cfg, stationary, quality, filter_pass)
     return StartPieces(quality, stationary, init, bank)
 
 
@@ -145,7 +144,8 @@ def start_for(
     init = init if init is not None else run.init
     if init is None or quality is None:
         raise ValueError(
-            "an estimator given its settings needs init= and quality= (gnssacc.pipeline.prepare gives "
+            "an estimator given its settings needs init= and quality= (gnssacc.pipeline.prepare "
+            "gives "
             "both)"
         )
     return init, quality

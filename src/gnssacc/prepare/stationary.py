@@ -72,6 +72,7 @@ from ..core.stationary_params import (  # noqa: F401 (this stage's API)
     StationaryParams,
     params_from_config,
 )
+from ..core.units import DEG
 from .allan import (
     allan_deviation_pooled,
     fit_noise_terms,
@@ -79,8 +80,8 @@ from .allan import (
     remove_spectral_lines,
 )
 
-DEG = np.pi / 180.0
 CHANNELS = ("ax", "ay", "az", "gx", "gy", "gz")
+ACCEL_CHANNELS, GYRO_CHANNELS = slice(0, 3), slice(3, 6)
 #: Gravity for error budgets only [m/s^2] (2 % accuracy is plenty there).
 G_APPROX = 9.8
 
@@ -790,12 +791,12 @@ class StationaryNoise:
     @property
     def accel_density(self) -> np.ndarray:
         """Accelerometer white-noise density per axis [m/s^2/sqrt(Hz)], shape (3,)."""
-        return self.white_density[:3]
+        return self.white_density[ACCEL_CHANNELS]
 
     @property
     def gyro_density(self) -> np.ndarray:
         """Gyro white-noise density per axis [rad/s/sqrt(Hz)], shape (3,)."""
-        return self.white_density[3:]
+        return self.white_density[GYRO_CHANNELS]
 
     @property
     def seconds(self) -> float:

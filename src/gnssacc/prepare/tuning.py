@@ -5,7 +5,8 @@ ground-vehicle aids' noise when they are in use: ``nhc.sigma_lateral_mps``,
 ``nhc.sigma_vertical_mps``, ``odometry.speed_sigma_mps``, :func:`aids`) is identified
 without truth, in five steps:
 
-1. **Stationary stretches** (:mod:`gnssacc.prepare.stationary`): the white-noise densities of the gyros
+1. **Stationary stretches** (:mod:`gnssacc.prepare.stationary`): the white-noise densities of the
+gyros
    and accelerometers per axis, read from the Allan deviation in its white-noise region (robust
    to engine vibration), become the starting values of ARW and VRW.
 2. **Maximum likelihood of the EKF's innovations.** With ``theta`` the log10 scale factors of
@@ -25,7 +26,8 @@ without truth, in five steps:
    also a floor: the search stays above 1/1.25 of it, :data:`REST_FLOOR_DECADES`): it keeps the
    parameters the data barely inform from wandering (the one-step position innovations of 1 Hz
    metre-level fixes say little about the white noise, and will trade it for unmodelled errors
-   such as scale factors) and costs a well-informed parameter nothing. ``J`` is minimised by Nelder-Mead (scipy) within
+   such as scale factors) and costs a well-informed parameter nothing. ``J`` is minimised by
+   Nelder-Mead (scipy) within
    ``[tune] max_evaluations`` EKF passes (after a probe of each parameter at +-1 decade,
    :func:`ml_search`), each bounded to +-2 decades; the passes propagate the covariance every
    ``[tune] cov_every`` samples for speed.
@@ -50,7 +52,8 @@ without truth, in five steps:
    drifted to 10.3 m against the EKF's 2.2 m). So a turn-on sigma that ended above its start is
    drawn back toward it by bisection (at most three passes) to the smallest value whose
    log-likelihood stays within :data:`SHRINK_TOLERANCE` of the search's best, shared by both
-   sigmas (:func:`draw_back`). The noise densities and the GNSS scale are left at the optimum: a value too
+   sigmas (:func:`draw_back`). The noise densities and the GNSS scale are left at the optimum: a
+   value too
    large widens every innovation, so the likelihood bounds them on both sides, and drawing them
    toward a default would trade accuracy for a prior that is no better informed.
 
@@ -89,27 +92,34 @@ import numpy as np
 
 from ..core.config import RunConfig, toml_value
 from ..core.errors import InputError
+from ..estimators.aids import REGISTRY
+from ..estimators.settings import GnssModel
 from .filter_pass import FilterPass
 
-#: The identified parameters: (section, key), in the order of the search vector.
-PARAMETERS = (
+#: The IMU noise parameters: (section, key).
+IMU_PARAMETERS = (
     ("imu", "gyro_arw_deg_rth"),
     ("imu", "accel_vrw_mps_rth"),
     ("imu", "gyro_bias_instability_deg_h"),
     ("imu", "accel_bias_instability_mg"),
     ("imu", "gyro_bias_sigma0_deg_h"),
     ("imu", "accel_bias_sigma0_mg"),
-    ("gnss", "sigma_scale"),
 )
-#: The ground-vehicle aids' noise, identified (after :data:`PARAMETERS`) when the aid is in use:
-#: the non-holonomic constraint's sigmas when ``[nhc] enabled``, the odometry's speed sigma when
-#: the run has wheel odometry and ``[odometry] enabled``; their innovations join the likelihood.
-NHC_SIGMAS = (("nhc", "sigma_lateral_mps"), ("nhc", "sigma_vertical_mps"))
-NHC_PARAMETERS = NHC_SIGMAS + (("nhc", "pitch_offset_deg"), ("nhc", "yaw_offset_deg"))
-ODOMETRY_PARAMETERS = (("odometry", "speed_sigma_mps"),)
+#: The parameters identified together (steps 2-4), in the order of the search vector: the IMU
+#: noise, then the noise of the aids identified with it (the GNSS fixes' ``gnss.sigma_scale``).
+PARAMETERS = IMU_PARAMETERS + tuple(
+    key for spec in REGISTRY if spec.stage == "imu" for key in spec.noise_keys
+)
+#: The ground vehicle's aids (step 5), identified after :data:`PARAMETERS` when in use
+#: (:func:`aids`; their innovations join the likelihood): the non-holonomic constraint's sigmas
+#: and axes, the wheel odometry's speed sigma.
+VEHICLE_AIDS = tuple(spec for spec in REGISTRY if spec.stage == "vehicle")
 #: Parameters searched additively, ``start + theta * step`` (signed angles near zero), with their
 #: step per unit of ``theta`` (the others: ``start * 10**theta``, ``theta`` in decades).
-ADDITIVE = {("nhc", "pitch_offset_deg"): 1.5, ("nhc", "yaw_offset_deg"): 1.5}
+ADDITIVE = {key: step for spec in VEHICLE_AIDS for key, step in spec.additive_keys.items()}
+#: Sigmas floored by another key's value: ``{key: floor key}`` (the constraint's sigmas by the
+#: zero-velocity sigma).
+FLOORED = {key: spec.floor_key for spec in VEHICLE_AIDS for key in spec.floored_keys}
 #: The Gauss-Markov GNSS error model, identified in a second stage (see the module docstring).
 GM_PARAMETERS = (("gnss", "sigma_scale"), ("gnss", "gm_sigma_m"), ("gnss", "gm_tau_s"))
 #: Lag-1 autocorrelation of the whitened position innovations above which the fix errors are
@@ -122,7 +132,8 @@ GM_MIN_GAIN = 9.2
 #: coordinate probe of 7 parameters takes 15): a search that cannot fit correlated errors is
 #: abandoned then for the Gauss-Markov one.
 CHECK_AFTER = 20
-#: Budget of EKF passes of the aids' search (step 5; its coordinate probe of four parameters takes 9).
+# : Budget of EKF passes of the aids' search (step 5; its coordinate probe of four parameters takes
+# 9).
 AIDS_EVALUATIONS = 25
 #: ... and of the search of the vehicle's axes again once the sigmas were inflated.
 OFFSET_EVALUATIONS = 12
@@ -142,7 +153,8 @@ TURN_ON_SIGMAS = (("imu", "gyro_bias_sigma0_deg_h"), ("imu", "accel_bias_sigma0_
 #: Log-likelihood the tuned point may give up, in all, when the turn-on sigmas are drawn back
 #: toward their starting values (step 4): half the 95 % quantile of chi-square with 1 dof.
 SHRINK_TOLERANCE = 1.92
-#: A parameter closer than this to its starting value [decades] is not drawn back (not worth passes).
+# : A parameter closer than this to its starting value [decades] is not drawn back (not worth
+# passes).
 SHRINK_MIN_DECADES = 0.1
 #: Each parameter stays within this many decades of its starting value.
 _BOUND_DECADES = 2.0
@@ -221,7 +233,7 @@ class TuneResult:
             f"{k} = {toml_value(_plain(cfg['gnss'][k]))}"
             for k in ("sigma_scale", "gm_sigma_m", "gm_tau_s")
         ]
-        for sec, key in NHC_PARAMETERS + ODOMETRY_PARAMETERS:  # the aids' noise, where identified
+        for sec, key in (k for spec in VEHICLE_AIDS for k in spec.noise_keys):  # where identified
             if key in self.values.get(sec, {}):
                 lines += ["", f"[{sec}]"] if f"[{sec}]" not in lines else []
                 lines.append(f"{key} = {toml_value(_plain(cfg[sec][key]))}")
@@ -271,7 +283,8 @@ def _lower_bounds(params: list, info: dict) -> np.ndarray:
 
 
 def _start_values(cfg: RunConfig, free: list, noise) -> tuple[dict, dict]:
-    """Starting value per free parameter (numpy arrays), from the configuration or the stationary noise."""
+    """Starting value per free parameter (numpy arrays), from the configuration or the stationary
+    noise."""
     start = {p: np.atleast_1d(np.asarray(cfg[p[0]][p[1]], float)).copy() for p in free}
     info = {}
     if noise is not None:
@@ -328,23 +341,22 @@ class _Objective:
 
     def config(self, theta) -> RunConfig:
         upd: dict = {}
-        for p, th in zip(self.free, theta):
+        for p, th in zip(self.free, theta, strict=True):
             v = self.start[p] + th * ADDITIVE[p] if p in ADDITIVE else self.start[p] * 10.0**th
             if p == ("gnss", "sigma_scale"):
                 v = np.maximum(v, MIN_WHITE_SIGMA_M / float(np.median(self.run.gnss.sigma_ned)))
-            elif p in NHC_SIGMAS:
-                v = np.maximum(v, float(self.cfg["zupt"]["velocity_sigma_mps"]))
+            elif p in FLOORED:
+                v = np.maximum(v, float(self.cfg[FLOORED[p][0]][FLOORED[p][1]]))
             upd.setdefault(p[0], {})[p[1]] = v.tolist() if v.size > 1 else float(v[0])
         return self.cfg.with_values(upd, "tuned")
 
     def __call__(self, theta) -> float:
         cfg = self.config(theta)
         scale = float(cfg["gnss"]["sigma_scale"])
-        run = scaled_gnss(self.run, scale)
         # The start's position sigma is that of the fixes it came from: it scales with them.
         init = replace(self.init, sigma_pos_m=self.init.sigma_pos_m * scale / self.init_scale)
         sol = self.filter_pass(
-            run,
+            self.run,
             ungated(cfg),
             self.method,
             init=init,
@@ -551,26 +563,27 @@ def _loglik(stats: dict, kinds) -> float:
 
 def aids(run, cfg: RunConfig) -> tuple[tuple, tuple]:
     """The aid parameters :func:`tune` identifies on ``run`` with ``cfg`` (the user's explicit keys
-    included: they are left alone) and the update kinds they add to the likelihood."""
+    included: they are left alone) and the update kinds they add to the likelihood: those of the
+    ground vehicle's aids (:data:`VEHICLE_AIDS`) enabled and in use."""
     params, kinds = (), ()
-    if cfg["nhc"]["enabled"]:
-        params += NHC_PARAMETERS
-        kinds += ("nhc",)
-    odo = getattr(run, "odometry", None)
-    if cfg["odometry"]["enabled"] and odo is not None and len(odo.t):
-        params += ODOMETRY_PARAMETERS
-        kinds += ("odo",)
+    for spec in VEHICLE_AIDS:
+        section, key = spec.enabled_key
+        if cfg[section][key] and spec.in_use(run, cfg):
+            params += spec.noise_keys
+            kinds += spec.kinds
     return params, kinds
 
 
 def without_aids(cfg: RunConfig) -> RunConfig:
-    """``cfg`` with the ground-vehicle aids off, for the IMU and GNSS noise's passes (step 5) and
-    the yaw bank's (:func:`gnssacc.prepare.yawbank.select_yaw`)."""
-    if not cfg["nhc"]["enabled"] and not cfg["odometry"]["enabled"]:
+    """``cfg`` with the ground vehicle's aids off, for the IMU and GNSS noise's passes (step 5)
+    and the yaw bank's (:func:`gnssacc.prepare.yawbank.select_yaw`)."""
+    keys = [spec.enabled_key for spec in VEHICLE_AIDS]
+    if not any(cfg[section][key] for section, key in keys):
         return cfg
-    return cfg.with_values(
-        {"nhc": {"enabled": False}, "odometry": {"enabled": False}}, "tuning passes, aids off"
-    )
+    off: dict = {}
+    for section, key in keys:
+        off.setdefault(section, {})[key] = False
+    return cfg.with_values(off, "tuning passes, aids off")
 
 
 def ungated(cfg: RunConfig) -> RunConfig:
@@ -584,13 +597,6 @@ def ungated(cfg: RunConfig) -> RunConfig:
     if float(cfg["ekf"]["position_gate_nis"]) == 0.0:
         return cfg
     return cfg.with_values({"ekf": {"position_gate_nis": 0.0}}, "tuning passes, ungated")
-
-
-def scaled_gnss(run, scale: float):
-    """The run with every fix's sigma multiplied by ``scale``."""
-    if scale == 1.0:
-        return run
-    return run.with_gnss(replace(run.gnss, sigma_ned=run.gnss.sigma_ned * scale))
 
 
 def tune(
@@ -802,18 +808,18 @@ def _inflate(raw: dict, obj: "_Objective", theta: np.ndarray) -> bool:
     filter that under-weights a measurement leaves its innovations correlated too (an exact
     simulated constraint gave a lag-1 autocorrelation of 0.7 at the floor)."""
     stats = obj.stats[tuple(np.round(theta, 12))]
-    floor = float(obj.cfg["zupt"]["velocity_sigma_mps"])
     inflated = False
-    for kind, sigmas in (("nhc", NHC_SIGMAS), ("odo", ODOMETRY_PARAMETERS)):
+    for spec in VEHICLE_AIDS:
+        (kind,) = spec.kinds
         factor = correlation_inflation(
             stats.get(f"acf1_{kind}"), int(stats.get(f"n_{kind}_updates", 0) or 0)
         )
-        for p in sigmas:
+        for p in spec.inflated_keys:
             if p not in obj.free or factor <= 1.0:
                 continue
             value = float(raw[p[0]][p[1]])
             if theta[obj.free.index(p)] <= -_BOUND_DECADES + 1e-9 or (
-                p in NHC_SIGMAS and value <= floor * (1 + 1e-9)
+                p in FLOORED and value <= float(obj.cfg[FLOORED[p][0]][FLOORED[p][1]]) * (1 + 1e-9)
             ):
                 continue
             raw[p[0]][p[1]] = value * factor
@@ -883,17 +889,20 @@ def correlation_inflation(acf1: float | None, n: int) -> float:
 def tune_gauss_markov(
     run, cfg: RunConfig, stationary=None, quality=None, init=None, *, filter_pass: FilterPass
 ) -> tuple[RunConfig, dict]:
-    """Fit the Gauss-Markov fix-error model alone, the IMU noise of ``cfg`` held (the ``-gm`` methods
+    """Fit the Gauss-Markov fix-error model alone, the IMU noise of ``cfg`` held (the ``-gm``
+    methods
     on a run where :func:`tune` kept white fixes).
 
     The free keys of :data:`GM_PARAMETERS` (not in ``cfg.explicit``) are searched by maximum
     likelihood of one EKF pass's position and zero-rate innovations, from the start of step 3 of
-    the module docstring: the stated sigmas as the correlated part, a fifth of them as the white part.
+    the module docstring: the stated sigmas as the correlated part, a fifth of them as the white
+    part.
 
     Parameters
     ----------
     run : RecordedRun
-        As the estimators see it (fix sigmas already times ``cfg``'s ``gnss.sigma_scale``).
+        As the estimators read it (the fixes' sigmas as stated; ``cfg``'s ``gnss.sigma_scale``
+        is their noise model).
     cfg : RunConfig
     stationary, quality, init, filter_pass
         As for :func:`tune`.
@@ -901,11 +910,12 @@ def tune_gauss_markov(
     Returns
     -------
     cfg : RunConfig
-        With ``gnss.gm_sigma_m``, ``gnss.gm_tau_s`` and ``gnss.sigma_scale`` (relative to the raw
-        fixes, as :func:`tune` gives it) as fitted.
+        With ``gnss.gm_sigma_m``, ``gnss.gm_tau_s`` and ``gnss.sigma_scale`` (relative to the
+        fixes as read, as :func:`tune` gives it) as fitted.
     info : dict
         ``loglik_gain`` over the white model, ``n_evaluations``, ``seconds``, ``run_scale`` (the
-        factor to apply to ``run``'s fix sigmas: the white part of the fitted model).
+        white part of the fitted model relative to ``cfg``'s: the new ``gnss.sigma_scale`` over
+        the old).
 
     Raises
     ------
@@ -918,20 +928,27 @@ def tune_gauss_markov(
             "gnss.gm_sigma_m", "is set to 0 (white fixes); a -gm method needs it > 0 or unset"
         )
     free_scale = ("gnss", "sigma_scale") not in cfg.explicit
-    base = (
-        cfg.with_values({"gnss": {"sigma_scale": 1.0}}, "sigma scale of the run")
+    fixes = GnssModel.from_config(cfg).fixes(run.gnss)  # the fixes' noise under cfg
+    # A free scale is searched relative to that noise: on the fixes with it, from 1.
+    searched, base = (
+        (
+            run.with_gnss(fixes),
+            cfg.with_values({"gnss": {"sigma_scale": 1.0}}, "sigma scale of the run"),
+        )
         if free_scale
-        else cfg
+        else (run, cfg)
     )
     params = [p for p in GM_PARAMETERS if p not in cfg.explicit]
     start = {
         ("gnss", "sigma_scale"): np.atleast_1d(0.2),
-        ("gnss", "gm_sigma_m"): np.median(run.gnss.sigma_ned, axis=0),
+        ("gnss", "gm_sigma_m"): np.median(fixes.sigma_ned, axis=0),
         ("gnss", "gm_tau_s"): np.atleast_1d(cfg.gnss_gm_tau.mean()),
     }
     start = {p: start[p] for p in params}
     kinds = ("pos", "zaru")
-    obj = _Objective(run, base, params, start, stationary, quality, init, "ekf", kinds, filter_pass)
+    obj = _Objective(
+        searched, base, params, start, stationary, quality, init, "ekf", kinds, filter_pass
+    )
     theta, _, n_eval = ml_search(
         obj,
         len(params),
@@ -961,7 +978,8 @@ def tune_gauss_markov(
 def run_white_stats(
     run, cfg: RunConfig, stationary=None, quality=None, init=None, *, filter_pass: FilterPass
 ) -> dict:
-    """The innovation statistics of one EKF pass with ``cfg`` as it is on ``run`` (already scaled)."""
+    """The innovation statistics of one EKF pass with ``cfg`` as it is on ``run`` (already
+    scaled)."""
     return filter_pass(
         run,
         ungated(cfg),

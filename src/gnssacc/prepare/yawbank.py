@@ -1,8 +1,9 @@
 r"""Yaw at the start of a recording from a bank of hypotheses scored by innovation likelihood.
 
-The start state (:func:`gnssacc.prepare.initialise.start_state`) fixes position, velocity and roll/pitch;
-the yaw is unknown. ``[init] yaw_hypotheses`` = n filters start with yaws ``2 pi k / n`` and a
-1-sigma of half the spacing, and run the EKF (position and stationary updates) from the start.
+The start state (:func:`gnssacc.prepare.initialise.start_state`) fixes position, velocity and
+roll/pitch; the yaw is unknown. ``[init] yaw_hypotheses`` = n filters start with yaws
+``2 pi k / n`` and a 1-sigma of half the spacing, and run the EKF (position and stationary
+updates) from the start.
 Each hypothesis k accumulates the Gaussian log-likelihood of its innovations, ``L_k(t)``; with
 equal prior weights its posterior probability is ``p_k = exp(L_k) / sum_j exp(L_j)``.
 
@@ -145,12 +146,10 @@ def select_yaw(
     start : StartState, optional
         Computed with :func:`gnssacc.prepare.initialise.start_state` when omitted.
     filter_pass : FilterPass
-        The EKF pass that scores the hypotheses (handed in: this stage precedes the estimators).
+        The EKF pass that scores the hypotheses (:func:`gnssacc.prepare.passes.filter_pass`).
     """
-    # The hypotheses start tens of degrees off in yaw, far outside the linearisation of the
-    # ground-vehicle aids' models (the constraint would force the velocity along a wrong heading
-    # at once): the bank scores the IMU and GNSS model alone. On a simulated UGV with correlated
-    # fix errors the bank with the constraint on chose a yaw 15 deg off (3 sigma).
+    # The hypotheses start far outside the vehicle aids' linearisation: the bank scores the IMU
+    # and GNSS model alone (docs/estimators.md, "Its noise and the vehicle's axes").
     cfg = without_aids(cfg)
     c = cfg["init"]
     start = start or start_state(run, cfg, stationary)
@@ -185,10 +184,10 @@ def select_yaw(
     )
     t_dec = float(grid[min(first_ok, len(grid) - 1)])
     how = (
-        f"{start.how}; yaw from a bank of {n} hypotheses scored by innovation likelihood, sector found "
-        f"{max(t_dec - t_move, 0.0):.0f} s after the vehicle started to move (posterior {mass[-1]:.3f}), then "
-        f"refined at {np.degrees(2 * np.pi / n) / 4:.1f} deg: {np.degrees(init.rpy[2]) % 360:.1f} deg "
-        f"+- {np.degrees(init.sigma_att_rad[2]):.1f}"
+        f"{start.how}; yaw from a bank of {n} hypotheses scored by innovation likelihood, "
+        f"sector found {max(t_dec - t_move, 0.0):.0f} s after the vehicle started to move "
+        f"(posterior {mass[-1]:.3f}), then refined at {np.degrees(2 * np.pi / n) / 4:.1f} deg: "
+        f"{np.degrees(init.rpy[2]) % 360:.1f} deg +- {np.degrees(init.sigma_att_rad[2]):.1f}"
     )
     return BankResult(
         replace(init, how=how, yaw_evidence="bank"),
@@ -208,9 +207,10 @@ def _undetermined(start, hyps, yaws, best, mass, post, t_h) -> BankResult:
     att = chosen.sigma_att_rad.copy()
     att[2] = sigma
     how = (
-        f"{start.how}; yaw UNDETERMINED: a bank of {n} hypotheses could not tell them apart by the end of "
-        f"the run (best {np.degrees(yaws[best]):.0f} deg, posterior {post[best]:.2f}; yaw sigma set to "
-        f"{np.degrees(sigma):.0f} deg) - the vehicle never accelerated or turned enough"
+        f"{start.how}; yaw UNDETERMINED: a bank of {n} hypotheses could not tell them apart by the "
+        f"end of the run (best {np.degrees(yaws[best]):.0f} deg, posterior {post[best]:.2f}; yaw "
+        f"sigma set to {np.degrees(sigma):.0f} deg) - the vehicle never accelerated or turned "
+        "enough"
     )
     conf = float(mass[-1]) if len(mass) else 0.0
     return BankResult(

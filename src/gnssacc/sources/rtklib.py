@@ -48,6 +48,7 @@ import numpy as np
 
 from ..core.earth import R_en_batch, ecef_to_llh, llh_to_ecef
 from ..core.errors import InputError, warn_data
+from ..core.units import DEG
 from .common import text_file_lines
 from .gnss_time import (
     GPS_EPOCH_UNIX,
@@ -61,7 +62,6 @@ from .gnss_time import (
     week_tow_to_gps_seconds,
 )
 
-DEG = np.pi / 180.0
 KIND = "an RTKLIB .pos solution file"
 #: Position columns of each output form, and the covariance columns in the file's order.
 FORMS = {

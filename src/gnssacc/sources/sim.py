@@ -52,6 +52,7 @@ from ..core.earth import LocalTangentFrame
 from ..core.errors import InputError
 from ..core.memory import release_free_memory
 from ..core.recording import GnssFixes, ImuData, InitialState, RecordedRun, SimTruth
+from ..core.units import DEG
 from .gnss_noise import PROFILE_QUALITY, PROFILES, fixes_from_truth
 from .sim_imu_errors import (  # noqa: F401 (re-exported)
     GRADE_KEYS,
@@ -102,7 +103,6 @@ from .sim_vibration import (  # noqa: F401
     road_vibration,
 )
 
-DEG = np.pi / 180.0
 WHERE = "simulator"
 
 

@@ -42,11 +42,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.config import DEFAULTS, G0
+from ..core.config import DEFAULTS
+from ..core.units import DEG, MG
 from ..core.errors import InputError
 
-DEG = np.pi / 180.0
-MG = 1e-3 * G0
 WHERE = "simulator"
 
 #: Keys of an IMU grade known to the filter; identical to ``gnssacc.core.config.DEFAULTS["imu"]``.

@@ -18,9 +18,9 @@ from ..core.earth import OMEGA_IE, R_en_batch, normal_gravity, radii
 from ..core.errors import InputError
 from ..core.recording import Truth
 from ..core.rotations import wrap_angle
+from ..core.units import DEG
 from .sim_scenarios import Kinematics, Scenario, make_scenario
 
-DEG = np.pi / 180.0
 WHERE = "simulator"
 
 #: IMU samples per block of the sweep (twice as many grid nodes; memory ~1 kB per sample in a block).

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.errors import InputError
+from ..core.units import DEG
 
-DEG = np.pi / 180.0
 WHERE = "simulator"
 
 # Smooth pulses: the building block of every kinematic channel

@@ -25,7 +25,8 @@ import copy
 
 import numpy as np
 
-from .sim_imu_errors import DEG, gauss_markov, per_axis
+from ..core.units import DEG
+from .sim_imu_errors import gauss_markov, per_axis
 
 
 def harmonic_interval_mean(phase_edges: np.ndarray, order: int, offset=0.0) -> np.ndarray:

@@ -54,7 +54,8 @@ The window-consistent prediction applies the same operator to what the INS says:
 ``t_k`` integrated from the bias-corrected gyros. IMU sample ``i`` holds over
 ``(t_{i-1}, t_i]``, so it enters with weight ``w_i = int K`` over that interval (clipped to the
 window), exact because ``K`` is piecewise linear (:func:`peano_weights`), and with the rotation at
-the interval's midpoint (:func:`gnssacc.estimators.mechanization.kernel_force_integrals`). Neglected, as in
+the interval's midpoint (:func:`gnssacc.estimators.mechanization.kernel_force_integrals`).
+Neglected, as in
 the paper's model: the earth rate in the relative rotation (7.3e-5 rad/s, < 2e-4 rad over a
 2 s window), the transport rate and Coriolis acceleration (``2 omega_ie x v`` < 5e-3 m/s^2 at
 30 m/s), the change of ``g^n`` over the window, and the IMU noise over the window. The attitude
@@ -73,7 +74,8 @@ Correlations (all variants)
 ``a~`` is a deterministic linear function of fixes the filter also uses as position updates.
 Both ``ekf-acc`` and ``ekf-accw`` treat it as an independent measurement, so the same fix noise
 is counted twice. An exact treatment (stochastic cloning with the fix noises carried as states,
-:mod:`gnssacc.analysis.aiding_theory`) reproduces the position-only filter in the linear-Gaussian case:
+:mod:`gnssacc.analysis.aiding_theory`) reproduces the position-only filter in the linear-Gaussian
+case:
 the acceleration then carries no information of its own.
 """
 
@@ -84,16 +86,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..checks.quality import touches_segments
-from ..core.earth import gravity_n
-from ..core.gnss_fit import (  # noqa: F401
+from ...checks.quality import touches_segments
+from ...core.earth import gravity_n
+from ...core.gnss_fit import (  # noqa: F401
     acceleration_row,
     design_matrix,
     ls_acceleration,
     window_accelerations,
 )
-from ..core.rotations import euler_to_dcm, skew
-from .mechanization import kernel_force_integrals
+from ...core.rotations import euler_to_dcm, skew
+from ..layout import ATT, BA, N_NAV
+from ..mechanization import kernel_force_integrals
 
 
 @dataclass
@@ -264,9 +267,9 @@ def H_a_blocks(R_nb: np.ndarray, f_b: np.ndarray) -> tuple[np.ndarray, np.ndarra
 def H_a(R_nb: np.ndarray, f_b: np.ndarray) -> np.ndarray:
     """Full 3x15 acceleration measurement matrix ``[0, 0, d_phi, d_ba, 0]``."""
     d_phi, d_ba = H_a_blocks(R_nb, f_b)
-    H = np.zeros((3, 15))
-    H[:, 6:9] = d_phi
-    H[:, 9:12] = d_ba
+    H = np.zeros((3, N_NAV))
+    H[:, ATT] = d_phi
+    H[:, BA] = d_ba
     return H
 
 
@@ -281,7 +284,8 @@ def H_w_blocks(
         Estimated body-to-NED rotation at the update epoch ``t_k``.
     F_b, M, G : ndarray (3,), (3, 3), (3, 3)
         Kernel integrals ``int K u``, ``int K R_{b_k b_s}``, ``int K [u x] Gamma`` (body frame at
-        ``t_k``; [m/s^2], [-], [m/s]) from :func:`gnssacc.estimators.mechanization.kernel_force_integrals`.
+        ``t_k``; [m/s^2], [-], [m/s]) from
+        :func:`gnssacc.estimators.mechanization.kernel_force_integrals`.
 
     Returns
     -------
@@ -339,6 +343,7 @@ def model_errors(
             run.imu.f_b[k0:k1], run.imu.omega_ib_b[k0:k1], h, w, z3, z3
         )
         f = measured_specific_force(run.imu, g.t[j], 0.0, no, no)
+        assert f is not None  # no suspect segments given
         rows.append(
             (
                 g.t[j],

@@ -1,0 +1,271 @@
+r"""GNSS-derived acceleration (the paper's method): its two forms in the EKF and the smoother.
+
+The measurement is the least-squares acceleration of the last ``[accel] window`` fixes (the
+window restarts after a gap longer than ``[accel] max_gap_s``), valid at the newest fix, with
+the propagated covariance of the fixes' noise (or ``[accel] sigma_override``); the model, its
+Jacobians and the window are :mod:`gnssacc.estimators.aids.accel_model`. Two forms of the INS
+prediction it is compared with (:data:`FORMS`, one vocabulary for both estimators and the method
+ids):
+
+``paper`` (``ekf-acc``, ``smoother-acc``)
+    The paper's: ``R_nb f + g`` with the specific force measured at the newest fix (averaged over
+    ``[accel] specific_force_avg_s``); ``H_a = [0, 0, -[(R f) x], R, 0]``. Smoother: the
+    factor of :func:`gnssacc.factors.gnss_accel_factor` on (X_k, B_k).
+``window`` (``ekf-accw``, ``smoother-accw``)
+    Window-consistent: the kernel-weighted INS acceleration over the fixes' window,
+    ``H_w = [0, 0, -[(R F) x], R M, R G]``. Smoother: the factor of
+    :func:`gnssacc.factors.window_accel_factor` on the poses of the window's fixes
+    (``sum_j B_j p_ant(X_j) - a~``), which widens the smoother's band of nodes.
+
+The window is fed with every fix, those before the estimator starts too. An update whose specific
+force comes from a suspect IMU span (fabricated or damaged data) is skipped
+(``n_acc_skipped_suspect_imu``). The EKF evaluates the paper's form without applying it when an
+observer watches a pass without acceleration (the observability analysis' counterfactual).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...core.earth import gravity_n, normal_gravity
+from ..layout import ATT, BA, BG, SYM_B, SYM_X
+from ..mechanization import kernel_force_integrals
+from .accel_model import (
+    AccelWindow,
+    H_a_blocks,
+    H_w_blocks,
+    acceleration_row,
+    measured_specific_force,
+    predicted_acceleration,
+    window_accelerations,
+    window_samples,
+)
+from .base import AidSpec, EkfAid, Measurement, SmootherAid, zero_jacobian
+
+#: The forms of the INS prediction, by the suffix of their method ids (``ekf-acc``, ...).
+FORMS = {"acc": "paper", "accw": "window"}
+#: Order at equal times: right after the GNSS position update of the same fix.
+ORDER = 3
+
+
+def acceleration(
+    s, a_n: np.ndarray, cov: np.ndarray, f_meas_b: np.ndarray, g_n: np.ndarray
+) -> Measurement:
+    """GNSS-derived acceleration ``a_n`` [m/s^2] (covariance ``cov``) against the INS prediction
+    from the measured specific force ``f_meas_b`` [m/s^2, body] and gravity ``g_n`` (the
+    ``paper`` form)."""
+    f_b = f_meas_b - s.b_a
+    a_pred = predicted_acceleration(s.R_nb, f_b, g_n)
+    d_phi, d_ba = H_a_blocks(s.R_nb, f_b)
+    H = zero_jacobian(s, 3)
+    H[:, ATT] = d_phi
+    H[:, BA] = d_ba
+    return Measurement("acc", a_pred - a_n, H, cov)
+
+
+def window_acceleration(
+    s,
+    a_n: np.ndarray,
+    cov: np.ndarray,
+    F_b: np.ndarray,
+    M: np.ndarray,
+    G: np.ndarray,
+    g_n: np.ndarray,
+) -> Measurement:
+    """GNSS-derived acceleration ``a_n`` [m/s^2] (covariance ``cov``) against the window-consistent
+    INS prediction ``R_nb F_b + g_n``, ``F_b, M, G`` the kernel integrals of
+    :func:`gnssacc.estimators.mechanization.kernel_force_integrals` at the state's biases (body
+    frame at the update epoch; the ``window`` form)."""
+    d_phi, d_ba, d_bg = H_w_blocks(s.R_nb, F_b, M, G)
+    H = zero_jacobian(s, 3)
+    H[:, ATT] = d_phi
+    H[:, BA] = d_ba
+    H[:, BG] = d_bg
+    return Measurement("acc", predicted_acceleration(s.R_nb, F_b, g_n) - a_n, H, cov)
+
+
+class EkfAccel(EkfAid):
+    """The acceleration update at every fix whose window is full (module notes)."""
+
+    order, epoch = ORDER, "gnss"
+
+    def __init__(self, ctx):
+        run, acc = ctx.run, ctx.settings.accel
+        fixes = ctx.settings.gnss.fixes(run.gnss)
+        self.t, self.sigma = fixes.t, fixes.sigma_ned
+        self.p_fix = run.origin.to_ned(fixes.lat, fixes.lon, fixes.h)
+        self.window = AccelWindow(acc.window, acc.max_gap_s, acc.sigma_override)
+        self.apply = ctx.variant is not None
+        self.form = ctx.variant or "paper"
+        self.imu, self.f_avg_s, self.segments = run.imu, acc.specific_force_avg_s, ctx.segments
+        self.current = None  # the window's acceleration at the last fix seen
+
+    def see(self, j: int) -> None:
+        self.current = self.window.push(self.t[j], self.p_fix[j], self.sigma[j])
+
+    def model(self, s, t: float) -> Measurement | None:
+        """The update for the window's acceleration at ``t`` [s], or ``None`` when the specific
+        force it needs comes from a suspect IMU span or, for the ``window`` form, the IMU does
+        not cover the window."""
+        acc = self.current
+        assert acc is not None  # a full window (models and updates ask only then)
+        g_n = gravity_n(s.pos[0], s.pos[2])
+        if self.form == "window":
+            win = window_samples(self.imu.t, acc.t_window)
+            if win is None or self.segments.touch(win[0], win[1]):
+                return None
+            k0, k1, h, w = win
+            F_b, M, G = kernel_force_integrals(
+                self.imu.f_b[k0:k1], self.imu.omega_ib_b[k0:k1], h, w, s.b_a, s.b_g
+            )
+            return window_acceleration(s, acc.a_n, acc.cov, F_b, M, G, g_n)
+        seg = self.segments
+        f_meas = measured_specific_force(self.imu, t, self.f_avg_s, seg.i0, seg.i1)
+        if f_meas is None:
+            return None
+        return acceleration(s, acc.a_n, acc.cov, f_meas, g_n)
+
+    def models(self, s, j: int) -> list[Measurement]:
+        m = None if self.current is None else self.model(s, float(self.t[j]))
+        return [] if m is None else [m]
+
+    def updates(self, s, j: int, stats: dict):
+        if self.current is None:
+            return
+        m = self.model(s, float(self.t[j]))
+        if m is None:
+            stats["n_acc_skipped_suspect_imu"] += 1 if self.apply else 0
+            return
+        yield m, self.apply
+
+    def final_stats(self, s, stats: dict) -> None:
+        stats["accel_window_resets"] = self.window.resets
+
+
+def _ekf(ctx) -> EkfAccel | None:
+    """The aid when the method applies a form, or an observer watches (the paper's, evaluated)."""
+    return EkfAccel(ctx) if ctx.variant is not None or ctx.observed else None
+
+
+def bandwidth(settings) -> int:
+    """How many nodes apart a window-consistent acceleration factor may reach: its window's m
+    fixes are at most ``[accel] max_gap_s`` apart, with fill nodes at most ``[smoother]
+    max_node_spacing_s`` apart between them (stationary nodes may add more: such a factor makes
+    the marginals come from iSAM2 while it is in the window)."""
+    per_gap = int(np.ceil(settings.accel.max_gap_s / settings.max_node_spacing_s - 1e-9))
+    return (settings.accel.window - 1) * max(per_gap, 1)
+
+
+class SmootherAccel(SmootherAid):
+    """The acceleration factors of a smoother run (module notes)."""
+
+    order = 1
+
+    def __init__(self, ctx):
+        run, settings = ctx.run, ctx.settings
+        self.stats, self.form, self.imu = ctx.stats, ctx.variant, run.imu
+        self.fixes = settings.gnss.fixes(run.gnss)
+        self.p_fix = run.origin.to_ned(self.fixes.lat, self.fixes.lon, self.fixes.h)
+        self.fix_at = {float(t): i for i, t in enumerate(self.fixes.t)}
+        self.lever = settings.gnss.lever_arm_b
+        origin = run.origin
+        self.g_n = np.array([0.0, 0.0, float(normal_gravity(origin.lat0, origin.h0))])
+        acc = settings.accel
+        self.f_avg = acc.specific_force_avg_s
+        self.acc_window = (acc.window, acc.max_gap_s, acc.sigma_override)
+        self.bandwidth = bandwidth(settings) if self.form == "window" else 1
+
+    def attach(self, ctx) -> None:
+        """The accelerations of every fix, all at once: the fixes before the first node and those
+        at node times, in order, as :class:`gnssacc.estimators.aids.accel_model.AccelWindow` would
+        see them; and the node of each fix at a node time."""
+        times = ctx.times
+        t_fix = self.fixes.t
+        nodes = set(times.tolist())
+        pushed = np.flatnonzero(
+            (t_fix < times[0]) | np.array([t in nodes for t in t_fix.tolist()], bool)
+        )
+        full, a_n, var = window_accelerations(
+            t_fix[pushed], self.p_fix[pushed], self.fixes.sigma_ned[pushed], *self.acc_window
+        )
+        self.acc = {int(k): (a_n[j], var[j]) for j, k in enumerate(pushed) if full[j]}
+        m = self.acc_window[0]
+        self.acc_fixes = {
+            int(k): pushed[j - m + 1 : j + 1] for j, k in enumerate(pushed) if full[j]
+        }
+        self.node_of = {self.fix_at[t]: i for i, t in enumerate(times.tolist()) if t in self.fix_at}
+
+    def node(self, graph, ctx, i: int, t: float, pred) -> None:
+        k = self.fix_at.get(float(t))
+        if k is None:
+            return
+        if self.form == "window":
+            self._window(graph, k, lambda n: n == i or ctx.has_node(n))
+        else:
+            self._paper(graph, i, t, k, ctx.segments)
+
+    def _paper(self, graph, i: int, t: float, k: int, segments) -> None:
+        """The paper's factor on (X_i, B_i) once the least-squares window is full."""
+        import gtsam
+
+        from ...factors import gnss_accel_factor
+
+        meas = self.acc.get(k)
+        if meas is None:
+            return
+        f_meas = measured_specific_force(self.imu, t, self.f_avg, segments.i0, segments.i1)
+        if f_meas is None:
+            self.stats["n_acc_skipped_suspect_imu"] += 1
+            return
+        graph.add(
+            gnss_accel_factor(
+                gtsam.symbol(SYM_X, i),
+                gtsam.symbol(SYM_B, i),
+                f_meas,
+                meas[0],
+                self.g_n,
+                np.diag(meas[1]),
+            )
+        )
+        self.stats["n_acc_factors"] += 1
+
+    def _window(self, graph, k: int, in_window) -> None:
+        """The window-consistent factor on the poses of fix ``k``'s window, when its window is
+        full and all of its fixes' nodes are in the smoother (``in_window(node)``)."""
+        import gtsam
+
+        from ...factors import window_accel_factor
+
+        meas = self.acc.get(k)
+        if meas is None:
+            return
+        fixes = self.acc_fixes[k]
+        nodes = [self.node_of.get(int(f)) for f in fixes]
+        if any(n is None or not in_window(n) for n in nodes):  # before the start, or marginalised
+            self.stats["n_acc_skipped_window"] = self.stats.get("n_acc_skipped_window", 0) + 1
+            return
+        B_row = acceleration_row(self.fixes.t[fixes])
+        graph.add(
+            window_accel_factor(
+                [gtsam.symbol(SYM_X, n) for n in nodes if n is not None],
+                B_row,
+                meas[0],
+                self.lever,
+                np.diag(meas[1]),
+            )
+        )
+        self.stats["n_acc_factors"] += 1
+
+
+def _smoother(ctx) -> SmootherAccel | None:
+    return SmootherAccel(ctx) if ctx.variant is not None else None
+
+
+AID = AidSpec(
+    name="gnss_accel",
+    kinds=("acc",),
+    ekf=_ekf,
+    smoother=_smoother,
+    counts={"n_acc_skipped_suspect_imu": 0, "accel_window_resets": 0},
+    smoother_counts={"n_acc_factors": 0, "n_acc_skipped_suspect_imu": 0},
+)
