@@ -2,21 +2,31 @@
 
 For each simulated scenario (``car`` 120 s, ``ugv-slow`` 240 s: parked 36 s, slow, reversing)
 and IMU grade (consumer, industrial, tactical; ``--all-grades`` adds the ``-basic`` grades), a
-clean run is written as a CSV run directory, then copies of it with one corruption each (the
-cases of issue 9: IMU on UTC beside GNSS on GPS time, clock offsets of 0.1 s and 1 s, lat/lon
-swapped, lat/lon in radians with a correct init.json, gyro in deg/s, accelerometer in g, IMU
-stamps in ms with a correct init.json, IMU upside down, IMU turned 90 deg in yaw). Each is run
-twice in-process through ``gnssacc.cli.main`` (``--methods ekf --tune none``):
+clean run stamped in UNIX seconds (2024, as loggers and bags stamp them) is written as a CSV run
+directory, then copies of it with one corruption each (the cases of issue 9: a logger clock on
+UTC beside fixes on GPS time, clock offsets of 0.1 s and 1 s (the logger's clock stamps the
+IMU, the truth and the odometry alike: docs/formats.md), lat/lon swapped, lat/lon in radians
+with a correct init.json, gyro in deg/s, accelerometer in g, IMU stamps in ms with a correct
+init.json, IMU upside down, IMU turned 90 deg in yaw). Each is run in-process through
+``gnssacc.cli.main`` (``--methods ekf --tune none``) with three configurations:
 
-* with the default configuration: the case must end with exit 2 and one ``gnssacc: error:`` line
-  holding the case's key words; the clean run must end with exit 0 (no false alarm);
-* with the repair configuration (``[checks] repair = "auto"``, ``imu_time_offset_s = "auto"``,
-  ``imu_to_body_rpy_deg = "auto"``): the case must end with exit 0 and PRMSE within 10 % of the
-  clean run's (judged against the unmodified truth); time offsets must be recovered within
-  20 ms; on the clean run nothing may be repaired or applied (no offset beyond 20 ms, no mounting).
+* ``default``: a correction the estimator proves is applied and stated (issue 32). The case is
+  ``repaired`` when the run ends with exit 0, the correction in ``metrics.json``'s
+  ``input_corrections``, the EKF's PRMSE within 10 % of the clean run's (both against the
+  simulated truth, on the GNSS clock: a truth on the IMU's clock would carry the applied
+  offset's error) and a clock offset within 20 ms or 3 of its sigmas; ``caught`` when it ends
+  with exit 2 and one ``gnssacc: error:`` line holding the case's key words (what the data
+  cannot tell from another: swapped or sign-lost coordinates); ``unprovable`` when nothing is
+  applied and the run says that an offset of that size could go unseen; else ``MISSED`` or
+  ``WRONG``;
+* ``strict`` (``--strict``): today's refusal: ``caught`` or ``MISSED``;
+* ``auto`` (``imu_time_offset_s`` and ``imu_to_body_rpy_deg = "auto"``): as ``default``, where
+  every measured offset is proposed.
 
-Then the clean KITTI sequence and the shared real recordings (``../shared/data``) through the
-checks alone (no false alarm), and the time the checks add to a 10-minute run (median of 3).
+On the clean run nothing may be applied, refused or warned of in any configuration (else a
+``FALSE`` alarm). Then the clean KITTI sequence and the shared real recordings
+(``../shared/data``) through the checks alone (no false alarm), clock offsets with RTK-grade
+fixes, and the time the checks add to a 10-minute run (median of 3).
 
     python bench/bench_input_checks.py [--seeds 0] [--all-grades] [--quick]
 """
@@ -27,7 +37,6 @@ import argparse
 import contextlib
 import io
 import json
-import re
 import statistics
 import sys
 import tempfile
@@ -48,7 +57,13 @@ from gnssacc.sources.sim import simulate
 SCENARIOS = {"car": 120.0, "ugv-slow": 240.0}
 GRADES = ("consumer", "industrial", "tactical")
 BASIC = ("consumer-basic", "industrial-basic", "tactical-basic")
-AUTO = '[checks]\nrepair = "auto"\n[mounting]\nimu_time_offset_s = "auto"\nimu_to_body_rpy_deg = "auto"\n'
+#: 2024-03-01 12:00 UTC: the first IMU sample of every run [UNIX s].
+T0_UNIX = 1709294400.0
+CONFIGS = {
+    "default": None,
+    "strict": '[checks]\non_proof = "refuse"\n',
+    "auto": '[mounting]\nimu_time_offset_s = "auto"\nimu_to_body_rpy_deg = "auto"\n',
+}
 OFFSET_TOL_S = 0.02
 PRMSE_TOL = 0.10
 
@@ -63,6 +78,14 @@ def _imu(run, t=None, f=None, w=None):
     )
 
 
+def _late(run, offset_s: float):
+    """A logger clock that needs ``offset_s`` added to reach the GNSS clock: its IMU, truth and
+    odometry stamps alike."""
+    out = _imu(run, t=run.imu.t - offset_s)
+    out = replace(out, truth=replace(run.truth, t=run.truth.t - offset_s))
+    return out if run.odometry is None else replace(out, odometry=run.odometry.shifted(-offset_s))
+
+
 def _gnss(run, lat, lon):
     g = run.gnss
     return replace(run, gnss=GnssFixes(g.t, lat, lon, g.h, g.sigma_ned))
@@ -74,56 +97,61 @@ def _rotated(run, R):
 
 @dataclass(frozen=True)
 class Case:
-    """One corruption: what it does to the run, the words its error must hold, and, when the
-    checks can measure it, the offset [s] the repair configuration must apply."""
+    """One corruption: what it does to the run, the check that must answer it, the words a
+    refusal must hold and, for a clock offset, the offset [s] a correction must apply."""
 
     name: str
     corrupt: object
+    check: str
     words: tuple
     offset_s: float | None = None
     needs_init: bool = False
-    default_must_fail: bool = True
-    repairable: bool = True
+    ambiguous: bool = False
 
 
 CASES = (
-    Case(
-        "gps-vs-utc-18s",
-        lambda r: _imu(r, t=r.imu.t - 18.0),
-        ("imu.csv", "imu_time_offset_s"),
-        18.0,
-    ),
-    Case("offset-1s", lambda r: _imu(r, t=r.imu.t + 1.0), ("imu.csv", "imu_time_offset_s"), -1.0),
-    Case("offset-0.1s", lambda r: _imu(r, t=r.imu.t - 0.1), (), 0.1, default_must_fail=False),
-    # Swapped and sign-lost coordinates look alike (a mirror image): never repaired, always an error.
+    Case("gps-vs-utc-18s", lambda r: _late(r, 18.0), "time_offset", ("imu_time_offset_s",), 18.0),
+    Case("offset-1s", lambda r: _late(r, -1.0), "time_offset", ("imu_time_offset_s",), -1.0),
+    Case("offset-0.1s", lambda r: _late(r, 0.1), "time_offset", ("imu_time_offset_s",), 0.1),
+    # Swapped and sign-lost coordinates look alike (a mirror image): refused, naming both.
     Case(
         "latlon-swapped",
         lambda r: _gnss(r, r.gnss.lon, r.gnss.lat),
-        ("gnss.csv", "swapped"),
-        repairable=False,
+        "latlon",
+        ("gnss.csv", "swapped", "lost sign"),
+        ambiguous=True,
     ),
     Case(
         "latlon-radians",
         lambda r: _gnss(r, np.radians(r.gnss.lat), np.radians(r.gnss.lon)),
+        "latlon",
         ("gnss.csv", "radians"),
         needs_init=True,
     ),
-    Case("gyro-deg-s", lambda r: _imu(r, w=np.degrees(r.imu.omega_ib_b)), ("imu.csv", "deg/s")),
-    Case("accel-g", lambda r: _imu(r, f=r.imu.f_b / 9.80665), ("imu.csv", "in g")),
+    Case(
+        "gyro-deg-s",
+        lambda r: _imu(r, w=np.degrees(r.imu.omega_ib_b)),
+        "gyro_units",
+        ("imu.csv", "deg/s"),
+    ),
+    Case("accel-g", lambda r: _imu(r, f=r.imu.f_b / 9.80665), "accel_units", ("imu.csv", "in g")),
     Case(
         "imu-ms",
         lambda r: _imu(r, t=r.imu.t * 1000.0),
+        "time_units",
         ("imu.csv", "milliseconds"),
         needs_init=True,
     ),
     Case(
         "upside-down",
         lambda r: _rotated(r, np.diag([1.0, -1.0, -1.0])),
+        "mounting",
         ("imu.csv", "imu_to_body_rpy_deg"),
     ),
     Case(
         "yawed-90",
         lambda r: _rotated(r, np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])),
+        "mounting",
         ("imu.csv", "imu_to_body_rpy_deg"),
     ),
 )
@@ -154,84 +182,109 @@ def _run(folder: Path, out: Path, config: Path | None) -> tuple[int, str, dict |
     return code, err, metrics
 
 
-def _applied(err: str) -> tuple[float | None, float | None, bool]:
-    """The offset the checks applied and its 1-sigma [s] (from the warning), and whether a mounting
-    was applied."""
-    m = re.search(
-        r'imu_time_offset_s = "auto": measured ([-+0-9.]+) s \+- ([0-9.]+) s \([^)]*\)[,;] added',
-        err,
-    )
-    off, sig = (float(m.group(1)), float(m.group(2))) if m else (None, None)
-    return off, sig, "applied imu_to_body_rpy_deg" in err
+def prmse_against(truth, out: Path) -> float:
+    """The EKF's PRMSE [m] against the simulated truth (the GNSS clock), from trajectory_ekf.csv."""
+    from gnssacc.core.earth import LocalTangentFrame
+
+    tab = np.genfromtxt(out / "trajectory_ekf.csv", delimiter=",", names=True)
+    frame = LocalTangentFrame(truth.lat[0], truth.lon[0], truth.h[0])
+    p = frame.to_ned(np.radians(tab["lat_deg"]), np.radians(tab["lon_deg"]), tab["h_m"])
+    q = frame.to_ned(truth.lat, truth.lon, truth.h)
+    inside = (tab["t"] >= truth.t[0]) & (tab["t"] <= truth.t[-1])
+    ref = np.column_stack([np.interp(tab["t"][inside], truth.t, q[:, i]) for i in range(3)])
+    return float(np.sqrt(np.mean(np.sum((p[inside] - ref) ** 2, axis=1))))
 
 
-def _judge_default(case: Case | None, code: int, err: str) -> str:
+def _applied(metrics: dict, err: str) -> dict:
+    """``{check: details}`` of the corrections a run applied (``metrics.json``; IMU stamps
+    rescaled when the run was loaded: said in a warning)."""
+    applied = {
+        c["check"]: c.get("details", {})
+        for c in metrics.get("input_checks", [])
+        if c.get("action") in ("applied", "repaired")
+    }
+    if "divided the IMU time stamps by" in err:
+        applied["time_units"] = {}
+    return applied
+
+
+def _unseen_s(metrics: dict) -> float | None:
+    clock = (metrics.get("input_corrections") or {}).get("clock") or {}
+    return clock.get("unseen_s")
+
+
+def _offset_ok(d: dict, truth: float) -> bool:
+    """Within 20 ms, or within 3 sigma where the fixes cannot tell better (3 m fixes at 1 Hz)."""
+    total = d.get("configured_s", 0.0) + d.get("offset_s", 0.0)
+    return abs(total - truth) <= max(OFFSET_TOL_S, 3.0 * (d.get("sigma_s") or 0.0))
+
+
+def _judge(case, code, err, metrics, ratio) -> str:
+    """The outcome of one run (module notes)."""
     errors = [ln for ln in err.splitlines() if ln.startswith("gnssacc: error:")]
     if "Traceback" in err:
         return "TRACEBACK"
-    if case is None:
-        return "ok" if code == 0 else f"FALSE ALARM: {errors[:1]}"
-    if code == 2 and len(errors) == 1 and all(w in errors[0] for w in case.words):
-        return "caught"
-    if code == 0 and not case.default_must_fail:
-        return "passed (harmless)"
-    return f"MISSED exit {code}: {errors[:1]}"
-
-
-def _offset_ok(off: float | None, sig: float | None, truth: float) -> bool:
-    """Within 20 ms, or within 3 sigma where the fixes cannot tell better (3 m fixes at 1 Hz)."""
-    return off is not None and abs(off - truth) <= max(OFFSET_TOL_S, 3.0 * sig)
-
-
-def _judge_auto(case: Case | None, code: int, err: str, metrics, clean_prmse: float) -> str:
-    if case is not None and not case.repairable:
-        return _judge_default(case, code, err).replace("caught", "caught (not repairable)")
+    if code == 2:
+        ok = case is not None and len(errors) == 1 and all(w in errors[0] for w in case.words)
+        return "caught" if ok else f"WRONG error: {errors[:1]}"
     if code != 0:
-        return f"FAILED exit {code}: {[ln for ln in err.splitlines() if 'error' in ln][:1]}"
-    off, sig, mounted = _applied(err)
-    ratio = metrics["methods"]["ekf"]["prmse_m"] / clean_prmse
-    text = f"PRMSE x{ratio:.3f}" + (
-        f", offset {off:+.3f} s +- {sig:.3f}" if off is not None else ""
-    )
+        return f"FAILED exit {code}: {errors[:1]}"
+    applied = _applied(metrics, err)
+    # What the input checks warn of (a method's own consistency warnings are not theirs).
+    warned = [
+        ln
+        for ln in err.splitlines()
+        if ln.startswith("gnssacc: warning:") and not ln.startswith("gnssacc: warning: ekf")
+    ]
     if case is None:
-        bad = mounted or (off is not None and not _offset_ok(off, sig, 0.0)) or "repair" in err
-        return ("FALSE ALARM " if bad else "ok ") + text
-    wrong = case.offset_s is not None and not _offset_ok(off, sig, case.offset_s)
-    return ("WRONG " if wrong or abs(ratio - 1) > PRMSE_TOL else "repaired ") + text
+        return f"FALSE: applied {sorted(applied)}, {warned[:1]}" if applied or warned else "ok"
+    if case.check not in applied:
+        unseen = _unseen_s(metrics)
+        if case.offset_s is not None and unseen is not None and abs(case.offset_s) <= unseen:
+            return f"unprovable (said: below {unseen:.2f} s unseen), PRMSE x{ratio:.3f}"
+        return f"MISSED, PRMSE x{ratio:.3f}"
+    off = case.offset_s is not None and not _offset_ok(applied[case.check], case.offset_s)
+    text = f"PRMSE x{ratio:.3f}"
+    if case.offset_s is not None:
+        d = applied[case.check]
+        total = d.get("configured_s", 0.0) + d.get("offset_s", 0.0)
+        text += f", offset {total:+.3f} s +- {d.get('sigma_s') or 0.0:.3f}"
+    return ("WRONG " if off or abs(ratio - 1) > PRMSE_TOL else "repaired ") + text
 
 
-def sweep(scenario: str, grade: str, seed: int, tmp: Path, auto: Path, tally: dict) -> None:
-    """Every case on one simulated run, default and repair configurations."""
-    base = simulate(scenario, SCENARIOS[scenario], imu_grade=grade, noise="white", seed=seed)
-    with_init = simulate(
-        scenario, SCENARIOS[scenario], imu_grade=grade, noise="white", seed=seed, give_init=True
-    )
+def sweep(scenario: str, grade: str, seed: int, tmp: Path, configs: dict, tally: dict) -> None:
+    """Every case on one simulated run, in every configuration."""
+    kw = dict(imu_grade=grade, noise="white", seed=seed, t_start_s=T0_UNIX)
+    base = simulate(scenario, SCENARIOS[scenario], **kw)
+    with_init = simulate(scenario, SCENARIOS[scenario], give_init=True, **kw)
     tag = f"{scenario}/{grade}/{seed}"
-    code, err, metrics = _run(write_csv_run(base, tmp / "clean"), tmp / "out", None)
-    clean = metrics["methods"]["ekf"]["prmse_m"] if metrics else float("nan")
-    _report(tally, tag, "clean", _judge_default(None, code, err), f"PRMSE {clean:.2f} m")
-    code, err, metrics = _run(tmp / "clean", tmp / "out", auto)
-    _report(tally, tag, "clean+auto", _judge_auto(None, code, err, metrics, clean), "")
-    _, _, m_init = _run(write_csv_run(with_init, tmp / "clean-init"), tmp / "out", None)
-    clean_init = (
-        m_init["methods"]["ekf"]["prmse_m"] if m_init else float("nan")
-    )  # the same run started from init.json
+    clean = {}
+    for run, name in ((base, "clean"), (with_init, "clean-init")):
+        folder = write_csv_run(run, tmp / name)
+        for cname, config in configs.items():
+            code, err, metrics = _run(folder, tmp / "out", config)
+            clean[(name, cname)] = prmse_against(run.truth, tmp / "out") if code == 0 else np.nan
+            if name == "clean":
+                verdict = _judge(None, code, err, metrics, 1.0)
+                _report(tally, tag, f"clean/{cname}", verdict, f"PRMSE {clean[(name, cname)]:.2f}")
     for case in CASES:
-        folder = write_csv_run(
-            case.corrupt(with_init if case.needs_init else base), tmp / case.name
-        )
-        code, err, _ = _run(folder, tmp / "out", None)
-        _report(tally, tag, case.name, _judge_default(case, code, err), "")
-        code, err, metrics = _run(folder, tmp / "out", auto)
-        ref = clean_init if case.needs_init else clean
-        _report(tally, tag, case.name + "+auto", _judge_auto(case, code, err, metrics, ref), "")
+        run = with_init if case.needs_init else base
+        folder = write_csv_run(case.corrupt(run), tmp / case.name)
+        for cname, config in configs.items():
+            code, err, metrics = _run(folder, tmp / "out", config)
+            ref = clean[("clean-init" if case.needs_init else "clean", cname)]
+            ratio = prmse_against(run.truth, tmp / "out") / ref if code == 0 else np.nan
+            verdict = _judge(case, code, err, metrics, ratio)
+            if cname == "strict" and verdict.startswith(("MISSED", "unprovable")):
+                verdict = "MISSED " + verdict.split(" ", 1)[-1]
+            _report(tally, tag, f"{case.name}/{cname}", verdict, "")
 
 
 def _report(tally: dict, tag: str, case: str, verdict: str, extra: str) -> None:
-    word = verdict.split()[0]
+    word = verdict.split()[0].rstrip(":,")
     tally.setdefault(case, {}).setdefault(word, 0)
     tally[case][word] += 1
-    print(f"{tag:28s} {case:22s} {verdict} {extra}".rstrip(), flush=True)
+    print(f"{tag:28s} {case:28s} {verdict} {extra}".rstrip(), flush=True)
 
 
 def real_recordings(cfg) -> None:
@@ -313,10 +366,7 @@ def check_time(duration_s: float = 600.0, rounds: int = 3) -> None:
     run = simulate("car-city", duration_s, imu_grade="consumer", noise="white", seed=0)
     plain = load_config()
     auto = load_config(
-        overrides={
-            "mounting": {"imu_time_offset_s": "auto", "imu_to_body_rpy_deg": "auto"},
-            "checks": {"repair": "auto"},
-        }
+        overrides={"mounting": {"imu_time_offset_s": "auto", "imu_to_body_rpy_deg": "auto"}}
     )
     warnings.simplefilter("ignore")  # the "auto" offset's warning, printed once per round otherwise
     check_input(run, auto)  # compile
@@ -349,17 +399,20 @@ def main() -> None:
     tally: dict = {}
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
-        auto = Path(tmp) / "auto.toml"
-        auto.write_text(AUTO)
+        configs = {}
+        for name, text in CONFIGS.items():
+            if text is not None:
+                (Path(tmp) / f"{name}.toml").write_text(text)
+            configs[name] = None if text is None else Path(tmp) / f"{name}.toml"
         for seed in (int(s) for s in a.seeds.split(",")):
             for scenario in SCENARIOS:
                 for grade in grades:
-                    sweep(scenario, grade, seed, Path(tmp), auto, tally)
+                    sweep(scenario, grade, seed, Path(tmp), configs, tally)
     print(
         f"\n{sum(sum(v.values()) for v in tally.values())} runs in {time.perf_counter() - t0:.0f} s; outcomes:"
     )
     for case, words in tally.items():
-        print(f"  {case:22s} " + ", ".join(f"{w} {n}" for w, n in sorted(words.items())))
+        print(f"  {case:28s} " + ", ".join(f"{w} {n}" for w, n in sorted(words.items())))
     print()
     real_recordings(load_config())
     offsets_rtk(grades)

@@ -26,6 +26,30 @@ SCENARIOS = (
 GRADES = ("consumer", "industrial", "tactical")
 
 
+#: The cases of issue 32 (one clock for every stream, proven corrections applied): stamps on the
+#: UNIX clock (2024), where the GPS - UTC leap seconds are a known clock relation, a truth on the
+#: IMU's clock (as a CSV run's), RTK-grade fixes that hold a truth to centimetres, and wheel
+#: odometry on the IMU's clock.
+UNIX_2024 = 1709294400.0
+ISSUE32 = (
+    ("car", 90.0, "white", {"t_start_s": UNIX_2024}),
+    ("car-city", 120.0, "rtk", {}),
+    ("ugv", 120.0, "precise", {"t_start_s": UNIX_2024, "odom_hz": 10.0}),
+)
+
+
+def issue32_cases(n_seeds: int = 2):
+    """``(name, run)`` of :data:`ISSUE32` for every grade and seed (truth on the IMU's clock)."""
+    for (scenario, duration, noise, kw), grade, seed in itertools.product(
+        ISSUE32, GRADES, range(n_seeds)
+    ):
+        run = simulate(scenario, duration, imu_grade=grade, noise=noise, seed=2000 + seed, **kw)
+        yield (
+            f"{scenario}/{grade}/{noise}/{2000 + seed}/issue32",
+            replace(run, truth_on_imu_clock=True),
+        )
+
+
 def cases(n_seeds: int = 4):
     """``(name, run)`` for every scenario, noise, grade and seed; the rover's fixes state no sigmas."""
     for (scenario, duration, rate, noises), grade, seed in itertools.product(

@@ -141,7 +141,19 @@ CONFIG_CASES = {
     "section-not-a-table": _cfg_case("imu = 5\n", ["imu = 5", "must be a table"]),
     "negative-density": _cfg_case(
         "[imu]\naccel_vrw_mps_rth = -0.1\n",
-        ["accel_vrw_mps_rth", "-0.1", "out of range", "[0, 1000]"],
+        ["accel_vrw_mps_rth", "-0.1", "out of range", "(0, 1000]"],
+    ),
+    # The estimator needs white noise: one line naming the key, not a run with 36-160 m errors.
+    "zero-density": _cfg_case(
+        "[imu]\ngyro_arw_deg_rth = 0\n",
+        ["[imu] gyro_arw_deg_rth", "out of range", "(0, 1000]", "has no noise"],
+    ),
+    "zero-density-on-one-axis": _cfg_case(
+        "[imu]\naccel_vrw_mps_rth = [0.1, 0.1, 0.0]\n",
+        ["[imu] accel_vrw_mps_rth", "0.0", "out of range", "has no noise"],
+    ),
+    "zero-fix-sigma": _cfg_case(
+        "[gnss]\ndefault_sigma_m = 0\n", ["[gnss] default_sigma_m", "out of range", "exact"]
     ),
     "negative-in-vector": _cfg_case(
         "[gnss]\ndefault_sigma_m = [3.0, -3.0, 5.0]\n",
@@ -228,6 +240,7 @@ def test_awkward_but_valid_config(env, capsys):
     text = (
         '\ufeff# my IMU\n[smoother]\nfactorization = "cholesky"  # lower case\nlag_s = 5\n'
         "[imu]\ngyro_arw_deg_rth = [0.2, 0.2, 0.4]\n"
+        "gyro_bias_instability_deg_h = 0\naccel_bias_sigma0_mg = 0  # a known bias\n"
     )
     code, out, err = _cli(capsys, ["config", "--config", _file(env, "odd.toml", text)])
     assert code == 0 and "Traceback" not in err
@@ -841,6 +854,13 @@ def test_awkward_but_valid_bags(env, capsys):
     assert 10.0 < m["duration_s"] < 50.0 and m["methods"]["ekf"]["prmse_m"] < m["gnss_prmse_m"]
     code, out, err = _cli(capsys, ["inspect", _storage(env.bags["sqlite"])])
     assert code == 0 and "/imu/data" in out and "gnssacc would use" in out
+    assert "metadata.yaml beside it" in err and "is not used" in err  # said, not silent
+    alone = env.tmp / "alone"
+    alone.mkdir(exist_ok=True)
+    shutil.copy(_storage(env.bags["sqlite"]), alone / "bag.db3")
+    code, out, err = _cli(capsys, ["inspect", alone / "bag.db3"])
+    assert code == 0 and "/imu/data" in out
+    assert "without its bag's metadata.yaml" in err and "reconstructed" in err  # salvage notice
     code, out, err = _cli(capsys, ["inspect", env.bags["sqlite"], "--truth-topic", "/gt"])
     # It cannot pick them: the listing to choose from on stdout, one line on stderr, exit 2 (issue 22).
     assert code == 2 and "/imu/data" in out and "cannot pick the topics" in err and "/gt" in err

@@ -375,17 +375,16 @@ def test_gnss_not_overlapping_imu(tmp_path, cfg):
 )
 def test_imu_stamps_in_another_unit_named_or_rescaled(tmp_path, unit, scale, divisor):
     # Stamps since the Unix epoch: the IMU's in ms or ns, the fixes' in s. The loader names the
-    # unit (not "different clocks?") and, with repair = "auto", rescales before the time offset (the
-    # input checks' unit finding, which the pipeline hands to the loader).
+    # unit (not "different clocks?") and, unless told to refuse, rescales before the time offset
+    # (the input checks' unit finding, which the pipeline hands to the loader).
     a = _arrays()
     a["t"], a["tg"] = (a["t"] + 1.7e9) * scale, a["tg"] + 1.7e9
     d = _make_dir(tmp_path, a)
+    strict = load_config(overrides={"checks": {"on_proof": "refuse"}})
     with pytest.raises(InputError) as exc:
-        load_csv_run(d, load_config(), time_units=fix_imu_time_units)
+        load_csv_run(d, strict, time_units=fix_imu_time_units)
     assert exc.value.where == str(d / "imu.csv") and unit in exc.value.problem
-    cfg = load_config(
-        overrides={"checks": {"repair": "auto"}, "mounting": {"imu_time_offset_s": -0.1}}
-    )
+    cfg = load_config(overrides={"mounting": {"imu_time_offset_s": -0.1}})  # rescaled by default
     with pytest.warns(DataWarning, match=f"divided the IMU time stamps by {divisor} "):
         run = load_csv_run(d, cfg, time_units=fix_imu_time_units)
     np.testing.assert_allclose(run.imu.t, a["t"] / scale - 0.1, rtol=0, atol=1e-6)

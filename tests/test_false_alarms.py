@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from clean_cases import cases
+from clean_cases import cases, issue32_cases
 
 from gnssacc.core.config import load_config
 
@@ -23,7 +23,7 @@ from bench_false_alarms import real_runs, verdicts  # noqa: E402
 
 @pytest.mark.slow
 def test_no_false_alarm_on_clean_recordings():
-    runs = list(real_runs()) + list(cases(6))
+    runs = list(real_runs()) + list(cases(6)) + list(issue32_cases(2))
     assert len(runs) >= 200
     alarms = {}
     for name, run in runs:

@@ -55,14 +55,12 @@ def sideways_bag(tmp_path_factory):
     return run, path
 
 
-def test_sideways_imu_is_refused_with_the_evidence_when_the_configuration_says_otherwise(
-    sideways_bag,
-):
+def test_sideways_imu_is_refused_with_the_evidence_when_asked_to_refuse(sideways_bag):
     _, path = sideways_bag
     with pytest.raises(InputError) as exc:
-        gnssacc.process(str(path), methods=["ekf"])
+        gnssacc.process(str(path), methods=["ekf"], config={"checks": {"on_proof": "refuse"}})
     problem = exc.value.problem
-    assert "imu_to_body_rpy_deg = [90, 0, 90]" in problem and "the estimator confirms it" in problem
+    assert "imu_to_body_rpy_deg = [90, 0, 90]" in problem and "the estimator proves it" in problem
 
 
 def test_sideways_imu_with_automatic_mounting_and_a_magnetometer_yaw(sideways_bag):

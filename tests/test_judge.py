@@ -103,10 +103,23 @@ def test_a_chance_correlation_peak_is_refuted_by_the_estimator(monkeypatch, slow
     assert findings[0].action == "refuted" and verdict["loglik_gain"] < -LR_MIN
 
 
-def test_a_true_offset_is_refused_with_the_evidence(slow_ugv):
+def test_a_true_offset_is_refused_with_the_evidence_on_request(slow_ugv):
     bad = slow_ugv.with_imu_shift(-18.0)
     with pytest.raises(InputError) as exc:
-        check_input(bad, load_config())
+        check_input(bad, load_config(overrides={"checks": {"on_proof": "refuse"}}))
     problem = exc.value.problem
-    assert "imu_time_offset_s = 18." in problem and "the estimator confirms it" in problem
+    assert "imu_time_offset_s = 18." in problem and "the estimator proves it" in problem
     assert "as given" in problem and "as corrected" in problem  # the evidence both ways
+    assert 'on_proof = "refuse"' in problem
+
+
+def test_a_true_offset_is_applied_by_default_with_the_evidence(slow_ugv):
+    bad = slow_ugv.with_imu_shift(-18.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # stated by the caller (header line, metrics), not warned
+        out, cfg, findings = check_input(bad, load_config())
+    (f,) = findings
+    assert f.check == "time_offset" and f.action == "applied"
+    assert abs(cfg["mounting"]["imu_time_offset_s"] - 18.0) < 0.3
+    np.testing.assert_allclose(out.imu.t, slow_ugv.imu.t, atol=0.3)
+    assert "as given" in f.details["evidence"] and f.details["verdict"]["decisive"]

@@ -13,7 +13,7 @@ from gnssacc.analysis import errorstats
 from gnssacc.analysis.consistency import nees_warnings
 from gnssacc.cli import main
 from gnssacc.core.solution import NavSolution
-from gnssacc.outputs.report import group_warnings
+from gnssacc.outputs.report import group_warnings, table_rows
 from gnssacc.sources.bagwrite import write_bag
 from gnssacc.sources.csvdir import write_csv_run
 from gnssacc.sources.sim import simulate
@@ -154,15 +154,50 @@ def test_nees_inside_its_band_when_the_sigma_is_right_and_named_per_axis_when_no
     e[:, 2] *= 5.0  # the down errors 5x their stated sigma: NEES 25 on that axis
     bad = errorstats.nees(e, s, errorstats.AXES_NED)
     assert bad["per_axis"]["D"]["value"] == pytest.approx(25, rel=0.1) and bad["outside"] == ["D"]
-    (text,) = nees_warnings({"nees_position": bad})
+    ((text, column),) = nees_warnings({"nees_position": bad})
     assert (
         text.startswith("position NEES per dof")
         and "D: errors larger than the stated sigma" in text
+        and column == "nees"
     )
     assert "N:" not in text and "E:" not in text
     e[:, 0] *= 0.1  # north errors a tenth of their sigma: too cautious there
-    (text,) = nees_warnings({"nees_position": errorstats.nees(e, s, errorstats.AXES_NED)})
+    ((text, _),) = nees_warnings({"nees_position": errorstats.nees(e, s, errorstats.AXES_NED)})
     assert "D: errors larger" in text and "N: stated sigma larger than the errors" in text
+
+
+def test_a_nees_warning_says_outside_only_of_what_is_outside():
+    """The pooled NEES inside its band, one axis outside its own: the warning names the axis with
+    its figure and band, says the pooled one is inside, and concerns no table column for the
+    attitude (the table has no attitude NEES column)."""
+    axis = {"value": 4.1, "band": [0.5, 2.0]}
+    inside = {"value": 1.0, "band": [0.5, 2.0]}
+    stats = {
+        "value": 1.94,
+        "band": [0.5, 2.0],
+        "per_axis": {"roll": axis, "pitch": inside, "yaw": {"value": 0.72, "band": [0.5, 2.0]}},
+        "outside": ["roll"],
+        "pooled_outside": False,
+    }
+    ((text, column),) = nees_warnings({"nees_attitude": stats})
+    assert column == "nees_att"
+    assert "roll 4.1 outside [0.5, 2.0]" in text and "inside [0.5, 2.0]" in text, text
+    assert "1.94 outside" not in text and "1.9 outside" not in text
+
+
+@pytest.mark.parametrize(
+    "value, lo, hi, expected",
+    [
+        (1.94, 0.5, 1.9, "1.94 outside [0.50, 1.90]"),
+        (2.004, 0.5, 2.0, "2.004 outside [0.500, 2.000]"),
+        (0.4999, 0.5, 2.0, "0.4999 outside [0.5000, 2.0000]"),
+        (7.0, 0.5, 2.0, "7.00 outside [0.50, 2.00]"),
+    ],
+)
+def test_outside_reads_outside(value, lo, hi, expected):
+    from gnssacc.analysis.consistency import outside
+
+    assert outside(value, lo, hi) == expected
 
 
 def _solution_from_truth(run, offset_ned):
@@ -393,3 +428,54 @@ def test_inspect_exits_2_when_it_cannot_pick_the_topics(sim_run, tmp_path, capsy
     assert code == 2 and "/rtk/fix" in out  # the listing, to choose from
     assert err.count("\n") == 1 and err.startswith("gnssacc: error: ") and "--gnss-topic" in err
     assert _cli(["inspect", p, "--gnss-topic", "/gnss/fix"], capsys)[0] == 0
+
+
+def _one_method_metrics(flags: list) -> dict:
+    """A ``metrics.json`` of one EKF method with truth, whose warnings concern ``flags``."""
+    return {
+        "duration_s": 10.0,
+        "gnss_prmse_m": 5.0,
+        "methods": {
+            "ekf": {
+                "status": "ok",
+                "prmse_m": 1.0,
+                "hrmse_m": 0.9,
+                "n_epochs": 10,
+                "improvement_pct": None,
+                "runtime_s": 0.1,
+                "realtime_factor": 100.0,
+                "errors": {"nees_position": {"value": 1.2}, "at_fixes": {"prmse_m": 1.0}},
+            }
+        },
+        "consistency": {
+            "ekf": {"nis": {"pos": 1.0}, "warnings": ["w"] * len(flags), "flags": flags}
+        },
+    }
+
+
+@pytest.mark.parametrize(
+    "flags, marked",
+    [
+        (["nees_att"], []),  # an attitude NEES warning: the table has no such column
+        (["zupt", "config"], []),  # another update kind's NIS, the configured noise
+        (["nees"], ["NEES pos"]),
+        (["nis", "fixes"], ["NIS", "PRMSE at fixes [m]"]),
+    ],
+)
+def test_the_table_marks_the_column_a_warning_is_about(flags, marked):
+    head, rows = table_rows(_one_method_metrics(flags))
+    cells = dict(zip(head, rows[0], strict=True))
+    assert sorted(h for h, c in cells.items() if c.endswith("!")) == sorted(marked), cells
+
+
+def test_a_warning_is_flagged_with_the_figure_it_is_about(sim_run):
+    """A zero-velocity NIS out of its band concerns no table column (the NIS column is the
+    position NIS's); a position NIS out of its band concerns the NIS column."""
+    from gnssacc.analysis.consistency import assess
+
+    sol = _solution_from_truth(sim_run, lambda t: np.zeros((len(t), 3)))
+    sol.stats = {"nis_zupt_mean": 9.0, "n_zupt_updates": 50}
+    c = assess(sim_run, sol)
+    assert c.flags == ["zupt"] and "zero-velocity NIS per dof 9.00, outside" in c.warnings[0]
+    sol.stats = {"nis_pos_mean": 9.0, "n_pos_updates": 50}
+    assert assess(sim_run, sol).flags == ["nis"]

@@ -33,7 +33,10 @@ def test_default_run_prepares_once(counted, tune, banks):
     assert set(res.solutions) >= {"ekf", "ekf-acc", "smoother", "smoother-acc"}
     assert counted == {"check_imu": 1, "detect_stationary": 1, "select_yaw": banks}
     offset = [f for f in res.prepared.checks if f.check == "time_offset"]
-    assert [f.action for f in offset] == ["refuted"] and offset[0].details["verdict"]["refuted"]
+    assert [f.action for f in offset] == ["refuted", "bound"]
+    assert offset[0].details["verdict"]["refuted"]
+    # The clock's bound comes from that verdict's sigma: no pass of its own.
+    assert offset[1].details["sigma_s"] == offset[0].details["sigma_s"]
 
 
 def test_an_estimator_reads_the_prepared_recording(counted):
@@ -52,7 +55,8 @@ def test_an_estimator_reads_the_prepared_recording(counted):
 
 def test_the_estimator_is_asked_only_when_the_data_propose_something(monkeypatch):
     """A clean drive whose views agree with the stamps and axes as given costs no verdict pass:
-    the clock-offset search and the judge's passes run only for a proposal."""
+    the clock-offset search and the judge's passes run only for a proposal; how large an offset
+    could go unseen costs a few passes of the likelihood at the stamps as given (at most 9)."""
     import gnssacc.prepare.judge as judge
     import gnssacc.prepare.settle as settle
 
@@ -67,8 +71,11 @@ def test_the_estimator_is_asked_only_when_the_data_propose_something(monkeypatch
         calls["innovations"] += 1
         return real_inn(*a, **k)
 
+    import gnssacc.prepare.clock as clock
+
     monkeypatch.setattr(settle, "_evaluate", evaluate)
     monkeypatch.setattr(judge, "innovations", innovations)
+    monkeypatch.setattr(clock, "innovations", innovations)
     res = gnssacc.process("sim:car,duration=120", methods=["ekf"], tune="none", seed=4)
-    assert [f.check for f in res.prepared.checks] == []
-    assert calls == {"evaluate": 0, "innovations": 0}
+    assert [f.action for f in res.prepared.checks] == ["bound"]
+    assert calls["evaluate"] == 0 and 3 <= calls["innovations"] <= 9, calls

@@ -79,6 +79,9 @@ def test_run_with_report_and_tum_export(run_dir, tmp_path, capsys):
     for name in ("errors.png", "trajectory.png", "sigmas.png"):
         assert (out / name).is_file() and f'src="{name}"' in page
     assert "IMU data quality" in page and "ekf" in page
+    # What the input checks proposed and the estimator proved, and how well the clock is told.
+    assert "Input checks: what was proposed and proven" in page and "on_proof" in page
+    assert "could go unseen" in page
     # The observability section: motion shares that add up, and per-state variance shares.
     assert "Observability" in page and "position + acceleration" in page
     import re

@@ -349,6 +349,10 @@ def test_grade_config_builds_filter_config():
     for grade in sim.IMU_GRADES:
         values = sim.grade_config(grade)
         assert set(values) == set(load_config()["imu"])
+        if grade == "perfect":  # zero white noise: no filter configuration (one clear error)
+            with pytest.raises(InputError, match="gyro_arw_deg_rth"):
+                load_config(overrides={"imu": values})
+            continue
         cfg = load_config(overrides={"imu": values})
         assert cfg["imu"] == values
     cfg = load_config(overrides={"imu": sim.grade_config("industrial")})

@@ -124,18 +124,28 @@ def evaluate(
     show_progress: bool = False,
     observe: bool = True,
     say=None,
+    header: str | None = None,
 ) -> "Result":
     """Check, prepare, run and score ``methods`` on a loaded run (:func:`gnssacc.pipeline.compare`).
 
     ``observe``: keep the ``ekf-acc`` pass's matrices for the report's observability section
     (:attr:`Result.replay`), so that ``save(report=True)`` does not run the filter again.
-    ``say(line)``: told the preparation's findings and each method's end as they happen.
+    ``say(line)``: told the run's ``header`` line once the input checks are settled (with the
+    corrections the estimator proved), then the preparation's findings and each method's end as
+    they happen.
     """
     cfg = known_noise_config(
         cfg, run, tune
     )  # a sim: source with --tune none: the simulator's IMU noise
     metrics, sols, prep, replay = compare_observed(
-        run, cfg, methods, tune=tune, show_progress=show_progress, observe=observe, say=say
+        run,
+        cfg,
+        methods,
+        tune=tune,
+        show_progress=show_progress,
+        observe=observe,
+        say=say,
+        header=header,
     )
     return Result(prep.run, cfg, metrics, sols, prep, replay)
 

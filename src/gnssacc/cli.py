@@ -99,6 +99,13 @@ def _run_parser(sub) -> None:
         help="the non-holonomic constraint in every method (default: [nhc] enabled, on); off: IMU-only "
         "bridging of GNSS outages, for comparison",
     )
+    r.add_argument(
+        "--strict",
+        action="store_true",
+        help="refuse the run instead of applying a correction the estimator proves (a clock "
+        "offset, a mounting, a unit), naming the setting that makes the data right: [checks] "
+        'on_proof = "refuse"',
+    )
     _gnss_argument(r)
     _bag_arguments(r)
     r.add_argument(
@@ -468,6 +475,8 @@ def _run_locked(args, stack, held) -> int:
     cfg = configure(args.source, preset=args.preset, config=args.config)
     if args.nhc is not None:
         cfg = cfg.with_values({"nhc": {"enabled": args.nhc == "on"}}, f"--nhc {args.nhc}")
+    if args.strict:
+        cfg = cfg.with_values({"checks": {"on_proof": "refuse"}}, "--strict")
     run = load(
         args.source,
         config=cfg,
@@ -486,13 +495,20 @@ def _run_locked(args, stack, held) -> int:
     )
     target = target or _lock_out(default_out_dir(run), args, stack, held)
     console = _Console()
-    console.say(
+    header = (
         f"{run.name}: {run.duration_s:.1f} s, {len(run.imu)} IMU samples, {len(run.gnss)} GNSS fixes"
         + (f", noise {run.meta['noise']} seed {run.meta['seed']}" if "noise" in run.meta else "")
         + f"; config: {', '.join(cfg.sources)}"
     )
-    res = evaluate(
-        run, cfg, methods, tune=args.tune, show_progress=True, observe=args.report, say=console.say
+    res = evaluate(  # the header is said once the input checks settle, with their corrections
+        run,
+        cfg,
+        methods,
+        tune=args.tune,
+        show_progress=True,
+        observe=args.report,
+        say=console.say,
+        header=header,
     )
     raise_if_arrived()  # a signal that compiled code swallowed interrupts all the same
     if not res.solutions:  # nothing to show or write

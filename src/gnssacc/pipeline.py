@@ -29,8 +29,13 @@ from .estimators.settings import EkfSettings
 from .outputs.figures import PLOT_SETS, write_figures
 from .outputs.outdir import ResultDir
 from .outputs.report import (
+    APPLIED,
+    applied_corrections,
+    clock_line,
+    corrections_summary,
     format_table,
     group_warnings,
+    header_line,
     metrics_dict,
     quality_line,
     write_json,
@@ -79,16 +84,48 @@ def check_input(run: RecordedRun, cfg: RunConfig) -> tuple[RecordedRun, RunConfi
     return checked(run, cfg, filter_pass)
 
 
-def prepare(run: RecordedRun, cfg: RunConfig, tune: str | None = None, methods=()) -> Prepared:
+def prepare(
+    run: RecordedRun, cfg: RunConfig, tune: str | None = None, methods=(), on_checked=None
+) -> Prepared:
     """The prepared recording (:func:`gnssacc.prepare.prepared.prepare`) with the EKF as its filter
-    pass, and the ``-gm`` methods' setup when ``methods`` has one."""
+    pass, and the ``-gm`` methods' setup when ``methods`` has one; ``on_checked(findings)`` is told
+    the input checks' findings once they are settled."""
     return prepare_recording(
         run,
         cfg,
         tune,
         filter_pass=filter_pass,
         gauss_markov=any(METHODS.get(m) is _gm for m in methods),
+        on_checked=on_checked,
     )
+
+
+def check_dicts(run: RecordedRun, findings) -> list[dict]:
+    """The input checks' findings as ``metrics.json`` lists them: the repairs made as the run was
+    read (``run.meta["repaired_on_load"]``: IMU stamps not in seconds) first."""
+    return list(run.meta.get("repaired_on_load", [])) + [f.to_dict() for f in findings]
+
+
+def state_corrections(say: Callable[[str], None] | None, header: str | None, run: RecordedRun):
+    """What to do with the input checks' settled findings (``on_checked`` of :func:`prepare`):
+    with ``say``, say the run's header line with the corrections the estimator proved
+    (:func:`gnssacc.outputs.report.header_line`); without (the Python API), warn of each."""
+
+    def told(findings: list) -> None:
+        dicts = check_dicts(run, findings)
+        if say is not None:
+            line = header_line(header, dicts)
+            if line:
+                say(line)
+            return
+        for d, text in zip(
+            [d for d in dicts if d["action"] in APPLIED], applied_corrections(dicts), strict=True
+        ):
+            if d in run.meta.get("repaired_on_load", []):
+                continue  # said as the run was read
+            warn_data(d["where"], f"{d['problem']}; {text}, as the estimator proves")
+
+    return told
 
 
 #: Estimators by method id: ``(prepared, method, show_progress) -> {id: NavSolution}``.
@@ -429,6 +466,7 @@ def compare(
     show_progress: bool = False,
     observers: dict | None = None,
     say: Callable[[str], None] | None = None,
+    header: str | None = None,
 ) -> tuple[dict, dict, Prepared]:
     """Prepare the recording, run and score the methods over a common window, with consistency figures.
 
@@ -437,7 +475,10 @@ def compare(
     to the caller what to do when every method failed. ``observers`` (``{method: observer}``)
     watch EKF methods' own passes (:func:`run_methods`). ``say(line)``, when given, is told the
     preparation's findings (IMU data quality, stationary spans, start, tuning) as soon as they are
-    known and each method's end (:func:`run_methods`), so a caller can print results as they come.
+    known and each method's end (:func:`run_methods`), so a caller can print results as they come;
+    the first line it is told is ``header`` (the run's header line), once the input checks are
+    settled, with the corrections the estimator proved (:func:`state_corrections`; without
+    ``say`` each is a warning).
 
     Returns
     -------
@@ -448,7 +489,7 @@ def compare(
     prep : Prepared
         The shared start, stationary spans and (tuned) configuration.
     """
-    prep = prepare(run, cfg, tune, methods)
+    prep = prepare(run, cfg, tune, methods, on_checked=state_corrections(say, header, run))
     for line in preparation_lines(prep) if say else ():
         say(line)
     t = time.perf_counter()
@@ -510,7 +551,10 @@ def compare(
         "init": prep.init.how,
         "start": start_dict(prep.init),
         "stationary": prep.stationary.to_dict(),
-        "input_checks": [f.to_dict() for f in prep.checks],
+        "input_checks": check_dicts(run, prep.checks),
+        "input_corrections": corrections_summary(
+            check_dicts(run, prep.checks), str(cfg["checks"]["on_proof"])
+        ),
         "model_check": models[""].to_dict(),
         "model_check_gm": models["gm"].to_dict() if "gm" in models else None,
         "tuning": prep.tuning.to_dict() if prep.tuning is not None else None,
@@ -599,7 +643,8 @@ def _coverage(run: RecordedRun, sol: NavSolution) -> dict:
 def preparation_lines(prep: Prepared) -> list[str]:
     """What the preparation found, one line each: IMU data quality, stationary spans, the start and
     (``--tune auto``) the identified noise."""
-    lines = [
+    clock = clock_line([f.to_dict() for f in prep.checks])
+    lines = ([clock] if clock else []) + [
         quality_line(prep.quality.to_dict()),
         prep.stationary.summary(),
         f"start: {prep.init.how}",
@@ -660,6 +705,7 @@ def compare_observed(
     show_progress: bool = False,
     observe: bool = True,
     say: Callable[[str], None] | None = None,
+    header: str | None = None,
 ):
     """:func:`compare`, keeping (with ``observe``, when ``ekf-acc`` runs) that pass's matrices at
     every GNSS epoch for the report's observability section.
@@ -683,6 +729,7 @@ def compare_observed(
         show_progress=show_progress,
         observers={"ekf-acc": collector} if collector else None,
         say=say,
+        header=header,
     )
     replay = (
         collector.replay("ekf-acc", sols["ekf-acc"]) if collector and "ekf-acc" in sols else None

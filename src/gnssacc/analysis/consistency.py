@@ -78,9 +78,11 @@ REST_FACTOR = 2.0
 #: Heavy tails are reported when the count beyond the bound has a binomial tail probability
 #: below this under Gaussian errors (and at least 3 are beyond): a false alarm once in 10,000 runs.
 TAIL_ALARM = 1e-4
-#: Table columns a warning can be about: the NIS, the comparison with the raw fixes, the position
-#: NEES and the attitude NEES.
-COLUMNS = ("nis", "fixes", "nees", "nees_att")
+#: What a warning can be about (:attr:`Consistency.flags`): the position NIS (the table's NIS
+#: column), the comparison with the raw fixes, the position NEES, the attitude NEES, another
+#: update kind's NIS (``acc``, ``zupt``, ``zaru``, ``nhc``, ``odo``) or the configured noise
+#: (``config``). The table marks the columns it has; the others are marked nowhere.
+COLUMNS = ("nis", "fixes", "nees", "nees_att", "acc", "zupt", "zaru", "nhc", "odo", "config")
 #: Update kinds and their names in messages.
 KIND_NAMES = {
     "pos": "position",
@@ -93,10 +95,44 @@ KIND_NAMES = {
 _DOF = {"pos": 3, "acc": 3, "zupt": 3, "zaru": 3, "nhc": 2, "odo": 1}
 
 
+def shown(value: float, *bounds: float, decimals: int = 2) -> list[str]:
+    """``value`` and ``bounds`` as text, with as many decimals (from ``decimals``, at most 6) as it
+    takes for the printed numbers to stand in the order the numbers do: a figure outside its band
+    (or above its limit) reads visibly outside it ("1.94 outside [0.50, 1.90]", never "1.9 outside
+    [0.5, 1.9]"), one inside reads inside."""
+    for d in range(decimals, 7):
+        texts = [f"{x:.{d}f}" for x in (value, *bounds)]
+        r = [float(t) for t in texts]
+        if all(
+            (value < b) == (r[0] < rb) and (value > b) == (r[0] > rb)
+            for b, rb in zip(bounds, r[1:], strict=True)
+        ):
+            break
+    return texts
+
+
+def outside(value: float, lo: float, hi: float, decimals: int = 2) -> str:
+    """``"<value> outside [<lo>, <hi>]"`` with :func:`shown`'s digits."""
+    v, a, b = shown(value, lo, hi, decimals=decimals)
+    return f"{v} outside [{a}, {b}]"
+
+
+def above(value: float, limit: float, decimals: int = 2) -> str:
+    """``"<value> > <limit>"`` with :func:`shown`'s digits."""
+    v, b = shown(value, limit, decimals=decimals)
+    return f"{v} > {b}"
+
+
+def acf_limit(n: int) -> float:
+    """The largest lag-1 autocorrelation of ``n`` white innovations that is not reported
+    (:func:`correlated`)."""
+    return max(ACF_MAX, 3.0 / math.sqrt(3 * max(n, 1)))
+
+
 def correlated(acf1: float | None, n: int) -> bool:
     """Whether ``n`` whitened innovations with lag-1 autocorrelation ``acf1`` are correlated in
     time: above :data:`ACF_MAX` and three standard errors of it."""
-    return acf1 is not None and n > 10 and acf1 > max(ACF_MAX, 3.0 / math.sqrt(3 * n))
+    return acf1 is not None and n > 10 and acf1 > acf_limit(n)
 
 
 def heavy_tails(n_beyond: int, n: int, who: str, acf1: float | None = None) -> str | None:
@@ -213,20 +249,21 @@ class ModelCheck:
             lo, hi = band(self.n, acf1=self.acf1)
             if not lo <= self.nis <= hi:
                 out.append(
-                    f"the noise model does not fit this recording: the EKF's position NIS per dof with it is "
-                    f"{self.nis:.2f}, outside [{lo:.2f}, {hi:.2f}]"
+                    f"the noise model does not fit this recording: the EKF's position NIS per dof "
+                    f"with it is {outside(self.nis, lo, hi)}"
                 )
         if correlated(self.acf1, self.n):
             out.append(
-                f"the noise model misses a slowly varying error: the EKF's position innovations with it are "
-                f"correlated in time (lag-1 autocorrelation {self.acf1:.2f} > {ACF_MAX}); IMU noise set too low "
-                f"or time-correlated GNSS errors not modelled"
+                f"the noise model misses a slowly varying error: the EKF's position innovations "
+                f"with it are correlated in time (lag-1 autocorrelation "
+                f"{above(self.acf1, acf_limit(self.n))}); IMU noise set too low or "
+                f"time-correlated GNSS errors not modelled"
             )
         if self.nis_zupt is not None and self.n_zupt and self.nis_zupt > band(self.n_zupt)[1]:
             out.append(
-                f"the noise model lets the velocity error grow too slowly: the EKF's zero-velocity NIS per dof "
-                f"with it is {self.nis_zupt:.2f} > {band(self.n_zupt)[1]:.2f} while the vehicle stands "
-                f"(IMU noise set too low)"
+                f"the noise model lets the velocity error grow too slowly: the EKF's zero-velocity "
+                f"NIS per dof with it is {above(self.nis_zupt, band(self.n_zupt)[1])} while the "
+                f"vehicle stands (IMU noise set too low)"
             )
         # Fixes a position gate rejected count as beyond the bound: the smoothers take them.
         tails = heavy_tails(
@@ -403,17 +440,19 @@ def assess(
                 if value > hi
                 else "its stated uncertainty is too large: it discards information"
             )
+            v, a, b = shown(value, lo, hi)
             c.add(
-                f"{KIND_NAMES[kind]} NIS per dof {value:.2f} outside the consistent band "
-                f"[{lo:.2f}, {hi:.2f}] ({n[kind]} updates): {what}; check the noise configuration "
-                f"(--tune auto identifies it from the recording)",
-                "nis",
+                f"{KIND_NAMES[kind]} NIS per dof {v}, outside the consistent band [{a}, {b}] "
+                f"({n[kind]} updates): {what}; check the noise configuration (--tune auto "
+                f"identifies it from the recording)",
+                "nis" if kind == "pos" else kind,
             )
     if correlated(c.acf1, n["pos"]):
         c.add(
-            f"its position innovations are correlated in time (lag-1 autocorrelation {c.acf1:.2f} > "
-            f"{ACF_MAX}): the model misses a slowly varying error (IMU noise set too low, or "
-            f"time-correlated GNSS errors not modelled), so its stated uncertainty is not to be trusted",
+            f"its position innovations are correlated in time (lag-1 autocorrelation "
+            f"{above(c.acf1, acf_limit(n['pos']))}): the model misses a slowly varying error (IMU "
+            f"noise set too low, or time-correlated GNSS errors not modelled), so its stated "
+            f"uncertainty is not to be trusted",
             "nis",
         )
     tails = (
@@ -428,12 +467,12 @@ def assess(
             c.add(text, "nis")
     if model is not None:  # no method's own figures can see it
         for text in model.rest:
-            c.add(text, "nis")
+            c.add(text, "config")
     if c.fix_ratio is not None and c.fix_ratio > FIX_RATIO_MAX:
         c.add(
             f"its positions are as far from the GNSS fixes as an independent estimate no better "
-            f"than them would be (RMS normalised residual {c.fix_ratio:.2f} > {FIX_RATIO_MAX:.2f}): it "
-            f"does no better than the raw fixes it is fed",
+            f"than them would be (RMS normalised residual {above(c.fix_ratio, FIX_RATIO_MAX)}): "
+            f"it does no better than the raw fixes it is fed",
             "fixes",
         )
     if (
@@ -441,47 +480,64 @@ def assess(
         and gnss_prmse_m is not None
         and prmse_m > (1.0 + WORSE_MARGIN) * gnss_prmse_m
     ):
+        p, g = shown(prmse_m, gnss_prmse_m)
         c.add(
-            f"PRMSE {prmse_m:.2f} m at the {n_fixes} raw fix epochs is worse than the raw fixes' "
-            f"{gnss_prmse_m:.2f} m at the same epochs (against the truth)",
+            f"PRMSE {p} m at the {n_fixes} raw fix epochs is worse than the raw fixes' "
+            f"{g} m at the same epochs (against the truth)",
             "fixes",
         )
     elif prmse_m is not None and gnss_prmse_m is not None and prmse_m >= gnss_prmse_m:
+        p, g = shown(prmse_m, gnss_prmse_m)
         c.add(
-            f"PRMSE {prmse_m:.2f} m at the {n_fixes} raw fix epochs is no better than the raw fixes' "
-            f"{gnss_prmse_m:.2f} m at the same epochs (within {100 * WORSE_MARGIN:.0f} %): it adds nothing over "
+            f"PRMSE {p} m at the {n_fixes} raw fix epochs is no better than the raw fixes' "
+            f"{g} m at the same epochs (within {100 * WORSE_MARGIN:.0f} %): it adds nothing over "
             f"the fixes on this recording",
             "fixes",
         )
-    for key, column in (("nees_position", "nees"), ("nees_attitude", "nees_att")):
-        for text in nees_warnings({key: (errors or {}).get(key)}):
-            c.add(text, column)
+    for text, column in nees_warnings(errors or {}):
+        c.add(text, column)
     return c
 
 
-def nees_warnings(stats: dict) -> list[str]:
+def nees_warnings(stats: dict) -> list[tuple[str, str]]:
     """One warning per NEES (position, attitude) of :func:`gnssacc.analysis.errorstats.error_statistics`
-    outside its band, naming the axes outside theirs and which way each is off."""
+    outside its band, or with axes outside theirs, and the table column it is about (``nees``,
+    ``nees_att``). The pooled figure is said to be outside only when it is; axes outside their own
+    band are named with their figure and band, and which way each is off."""
     out = []
-    for key, what in (("nees_position", "position"), ("nees_attitude", "attitude")):
+    for key, what, column in (
+        ("nees_position", "position", "nees"),
+        ("nees_attitude", "attitude", "nees_att"),
+    ):
         n = stats.get(key)
         if not n or not (n["pooled_outside"] or n["outside"]):
             continue
         lo, hi = n["band"]
-        axes = ", ".join(f"{a} {v['value']:.1f}" for a, v in n["per_axis"].items())
-        above = [a for a in n["outside"] if n["per_axis"][a]["value"] > n["per_axis"][a]["band"][1]]
-        below = [a for a in n["outside"] if a not in above]
-        if not above and not below:
-            above, below = (["pooled"], []) if n["value"] > hi else ([], ["pooled"])
+        axes = n["per_axis"]
+        high = [a for a in n["outside"] if axes[a]["value"] > axes[a]["band"][1]]
+        low = [a for a in n["outside"] if a not in high]
+        if not high and not low:
+            high, low = (["pooled"], []) if n["value"] > hi else ([], ["pooled"])
         says = (
-            [f"{', '.join(above)}: errors larger than the stated sigma says"] if above else []
+            [f"{', '.join(high)}: errors larger than the stated sigma says"] if high else []
         ) + (
-            [f"{', '.join(below)}: stated sigma larger than the errors (too cautious)"]
-            if below
-            else []
+            [f"{', '.join(low)}: stated sigma larger than the errors (too cautious)"] if low else []
         )
-        out.append(
-            f"{what} NEES per dof {n['value']:.1f} against the truth is outside its chi-square band "
-            f"[{lo:.1f}, {hi:.1f}] (per axis {axes}); {'; '.join(says)}"
-        )
+        if n["pooled_outside"]:
+            each = ", ".join(f"{a} {shown(v['value'], decimals=1)[0]}" for a, v in axes.items())
+            v, a, b = shown(n["value"], lo, hi, decimals=1)
+            head = (
+                f"{what} NEES per dof against the truth {v}, outside its chi-square band "
+                f"[{a}, {b}] (per axis {each})"
+            )
+        else:
+            each = "; ".join(
+                f"{a} {outside(axes[a]['value'], *axes[a]['band'], 1)}" for a in n["outside"]
+            )
+            v, a, b = shown(n["value"], lo, hi, decimals=1)
+            head = (
+                f"{what} NEES per dof against the truth: {each}, the axis's chi-square band (all "
+                f"axes together {v}, inside [{a}, {b}])"
+            )
+        out.append((f"{head}; {'; '.join(says)}", column))
     return out

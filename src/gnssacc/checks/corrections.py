@@ -144,12 +144,35 @@ def mount_proposal(
         else f"{text}, not as [mounting] imu_to_body_rpy_deg = {rpy_text(cfg.R_bi, True)} says"
     )
     R = me.R_bi
+    others = (
+        () if me.yaw_determined else _forward_alternatives(absolute, lf is not None, me.snapped)
+    )
+    fix = (
+        "set [mounting] imu_to_body_rpy_deg to the one whose x axis points forward"
+        if others
+        else f'set [mounting] imu_to_body_rpy_deg = {line} (or "auto")'
+    )
     return Finding(
         "mounting",
         where,
         problem,
-        f'set [mounting] imu_to_body_rpy_deg = {line} (or "auto")',
+        fix,
         lambda r: r.with_mounting(R),
-        f"applied imu_to_body_rpy_deg = {line}",
+        f"imu_to_body_rpy_deg = {line}",
         details={"tilt_deg": me.tilt_deg, "rpy_deg": mounting_rpy_deg(absolute)},
+        alternatives=others,
     ), text
+
+
+def _forward_alternatives(absolute: np.ndarray, moved: bool, snapped: bool) -> tuple[str, ...]:
+    """The mountings with the same down axis that the data explain as well when the motion never
+    showed the forward axis: the one turned by 180 deg (the ground-vehicle model cannot tell
+    forward from backward), and those turned by 90 deg when the vehicle never moved enough to
+    show even along which axis it drives."""
+    turns = (2,) if moved else (1, 2, 3)
+    out = []
+    for k in turns:
+        c, s = np.cos(k * np.pi / 2), np.sin(k * np.pi / 2)
+        Rz = np.round(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]))
+        out.append(f"imu_to_body_rpy_deg = {rpy_text(Rz @ absolute, snapped)}")
+    return tuple(out)

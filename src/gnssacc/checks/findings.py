@@ -29,13 +29,19 @@ class Finding:
     repaired : str
         What the repair does, for the warning (e.g. "multiplied ax, ay, az by 9.80665").
     action : str
-        Filled in as the finding is settled: ``"repaired"``, ``"applied"`` (a measured ``"auto"``
-        mounting or offset), ``"refused"``, ``"not confirmed"`` or ``"noted"``.
+        Filled in as the finding is settled: ``"repaired"`` (units, layout), ``"applied"`` (a
+        measured mounting or offset), ``"refused"``, ``"refuted"`` or ``"not confirmed"`` (the
+        data were used as given), ``"noted"`` (one view alone: a warning), ``"kept"`` (an
+        ``"auto"`` mounting measured as the axes already are), ``"not scored"`` (a truth that
+        disagrees with the fixes) or ``"bound"`` (how large a clock offset could go unseen).
     details : dict
-        Numbers behind the verdict (JSON-friendly), for reports and tests.
-    repairable : bool
-        Whether ``[checks] repair = "auto"`` may apply the correction once confirmed (swapped or
-        sign-lost coordinates look alike: confirmed, they are refused, never repaired).
+        Numbers behind the verdict (JSON-friendly), for reports and tests; once settled,
+        ``verdict`` (:meth:`gnssacc.prepare.judge.Verdict.to_dict`) and ``evidence`` (its text).
+    alternatives : tuple of str
+        Other readings of the data that explain them as well as the proposal does (swapped and
+        sign-lost coordinates are mirror images alike; an IMU whose forward axis the motion never
+        showed): the estimator cannot tell them apart, so a proof is refused, naming them all,
+        never guessed.
     impossible : bool
         The data as given cannot be estimated at all (no fixes in the IMU's span, fix stamps no
         receiver writes): refused without asking the estimator.
@@ -49,7 +55,7 @@ class Finding:
     repaired: str = ""
     action: str = ""
     details: dict = field(default_factory=dict)
-    repairable: bool = True
+    alternatives: tuple = ()
     impossible: bool = False
 
     @property
@@ -63,6 +69,8 @@ class Finding:
             "where": self.where,
             "problem": self.problem,
             "fix": self.fix,
+            "correction": self.repaired,
             "action": self.action,
             "details": self.details,
+            **({"alternatives": list(self.alternatives)} if self.alternatives else {}),
         }

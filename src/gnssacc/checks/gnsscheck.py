@@ -230,7 +230,8 @@ def mirror_image(
 ) -> Finding | None:
     """The track mirrored against both IMU sensors (a proposal: latitude and longitude swapped back,
     which the estimator judges; swapped and sign-lost coordinates look alike, so a confirmed one is
-    refused, never repaired), or the IMU's sensors against each other (a note). ``lat``, ``lon``:
+    refused naming both, never guessed), or the IMU's sensors against each other (a note).
+    ``lat``, ``lon``:
     the fixes' [rad], for the log-Jacobian of swapping them (east is ``cos(lat)`` per degree)."""
     acc, gyr = _fit_side(fit), _slope_side(tf)
     if acc == -1 and gyr == -1:
@@ -254,7 +255,10 @@ def mirror_image(
                 "rho_mirror": fit.rho_mirror,
                 "log_jacobian_per_fix": jac,
             },
-            repairable=False,
+            alternatives=(
+                "a lost sign of the latitude (hemisphere)",
+                "a lost sign of the longitude",
+            ),
         )
     if acc * gyr == -1:
         return Finding(

@@ -16,36 +16,42 @@ each of these in the data themselves, in order:
 4. ``mounting``: the IMU axes against the body axes (:mod:`gnssacc.checks.mountcheck`), and the
    IMU's gyro and accelerometer against each other (handedness).
 5. ``init_position``: a given start near the fixes.
+6. ``truth``: once every proven correction is applied, the truth against the fixes
+   (:mod:`gnssacc.checks.truthcheck`, run by the preparation stage): a truth that disagrees is
+   reported and not scored.
 
 What happens with a finding (:func:`consider`)
     A check proposes; only the estimator proves. A finding with a correction (a ``repair``) is a
     *proposal*: :func:`check_run` stops at the first one and returns it, and the preparation stage
-    runs the EKF on the data as given and as corrected (:mod:`gnssacc.prepare.judge`). Only when
-    the corrected data are decisively more likely does it act: it applies the correction when the
-    configuration allows it (``[checks] repair = "auto"``, or the ``"auto"`` offset and mounting)
-    and otherwise refuses the data with the evidence both ways in one error line; when they are
-    not, it warns and the data are used as given (the proposal is not made again). A finding
-    without a correction is one view alone: a warning. Only data that cannot be estimated at all
-    (no fixes in the IMU's span, fix stamps no receiver writes) are refused outright.
+    runs the EKF on the data as given and as corrected (:mod:`gnssacc.prepare.judge`). A proven
+    correction is applied and stated (the run's header line, ``metrics.json``, the report), unless
+    the configuration asks for a refusal (``[checks] on_proof = "refuse"``, ``--strict``): then the
+    run stops with the evidence both ways in one error line. A correction the data cannot tell from
+    another (:attr:`~gnssacc.checks.findings.Finding.alternatives`) is refused either way, naming
+    both. A refuted or inconclusive proposal leaves the data as given and is recorded
+    (``metrics.json``, the report), not warned of; it is not made again. A finding without a
+    correction is one view alone: a warning. Only data that cannot be estimated at all (no fixes
+    in the IMU's span, fix stamps no receiver writes) are refused outright.
 
 Configuration
-    ``[checks] repair = "never"`` (default) or ``"auto"``: whether confirmed unit and layout
-    errors are repaired. ``[checks] skip = "name, name"``: checks to leave out (names above).
-    ``[mounting] imu_time_offset_s = "auto"`` and ``imu_to_body_rpy_deg = "auto"`` apply the
-    measured offset and mounting once confirmed; with numbers (the default 0 and [0, 0, 0]) a
-    confirmed contradiction is an error naming the line that fixes it. A plausible mounting
-    (within 20 deg of the configured one: road grade, sitting attitude) or offset (within 50 ms
-    or 3 sigma of it) is not even proposed.
+    ``[checks] on_proof = "apply"`` (default) or ``"refuse"``; ``[checks] repair = "auto"``
+    (default) or ``"never"`` (unit and layout repairs refused even when proven); ``[checks] skip =
+    "name, name"``: checks to leave out (names above). ``[mounting] imu_time_offset_s = "auto"``
+    and ``imu_to_body_rpy_deg = "auto"`` propose every measured offset and mounting (and apply a
+    proven one whatever ``on_proof`` says); with numbers (the default 0 and [0, 0, 0]) only a
+    contradiction is proposed: a plausible mounting (within 20 deg of the configured one: road
+    grade, sitting attitude) or offset (within 50 ms or 3 sigma of it) is not.
 
-Example messages::
+Example messages (with ``--strict``; by default the first is applied and stated)::
 
     gnssacc: error: run/imu.csv: the accelerometer reads 1.001 on average (median norm of the
       specific force), where local gravity is 9.795 m/s^2: the ax, ay, az columns are in g;
-      multiply them by 9.80665, or set [checks] repair = "auto" to let gnssacc do it; the
-      estimator confirms it: log-likelihood +48210 as corrected over 110 fixes (26300 per minute)
-    gnssacc: warning: run/imu.csv: the IMU time stamps run 45.000 s behind the GNSS clock (...),
-      but the estimator does not confirm it: log-likelihood -201 as corrected over 180 fixes
-      (-67 per minute); the data are used as given
+      multiply them by 9.80665; the estimator proves it: log-likelihood +48210 as corrected over
+      110 fixes (26300 per minute); refused as [checks] on_proof = "refuse" (--strict) asks
+    gnssacc: error: run/gnss.csv: the fixes' track is the mirror image of the motion the IMU
+      measured (...); the estimator proves the data as given wrong (...), but the data cannot tell
+      swapped latitude and longitude from a lost sign of the latitude (hemisphere) or a lost sign
+      of the longitude: not guessed; check the lat_deg and lon_deg columns
 """
 
 from __future__ import annotations
@@ -74,8 +80,10 @@ CHECKS = (
     "init_position",
     "time_offset",
     "mounting",
+    "truth",
 )
 REPAIR_MODES = ("never", "auto")
+ON_PROOF = ("apply", "refuse")
 
 
 @dataclass(frozen=True)
@@ -89,12 +97,29 @@ class Policy:
     skip : frozenset of str
     offset_auto, mount_auto : bool
         ``[mounting] imu_time_offset_s`` / ``imu_to_body_rpy_deg`` are ``"auto"``.
+    apply : bool
+        ``[checks] on_proof = "apply"``: a proven correction is applied (else refused).
     """
 
     repair: bool
     skip: frozenset
     offset_auto: bool
     mount_auto: bool
+    apply: bool = True
+
+    def allows(self, check: str) -> bool:
+        """Whether a proven correction of ``check`` may be applied (module notes)."""
+        if check == "time_offset":
+            return self.offset_auto or self.apply
+        if check == "mounting":
+            return self.mount_auto or self.apply
+        return self.apply and self.repair
+
+    def refusal_reason(self, check: str) -> str:
+        """Why :meth:`allows` says no, for the error line."""
+        if self.apply and check not in ("time_offset", "mounting"):
+            return '[checks] repair = "never" asks for it'
+        return '[checks] on_proof = "refuse" (--strict) asks for it'
 
     @classmethod
     def from_config(cls, cfg: RunConfig) -> "Policy":
@@ -103,6 +128,10 @@ class Policy:
         if c["repair"] not in REPAIR_MODES:
             raise InputError(
                 "config", f'[checks] repair must be "never" or "auto", got {c["repair"]!r}'
+            )
+        if c["on_proof"] not in ON_PROOF:
+            raise InputError(
+                "config", f'[checks] on_proof must be "apply" or "refuse", got {c["on_proof"]!r}'
             )
         if not isinstance(c["skip"], str):
             raise InputError(
@@ -122,6 +151,7 @@ class Policy:
             skip,
             m["imu_time_offset_s"] == "auto",
             m["imu_to_body_rpy_deg"] == "auto",
+            c["on_proof"] == "apply",
         )
 
 
@@ -186,21 +216,22 @@ def consider(finding: Finding | None, policy: Policy, findings: list, declined=f
 
 def settle_now(run: RecordedRun, finding: Finding | None, policy: Policy) -> RecordedRun:
     """For a source that cannot wait for the estimator (IMU stamps that never meet the fixes: as
-    given there is nothing to estimate): repair (with a warning) when the policy allows it, else
-    raise."""
+    given there is nothing to estimate, and one unit alone lines them up): repair, with a notice
+    of what was reconstructed, when the policy allows it, else raise."""
     if finding is None or finding.check in policy.skip:
         return run
-    if finding.repair is not None and policy.repair:
+    if finding.repair is not None and policy.allows(finding.check):
         warn_data(
-            finding.where, f'{finding.problem}; {finding.repaired} ([checks] repair = "auto")'
+            finding.where,
+            f"{finding.problem}; {finding.repaired} (as given the IMU never meets the fixes)",
         )
         return finding.repair(run)
-    hint = (
-        ', or set [checks] repair = "auto" to let gnssacc do it'
+    why = (
+        f"; not repaired as {policy.refusal_reason(finding.check)}"
         if finding.repair is not None
         else ""
     )
-    raise InputError(finding.where, f"{finding.problem}; {finding.fix}{hint}")
+    raise InputError(finding.where, f"{finding.problem}; {finding.fix}{why}")
 
 
 def fix_imu_time_units(imu: ImuData, t_gnss: np.ndarray, where: str, cfg: RunConfig) -> ImuData:
@@ -285,7 +316,7 @@ def _motion_steps(run, cfg, policy, findings, declined, imu_w, gnss_w) -> RunCon
                         "mounting",
                         imu_w,
                         text,
-                        action="applied",
+                        action="kept",  # measured: the axes as they are
                         details={"rpy_deg": [0.0, 0.0, 0.0]},
                     )
                 )

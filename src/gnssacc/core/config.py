@@ -47,28 +47,38 @@ DEFAULTS: dict[str, dict] = {
     "mounting": {
         # Rotation from IMU axes to body (FRD) axes as roll, pitch, yaw [deg]:
         # f_body = R(roll, pitch, yaw) @ f_imu. An upside-down IMU is [180, 0, 0]. "auto": measured
-        # from the recording (gravity gives roll/pitch, turns give yaw; gnssacc.checks.mountcheck) and
-        # applied with a warning. With numbers, a recording that shows a clearly different
-        # mounting (upside down, sideways, turned by 90 deg or more than 30 deg) is an error that
-        # names the line to write.
+        # from the recording (gravity gives roll/pitch, turns give yaw; gnssacc.checks.mountcheck)
+        # and applied once the estimator proves it. With numbers, a recording that shows a clearly
+        # different mounting (upside down, sideways, turned by 90 deg or more than 30 deg) is
+        # proposed to the estimator, and a proven one is applied (or, with [checks] on_proof =
+        # "refuse", an error naming the line to write).
         "imu_to_body_rpy_deg": [0.0, 0.0, 0.0],
         # Added to every IMU time stamp to put it on the GNSS clock [s]. A logger that stamps IMU
         # samples 0.1 s late needs -0.1; IMU stamps on UTC beside fixes on GPS time need +18.
-        # "auto": measured from the recording (gnssacc.checks.timeoffset, up to +-60 s) and applied with
-        # a warning. With a number, a measured offset many sigma and more than 50 ms away from it
-        # is an error that names the measured value.
+        # "auto": measured from the recording (gnssacc.checks.timeoffset, up to +-60 s) and applied
+        # once the estimator proves it. With a number, a measured offset many sigma and more than
+        # 50 ms away from it is proposed to the estimator, and a proven one is applied (or, with
+        # [checks] on_proof = "refuse", an error naming the measured value). Every stream on the
+        # IMU's clock moves with it (a CSV run's odometry and truth: docs/formats.md).
         "imu_time_offset_s": 0.0,
     },
     "checks": {
         # Plausibility checks of the input before estimation (gnssacc.checks.plausibility): units, clocks,
-        # coordinates and mounting checked against the data themselves. What a check does when the
-        # data contradict their stated units or layout (accelerometer in g, gyro in deg/s, IMU
-        # stamps in ms/us/ns, latitude/longitude in radians): "never" stops with an error naming
-        # the likely cause and the fix; "auto" repairs the input where the evidence is unambiguous
-        # and says what it assumed in a warning.
-        "repair": "never",
+        # coordinates and mounting checked against the data themselves; what they propose, the
+        # estimator proves or refutes (gnssacc.prepare.judge). What to do with a proven correction
+        # (a clock offset, a mounting, a unit): "apply" uses it and states it on the run's header
+        # line, in metrics.json and in the report, with the evidence; "refuse" stops with an error
+        # naming the setting that makes the data right, with the evidence (also: --strict).
+        # Corrections the data cannot tell from another (swapped or sign-lost coordinates) are
+        # refused either way, naming both.
+        "on_proof": "apply",
+        # Unit and layout repairs (accelerometer in g, gyro in deg/s, IMU stamps in ms/us/ns,
+        # latitude/longitude in radians) under on_proof = "apply": "auto" lets them be applied,
+        # "never" refuses them as on_proof = "refuse" does.
+        "repair": "auto",
         # Checks to leave out, comma-separated, for a recording that really is unusual: time_units,
-        # fix_count, heights, accel_units, gyro_units, latlon, init_position, time_offset, mounting.
+        # fix_count, heights, accel_units, gyro_units, latlon, init_position, time_offset, mounting,
+        # truth (the truth against the fixes: one that disagrees is not scored).
         "skip": "",
     },
     "gnss": {

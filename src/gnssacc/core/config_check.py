@@ -5,7 +5,8 @@ number, a string, a table, or a vector: a number or a list of three, or ``[]`` w
 is ``[]``), unless :data:`KINDS` says otherwise. Numbers must be finite; :data:`BOUNDS` gives
 the range of each numeric key (every axis of a vector key) and :data:`CHOICES` the values of a
 key that takes one of a few. Zero is allowed only where it means "off" and the code handles it
-(e.g. a bias random walk of zero, a gate of zero = never).
+(e.g. a bias random walk of zero, a known bias of zero sigma, a gate of zero = never); a white
+noise density or a sigma the estimator divides by must be positive (:data:`WHY`).
 """
 
 from __future__ import annotations
@@ -64,11 +65,13 @@ def _all(section: str, keys: str, bound: Bound) -> dict:
 
 #: Range of each numeric key (all axes of a vector key). Keys not listed: any finite number.
 BOUNDS: dict[tuple[str, str], Bound] = {
-    # Densities, instabilities and start-up sigmas: 0 switches the noise off or states a known
+    # White-noise densities must be positive: a real sensor has noise, and a density of 0 tells
+    # the estimators to trust the IMU exactly (they then drift tens of metres and every figure
+    # reads inconsistent). Instabilities and start-up sigmas may be 0: no bias walk, a known
     # (calibrated) bias; the smoother floors them far below any real IMU where GTSAM needs a
     # non-singular covariance. The correlation time must be positive. The upper ends are far
     # beyond any real sensor; they only keep squares and products finite.
-    **_all("imu", "gyro_arw_deg_rth accel_vrw_mps_rth", Bound(0.0, 1e3)),
+    **_all("imu", "gyro_arw_deg_rth accel_vrw_mps_rth", Bound(0.0, 1e3, lo_open=True)),
     **_all("imu", "gyro_bias_instability_deg_h accel_bias_instability_mg", Bound(0.0, 1e6)),
     **_all("imu", "gyro_bias_sigma0_deg_h accel_bias_sigma0_mg", Bound(0.0, 1e6)),
     ("imu", "bias_correlation_time_s"): Bound(0.0, 1e9, lo_open=True),
@@ -129,6 +132,19 @@ BOUNDS: dict[tuple[str, str], Bound] = {
     ("data", "max_bad_fraction"): Bound(0.0, 1.0),
 }
 
+#: Why a key must be positive, for the error line (a key not listed: its range says enough).
+WHY = {
+    **dict.fromkeys(
+        (("imu", "gyro_arw_deg_rth"), ("imu", "accel_vrw_mps_rth")),
+        "a white-noise density of 0 tells the estimators the IMU has no noise; write the "
+        "sensor's datasheet value, or leave the key out and let --tune auto identify it",
+    ),
+    **dict.fromkeys(
+        (("gnss", "default_sigma_m"), ("gnss", "sigma_scale")),
+        "a fix sigma of 0 tells the estimators a fix is exact",
+    ),
+}
+
 #: Keys that take one of a few values (strings are compared case-insensitively where the code does).
 CHOICES: dict[tuple[str, str], tuple] = {
     ("ekf", "phi_order"): (1, 2),
@@ -137,6 +153,7 @@ CHOICES: dict[tuple[str, str], tuple] = {
     ("tune", "mode"): ("auto", "none"),
     ("tune", "likelihood"): ("position", "position+accel"),
     ("checks", "repair"): ("never", "auto"),
+    ("checks", "on_proof"): ("apply", "refuse"),
 }
 #: Choices compared in upper case (the code upper-cases the value).
 UPPER_CASE = {("smoother", "factorization")}
@@ -225,7 +242,10 @@ def check_value(section: str, key: str, value, default) -> str | None:
     problem = _problem(kind, value, bound, choices)
     if problem is None:
         return mappings_problem(value) if (section, key) == ("bag", "fix_mappings") else None
-    return f"[{section}] {key}: {problem} (expected {expectation(kind, bound, choices)})"
+    why = WHY.get((section, key))
+    return f"[{section}] {key}: {problem} (expected {expectation(kind, bound, choices)})" + (
+        f": {why}" if why else ""
+    )
 
 
 def quality_map_problem(value, drop_allowed: bool) -> str | None:

@@ -31,5 +31,9 @@ class DataWarning(UserWarning):
 
 
 def warn_data(where: str, problem: str) -> None:
-    """Emit a :class:`DataWarning` naming the file and the repair that was made."""
-    warnings.warn(f"{where}: {problem}", DataWarning, stacklevel=2)
+    """Emit a :class:`DataWarning` naming the file and the repair that was made.
+
+    One line wherever it is shown: attributed to ``gnssacc`` at line 0, so Python's default
+    display prints no source line of gnssacc's own code under it (``gnssacc:0: DataWarning:
+    <where>: <problem>``), and each run shows its own warnings (no registry of those seen)."""
+    warnings.warn_explicit(f"{where}: {problem}", DataWarning, "gnssacc", 0, module="gnssacc")

@@ -337,6 +337,9 @@ class RecordedRun:
         A simulated run's IMU truths (true biases, scenario segments).
     odometry : WheelOdometry or None
         Wheel odometry, on the IMU's clock (shifted with it), when the source has it.
+    truth_on_imu_clock : bool
+        Whether the truth is stamped on the IMU's clock (a CSV run directory's ``truth.csv``,
+        logged beside ``imu.csv``) and so shifted with it; else it is on the fixes' clock.
     meta : dict
         Small facts about the source (noise profile, seed, bag topics, ...): those of
         :data:`gnssacc.outputs.report.RUN_FIELDS` are written to ``metrics.json``.
@@ -353,6 +356,7 @@ class RecordedRun:
     sim: SimTruth | None = None
     meta: dict = field(default_factory=dict)
     odometry: WheelOdometry | None = None
+    truth_on_imu_clock: bool = False
 
     @property
     def t_start(self) -> float:
@@ -420,11 +424,17 @@ class RecordedRun:
         return self
 
     def with_imu_shift(self, delta_s: float) -> "RecordedRun":
-        """A copy with ``delta_s`` [s] added to the IMU time stamps and to the wheel odometry's,
-        which share the IMU's clock."""
+        """A copy with ``delta_s`` [s] added to the time stamps of every stream on the IMU's clock:
+        the IMU's, the wheel odometry's, and the truth's when :attr:`truth_on_imu_clock` (the
+        fixes keep theirs)."""
         imu = self.imu
         odo = None if self.odometry is None else self.odometry.shifted(delta_s)
-        return replace(self, imu=ImuData(imu.t + delta_s, imu.f_b, imu.omega_ib_b), odometry=odo)
+        truth = self.truth
+        if truth is not None and self.truth_on_imu_clock:
+            truth = replace(truth, t=truth.t + delta_s)
+        return replace(
+            self, imu=ImuData(imu.t + delta_s, imu.f_b, imu.omega_ib_b), odometry=odo, truth=truth
+        )
 
     def with_mounting(self, R_bi: np.ndarray) -> "RecordedRun":
         """A copy with the body axes turned by ``R_bi`` (``x_b = R_bi x``, from the axes the run

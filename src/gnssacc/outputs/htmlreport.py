@@ -299,6 +299,40 @@ def statistics_html(metrics: dict) -> str:
     )
 
 
+def input_checks_html(metrics: dict) -> str:
+    """The input checks' proposals and the estimator's verdicts: the corrections applied, those
+    tested and left (the data used as given), a truth set aside, and how well the clock is told."""
+    c = metrics.get("input_corrections")
+    if not c:
+        return ""
+
+    def rows(entries: list) -> str:
+        return "".join(
+            f"<tr><td>{html.escape(e['check'])}</td><td>{html.escape(e['proposal'])}</td>"
+            f"<td>{html.escape(e['correction'])}</td><td>{html.escape(e['verdict'])}</td>"
+            f"<td>{html.escape(e['evidence'])}</td></tr>"
+            for e in entries
+        )
+
+    head = (
+        "<tr><th>check</th><th>what the data show</th><th>correction</th><th>verdict</th>"
+        "<th>the estimator's evidence</th></tr>"
+    )
+    entries = c["applied"] + c["not_applied"]
+    out = (
+        f"<p>Policy: a correction the estimator proves is "
+        f"{'applied' if c['on_proof'] == 'apply' else 'refused'} "
+        f'(<code>[checks] on_proof = "{html.escape(c["on_proof"])}"</code>); refuted and '
+        f"undecided proposals leave the data as given.</p>"
+    )
+    out += f"<table>{head}{rows(entries)}</table>" if entries else "<p>Nothing was proposed.</p>"
+    if c.get("truth_not_scored"):
+        out += f"<p>Truth not scored: {html.escape(c['truth_not_scored'])}</p>"
+    if c.get("clock"):
+        out += f"<p>Clock: {html.escape(c['clock']['text'])}</p>"
+    return out
+
+
 def _quality_html(metrics: dict, run: RecordedRun) -> str:
     spans = metrics.get("quality", {}).get("spans", [])
     rows = "".join(
@@ -351,6 +385,7 @@ def write_html_report(
         ("Statistics", lambda: statistics_html(metrics)),
         ("Consistency", lambda: consistency_html(metrics)),
         ("Noise identification", lambda: tuning_html(metrics)),
+        ("Input checks: what was proposed and proven", lambda: input_checks_html(metrics)),
         ("Initialisation", lambda: _init_html(metrics)),
         ("IMU data quality", lambda: _quality_html(metrics, run)),
     ]

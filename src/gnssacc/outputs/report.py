@@ -313,8 +313,19 @@ def format_table(metrics: dict) -> str:
     # A failed row is not cut into columns: its reason runs on after the method id.
     failed_rows = [f"{mid.ljust(first)}  failed: {reason}" for mid, reason in failed.items()]
     return "\n".join(
-        _window_lines(metrics) + lines + failed_rows + _start_lines(metrics) + _legend(metrics)
+        _window_lines(metrics)
+        + lines
+        + failed_rows
+        + _start_lines(metrics)
+        + _truth_lines(metrics)
+        + _legend(metrics)
     )
+
+
+def _truth_lines(metrics: dict) -> list[str]:
+    """Why a recording's truth is not scored, when the input checks set it aside."""
+    why = (metrics.get("input_corrections") or {}).get("truth_not_scored")
+    return [f"truth not scored: {why}"] if why else []
 
 
 def _start_lines(metrics: dict) -> list[str]:
@@ -398,6 +409,76 @@ def group_warnings(items: list[tuple[str, str]]) -> list[tuple[str, str]]:
         text = "".join(p + (next(slots) if i < len(parts) - 1 else "") for i, p in enumerate(parts))
         out.append((", ".join(dict.fromkeys(m for m, _ in members)), text))
     return out
+
+
+#: Actions of an input-check finding (:class:`gnssacc.checks.findings.Finding`) that changed
+#: the run.
+APPLIED = ("applied", "repaired")
+#: ... and those that left the data as given after the estimator's verdict.
+NOT_APPLIED = ("refuted", "not confirmed")
+
+
+def _gain_text(finding: dict) -> str:
+    """The estimator's evidence in a few words, e.g. "log-likelihood +18606 over 963 fixes"."""
+    v = (finding.get("details") or {}).get("verdict") or {}
+    gain = v.get("loglik_gain")
+    if isinstance(gain, str) or gain is None:  # "inf": as given nothing could be estimated
+        return "the data as given cannot be estimated"
+    return f"log-likelihood {gain:+.0f} over {v.get('n_fixes', 0)} fixes"
+
+
+def applied_corrections(checks: list[dict]) -> list[str]:
+    """One short text per correction the input checks applied (``metrics.json``'s ``input_checks``
+    entries), with the estimator's evidence."""
+    return [
+        f"{c.get('correction') or c['check']} ({_gain_text(c)})"
+        for c in checks
+        if c.get("action") in APPLIED
+    ]
+
+
+def header_line(header: str | None, checks: list[dict]) -> str | None:
+    """The run's header line (``header``: what the run is) with the corrections the estimator
+    proved and the input checks applied; ``None`` when there is neither."""
+    applied = applied_corrections(checks)
+    tail = "corrected, as the estimator proves: " + "; ".join(applied) if applied else ""
+    if header is None:
+        return tail or None
+    return f"{header}; {tail}" if tail else header
+
+
+def corrections_summary(checks: list[dict], on_proof: str) -> dict:
+    """``metrics.json``'s ``input_corrections``: the policy, the corrections applied and the
+    proposals tested and left (refuted, or not decided), each with its evidence."""
+
+    def entry(c: dict) -> dict:
+        d = c.get("details") or {}
+        return {
+            "check": c["check"],
+            "proposal": c["problem"],
+            "correction": c.get("correction", ""),
+            "verdict": c["action"],
+            "evidence": d.get("evidence", ""),
+        }
+
+    return {
+        "on_proof": on_proof,
+        "applied": [entry(c) for c in checks if c.get("action") in APPLIED],
+        "not_applied": [entry(c) for c in checks if c.get("action") in NOT_APPLIED],
+        "truth_not_scored": next(
+            (c["problem"] for c in checks if c.get("action") == "not scored"), None
+        ),
+        "clock": next(
+            ({"text": c["problem"], **c["details"]} for c in checks if c.get("action") == "bound"),
+            None,
+        ),
+    }
+
+
+def clock_line(checks: list[dict]) -> str | None:
+    """What the run says about its IMU-to-GNSS clock offset (how large one could go unseen)."""
+    bound = next((c for c in checks if c.get("action") == "bound"), None)
+    return f"clock: {bound['problem']}" if bound else None
 
 
 def quality_line(quality: dict) -> str:

@@ -15,6 +15,20 @@ is jagged on a smaller scale).
 
 What is attainable depends on the fixes. Measured on a simulated 120 s car run (consumer IMU):
 1 Hz fixes with 5 cm white noise give a 1-sigma of ~4 ms, 0.5 m white ~17 ms, 3 m white ~70 ms.
+
+Known clock relations: stamps on an absolute clock (UNIX or GPS seconds) beside fixes on another
+differ by the GPS - UTC leap seconds of their date exactly (an IMU logged in GPS time on the UNIX
+epoch beside an RTKLIB ``.pos`` in GPST). Which of the two models the fixes support, the exact
+relation or a free offset (one parameter more), is a choice between nested models: the free one
+is taken only when its log-likelihood beats the relation's by more than the Bayesian information
+criterion's penalty for one parameter, ``ln(n) / 2`` over ``n`` scored fixes (2.3 for 100
+fixes, 3.1 for 500), else the exact relation (:func:`known_offsets`): with 3 m fixes the free
+estimate is tens of milliseconds off (18.107 +- 0.053 s on a 2-minute car run), which a truth on
+the IMU's clock would carry too.
+
+How large an offset could go unseen (:func:`unseen_offset`): the likelihood's 1-sigma at the
+stamps as given, from its curvature, times the number of sigmas a decisive verdict needs
+(``sqrt(2 x needed gain)``): a smaller offset is never proven, whatever the checks propose.
 """
 
 from __future__ import annotations
@@ -28,8 +42,9 @@ from ..checks.timeoffset import OffsetEstimate, shifted
 from ..core.config import RunConfig
 from ..core.recording import InitialState, RecordedRun
 from ..core.states import ATT, BA, BG, POS, VEL
+from ..sources.gnss_time import ABSOLUTE_CLOCK_MIN_S, gps_seconds_to_unix, leap_seconds_at_unix
 from .filter_pass import FilterPass
-from .judge import BURN_IN_S, Innovations, Verdict, compare, innovations
+from .judge import BURN_IN_S, LR_MIN, RATE_MIN, Innovations, Verdict, compare, innovations
 from .start import StartPieces, start_pieces
 from .tuning import ungated, without_aids
 
@@ -46,6 +61,22 @@ BRACKET_MIN_S, BRACKET_MAX_S = 0.5, 2.0
 #: velocity made for the wrong IMU samples, which pulls the likelihood's maximum toward 0 (by 0.1 s
 #: for a 1 s offset with 5 cm fixes); within half a second it does not.
 LARGE_SHIFT_S = 0.5
+
+
+def known_drop(n_fixes: int) -> float:
+    """How much better than a known clock relation a free offset must explain ``n_fixes`` fixes
+    to be taken instead (module notes: the information criterion's ``ln(n) / 2``)."""
+    return 0.5 * float(np.log(max(n_fixes, 2)))
+
+
+def known_offsets(run: RecordedRun) -> tuple[float, ...]:
+    """The clock relations the run's stamps are known to be able to have [s]: +-(GPS - UTC) at
+    their date when they are absolute seconds (read as UNIX and as GPS seconds), else none."""
+    t0 = float(run.t_start)
+    if t0 < ABSOLUTE_CLOCK_MIN_S:
+        return ()
+    leaps = {float(leap_seconds_at_unix(t0)), float(leap_seconds_at_unix(gps_seconds_to_unix(t0)))}
+    return tuple(sorted({s * v for v in leaps if v > 0 for s in (1.0, -1.0)}))
 
 
 def state_at(
@@ -175,7 +206,8 @@ def evaluate_offset(
         ref, cfg, pieces, start, filter_pass, t_start + BURN_IN_S, ref.t_end - max(-lo, 0.0) - 0.05
     )
     res = minimize_scalar(shifts.cost, bounds=(lo, hi), method="bounded", options={"xatol": 0.002})
-    d, f0 = float(res.x), float(res.fun)
+    d_free, f0 = float(res.x), float(res.fun)
+    d, how = _known(shifts, known_offsets(run), centre, d_free, f0, (lo, hi))
     total = centre + d
     if far:  # the stamps as given, from their own start
         verdict = compare(
@@ -186,6 +218,56 @@ def evaluate_offset(
         )
     else:
         verdict = compare(shifts.at(0.0), shifts.at(d), t_from=shifts.t_from, t_to=shifts.t_to)
-    sigma = _sigma(shifts, d, f0, hw) if np.isfinite(f0) else None
-    est = None if sigma is None else OffsetEstimate(total, sigma, True, method="EKF likelihood")
+    sigma = _sigma(shifts, d_free, f0, hw) if np.isfinite(f0) else None
+    est = None if sigma is None else OffsetEstimate(total, sigma, True, method=how)
     return verdict, shifted(run, total), est
+
+
+def _known(shifts: _Shifts, known, centre: float, d: float, f0: float, bounds) -> tuple:
+    """``(d, method)``: the known relation (:func:`known_offsets`) the free best ``d`` cannot be
+    told from, relative to ``centre``, or ``d`` itself."""
+    near = [k - centre for k in known if bounds[0] <= k - centre <= bounds[1]]
+    costs = [(shifts.cost(k), k) for k in near]
+    cost, k = min(costs, default=(np.inf, d))
+    if cost - f0 <= known_drop(shifts.n_scored):
+        return k, f"EKF likelihood; the GPS - UTC leap seconds, {cost - f0:.1f} below the free best"
+    return d, "EKF likelihood"
+
+
+#: The largest shift the curvature at the stamps as given is measured over [s] (beyond it the
+#: offset is taken as unobservable: the motion cannot show it).
+UNSEEN_MAX_STEP_S = 1.0
+#: ... and the first one tried [s] (about the 1-sigma of 3 m fixes on a car).
+UNSEEN_FIRST_STEP_S = 0.1
+
+
+def offset_sigma(
+    run: RecordedRun, cfg: RunConfig, pieces: StartPieces, filter_pass: FilterPass
+) -> tuple[float, float]:
+    """The 1-sigma of a clock offset at the stamps as given [s] (the log-likelihood's curvature
+    over a step that lowers it by :data:`CURVATURE_DROP`, at most :data:`UNSEEN_MAX_STEP_S`; ``inf``
+    when even that step does not) and the minutes of fixes scored. A few EKF passes."""
+    hw = UNSEEN_MAX_STEP_S
+    t_start = max(float(pieces.init.t), run.t_start + hw + 0.05)
+    start = state_at(run, cfg, pieces, t_start, filter_pass)
+    t_to = run.t_end - hw - 0.05
+    shifts = _Shifts(run, cfg, pieces, start, filter_pass, t_start + BURN_IN_S, t_to)
+    g = run.gnss.t[(run.gnss.t >= t_start + BURN_IN_S) & (run.gnss.t <= t_to)]
+    minutes = float(g[-1] - g[0]) / 60.0 if len(g) > 1 else 0.0
+    f0, h, drop = shifts.cost(0.0), UNSEEN_FIRST_STEP_S, 0.0
+    for _ in range(4):
+        drop = 0.5 * (shifts.cost(h) + shifts.cost(-h)) - f0
+        if not np.isfinite(drop) or drop >= CURVATURE_DROP or h >= hw:
+            break
+        h = min(hw, h * float(np.sqrt(1.25 * CURVATURE_DROP / max(drop, 0.02))))
+    if not (np.isfinite(drop) and drop >= CURVATURE_DROP):
+        return float("inf"), minutes
+    return h / float(np.sqrt(2.0 * drop)), minutes
+
+
+def unseen_offset(sigma_s: float, minutes: float) -> float:
+    """The largest clock offset no verdict would prove with the likelihood's 1-sigma ``sigma_s``
+    over ``minutes`` of fixes [s]: the shift whose expected log-likelihood gain,
+    ``(d / sigma)^2 / 2``, reaches the decisive gain."""
+    needed = max(LR_MIN, RATE_MIN * minutes)
+    return float(np.sqrt(2.0 * needed) * sigma_s)

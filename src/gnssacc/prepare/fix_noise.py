@@ -26,6 +26,9 @@ from ..core.recording import RecordedRun
 MIN_SIGMA_M = 0.01
 #: Fewest fixes to measure the scatter from.
 MIN_FIXES = 20
+#: ``run.meta["fix_sigmas"]`` of a run whose fix sigmas were measured here (what the recording
+#: did not state: :mod:`gnssacc.checks.truthcheck` judges its truth by the configured default).
+FROM_SCATTER = "the fixes' scatter"
 
 
 def with_measured_sigmas(run: RecordedRun) -> tuple[RecordedRun, Finding | None]:
@@ -50,4 +53,5 @@ def with_measured_sigmas(run: RecordedRun) -> tuple[RecordedRun, Finding | None]
         details={"sigma_h_m": s_h, "sigma_v_m": s_v},
     )
     warn_data(note.where, note.problem)
-    return run.with_gnss(replace(g, sigma_ned=sigma, sigma_stated=True)), note
+    measured = replace(g, sigma_ned=sigma, sigma_stated=True)
+    return run.with_gnss(measured, fix_sigmas=FROM_SCATTER), note

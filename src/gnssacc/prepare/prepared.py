@@ -6,7 +6,8 @@
 (:mod:`gnssacc.prepare.fix_noise`);
    then the input checks (:mod:`gnssacc.checks.plausibility`): units, clocks, coordinates and
    mounting checked against the data themselves, their proposals settled by the estimator
-   (:mod:`gnssacc.prepare.settle`), so every later step and estimator sees the corrected run;
+   (:mod:`gnssacc.prepare.settle`), so every later step and estimator sees the corrected run,
+   and how large a clock offset could go unseen (:func:`gnssacc.prepare.settle.clock_bound`);
 1. the IMU data-quality check (:mod:`gnssacc.checks.quality`);
 2. stationary detection from windowed IMU statistics and GNSS agreement
    (:mod:`gnssacc.prepare.stationary`), and the noise the IMU shows at rest;
@@ -27,6 +28,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from typing import Callable
 
 import numpy as np
 
@@ -37,7 +39,7 @@ from ..core.recording import InitialState, RecordedRun
 from ..estimators.settings import GnssModel
 from .filter_pass import FilterPass
 from .fix_noise import with_measured_sigmas
-from .settle import settled
+from .settle import clock_bound, settled
 from .start import start_of, start_pieces
 from .stationary import StationaryNoise, StationaryReport, noise_from_stationary
 from .tuning import TuneResult, tune
@@ -131,6 +133,7 @@ def prepare(
     *,
     filter_pass: FilterPass,
     gauss_markov: bool = False,
+    on_checked: Callable[[list], None] | None = None,
 ) -> Prepared:
     """Checks, quality, stationary spans, start state and (``tune_mode="auto"``) noise, in that
     order.
@@ -147,6 +150,9 @@ def prepare(
         (:func:`gnssacc.prepare.passes.filter_pass`).
     gauss_markov : bool
         Also set up the ``-gm`` methods' Gauss-Markov model (:attr:`Prepared.gauss_markov`).
+    on_checked : callable, optional
+        Told the input checks' findings as soon as they are settled (before the start and the
+        tuning), so that a caller can state the corrections at once.
     """
     tune_mode = tune_mode or cfg["tune"]["mode"]
     secs = {}
@@ -154,10 +160,14 @@ def prepare(
     run, sigma_note = with_measured_sigmas(run)  # before any decision uses the fixes' noise
     run, cfg, checks, pieces = settled(run, cfg, filter_pass)
     checks = ([sigma_note] if sigma_note else []) + checks
+    if on_checked is not None:
+        on_checked(checks)
     release_free_memory()  # the checks' temporaries, before the next stage's
     secs["input_checks_s"] = time.perf_counter() - t
     t = time.perf_counter()
     pieces = pieces or start_pieces(run, cfg, filter_pass)  # made once: by a verdict, or here
+    bound = clock_bound(run, cfg, checks, pieces, filter_pass)
+    checks += [bound] if bound is not None else []
     quality, stationary, init, bank = pieces.quality, pieces.stationary, pieces.init, pieces.bank
     release_free_memory()  # before the estimators build on the heap
     secs["start_s"] = time.perf_counter() - t

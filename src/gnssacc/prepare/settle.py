@@ -2,24 +2,30 @@
 :mod:`gnssacc.prepare.judge` proves).
 
 :func:`settled` runs the checks up to their first proposal, asks the estimator for its verdict on
-it, and acts on the verdict: a decisive one applies the correction when the configuration allows
-it and otherwise refuses the data, with the evidence both ways; an inconclusive one is a
-warning, and the data are used as given; a refuted one (the data as given are as likely or
-more) is only recorded (``metrics.json``). The proposal is not made again. Then the checks run
-again on the run as it now is, until nothing more is proposed. A recording with nothing to propose
-costs no EKF pass here, and the start made for a verdict (quality, stationary spans, yaw bank) is
-handed on, so the preparation makes none of them twice.
+it, and acts on the verdict: a decisive one applies the correction (recorded with its evidence:
+the caller states it) unless the configuration asks for a refusal (``[checks] on_proof =
+"refuse"``) or the data cannot tell the correction from another
+(:attr:`~gnssacc.checks.findings.Finding.alternatives`): then it refuses the data, with the
+evidence both ways; a refuted or inconclusive one leaves the data as given and is only recorded
+(``metrics.json``, the report), never warned of. The proposal is not made again. Then the checks
+run again on the run as it now is, until nothing more is proposed; last, the truth is checked
+against the fixes as the corrections left both (:func:`gnssacc.checks.truthcheck.checked_truth`).
+A recording with nothing to propose costs no EKF pass here, and the start made for a verdict
+(quality, stationary spans, yaw bank) is handed on, so the preparation makes none of them twice.
 """
 
 from __future__ import annotations
 
+import numpy as np
+
 from ..checks.corrections import offset_problem
 from ..checks.findings import Finding
-from ..checks.plausibility import CHECKS, Policy, check_run
+from ..checks.plausibility import CHECKS, Policy, check_run, file_names
+from ..checks.truthcheck import checked_truth
 from ..core.config import RunConfig
 from ..core.errors import InputError, warn_data
 from ..core.recording import RecordedRun
-from .clock import evaluate_offset
+from .clock import evaluate_offset, offset_sigma, unseen_offset
 from .filter_pass import FilterPass
 from .judge import MIN_FIXES, Verdict, compare, innovations, judge
 from .start import StartPieces, start_pieces
@@ -66,6 +72,8 @@ def _evaluate(
         d["offset_s"] = (
             d.get("measured_s", d["stage1_s"]) if verdict.decisive else 0.0
         )  # what is applied
+        total = d["configured_s"] + d.get("measured_s", d["stage1_s"])
+        finding.repaired = f"imu_time_offset_s = {total:.3f} (the IMU and the streams on its clock)"
         return verdict, corrected, None
     corrected = finding.repair(run)
     pieces = start_pieces(corrected, cfg, filter_pass)
@@ -85,22 +93,12 @@ def _evaluate(
     )
 
 
-def _allowed(finding: Finding, policy: Policy) -> bool:
-    """Whether the configuration lets a confirmed correction be applied."""
-    if finding.check == "time_offset":
-        return policy.offset_auto
-    if finding.check == "mounting":
-        return policy.mount_auto
-    return policy.repair and finding.repairable
-
-
 def _applied_cfg(cfg: RunConfig, finding: Finding) -> RunConfig:
     """The configuration after an applied offset or mounting (the values now in effect)."""
     if finding.check == "time_offset":
         value = finding.details.get("measured_s", finding.details["stage1_s"])
-        return cfg.with_values(
-            {"mounting": {"imu_time_offset_s": round(float(value), 4)}}, "input checks"
-        )
+        total = float(finding.details.get("configured_s", 0.0)) + float(value)
+        return cfg.with_values({"mounting": {"imu_time_offset_s": round(total, 4)}}, "input checks")
     if finding.check == "mounting":
         return cfg.with_values(
             {"mounting": {"imu_to_body_rpy_deg": finding.details["rpy_deg"]}}, "input checks"
@@ -108,15 +106,20 @@ def _applied_cfg(cfg: RunConfig, finding: Finding) -> RunConfig:
     return cfg
 
 
-def _refuse(finding: Finding, verdict: Verdict) -> InputError:
-    hint = (
-        ', or set [checks] repair = "auto" to let gnssacc do it'
-        if finding.repairable and finding.check not in ("time_offset", "mounting")
-        else ""
-    )
+def _refuse(finding: Finding, verdict: Verdict, policy: Policy) -> InputError:
+    """The refusal of a proven correction: ambiguous, or the configuration asks for it."""
+    if finding.alternatives:
+        others = " or ".join(finding.alternatives)
+        return InputError(
+            finding.where,
+            f"{finding.problem}; the estimator proves the data as given wrong ({verdict.text()}), "
+            f"but the data cannot tell {finding.repaired} from {others}: not guessed; "
+            f"{finding.fix}",
+        )
     return InputError(
         finding.where,
-        f"{finding.problem}; {finding.fix}{hint}; the estimator confirms it: {verdict.text()}",
+        f"{finding.problem}; {finding.fix}; the estimator proves it: {verdict.text()}; refused as "
+        f"{policy.refusal_reason(finding.check)}",
     )
 
 
@@ -131,6 +134,22 @@ def _note_once(findings: list, seen: set, new: list) -> None:
             findings.append(f)
 
 
+def _settle(f: Finding, verdict: Verdict, policy: Policy) -> bool:
+    """Record the verdict on ``f`` and say whether to apply it; raise a refusal (module notes)."""
+    f.details["verdict"] = verdict.to_dict()
+    f.details["evidence"] = verdict.text()
+    if verdict.decisive and (f.alternatives or not policy.allows(f.check)):
+        f.action = "refused"
+        raise _refuse(f, verdict, policy)
+    if verdict.decisive:
+        f.action = "applied" if f.check in ("time_offset", "mounting") else "repaired"
+        return True
+    # The stamps, units or axes as given are as likely or more (refuted), or the evidence does not
+    # decide: the data are used as given, and the verdict is recorded, not warned of.
+    f.action = "refuted" if verdict.refuted else "not confirmed"
+    return False
+
+
 def settled(
     run: RecordedRun, cfg: RunConfig, filter_pass: FilterPass
 ) -> tuple[RecordedRun, RunConfig, list, StartPieces | None]:
@@ -139,17 +158,18 @@ def settled(
     Returns
     -------
     run, cfg
-        As corrected by confirmed corrections the configuration allows.
+        As corrected by the proven corrections (and without a truth that disagrees with the fixes).
     findings : list of Finding
-        Everything the checks said and did, with the estimator's verdicts (``details["verdict"]``).
+        Everything the checks said and did, with the estimator's verdicts (``details["verdict"]``,
+        ``details["evidence"]``), and the truth's check when it failed.
     start : StartPieces or None
         The start of the final run, when a verdict needed it (else the caller makes it).
 
     Raises
     ------
     InputError
-        A confirmed problem the configuration does not let gnssacc correct, with the evidence; or
-        data that cannot be estimated at all.
+        A proven problem the configuration does not let gnssacc correct, or one the data cannot
+        tell from another, with the evidence; or data that cannot be estimated at all.
     """
     policy = Policy.from_config(cfg)
     findings, seen, declined, base = [], set(), set(), None
@@ -158,33 +178,59 @@ def settled(
         _note_once(findings, seen, res.findings)
         f = res.proposal
         if f is None:
-            return run, res.cfg, findings, base
+            cfg = res.cfg
+            break
         # One verdict per proposal; the offset and the mounting are measured again after a change,
         # so one verdict per check.
         declined.add(f.check if f.check in ("time_offset", "mounting") else f.key)
         start = _Start(run, cfg, filter_pass, base)
         verdict, corrected, pieces = _evaluate(run, cfg, f, start, filter_pass)
         base = start.pieces
-        f.details["verdict"] = verdict.to_dict()
-        if verdict.decisive and not _allowed(f, policy):
-            f.action = "refused"
-            raise _refuse(f, verdict)
-        if verdict.decisive:
-            f.action = "applied" if f.check in ("time_offset", "mounting") else "repaired"
-            warn_data(
-                f.where, f"{f.problem}; {f.repaired}, confirmed by the estimator: {verdict.text()}"
-            )
+        if _settle(f, verdict, policy):
             run, cfg, base = corrected, _applied_cfg(cfg, f), pieces
-        elif (
-            verdict.refuted
-        ):  # the stamps, units or axes as given are the likelier: nothing to warn of
-            f.action = "refuted"
-        else:
-            f.action = "not confirmed"
-            warn_data(
-                f.where,
-                f"{f.problem}, but the estimator does not confirm it: {verdict.text()}; the data are "
-                f"used as given",
-            )
         findings.append(f)
-    return run, cfg, findings, base
+    return _with_truth_checked(run, cfg, policy, findings) + (base,)
+
+
+def clock_bound(
+    run: RecordedRun, cfg: RunConfig, findings: list, pieces: StartPieces, filter_pass: FilterPass
+) -> Finding | None:
+    """How well the data tell the IMU-to-GNSS clock offset, and how large one could go unseen
+    (:func:`gnssacc.prepare.clock.unseen_offset`), as a finding of the ``time_offset`` check
+    (action ``"bound"``): from the offset's verdict when one was made, else from the likelihood's
+    curvature at the stamps as given (a few EKF passes from the run's start ``pieces``). ``None``
+    when the check is skipped or too few fixes meet the IMU."""
+    if "time_offset" in Policy.from_config(cfg).skip or _fixes_in_imu_span(run) < MIN_FIXES:
+        return None
+    judged = [f for f in findings if f.check == "time_offset" and "sigma_s" in f.details]
+    if judged:
+        d = judged[-1].details
+        sigma, minutes = float(d["sigma_s"]), float(d["verdict"]["minutes"])
+    else:
+        sigma, minutes = offset_sigma(run, cfg, pieces, filter_pass)
+    unseen = unseen_offset(sigma, minutes)
+    text = (
+        f"the IMU-to-GNSS clock offset is told to +-{sigma:.3f} s (1-sigma, EKF likelihood): an "
+        f"offset below {unseen:.2f} s cannot be proven and could go unseen"
+        if np.isfinite(unseen)
+        else "the motion does not show the IMU-to-GNSS clock offset (a 1 s shift changes the EKF "
+        "likelihood by less than 2): an offset of a second or more could go unseen"
+    )
+    return Finding(
+        "time_offset",
+        file_names(run)[0],
+        text,
+        action="bound",
+        details={
+            "sigma_s": sigma if np.isfinite(sigma) else None,
+            "unseen_s": unseen if np.isfinite(unseen) else None,
+        },
+    )
+
+
+def _with_truth_checked(run, cfg, policy: Policy, findings: list) -> tuple:
+    """``(run, cfg, findings)`` after the truth's check against the fixes (unless skipped)."""
+    if "truth" in policy.skip:
+        return run, cfg, findings
+    run, truth_finding = checked_truth(run, cfg)
+    return run, cfg, findings + ([truth_finding] if truth_finding is not None else [])

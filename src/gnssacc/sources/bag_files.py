@@ -87,6 +87,22 @@ def _check_magic(path: Path, where: str) -> None:
     raise InputError(where, f"not {kind}: it starts with {head!r}, expected {magic!r}{hint}")
 
 
+def _db3_notice(path: Path) -> str:
+    """What reading a ROS 2 storage file on its own reconstructs (a salvage notice)."""
+    if (path.parent / "metadata.yaml").is_file():
+        return (
+            f"read as a storage file on its own: the bag's metadata.yaml beside it (and any other "
+            f"file of a split bag) is not used; give the directory {path.parent} to read the "
+            f"whole bag"
+        )
+    return (
+        "a ROS 2 storage file without its bag's metadata.yaml: the topics, message types, counts "
+        "and time span are reconstructed from the database itself (what metadata.yaml would "
+        "have said), and any other file of a split bag is missing; 'ros2 bag reindex' rebuilds "
+        "the metadata"
+    )
+
+
 def open_reader(path: Path):
     """An open reader of the bag at ``path``.
 
@@ -105,6 +121,8 @@ def open_reader(path: Path):
 
     where = str(path)
     check_bag_path(path)
+    if path.is_file() and path.suffix == ".db3":
+        warn_data(where, _db3_notice(path))
     try:
         reader = AnyReader([path])
         reader.open()

@@ -24,8 +24,11 @@ A run directory holds
     the negative of ROS's ``angular.z``), and their per-sample 1-sigma.
 ``truth.csv`` (optional)
     Columns ``t, lat_deg, lon_deg, h_m``, optionally ``vn, ve, vd`` [m/s] and
-    ``roll_deg, pitch_deg, yaw_deg`` (each group all or none). It may span less than the run:
-    the outputs still cover the whole run, the scores only the truth's span (with a warning).
+    ``roll_deg, pitch_deg, yaw_deg`` (each group all or none); time [s] on the IMU's clock (a
+    logger stamps it beside the IMU: it is shifted with the IMU by ``[mounting]
+    imu_time_offset_s`` and by a measured offset). It may span less than the run: the outputs
+    still cover the whole run, the scores only the truth's span (with a warning). A truth that
+    disagrees with the fixes is not scored (:mod:`gnssacc.checks.truthcheck`).
 ``init.json`` (optional)
     ``{"t", "lat_deg", "lon_deg", "h_m", "vn", "ve", "vd", "roll_deg", "pitch_deg", "yaw_deg",
     "sigma": {"pos_m", "vel_mps", "roll_pitch_deg", "yaw_deg"}}``. ``sigma`` and each of its keys
@@ -35,14 +38,15 @@ A run directory holds
     :data:`INIT_BEFORE_START_TOLERANCE_S` before the first.
 
 In every CSV file header names are case-insensitive, column order is free, extra columns are
-ignored, and lines starting with ``#`` are comments. All times are seconds; GNSS, truth and
-init times are on the GNSS clock, odometry times on the IMU's.
+ignored, and lines starting with ``#`` are comments. All times are seconds; GNSS and init
+times are on the GNSS clock, IMU, odometry and truth times on the IMU's.
 """
 
 from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -155,13 +159,18 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) 
         # Stamps in ms/us/ns would never meet the fixes: found (and rescaled, or named) before the
         # overlap check, which could only say "different clocks?".
         if time_units is not None:
-            imu = time_units(imu, gnss.t, str(root / "imu.csv"), cfg)
+            imu = _rescaled(imu, time_units(imu, gnss.t, str(root / "imu.csv"), cfg), root, meta)
         imu = apply_mounting(imu, cfg)
     else:  # absolute fix times are put on the IMU's clock, which must be absolute too
         imu = apply_mounting(imu, cfg)
         gnss, read = load_gnss_file(gnss_file, cfg, imu.t)
         meta.update(read)
-    truth = _read_truth(root / "truth.csv", max_bad) if (root / "truth.csv").exists() else None
+    offset_s = configured_time_offset_s(cfg)  # what puts the IMU's clock on the fixes'
+    truth = (
+        _shifted_truth(_read_truth(root / "truth.csv", max_bad), offset_s)
+        if (root / "truth.csv").exists()
+        else None
+    )
     init = (
         _read_init(root / "init.json", gnss.sigma_ned[0]) if (root / "init.json").exists() else None
     )
@@ -169,9 +178,7 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) 
         check_init_time(init.t, imu.t[0], imu.t[-1], str(root / "init.json"))
     odometry = None
     if (root / "odom.csv").exists():
-        odometry = read_odometry_csv(root / "odom.csv", max_bad).shifted(
-            configured_time_offset_s(cfg)
-        )
+        odometry = read_odometry_csv(root / "odom.csv", max_bad).shifted(offset_s)
     run = RecordedRun(
         name=root.resolve().name,
         where=where,
@@ -182,9 +189,29 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) 
         init=init,
         meta=meta,
         odometry=odometry,
+        truth_on_imu_clock=True,
     )
     release_free_memory()  # the parser's blocks
     return run.validate()
+
+
+def _rescaled(imu: ImuData, scaled: ImuData, root: Path, meta: dict) -> ImuData:
+    """``scaled``; when it is not ``imu`` (stamps not in seconds, rescaled as they were read), the
+    repair recorded in ``meta["repaired_on_load"]`` as an input check's finding would say it."""
+    if scaled is not imu:
+        k = float(np.median(np.diff(imu.t)) / np.median(np.diff(scaled.t)))
+        meta["repaired_on_load"] = [
+            {
+                "check": "time_units",
+                "where": str(root / "imu.csv"),
+                "problem": "the IMU stamps are not seconds: as given the IMU never meets the fixes",
+                "fix": f"divide the t column by {k:.6g}",
+                "correction": f"divided the IMU time stamps by {k:.6g}",
+                "action": "repaired",
+                "details": {"evidence": "one unit alone puts the IMU on the fixes' time span"},
+            }
+        ]
+    return scaled
 
 
 def _gnss_file(root: Path) -> Path:
@@ -264,6 +291,11 @@ def _read_imu(path: Path, frame: str, max_bad: float) -> ImuData:
         f_imu, omega_imu = flu_to_frd(f_imu), flu_to_frd(omega_imu)
     # A copy of the time column: a view would keep the whole parsed table alive with the run.
     return ImuData(tab["t"].copy(), f_imu, omega_imu)
+
+
+def _shifted_truth(truth: Truth, offset_s: float) -> Truth:
+    """The truth with ``offset_s`` [s] added to its stamps (it is on the IMU's clock)."""
+    return replace(truth, t=truth.t + offset_s) if offset_s else truth
 
 
 def _read_truth(path: Path, max_bad: float) -> Truth:

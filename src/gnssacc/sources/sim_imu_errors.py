@@ -189,7 +189,7 @@ def grade_config(grade: str, overrides: dict | None = None) -> dict:
     dict
         The keys of ``gnssacc.core.config.DEFAULTS["imu"]``, usable as
         ``gnssacc.core.config.load_config(overrides={"imu": grade_config(grade)})``. ``"perfect"``
-        gives zeros, which a filter cannot use as process noise.
+        gives zeros, which a filter cannot use as process noise (``load_config`` refuses them).
 
     Raises
     ------
