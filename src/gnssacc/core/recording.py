@@ -134,6 +134,83 @@ class GnssFixes:
 
 
 @dataclass
+class GnssVelocity:
+    """GNSS (Doppler) velocities of the antenna, on the fixes' clock.
+
+    Attributes
+    ----------
+    t : ndarray, shape (K,)
+        Receiver time tags [s], on the same clock as :attr:`GnssFixes.t`.
+    v_ned : ndarray, shape (K, 3)
+        Velocity of the antenna along north, east, down [m/s]; NaN on an axis the source does
+        not measure (e.g. NMEA speed and course: no down component).
+    sigma_ned : ndarray, shape (K, 3)
+        1-sigma velocity uncertainty along north, east, down [m/s]; NaN where ``v_ned`` is NaN.
+    corr_ned : ndarray, shape (K, 3), or None
+        Correlation coefficients ``(rho_ne, rho_nd, rho_ed)`` of the velocity error when the
+        source states them (RTKLIB's ``sdvne, sdveu, sdvun``); None: uncorrelated axes.
+    sigma_stated : bool
+        Whether the source states the sigmas (False: a documented default stands in, which the
+        tuner scales).
+    """
+
+    t: np.ndarray
+    v_ned: np.ndarray
+    sigma_ned: np.ndarray
+    corr_ned: np.ndarray | None = None
+    sigma_stated: bool = True
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def select(self, mask) -> "GnssVelocity":
+        return GnssVelocity(
+            self.t[mask],
+            self.v_ned[mask],
+            self.sigma_ned[mask],
+            None if self.corr_ned is None else self.corr_ned[mask],
+            self.sigma_stated,
+        )
+
+    def measured(self) -> np.ndarray:
+        """Boolean mask, shape (K, 3): the axes each velocity measures."""
+        return np.isfinite(self.v_ned) & np.isfinite(self.sigma_ned)
+
+    def cov_ned(self, k) -> np.ndarray:
+        """The NED covariance [m^2/s^2] of velocity ``k`` (shape (3, 3)) or of velocities ``k``
+        (an index array: shape (K, 3, 3)); rows and columns of unmeasured axes are NaN."""
+        s = np.asarray(self.sigma_ned[k], float)
+        C = np.broadcast_to(np.eye(3), s.shape[:-1] + (3, 3)).copy()
+        if self.corr_ned is not None:
+            r = np.asarray(self.corr_ned[k], float)
+            C[..., 0, 1] = C[..., 1, 0] = r[..., 0]
+            C[..., 0, 2] = C[..., 2, 0] = r[..., 1]
+            C[..., 1, 2] = C[..., 2, 1] = r[..., 2]
+        return s[..., :, None] * C * s[..., None, :]
+
+
+def check_gnss_velocity(vel: GnssVelocity, where: str) -> None:
+    """Shapes, time order and ranges of GNSS velocities; raise :class:`InputError` naming the
+    problem."""
+    k = len(vel)
+    if vel.v_ned.shape != (k, 3) or vel.sigma_ned.shape != (k, 3):
+        raise InputError(where, "GNSS velocity arrays must have shape (K, 3)")
+    check_increasing(vel.t, where, "GNSS velocity")
+    if not np.all(np.isfinite(vel.t)):
+        raise InputError(where, "GNSS velocity time contains NaN or inf values")
+    if np.any(np.isfinite(vel.v_ned) != np.isfinite(vel.sigma_ned)):
+        raise InputError(where, "GNSS velocity: a component and its sigma must both be given")
+    s = vel.sigma_ned[np.isfinite(vel.sigma_ned)]
+    if np.any(s <= 0):
+        raise InputError(where, "GNSS velocity sigmas must be positive m/s")
+    v = vel.v_ned[np.isfinite(vel.v_ned)]
+    if np.any(np.abs(v) > 600.0):
+        raise InputError(
+            where, "GNSS velocity above 600 m/s: not m/s (km/h, knots, cm/s?) or not a velocity"
+        )
+
+
+@dataclass
 class WheelOdometry:
     """Wheel (drive-controller) odometry: the vehicle's forward speed, optionally its yaw rate.
 
@@ -337,6 +414,8 @@ class RecordedRun:
         A simulated run's IMU truths (true biases, scenario segments).
     odometry : WheelOdometry or None
         Wheel odometry, on the IMU's clock (shifted with it), when the source has it.
+    gnss_vel : GnssVelocity or None
+        GNSS (Doppler) velocities of the antenna, on the fixes' clock, when the source has them.
     truth_on_imu_clock : bool
         Whether the truth is stamped on the IMU's clock (a CSV run directory's ``truth.csv``,
         logged beside ``imu.csv``) and so shifted with it; else it is on the fixes' clock.
@@ -357,6 +436,7 @@ class RecordedRun:
     meta: dict = field(default_factory=dict)
     odometry: WheelOdometry | None = None
     truth_on_imu_clock: bool = False
+    gnss_vel: GnssVelocity | None = None
 
     @property
     def t_start(self) -> float:
@@ -411,6 +491,8 @@ class RecordedRun:
         _check_fix_extras(gnss, self.where)
         if self.truth is not None:
             check_increasing(self.truth.t, self.where, "truth")
+        if self.gnss_vel is not None:
+            check_gnss_velocity(self.gnss_vel, self.where)
         if self.odometry is not None:
             check_odometry(self.odometry, self.where)
             odo_t = self.odometry.t
