@@ -669,3 +669,31 @@ def test_init_outside_the_run_is_refused(tmp_path, capsys):
         json.dumps({**doc, "t": -0.2})
     )  # a start taken a little early is fine
     assert _cli(["run", d, "--methods", "ekf", "--out", tmp_path / "o"] + FAST, capsys)[0] == 0
+
+
+def test_a_signal_landing_in_a_weakref_callback_is_kept_quiet_and_raised_later(monkeypatch):
+    """A SIGTERM handled inside a garbage-collector callback cannot unwind from there; Python
+    would print it as "Exception ignored ... Traceback". It is recorded, printed nowhere, and
+    raised at the next checkpoint."""
+    import weakref
+
+    from gnssacc.core.interrupts import Terminated, arrived, raise_if_arrived, signals_raise
+
+    class Thing:
+        pass
+
+    def callback(_ref):
+        os.kill(os.getpid(), signal.SIGTERM)
+        for _ in range(1000):  # the handler runs between bytecodes, here
+            pass
+
+    printed = []  # what Python would print as "Exception ignored in ..."
+    monkeypatch.setattr(sys, "unraisablehook", printed.append)
+    with signals_raise():
+        thing = Thing()
+        ref = weakref.ref(thing, callback)
+        del thing
+        assert ref() is None and arrived() == signal.SIGTERM
+        with pytest.raises(Terminated):
+            raise_if_arrived()
+    assert printed == []

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import sys
 
 
 class Terminated(BaseException):
@@ -33,6 +34,20 @@ def _record_and_raise(signum, frame):
     raise _interruption(signum)
 
 
+def _quiet_unraisable(previous):
+    """An ``sys.unraisablehook`` that drops our own interruptions: a signal landing in a
+    weakref callback or a finaliser (the garbage collector's) cannot unwind from there, and
+    Python would print it as "Exception ignored ... Traceback". Its arrival is recorded, and
+    :func:`raise_if_arrived` raises it at the next checkpoint."""
+
+    def hook(unraisable):
+        if isinstance(unraisable.exc_value, (Terminated, KeyboardInterrupt)) and _ARRIVED:
+            return
+        previous(unraisable)
+
+    return hook
+
+
 def arrived() -> int | None:
     """The first signal (``signal.SIGINT`` or ``signal.SIGTERM``) that arrived within the current
     :func:`signals_raise` block, or ``None``."""
@@ -51,9 +66,13 @@ def signals_raise():
             old[s] = signal.signal(s, _record_and_raise)
     except ValueError:  # not the main thread
         pass
+    previous_hook = sys.unraisablehook
+    if old:
+        sys.unraisablehook = _quiet_unraisable(previous_hook)
     try:
         yield
     finally:
+        sys.unraisablehook = previous_hook
         for s, handler in old.items():
             signal.signal(s, handler if handler is not None else signal.SIG_DFL)
         _ARRIVED.clear()
