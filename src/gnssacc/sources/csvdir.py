@@ -71,15 +71,17 @@ from .gnssfile import (
     QUALITY_COLUMN,
     SIGMA_COLUMNS,
     apply_quality_policy,
-    load_gnss_file,
+    load_gnss_data,
     optional_group,
-    read_gnss_csv,
+    read_gnss_csv_file,
     read_positions,
+    velocities_of_kept_fixes,
+    velocity_columns,
     write_gnss_file,
 )
 
 IMU_COLUMNS = ("t", "ax", "ay", "az", "gx", "gy", "gz")
-GNSS_FILES = ("gnss.csv", "gnss.pos", "gnss.nmea")
+GNSS_FILES = ("gnss.csv", "gnss.pos", "gnss.nmea", "gnss.ubx")
 ODOM_COLUMNS = ("t", "v_forward")
 ODOM_OPTIONAL = ("yaw_rate", "sigma_v", "sigma_yaw_rate")
 VEL_COLUMNS = ("vn", "ve", "vd")
@@ -151,11 +153,9 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) 
     imu = _read_imu(root / "imu.csv", frame, max_bad)
     meta = {"source": "csv", "imu_frame": frame}
     if gnss_file.name == "gnss.csv":
-        gnss, _ = apply_quality_policy(
-            read_gnss_csv(gnss_file, cfg.default_sigma_ned, max_bad),
-            cfg["gnss"]["quality"],
-            str(gnss_file),
-        )
+        read_fixes, gnss_vel = read_gnss_csv_file(gnss_file, cfg.default_sigma_ned, max_bad)
+        gnss, _ = apply_quality_policy(read_fixes, cfg["gnss"]["quality"], str(gnss_file))
+        gnss_vel = velocities_of_kept_fixes(gnss_vel, read_fixes.t, gnss.t)
         # Stamps in ms/us/ns would never meet the fixes: found (and rescaled, or named) before the
         # overlap check, which could only say "different clocks?".
         if time_units is not None:
@@ -163,7 +163,7 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) 
         imu = apply_mounting(imu, cfg)
     else:  # absolute fix times are put on the IMU's clock, which must be absolute too
         imu = apply_mounting(imu, cfg)
-        gnss, read = load_gnss_file(gnss_file, cfg, imu.t)
+        gnss, gnss_vel, read = load_gnss_data(gnss_file, cfg, imu.t)
         meta.update(read)
     offset_s = configured_time_offset_s(cfg)  # what puts the IMU's clock on the fixes'
     truth = (
@@ -190,6 +190,7 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) 
         meta=meta,
         odometry=odometry,
         truth_on_imu_clock=True,
+        gnss_vel=gnss_vel,
     )
     release_free_memory()  # the parser's blocks
     return run.validate()
@@ -438,9 +439,15 @@ def write_csv_run(run: RecordedRun, path, gnss_format: str = "csv") -> Path:
     for stale in ("truth.csv", "init.json", "odom.csv") + GNSS_FILES:
         (root / stale).unlink(missing_ok=True)
     if gnss_format == "csv":
-        write_gnss_csv(root / "gnss.csv", run.gnss, src)
+        write_gnss_csv(root / "gnss.csv", run.gnss, src, vel=run.gnss_vel)
     else:
-        write_gnss_file(root / f"gnss.{gnss_format}", run.gnss, gnss_format, truth=run.truth)
+        write_gnss_file(
+            root / f"gnss.{gnss_format}",
+            run.gnss,
+            gnss_format,
+            truth=run.truth,
+            vel=run.gnss_vel,
+        )
     if run.odometry is not None:
         write_odometry_csv(root / "odom.csv", run.odometry, src)
     if run.truth is not None:
@@ -450,8 +457,10 @@ def write_csv_run(run: RecordedRun, path, gnss_format: str = "csv") -> Path:
     return root
 
 
-def write_gnss_csv(path: Path, g, src: str = "# gnssacc GNSS fixes") -> None:
-    """Fixes as ``gnss.csv`` (with the correlations and quality codes when they have them)."""
+def write_gnss_csv(path: Path, g, src: str = "# gnssacc GNSS fixes", vel=None) -> None:
+    """Fixes as ``gnss.csv`` (with the correlations and quality codes when they have them, and
+    the velocities ``vel`` at the fixes with the same time tag:
+    :func:`gnssacc.sources.gnssfile.velocity_columns`)."""
     names = list(POS_COLUMNS + SIGMA_COLUMNS)
     cols = [g.t, np.degrees(g.lat), np.degrees(g.lon), g.h, *g.sigma_ned.T]
     if g.corr_ned is not None:
@@ -460,12 +469,14 @@ def write_gnss_csv(path: Path, g, src: str = "# gnssacc GNSS fixes") -> None:
     if g.quality is not None:
         names.append(QUALITY_COLUMN)
         cols.append(g.quality)
+    v_names, v_cols = velocity_columns(g, vel)
     _write_table(
         path,
-        names,
-        cols,
+        names + v_names,
+        cols + v_cols,
         f"{src}\n# t [s], lat/lon [deg], h [m] ellipsoidal, 1-sigma N/E/D [m], "
-        f"correlations, quality code (1 fix .. 5 single)",
+        f"correlations, quality code (1 fix .. 5 single)"
+        + (", NED velocity and its 1-sigma [m/s] (nan: none at that fix)" if v_names else ""),
     )
 
 
