@@ -195,7 +195,7 @@ def _unix_times(rows: list) -> np.ndarray:
     return gps_seconds_to_unix(week * SECONDS_PER_WEEK + tow)
 
 
-# --- writing -------------------------------------------------------------------------------------------
+# --- writing ---------------------------------------------------------------------------------
 
 
 #: Quality code -> (fixType, diffSoln, carrSoln) written.
