@@ -7,15 +7,18 @@ A run directory holds
     [rad/s], in the IMU axes, Front-Right-Down unless the loader is told ``imu_frame="flu"``
     (Front-Left-Up; converted by negating y and z). ``[mounting]`` in the config then rotates
     the IMU axes into the body frame and shifts the IMU time stamps onto the GNSS clock.
-``gnss.csv``, or ``gnss.pos`` or ``gnss.nmea`` (exactly one of them)
+``gnss.csv``, or ``gnss.pos``, ``gnss.nmea`` or ``gnss.ubx`` (exactly one of them)
     ``gnss.csv``: columns ``t, lat_deg, lon_deg, h_m`` and optionally ``sn, se, sd``: the 1-sigma
     north, east, down position uncertainty [m] (all three or none; without them
     ``gnss.default_sigma_m``), ``rho_ne, rho_nd, rho_ed``: the correlations of those errors
     (with the sigmas), and ``quality``: the fix quality code (1 fix, 2 float, 3 sbas, 4 dgps,
-    5 single, 6 ppp, 7 estimated, 0 unknown). ``gnss.pos``: an RTKLIB solution file
-    (:mod:`gnssacc.sources.rtklib`); ``gnss.nmea``: an NMEA 0183 log (:mod:`gnssacc.sources.nmea`):
+    5 single, 6 ppp, 7 estimated, 0 unknown); optionally the GNSS velocity ``vn, ve[, vd]``
+    [m/s] with ``sigma_vn, sigma_ve[, sigma_vd]`` and ``rho_vne, rho_vnd, rho_ved``
+    (:func:`gnssacc.sources.gnssfile.read_gnss_csv_velocity`). ``gnss.pos``: an RTKLIB solution
+    file (:mod:`gnssacc.sources.rtklib`); ``gnss.nmea``: an NMEA 0183 log
+    (:mod:`gnssacc.sources.nmea`); ``gnss.ubx``: a u-blox UBX log (:mod:`gnssacc.sources.ubx`):
     their times are absolute (GPST, UTC), so ``imu.csv`` must then be stamped in UNIX (UTC) or GPS
-    seconds (:mod:`gnssacc.sources.gnssfile`).
+    seconds (:mod:`gnssacc.sources.gnssfile`). Their velocities become ``run.gnss_vel``.
 ``odom.csv`` (optional)
     Wheel odometry: columns ``t, v_forward`` and optionally ``yaw_rate``, ``sigma_v``,
     ``sigma_yaw_rate``: time [s] on the IMU's clock (shifted with it by ``[mounting]
@@ -416,10 +419,10 @@ def write_csv_run(run: RecordedRun, path, gnss_format: str = "csv") -> Path:
     run : RecordedRun
     path : str or Path
         The directory; created if needed, existing files of the format are overwritten.
-    gnss_format : {"csv", "pos", "nmea"}
-        The fixes as ``gnss.csv`` (full precision), or as ``gnss.pos`` (RTKLIB, GPST) or
-        ``gnss.nmea`` (NMEA 0183) in those formats' precision; the latter two need the run's
-        times in UNIX seconds.
+    gnss_format : {"csv", "pos", "nmea", "ubx"}
+        The fixes (and ``run.gnss_vel``) as ``gnss.csv`` (full precision), or as ``gnss.pos``
+        (RTKLIB, GPST), ``gnss.nmea`` (NMEA 0183) or ``gnss.ubx`` (u-blox NAV-PVT) in those
+        formats' precision; the latter three need the run's times in UNIX seconds.
 
     Returns
     -------
