@@ -29,14 +29,43 @@ import argparse
 import json
 import subprocess
 import tempfile
+import warnings
+from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
+
 from gnssacc.core.config import load_config
+from gnssacc.core.earth import R_en_batch
+from gnssacc.core.errors import DataWarning
+from gnssacc.core.recording import RecordedRun
 from gnssacc.sources.comma2k19 import load_comma2k19
 from gnssacc.sources.csvdir import write_csv_run
 from gnssacc.sources.vectornav import load_vectornav
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def comma(root: Path) -> RecordedRun:
+    """comma2k19 example 1 as the other benches have always held it (their figures rest on it):
+    through the reader, without odometry and velocity, the default fix sigma taken as stated
+    (the caveat warning of its reference is left to ``gnssacc run``)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        run = load_comma2k19(root, load_config(), odometry=False, velocity=False)
+    return replace(run, name="comma2k19-ex1", gnss=replace(run.gnss, sigma_stated=True))
+
+
+def vn310(root: Path, log: str) -> RecordedRun:
+    """A VN-310E static log (``lckf``, ``tckf``) through the reader, without velocity."""
+    return replace(
+        load_vectornav(root / f"{log}_vn310-imu.csv", velocity=False), name=f"vn310-{log}"
+    )
+
+
+def ned_rotation(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
+    """ECEF -> NED rotations at (lat, lon) [rad], shape (K, 3, 3)."""
+    return R_en_batch(lat, lon)
 
 
 def recordings(data: Path) -> list[tuple[str, Path]]:

@@ -294,7 +294,11 @@ def _csv_with(tmp_path, cols: str, value: str):
     [
         ("vn", "1.0", "velocity columns vn need vn and ve"),
         ("vn,ve", "1500,20", "GNSS velocity above 600 m/s: not m/s"),
-        ("vn,ve,vd,sigma_vn", "1,2,3,0.1", "give all of the columns sigma_vn, sigma_ve, sigma_vd or none"),
+        (
+            "vn,ve,vd,sigma_vn",
+            "1,2,3,0.1",
+            "give all of the columns sigma_vn, sigma_ve, sigma_vd or none",
+        ),
         ("vn,ve,sigma_vn,sigma_ve", "1,2,0,0.1", "velocity sigmas must be positive m/s"),
     ],
 )
@@ -318,3 +322,80 @@ def test_not_a_ubx_log_and_no_nav_pvt(tmp_path):
     (tmp_path / "clock.ubx").write_bytes(msg.serialize() * 3)
     with pytest.raises(InputError, match=r"no NAV-PVT message \(NAV-CLOCK 3\)"):
         read_ubx(tmp_path / "clock.ubx")
+
+
+# --- the public recordings in ../shared/data ---------------------------------------------------------
+
+SHARED = __import__("pathlib").Path(__file__).resolve().parents[2] / "shared" / "data"
+COMMA = SHARED / "comma2k19_example1"
+VN = SHARED / "vn310_static"
+needs_comma = pytest.mark.skipif(not COMMA.is_dir(), reason=f"no comma2k19 example at {COMMA}")
+needs_vn = pytest.mark.skipif(not VN.is_dir(), reason=f"no VN-310 logs at {VN}")
+
+
+@needs_comma
+def test_comma2k19_reader_and_its_velocity_against_the_reference():
+    """The u-blox speed and bearing, as velocities, agree with comma's reference velocity (an
+    independent estimate: its optimiser fuses positions, IMU and vision) to about 0.1 m/s."""
+    from gnssacc.sources.comma2k19 import REFERENCE_CAVEAT, load_comma2k19
+
+    with pytest.warns(DataWarning, match="comma's own optimiser output"):
+        run = load_comma2k19(COMMA, load_config())
+    assert (len(run.imu), len(run.gnss), len(run.odometry), len(run.truth.t)) == (
+        6256,
+        579,
+        4974,
+        1200,
+    )
+    assert run.truth.caveat == REFERENCE_CAVEAT and not run.gnss.sigma_stated
+    v, tr = run.gnss_vel, run.truth
+    ref = np.column_stack([np.interp(v.t, tr.t, tr.v_n[:, i]) for i in range(2)])
+    assert np.sqrt(np.mean((v.v_ned[:, :2] - ref) ** 2)) < 0.2
+    # the CAN speed is the car's speed to its scale factor
+    odo = run.odometry
+    speed = np.interp(odo.t, tr.t, np.hypot(tr.v_n[:, 0], tr.v_n[:, 1]))
+    assert np.median(odo.v_forward / speed) == pytest.approx(1.0, abs=0.03)
+
+
+@needs_vn
+@pytest.mark.parametrize("log, n_imu, n_fix", [("lckf", 1612, 163), ("tckf", 1638, 166)])
+def test_vectornav_reader_static_logs(log, n_imu, n_fix):
+    """Standing still: every GNSS velocity within 3 of its stated sigmas of zero."""
+    from gnssacc.sources.vectornav import load_vectornav
+
+    run = load_vectornav(VN / f"{log}_vn310-imu.csv")
+    assert (len(run.imu), len(run.gnss), len(run.gnss_vel)) == (n_imu, n_fix, n_fix)
+    assert run.truth is None and run.gnss.sigma_stated and run.gnss_vel.sigma_stated
+    v = run.gnss_vel
+    assert np.all(np.abs(v.v_ned) < 3 * v.sigma_ned)
+    np.testing.assert_allclose(np.median(run.imu.f_b, axis=0)[2], -9.8, atol=0.1)  # FRD, level
+
+
+@needs_vn
+def test_vectornav_folder_with_two_logs_is_refused_naming_them(tmp_path, capsys):
+    code = main(["run", str(VN), "--out", str(tmp_path / "o"), "--plots", "none"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and err[-1].startswith("gnssacc: error: ")
+    assert "holds 2 VectorNav exports (lckf_vn310-imu.csv, tckf_vn310-imu.csv)" in err[-1]
+
+
+@needs_vn
+def test_vectornav_partner_missing(tmp_path, capsys):
+    import shutil
+
+    shutil.copy(VN / "lckf_vn310-imu.csv", tmp_path / "x-imu.csv")
+    code = main(["run", str(tmp_path / "x-imu.csv"), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and "needs its partner x-gnss.csv" in err[-1]
+
+
+@needs_vn
+@needs_comma
+@pytest.mark.parametrize("source", [COMMA, VN / "lckf_vn310-gnss.csv"])
+def test_public_recordings_run_directly(tmp_path, capsys, source):
+    out = tmp_path / "o"
+    args = ["run", str(source), "--out", str(out), "--plots", "none", "--tune", "none"]
+    code = main(args + ["--methods", "ekf"])
+    assert code == 0, capsys.readouterr().err
+    metrics = __import__("json").loads((out / "metrics.json").read_text())
+    assert metrics["methods"]["ekf"]["n_epochs"] > 0

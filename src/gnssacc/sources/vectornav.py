@@ -43,8 +43,8 @@ FIX_QUALITY_VN = {
     2: FIX_QUALITY["unknown"],
     3: FIX_QUALITY["single"],
     4: FIX_QUALITY["sbas"],
-    5: FIX_QUALITY["dgps"],
-    6: FIX_QUALITY["single"],
+    5: FIX_QUALITY["unknown"],
+    6: FIX_QUALITY["unknown"],
     7: FIX_QUALITY["float"],
     8: FIX_QUALITY["fix"],
 }
