@@ -6,6 +6,7 @@ bad input refused with one line (exit 2)."""
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -61,7 +62,7 @@ def _load(root):
         return load_csv_run(root, load_config(overrides=CFG))
 
 
-# --- round trips -------------------------------------------------------------------------------------
+# --- round trips ---------------------------------------------------------------------------------
 
 
 def test_csv_round_trip_is_exact(sim_run, tmp_path):
@@ -173,12 +174,15 @@ def test_bag_velocity_is_told_apart_from_wheel_odometry(tmp_path):
     assert back.meta["topics"]["odometry"] == "/gnss/vel"
 
 
-# --- hand-written files in the real layouts ------------------------------------------------------------
+# --- hand-written files in the real layouts ---------------------------------------------------
 
 POS_HEAD = (
     "% program   : RTKPOST ver.2.4.3 b34\n"
-    "% (lat/lon/height=WGS84/ellipsoidal,Q=1:fix,2:float,3:sbas,4:dgps,5:single,6:ppp,ns=# of satellites)\n"
-    "%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio    vn(m/s)    ve(m/s)    vu(m/s)      sdvn     sdve     sdvu    sdvne    sdveu    sdvun\n"
+    "% (lat/lon/height=WGS84/ellipsoidal,Q=1:fix,2:float,3:sbas,4:dgps,5:single,6:ppp,"
+    "ns=# of satellites)\n"
+    "%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)"
+    "   sdu(m)  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio    vn(m/s)    ve(m/s)    vu(m/s)"
+    "      sdvn     sdve     sdvu    sdvne    sdveu    sdvun\n"
 )
 
 
@@ -274,7 +278,7 @@ def test_gnss_csv_horizontal_velocity_and_empty_cells(tmp_path):
     np.testing.assert_array_equal(vel.sigma_ned[0, :2], DEFAULT_VELOCITY_SIGMA_MPS[:2])
 
 
-# --- bad input -----------------------------------------------------------------------------------------
+# --- bad input -----------------------------------------------------------------------------------
 
 
 def _csv_with(tmp_path, cols: str, value: str):
@@ -324,9 +328,9 @@ def test_not_a_ubx_log_and_no_nav_pvt(tmp_path):
         read_ubx(tmp_path / "clock.ubx")
 
 
-# --- the public recordings in ../shared/data ---------------------------------------------------------
+# --- the public recordings in ../shared/data -----------------------------------------------------
 
-SHARED = __import__("pathlib").Path(__file__).resolve().parents[2] / "shared" / "data"
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 COMMA = SHARED / "comma2k19_example1"
 VN = SHARED / "vn310_static"
 needs_comma = pytest.mark.skipif(not COMMA.is_dir(), reason=f"no comma2k19 example at {COMMA}")
@@ -399,3 +403,65 @@ def test_public_recordings_run_directly(tmp_path, capsys, source):
     assert code == 0, capsys.readouterr().err
     metrics = __import__("json").loads((out / "metrics.json").read_text())
     assert metrics["methods"]["ekf"]["n_epochs"] > 0
+
+
+def test_same_run_as_csv_pos_ubx_and_a_bag_gives_the_same_prmse(sim_run, tmp_path):
+    """One simulated run (with its velocities) written as gnss.csv, .pos, UBX and a ROS 2 bag:
+    the EKF's PRMSE with the noise model fixed moves only by the formats' rounding (UBX: 1e-7 deg
+    and 1 mm, under 1 cm; .pos: 0.1 mm; a bag holds float64), far inside the acceptance's 1 %."""
+    import gnssacc
+    from gnssacc.sources.bagwrite import write_bag
+
+    prmse = {}
+    sources = {}
+    for fmt in ("csv", "pos", "ubx"):
+        write_csv_run(sim_run, tmp_path / fmt, gnss_format=fmt)
+        sources[fmt] = str(tmp_path / fmt)
+    sources["bag"] = str(write_bag(sim_run, tmp_path / "bag", "ros2-sqlite3", truth_topic="/rtk"))
+    for fmt, src in sources.items():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DataWarning)
+            topics = {"gnss_topic": "/gnss/fix", "truth_topic": "/rtk"} if fmt == "bag" else {}
+            res = gnssacc.process(
+                src, methods=["ekf"], tune="none", config=CFG, preset="none", **topics
+            )
+        assert res.run.truth is not None, fmt
+        assert res.run.gnss_vel is not None and len(res.run.gnss_vel) == len(sim_run.gnss)
+        prmse[fmt] = res.prmse()["ekf"]
+    tol = {"pos": 1e-3, "ubx": 1e-2, "bag": 1e-6}
+    for fmt, t in tol.items():
+        assert prmse[fmt] == pytest.approx(prmse["csv"], abs=t), (fmt, prmse)
+        assert abs(prmse[fmt] / prmse["csv"] - 1) < 0.01
+
+
+def test_sim_writes_ubx_and_gnss_file_replaces_fixes_and_velocities(tmp_path, capsys):
+    """``gnssacc sim --gnss-format ubx`` writes a UBX log of the simulated fixes; the same log as
+    ``--gnss FILE`` on another source brings its velocities (here none: the simulator's run has
+    none) in place of the source's."""
+    from gnssacc.sources.gnssfile import with_gnss_file
+
+    assert main(["sim", str(tmp_path / "s"), "--duration", "30", "--gnss-format", "ubx"]) == 0
+    capsys.readouterr()
+    run = _load(tmp_path / "s")
+    assert run.meta["gnss_format"] == "ubx" and len(run.gnss) >= 30
+    ubx = tmp_path / "v.ubx"
+    src = with_velocity(simulate("car", 30.0, t_start_s=UNIX_2024, seed=3), corr=False)
+    from gnssacc.sources.ubx import write_ubx
+    from gnssacc.sources.gnssfile import velocity_at_fixes
+
+    write_ubx(ubx, src.gnss, *velocity_at_fixes(src.gnss_vel, src.gnss.t))
+    replaced = with_gnss_file(run, ubx, load_config())
+    np.testing.assert_allclose(replaced.gnss_vel.v_ned, src.gnss_vel.v_ned, atol=5.1e-4)
+
+
+def test_pos_with_part_of_the_velocity_columns_is_refused(tmp_path):
+    head = POS_HEAD.replace(
+        "    vu(m/s)      sdvn     sdve     sdvu    sdvne    sdveu    sdvun", ""
+    )
+    line = (
+        "2024/03/01 12:00:00.000   47.480954411   19.056534073   181.7826   5   9   2.1245"
+        "   1.9103   3.7333   0.1328   0.9211   1.1049   0.00    0.0    1.00000    2.00000"
+    )
+    (tmp_path / "p.pos").write_text(head + line + "\n")
+    with pytest.raises(InputError, match=r"has vn\(m/s\), ve\(m/s\) but not all of"):
+        read_pos(tmp_path / "p.pos")
