@@ -465,3 +465,18 @@ def test_pos_with_part_of_the_velocity_columns_is_refused(tmp_path):
     (tmp_path / "p.pos").write_text(head + line + "\n")
     with pytest.raises(InputError, match=r"has vn\(m/s\), ve\(m/s\) but not all of"):
         read_pos(tmp_path / "p.pos")
+
+
+def test_quality_policy_drops_the_velocities_of_dropped_fixes(sim_run, tmp_path):
+    from gnssacc.core.recording import FIX_QUALITY
+
+    run = with_velocity(simulate("car", 40.0, t_start_s=UNIX_2024, seed=1))
+    q = np.where(np.arange(len(run.gnss)) % 4 == 0, FIX_QUALITY["float"], FIX_QUALITY["single"])
+    run.gnss.quality = q
+    write_csv_run(run, tmp_path, gnss_format="pos")
+    cfg = load_config(overrides={**CFG, "gnss": {"quality": {"float": "drop"}}})
+    with pytest.warns(DataWarning, match="quality dropped"):
+        back = load_csv_run(tmp_path, cfg)
+    kept = q == FIX_QUALITY["single"]
+    np.testing.assert_allclose(back.gnss_vel.t, run.gnss.t[kept], atol=1e-3)
+    np.testing.assert_allclose(back.gnss_vel.v_ned, run.gnss_vel.v_ned[kept], atol=5.1e-6)

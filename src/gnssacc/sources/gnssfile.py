@@ -366,12 +366,7 @@ def write_gnss_file(
         )
     from .nmea import write_nmea
 
-    speed = course = None
-    if v_fix is not None:
-        speed, course = speed_course(v_fix)
-    elif truth is not None and truth.v_n is not None:
-        v = np.column_stack([np.interp(gnss.t, truth.t, truth.v_n[:, i]) for i in range(3)])
-        speed, course = np.hypot(v[:, 0], v[:, 1]), np.degrees(np.arctan2(v[:, 1], v[:, 0]))
+    speed, course = _nmea_speed_course(gnss, v_fix, truth)
     return write_nmea(
         path,
         gnss.t,
@@ -387,6 +382,17 @@ def write_gnss_file(
         course_deg=course,
         vtg=v_fix is not None,
     )
+
+
+def _nmea_speed_course(gnss: GnssFixes, v_fix, truth):
+    """NMEA's speed [m/s] and course [deg] at the fixes: of the velocities, else of the truth's
+    (the simulator's way before velocities existed), else none."""
+    if v_fix is not None:
+        return speed_course(v_fix)
+    if truth is not None and truth.v_n is not None:
+        v = np.column_stack([np.interp(gnss.t, truth.t, truth.v_n[:, i]) for i in range(3)])
+        return np.hypot(v[:, 0], v[:, 1]), np.degrees(np.arctan2(v[:, 1], v[:, 0]))
+    return None, None
 
 
 #: Velocities within this of a fix's time are that fix's [s] (below every format's resolution).

@@ -211,6 +211,54 @@ QUALITY_PVT = {
 }
 
 
+def _pvt_message(gnss: GnssFixes, k: int, quality: int, v_ned: np.ndarray, s_acc: float):
+    """The NAV-PVT message of fix ``k`` (UBX units: ms, 1e-7 deg, mm, mm/s)."""
+    from pyubx2 import GET, UBXMessage
+
+    ms = int(np.rint(float(unix_to_gps_seconds(gnss.t[k])) * 1e3))
+    utc = float(gps_seconds_to_unix(ms * 1e-3))
+    sec = int(np.floor(utc))
+    d = datetime.fromtimestamp(sec, timezone.utc)
+    fix_type, diff, carr = QUALITY_PVT[quality]
+    mm = lambda x: int(np.rint(x * 1e3))  # noqa: E731
+    return UBXMessage(
+        "NAV",
+        "NAV-PVT",
+        GET,
+        iTOW=ms % int(SECONDS_PER_WEEK * 1000),
+        year=d.year,
+        month=d.month,
+        day=d.day,
+        hour=d.hour,
+        min=d.minute,
+        second=d.second,
+        validDate=1,
+        validTime=1,
+        fullyResolved=1,
+        tAcc=20,
+        nano=int(np.rint((utc - sec) * 1e9)),
+        fixType=fix_type,
+        gnssFixOk=1,
+        diffSoln=diff,
+        carrSoln=carr,
+        numSV=12,
+        lon=float(np.degrees(gnss.lon[k])),
+        lat=float(np.degrees(gnss.lat[k])),
+        height=mm(gnss.h[k]),
+        hMSL=mm(gnss.h[k]),
+        hAcc=mm(max(gnss.sigma_ned[k, 0], gnss.sigma_ned[k, 1])),
+        vAcc=mm(gnss.sigma_ned[k, 2]),
+        velN=mm(v_ned[0]),
+        velE=mm(v_ned[1]),
+        velD=mm(v_ned[2]),
+        gSpeed=mm(np.hypot(v_ned[0], v_ned[1])),
+        headMot=float(np.degrees(np.arctan2(v_ned[1], v_ned[0])) % 360.0),
+        sAcc=mm(s_acc),
+        headAcc=180.0,
+        pDOP=1.5,
+    )
+
+
 def write_ubx(path, gnss: GnssFixes, vel_ned=None, vel_cov_ned=None) -> Path:
     """Write fixes held on a UNIX clock as a UBX log of NAV-PVT messages (``pyubx2``).
 
@@ -231,8 +279,6 @@ def write_ubx(path, gnss: GnssFixes, vel_ned=None, vel_cov_ned=None) -> Path:
     ValueError
         A velocity with an unmeasured axis (NAV-PVT always has three).
     """
-    from pyubx2 import GET, UBXMessage
-
     m = len(gnss)
     quality = np.full(m, FIX_QUALITY["single"]) if gnss.quality is None else gnss.quality
     v = np.full((m, 3), np.nan) if vel_ned is None else np.asarray(vel_ned, float)
@@ -247,50 +293,8 @@ def write_ubx(path, gnss: GnssFixes, vel_ned=None, vel_cov_ned=None) -> Path:
         s_acc = np.where(has_v, sd.max(axis=1), 0.0)
     out = bytearray()
     for k in range(m):
-        ms = int(np.rint(float(unix_to_gps_seconds(gnss.t[k])) * 1e3))
-        tow_ms = ms % int(SECONDS_PER_WEEK * 1000)
-        utc = float(gps_seconds_to_unix(ms * 1e-3))
-        sec = int(np.floor(utc))
-        d = datetime.fromtimestamp(sec, timezone.utc)
-        fix_type, diff, carr = QUALITY_PVT[int(quality[k])]
         vk = np.where(has_v[k], v[k], 0.0)
-        msg = UBXMessage(
-            "NAV",
-            "NAV-PVT",
-            GET,
-            iTOW=tow_ms,
-            year=d.year,
-            month=d.month,
-            day=d.day,
-            hour=d.hour,
-            min=d.minute,
-            second=d.second,
-            validDate=1,
-            validTime=1,
-            fullyResolved=1,
-            tAcc=20,
-            nano=int(np.rint((utc - sec) * 1e9)),
-            fixType=fix_type,
-            gnssFixOk=1,
-            diffSoln=diff,
-            carrSoln=carr,
-            numSV=12,
-            lon=float(np.degrees(gnss.lon[k])),
-            lat=float(np.degrees(gnss.lat[k])),
-            height=int(np.rint(gnss.h[k] * 1e3)),
-            hMSL=int(np.rint(gnss.h[k] * 1e3)),
-            hAcc=int(np.rint(max(gnss.sigma_ned[k, 0], gnss.sigma_ned[k, 1]) * 1e3)),
-            vAcc=int(np.rint(gnss.sigma_ned[k, 2] * 1e3)),
-            velN=int(np.rint(vk[0] * 1e3)),
-            velE=int(np.rint(vk[1] * 1e3)),
-            velD=int(np.rint(vk[2] * 1e3)),
-            gSpeed=int(np.rint(np.hypot(vk[0], vk[1]) * 1e3)),
-            headMot=float(np.degrees(np.arctan2(vk[1], vk[0])) % 360.0),
-            sAcc=int(np.rint(s_acc[k] * 1e3)),
-            headAcc=180.0,
-            pDOP=1.5,
-        )
-        out += msg.serialize()
+        out += _pvt_message(gnss, k, int(quality[k]), vk, float(s_acc[k])).serialize()
     path = Path(path)
     path.write_bytes(bytes(out))
     return path
