@@ -480,3 +480,27 @@ def test_quality_policy_drops_the_velocities_of_dropped_fixes(sim_run, tmp_path)
     kept = q == FIX_QUALITY["single"]
     np.testing.assert_allclose(back.gnss_vel.t, run.gnss.t[kept], atol=1e-3)
     np.testing.assert_allclose(back.gnss_vel.v_ned, run.gnss_vel.v_ned[kept], atol=5.1e-6)
+
+
+def test_bag_velocity_stamped_late_is_paired_and_a_fast_twist_is_not(tmp_path):
+    """A driver that stamps the velocity sentence 70 ms after the position (as it arrives)
+    keeps one message per fix at a steady offset: taken. A 50 Hz twist in the fixes' frame is
+    not one velocity per fix: refused (whatever its values)."""
+    from gnssacc.sources.bagwrite import write_bag
+    from gnssacc.sources.rosbag import load_bag_run
+
+    run = with_velocity(simulate("car", 60.0, noise="white", seed=2), corr=False)
+    v = run.gnss_vel
+    run.gnss_vel = GnssVelocity(v.t + 0.07, v.v_ned, v.sigma_ned)
+    write_bag(run, tmp_path / "late", "ros2-sqlite3")
+    back = load_bag_run(tmp_path / "late", load_config())
+    assert back.meta["topics"]["gnss_velocity"] == "/gnss/vel"
+    assert any("100 % stamped at fix epochs" in r for r in back.meta["selection"])
+    tr = run.truth
+    t = np.arange(tr.t[0], tr.t[-1], 0.02)
+    fast = np.column_stack([np.interp(t, tr.t, tr.v_n[:, i]) for i in range(3)])
+    run.gnss_vel = GnssVelocity(t, fast, np.full((len(t), 3), 0.05))
+    write_bag(run, tmp_path / "fast", "ros2-sqlite3")
+    back = load_bag_run(tmp_path / "fast", load_config())
+    assert back.gnss_vel is None
+    assert any("not one per fix epoch" in r for r in back.meta["selection"])

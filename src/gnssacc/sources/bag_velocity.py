@@ -10,8 +10,10 @@ frame
     Its ``frame_id`` is not a body frame (``base_link``, ``base_footprint``) nor a local
     odometry frame (``odom``, REP-105).
 pairing
-    At least :data:`MIN_PAIRED` of its stamps lie within :data:`PAIR_FRACTION` of the fixes'
-    median interval of a fix stamp: the receiver tags both with one epoch.
+    One message per fix (counts within 25 %), and at least :data:`MIN_PAIRED` of its stamps at
+    the same offset from the nearest fix stamp, to :data:`PAIR_FRACTION` of the fixes' median
+    interval: the receiver tags both with one epoch (a driver that stamps each sentence as it
+    arrives keeps a steady offset).
 agreement
     Read as ENU, it agrees with the fixes' central differences: the mean over the horizontal
     axes of the squared residual over its variance (the differences' from the fixes' sigmas
@@ -42,8 +44,11 @@ from .truth_check import is_local_frame
 
 #: Fraction of a candidate's stamps that must lie at a fix epoch.
 MIN_PAIRED = 0.8
-#: A stamp within this fraction of the fixes' median interval of a fix stamp is at its epoch.
+#: A stamp within this fraction of the fixes' median interval of the median offset from the
+#: fixes' stamps is at its fix's epoch.
 PAIR_FRACTION = 0.1
+#: Messages per fix beyond which (or below whose inverse) a topic is not one velocity per fix.
+MAX_COUNT_RATIO = 1.25
 #: The normalised agreement bound's floor (mean of two chi-square(1) terms: 4 is far out).
 CHI2_FLOOR = 4.0
 
@@ -109,6 +114,10 @@ def _check(tab: np.ndarray, frame: str, gnss: GnssFixes, origin: LocalTangentFra
     out = {"frame": frame, "paired": paired, "chi2": chi2, "chi2_motion": chi2_motion}
     if f in BASE_FRAMES or is_local_frame(f):
         return {**out, "ok": False, "why": f"its frame {frame!r} is a body or odometry frame"}
+    ratio = len(tab) / max(len(gnss), 1)
+    if not 1.0 / MAX_COUNT_RATIO <= ratio <= MAX_COUNT_RATIO:
+        why = f"{len(tab)} messages for {len(gnss)} fixes: not one per fix epoch"
+        return {**out, "ok": False, "why": why}
     if paired < MIN_PAIRED:
         return {
             **out,
@@ -134,13 +143,20 @@ def _check(tab: np.ndarray, frame: str, gnss: GnssFixes, origin: LocalTangentFra
 
 
 def _paired_fraction(t: np.ndarray, t_fix: np.ndarray) -> float:
-    """Fraction of the stamps ``t`` within :data:`PAIR_FRACTION` of a fix interval of a fix."""
-    if len(t_fix) < 2:
+    """Fraction of the stamps ``t`` at a fix epoch: one stamp per fix (their counts within
+    :data:`MAX_COUNT_RATIO` of each other, else 0) whose offset from the nearest fix lies within
+    :data:`PAIR_FRACTION` of the fixes' median interval of the median offset (a driver that
+    stamps the velocity sentence a little after the position one keeps a steady offset)."""
+    if len(t_fix) < 2 or len(t) < 2:
         return 0.0
-    tol = PAIR_FRACTION * float(np.median(np.diff(t_fix)))
+    ratio = len(t) / len(t_fix)
+    if not 1.0 / MAX_COUNT_RATIO <= ratio <= MAX_COUNT_RATIO:
+        return 0.0
+    dt = float(np.median(np.diff(t_fix)))
     j = np.clip(np.searchsorted(t_fix, t), 1, len(t_fix) - 1)
-    near = np.minimum(np.abs(t_fix[j - 1] - t), np.abs(t_fix[j] - t))
-    return float(np.mean(near <= tol))
+    before, after = t - t_fix[j - 1], t - t_fix[j]
+    offset = np.where(np.abs(before) <= np.abs(after), before, after)
+    return float(np.mean(np.abs(offset - np.median(offset)) <= PAIR_FRACTION * dt))
 
 
 def _agreement(tab: np.ndarray, gnss: GnssFixes, origin: LocalTangentFrame):
