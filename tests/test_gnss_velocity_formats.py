@@ -504,3 +504,17 @@ def test_bag_velocity_stamped_late_is_paired_and_a_fast_twist_is_not(tmp_path):
     back = load_bag_run(tmp_path / "fast", load_config())
     assert back.gnss_vel is None
     assert any("not one per fix epoch" in r for r in back.meta["selection"])
+
+
+@needs_vn
+def test_vectornav_export_without_a_needed_column_is_refused(tmp_path, capsys):
+    for name in ("x-imu.csv", "x-gnss.csv"):
+        src = VN / name.replace("x-", "lckf_vn310-")
+        text = src.read_text()
+        if "gnss" in name:
+            text = text.replace("GNSS1::PosU::D [m]", "GNSS1::PosUncertainty::D [m]", 1)
+        (tmp_path / name).write_text(text)
+    code = main(["run", str(tmp_path / "x-imu.csv"), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and err[-1].startswith("gnssacc: error: ")
+    assert "x-gnss.csv: no column GNSS1::PosU::D: not a VectorNav export gnssacc reads" in err[-1]

@@ -14,7 +14,7 @@ satellite lists, which are ignored):
     dropped; 2 2-D -> unknown, 3 3-D -> single, 4 SBAS -> sbas, 7 RTK float, 8 RTK fixed),
     ``GNSS1::PosLla`` [deg, deg, m ellipsoidal], ``GNSS1::PosU::N/E/D [m]`` (1-sigma, stated),
     ``GNSS1::VelNed::N/E/D [m/s]`` with ``GNSS1::VelU [m/s]`` as the sigma of each axis: the
-    GNSS velocity. The unit's own INS solution (``INS::*``, ``Att::*``) is in the file too: it
+    GNSS velocity (none when the export lacks those columns). The unit's own INS solution (``INS::*``, ``Att::*``) is in the file too: it
     is the unit's filter output, a reference never a truth, and is not read as one.
 Times
     Seconds of GPS time from the first IMU sample (``(week - week0) * 604800 + tow - tow0``), the
@@ -178,8 +178,13 @@ def _gnss(path: Path, t0: tuple, velocity: bool):
     want.update(lat="GNSS1::PosLla::latitude", lon="GNSS1::PosLla::longitude")
     want.update(h="GNSS1::PosLla::altitude")
     want.update({f"s{a}": f"GNSS1::PosU::{a}" for a in "NED"})
-    want.update({f"v{a}": f"GNSS1::VelNed::{a}" for a in "NED"}, su="GNSS1::VelU")
     c = _columns(path, want)
+    if velocity:
+        vel_cols = {f"v{a}": f"GNSS1::VelNed::{a}" for a in "NED"}
+        try:
+            c.update(_columns(path, {**vel_cols, "su": "GNSS1::VelU"}))
+        except InputError:  # an export without the velocity: fixes only
+            velocity = False
     q = np.array([FIX_QUALITY_VN.get(int(f), None) if np.isfinite(f) else None for f in c["fix"]])
     keep = np.array([x is not None for x in q]) & np.isfinite(c["lat"]) & np.isfinite(c["tow"])
     if not keep.any():
