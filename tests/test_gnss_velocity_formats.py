@@ -518,3 +518,15 @@ def test_vectornav_export_without_a_needed_column_is_refused(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and err[-1].startswith("gnssacc: error: ")
     assert "x-gnss.csv: no column GNSS1::PosU::D: not a VectorNav export gnssacc reads" in err[-1]
+
+
+@needs_comma
+def test_comma2k19_segment_without_fixes_is_refused(tmp_path, capsys):
+    import shutil
+
+    seg = tmp_path / "seg"
+    shutil.copytree(COMMA / "processed_log" / "IMU", seg / "processed_log" / "IMU")
+    code = main(["run", str(seg), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and err[-1].startswith("gnssacc: error: ")
+    assert "live_gnss_ublox/t: missing: a comma2k19 segment needs the u-blox fixes" in err[-1]
