@@ -288,15 +288,9 @@ def read_nmea(
         )
     times = _dated(kept, dates, where)
     sig, corr, sigma_from = _sigmas(kept, gst, uere_m, vertical_factor, default_sigma_ned)
-    none = (np.nan, np.nan)
-    sc = [rmc.get(round(g.tod * 100), none) for g in kept]
-    sc = [
-        x if np.isfinite(x[0]) else counts["vtg"].get(round(g.tod * 100), none)
-        for x, g in zip(sc, kept, strict=True)
-    ]
+    sc = [rmc.get(round(g.tod * 100), (np.nan, np.nan)) for g in kept]
     speed = np.array([x[0] for x in sc])
     course = np.array([x[1] for x in sc])
-    counts = {k: v for k, v in counts.items() if k != "vtg"}
     meta = {
         **counts,
         "dropped_quality": {str(k): v for k, v in dropped.items()},
@@ -319,8 +313,9 @@ def read_nmea(
 
 
 def _scan(lines: list[str], where: str, max_bad_fraction: float):
-    """Every sentence read: GGA fixes, dates (index, time of day, midnight), GST and RMC by time of
-    day [centiseconds], and the counts; bad lines counted, warned or refused."""
+    """Every sentence read: GGA fixes, dates (index, time of day, midnight), GST and the speed and
+    course (RMC's, else VTG's) by time of day [centiseconds], and the counts; bad lines counted,
+    warned or refused."""
     fixes, dates, gst, rmc = [], [], {}, {}
     tagged: list = []  # (line index, time of day) of every time-tagged sentence
     vtgs: list = []  # (line index, (speed, course))
@@ -356,8 +351,10 @@ def _scan(lines: list[str], where: str, max_bad_fraction: float):
         "sentences": n_lines,
         "bad": bad,
         "first_bad_line": first_bad[0] if first_bad else None,
-        "vtg": _vtg_epochs(vtgs, tagged),
     }
+    for key, value in _vtg_epochs(vtgs, tagged).items():  # where RMC gives no speed
+        if not np.isfinite(rmc.get(key, (np.nan,))[0]):
+            rmc[key] = value
     if n_bad:
         listing = ", ".join(f"{v} {k}" for k, v in sorted(bad.items()))
         text = (
