@@ -530,3 +530,12 @@ def test_comma2k19_segment_without_fixes_is_refused(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and err[-1].startswith("gnssacc: error: ")
     assert "live_gnss_ublox/t: missing: a comma2k19 segment needs the u-blox fixes" in err[-1]
+
+
+def test_velocities_at_no_fix_time_are_warned_not_lost_silently(tmp_path):
+    run = with_velocity(simulate("car", 20.0, seed=1))
+    v = run.gnss_vel
+    run.gnss_vel = GnssVelocity(v.t + 0.5, v.v_ned, v.sigma_ned)  # between the 1 Hz fixes
+    with pytest.warns(DataWarning, match=rf"{len(v)} of {len(v)} velocities are at no fix's time"):
+        write_csv_run(run, tmp_path)
+    assert _load(tmp_path).gnss_vel is None

@@ -402,7 +402,8 @@ SAME_EPOCH_S = 1e-4
 def velocity_at_fixes(vel: GnssVelocity | None, t_fix: np.ndarray):
     """(NED velocity (M, 3) [m/s], NED covariance (M, 3, 3)) at each fix from the velocity with
     the same time tag (NaN rows where none), or (None, None) without velocities. Formats that
-    write a velocity per fix record use it."""
+    write a velocity per fix record use it; velocities at no fix's time are counted in a
+    warning (they cannot be written)."""
     if vel is None or len(vel) == 0:
         return None, None
     t_fix = np.asarray(t_fix, float)
@@ -412,6 +413,12 @@ def velocity_at_fixes(vel: GnssVelocity | None, t_fix: np.ndarray):
     else:
         near = np.where(np.abs(vel.t[j - 1] - t_fix) <= np.abs(vel.t[j] - t_fix), j - 1, j)
     hit = np.abs(vel.t[near] - t_fix) <= SAME_EPOCH_S
+    if int(hit.sum()) < len(vel):
+        warn_data(
+            "GNSS velocity",
+            f"{len(vel) - int(hit.sum())} of {len(vel)} velocities are at no fix's time: a format "
+            f"with one record per fix cannot hold them (not written)",
+        )
     v = np.full((len(t_fix), 3), np.nan)
     cov = np.full((len(t_fix), 3, 3), np.nan)
     v[hit] = vel.v_ned[near[hit]]
@@ -551,10 +558,9 @@ def velocity_columns(g: GnssFixes, vel: GnssVelocity | None) -> tuple[list, list
     """``gnss.csv``'s velocity column names and columns for ``vel`` at the fixes (NaN where a fix
     has none); the down column only when some velocity measures it, the sigma columns unless
     every sigma is the unstated default."""
-    v, _ = velocity_at_fixes(vel, g.t)
+    v, cov = velocity_at_fixes(vel, g.t)
     if v is None:
         return [], []
-    _, cov = velocity_at_fixes(vel, g.t)
     sig = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
     k = 3 if np.isfinite(v[:, 2]).any() else 2
     names = list(VEL_H_COLUMNS) + ([VEL_D_COLUMN] if k == 3 else [])
