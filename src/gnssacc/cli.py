@@ -254,10 +254,11 @@ def _tool_parsers(sub) -> None:
     )
     s.add_argument(
         "--gnss-format",
-        choices=["csv", "pos", "nmea"],
+        choices=["csv", "pos", "nmea", "ubx"],
         default="csv",
-        help="write the fixes as gnss.csv (default), gnss.pos (RTKLIB, GPST) or gnss.nmea (NMEA 0183); "
-        "the last two hold absolute times, so the run is then stamped in UNIX seconds from --t-start",
+        help="write the fixes as gnss.csv (default), gnss.pos (RTKLIB, GPST), gnss.nmea (NMEA 0183) "
+        "or gnss.ubx (u-blox NAV-PVT); the last three hold absolute times, so the run is then "
+        "stamped in UNIX seconds from --t-start",
     )
     s.add_argument(
         "--t-start",
@@ -265,7 +266,7 @@ def _tool_parsers(sub) -> None:
         default=None,
         metavar="UNIX_S",
         help="time of the first IMU sample [s] (default 0, or 1709294400 = 2024-03-01 12:00 UTC for "
-        "--gnss-format pos or nmea)",
+        "--gnss-format pos, nmea or ubx)",
     )
 
 

@@ -267,6 +267,15 @@ def load_source(
             seed=seed,
             odom_topic=odom_topic,
         )
+    public = _load_public_recording(path, cfg)
+    if public is not None:
+        if noise is not None:
+            from .sources.common import with_noisy_fixes
+
+            if public.truth is None:
+                raise InputError(str(path), "--noise makes fixes from the truth; it has none")
+            public = with_noisy_fixes(public, public.truth, noise, seed)
+        return public
     if path.is_dir():
         from .checks.plausibility import fix_imu_time_units
         from .sources.common import with_noisy_fixes
@@ -297,8 +306,24 @@ def load_source(
     raise InputError(
         source,
         "not a run: expected a CSV run directory (imu.csv, gnss.csv), a ROS 1 .bag, "
-        "a .mcap file or a ROS 2 bag directory",
+        "a .mcap file, a ROS 2 bag directory, a comma2k19 segment folder or a VectorNav "
+        "export (X-imu.csv with X-gnss.csv)",
     )
+
+
+def _load_public_recording(path: Path, cfg: RunConfig) -> RecordedRun | None:
+    """A public recording's layout read by its reader: a comma2k19 segment folder
+    (:mod:`gnssacc.sources.comma2k19`) or a VectorNav CSV export
+    (:mod:`gnssacc.sources.vectornav`); None for anything else (a CSV run directory holding
+    ``imu.csv`` is never one)."""
+    from .sources.comma2k19 import is_comma2k19, load_comma2k19
+    from .sources.vectornav import load_vectornav, vectornav_pair
+
+    if is_comma2k19(path):
+        return load_comma2k19(path, cfg)
+    if not (path.is_dir() and (path / "imu.csv").exists()) and vectornav_pair(path) is not None:
+        return load_vectornav(path)
+    return None
 
 
 def with_outages(run: RecordedRun, outage: str | None, outage_every: str | None) -> RecordedRun:

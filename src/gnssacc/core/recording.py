@@ -274,6 +274,9 @@ class Truth:
         NED velocity [m/s], when known.
     rpy : ndarray, shape (K, 3) or None
         Roll, pitch, yaw [rad], when known.
+    caveat : str
+        How far the reference falls short of a truth, when it does (e.g. a dataset's own
+        post-processed solution, of another point than the antenna); "" for an independent one.
     """
 
     t: np.ndarray
@@ -282,6 +285,7 @@ class Truth:
     h: np.ndarray
     v_n: np.ndarray | None = None
     rpy: np.ndarray | None = None
+    caveat: str = ""
 
 
 @dataclass

@@ -26,6 +26,7 @@ IMU_TYPE = "sensor_msgs/msg/Imu"
 NAVSATFIX_TYPE = "sensor_msgs/msg/NavSatFix"
 ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
 TWIST_TYPE = "geometry_msgs/msg/TwistStamped"
+TWIST_COV_TYPE = "geometry_msgs/msg/TwistWithCovarianceStamped"
 POSE_TYPES = (
     ODOMETRY_TYPE,
     "geometry_msgs/msg/PoseStamped",
@@ -33,6 +34,8 @@ POSE_TYPES = (
 )
 #: Types that may carry wheel odometry (a forward speed and a yaw rate).
 ODOM_TYPES = (ODOMETRY_TYPE, TWIST_TYPE)
+#: Types that may carry a GNSS receiver's velocity (ENU, as ROS GNSS drivers publish it).
+VELOCITY_TYPES = (TWIST_TYPE, TWIST_COV_TYPE)
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 TIME_SOURCES = ("header", "receive")
 BASE_FRAMES = ("base_link", "base_footprint")
@@ -76,10 +79,11 @@ _MAPPING_DEFAULTS = {
 
 #: Columns of the rows: IMU ``t, f (3), omega (3), q (x, y, z, w), var(roll, pitch, yaw)``;
 #: fix ``t, lat, lon, h, sigma N, E, D``; pose ``t, p N, E, D, v N, E, D, roll, pitch, yaw``;
-#: Odometry: the pose's and then the twist's ``v x, y, z (FLU), omega z (FLU), var v x, var omega z``;
-#: TwistStamped: ``t`` and the twist's columns.
+#: Odometry: the pose's and then the twist's ``v x, y, z (FLU), omega z (FLU), var v x, var omega z``
+#: and its linear covariance as given ``xx, yy, zz, xy, xz, yz`` (NaN without one);
+#: TwistStamped, TwistWithCovarianceStamped: ``t`` and the twist's columns.
 IMU_COLS, FIX_COLS, POSE_COLS = 14, 7, 10
-TWIST_COLS = 6
+TWIST_COLS = 12
 ODOM_COLS = POSE_COLS + TWIST_COLS
 
 
@@ -298,11 +302,18 @@ def pose_row(msg, t: float, msgtype: str) -> tuple:
 
 
 def twist_columns(twist, cov=None) -> tuple:
-    """A twist (FLU body axes) -> (v x, y, z [m/s], omega z [rad/s], var v x, var omega z); the
-    variances NaN when unknown (no covariance, or a non-positive one)."""
+    """A twist (in its message's axes) -> (v x, y, z [m/s], omega z [rad/s], var v x, var omega z,
+    and the linear covariance ``xx, yy, zz, xy, xz, yz`` [m^2/s^2] as given); the two variances
+    NaN when unknown (no covariance, or a non-positive one), the linear block NaN without a
+    covariance."""
     var_v = float(cov[0]) if cov is not None and float(cov[0]) > 0 else np.nan
     var_w = float(cov[35]) if cov is not None and float(cov[35]) > 0 else np.nan
-    return (twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.z, var_v, var_w)
+    lin = (
+        (np.nan,) * 6
+        if cov is None
+        else tuple(float(cov[i]) for i in (0, 7, 14, 1, 2, 8))  # row-major 6x6
+    )
+    return (twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.z, var_v, var_w, *lin)
 
 
 def odometry_row(msg, t: float) -> tuple:
@@ -312,7 +323,10 @@ def odometry_row(msg, t: float) -> tuple:
 
 
 def twist_row(msg, t: float) -> tuple:
-    """``geometry_msgs/TwistStamped`` -> (t, the twist's columns), variances unknown."""
+    """``geometry_msgs/TwistStamped`` -> (t, the twist's columns), variances unknown;
+    ``TwistWithCovarianceStamped`` -> (t, the twist's columns with its covariance)."""
+    if hasattr(msg.twist, "covariance"):
+        return (t,) + twist_columns(msg.twist.twist, msg.twist.covariance)
     return (t,) + twist_columns(msg.twist)
 
 
@@ -350,7 +364,7 @@ class RowDecoder:
             return navsat_row(msg, t, col, self.default_sigma)
         if typ == ODOMETRY_TYPE:
             return odometry_row(msg, t)
-        if typ == TWIST_TYPE:
+        if typ in VELOCITY_TYPES:
             return twist_row(msg, t)
         if typ in POSE_TYPES:
             return pose_row(msg, t, typ)
@@ -361,9 +375,9 @@ class RowDecoder:
 
 def row_width(typ: str) -> int:
     """Columns of a row of message type ``typ``."""
-    return {IMU_TYPE: IMU_COLS, ODOMETRY_TYPE: ODOM_COLS, TWIST_TYPE: 1 + TWIST_COLS}.get(
-        typ, POSE_COLS if typ in POSE_TYPES else FIX_COLS
-    )
+    widths = {IMU_TYPE: IMU_COLS, ODOMETRY_TYPE: ODOM_COLS, TWIST_TYPE: 1 + TWIST_COLS}
+    widths[TWIST_COV_TYPE] = 1 + TWIST_COLS
+    return widths.get(typ, POSE_COLS if typ in POSE_TYPES else FIX_COLS)
 
 
 @dataclass

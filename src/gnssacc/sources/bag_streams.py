@@ -22,6 +22,8 @@ NAVSATFIX_TYPE = "sensor_msgs/msg/NavSatFix"
 HPPOSLLH_TYPE = "ubxtranslator/msg/hpposllh"
 ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
 IMAGE_TYPE = "sensor_msgs/msg/Image"
+TWIST_TYPE = "geometry_msgs/msg/TwistStamped"
+TWIST_COV_TYPE = "geometry_msgs/msg/TwistWithCovarianceStamped"
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 #: Orientation sigmas written with ``with_orientation`` (roll, pitch, yaw) [deg].
 ORIENTATION_SIGMA_DEG = (1.0, 1.0, 5.0)
@@ -260,6 +262,38 @@ def wheel_odometry_messages(ty: MessageTypes, run: RecordedRun, opts, key: str =
             key,
             ty.serialize(msg, ODOMETRY_TYPE),
         )
+
+
+def gnss_velocity_messages(
+    ty: MessageTypes, run: RecordedRun, opts, typ: str, frame_id: str, key: str = "gnss_vel"
+):
+    """``run.gnss_vel`` as a ROS GNSS driver publishes it: ``TwistWithCovarianceStamped`` (or
+    ``TwistStamped``, ``typ``) in ENU [m/s], stamped with the fixes' epochs, the linear block of
+    the covariance ENU [m^2/s^2] (an unmeasured axis: velocity 0, variance -1; the angular block
+    -1: not measured)."""
+    vel = run.gnss_vel
+    T = ty.T
+    for k in range(len(vel.t)):
+        v_enu = ENU_NED @ np.nan_to_num(vel.v_ned[k])
+        twist = T["geometry_msgs/msg/Twist"](linear=ty.vec3(v_enu), angular=ty.vec3((0, 0, 0)))
+        t = vel.t[k] + opts.time_offset_s
+        if typ == TWIST_TYPE:
+            msg = T[typ](header=ty.header(t, frame_id), twist=twist)
+        else:
+            c = ENU_NED @ vel.cov_ned(k) @ ENU_NED.T
+            unmeasured = ~np.isfinite(np.diag(c))
+            c = np.nan_to_num(c)
+            c[unmeasured, unmeasured] = -1.0
+            cov = np.zeros((6, 6))
+            cov[:3, :3] = c
+            cov[3, 3] = cov[4, 4] = cov[5, 5] = -1.0
+            msg = T[typ](
+                header=ty.header(t, frame_id),
+                twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                    twist=twist, covariance=cov.ravel()
+                ),
+            )
+        yield ns(t + opts.receive_delay_s), key, ty.serialize(msg, typ)
 
 
 def image_messages(ty: MessageTypes, run: RecordedRun, opts, key: str = "image"):

@@ -21,6 +21,7 @@ from .bag_decode import (
     ODOM_TYPES,
     POSE_TYPES,
     TF_TYPE,
+    VELOCITY_TYPES,
     merge_fix_mappings,
 )
 
@@ -33,6 +34,7 @@ _NOT_FIX_TYPES = (
     "sensor_msgs/msg/CompressedImage",
     *POSE_TYPES,
     *ODOM_TYPES,
+    *VELOCITY_TYPES,
 )
 
 
@@ -70,6 +72,10 @@ class Selection:
     odom_candidates : list of TopicStat
         Without one given: the Odometry / TwistStamped topics (but a given truth), of which the one
         left after the truth is decided is the wheel odometry.
+    vel_candidates : list of TopicStat
+        The TwistStamped / TwistWithCovarianceStamped topics (but the given odometry) that may be
+        the GNSS receiver's velocity (decided from the data:
+        :func:`gnssacc.sources.bag_velocity.choose_velocity`).
     """
 
     imu: TopicStat
@@ -80,6 +86,7 @@ class Selection:
     truth_candidates: list = field(default_factory=list)
     odom: TopicStat | None = None
     odom_candidates: list = field(default_factory=list)
+    vel_candidates: list = field(default_factory=list)
 
 
 def survey(reader) -> list[TopicStat]:
@@ -334,4 +341,16 @@ def select_topics(
     gnss = pick.gnss(gnss_topic, fixes, truth)
     cands = pick.truth_candidates(fixes, gnss) if truth is None else []
     odom, odoms = pick.odometry(odom_topic, truth)
-    return Selection(imu, gnss, truth, truth_kind, pick.reasons, cands, odom, odoms)
+    vels = [
+        s
+        for s in pick.nonempty
+        if s.msgtype in VELOCITY_TYPES and s.topic not in (getattr(odom, "topic", None),)
+    ]
+    if vels:
+        pick.reasons.append(
+            "GNSS velocity candidate(s) "
+            + ", ".join(v.topic for v in vels)
+            + ": taken only if not in a body or odometry frame, stamped with the fixes and "
+            "agreeing with their differences (as ENU)"
+        )
+    return Selection(imu, gnss, truth, truth_kind, pick.reasons, cands, odom, odoms, vels)

@@ -35,8 +35,11 @@ from .bag_streams import (
     NAVSATFIX_TYPE,
     ODOMETRY_TYPE,
     TF_TYPE,
+    TWIST_COV_TYPE,
+    TWIST_TYPE,
     MessageTypes,
     fix_messages,
+    gnss_velocity_messages,
     image_messages,
     imu_messages,
     odometry_messages,
@@ -99,6 +102,13 @@ class BagOptions:
     odom_topic : str, optional
         Write ``run.odometry`` on this topic as a drive controller does: ``nav_msgs/Odometry`` in
         the local ``odom`` frame (:func:`gnssacc.sources.bag_streams.wheel_odometry_messages`).
+    gnss_vel_topic : str or None
+        Where ``run.gnss_vel`` is written when the run has it (default ``/gnss/vel``), in the
+        fixes' frame ``gnss``, as a GNSS driver publishes it
+        (:func:`gnssacc.sources.bag_streams.gnss_velocity_messages`); None: not written.
+    gnss_vel_covariance : bool
+        ``TwistWithCovarianceStamped`` with the velocity's covariance (default), else
+        ``TwistStamped`` (no covariance).
     """
 
     imu_topic: str | None = None
@@ -122,6 +132,8 @@ class BagOptions:
     truth_frame_id: str = "map"
     truth_offset_enu_m: tuple = (0.0, 0.0, 0.0)
     odom_topic: str | None = None
+    gnss_vel_topic: str | None = "default"
+    gnss_vel_covariance: bool = True
 
 
 def write_bag(
@@ -243,6 +255,11 @@ def _topics(ty: MessageTypes, run: RecordedRun, opts: BagOptions):
         )
     if opts.odom_topic:
         yield "odom", opts.odom_topic, ODOMETRY_TYPE, wheel_odometry_messages(ty, run, opts)
+    if run.gnss_vel is not None and gnss_topic and opts.gnss_vel_topic:
+        topic = "/gnss/vel" if opts.gnss_vel_topic == "default" else opts.gnss_vel_topic
+        typ = TWIST_COV_TYPE if opts.gnss_vel_covariance else TWIST_TYPE
+        frame = "gnss"  # the fixes' frame (bag_streams writes NavSatFix in "gnss")
+        yield "gnss_vel", topic, typ, gnss_velocity_messages(ty, run, opts, typ, frame)
     if opts.imu_mount_rpy_deg is not None and opts.write_tf:
         yield "tf", "/tf_static", TF_TYPE, tf_static_messages(ty, run, opts)
     if opts.extra_image_topic_bytes > 0:

@@ -7,15 +7,18 @@ A run directory holds
     [rad/s], in the IMU axes, Front-Right-Down unless the loader is told ``imu_frame="flu"``
     (Front-Left-Up; converted by negating y and z). ``[mounting]`` in the config then rotates
     the IMU axes into the body frame and shifts the IMU time stamps onto the GNSS clock.
-``gnss.csv``, or ``gnss.pos`` or ``gnss.nmea`` (exactly one of them)
+``gnss.csv``, or ``gnss.pos``, ``gnss.nmea`` or ``gnss.ubx`` (exactly one of them)
     ``gnss.csv``: columns ``t, lat_deg, lon_deg, h_m`` and optionally ``sn, se, sd``: the 1-sigma
     north, east, down position uncertainty [m] (all three or none; without them
     ``gnss.default_sigma_m``), ``rho_ne, rho_nd, rho_ed``: the correlations of those errors
     (with the sigmas), and ``quality``: the fix quality code (1 fix, 2 float, 3 sbas, 4 dgps,
-    5 single, 6 ppp, 7 estimated, 0 unknown). ``gnss.pos``: an RTKLIB solution file
-    (:mod:`gnssacc.sources.rtklib`); ``gnss.nmea``: an NMEA 0183 log (:mod:`gnssacc.sources.nmea`):
+    5 single, 6 ppp, 7 estimated, 0 unknown); optionally the GNSS velocity ``vn, ve[, vd]``
+    [m/s] with ``sigma_vn, sigma_ve[, sigma_vd]`` and ``rho_vne, rho_vnd, rho_ved``
+    (:func:`gnssacc.sources.gnssfile.read_gnss_csv_velocity`). ``gnss.pos``: an RTKLIB solution
+    file (:mod:`gnssacc.sources.rtklib`); ``gnss.nmea``: an NMEA 0183 log
+    (:mod:`gnssacc.sources.nmea`); ``gnss.ubx``: a u-blox UBX log (:mod:`gnssacc.sources.ubx`):
     their times are absolute (GPST, UTC), so ``imu.csv`` must then be stamped in UNIX (UTC) or GPS
-    seconds (:mod:`gnssacc.sources.gnssfile`).
+    seconds (:mod:`gnssacc.sources.gnssfile`). Their velocities become ``run.gnss_vel``.
 ``odom.csv`` (optional)
     Wheel odometry: columns ``t, v_forward`` and optionally ``yaw_rate``, ``sigma_v``,
     ``sigma_yaw_rate``: time [s] on the IMU's clock (shifted with it by ``[mounting]
@@ -71,15 +74,17 @@ from .gnssfile import (
     QUALITY_COLUMN,
     SIGMA_COLUMNS,
     apply_quality_policy,
-    load_gnss_file,
+    load_gnss_data,
     optional_group,
-    read_gnss_csv,
+    read_gnss_csv_file,
     read_positions,
+    velocities_of_kept_fixes,
+    velocity_columns,
     write_gnss_file,
 )
 
 IMU_COLUMNS = ("t", "ax", "ay", "az", "gx", "gy", "gz")
-GNSS_FILES = ("gnss.csv", "gnss.pos", "gnss.nmea")
+GNSS_FILES = ("gnss.csv", "gnss.pos", "gnss.nmea", "gnss.ubx")
 ODOM_COLUMNS = ("t", "v_forward")
 ODOM_OPTIONAL = ("yaw_rate", "sigma_v", "sigma_yaw_rate")
 VEL_COLUMNS = ("vn", "ve", "vd")
@@ -151,11 +156,9 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) 
     imu = _read_imu(root / "imu.csv", frame, max_bad)
     meta = {"source": "csv", "imu_frame": frame}
     if gnss_file.name == "gnss.csv":
-        gnss, _ = apply_quality_policy(
-            read_gnss_csv(gnss_file, cfg.default_sigma_ned, max_bad),
-            cfg["gnss"]["quality"],
-            str(gnss_file),
-        )
+        read_fixes, gnss_vel = read_gnss_csv_file(gnss_file, cfg.default_sigma_ned, max_bad)
+        gnss, _ = apply_quality_policy(read_fixes, cfg["gnss"]["quality"], str(gnss_file))
+        gnss_vel = velocities_of_kept_fixes(gnss_vel, read_fixes.t, gnss.t)
         # Stamps in ms/us/ns would never meet the fixes: found (and rescaled, or named) before the
         # overlap check, which could only say "different clocks?".
         if time_units is not None:
@@ -163,7 +166,7 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) 
         imu = apply_mounting(imu, cfg)
     else:  # absolute fix times are put on the IMU's clock, which must be absolute too
         imu = apply_mounting(imu, cfg)
-        gnss, read = load_gnss_file(gnss_file, cfg, imu.t)
+        gnss, gnss_vel, read = load_gnss_data(gnss_file, cfg, imu.t)
         meta.update(read)
     offset_s = configured_time_offset_s(cfg)  # what puts the IMU's clock on the fixes'
     truth = (
@@ -190,6 +193,7 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) 
         meta=meta,
         odometry=odometry,
         truth_on_imu_clock=True,
+        gnss_vel=gnss_vel,
     )
     release_free_memory()  # the parser's blocks
     return run.validate()
@@ -415,10 +419,10 @@ def write_csv_run(run: RecordedRun, path, gnss_format: str = "csv") -> Path:
     run : RecordedRun
     path : str or Path
         The directory; created if needed, existing files of the format are overwritten.
-    gnss_format : {"csv", "pos", "nmea"}
-        The fixes as ``gnss.csv`` (full precision), or as ``gnss.pos`` (RTKLIB, GPST) or
-        ``gnss.nmea`` (NMEA 0183) in those formats' precision; the latter two need the run's
-        times in UNIX seconds.
+    gnss_format : {"csv", "pos", "nmea", "ubx"}
+        The fixes (and ``run.gnss_vel``) as ``gnss.csv`` (full precision), or as ``gnss.pos``
+        (RTKLIB, GPST), ``gnss.nmea`` (NMEA 0183) or ``gnss.ubx`` (u-blox NAV-PVT) in those
+        formats' precision; the latter three need the run's times in UNIX seconds.
 
     Returns
     -------
@@ -438,9 +442,15 @@ def write_csv_run(run: RecordedRun, path, gnss_format: str = "csv") -> Path:
     for stale in ("truth.csv", "init.json", "odom.csv") + GNSS_FILES:
         (root / stale).unlink(missing_ok=True)
     if gnss_format == "csv":
-        write_gnss_csv(root / "gnss.csv", run.gnss, src)
+        write_gnss_csv(root / "gnss.csv", run.gnss, src, vel=run.gnss_vel)
     else:
-        write_gnss_file(root / f"gnss.{gnss_format}", run.gnss, gnss_format, truth=run.truth)
+        write_gnss_file(
+            root / f"gnss.{gnss_format}",
+            run.gnss,
+            gnss_format,
+            truth=run.truth,
+            vel=run.gnss_vel,
+        )
     if run.odometry is not None:
         write_odometry_csv(root / "odom.csv", run.odometry, src)
     if run.truth is not None:
@@ -450,8 +460,10 @@ def write_csv_run(run: RecordedRun, path, gnss_format: str = "csv") -> Path:
     return root
 
 
-def write_gnss_csv(path: Path, g, src: str = "# gnssacc GNSS fixes") -> None:
-    """Fixes as ``gnss.csv`` (with the correlations and quality codes when they have them)."""
+def write_gnss_csv(path: Path, g, src: str = "# gnssacc GNSS fixes", vel=None) -> None:
+    """Fixes as ``gnss.csv`` (with the correlations and quality codes when they have them, and
+    the velocities ``vel`` at the fixes with the same time tag:
+    :func:`gnssacc.sources.gnssfile.velocity_columns`)."""
     names = list(POS_COLUMNS + SIGMA_COLUMNS)
     cols = [g.t, np.degrees(g.lat), np.degrees(g.lon), g.h, *g.sigma_ned.T]
     if g.corr_ned is not None:
@@ -460,12 +472,14 @@ def write_gnss_csv(path: Path, g, src: str = "# gnssacc GNSS fixes") -> None:
     if g.quality is not None:
         names.append(QUALITY_COLUMN)
         cols.append(g.quality)
+    v_names, v_cols = velocity_columns(g, vel)
     _write_table(
         path,
-        names,
-        cols,
+        names + v_names,
+        cols + v_cols,
         f"{src}\n# t [s], lat/lon [deg], h [m] ellipsoidal, 1-sigma N/E/D [m], "
-        f"correlations, quality code (1 fix .. 5 single)",
+        f"correlations, quality code (1 fix .. 5 single)"
+        + (", NED velocity and its 1-sigma [m/s] (nan: none at that fix)" if v_names else ""),
     )
 
 

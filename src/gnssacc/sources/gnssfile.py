@@ -28,30 +28,50 @@ from ..core.recording import (
     FIX_QUALITY,
     FIX_QUALITY_NAMES,
     GnssFixes,
+    GnssVelocity,
     RecordedRun,
     check_increasing,
 )
 from .common import check_degrees, read_table
 from .gnss_time import ABSOLUTE_CLOCK_MIN_S, place_on_clock
+from .gnss_vel import (
+    DEFAULT_VELOCITY_SIGMA_MPS,
+    speed_course,
+    velocity_from_covariance,
+    velocity_from_speed_course,
+    velocity_on_fixes,
+)
 
 POS_COLUMNS = ("t", "lat_deg", "lon_deg", "h_m")
 SIGMA_COLUMNS = ("sn", "se", "sd")
 CORR_COLUMNS = ("rho_ne", "rho_nd", "rho_ed")
 QUALITY_COLUMN = "quality"
+#: Optional velocity columns of ``gnss.csv``: north and east (together), down (with them).
+VEL_H_COLUMNS = ("vn", "ve")
+VEL_D_COLUMN = "vd"
+VEL_SIGMA_H_COLUMNS = ("sigma_vn", "sigma_ve")
+VEL_SIGMA_D_COLUMN = "sigma_vd"
+VEL_CORR_COLUMNS = ("rho_vne", "rho_vnd", "rho_ved")
 #: File kinds by suffix (anything else is recognised by its first line).
-SUFFIXES = {".pos": "pos", ".nmea": "nmea", ".nma": "nmea", ".csv": "csv"}
+SUFFIXES = {".pos": "pos", ".nmea": "nmea", ".nma": "nmea", ".csv": "csv", ".ubx": "ubx"}
+#: ``meta["gnss_format"]`` of each kind.
+FORMAT_NAMES = {"pos": "rtklib-pos", "nmea": "nmea", "csv": "csv", "ubx": "ubx"}
 #: A fix whose correlation matrix has a determinant below this is taken as uncorrelated.
 MIN_CORRELATION_DET = 1e-6
 
 
 def file_kind(path: Path) -> str:
-    """``"pos"``, ``"nmea"`` or ``"csv"``: by suffix, else by the first non-blank line (``%``: a
-    ``.pos`` header, ``$``: NMEA, anything else: CSV)."""
+    """``"pos"``, ``"nmea"``, ``"ubx"`` or ``"csv"``: by suffix, else by the first bytes (u-blox's
+    sync characters ``0xB5 0x62``: UBX) or the first non-blank line (``%``: a ``.pos`` header,
+    ``$``: NMEA, anything else: CSV)."""
     kind = SUFFIXES.get(path.suffix.lower())
     if kind:
         return kind
     try:
         with open(path, "rb") as fh:
+            if b"\xb5\x62" in fh.read(4096):
+                return "ubx"
+            fh.seek(0)
             for raw in fh:
                 text = raw.strip()
                 if text:
@@ -64,12 +84,20 @@ def file_kind(path: Path) -> str:
 
 
 def load_gnss_file(path, cfg: RunConfig, imu_t: np.ndarray) -> tuple[GnssFixes, dict]:
-    """The fixes of a GNSS file on the IMU's clock, with ``[gnss] quality`` applied.
+    """The fixes of a GNSS file on the IMU's clock (:func:`load_gnss_data` without velocities)."""
+    gnss, _, meta = load_gnss_data(path, cfg, imu_t)
+    return gnss, meta
+
+
+def load_gnss_data(
+    path, cfg: RunConfig, imu_t: np.ndarray
+) -> tuple[GnssFixes, GnssVelocity | None, dict]:
+    """The fixes and velocities of a GNSS file on the IMU's clock, with ``[gnss] quality`` applied.
 
     Parameters
     ----------
     path : str or Path
-        ``.csv`` (columns as ``gnss.csv``), ``.pos`` (RTKLIB) or ``.nmea``.
+        ``.csv`` (columns as ``gnss.csv``), ``.pos`` (RTKLIB), ``.nmea`` or ``.ubx`` (u-blox).
     cfg : RunConfig
         ``gnss.default_sigma_m``, ``gnss.quality``, ``gnss.nmea_uere_m``,
         ``gnss.nmea_vertical_factor``, ``data.max_bad_fraction``.
@@ -79,53 +107,63 @@ def load_gnss_file(path, cfg: RunConfig, imu_t: np.ndarray) -> tuple[GnssFixes, 
     Returns
     -------
     GnssFixes
+    GnssVelocity or None
+        The file's velocities on the fixes' clock (None when it has none); those of fixes that
+        the quality policy drops are dropped with them.
     dict
         What was read: ``gnss_file``, ``gnss_format``, and for absolute times
-        ``gnss_time_system`` and ``gnss_clock`` (``unix`` or ``gps``); the quality counts.
+        ``gnss_time_system`` and ``gnss_clock`` (``unix`` or ``gps``); the quality counts;
+        ``gnss_velocity`` (how many, and whether their sigmas are stated) when there are any.
     """
     path = Path(path)
     where = str(path)
     if not path.exists():
         raise InputError(where, "GNSS file not found")
     kind = file_kind(path)
-    meta: dict = {
-        "gnss_file": where,
-        "gnss_format": {"pos": "rtklib-pos", "nmea": "nmea", "csv": "csv"}[kind],
-    }
+    meta: dict = {"gnss_file": where, "gnss_format": FORMAT_NAMES[kind]}
     if kind == "csv":
-        gnss = read_gnss_csv(path, cfg.default_sigma_ned, float(cfg["data"]["max_bad_fraction"]))
+        gnss, vel = read_gnss_csv_file(
+            path, cfg.default_sigma_ned, float(cfg["data"]["max_bad_fraction"])
+        )
     else:
-        gnss, times = _absolute_fixes(path, kind, cfg, meta)
+        gnss, times, vel = _absolute_fixes(path, kind, cfg, meta)
         t, clock = place_on_clock(times, imu_t, where)
         meta.update(gnss_time_system=times.system, gnss_clock=clock)
-        gnss = GnssFixes(
-            t,
-            gnss.lat,
-            gnss.lon,
-            gnss.h,
-            gnss.sigma_ned,
-            gnss.quality,
-            gnss.corr_ned,
-            gnss.sigma_stated,
-        )
+        vel = velocity_on_fixes(vel, gnss.t, t)
+        gnss = replace(gnss, t=t)
         check_increasing(gnss.t, where, "GNSS")
-    gnss, counts = apply_quality_policy(gnss, cfg["gnss"]["quality"], where)
+    kept, counts = apply_quality_policy(gnss, cfg["gnss"]["quality"], where)
     meta.update(counts)
-    return gnss, meta
+    vel = velocities_of_kept_fixes(vel, gnss.t, kept.t)
+    if vel is not None:
+        meta["gnss_velocity"] = {"count": len(vel), "sigma_stated": bool(vel.sigma_stated)}
+    return kept, vel, meta
+
+
+def velocities_of_kept_fixes(vel: GnssVelocity | None, t_all, t_kept) -> GnssVelocity | None:
+    """``vel`` without the velocities tagged at a fix that was dropped (same epoch, same
+    receiver solution); velocities at no fix's time stay."""
+    if vel is None or len(t_all) == len(t_kept):
+        return vel
+    dropped = np.setdiff1d(t_all, t_kept)
+    keep = ~np.isin(vel.t, dropped)
+    return vel if keep.all() else (vel.select(keep) if keep.any() else None)
 
 
 def with_gnss_file(run: RecordedRun, path, cfg: RunConfig) -> RecordedRun:
     """``run`` with its fixes replaced by those of a GNSS file (``--gnss FILE``), on its IMU's clock.
 
-    The run keeps its origin, truth, odometry and given initial state; ``meta`` records the file
-    (:func:`load_gnss_file`).
+    The run keeps its origin, truth, odometry and given initial state; its GNSS velocities
+    become the file's (none when the file has none: they belong to the receiver that made the
+    fixes); ``meta`` records the file (:func:`load_gnss_data`).
     """
-    gnss, meta = load_gnss_file(path, cfg, run.imu.t)
-    return replace(run, gnss=gnss, meta={**run.meta, **meta}).validate()
+    gnss, vel, meta = load_gnss_data(path, cfg, run.imu.t)
+    return replace(run, gnss=gnss, gnss_vel=vel, meta={**run.meta, **meta}).validate()
 
 
 def _absolute_fixes(path: Path, kind: str, cfg: RunConfig, meta: dict):
-    """(fixes with times still absolute, FileTimes) of a .pos or NMEA file."""
+    """(fixes with times still absolute, FileTimes, velocities on the same times or None) of a
+    .pos, NMEA or UBX file."""
     where = str(path)
     if kind == "pos":
         from .rtklib import read_pos
@@ -139,7 +177,17 @@ def _absolute_fixes(path: Path, kind: str, cfg: RunConfig, meta: dict):
             )
         meta["gnss_file_form"] = pos.meta["form"]
         sig, corr = sigmas_and_correlations(pos.cov_ned, cfg.default_sigma_ned, where, pos.times.t)
-        return GnssFixes(pos.times.t, pos.lat, pos.lon, pos.h, sig, pos.quality, corr), pos.times
+        vel = None
+        if pos.vel_ned is not None:
+            vel = velocity_from_covariance(pos.times.t, pos.vel_ned, pos.vel_cov_ned, where)
+        fixes = GnssFixes(pos.times.t, pos.lat, pos.lon, pos.h, sig, pos.quality, corr)
+        return fixes, pos.times, vel
+    if kind == "ubx":
+        from .ubx import read_ubx
+
+        ub = read_ubx(path, float(cfg["data"]["max_bad_fraction"]))
+        meta["gnss_ubx_messages"] = ub.meta["messages"]
+        return ub.fixes, ub.times, ub.velocity
     from .nmea import read_nmea
 
     uere = uere_by_code(cfg["gnss"]["nmea_uere_m"])
@@ -157,9 +205,9 @@ def _absolute_fixes(path: Path, kind: str, cfg: RunConfig, meta: dict):
             f"{nm.meta['sigma_from']['hdop']} fix(es) without GST: sigmas assumed from HDOP x UERE "
             f"([gnss] nmea_uere_m, nmea_vertical_factor), not measured",
         )
-    return GnssFixes(
-        nm.times.t, nm.lat, nm.lon, nm.h, nm.sigma_ned, nm.quality, nm.corr_ned
-    ), nm.times
+    vel = velocity_from_speed_course(nm.times.t, nm.speed_mps, nm.course_deg)
+    fixes = GnssFixes(nm.times.t, nm.lat, nm.lon, nm.h, nm.sigma_ned, nm.quality, nm.corr_ned)
+    return fixes, nm.times, vel
 
 
 def uere_by_code(user: dict) -> dict[int, float]:
@@ -265,13 +313,18 @@ def write_gnss_file(
     kind: str,
     *,
     truth=None,
+    vel: GnssVelocity | None = None,
     form: str = "llh",
     time_system: str = "GPST",
     time_format: str = "calendar",
 ) -> Path:
-    """Write fixes held on a UNIX clock as an RTKLIB ``.pos`` (``kind="pos"``) or an NMEA log
-    (``kind="nmea"``; RMC's speed and course from ``truth.v_n`` at the fix epochs when given).
+    """Write fixes held on a UNIX clock as an RTKLIB ``.pos`` (``kind="pos"``), an NMEA log
+    (``kind="nmea"``) or a u-blox UBX log (``kind="ubx"``), with their velocities when given.
 
+    ``vel``: the GNSS velocities (:attr:`RecordedRun.gnss_vel`), written at the fixes they share
+    a time with: the ``.pos`` velocity columns, NMEA RMC/VTG speed and course, UBX NAV-PVT
+    ``velN/velE/velD``. Without ``vel`` the NMEA speed and course come from ``truth.v_n`` at the
+    fix epochs when given (as before velocities existed), and the other formats have none.
     ``form``, ``time_system``, ``time_format``: of the ``.pos`` (:func:`gnssacc.sources.rtklib.write_pos`).
     The NMEA HDOP is the one that gives the fixes' horizontal sigma with the default UERE of their
     quality (GST carries the sigmas themselves).
@@ -289,6 +342,11 @@ def write_gnss_file(
             f"holds absolute times (simulate with t_start_s set to a UNIX time)",
         )
     cov = gnss.cov_ned(np.arange(len(gnss)))
+    v_fix, v_cov = velocity_at_fixes(vel, gnss.t)
+    if kind == "ubx":
+        from .ubx import write_ubx
+
+        return write_ubx(path, gnss, v_fix, v_cov)
     if kind == "pos":
         from .rtklib import write_pos
 
@@ -303,13 +361,12 @@ def write_gnss_file(
             form=form,
             time_system=time_system,
             time_format=time_format,
+            vel_ned=v_fix,
+            vel_cov_ned=v_cov,
         )
     from .nmea import write_nmea
 
-    speed = course = None
-    if truth is not None and truth.v_n is not None:
-        v = np.column_stack([np.interp(gnss.t, truth.t, truth.v_n[:, i]) for i in range(3)])
-        speed, course = np.hypot(v[:, 0], v[:, 1]), np.degrees(np.arctan2(v[:, 1], v[:, 0]))
+    speed, course = _nmea_speed_course(gnss, v_fix, truth)
     return write_nmea(
         path,
         gnss.t,
@@ -323,7 +380,50 @@ def write_gnss_file(
         vertical_factor=float(DEFAULTS["gnss"]["nmea_vertical_factor"]),
         speed_mps=speed,
         course_deg=course,
+        vtg=v_fix is not None,
     )
+
+
+def _nmea_speed_course(gnss: GnssFixes, v_fix, truth):
+    """NMEA's speed [m/s] and course [deg] at the fixes: of the velocities, else of the truth's
+    (the simulator's way before velocities existed), else none."""
+    if v_fix is not None:
+        return speed_course(v_fix)
+    if truth is not None and truth.v_n is not None:
+        v = np.column_stack([np.interp(gnss.t, truth.t, truth.v_n[:, i]) for i in range(3)])
+        return np.hypot(v[:, 0], v[:, 1]), np.degrees(np.arctan2(v[:, 1], v[:, 0]))
+    return None, None
+
+
+#: Velocities within this of a fix's time are that fix's [s] (below every format's resolution).
+SAME_EPOCH_S = 1e-4
+
+
+def velocity_at_fixes(vel: GnssVelocity | None, t_fix: np.ndarray):
+    """(NED velocity (M, 3) [m/s], NED covariance (M, 3, 3)) at each fix from the velocity with
+    the same time tag (NaN rows where none), or (None, None) without velocities. Formats that
+    write a velocity per fix record use it; velocities at no fix's time are counted in a
+    warning (they cannot be written)."""
+    if vel is None or len(vel) == 0:
+        return None, None
+    t_fix = np.asarray(t_fix, float)
+    j = np.clip(np.searchsorted(vel.t, t_fix), 1, len(vel.t) - 1) if len(vel.t) > 1 else None
+    if j is None:
+        near = np.zeros(len(t_fix), int)
+    else:
+        near = np.where(np.abs(vel.t[j - 1] - t_fix) <= np.abs(vel.t[j] - t_fix), j - 1, j)
+    hit = np.abs(vel.t[near] - t_fix) <= SAME_EPOCH_S
+    if int(hit.sum()) < len(vel):
+        warn_data(
+            "GNSS velocity",
+            f"{len(vel) - int(hit.sum())} of {len(vel)} velocities are at no fix's time: a format "
+            f"with one record per fix cannot hold them (not written)",
+        )
+    v = np.full((len(t_fix), 3), np.nan)
+    cov = np.full((len(t_fix), 3, 3), np.nan)
+    v[hit] = vel.v_ned[near[hit]]
+    cov[hit] = vel.cov_ned(near[hit])
+    return v, cov
 
 
 # --- gnss.csv --------------------------------------------------------------------------------------------
@@ -394,3 +494,95 @@ def read_gnss_csv(path: Path, default_sigma_ned: np.ndarray, max_bad: float) -> 
         None if corr is None else corr.copy(),
         sigma_stated="sn" in tab,
     )
+
+
+def read_gnss_csv_file(
+    path: Path, default_sigma_ned: np.ndarray, max_bad: float
+) -> tuple[GnssFixes, GnssVelocity | None]:
+    """``gnss.csv``'s fixes (:func:`read_gnss_csv`) and its optional velocities
+    (:func:`read_gnss_csv_velocity`)."""
+    return read_gnss_csv(path, default_sigma_ned, max_bad), read_gnss_csv_velocity(path)
+
+
+def read_gnss_csv_velocity(path: Path) -> GnssVelocity | None:
+    """The optional velocity columns of ``gnss.csv``, None without them.
+
+    ``vn, ve`` [m/s] (together), ``vd`` [m/s] (with them; without it the velocities are
+    horizontal), ``sigma_vn, sigma_ve`` and ``sigma_vd`` [m/s] (for the axes given, all or none:
+    without them :data:`~gnssacc.sources.gnss_vel.DEFAULT_VELOCITY_SIGMA_MPS`, not stated), and
+    ``rho_vne, rho_vnd, rho_ved`` (correlations, with the sigmas). A row with an empty (or
+    ``nan``) velocity cell has no velocity: only the fix is used.
+    """
+    import warnings
+
+    from ..core.errors import DataWarning
+
+    where = str(path)
+    names = VEL_H_COLUMNS + (VEL_D_COLUMN,) + VEL_SIGMA_H_COLUMNS + (VEL_SIGMA_D_COLUMN,)
+    with warnings.catch_warnings():  # rows without a velocity are dropped here, not warned
+        warnings.simplefilter("ignore", DataWarning)
+        tab = read_table(path, ("t",), names + VEL_CORR_COLUMNS, 1.0)
+    found = [c for c in names + VEL_CORR_COLUMNS if c in tab]
+    if not found:
+        return None
+    if not all(c in tab for c in VEL_H_COLUMNS):
+        raise InputError(
+            where, f"velocity columns {', '.join(found)} need vn and ve (north and east, m/s)"
+        )
+    axes = list(VEL_H_COLUMNS) + ([VEL_D_COLUMN] if VEL_D_COLUMN in tab else [])
+    sig_names = list(VEL_SIGMA_H_COLUMNS) + ([VEL_SIGMA_D_COLUMN] if VEL_D_COLUMN in tab else [])
+    k, n = len(axes), len(tab["t"])
+    if n == 0:
+        return None
+    v = np.full((n, 3), np.nan)
+    v[:, :k] = np.column_stack([tab[c] for c in axes])
+    sig = np.full((n, 3), np.nan)
+    given = optional_group(tab, sig_names, where)
+    if given is None and any(c in tab for c in VEL_SIGMA_H_COLUMNS + (VEL_SIGMA_D_COLUMN,)):
+        raise InputError(where, f"give the velocity sigmas {', '.join(sig_names)} or none")
+    sig[:, :k] = np.tile(DEFAULT_VELOCITY_SIGMA_MPS[:k], (n, 1)) if given is None else given
+    corr = optional_group(tab, VEL_CORR_COLUMNS, where)
+    if corr is not None and (given is None or k < 3):
+        raise InputError(
+            where, "velocity correlations rho_vne, rho_vnd, rho_ved need vd and the sigma columns"
+        )
+    if np.any(sig[:, :k] <= 0):
+        raise InputError(where, "velocity sigmas must be positive m/s")
+    check_increasing(tab["t"], where, "GNSS velocity")
+    return GnssVelocity(
+        tab["t"].copy(), v, sig, None if corr is None else corr.copy(), given is not None
+    )
+
+
+def velocity_columns(g: GnssFixes, vel: GnssVelocity | None) -> tuple[list, list]:
+    """``gnss.csv``'s velocity column names and columns for ``vel`` at the fixes (NaN where a fix
+    has none); the down column only when some velocity measures it, the sigma columns unless
+    every sigma is the unstated default."""
+    v, cov = velocity_at_fixes(vel, g.t)
+    if v is None:
+        return [], []
+    sig = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
+    k = 3 if np.isfinite(v[:, 2]).any() else 2
+    names = list(VEL_H_COLUMNS) + ([VEL_D_COLUMN] if k == 3 else [])
+    cols = [v[:, i] for i in range(k)]
+    s = sig[np.isfinite(sig[:, 0]), :k]
+    default = not vel.sigma_stated and np.allclose(s, DEFAULT_VELOCITY_SIGMA_MPS[:k])
+    if not default:
+        names += list(VEL_SIGMA_H_COLUMNS) + ([VEL_SIGMA_D_COLUMN] if k == 3 else [])
+        cols += [sig[:, i] for i in range(k)]
+    if vel.corr_ned is not None and k == 3 and not default:
+        hit = np.isfinite(v[:, 0])
+        corr = np.full((len(g.t), 3), np.nan)
+        corr[hit] = 0.0
+        c = cov[hit]
+        s3 = sig[hit]
+        corr[hit] = np.column_stack(
+            [
+                c[:, 0, 1] / (s3[:, 0] * s3[:, 1]),
+                c[:, 0, 2] / (s3[:, 0] * s3[:, 2]),
+                c[:, 1, 2] / (s3[:, 1] * s3[:, 2]),
+            ]
+        )
+        names += list(VEL_CORR_COLUMNS)
+        cols += [corr[:, i] for i in range(3)]
+    return names, cols

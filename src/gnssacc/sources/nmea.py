@@ -7,7 +7,15 @@ Sentences (any talker: ``GP``, ``GN``, ``GL``, ``GA``, ``GB``, ``BD`` ...; other
     the ellipsoidal height is ``altitude + separation``.
     ``RMC`` / ``ZDA``: the UTC date that puts GGA's time of day on a calendar day (the one with the
     same time of day, else the nearest one before, across midnight); RMC's speed over ground
-    [knots -> m/s] and course [deg] are kept beside the fixes (``NmeaFile.speed_mps``, ``course_deg``).
+    [knots -> m/s] and course [deg] (status ``A`` only) are kept beside the fixes
+    (``NmeaFile.speed_mps``, ``course_deg``) and become the horizontal GNSS velocity
+    (:func:`gnssacc.sources.gnss_vel.velocity_from_speed_course`: a documented default sigma, and
+    below a stated speed no course).
+    ``VTG``: course over ground (true) and speed (knots, else km/h), used at the epochs RMC gives
+    none. VTG has no time of its own: it belongs to the epoch of the time-tagged sentence (RMC,
+    GGA, GST, ZDA) before it, or, when the file's first VTG comes before any of them (a receiver
+    that leads each epoch with VTG), to the one after it. A VTG of mode ``N`` (not valid) is
+    ignored.
     ``GST``: per-axis 1-sigma of latitude, longitude and altitude [m] and the error ellipse
     (semi-major, semi-minor, orientation from true north): preferred over HDOP; the ellipse gives
     the north-east correlation.
@@ -68,7 +76,7 @@ QUALITY_GGA = {
     FIX_QUALITY["unknown"]: 1,
 }
 #: Fields after the address that a sentence must have to be read.
-MIN_FIELDS = {"GGA": 11, "RMC": 9, "ZDA": 4, "GST": 8}
+MIN_FIELDS = {"GGA": 11, "RMC": 9, "ZDA": 4, "GST": 8, "VTG": 7}
 #: Dates further than this from a GGA's time of day are a day away [s].
 HALF_DAY_S = 43200.0
 
@@ -280,8 +288,9 @@ def read_nmea(
         )
     times = _dated(kept, dates, where)
     sig, corr, sigma_from = _sigmas(kept, gst, uere_m, vertical_factor, default_sigma_ned)
-    speed = np.array([rmc.get(round(g.tod * 100), (np.nan, np.nan))[0] for g in kept])
-    course = np.array([rmc.get(round(g.tod * 100), (np.nan, np.nan))[1] for g in kept])
+    sc = [rmc.get(round(g.tod * 100), (np.nan, np.nan)) for g in kept]
+    speed = np.array([x[0] for x in sc])
+    course = np.array([x[1] for x in sc])
     meta = {
         **counts,
         "dropped_quality": {str(k): v for k, v in dropped.items()},
@@ -304,9 +313,12 @@ def read_nmea(
 
 
 def _scan(lines: list[str], where: str, max_bad_fraction: float):
-    """Every sentence read: GGA fixes, dates (index, time of day, midnight), GST and RMC by time of
-    day [centiseconds], and the counts; bad lines counted, warned or refused."""
+    """Every sentence read: GGA fixes, dates (index, time of day, midnight), GST and the speed and
+    course (RMC's, else VTG's) by time of day [centiseconds], and the counts; bad lines counted,
+    warned or refused."""
     fixes, dates, gst, rmc = [], [], {}, {}
+    tagged: list = []  # (line index, time of day) of every time-tagged sentence
+    vtgs: list = []  # (line index, (speed, course))
     bad: dict[str, int] = {}
     first_bad = None
     n_lines = 0
@@ -319,12 +331,17 @@ def _scan(lines: list[str], where: str, max_bad_fraction: float):
             if parsed is None:
                 continue
             kind, f = parsed
+            if kind == "VTG":
+                _vtg(f, n_lines, vtgs)
+                continue
             if kind == "GGA":
                 fixes.append(_gga(f, n_lines, n))
             elif kind in ("RMC", "ZDA"):
                 _date_sentence(kind, f, n_lines, dates, rmc)
             else:
                 _gst(f, gst)
+            if f[0]:
+                tagged.append((n_lines, _time_of_day(f[0])))
         except BadSentence as err:
             reason = str(err)
             bad[reason] = bad.get(reason, 0) + 1
@@ -335,6 +352,9 @@ def _scan(lines: list[str], where: str, max_bad_fraction: float):
         "bad": bad,
         "first_bad_line": first_bad[0] if first_bad else None,
     }
+    for key, value in _vtg_epochs(vtgs, tagged).items():  # where RMC gives no speed
+        if not np.isfinite(rmc.get(key, (np.nan,))[0]):
+            rmc[key] = value
     if n_bad:
         listing = ", ".join(f"{v} {k}" for k, v in sorted(bad.items()))
         text = (
@@ -361,11 +381,42 @@ def _date_sentence(kind: str, f: list[str], index: int, dates: list, rmc: dict) 
         if len(d) != 6:
             raise BadSentence("unreadable date")
         dates.append((index, tod, _midnight(d[0:2], d[2:4], d[4:6])))
-        speed = _number(f[6], "speed") * KNOT_MPS if f[6] else np.nan
-        course = _number(f[7], "course") if f[7] else np.nan
-        rmc[round(tod * 100)] = (speed, course)
+        if f[1] == "A":  # V: void, no valid navigation (its speed and course are not used)
+            speed = _number(f[6], "speed") * KNOT_MPS if f[6] else np.nan
+            course = _number(f[7], "course") if f[7] else np.nan
+            rmc[round(tod * 100)] = (speed, course)
     elif f[0] and f[1] and f[2] and f[3]:
         dates.append((index, _time_of_day(f[0]), _midnight(f[1], f[2], f[3])))
+
+
+def _vtg(f: list[str], index: int, vtgs: list) -> None:
+    """A VTG: (index, (speed [m/s], course [deg])); none when its mode is N (not valid)."""
+    if len(f) > 8 and f[8][:1] == "N":
+        return
+    course = _number(f[0], "course") if f[0] else np.nan
+    if f[4]:
+        speed = _number(f[4], "speed") * KNOT_MPS
+    elif f[6]:
+        speed = _number(f[6], "speed") / 3.6
+    else:
+        return
+    vtgs.append((index, (speed, course)))
+
+
+def _vtg_epochs(vtgs: list, tagged: list) -> dict:
+    """VTG (speed, course) by time of day [centiseconds]: each at the time-tagged sentence before
+    it, or after it when the file's first VTG precedes every time-tagged sentence."""
+    if not vtgs or not tagged:
+        return {}
+    idx = np.array([i for i, _ in tagged])
+    tod = np.array([t for _, t in tagged])
+    leads = vtgs[0][0] < idx[0]
+    out = {}
+    for i, value in vtgs:
+        j = int(np.searchsorted(idx, i)) if leads else int(np.searchsorted(idx, i)) - 1
+        if 0 <= j < len(idx):
+            out[round(tod[j] * 100)] = value
+    return out
 
 
 def _gst(f: list[str], gst: dict) -> None:
@@ -481,9 +532,10 @@ def write_nmea(
     geoid_sep_m: float = 0.0,
     gst: bool = True,
     rmc: bool = True,
+    vtg: bool = False,
     talker: str = "GP",
 ) -> Path:
-    """Write fixes as NMEA 0183: per epoch RMC (date, speed, course), GGA and GST.
+    """Write fixes as NMEA 0183: per epoch RMC (date, speed, course), VTG (when asked), GGA and GST.
 
     Parameters
     ----------
@@ -502,8 +554,8 @@ def write_nmea(
         As for :func:`read_nmea`: HDOP = sqrt(2) sigma_h / UERE(quality).
     speed_mps, course_deg : ndarray, optional
         RMC's speed over ground [m/s] and course [deg] (empty fields without).
-    gst, rmc : bool
-        Write GST and RMC sentences.
+    gst, rmc, vtg : bool
+        Write GST, RMC and VTG sentences (VTG after RMC, at the epochs with a speed).
     talker : str
     """
     m = len(t_unix)
@@ -534,6 +586,10 @@ def write_nmea(
             out.append(
                 _sentence(f"{talker}RMC,{hms},A,{la},{ns_},{lo},{ew},{sp},{co},{d:%d%m%y},,,A")
             )
+        if vtg and speed_mps is not None and np.isfinite(speed_mps[k]):
+            co = f"{course_deg[k] % 360.0:.2f}" if np.isfinite(course_deg[k]) else ""
+            kn, kmh = speed_mps[k] / KNOT_MPS, speed_mps[k] * 3.6
+            out.append(_sentence(f"{talker}VTG,{co},T,,M,{kn:.3f},N,{kmh:.3f},K,A"))
         out.append(
             _sentence(
                 f"{talker}GGA,{hms},{la},{ns_},{lo},{ew},{QUALITY_GGA[int(quality[k])]},{n_sat[k]:02d},"

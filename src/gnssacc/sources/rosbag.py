@@ -13,6 +13,10 @@ Topics
     Wheel odometry (optional): the ``nav_msgs/msg/Odometry`` or ``geometry_msgs/msg/TwistStamped``
     topic left after the truth (``linear.x`` forward, ``-angular.z`` the yaw rate about the body's
     down axis), as ``run.odometry``, on the IMU's clock.
+    GNSS velocity (optional): a ``geometry_msgs/msg/TwistWithCovarianceStamped`` or
+    ``TwistStamped`` topic in ENU beside the fixes, told apart from wheel odometry by its frame,
+    its stamps at the fix epochs and its agreement with the fixes' differences
+    (:mod:`.bag_velocity`), as ``run.gnss_vel`` on the fixes' clock.
     Topics are picked by type and rate when unambiguous (see :func:`select_topics`); otherwise
     an :class:`~gnssacc.core.errors.InputError` lists the candidates and the argument that picks one.
 
@@ -42,6 +46,7 @@ Modules
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -67,6 +72,7 @@ from .bag_files import MAGIC, STORAGE_SUFFIXES, check_bag_path, open_reader, sto
 from .bag_tables import Context, choose, clean_rows, fix_table, fixes_of, pose_origin, pose_truth
 from .bag_times import find_gaps, subsample
 from .bag_topics import Selection, TopicStat, select_topics, survey
+from .bag_velocity import VelocityChoice, choose_velocity
 from .common import apply_mounting, configured_time_offset_s, one_line, with_noisy_fixes
 
 # The bag source's public names, wherever they are defined.
@@ -176,6 +182,10 @@ def load_bag_run(
     if sel.truth is not None and sel.truth_kind == "pose":
         porigin, meta["truth_origin"] = pose_origin(origin, truth_origin_llh_deg)
         truth = pose_truth(dec.cols[sel.truth.topic], porigin, where, max_bad, meta)
+    vel = VelocityChoice()
+    if sel.gnss is not None:  # a receiver's velocity belongs with its own fixes only
+        vel = choose_velocity(sel.vel_candidates, dec, gnss, origin, where)
+        sel = replace(sel, odom_candidates=[s for s in sel.odom_candidates if s.topic != vel.topic])
     chosen = choose(
         sel,
         dec,
@@ -191,6 +201,9 @@ def load_bag_run(
         truth,
     )
     _record_choice(chosen, sel, meta, truth_origin_llh_deg, origin)
+    if vel.topic:
+        meta["topics"]["gnss_velocity"] = vel.topic
+    meta["selection"] += vel.reasons
     odometry = (
         None if chosen.odometry is None else chosen.odometry.shifted(configured_time_offset_s(cfg))
     )
@@ -208,6 +221,7 @@ def load_bag_run(
         init=init,
         meta=meta,
         odometry=odometry,
+        gnss_vel=vel.velocity,
     )
     release_free_memory()  # the decoded message columns
     return run.validate()
@@ -287,6 +301,7 @@ def chosen_topics(sel: Selection, with_imu: bool = True) -> dict[str, str]:
     its candidates, the odometry and its candidates)."""
     stats = [sel.imu if with_imu else None, sel.gnss, sel.truth, sel.odom]
     stats += [s for s, _ in sel.truth_candidates] + list(sel.odom_candidates)
+    stats += list(sel.vel_candidates)
     return {s.topic: s.msgtype for s in stats if s is not None}
 
 
@@ -469,7 +484,7 @@ def _decide_candidates(path: Path, sel: Selection, mappings: dict) -> list[str]:
     from ..core.config import load_config
 
     if sel.gnss is None or not (
-        sel.truth_candidates or sel.odom_candidates or sel.odom or sel.truth
+        sel.truth_candidates or sel.odom_candidates or sel.odom or sel.truth or sel.vel_candidates
     ):
         return []
     cfg = load_config(None)
@@ -493,8 +508,10 @@ def _decide_candidates(path: Path, sel: Selection, mappings: dict) -> list[str]:
                 given = Truth(rows[:, 0], rows[:, 1] * DEG, rows[:, 2] * DEG, rows[:, 3])
             else:
                 given = pose_truth(col, origin, where, max_bad, {})
+        vel = choose_velocity(sel.vel_candidates, dec, gnss, origin, where)
+        sel = replace(sel, odom_candidates=[s for s in sel.odom_candidates if s.topic != vel.topic])
         chosen = choose(sel, dec, Context(where, gnss, origin, None, 0.0, max_bad, {}), given)
-    out = list(chosen.reasons)
+    out = list(chosen.reasons) + list(vel.reasons)
     for topic, v in chosen.checks.items():
         if sel.truth is not None and topic == sel.truth.topic and not v["ok"]:
             out.append(f"truth {topic} (given) disagrees: {v['why']}")

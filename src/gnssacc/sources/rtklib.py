@@ -86,6 +86,44 @@ FORMS = {
         ("sden(m)", "sdnu(m)", "sdue(m)"),
     ),
 }
+#: Velocity columns (RTKLIB's ``outvel`` option) of each form that has them: velocity, standard
+#: deviations and signed-root cross terms, in the file's order (RTKLIB writes none for ``enu``).
+VEL_FORMS = {
+    "llh": (
+        ("vn(m/s)", "ve(m/s)", "vu(m/s)"),
+        ("sdvn", "sdve", "sdvu"),
+        ("sdvne", "sdveu", "sdvun"),
+    ),
+    "dms": (
+        ("vn(m/s)", "ve(m/s)", "vu(m/s)"),
+        ("sdvn", "sdve", "sdvu"),
+        ("sdvne", "sdveu", "sdvun"),
+    ),
+    "xyz": (
+        ("vx(m/s)", "vy(m/s)", "vz(m/s)"),
+        ("sdvx", "sdvy", "sdvz"),
+        ("sdvxy", "sdvyz", "sdvzx"),
+    ),
+}
+#: Axis-index pairs of each cross-term column in the file's axes (ENU for llh/dms/enu, ECEF for
+#: xyz): llh/dms sdne (E,N), sdeu (E,U), sdun (U,N); enu sden, sdnu, sdue; xyz sdxy, sdyz, sdzx.
+CROSS_PAIRS = {
+    "sdne(m)": (0, 1),
+    "sdeu(m)": (0, 2),
+    "sdun(m)": (2, 1),
+    "sden(m)": (0, 1),
+    "sdnu(m)": (1, 2),
+    "sdue(m)": (2, 0),
+    "sdxy(m)": (0, 1),
+    "sdyz(m)": (1, 2),
+    "sdzx(m)": (2, 0),
+    "sdvne": (0, 1),
+    "sdveu": (0, 2),
+    "sdvun": (2, 1),
+    "sdvxy": (0, 1),
+    "sdvyz": (1, 2),
+    "sdvzx": (2, 0),
+}
 #: NED <-> ENU axis swap (its own inverse).
 T_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 _SPLIT = re.compile(r"[,\s]+")
@@ -111,6 +149,11 @@ class PosFile:
     meta : dict
         ``form`` (llh, dms, xyz, enu), ``time_system``, ``time_format`` (calendar, week),
         ``height_kind``, ``header_line`` (its number), ``program``.
+    vel_ned : ndarray, shape (M, 3), or None
+        Velocity of the antenna along north, east, down [m/s] (``vn ve vu`` with ``vu`` negated,
+        or ``vx vy vz`` rotated from ECEF), when the file has velocity columns.
+    vel_cov_ned : ndarray, shape (M, 3, 3), or None
+        Its NED covariance [m^2/s^2] (zero where the file states none).
     """
 
     times: FileTimes
@@ -121,6 +164,8 @@ class PosFile:
     quality: np.ndarray
     n_sat: np.ndarray | None
     meta: dict = field(default_factory=dict)
+    vel_ned: np.ndarray | None = None
+    vel_cov_ned: np.ndarray | None = None
 
 
 # --- reading -------------------------------------------------------------------------------------------
@@ -158,7 +203,33 @@ def read_pos(path) -> PosFile:
         "header_line": head.line_no,
         "program": head.program,
     }
-    return PosFile(times, lat, lon, h, cov, quality, n_sat, meta)
+    vel, vel_cov = _velocities(values, col, head, lat, lon, where)
+    return PosFile(times, lat, lon, h, cov, quality, n_sat, meta, vel, vel_cov)
+
+
+def _velocities(values: np.ndarray, col: dict, head: "_Header", lat, lon, where: str):
+    """(NED velocity (M, 3) [m/s], NED covariance (M, 3, 3) [m^2/s^2]) of the rows, or
+    (None, None) without velocity columns; a partial set of velocity columns is an error."""
+    forms = VEL_FORMS.get(head.form)
+    if forms is None:
+        return None, None
+    v_names, sd_names, cross_names = forms
+    found = [c for c in v_names if c in col]
+    if not found:
+        return None, None
+    if len(found) != 3:
+        raise InputError(
+            where,
+            f"line {head.line_no}: the column header has {', '.join(found)} but not all of "
+            f"{', '.join(v_names)}",
+        )
+    v = values[:, [col[c] for c in v_names]]
+    cov = _file_covariance(values, col, sd_names, cross_names)
+    R_f = R_en_batch(lat, lon)  # ECEF -> NED at the fix
+    if head.form == "xyz":
+        return np.einsum("kij,kj->ki", R_f, v), R_f @ cov @ R_f.transpose(0, 2, 1)
+    v_ned = v[:, [0, 1, 2]] * np.array([1.0, 1.0, -1.0])  # vn ve vu -> N E D
+    return v_ned, T_ENU_NED @ cov @ T_ENU_NED.T
 
 
 @dataclass
@@ -369,34 +440,22 @@ def _dms_columns(v: np.ndarray) -> np.ndarray:
 
 def _file_covariance(values: np.ndarray, col: dict, sd_names, cross_names) -> np.ndarray:
     """The covariance in the file's own axes (ENU for llh/dms/enu, ECEF for xyz), (M, 3, 3) [m^2];
-    zero where the file has no standard deviations."""
+    zero where the file has no standard deviations. Cross terms are RTKLIB's signed roots
+    ``sqvar``: ``c = sign(s) s^2``, axis pairs in :data:`CROSS_PAIRS`."""
     m = len(values)
     cov = np.zeros((m, 3, 3))
     if not all(c in col for c in sd_names):
         return cov
     sd = values[:, [col[c] for c in sd_names]]
-    if sd_names[0] == "sdn(m)":  # llh/dms: sdn sde sdu -> E, N, U axes
+    if sd_names[0] in ("sdn(m)", "sdvn"):  # llh/dms: sdn sde sdu -> E, N, U axes
         sd = sd[:, [1, 0, 2]]
     for i in range(3):
         cov[:, i, i] = sd[:, i] ** 2
     if all(c in col for c in cross_names):
         cross = values[:, [col[c] for c in cross_names]]
-        signed = np.sign(cross) * cross**2  # RTKLIB's sqvar: c = sign(s) s^2
-        # llh/dms: sdne (E,N), sdeu (E,U), sdun (U,N); enu: sden (E,N), sdnu (N,U), sdue (U,E);
-        # xyz: sdxy, sdyz, sdzx: in axis-index pairs:
-        pairs = {
-            "sdne(m)": (0, 1),
-            "sdeu(m)": (0, 2),
-            "sdun(m)": (2, 1),
-            "sden(m)": (0, 1),
-            "sdnu(m)": (1, 2),
-            "sdue(m)": (2, 0),
-            "sdxy(m)": (0, 1),
-            "sdyz(m)": (1, 2),
-            "sdzx(m)": (2, 0),
-        }
+        signed = np.sign(cross) * cross**2
         for j, name in enumerate(cross_names):
-            a, b = pairs[name]
+            a, b = CROSS_PAIRS[name]
             cov[:, a, b] = cov[:, b, a] = signed[:, j]
     return cov
 
@@ -432,6 +491,8 @@ def write_pos(
     time_format: str = "calendar",
     ref_llh=None,
     program: str = "gnssacc",
+    vel_ned=None,
+    vel_cov_ned=None,
 ) -> Path:
     """Write fixes as an RTKLIB ``.pos`` file, in RTKLIB's own layout and precision.
 
@@ -454,6 +515,12 @@ def write_pos(
         The base position of the ``enu`` form (default: the first fix).
     program : str
         Written as ``% program :``.
+    vel_ned : ndarray, shape (M, 3), optional
+        NED velocity at each fix [m/s]: written as RTKLIB's velocity columns (``outvel``: ``vn
+        ve vu`` for llh, ``vx vy vz`` ECEF for xyz; RTKLIB has none for enu) to 0.01 mm/s. A NaN
+        row is written as zeros (no velocity), a NaN axis with a zero standard deviation.
+    vel_cov_ned : ndarray, shape (M, 3, 3), optional
+        Its NED covariance [m^2/s^2] (NaN rows and columns of unmeasured axes are written as 0).
 
     Returns
     -------
@@ -488,6 +555,20 @@ def write_pos(
         + " ".join(f"{n:>8}" for n in sd_names + cross_names)
         + f" {'age(s)':>6} {'ratio':>6}"
     )
+    vel = None
+    if vel_ned is not None:
+        if form not in VEL_FORMS:
+            raise ValueError(f"RTKLIB writes no velocity in the {form} form")
+        if form == "xyz" and np.isnan(np.asarray(vel_ned, float)).any():
+            raise ValueError("a velocity without all three axes has no ECEF (xyz) form")
+        v_names, vsd_names, vcross_names = VEL_FORMS[form]
+        names += (
+            " "
+            + " ".join(f"{n:>10}" for n in v_names)
+            + f" {vsd_names[0]:>9} "
+            + " ".join(f"{n:>8}" for n in vsd_names[1:] + vcross_names)
+        )
+        vel = _velocity_values(form, lat, lon, vel_ned, vel_cov_ned)
     lines.append(f"%  {label}{names}")
     stamps = _time_strings(np.asarray(t_unix, float), time_system, time_format)
     pos, sd, cross = _form_values(form, lat, lon, h, cov_ned, ref)
@@ -500,10 +581,41 @@ def write_pos(
             f"{stamps[k]} {p} {quality[k]:3d} {n_sat[k]:3d} "
             + " ".join(f"{v:8.4f}" for v in (*sd[k], *cross[k]))
             + f" {0.0:6.2f} {0.0:6.1f}"
+            + ("" if vel is None else _velocity_fields(*(a[k] for a in vel)))
         )
     path = Path(path)
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def _velocity_values(form: str, lat, lon, vel_ned, vel_cov_ned):
+    """Velocities, standard deviations and signed-root cross terms in the form's axes and order
+    (NaN velocities and covariances written as zeros: "not given")."""
+    v = np.nan_to_num(np.asarray(vel_ned, float))
+    m = len(v)
+    cov = np.zeros((m, 3, 3)) if vel_cov_ned is None else np.nan_to_num(vel_cov_ned)
+    if form == "xyz":
+        R_f = R_en_batch(lat, lon)
+        v_f = np.einsum("kji,kj->ki", R_f, v)  # NED -> ECEF
+        cov_f = R_f.transpose(0, 2, 1) @ cov @ R_f
+        order, pairs = [0, 1, 2], [(0, 1), (1, 2), (2, 0)]
+    else:
+        v_f = v * np.array([1.0, 1.0, -1.0])  # vn ve vu
+        cov_f = T_ENU_NED @ cov @ T_ENU_NED.T  # ENU
+        order, pairs = [1, 0, 2], [(0, 1), (0, 2), (2, 1)]
+    sd = np.sqrt(np.maximum(np.diagonal(cov_f, axis1=1, axis2=2), 0.0))[:, order]
+    cross = np.column_stack([cov_f[:, a, b] for a, b in pairs])
+    return v_f, sd, np.sign(cross) * np.sqrt(np.abs(cross))
+
+
+def _velocity_fields(v, sd, cross) -> str:
+    """RTKLIB's velocity fields (``outpos``: ``%10.5f`` x3, ``%9.5f``, ``%8.5f`` x5)."""
+    return (
+        " "
+        + " ".join(f"{x:10.5f}" for x in v)
+        + f" {sd[0]:9.5f} "
+        + " ".join(f"{x:8.5f}" for x in (*sd[1:], *cross))
+    )
 
 
 def _time_strings(t_unix: np.ndarray, system: str, time_format: str) -> list[str]:
