@@ -7,6 +7,7 @@ compute the same numbers the same way.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
 from typing import Callable
@@ -41,6 +42,7 @@ from .outputs.report import (
     write_json,
     write_trajectory_csv,
 )
+from .prepare.cache import PreparationCache, prepared_once
 from .prepare.passes import filter_pass
 from .prepare.prepared import Prepared, checked
 from .prepare.prepared import prepare as prepare_recording
@@ -85,18 +87,33 @@ def check_input(run: RecordedRun, cfg: RunConfig) -> tuple[RecordedRun, RunConfi
 
 
 def prepare(
-    run: RecordedRun, cfg: RunConfig, tune: str | None = None, methods=(), on_checked=None
+    run: RecordedRun,
+    cfg: RunConfig,
+    tune: str | None = None,
+    methods=(),
+    on_checked=None,
+    cache: PreparationCache | None = None,
 ) -> Prepared:
     """The prepared recording (:func:`gnssacc.prepare.prepared.prepare`) with the EKF as its filter
     pass, and the ``-gm`` methods' setup when ``methods`` has one; ``on_checked(findings)`` is told
-    the input checks' findings once they are settled."""
-    return prepare_recording(
+    the input checks' findings once they are settled. With ``cache``, a stored outcome for the same
+    recording and settings is reused, else the fresh one stored
+    (:func:`gnssacc.prepare.cache.prepared_once`; ``on_checked`` is then also told ``reused=``)."""
+    gm = any(METHODS.get(m) is _gm for m in methods)
+    if cache is None:
+        return prepare_recording(
+            run, cfg, tune, filter_pass=filter_pass, gauss_markov=gm, on_checked=on_checked
+        )
+    from .prepare.gauss_markov import gm_setup
+
+    return prepared_once(
         run,
         cfg,
-        tune,
-        filter_pass=filter_pass,
-        gauss_markov=any(METHODS.get(m) is _gm for m in methods),
-        on_checked=on_checked,
+        tune or cfg["tune"]["mode"],
+        cache,
+        lambda told: prepare_recording(run, cfg, tune, filter_pass=filter_pass, on_checked=told),
+        (lambda p: replace(p, gauss_markov=gm_setup(p, filter_pass=filter_pass))) if gm else None,
+        on_checked,
     )
 
 
@@ -109,12 +126,14 @@ def check_dicts(run: RecordedRun, findings) -> list[dict]:
 def state_corrections(say: Callable[[str], None] | None, header: str | None, run: RecordedRun):
     """What to do with the input checks' settled findings (``on_checked`` of :func:`prepare`):
     with ``say``, say the run's header line with the corrections the estimator proved
-    (:func:`gnssacc.outputs.report.header_line`); without (the Python API), warn of each."""
+    (:func:`gnssacc.outputs.report.header_line`) and, when the preparation was reused, where from
+    (``reused``); without (the Python API), warn of each."""
 
-    def told(findings: list) -> None:
+    def told(findings: list, reused: str | None = None) -> None:
         dicts = check_dicts(run, findings)
         if say is not None:
-            line = header_line(header, dicts)
+            said = f"{header}; {reused}" if header and reused else (header or reused)
+            line = header_line(said, dicts)
             if line:
                 say(line)
             return
@@ -467,6 +486,7 @@ def compare(
     observers: dict | None = None,
     say: Callable[[str], None] | None = None,
     header: str | None = None,
+    cache: PreparationCache | None = None,
 ) -> tuple[dict, dict, Prepared]:
     """Prepare the recording, run and score the methods over a common window, with consistency figures.
 
@@ -478,7 +498,7 @@ def compare(
     known and each method's end (:func:`run_methods`), so a caller can print results as they come;
     the first line it is told is ``header`` (the run's header line), once the input checks are
     settled, with the corrections the estimator proved (:func:`state_corrections`; without
-    ``say`` each is a warning).
+    ``say`` each is a warning). ``cache``: reuse or store the preparation (:func:`prepare`).
 
     Returns
     -------
@@ -489,7 +509,8 @@ def compare(
     prep : Prepared
         The shared start, stationary spans and (tuned) configuration.
     """
-    prep = prepare(run, cfg, tune, methods, on_checked=state_corrections(say, header, run))
+    told = state_corrections(say, header, run)
+    prep = prepare(run, cfg, tune, methods, on_checked=told, cache=cache)
     for line in preparation_lines(prep) if say else ():
         say(line)
     t = time.perf_counter()
@@ -558,6 +579,7 @@ def compare(
         "model_check": models[""].to_dict(),
         "model_check_gm": models["gm"].to_dict() if "gm" in models else None,
         "tuning": prep.tuning.to_dict() if prep.tuning is not None else None,
+        "preparation_cache": prep.cache,
     }
     return metrics_dict(run, sols, scores, raw, extra, failed), sols, prep
 
@@ -664,8 +686,10 @@ def compare_and_write(
     export: tuple = (),
     extra_files: Callable[[dict], dict[str, str]] | None = None,
     show_progress: bool = False,
+    cache: PreparationCache | None = None,
 ) -> tuple[dict, dict, Prepared, Path | None]:
-    """:func:`compare`, then :func:`write_result` (what each ``gnssacc batch`` task does).
+    """:func:`compare`, then :func:`write_result` (what each ``gnssacc batch`` task does;
+    ``cache``: see :func:`compare`).
 
     Returns
     -------
@@ -675,7 +699,7 @@ def compare_and_write(
         As from :func:`write_result`.
     """
     metrics, sols, prep, replay = compare_observed(
-        run, cfg, methods, tune=tune, show_progress=show_progress, observe=report
+        run, cfg, methods, tune=tune, show_progress=show_progress, observe=report, cache=cache
     )
     return (
         metrics,
@@ -706,6 +730,7 @@ def compare_observed(
     observe: bool = True,
     say: Callable[[str], None] | None = None,
     header: str | None = None,
+    cache: PreparationCache | None = None,
 ):
     """:func:`compare`, keeping (with ``observe``, when ``ekf-acc`` runs) that pass's matrices at
     every GNSS epoch for the report's observability section.
@@ -730,6 +755,7 @@ def compare_observed(
         observers={"ekf-acc": collector} if collector else None,
         say=say,
         header=header,
+        cache=cache,
     )
     replay = (
         collector.replay("ekf-acc", sols["ekf-acc"]) if collector and "ekf-acc" in sols else None

@@ -30,6 +30,7 @@ from ..core.errors import DataWarning, InputError, warn_data
 from ..core.interrupts import raise_if_interrupted
 from ..core.progress import CampaignProgress
 from ..outputs.outdir import ResultDir
+from ..prepare.cache import open_cache
 from ..pipeline import compare, compare_and_write, configure, failure_reason, load
 from ..sources.simspec import is_sim_spec, known_noise_config
 from .campaign import TASK_FILE, Campaign, TaskSpec, config_identity, write_atomic, write_record
@@ -146,7 +147,7 @@ def _compute(spec: TaskSpec, note: _Notary, target: ResultDir | None) -> dict:
     o = spec.options
     run, cfg = _load(spec)
     if target is None:
-        metrics, sols, _ = compare(run, cfg, o["methods"], tune=o["tune"])
+        metrics, sols, _ = compare(run, cfg, o["methods"], tune=o["tune"], cache=open_cache())
     else:
         kept: list[dict] = []
 
@@ -165,6 +166,7 @@ def _compute(spec: TaskSpec, note: _Notary, target: ResultDir | None) -> dict:
             report=outputs["report"],
             export=tuple(outputs["export"]),
             extra_files=files,
+            cache=open_cache(),  # tasks on one recording and settings prepare it once
         )
         if sols:
             return kept[-1]

@@ -75,6 +75,9 @@ class Prepared:
     gauss_markov : tuple or None
         ``(Prepared, how)`` for the ``-gm`` methods (:func:`gnssacc.prepare.gauss_markov.gm_setup`)
         when asked for.
+    cache : dict or None
+        With a preparation cache (:mod:`gnssacc.prepare.cache`): ``reused`` (whether this outcome
+        was read from it), ``file`` and ``key``.
     """
 
     run: RecordedRun
@@ -88,6 +91,7 @@ class Prepared:
     checks: tuple = ()
     seconds: dict = field(default_factory=dict)
     gauss_markov: tuple | None = None
+    cache: dict | None = None
 
     @property
     def modelled_run(self) -> RecordedRun:
