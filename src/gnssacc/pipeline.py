@@ -6,6 +6,9 @@ compute the same numbers the same way.
 
 from __future__ import annotations
 
+import os
+import shutil
+import sys
 import time
 from dataclasses import replace
 from datetime import datetime
@@ -687,9 +690,10 @@ def compare_and_write(
     extra_files: Callable[[dict], dict[str, str]] | None = None,
     show_progress: bool = False,
     cache: PreparationCache | None = None,
+    jobs: int | None = None,
 ) -> tuple[dict, dict, Prepared, Path | None]:
     """:func:`compare`, then :func:`write_result` (what each ``gnssacc batch`` task does;
-    ``cache``: see :func:`compare`).
+    ``cache``: see :func:`compare`; ``jobs``: see :func:`write_result`).
 
     Returns
     -------
@@ -716,6 +720,7 @@ def compare_and_write(
             export=export,
             extra_files=extra_files,
             replay=replay,
+            jobs=jobs,
         ),
     )
 
@@ -775,8 +780,9 @@ def write_result(
     export: tuple = (),
     extra_files: Callable[[dict], dict[str, str]] | None = None,
     replay=None,
+    jobs: int | None = None,
 ) -> Path | None:
-    """Write a complete result through ``target`` (all or nothing).
+    """Write a complete result through ``target``: all or nothing, the figures after the rest.
 
     Parameters
     ----------
@@ -791,6 +797,12 @@ def write_result(
         the result.
     replay : EkfReplay, optional
         For the report (:func:`write_result_files`).
+    jobs : int, optional
+        Processes the figures may be drawn in (:func:`draw_figures`; a campaign task: 1).
+
+    Without the report, the folder is first replaced by everything but the figures (the table,
+    ``metrics.json``, trajectories, exports), then the figures are drawn into it
+    (:func:`figures_into`): an interrupted drawing costs figures only.
 
     Returns
     -------
@@ -801,6 +813,8 @@ def write_result(
     if not sols:
         return None
     tuned = prep.tuning.to_toml(prep.cfg) if prep.tuning is not None else None
+    which = plot_set(plots, report)
+    later = which != "none" and not report  # the report embeds the figures: drawn before it
 
     def fill(folder: Path) -> None:
         write_result_files(
@@ -809,16 +823,114 @@ def write_result(
             sols,
             metrics,
             prep.cfg,
-            plots=plots,
+            plots="none" if later else which,
             report=report,
             export=export,
             tuned_toml=tuned,
             replay=replay,
+            jobs=jobs,
         )
         for name, text in (extra_files(metrics) if extra_files else {}).items():
             (folder / name).write_text(text)
 
-    return target.replace(fill)
+    out = target.replace(fill)
+    if later:  # the table, metrics.json and trajectories are in place; the figures after them
+        figures_into(out, run, sols, metrics, which, jobs)
+    return out
+
+
+def figures_into(folder: Path, run, sols, metrics, which: str, jobs: int | None = None) -> dict:
+    """Draw the figures into a finished result ``folder``: into a hidden folder inside it, each
+    moved into place when drawn (an interrupted run leaves its other files and whole figures)."""
+    tmp = Path(folder) / ".figures-partial"
+    tmp.mkdir(exist_ok=True)
+    try:
+        drawn = draw_figures(tmp, run, sols, metrics, which, jobs)
+        for png in tmp.glob("*.png"):
+            os.replace(png, Path(folder) / png.name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return drawn
+
+
+def figure_jobs() -> int:
+    """Processes the figures may be drawn in: ``$GNSSACC_JOBS`` when set, else the cores this
+    process may run on (at most 4); 1 where processes cannot be forked."""
+    env = os.environ.get("GNSSACC_JOBS", "").strip()
+    if env:
+        return max(1, int(env)) if env.isdigit() else 1
+    if not hasattr(os, "fork"):
+        return 1
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, min(4, cores or 1))
+
+
+def draw_figures(folder: Path, run, sols, metrics, which: str, jobs: int | None = None) -> dict:
+    """:func:`gnssacc.outputs.figures.write_figures`, the plot set split over ``jobs`` processes
+    (default :func:`figure_jobs`; forked after matplotlib is imported, each drawing every
+    ``jobs``-th figure, this process one share): what each drew, in the set's order. The figures of
+    a process that died, or did not end in time (:data:`SHARE_WAIT_FACTOR`), are drawn here."""
+    names = PLOT_SETS[which]
+    jobs = min(figure_jobs() if jobs is None else int(jobs), len(names))
+    if jobs < 2:
+        return write_figures(folder, run, sols, metrics, which)
+    import multiprocessing
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot  # noqa: F401  (imported once, before the fork)
+
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.SimpleQueue()
+    shares = [names[k::jobs] for k in range(jobs)]
+    args = (folder, run, sols, metrics)
+    sys.stdout.flush()  # a child must not write this process's buffers again
+    sys.stderr.flush()
+    procs = [ctx.Process(target=_draw_share, args=(queue, share, *args)) for share in shares[1:]]
+    for p in procs:
+        p.start()
+    try:
+        t = time.perf_counter()
+        got = _figure_share(shares[0], *args)
+        wait = max(SHARE_WAIT_MIN_S, SHARE_WAIT_FACTOR * (time.perf_counter() - t))
+        for p in procs:
+            p.join(timeout=max(0.0, wait - (time.perf_counter() - t)))
+        while not queue.empty():
+            got.update(queue.get())
+    finally:
+        for p in procs:
+            if p.is_alive():
+                p.terminate()
+    missing = [n for n in names if n not in got]  # a process that died or hung: drawn here
+    if missing:
+        got.update(_figure_share(missing, *args))
+    return {n: got[n] for n in names}
+
+
+#: How long the drawing processes get, from the start of this process's own share: that share's
+#: time this many times over, at least :data:`SHARE_WAIT_MIN_S` [s]; then their figures are drawn
+#: here.
+SHARE_WAIT_FACTOR = 10.0
+SHARE_WAIT_MIN_S = 60.0
+
+
+def _figure_share(names, folder, run, sols, metrics) -> dict:
+    """:func:`write_figures` of the figures ``names`` (a plot set of their own, for this call)."""
+    key = f"share-{os.getpid()}"
+    PLOT_SETS[key] = tuple(names)
+    try:
+        return write_figures(folder, run, sols, metrics, key)
+    finally:
+        PLOT_SETS.pop(key, None)
+
+
+def _draw_share(queue, names, folder, run, sols, metrics) -> None:
+    """A drawing process: its figures, and what it drew on ``queue``."""
+    try:
+        queue.put(_figure_share(names, folder, run, sols, metrics))
+    except BaseException as exc:  # noqa: BLE001 (reported by name, never raised in a child)
+        queue.put({n: f"not drawn: {type(exc).__name__}" for n in names})
 
 
 def default_out_dir(run: RecordedRun) -> Path:
@@ -883,6 +995,7 @@ def write_result_files(
     export: tuple = (),
     tuned_toml: str | None = None,
     replay=None,
+    jobs: int | None = None,
 ) -> None:
     """Write every output file into ``folder`` (a fresh folder; see :func:`write_outputs`).
 
@@ -893,7 +1006,7 @@ def write_result_files(
     bag of ``nav_msgs/Odometry``) and ``"ros1bag"`` (``trajectories.bag``); ``tuned_toml`` is written as
     ``tuned.toml`` (the identified noise, reusable with ``--config``); ``replay`` is the
     ``ekf-acc`` pass's :class:`gnssacc.analysis.observability.EkfReplay` for the report (``None``: the
-    report runs that filter once more).
+    report runs that filter once more); ``jobs``: see :func:`draw_figures`.
     """
     folder = Path(folder)
     for mid, sol in sols.items():
@@ -901,7 +1014,7 @@ def write_result_files(
     (folder / "config.toml").write_text(resolved_toml(cfg))
     if tuned_toml is not None:
         (folder / "tuned.toml").write_text(tuned_toml)
-    drawn = write_figures(folder, run, sols, metrics, plot_set(plots, report))
+    drawn = draw_figures(folder, run, sols, metrics, plot_set(plots, report), jobs)
     if "tum" in export:
         from .outputs.export import write_truth_tum, write_tum
 

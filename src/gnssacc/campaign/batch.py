@@ -167,6 +167,7 @@ def _compute(spec: TaskSpec, note: _Notary, target: ResultDir | None) -> dict:
             export=tuple(outputs["export"]),
             extra_files=files,
             cache=open_cache(),  # tasks on one recording and settings prepare it once
+            jobs=1,  # one task, one core: the worker's share
         )
         if sols:
             return kept[-1]
