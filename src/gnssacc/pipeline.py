@@ -674,7 +674,16 @@ def preparation_lines(prep: Prepared) -> list[str]:
         prep.stationary.summary(),
         f"start: {prep.init.how}",
     ]
-    return lines + ([prep.tuning.line()] if prep.tuning is not None else [])
+    tuned = [prep.tuning.line()] if prep.tuning is not None else []
+    win = prep.tuning.from_stationary.get("windows") if prep.tuning is not None else None
+    if win:
+        tuned.append(
+            f"tuned on {len(win['spans_s'])} windows, {win['imu_seconds_per_pass']:.0f} of "
+            f"{win['run_seconds']:.0f} s per pass (kept where the run rests and turns as a whole); "
+            f"confirmed over the whole run: log-likelihood {win['whole_run_loglik_gain']:+.0f} "
+            "against the configured noise"
+        )
+    return lines + tuned
 
 
 def compare_and_write(
