@@ -4,6 +4,7 @@ and turns, their likelihoods those of passes over each window; the whole run con
 
 from __future__ import annotations
 
+import os
 from types import SimpleNamespace
 
 import numpy as np
@@ -109,3 +110,27 @@ def test_a_short_run_is_tuned_whole():
         )
         is None
     )
+
+
+def test_windows_shared_among_processes_give_the_same_numbers(long_drive, monkeypatch):
+    run, prep = long_drive
+    wins = tw.windows(run, prep.cfg, prep.init, prep.quality, prep.stationary, filter_pass)
+    cfg = ungated(prep.cfg)
+    kw = dict(stationary=prep.stationary, quality=prep.quality, output_times=np.zeros(0))
+    one = tw.WindowedPass(wins, filter_pass, jobs=1)(run, cfg, "ekf", init=prep.init, **kw)
+    shared = tw.WindowedPass(wins, filter_pass, jobs=2)
+    try:
+        for _ in range(2):  # the workers serve one trial point after another
+            two = shared(run, cfg, "ekf", init=prep.init, **kw)
+            assert two.stats == one.stats
+        assert shared.workers is not None and len(shared.workers) == 1
+    finally:
+        shared.close()
+    # A worker that dies: its windows run here, the same numbers.
+    monkeypatch.setattr(tw.WindowedPass, "_serve", lambda self, conn, j, run: os._exit(3))
+    dying = tw.WindowedPass(wins, filter_pass, jobs=2)
+    try:
+        assert dying(run, cfg, "ekf", init=prep.init, **kw).stats == one.stats
+        assert dying.workers is None  # no workers more
+    finally:
+        dying.close()

@@ -25,6 +25,7 @@ from .core.config_docs import resolved_toml
 from .core.errors import InputError, warn_data
 from .core.interrupts import raise_if_interrupted
 from .core.memory import release_free_memory
+from .core.parallel import usable_jobs
 from .core.recording import RecordedRun
 from .core.solution import NavSolution
 from .estimators import kernels
@@ -863,15 +864,8 @@ def figures_into(folder: Path, run, sols, metrics, which: str, jobs: int | None 
 
 
 def figure_jobs() -> int:
-    """Processes the figures may be drawn in: ``$GNSSACC_JOBS`` when set, else the cores this
-    process may run on (at most 4); 1 where processes cannot be forked."""
-    env = os.environ.get("GNSSACC_JOBS", "").strip()
-    if env:
-        return max(1, int(env)) if env.isdigit() else 1
-    if not hasattr(os, "fork"):
-        return 1
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return max(1, min(4, cores or 1))
+    """Processes the figures may be drawn in (:func:`gnssacc.core.parallel.usable_jobs`)."""
+    return usable_jobs()
 
 
 def draw_figures(folder: Path, run, sols, metrics, which: str, jobs: int | None = None) -> dict:

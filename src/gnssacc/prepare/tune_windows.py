@@ -17,7 +17,9 @@ that together span :data:`SPAN_S` of IMU data, whatever the run's length:
 
 Each trial point is one pass per window (:class:`WindowedPass`, a
 :class:`~gnssacc.prepare.filter_pass.FilterPass` whose statistics add the windows' scored updates),
-so the search itself is unchanged. Then two passes over the whole run, with the starting and the
+so the search itself is unchanged; the windows of a trial point are shared among the usable cores
+(:func:`gnssacc.core.parallel.usable_jobs`, forked workers: the same numbers as in one process).
+Then two passes over the whole run, with the starting and the
 tuned noise, confirm it: the tuned noise must explain the whole run at least as well as the
 starting noise (log-likelihood gain >= 0), else the run is tuned over its whole length as before
 (:func:`tuned_on_windows` returns ``None``). The NIS the tuner reports is the whole run's.
@@ -32,6 +34,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..core.parallel import usable_jobs
 from ..core.recording import InitialState, RecordedRun
 from ..core.states import ATT, BA, BG, POS, VEL
 from .filter_pass import FilterPass
@@ -184,23 +187,111 @@ class WindowedPass:
     """A :class:`~gnssacc.prepare.filter_pass.FilterPass` over :class:`Window` s: one pass of
     ``filter_pass`` per window, statistics merged (:func:`merged`); the first window starts where
     the caller says (``init``), the others from their own starts. Only statistics are returned
-    (``output_times`` must be empty), on a solution of the first window."""
+    (``output_times`` must be empty), on a solution of the first window.
 
-    def __init__(self, wins: list[Window], filter_pass: FilterPass):
+    With ``jobs`` > 1 the windows are shared among that many processes (this one and workers
+    forked on the first call, which hold the recording as this process does; the windows of a
+    share are every ``jobs``-th): the same passes, merged in the same order, so the same numbers
+    as in one process. A worker that fails is replaced by this process (its windows run here).
+    :meth:`close` ends the workers.
+    """
+
+    def __init__(self, wins: list[Window], filter_pass: FilterPass, jobs: int = 1):
         self.wins, self.filter_pass, self.passes = wins, filter_pass, 0
+        self.jobs = max(1, min(int(jobs), len(wins)))
+        self.workers: list | None = None
+
+    def _window(self, k: int, run, cfg, method, init, kw) -> tuple[dict, object]:
+        w = self.wins[k]
+        start = init if w.start is None else w.start
+        lead = w.t_scored > w.t_from  # a lead not scored: the series tell what is
+        sol = self.filter_pass(
+            run, cfg, method, init=start, t_stop=w.t_to, **kw, record_innovations=lead
+        )
+        return (_scored(sol.stats, w.t_scored) if lead else sol.stats), sol
+
+    def _share(self, j: int) -> list[int]:
+        return list(range(j, len(self.wins), self.jobs))
 
     def __call__(self, run, cfg, method="ekf", *, init=None, **kw):
-        parts, first = [], None
-        for w in self.wins:
-            start = init if w.start is None else w.start
-            lead = w.t_scored > w.t_from  # a lead not scored: the series tell what is
-            sol = self.filter_pass(
-                run, cfg, method, init=start, t_stop=w.t_to, **kw, record_innovations=lead
-            )
-            parts.append(_scored(sol.stats, w.t_scored) if lead else sol.stats)
-            first = first or sol
+        parts: dict = {}
+        asked = self._ask(run, (cfg, method, init, kw))
+        first = None
+        for k in self._share(0) if asked else range(len(self.wins)):
+            parts[k], sol = self._window(k, run, cfg, method, init, kw)
+            first = sol if k == 0 else first
+        for j, conn in asked:
+            try:
+                got = conn.recv()
+            except (EOFError, OSError):  # the worker died: no workers more
+                self.close()
+                got = {}
+            if "failed" in got:  # a pass that raises: raised here, as in one process
+                got = {}
+            parts.update(got)
+            for k in [k for k in self._share(j) if k not in parts]:
+                parts[k], _ = self._window(k, run, cfg, method, init, kw)
         self.passes += 1
-        return replace(first, stats=merged(parts))
+        return replace(first, stats=merged([parts[k] for k in range(len(self.wins))]))
+
+    def _ask(self, run, job) -> list:
+        """Send ``job`` to the workers (started on the first call); ``[(share, connection)]``."""
+        if self.jobs < 2:
+            return []
+        if self.workers is None:
+            self._start(run)
+        asked = []
+        for j, (conn, _) in enumerate(self.workers or [], start=1):
+            try:
+                conn.send(job)
+                asked.append((j, conn))
+            except (OSError, ValueError):
+                self.close()
+                return []
+        return asked
+
+    def _start(self, run) -> None:
+        import multiprocessing
+        import sys
+
+        ctx = multiprocessing.get_context("fork")
+        sys.stdout.flush()  # a child must not write this process's buffers again
+        sys.stderr.flush()
+        self.workers = []
+        for j in range(1, self.jobs):
+            mine, theirs = ctx.Pipe()
+            p = ctx.Process(target=self._serve, args=(theirs, j, run), daemon=True)
+            p.start()
+            theirs.close()
+            self.workers.append((mine, p))
+
+    def _serve(self, conn, j: int, run) -> None:
+        """A worker: the windows of share ``j`` for each job received, until told to stop (or
+        interrupted: quietly, the parent says what happened)."""
+        try:
+            while (job := conn.recv()) is not None:
+                cfg, method, init, kw = job
+                try:
+                    got = {
+                        k: self._window(k, run, cfg, method, init, kw)[0] for k in self._share(j)
+                    }
+                except Exception:  # noqa: BLE001 (the parent runs these windows and raises)
+                    got = {"failed": True}
+                conn.send(got)
+        except BaseException:  # noqa: BLE001 (EOF, Ctrl-C: the worker just ends)
+            return
+
+    def close(self) -> None:
+        """End the workers (the windows then run in this process)."""
+        for conn, p in self.workers or []:
+            try:
+                conn.send(None)
+            except (OSError, ValueError):
+                pass
+            p.join(timeout=5.0)
+            if p.is_alive():
+                p.terminate()
+        self.workers, self.jobs = None, 1
 
 
 def _whole_run_stats(run, cfg, init, stationary, quality, method, filter_pass) -> dict:
@@ -232,8 +323,11 @@ def tuned_on_windows(run, cfg, stationary, quality, init, noise, *, filter_pass:
     wins = windows(run, cfg, init, quality, stationary, filter_pass)
     if not wins:
         return None
-    windowed = WindowedPass(wins, filter_pass)
-    cfg_t, result = tune(run, cfg, stationary, quality, init, noise, filter_pass=windowed)
+    windowed = WindowedPass(wins, filter_pass, usable_jobs())
+    try:
+        cfg_t, result = tune(run, cfg, stationary, quality, init, noise, filter_pass=windowed)
+    finally:
+        windowed.close()
     kinds = ("pos", "zaru") + aids(run, cfg_t)[1]
     method = "ekf-acc" if cfg["tune"]["likelihood"] == "position+accel" else "ekf"
     kinds += ("acc",) if method == "ekf-acc" else ()
