@@ -7,7 +7,6 @@ compute the same numbers the same way.
 from __future__ import annotations
 
 import os
-import shutil
 import sys
 import time
 from dataclasses import replace
@@ -792,7 +791,7 @@ def write_result(
     replay=None,
     jobs: int | None = None,
 ) -> Path | None:
-    """Write a complete result through ``target``: all or nothing, the figures after the rest.
+    """Write a complete result through ``target`` (all or nothing).
 
     Parameters
     ----------
@@ -810,10 +809,6 @@ def write_result(
     jobs : int, optional
         Processes the figures may be drawn in (:func:`draw_figures`; a campaign task: 1).
 
-    Without the report, the folder is first replaced by everything but the figures (the table,
-    ``metrics.json``, trajectories, exports), then the figures are drawn into it
-    (:func:`figures_into`): an interrupted drawing costs figures only.
-
     Returns
     -------
     Path or None
@@ -823,8 +818,6 @@ def write_result(
     if not sols:
         return None
     tuned = prep.tuning.to_toml(prep.cfg) if prep.tuning is not None else None
-    which = plot_set(plots, report)
-    later = which != "none" and not report  # the report embeds the figures: drawn before it
 
     def fill(folder: Path) -> None:
         write_result_files(
@@ -833,7 +826,7 @@ def write_result(
             sols,
             metrics,
             prep.cfg,
-            plots="none" if later else which,
+            plots=plots,
             report=report,
             export=export,
             tuned_toml=tuned,
@@ -843,24 +836,7 @@ def write_result(
         for name, text in (extra_files(metrics) if extra_files else {}).items():
             (folder / name).write_text(text)
 
-    out = target.replace(fill)
-    if later:  # the table, metrics.json and trajectories are in place; the figures after them
-        figures_into(out, run, sols, metrics, which, jobs)
-    return out
-
-
-def figures_into(folder: Path, run, sols, metrics, which: str, jobs: int | None = None) -> dict:
-    """Draw the figures into a finished result ``folder``: into a hidden folder inside it, each
-    moved into place when drawn (an interrupted run leaves its other files and whole figures)."""
-    tmp = Path(folder) / ".figures-partial"
-    tmp.mkdir(exist_ok=True)
-    try:
-        drawn = draw_figures(tmp, run, sols, metrics, which, jobs)
-        for png in tmp.glob("*.png"):
-            os.replace(png, Path(folder) / png.name)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    return drawn
+    return target.replace(fill)
 
 
 def figure_jobs() -> int:

@@ -1,6 +1,6 @@
-"""Figures off the critical path: the result folder holds the table, ``metrics.json`` and the
-trajectories before any figure is drawn; the figures are drawn in several processes with the same
-files as in one, and a drawing process that dies costs no figure (its share is drawn here)."""
+"""Figures drawn in several processes (after the table is printed): the same files as in one, one
+complete result (all or nothing), and a drawing process that dies costs no figure (its share is
+drawn here)."""
 
 from __future__ import annotations
 
@@ -17,23 +17,16 @@ def result():
     return gnssacc.process(gnssacc.simulate("car", 60.0, seed=2), methods=["ekf"], tune="none")
 
 
-def test_the_table_and_metrics_are_in_place_before_the_figures(result, tmp_path, monkeypatch):
-    seen = []
-    real = pipeline.draw_figures
+def test_a_result_drawn_in_processes_is_one_complete_result(result, tmp_path, monkeypatch):
+    import json
 
-    def drawing(folder, run, sols, metrics, which, *args, **kwargs):
-        if which != "none":
-            seen.append({p.name for p in folder.parent.iterdir()})
-        return real(folder, run, sols, metrics, which, *args, **kwargs)
+    from gnssacc.outputs.outdir import MARKER
 
-    monkeypatch.setattr(pipeline, "draw_figures", drawing)
+    monkeypatch.setenv("GNSSACC_JOBS", "2")
     out = result.save(tmp_path / "res")
-    (before,) = seen
-    assert {"metrics.json", "table.txt", "trajectory_ekf.csv"} <= before
-    assert not any(n.endswith(".png") for n in before)
-    pngs = {p.name for p in out.glob("*.png")}
-    assert pngs == {"summary.png", "trajectory.png", "errors.png"}
-    assert not (out / ".figures-partial").exists()
+    listed = json.loads((out / MARKER).read_text())["files"]
+    assert {"summary.png", "trajectory.png", "errors.png", "metrics.json"} <= set(listed)
+    assert listed == sorted(p.name for p in out.iterdir() if p.name != MARKER)
 
 
 def test_figures_drawn_in_processes_are_those_drawn_in_one(result, tmp_path):
