@@ -18,6 +18,12 @@ from gnssacc.prepare.passes import filter_pass
 from gnssacc.prepare.tuning import ungated
 
 
+@pytest.fixture(autouse=True)
+def windowed(monkeypatch):
+    """Windows from 900 s (off by default: see ``WINDOWED_FROM_S``)."""
+    monkeypatch.setattr(tw, "WINDOWED_FROM_S", 900.0)
+
+
 def test_merged_statistics_add_likelihoods_and_weight_the_means():
     a = {"n_pos_updates": 10, "loglik_pos": -5.0, "nis_pos_mean": 1.0, "acf1_pos": 0.1}
     b = {"n_pos_updates": 30, "loglik_pos": -20.0, "nis_pos_mean": 2.0, "acf1_pos": None}
@@ -99,6 +105,13 @@ def test_a_long_run_is_tuned_on_a_bounded_span_and_confirmed(long_drive, monkeyp
     assert len(whole) == 3  # the reference pass and the two confirming ones
     assert sum(s for s in spans if s <= 0.9 * run.duration_s) <= tw.SPAN_S * (result.n_evaluations)
     assert result.nis_after == pytest.approx(1.0, abs=0.3)  # the whole run's, as tuned
+
+
+def test_windows_are_off_by_default(long_drive, monkeypatch):
+    monkeypatch.undo()
+    run, prep = long_drive
+    assert tw.WINDOWED_FROM_S == float("inf")
+    assert tw.windows(run, prep.cfg, prep.init, prep.quality, prep.stationary, filter_pass) == []
 
 
 def test_a_short_run_is_tuned_whole():
