@@ -1,6 +1,12 @@
 """Shared test set-up."""
 
+import os
+
 import pytest
+
+# No preparation cache unless a test asks for one (a stored outcome would hide the passes tests
+# count); subprocesses inherit it.
+os.environ["GNSSACC_CACHE_DIR"] = "none"
 
 import gnssacc.estimators.kernels as kernels
 

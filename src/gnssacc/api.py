@@ -32,6 +32,7 @@ from .pipeline import (
     parse_methods,
     write_result,
 )
+from .prepare.cache import PreparationCache, open_cache
 from .prepare.prepared import Prepared
 from .sources.simspec import known_noise_config
 
@@ -61,6 +62,7 @@ def process(
     imu_frame: str = "frd",
     gnss=None,
     show_progress: bool = False,
+    cache=None,
     **bag_options,
 ) -> "Result":
     """Run the estimators on a source and score them: ``gnssacc run`` without the files.
@@ -92,6 +94,10 @@ def process(
         IMU stamped in UNIX or GPS seconds).
     show_progress : bool
         Progress bars on a terminal.
+    cache : bool, str or Path, optional
+        Keep the preparation (checks, start, tuned noise) for a rerun of the same recording and
+        settings, and reuse it when kept: ``True`` in the default folder, or in this folder
+        (:mod:`gnssacc.prepare.cache`); default none (``gnssacc run`` uses the default folder).
     **bag_options
         ``imu_topic``, ``gnss_topic``, ``truth_topic``, ``odom_topic``, ``time_source``,
         ``gnss_from_truth_hz``.
@@ -112,7 +118,7 @@ def process(
     run = load_configured(
         source, cfg, noise, seed, outage, outage_every, imu_frame, gnss, bag_options
     )
-    return evaluate(run, cfg, ids, tune=tune, show_progress=show_progress)
+    return evaluate(run, cfg, ids, tune=tune, show_progress=show_progress, cache=cache)
 
 
 def evaluate(
@@ -125,6 +131,7 @@ def evaluate(
     observe: bool = True,
     say=None,
     header: str | None = None,
+    cache=None,
 ) -> "Result":
     """Check, prepare, run and score ``methods`` on a loaded run (:func:`gnssacc.pipeline.compare`).
 
@@ -132,7 +139,8 @@ def evaluate(
     (:attr:`Result.replay`), so that ``save(report=True)`` does not run the filter again.
     ``say(line)``: told the run's ``header`` line once the input checks are settled (with the
     corrections the estimator proved), then the preparation's findings and each method's end as
-    they happen.
+    they happen. ``cache``: as for :func:`process`, or a
+    :class:`gnssacc.prepare.cache.PreparationCache`.
     """
     cfg = known_noise_config(
         cfg, run, tune
@@ -146,6 +154,7 @@ def evaluate(
         observe=observe,
         say=say,
         header=header,
+        cache=cache if isinstance(cache, PreparationCache) else open_cache(cache),
     )
     return Result(prep.run, cfg, metrics, sols, prep, replay)
 

@@ -90,6 +90,13 @@ def _run_parser(sub) -> None:
         "scale) from the recording itself, write tuned.toml; none: use the configuration as given",
     )
     r.add_argument(
+        "--retune",
+        action="store_true",
+        help="prepare the recording afresh (input checks, start, tuned noise) instead of reusing "
+        "the outcome kept from an earlier run of the same recording and settings "
+        "($GNSSACC_CACHE_DIR, default ~/.cache/gnssacc/prepared; 'none' keeps nothing)",
+    )
+    r.add_argument(
         "--imu-frame", choices=["frd", "flu"], default="frd", help="axes of a CSV run's imu.csv"
     )
     r.add_argument(
@@ -470,6 +477,7 @@ def _run_locked(args, stack, held) -> int:
     from .core.interrupts import raise_if_arrived
     from .outputs.report import failed_methods
     from .pipeline import default_out_dir, parse_methods
+    from .prepare.cache import open_cache
 
     target = _lock_out(args.out, args, stack, held) if args.out else None
     methods = parse_methods(args.methods)
@@ -510,6 +518,7 @@ def _run_locked(args, stack, held) -> int:
         observe=args.report,
         say=console.say,
         header=header,
+        cache=open_cache(True, retune=args.retune),
     )
     raise_if_arrived()  # a signal that compiled code swallowed interrupts all the same
     if not res.solutions:  # nothing to show or write

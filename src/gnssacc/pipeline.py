@@ -6,7 +6,10 @@ compute the same numbers the same way.
 
 from __future__ import annotations
 
+import os
+import sys
 import time
+from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
 from typing import Callable
@@ -21,6 +24,7 @@ from .core.config_docs import resolved_toml
 from .core.errors import InputError, warn_data
 from .core.interrupts import raise_if_interrupted
 from .core.memory import release_free_memory
+from .core.parallel import usable_jobs
 from .core.recording import RecordedRun
 from .core.solution import NavSolution
 from .estimators import kernels
@@ -41,6 +45,7 @@ from .outputs.report import (
     write_json,
     write_trajectory_csv,
 )
+from .prepare.cache import PreparationCache, prepared_once
 from .prepare.passes import filter_pass
 from .prepare.prepared import Prepared, checked
 from .prepare.prepared import prepare as prepare_recording
@@ -85,18 +90,33 @@ def check_input(run: RecordedRun, cfg: RunConfig) -> tuple[RecordedRun, RunConfi
 
 
 def prepare(
-    run: RecordedRun, cfg: RunConfig, tune: str | None = None, methods=(), on_checked=None
+    run: RecordedRun,
+    cfg: RunConfig,
+    tune: str | None = None,
+    methods=(),
+    on_checked=None,
+    cache: PreparationCache | None = None,
 ) -> Prepared:
     """The prepared recording (:func:`gnssacc.prepare.prepared.prepare`) with the EKF as its filter
     pass, and the ``-gm`` methods' setup when ``methods`` has one; ``on_checked(findings)`` is told
-    the input checks' findings once they are settled."""
-    return prepare_recording(
+    the input checks' findings once they are settled. With ``cache``, a stored outcome for the same
+    recording and settings is reused, else the fresh one stored
+    (:func:`gnssacc.prepare.cache.prepared_once`; ``on_checked`` is then also told ``reused=``)."""
+    gm = any(METHODS.get(m) is _gm for m in methods)
+    if cache is None:
+        return prepare_recording(
+            run, cfg, tune, filter_pass=filter_pass, gauss_markov=gm, on_checked=on_checked
+        )
+    from .prepare.gauss_markov import gm_setup
+
+    return prepared_once(
         run,
         cfg,
-        tune,
-        filter_pass=filter_pass,
-        gauss_markov=any(METHODS.get(m) is _gm for m in methods),
-        on_checked=on_checked,
+        tune or cfg["tune"]["mode"],
+        cache,
+        lambda told: prepare_recording(run, cfg, tune, filter_pass=filter_pass, on_checked=told),
+        (lambda p: replace(p, gauss_markov=gm_setup(p, filter_pass=filter_pass))) if gm else None,
+        on_checked,
     )
 
 
@@ -109,12 +129,14 @@ def check_dicts(run: RecordedRun, findings) -> list[dict]:
 def state_corrections(say: Callable[[str], None] | None, header: str | None, run: RecordedRun):
     """What to do with the input checks' settled findings (``on_checked`` of :func:`prepare`):
     with ``say``, say the run's header line with the corrections the estimator proved
-    (:func:`gnssacc.outputs.report.header_line`); without (the Python API), warn of each."""
+    (:func:`gnssacc.outputs.report.header_line`) and, when the preparation was reused, where from
+    (``reused``); without (the Python API), warn of each."""
 
-    def told(findings: list) -> None:
+    def told(findings: list, reused: str | None = None) -> None:
         dicts = check_dicts(run, findings)
         if say is not None:
-            line = header_line(header, dicts)
+            said = f"{header}; {reused}" if header and reused else (header or reused)
+            line = header_line(said, dicts)
             if line:
                 say(line)
             return
@@ -492,6 +514,7 @@ def compare(
     observers: dict | None = None,
     say: Callable[[str], None] | None = None,
     header: str | None = None,
+    cache: PreparationCache | None = None,
 ) -> tuple[dict, dict, Prepared]:
     """Prepare the recording, run and score the methods over a common window, with consistency figures.
 
@@ -503,7 +526,7 @@ def compare(
     known and each method's end (:func:`run_methods`), so a caller can print results as they come;
     the first line it is told is ``header`` (the run's header line), once the input checks are
     settled, with the corrections the estimator proved (:func:`state_corrections`; without
-    ``say`` each is a warning).
+    ``say`` each is a warning). ``cache``: reuse or store the preparation (:func:`prepare`).
 
     Returns
     -------
@@ -514,7 +537,8 @@ def compare(
     prep : Prepared
         The shared start, stationary spans and (tuned) configuration.
     """
-    prep = prepare(run, cfg, tune, methods, on_checked=state_corrections(say, header, run))
+    told = state_corrections(say, header, run)
+    prep = prepare(run, cfg, tune, methods, on_checked=told, cache=cache)
     for line in preparation_lines(prep) if say else ():
         say(line)
     t = time.perf_counter()
@@ -583,6 +607,7 @@ def compare(
         "model_check": models[""].to_dict(),
         "model_check_gm": models["gm"].to_dict() if "gm" in models else None,
         "tuning": prep.tuning.to_dict() if prep.tuning is not None else None,
+        "preparation_cache": prep.cache,
     }
     return metrics_dict(run, sols, scores, raw, extra, failed), sols, prep
 
@@ -674,7 +699,16 @@ def preparation_lines(prep: Prepared) -> list[str]:
         prep.stationary.summary(),
         f"start: {prep.init.how}",
     ]
-    return lines + ([prep.tuning.line()] if prep.tuning is not None else [])
+    tuned = [prep.tuning.line()] if prep.tuning is not None else []
+    win = prep.tuning.from_stationary.get("windows") if prep.tuning is not None else None
+    if win:
+        tuned.append(
+            f"tuned on {len(win['spans_s'])} windows, {win['imu_seconds_per_pass']:.0f} of "
+            f"{win['run_seconds']:.0f} s per pass (kept where the run rests and turns as a whole); "
+            f"confirmed over the whole run: log-likelihood {win['whole_run_loglik_gain']:+.0f} "
+            "against the configured noise"
+        )
+    return lines + tuned
 
 
 def compare_and_write(
@@ -689,8 +723,11 @@ def compare_and_write(
     export: tuple = (),
     extra_files: Callable[[dict], dict[str, str]] | None = None,
     show_progress: bool = False,
+    cache: PreparationCache | None = None,
+    jobs: int | None = None,
 ) -> tuple[dict, dict, Prepared, Path | None]:
-    """:func:`compare`, then :func:`write_result` (what each ``gnssacc batch`` task does).
+    """:func:`compare`, then :func:`write_result` (what each ``gnssacc batch`` task does;
+    ``cache``: see :func:`compare`; ``jobs``: see :func:`write_result`).
 
     Returns
     -------
@@ -700,7 +737,7 @@ def compare_and_write(
         As from :func:`write_result`.
     """
     metrics, sols, prep, replay = compare_observed(
-        run, cfg, methods, tune=tune, show_progress=show_progress, observe=report
+        run, cfg, methods, tune=tune, show_progress=show_progress, observe=report, cache=cache
     )
     return (
         metrics,
@@ -717,6 +754,7 @@ def compare_and_write(
             export=export,
             extra_files=extra_files,
             replay=replay,
+            jobs=jobs,
         ),
     )
 
@@ -731,6 +769,7 @@ def compare_observed(
     observe: bool = True,
     say: Callable[[str], None] | None = None,
     header: str | None = None,
+    cache: PreparationCache | None = None,
 ):
     """:func:`compare`, keeping (with ``observe``, when ``ekf-acc`` runs) that pass's matrices at
     every GNSS epoch for the report's observability section.
@@ -755,6 +794,7 @@ def compare_observed(
         observers={"ekf-acc": collector} if collector else None,
         say=say,
         header=header,
+        cache=cache,
     )
     replay = (
         collector.replay("ekf-acc", sols["ekf-acc"]) if collector and "ekf-acc" in sols else None
@@ -774,6 +814,7 @@ def write_result(
     export: tuple = (),
     extra_files: Callable[[dict], dict[str, str]] | None = None,
     replay=None,
+    jobs: int | None = None,
 ) -> Path | None:
     """Write a complete result through ``target`` (all or nothing).
 
@@ -790,6 +831,8 @@ def write_result(
         the result.
     replay : EkfReplay, optional
         For the report (:func:`write_result_files`).
+    jobs : int, optional
+        Processes the figures may be drawn in (:func:`draw_figures`; a campaign task: 1).
 
     Returns
     -------
@@ -813,11 +856,85 @@ def write_result(
             export=export,
             tuned_toml=tuned,
             replay=replay,
+            jobs=jobs,
         )
         for name, text in (extra_files(metrics) if extra_files else {}).items():
             (folder / name).write_text(text)
 
     return target.replace(fill)
+
+
+def figure_jobs() -> int:
+    """Processes the figures may be drawn in (:func:`gnssacc.core.parallel.usable_jobs`)."""
+    return usable_jobs()
+
+
+def draw_figures(folder: Path, run, sols, metrics, which: str, jobs: int | None = None) -> dict:
+    """:func:`gnssacc.outputs.figures.write_figures`, the plot set split over ``jobs`` processes
+    (default :func:`figure_jobs`; forked after matplotlib is imported, each drawing every
+    ``jobs``-th figure, this process one share): what each drew, in the set's order. The figures of
+    a process that died, or did not end in time (:data:`SHARE_WAIT_FACTOR`), are drawn here."""
+    names = PLOT_SETS[which]
+    jobs = min(figure_jobs() if jobs is None else int(jobs), len(names))
+    if jobs < 2:
+        return write_figures(folder, run, sols, metrics, which)
+    import multiprocessing
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot  # noqa: F401  (imported once, before the fork)
+
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.SimpleQueue()
+    shares = [names[k::jobs] for k in range(jobs)]
+    args = (folder, run, sols, metrics)
+    sys.stdout.flush()  # a child must not write this process's buffers again
+    sys.stderr.flush()
+    procs = [ctx.Process(target=_draw_share, args=(queue, share, *args)) for share in shares[1:]]
+    for p in procs:
+        p.start()
+    try:
+        t = time.perf_counter()
+        got = _figure_share(shares[0], *args)
+        wait = max(SHARE_WAIT_MIN_S, SHARE_WAIT_FACTOR * (time.perf_counter() - t))
+        for p in procs:
+            p.join(timeout=max(0.0, wait - (time.perf_counter() - t)))
+        while not queue.empty():
+            got.update(queue.get())
+    finally:
+        for p in procs:
+            if p.is_alive():
+                p.terminate()
+    missing = [n for n in names if n not in got]  # a process that died or hung: drawn here
+    if missing:
+        got.update(_figure_share(missing, *args))
+    return {n: got[n] for n in names}
+
+
+#: How long the drawing processes get, from the start of this process's own share: that share's
+#: time this many times over, at least :data:`SHARE_WAIT_MIN_S` [s]; then their figures are drawn
+#: here.
+SHARE_WAIT_FACTOR = 10.0
+SHARE_WAIT_MIN_S = 60.0
+
+
+def _figure_share(names, folder, run, sols, metrics) -> dict:
+    """:func:`write_figures` of the figures ``names`` (a plot set of their own, for this call)."""
+    key = f"share-{os.getpid()}"
+    PLOT_SETS[key] = tuple(names)
+    try:
+        return write_figures(folder, run, sols, metrics, key)
+    finally:
+        PLOT_SETS.pop(key, None)
+
+
+def _draw_share(queue, names, folder, run, sols, metrics) -> None:
+    """A drawing process: its figures, and what it drew on ``queue``."""
+    try:
+        queue.put(_figure_share(names, folder, run, sols, metrics))
+    except BaseException as exc:  # noqa: BLE001 (reported by name, never raised in a child)
+        queue.put({n: f"not drawn: {type(exc).__name__}" for n in names})
 
 
 def default_out_dir(run: RecordedRun) -> Path:
@@ -882,6 +999,7 @@ def write_result_files(
     export: tuple = (),
     tuned_toml: str | None = None,
     replay=None,
+    jobs: int | None = None,
 ) -> None:
     """Write every output file into ``folder`` (a fresh folder; see :func:`write_outputs`).
 
@@ -892,7 +1010,7 @@ def write_result_files(
     bag of ``nav_msgs/Odometry``) and ``"ros1bag"`` (``trajectories.bag``); ``tuned_toml`` is written as
     ``tuned.toml`` (the identified noise, reusable with ``--config``); ``replay`` is the
     ``ekf-acc`` pass's :class:`gnssacc.analysis.observability.EkfReplay` for the report (``None``: the
-    report runs that filter once more).
+    report runs that filter once more); ``jobs``: see :func:`draw_figures`.
     """
     folder = Path(folder)
     for mid, sol in sols.items():
@@ -900,7 +1018,7 @@ def write_result_files(
     (folder / "config.toml").write_text(resolved_toml(cfg))
     if tuned_toml is not None:
         (folder / "tuned.toml").write_text(tuned_toml)
-    drawn = write_figures(folder, run, sols, metrics, plot_set(plots, report))
+    drawn = draw_figures(folder, run, sols, metrics, plot_set(plots, report), jobs)
     if "tum" in export:
         from .outputs.export import write_truth_tum, write_tum
 

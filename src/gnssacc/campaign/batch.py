@@ -28,9 +28,11 @@ from pathlib import Path
 
 from ..core.errors import DataWarning, InputError, warn_data
 from ..core.interrupts import raise_if_interrupted
+from ..core.parallel import JOBS_ENV
 from ..core.progress import CampaignProgress
 from ..outputs.outdir import ResultDir
 from ..pipeline import compare, compare_and_write, configure, failure_reason, load
+from ..prepare.cache import open_cache
 from ..sources.simspec import is_sim_spec, known_noise_config
 from .campaign import TASK_FILE, Campaign, TaskSpec, config_identity, write_atomic, write_record
 from .campaign_summary import SummaryMarkdown, csv_text, task_rows
@@ -60,6 +62,7 @@ def run_task(spec: TaskSpec) -> dict:
     ``rows`` (its ``summary.csv`` rows), ``data_warnings`` (their text), ``worker`` (host:pid),
     ``traceback`` (of an unexpected error).
     """
+    os.environ.setdefault(JOBS_ENV, "1")  # one task, one core: the worker's share
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", DataWarning)
         note = _Notary(spec, time.perf_counter(), time.process_time(), caught)
@@ -146,7 +149,7 @@ def _compute(spec: TaskSpec, note: _Notary, target: ResultDir | None) -> dict:
     o = spec.options
     run, cfg = _load(spec)
     if target is None:
-        metrics, sols, _ = compare(run, cfg, o["methods"], tune=o["tune"])
+        metrics, sols, _ = compare(run, cfg, o["methods"], tune=o["tune"], cache=open_cache())
     else:
         kept: list[dict] = []
 
@@ -165,6 +168,8 @@ def _compute(spec: TaskSpec, note: _Notary, target: ResultDir | None) -> dict:
             report=outputs["report"],
             export=tuple(outputs["export"]),
             extra_files=files,
+            cache=open_cache(),  # tasks on one recording and settings prepare it once
+            jobs=1,  # one task, one core: the worker's share
         )
         if sols:
             return kept[-1]

@@ -13,9 +13,11 @@
    (:mod:`gnssacc.prepare.stationary`), and the noise the IMU shows at rest;
 3. the start state and the yaw bank (:mod:`gnssacc.prepare.initialise`,
    :mod:`gnssacc.prepare.yawbank`), unless the source gives an initial state;
-4. with ``tune_mode="auto"``, noise identification (:mod:`gnssacc.prepare.tuning`), after which the
-   bank runs again with the tuned noise (the initial sigmas and the hypotheses' filters depend on
-   it); should its choice of yaw change, the noise is identified once more from the new start;
+4. with ``tune_mode="auto"``, noise identification (:mod:`gnssacc.prepare.tuning`; on a long run
+   on representative windows, confirmed over the whole run: :mod:`gnssacc.prepare.tune_windows`),
+   after which the bank runs again with the tuned noise (the initial sigmas and the hypotheses'
+   filters depend on it); should its choice of yaw change, the noise is identified once more from
+   the new start;
 5. when asked, the ``-gm`` methods' own Gauss-Markov setup (:mod:`gnssacc.prepare.gauss_markov`).
 
 The result is one immutable :class:`Prepared`; every estimator starts from its start with its
@@ -42,6 +44,7 @@ from .fix_noise import with_measured_sigmas
 from .settle import clock_bound, settled
 from .start import start_of, start_pieces
 from .stationary import StationaryNoise, StationaryReport, noise_from_stationary
+from .tune_windows import tuned_on_windows
 from .tuning import TuneResult, tune
 from .yawbank import BankResult
 
@@ -75,6 +78,9 @@ class Prepared:
     gauss_markov : tuple or None
         ``(Prepared, how)`` for the ``-gm`` methods (:func:`gnssacc.prepare.gauss_markov.gm_setup`)
         when asked for.
+    cache : dict or None
+        With a preparation cache (:mod:`gnssacc.prepare.cache`): ``reused`` (whether this outcome
+        was read from it), ``file`` and ``key``.
     """
 
     run: RecordedRun
@@ -88,6 +94,7 @@ class Prepared:
     checks: tuple = ()
     seconds: dict = field(default_factory=dict)
     gauss_markov: tuple | None = None
+    cache: dict | None = None
 
     @property
     def modelled_run(self) -> RecordedRun:
@@ -106,13 +113,20 @@ def _other_heading(a: InitialState, b: InitialState) -> bool:
     return d > 3.0 * max(a.sigma_att_rad[2], b.sigma_att_rad[2])
 
 
+def _tune(run, cfg, stationary, quality, init, noise, filter_pass):
+    """The noise identification, on windows of a long run when the whole run confirms it
+    (:func:`gnssacc.prepare.tune_windows.tuned_on_windows`), else over the whole run."""
+    got = tuned_on_windows(run, cfg, stationary, quality, init, noise, filter_pass=filter_pass)
+    return got or tune(run, cfg, stationary, quality, init, noise, filter_pass=filter_pass)
+
+
 def _tuned(run, cfg, stationary, quality, init, bank, noise, filter_pass):
     """Step 4 of the module notes: the tuned configuration and result, and the start and bank
     under it."""
-    cfg_t, result = tune(run, cfg, stationary, quality, init, noise, filter_pass=filter_pass)
+    cfg_t, result = _tune(run, cfg, stationary, quality, init, noise, filter_pass)
     init2, bank2 = start_of(run, cfg_t, stationary, quality, filter_pass)
     if bank is not None and _other_heading(init, bank2.init):
-        cfg_t, result = tune(run, cfg, stationary, quality, init2, noise, filter_pass=filter_pass)
+        cfg_t, result = _tune(run, cfg, stationary, quality, init2, noise, filter_pass)
         init2, bank2 = start_of(run, cfg_t, stationary, quality, filter_pass)
     return cfg_t, result, init2, bank2
 

@@ -1,0 +1,366 @@
+"""Noise identification whose cost does not grow with the recording: the tuner's likelihood on a
+bounded, representative part of a long run, confirmed over the whole of it.
+
+The tuner (:mod:`gnssacc.prepare.tuning`) maximises the innovation likelihood of ~90 EKF passes;
+over the whole run each pass costs its length, so a one-hour drive spent most of a minute before
+its first estimate. A run longer than :data:`WINDOWED_FROM_S` is instead identified on windows
+that together span :data:`SPAN_S` of IMU data, whatever the run's length (off by default: see
+:data:`WINDOWED_FROM_S`):
+
+- the first :data:`FIRST_S` from the tuner's start, as the whole-run pass begins (the turn-on
+  biases are learnt there: their sigmas are the start's);
+- :data:`N_LATER` later windows, one per stratum of the rest of the run (equal parts in time),
+  each placed within its stratum where its share of rest (the stationary spans) and of turning
+  (yaw rate above :data:`TURN_RATE_DEG_S`) is closest to the stratum's own: the motion, rests and
+  turns of the run keep their weight. Each starts :data:`LEAD_S` before its scored part from the
+  state and covariance of one reference pass over the whole run (the configured noise); the
+  updates of the lead are not scored (the covariance settles to the trial noise there).
+
+Each trial point is one pass per window (:class:`WindowedPass`, a
+:class:`~gnssacc.prepare.filter_pass.FilterPass` whose statistics add the windows' scored updates),
+so the search itself is unchanged; the windows of a trial point are shared among the usable cores
+(:func:`gnssacc.core.parallel.usable_jobs`, forked workers: the same numbers as in one process).
+Then two passes over the whole run, with the starting and the
+tuned noise, confirm it: the tuned noise must explain the whole run at least as well as the
+starting noise (log-likelihood gain >= 0), else the run is tuned over its whole length as before
+(:func:`tuned_on_windows` returns ``None``). The NIS the tuner reports is the whole run's.
+
+A run up to :data:`WINDOWED_FROM_S` long is tuned over its whole length (windows would save little:
+the reference and the confirming passes cost three whole-run passes).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..core.parallel import usable_jobs
+from ..core.recording import InitialState, RecordedRun
+from ..core.states import ATT, BA, BG, POS, VEL
+from .filter_pass import FilterPass
+from .tuning import ungated, without_aids
+
+#: IMU seconds each trial pass covers on a windowed run [s].
+SPAN_S = 600.0
+#: A run longer than this is tuned on windows [s]. Off (infinite) by default: on a simulated
+#: 2,400 s car the windows held the accuracy for two seeds of three (PRMSE +0.2 % and +2.8 %) but
+#: not for the third (+72 %: the windows, 90 s each, cannot tell the small accelerometer noise
+#: and bias instability the whole run shows; a longer first window or longer leads did not help),
+#: so a long run is still tuned whole (``bench/bench_tuning_length.py --accuracy``). 900 s is where
+#: windows would start to pay (below it the whole run costs about as much).
+WINDOWED_FROM_S = float("inf")
+#: The first window, from the tuner's start [s].
+FIRST_S = 240.0
+#: Later windows (one per stratum of the rest of the run) and the unscored lead of each [s].
+N_LATER = 4
+LEAD_S = 30.0
+#: Yaw rate above which the vehicle counts as turning, for the placement of the windows [deg/s].
+TURN_RATE_DEG_S = 3.0
+#: Steps at which the placements within a stratum are compared [s].
+PLACEMENT_STEP_S = 10.0
+
+
+@dataclass(frozen=True)
+class Window:
+    """One window: the pass runs from ``start`` (``None``: the tuner's own) over ``t_from`` ..
+    ``t_to`` and scores the updates from ``t_scored`` [s]."""
+
+    t_from: float
+    t_scored: float
+    t_to: float
+    start: InitialState | None = None
+
+
+def _shares(run: RecordedRun, stationary, t: np.ndarray) -> np.ndarray:
+    """Per second ``t``: at rest (0/1) and turning (0/1)."""
+    rest = stationary.mask(t).astype(float) if stationary is not None else np.zeros(len(t))
+    wz = np.interp(t, run.imu.t, np.abs(run.imu.omega_ib_b[:, 2]))
+    return np.column_stack([rest, (wz > np.radians(TURN_RATE_DEG_S)).astype(float)])
+
+
+def placements(run: RecordedRun, stationary, t0: float) -> list[tuple[float, float]]:
+    """The later windows' spans ``(t_from, t_to)`` (module notes), from ``t0`` (the end of the first
+    window) to the end of the run."""
+    length = (SPAN_S - FIRST_S) / N_LATER
+    edges = np.linspace(t0, float(run.t_end), N_LATER + 1)
+    out = []
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        if b - a <= length:
+            out.append((float(a), float(b)))
+            continue
+        sec = np.arange(a, b, 1.0)
+        sh = _shares(run, stationary, sec)
+        target = sh.mean(axis=0)
+        cands = np.arange(a, b - length + 1e-9, PLACEMENT_STEP_S)
+        miss = [
+            np.abs(sh[(sec >= c) & (sec < c + length)].mean(axis=0) - target).sum() for c in cands
+        ]
+        # Ties (a uniform stratum): the candidate nearest the stratum's middle.
+        mid = 0.5 * (a + b - length)
+        best = min(range(len(cands)), key=lambda i: (round(miss[i], 6), abs(cands[i] - mid)))
+        out.append((float(cands[best]), float(cands[best] + length)))
+    return out
+
+
+def states_at(run, cfg, init, quality, times, filter_pass: FilterPass) -> list[InitialState]:
+    """The filter's state and sigmas at ``times`` [s] (one pass from ``init`` with ``cfg``'s noise,
+    the aids off and ungated), each as a start."""
+    sol = filter_pass(
+        run,
+        ungated(without_aids(cfg)),
+        "ekf",
+        init=init,
+        quality=quality,
+        output_times=np.asarray(times, float),
+        store_P=True,
+    )
+    out = []
+    for k in range(len(sol.t)):
+        sig = sol.sigma[k]
+        att = (
+            np.sqrt(np.maximum(np.diag(sol.P[k][ATT, ATT]), 0.0)) if sol.P is not None else sig[ATT]
+        )
+        out.append(
+            InitialState(
+                t=float(sol.t[k]),
+                lat=float(sol.lat[k]),
+                lon=float(sol.lon[k]),
+                h=float(sol.h[k]),
+                v_n=sol.v_n[k].copy(),
+                rpy=sol.rpy[k].copy(),
+                sigma_pos_m=sig[POS].copy(),
+                sigma_vel_mps=sig[VEL].copy(),
+                sigma_att_rad=att,
+                how=f"{init.how}; carried to t = {float(sol.t[k]):.2f} s",
+                b_a=sol.b_a[k].copy(),
+                b_g=sol.b_g[k].copy(),
+                sigma_b_a=sig[BA].copy(),
+                sigma_b_g=sig[BG].copy(),
+            )
+        )
+    return out
+
+
+def windows(run: RecordedRun, cfg, init, quality, stationary, filter_pass) -> list[Window]:
+    """The windows of a long run (module notes); empty when the run is tuned whole."""
+    t0 = float(init.t)
+    if run.t_end - t0 <= WINDOWED_FROM_S:
+        return []
+    first = Window(t0, t0, t0 + FIRST_S)
+    spans = placements(run, stationary, first.t_to)
+    starts = states_at(run, cfg, init, quality, [a for a, _ in spans], filter_pass)
+    later = [
+        Window(s.t, min(s.t + LEAD_S, b), b, s) for s, (_, b) in zip(starts, spans, strict=False)
+    ]
+    return [first] + later
+
+
+def _scored(stats: dict, t_scored: float) -> dict:
+    """A window's statistics with only the updates from ``t_scored`` counted (from its series)."""
+    out = {}
+    for key in [k for k in stats if k.startswith("nis_") and k.endswith("_t")]:
+        kind = key[len("nis_") : -len("_t")]
+        t = np.asarray(stats[key], float)
+        keep = t >= t_scored
+        ll, nis = np.asarray(stats[f"loglik_{kind}_series"]), np.asarray(stats[f"nis_{kind}"])
+        out[f"loglik_{kind}"] = float(ll[keep].sum())
+        out[f"n_{kind}_updates"] = int(keep.sum())
+        out[f"nis_{kind}_mean"] = float(nis[keep].mean()) if keep.any() else None
+        out[f"acf1_{kind}"] = stats.get(f"acf1_{kind}")
+    return out
+
+
+def merged(parts: list[dict]) -> dict:
+    """The windows' statistics as one pass's: log-likelihoods and counts added, the mean NIS and
+    the lag-1 autocorrelation weighted by the updates."""
+    out: dict = {}
+    kinds = {k[len("n_") : -len("_updates")] for p in parts for k in p if k.endswith("_updates")}
+    for kind in kinds:
+        n = np.array([p.get(f"n_{kind}_updates", 0) for p in parts], float)
+        out[f"n_{kind}_updates"] = int(n.sum())
+        out[f"loglik_{kind}"] = float(sum(p.get(f"loglik_{kind}", 0.0) for p in parts))
+        for stat in (f"nis_{kind}_mean", f"acf1_{kind}"):
+            vals = [(p.get(stat), w) for p, w in zip(parts, n, strict=True) if w > 0]
+            vals = [(v, w) for v, w in vals if v is not None]
+            wsum = sum(w for _, w in vals)
+            out[stat] = float(sum(v * w for v, w in vals) / wsum) if wsum > 0 else None
+    out["loglik"] = float(sum(v for k, v in out.items() if k.startswith("loglik_")))
+    return out
+
+
+class WindowedPass:
+    """A :class:`~gnssacc.prepare.filter_pass.FilterPass` over :class:`Window` s: one pass of
+    ``filter_pass`` per window, statistics merged (:func:`merged`); the first window starts where
+    the caller says (``init``), the others from their own starts. Only statistics are returned
+    (``output_times`` must be empty), on a solution of the first window.
+
+    With ``jobs`` > 1 the windows are shared among that many processes (this one and workers
+    forked on the first call, which hold the recording as this process does; the windows of a
+    share are every ``jobs``-th): the same passes, merged in the same order, so the same numbers
+    as in one process. A worker that fails is replaced by this process (its windows run here).
+    :meth:`close` ends the workers.
+    """
+
+    def __init__(self, wins: list[Window], filter_pass: FilterPass, jobs: int = 1):
+        self.wins, self.filter_pass, self.passes = wins, filter_pass, 0
+        self.jobs = max(1, min(int(jobs), len(wins)))
+        self.workers: list | None = None
+
+    def _window(self, k: int, run, cfg, method, init, kw) -> tuple[dict, object]:
+        w = self.wins[k]
+        start = init if w.start is None else w.start
+        lead = w.t_scored > w.t_from  # a lead not scored: the series tell what is
+        sol = self.filter_pass(
+            run, cfg, method, init=start, t_stop=w.t_to, **kw, record_innovations=lead
+        )
+        return (_scored(sol.stats, w.t_scored) if lead else sol.stats), sol
+
+    def _share(self, j: int) -> list[int]:
+        return list(range(j, len(self.wins), self.jobs))
+
+    def __call__(self, run, cfg, method="ekf", *, init=None, **kw):
+        parts: dict = {}
+        asked = self._ask(run, (cfg, method, init, kw))
+        first = None
+        for k in self._share(0) if asked else range(len(self.wins)):
+            parts[k], sol = self._window(k, run, cfg, method, init, kw)
+            first = sol if k == 0 else first
+        for j, conn in asked:
+            try:
+                got = conn.recv()
+            except (EOFError, OSError):  # the worker died: no workers more
+                self.close()
+                got = {}
+            if "failed" in got:  # a pass that raises: raised here, as in one process
+                got = {}
+            parts.update(got)
+            for k in [k for k in self._share(j) if k not in parts]:
+                parts[k], _ = self._window(k, run, cfg, method, init, kw)
+        self.passes += 1
+        return replace(first, stats=merged([parts[k] for k in range(len(self.wins))]))
+
+    def _ask(self, run, job) -> list:
+        """Send ``job`` to the workers (started on the first call); ``[(share, connection)]``."""
+        if self.jobs < 2:
+            return []
+        if self.workers is None:
+            self._start(run)
+        asked = []
+        for j, (conn, _) in enumerate(self.workers or [], start=1):
+            try:
+                conn.send(job)
+                asked.append((j, conn))
+            except (OSError, ValueError):
+                self.close()
+                return []
+        return asked
+
+    def _start(self, run) -> None:
+        import multiprocessing
+        import sys
+
+        ctx = multiprocessing.get_context("fork")
+        sys.stdout.flush()  # a child must not write this process's buffers again
+        sys.stderr.flush()
+        self.workers = []
+        for j in range(1, self.jobs):
+            mine, theirs = ctx.Pipe()
+            p = ctx.Process(target=self._serve, args=(theirs, j, run), daemon=True)
+            p.start()
+            theirs.close()
+            self.workers.append((mine, p))
+
+    def _serve(self, conn, j: int, run) -> None:
+        """A worker: the windows of share ``j`` for each job received, until told to stop (or
+        interrupted: quietly, the parent says what happened)."""
+        try:
+            while (job := conn.recv()) is not None:
+                cfg, method, init, kw = job
+                try:
+                    got = {
+                        k: self._window(k, run, cfg, method, init, kw)[0] for k in self._share(j)
+                    }
+                except Exception:  # noqa: BLE001 (the parent runs these windows and raises)
+                    got = {"failed": True}
+                conn.send(got)
+        except BaseException:  # noqa: BLE001 (EOF, Ctrl-C: the worker just ends)
+            return
+
+    def close(self) -> None:
+        """End the workers (the windows then run in this process)."""
+        for conn, p in self.workers or []:
+            try:
+                conn.send(None)
+            except (OSError, ValueError):
+                pass
+            p.join(timeout=5.0)
+            if p.is_alive():
+                p.terminate()
+        self.workers, self.jobs = None, 1
+
+
+def _whole_run_stats(run, cfg, init, stationary, quality, method, filter_pass) -> dict:
+    """One pass over the whole run with ``cfg`` (ungated), its start's position sigma scaled with
+    the fixes' as the tuner scales it."""
+    return filter_pass(
+        run,
+        ungated(cfg),
+        method,
+        init=init,
+        stationary=stationary,
+        quality=quality,
+        output_times=np.zeros(0),
+        cov_every=int(cfg["tune"]["cov_every"]),
+    ).stats
+
+
+def tuned_on_windows(run, cfg, stationary, quality, init, noise, *, filter_pass: FilterPass):
+    """:func:`gnssacc.prepare.tuning.tune` on the windows of a long run, confirmed over the whole
+    run (module notes): ``(cfg, result)`` as :func:`~gnssacc.prepare.tuning.tune` gives them, the
+    result's NIS and log-likelihoods those of the whole run with the configured and the tuned noise
+    (every aid in use) and ``from_stationary["windows"]`` what was done; ``None`` when the run is
+    tuned whole (short, or the tuned noise not confirmed)."""
+    import time
+
+    from .tuning import aids, tune
+
+    t0 = time.perf_counter()
+    wins = windows(run, cfg, init, quality, stationary, filter_pass)
+    if not wins:
+        return None
+    windowed = WindowedPass(wins, filter_pass, usable_jobs())
+    try:
+        cfg_t, result = tune(run, cfg, stationary, quality, init, noise, filter_pass=windowed)
+    finally:
+        windowed.close()
+    kinds = ("pos", "zaru") + aids(run, cfg_t)[1]
+    method = "ekf-acc" if cfg["tune"]["likelihood"] == "position+accel" else "ekf"
+    kinds += ("acc",) if method == "ekf-acc" else ()
+    scale = float(cfg_t["gnss"]["sigma_scale"]) / float(cfg["gnss"]["sigma_scale"])
+    before = _whole_run_stats(run, cfg, init, stationary, quality, method, filter_pass)
+    tuned_init = replace(init, sigma_pos_m=init.sigma_pos_m * scale)
+    after = _whole_run_stats(run, cfg_t, tuned_init, stationary, quality, method, filter_pass)
+    gain = sum(after[f"loglik_{k}"] - before[f"loglik_{k}"] for k in kinds)
+    info = dict(result.from_stationary)
+    info["windows"] = {
+        "spans_s": [[w.t_from - run.t_start, w.t_to - run.t_start] for w in wins],
+        "scored_from_s": [w.t_scored - run.t_start for w in wins],
+        "imu_seconds_per_pass": float(sum(w.t_to - w.t_from for w in wins)),
+        "run_seconds": float(run.duration_s),
+        "whole_run_loglik_gain": float(gain),
+        "confirmed": bool(gain >= 0.0),
+    }
+    if gain < 0.0:  # the windows' noise explains the whole run worse than the configured noise
+        return None
+    result = replace(
+        result,
+        from_stationary=info,
+        nis_before=before.get("nis_pos_mean"),
+        nis_after=after.get("nis_pos_mean"),
+        loglik_before=float(sum(before[f"loglik_{k}"] for k in kinds)),
+        loglik_after=float(sum(after[f"loglik_{k}"] for k in kinds)),
+        n_evaluations=result.n_evaluations + 3,  # the reference and the two confirming passes
+        seconds=time.perf_counter() - t0,
+    )
+    return cfg_t, result
