@@ -106,7 +106,7 @@ def main():
                 if n_out == 10
                 else srun.truth.t
             )
-            mib = peak_mib(lambda: run_ekf(srun, sim_cfg, "ekf-acc", output_times=t_out, **skw))
+            mib = peak_mib(lambda: run_ekf(srun, sim_cfg, "ekf-acc", output_times=t_out, **skw))  # noqa: B023 (called within the iteration)
             peaks[(duration, len(t_out))] = mib
             print(f"{duration:15.0f} {len(t_out):8d} {mib:11.2f}")
     (d0, n0), (d1, n1) = (600.0, 10), (6000.0, 10)

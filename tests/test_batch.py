@@ -18,7 +18,7 @@ from distributed.diagnostics.plugin import SchedulerPlugin  # noqa: E402
 
 from gnssacc import pipeline  # noqa: E402
 from gnssacc.analysis.montecarlo import summarise  # noqa: E402
-from gnssacc.campaign import batch
+from gnssacc.campaign import batch  # noqa: E402
 from gnssacc.campaign.campaign import CAMPAIGN_FILE, TASK_FILE  # noqa: E402
 from gnssacc.campaign.campaign_summary import TIMING_COLUMNS  # noqa: E402
 from gnssacc.cli import main  # noqa: E402

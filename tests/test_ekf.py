@@ -15,7 +15,7 @@ from gnssacc.prepare.passes import run_ekf
 from gnssacc.sources.sim import grade_config, simulate
 
 
-def _free_inertial(run, duration_s, b_a=np.zeros(3), b_g=np.zeros(3)):
+def _free_inertial(run, duration_s, b_a=np.zeros(3), b_g=np.zeros(3)):  # noqa: B008 (never mutated)
     """Integrate the run's IMU from the true initial state, no updates; return NED drift [m]."""
     tr = run.truth
     pos = np.array([tr.lat[0], tr.lon[0], tr.h[0]])

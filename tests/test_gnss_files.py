@@ -112,7 +112,7 @@ def test_rtkpost_llh_file_as_rtklib_writes_it():
     )
     np.testing.assert_allclose(pos.cov_ned[2], _enu_to_ned(enu), rtol=1e-12)
     sdeu = -0.0061
-    assert pos.cov_ned[0][1, 2] == pytest.approx(-(-(sdeu**2)))  # E-D = -(E-U) = +0.0061^2
+    assert pos.cov_ned[0][1, 2] == pytest.approx(sdeu**2)  # E-D = -(E-U) = +0.0061^2
 
 
 def test_rtkpost_ecef_file_with_week_and_utc():

@@ -33,7 +33,7 @@ B_TRUE = np.array([3e-4, -2e-4, 5e-4])  # gyro bias [rad/s]
 W_IE = earth_rate_n(LAT)
 
 
-def _state(err: np.ndarray, n: int = 15, gm_true=np.zeros(3)):
+def _state(err: np.ndarray, n: int = 15, gm_true=np.zeros(3)):  # noqa: B008 (never mutated)
     """The estimate that is ``err`` (estimate minus truth, order [dp, dv, phi, b_a, b_g (, x_g)]) off the truth."""
     R_M, R_N = radii(LAT)
     pos = np.array([LAT + err[0] / (R_M + H), LON + err[1] / ((R_N + H) * np.cos(LAT)), H - err[2]])

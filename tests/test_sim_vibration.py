@@ -54,7 +54,7 @@ def test_harmonic_interval_mean_matches_numerical_integration():
     for order in (1, 2, 3):
         got = sim_vibration.harmonic_interval_mean(edges, order, offsets)
         for j, off in enumerate(offsets):
-            ref = _simpson_means(edges[:-1], edges[1:], lambda p: np.sin(order * p + off))
+            ref = _simpson_means(edges[:-1], edges[1:], lambda p: np.sin(order * p + off))  # noqa: B023 (called within the iteration)
             np.testing.assert_allclose(got[:, j], ref, rtol=0, atol=1e-10)
         np.testing.assert_allclose(
             sim_vibration.harmonic_interval_mean(edges, order, 1.0), got[:, 1], atol=1e-15

@@ -25,7 +25,7 @@ from gnssacc.sources.sim import simulate
 LEVER = np.array([0.8, -0.3, -1.2])
 
 
-def _pim(f_b, w_b, dt, bias_hat, g=9.81, omega=np.zeros(3), acc_psd=1e-4, gyro_psd=1e-6):
+def _pim(f_b, w_b, dt, bias_hat, g=9.81, omega=np.zeros(3), acc_psd=1e-4, gyro_psd=1e-6):  # noqa: B008 (never mutated)
     p = gtsam.PreintegrationCombinedParams.MakeSharedD(g)
     p.setAccelerometerCovariance(np.eye(3) * acc_psd)
     p.setGyroscopeCovariance(np.eye(3) * gyro_psd)

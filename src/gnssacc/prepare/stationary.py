@@ -318,8 +318,8 @@ def _still_positions(mu, se2, gap_cells, B: int, p: StationaryParams) -> np.ndar
 
         def agree(other):
             b = np.clip(other, 0, P - 1)
-            tol2 = p.z**2 * (se2[j] + se2[b]) + floor**2
-            return np.all((mu[j] - mu[b]) ** 2 <= tol2, axis=1) | (other < 0) | (other >= P)
+            tol2 = p.z**2 * (se2[j] + se2[b]) + floor**2  # noqa: B023 (called within the iteration)
+            return np.all((mu[j] - mu[b]) ** 2 <= tol2, axis=1) | (other < 0) | (other >= P)  # noqa: B023 (called within the iteration)
 
         slow = np.linalg.norm(mu[j, 3:], axis=1) <= p.omega_max_dps * DEG
         no_gap = g[np.minimum(j + 2 * B, len(gap_cells))] - g[np.maximum(j - B, 0)] == 0
