@@ -134,9 +134,11 @@ METHODS = {
     "ekf": _ekf,
     "ekf-acc": _ekf,
     "ekf-accw": _ekf,
+    "ekf-vacc": _ekf,
     "smoother": _smoother,
     "smoother-acc": _smoother,
     "smoother-accw": _smoother,
+    "smoother-vacc": _smoother,
     "ekf-gm": _gm,
     "smoother-gm": _gm,
 }

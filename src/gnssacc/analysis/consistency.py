@@ -81,7 +81,8 @@ TAIL_ALARM = 1e-4
 #: What a warning can be about (:attr:`Consistency.flags`): the position NIS (the table's NIS
 #: column), the comparison with the raw fixes, the position NEES, the attitude NEES, the GNSS
 #: velocity's NIS (the table's ``NIS vel`` column), another update kind's NIS (``acc``,
-#: ``zupt``, ``zaru``, ``nhc``, ``odo``) or the configured noise (``config``). The table marks the columns it has; the others are marked nowhere.
+#: ``zupt``, ``zaru``, ``nhc``, ``odo``) or the configured noise (``config``). The table marks
+#: the columns it has; the others are marked nowhere.
 COLUMNS = (
     "nis",
     "fixes",

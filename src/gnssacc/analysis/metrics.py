@@ -23,6 +23,9 @@ BASELINES = {
     "smoother-accw": "smoother",
     "smoother-accw-online": "smoother-online",
     "ekf-gm": "ekf",
+    "ekf-vacc": "ekf",
+    "smoother-vacc": "smoother",
+    "smoother-vacc-online": "smoother-online",
     "smoother-gm": "smoother",
     "smoother-gm-online": "smoother-online",
 }

@@ -53,6 +53,8 @@ _COLOURS = {
     "smoother-accw": "C5",
     "ekf-gm": "C6",
     "smoother-gm": "C8",
+    "ekf-vacc": "C9",
+    "smoother-vacc": "saddlebrown",
 }
 #: Horizontal distance [m] under which the raw fixes' CDF is drawn (grey) in ``summary.png``.
 FIX_STYLE = {"color": "0.45", "ls": ":", "lw": 2.0}

@@ -111,14 +111,17 @@ class AccelMeasurement:
         Acceleration in NED [m/s^2].
     cov : ndarray, shape (3, 3)
         Covariance [m^2/s^4].
-    t_window : ndarray, shape (m,)
-        The fix times used.
+    t_window : ndarray, shape (m,) or None
+        The fix times used (``None`` for an acceleration fitted to velocities).
+    axes : ndarray (3,) of bool, or None
+        The axes measured (``None``: all three).
     """
 
     t: float
     a_n: np.ndarray
     cov: np.ndarray
-    t_window: np.ndarray
+    t_window: np.ndarray | None
+    axes: np.ndarray | None = None
 
 
 class AccelWindow:

@@ -17,6 +17,18 @@ ids):
     :func:`gnssacc.factors.window_accel_factor` on the poses of the window's fixes
     (``sum_j B_j p_ant(X_j) - a~``), which widens the smoother's band of nodes.
 
+``velocity`` (``ekf-vacc``, ``smoother-vacc``)
+    The paper's form (the same ``H_a`` and factor) with the acceleration fitted by least squares
+    to the last ``[accel] window`` Doppler velocities instead of the fixes (the slope of a line,
+    :func:`gnssacc.core.gnss_fit.velocity_accelerations`; the same gap rule), on the axes the
+    velocities measure, updated at each velocity's epoch; ``[accel] sigma_override`` is for the
+    position forms and is not used. It needs the recording's velocities (``[velocity] enabled``
+    or not: with ``--velocity off`` the acceleration is used without the velocity updates). As
+    for the positions, consecutive accelerations share all but one velocity, and each shares its
+    velocities with the velocity updates: every one is treated as an independent measurement
+    (the same velocity noise counted more than once; the fitted slope is also the acceleration at
+    the window's middle, compared with the specific force at its newest epoch as in the paper).
+
 The window is fed with every fix, those before the estimator starts too. An update whose specific
 force comes from a suspect IMU span (fabricated or damaged data) is skipped
 (``n_acc_skipped_suspect_imu``). The EKF evaluates the paper's form without applying it when an
@@ -25,12 +37,17 @@ observer watches a pass without acceleration (the observability analysis' counte
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ...core.earth import gravity_n, normal_gravity
+from ...core.errors import InputError
+from ...core.gnss_fit import velocity_accelerations
 from ..layout import ATT, BA, BG, SYM_B, SYM_X
 from ..mechanization import kernel_force_integrals
 from .accel_model import (
+    AccelMeasurement,
     AccelWindow,
     H_a_blocks,
     H_w_blocks,
@@ -41,9 +58,10 @@ from .accel_model import (
     window_samples,
 )
 from .base import AidSpec, EkfAid, Measurement, SmootherAid, zero_jacobian
+from .gnss_velocity import VelocityEpochs
 
 #: The forms of the INS prediction, by the suffix of their method ids (``ekf-acc``, ...).
-FORMS = {"acc": "paper", "accw": "window"}
+FORMS = {"acc": "paper", "accw": "window", "vacc": "velocity"}
 #: Order at equal times: right after the GNSS position update of the same fix.
 ORDER = 3
 
@@ -84,24 +102,64 @@ def window_acceleration(
     return Measurement("acc", predicted_acceleration(s.R_nb, F_b, g_n) - a_n, H, cov)
 
 
+def doppler_velocities(run, settings, method: str) -> VelocityEpochs:
+    """The velocities the ``velocity`` form fits (the run's, their sigmas times ``[velocity]
+    sigma_scale``, whether or not the velocity updates are on).
+
+    Raises
+    ------
+    InputError
+        The recording has no velocities.
+    """
+    vel = replace(settings.velocity, enabled=True).velocities(getattr(run, "gnss_vel", None))
+    ep = None if vel is None else VelocityEpochs(run, vel)
+    if ep is None or not len(ep):
+        raise InputError(
+            run.where, f"{method} fits the acceleration to GNSS velocities: this recording has none"
+        )
+    return ep
+
+
+def doppler_accelerations(ep: VelocityEpochs, acc) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`gnssacc.core.gnss_fit.velocity_accelerations` of the velocities ``ep`` with the
+    ``[accel]`` window and gap (``acc``: :class:`gnssacc.estimators.settings.AccelSettings`)."""
+    v = np.where(ep.axes, ep.vel.v_ned, np.nan)
+    return velocity_accelerations(ep.t, v, ep.vel.sigma_ned, acc.window, acc.max_gap_s)
+
+
 class EkfAccel(EkfAid):
-    """The acceleration update at every fix whose window is full (module notes)."""
+    """The acceleration update at every fix (every velocity, for the ``velocity`` form) whose
+    window is full (module notes)."""
 
     order, epoch = ORDER, "gnss"
 
     def __init__(self, ctx):
         run, acc = ctx.run, ctx.settings.accel
-        fixes = ctx.settings.gnss.fixes(run.gnss)
-        self.t, self.sigma = fixes.t, fixes.sigma_ned
-        self.p_fix = run.origin.to_ned(fixes.lat, fixes.lon, fixes.h)
-        self.window = AccelWindow(acc.window, acc.max_gap_s, acc.sigma_override)
         self.apply = ctx.variant is not None
         self.form = ctx.variant or "paper"
         self.imu, self.f_avg_s, self.segments = run.imu, acc.specific_force_avg_s, ctx.segments
         self.current = None  # the window's acceleration at the last fix seen
+        if self.form == "velocity":
+            ep = doppler_velocities(run, ctx.settings, "ekf-vacc")
+            self.t, self.epoch, self.vel_window = ep.t, "gnss_vel", doppler_accelerations(ep, acc)
+            self.window = AccelWindow(acc.window, acc.max_gap_s)  # counts no resets here
+            return
+        fixes = ctx.settings.gnss.fixes(run.gnss)
+        self.t, self.sigma = fixes.t, fixes.sigma_ned
+        self.p_fix = run.origin.to_ned(fixes.lat, fixes.lon, fixes.h)
+        self.window = AccelWindow(acc.window, acc.max_gap_s, acc.sigma_override)
 
     def see(self, j: int) -> None:
-        self.current = self.window.push(self.t[j], self.p_fix[j], self.sigma[j])
+        if self.form != "velocity":
+            self.current = self.window.push(self.t[j], self.p_fix[j], self.sigma[j])
+            return
+        full, a_n, var = self.vel_window
+        axes = np.isfinite(a_n[j])
+        if not full[j] or not axes.any():
+            self.current = None
+            return
+        cov = np.diag(np.where(axes, var[j], 1.0))
+        self.current = AccelMeasurement(float(self.t[j]), np.nan_to_num(a_n[j]), cov, None, axes)
 
     def model(self, s, t: float) -> Measurement | None:
         """The update for the window's acceleration at ``t`` [s], or ``None`` when the specific
@@ -123,7 +181,11 @@ class EkfAccel(EkfAid):
         f_meas = measured_specific_force(self.imu, t, self.f_avg_s, seg.i0, seg.i1)
         if f_meas is None:
             return None
-        return acceleration(s, acc.a_n, acc.cov, f_meas, g_n)
+        m = acceleration(s, acc.a_n, acc.cov, f_meas, g_n)
+        if acc.axes is None or acc.axes.all():
+            return m
+        ax = acc.axes
+        return Measurement(m.kind, m.dz[ax], m.H[ax], m.R[np.ix_(ax, ax)], m.gate)
 
     def models(self, s, j: int) -> list[Measurement]:
         m = None if self.current is None else self.model(s, float(self.t[j]))
@@ -174,11 +236,37 @@ class SmootherAccel(SmootherAid):
         self.f_avg = acc.specific_force_avg_s
         self.acc_window = (acc.window, acc.max_gap_s, acc.sigma_override)
         self.bandwidth = bandwidth(settings) if self.form == "window" else 1
+        self.accel = acc
+        if self.form == "velocity":
+            self.vel = doppler_velocities(run, settings, "smoother-vacc")
+
+    def _attach_velocity(self, ctx) -> None:
+        """The ``velocity`` form: the accelerations of the velocities before the first node and at
+        node times, in order (as the position forms take the fixes), by velocity index."""
+        ep, times = self.vel, ctx.times
+        at_node = np.isin(ep.t, times)
+        pushed = np.flatnonzero((ep.t < times[0]) | at_node)
+        sub = ep.vel.select(pushed)
+        v = np.where(ep.axes[pushed], sub.v_ned, np.nan)
+        acc = self.accel
+        full, a_n, var = velocity_accelerations(
+            ep.t[pushed], v, sub.sigma_ned, acc.window, acc.max_gap_s
+        )
+        self.acc = {
+            int(k): (np.nan_to_num(a_n[j]), np.where(np.isfinite(a_n[j]), var[j], 1.0),
+                     np.isfinite(a_n[j]))
+            for j, k in enumerate(pushed.tolist())
+            if full[j] and np.isfinite(a_n[j]).any()
+        }  # fmt: skip
+        self.at_t = {float(t): k for k, t in enumerate(ep.t.tolist())}
 
     def attach(self, ctx) -> None:
         """The accelerations of every fix, all at once: the fixes before the first node and those
         at node times, in order, as :class:`gnssacc.estimators.aids.accel_model.AccelWindow` would
         see them; and the node of each fix at a node time."""
+        if self.form == "velocity":
+            self._attach_velocity(ctx)
+            return
         times = ctx.times
         t_fix = self.fixes.t
         nodes = set(times.tolist())
@@ -196,6 +284,11 @@ class SmootherAccel(SmootherAid):
         self.node_of = {self.fix_at[t]: i for i, t in enumerate(times.tolist()) if t in self.fix_at}
 
     def node(self, graph, ctx, i: int, t: float, pred) -> None:
+        if self.form == "velocity":
+            k = self.at_t.get(float(t))
+            if k is not None:
+                self._paper(graph, i, t, k, ctx.segments)
+            return
         k = self.fix_at.get(float(t))
         if k is None:
             return
@@ -225,6 +318,7 @@ class SmootherAccel(SmootherAid):
                 meas[0],
                 self.g_n,
                 np.diag(meas[1]),
+                meas[2] if len(meas) > 2 else None,
             )
         )
         self.stats["n_acc_factors"] += 1
