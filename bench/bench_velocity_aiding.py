@@ -5,8 +5,11 @@ time-correlated errors, 1 Hz Doppler velocities of 0.05 m/s white plus a small G
 :mod:`gnssacc.sources.gnss_noise`), several seeds each, every run three times on the same data:
 
 * positions only (``--velocity off``): ``ekf``, ``smoother``;
-* positions and velocities (the default): ``ekf``, ``smoother``, ``ekf-vacc``, ``smoother-vacc``;
-* positions only, plus the acceleration fitted to the velocities: ``ekf-vacc``, ``smoother-vacc``.
+* positions and velocities (the default): ``ekf``, ``smoother`` and the acceleration fitted to
+  the velocities, the paper's form (``ekf-vacc``, ``smoother-vacc``) and the window-consistent one
+  (``ekf-vaccw``, ``smoother-vaccw``);
+* positions only, plus the acceleration fitted to the velocities (the four ``-vacc*`` methods);
+  ``--accel off`` leaves the accelerations out (the first two passes' ``ekf`` and ``smoother``).
 
 Prints, per cell, the median over the seeds of the whole-run PRMSE without and with velocity and
 their ratio (acceptance: the EKF's at most 0.5, the smoother's at most 0.7 on white fixes; no
@@ -39,10 +42,11 @@ from gnssacc.analysis.montecarlo import parse_seeds
 from gnssacc.analysis.study import paired_effect
 
 #: The three passes over each run: name, velocity updates on, methods.
+ACC = ("ekf-vacc", "smoother-vacc", "ekf-vaccw", "smoother-vaccw")
 PASSES = (
     ("pos", False, ("ekf", "smoother")),
-    ("pos+vel", True, ("ekf", "smoother", "ekf-vacc", "smoother-vacc")),
-    ("pos+vacc", False, ("ekf-vacc", "smoother-vacc")),
+    ("pos+vel", True, ("ekf", "smoother") + ACC),
+    ("pos+vacc", False, ACC),
 )
 
 
@@ -55,16 +59,20 @@ def parse_args(argv=None):
     p.add_argument("--noise", default="white,gm")
     p.add_argument("--tune", choices=["none", "auto"], default="none")
     p.add_argument("--aids", choices=["on", "off"], default="on")
+    p.add_argument("--accel", choices=["on", "off"], default="on")
     p.add_argument("--jobs", type=int, default=1)
     return p.parse_args(argv)
 
 
 def one_run(task) -> dict:
     """Every pass of :data:`PASSES` on one simulated run: ``{(pass, method): figures}``."""
-    scenario, imu, noise, seed, duration, tune, aids = task
+    scenario, imu, noise, seed, duration, tune, aids, accel = task
     source = f"sim:{scenario},imu={imu},duration={duration:g}"
     out = {}
     for name, vel, methods in PASSES:
+        methods = methods if accel == "on" else tuple(m for m in methods if m not in ACC)
+        if not methods:
+            continue
         cfg = {"velocity": {"enabled": vel}}
         if aids == "off":
             cfg |= {"nhc": {"enabled": False}, "zupt": {"enabled": False}}
@@ -100,7 +108,7 @@ def _col(rows, key, figure="prmse"):
     )
 
 
-def print_tables(results: list[dict]) -> None:
+def print_tables(results: list[dict], accel: bool = True) -> None:
     cells = sorted({r["cell"] for r in results})
     print("\nWhole-run PRMSE [m], median over seeds: positions only vs positions + velocities")
     head = (
@@ -126,17 +134,20 @@ def print_tables(results: list[dict]) -> None:
             f"{cell[0]:8} {cell[1]:10} {cell[2]:5} {len(rows):>2}  {e0:7.2f} {e1:8.2f} {re:5.2f}  "
             f"{s0:7.2f} {s1:8.2f} {rs:5.2f}  {nees:>9} {nis:>11} {vr:8.3f}"
         )
+    if not accel:
+        return
     print(
-        "\nVelocity-derived acceleration (ekf-vacc, smoother-vacc): PRMSE effect against the same "
+        "\nVelocity-derived acceleration (-vacc: the paper's form, -vaccw: window-consistent): "
+        "PRMSE effect against the same "
         "estimator without it,\nmean paired difference [%] with its 95 % bootstrap interval and "
         "sign-flip p-value"
     )
-    pairs = (
-        ("ekf-vacc vs ekf (pos only)", ("pos", "ekf"), ("pos+vacc", "ekf-vacc")),
-        ("ekf-vacc vs ekf (pos+vel)", ("pos+vel", "ekf"), ("pos+vel", "ekf-vacc")),
-        ("smoother-vacc vs smoother (pos only)", ("pos", "smoother"), ("pos+vacc", "smoother-vacc")),
-        ("smoother-vacc vs smoother (pos+vel)", ("pos+vel", "smoother"), ("pos+vel", "smoother-vacc")),
-    )  # fmt: skip
+    pairs = [
+        (f"{m}-{form} vs {m} ({label})", (base, m), (var, f"{m}-{form}"))
+        for m in ("ekf", "smoother")
+        for form in ("vacc", "vaccw")
+        for label, base, var in (("pos only", "pos", "pos+vacc"), ("pos+vel", "pos+vel", "pos+vel"))
+    ]
     for cell in cells:
         rows = [r for r in results if r["cell"] == cell]
         print(f"{cell[0]} {cell[1]} {cell[2]}:")
@@ -160,6 +171,7 @@ def main(argv=None) -> int:
             [a.duration],
             [a.tune],
             [a.aids],
+            [a.accel],
         )
     )
     t0 = time.perf_counter()
@@ -172,7 +184,7 @@ def main(argv=None) -> int:
         f"{len(tasks)} runs x {len(PASSES)} passes, {time.perf_counter() - t0:.0f} s; "
         f"--tune {a.tune}, aids {a.aids}, {a.duration:g} s each, 1 Hz fixes and velocities"
     )
-    print_tables(results)
+    print_tables(results, a.accel == "on")
     return 0
 
 

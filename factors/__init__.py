@@ -7,6 +7,7 @@ from .gnss_velocity_factor import (
     gnss_velocity_factor,
     preintegrated_velocity_factor,
     velocity_error_jacobians,
+    velocity_window_accel_factor,
 )
 from .preintegrated_position_factor import preintegrated_position_factor
 from .prior_factor import joint_prior_factor
@@ -26,6 +27,7 @@ __all__ = [
     "smoother_jacobians_from_H_a",
     "vehicle_velocity",
     "velocity_error_jacobians",
+    "velocity_window_accel_factor",
     "window_accel_error",
     "window_accel_factor",
 ]

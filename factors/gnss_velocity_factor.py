@@ -140,3 +140,67 @@ def preintegrated_velocity_factor(
     C = np.asarray(pim.preintMeasCov())[:9, :9]
     total = np.asarray(cov, float) + D0 @ C @ D0.T
     return gtsam.CustomFactor(_noise(total, axes), keys, error)
+
+
+def velocity_window_accel_factor(
+    node_keys: list,
+    C: np.ndarray,
+    a_n: np.ndarray,
+    axes: np.ndarray,
+    omega_b: np.ndarray,
+    lever_b: np.ndarray,
+    w_ie_n: np.ndarray,
+    cov: np.ndarray,
+) -> gtsam.CustomFactor:
+    """The acceleration fitted to a window of Doppler velocities against the slope of the nodes'
+    antenna velocities: ``e = S (sum_j C_j v_ant(X_j, V_j, B_j) - a~)`` (``v_ant`` as in
+    :func:`gnss_velocity_factor`; the window-consistent velocity form, ``smoother-vaccw``).
+
+    Parameters
+    ----------
+    node_keys : list of (X, V, B) keys
+        The nodes of the window's velocities, oldest first.
+    C : ndarray (m,)
+        The slope's coefficients [1/s]
+        (:func:`gnssacc.estimators.aids.velocity_window.slope_coefficients`).
+    a_n : ndarray (3,)
+        The fitted acceleration [m/s^2, NED]; ``axes`` the measured ones (boolean (3,)).
+    omega_b : ndarray (m, 3)
+        The raw gyro held at each velocity [rad/s].
+    lever_b, w_ie_n : ndarray (3,)
+    cov : ndarray (3, 3)
+        Covariance of ``a_n`` [m^2/s^4].
+    """
+    axes = np.asarray(axes, bool).copy()
+    C = np.asarray(C, float).copy()
+    a_n, lever_b, w_ie_n = (np.asarray(x, float).copy() for x in (a_n, lever_b, w_ie_n))
+    omega_b = np.asarray(omega_b, float).copy()
+    with_lever = bool(lever_b.any())
+    keys = [int(k) for nk in node_keys for k in (nk if with_lever else nk[1:2])]
+    per = 3 if with_lever else 1
+    S = np.eye(3)[axes]
+    J_pose, J_bias = np.zeros((3, 6)), np.zeros((3, 6))
+
+    def error(this, values: gtsam.Values, H: list | None) -> np.ndarray:
+        e = -a_n
+        for j in range(len(C)):
+            if not with_lever:
+                e = e + C[j] * values.atVector(keys[j])
+                if H is not None:
+                    H[j] = C[j] * S
+                continue
+            kx, kv, kb = keys[per * j : per * j + 3]
+            R = values.atPose3(kx).rotation().matrix()
+            w_b = omega_b[j] - values.atConstantBias(kb).gyroscope()
+            term, d_xi, d_bg = velocity_error_jacobians(R, w_b, lever_b, w_ie_n)
+            e = e + C[j] * (values.atVector(kv) + term)
+            if H is not None:
+                J_pose[:, X_ROT], J_bias[:, B_GYRO] = d_xi, d_bg
+                H[per * j], H[per * j + 1], H[per * j + 2] = (
+                    C[j] * J_pose[axes],
+                    C[j] * S,
+                    C[j] * J_bias[axes],
+                )
+        return e[axes]
+
+    return gtsam.CustomFactor(_noise(cov, axes), keys, error)

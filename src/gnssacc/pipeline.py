@@ -135,10 +135,12 @@ METHODS = {
     "ekf-acc": _ekf,
     "ekf-accw": _ekf,
     "ekf-vacc": _ekf,
+    "ekf-vaccw": _ekf,
     "smoother": _smoother,
     "smoother-acc": _smoother,
     "smoother-accw": _smoother,
     "smoother-vacc": _smoother,
+    "smoother-vaccw": _smoother,
     "ekf-gm": _gm,
     "smoother-gm": _gm,
 }

@@ -26,6 +26,9 @@ BASELINES = {
     "ekf-vacc": "ekf",
     "smoother-vacc": "smoother",
     "smoother-vacc-online": "smoother-online",
+    "ekf-vaccw": "ekf",
+    "smoother-vaccw": "smoother",
+    "smoother-vaccw-online": "smoother-online",
     "smoother-gm": "smoother",
     "smoother-gm-online": "smoother-online",
 }

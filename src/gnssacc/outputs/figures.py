@@ -55,6 +55,8 @@ _COLOURS = {
     "smoother-gm": "C8",
     "ekf-vacc": "C9",
     "smoother-vacc": "saddlebrown",
+    "ekf-vaccw": "olive",
+    "smoother-vaccw": "teal",
 }
 #: Horizontal distance [m] under which the raw fixes' CDF is drawn (grey) in ``summary.png``.
 FIX_STYLE = {"color": "0.45", "ls": ":", "lw": 2.0}

@@ -41,10 +41,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from ...core.earth import gravity_n, normal_gravity
+from ...core.earth import earth_rate_n, gravity_n, normal_gravity
 from ...core.errors import InputError
 from ...core.gnss_fit import velocity_accelerations
-from ..layout import ATT, BA, BG, SYM_B, SYM_X
+from ..layout import ATT, BA, BG, SYM_B, SYM_V, SYM_X
 from ..mechanization import kernel_force_integrals
 from .accel_model import (
     AccelMeasurement,
@@ -59,9 +59,19 @@ from .accel_model import (
 )
 from .base import AidSpec, EkfAid, Measurement, SmootherAid, zero_jacobian
 from .gnss_velocity import VelocityEpochs
+from .velocity_window import (
+    lever_term,
+    slope_coefficients,
+    slope_weights,
+    velocity_window_acceleration,
+)
 
 #: The forms of the INS prediction, by the suffix of their method ids (``ekf-acc``, ...).
-FORMS = {"acc": "paper", "accw": "window", "vacc": "velocity"}
+FORMS = {"acc": "paper", "accw": "window", "vacc": "velocity", "vaccw": "velocity-window"}
+#: The suffix of each form's method ids.
+VARIANT_SUFFIX = {form: suffix for suffix, form in FORMS.items()}
+#: The forms fitted to the Doppler velocities.
+VELOCITY_FORMS = ("velocity", "velocity-window")
 #: Order at equal times: right after the GNSS position update of the same fix.
 ORDER = 3
 
@@ -139,9 +149,10 @@ class EkfAccel(EkfAid):
         self.form = ctx.variant or "paper"
         self.imu, self.f_avg_s, self.segments = run.imu, acc.specific_force_avg_s, ctx.segments
         self.current = None  # the window's acceleration at the last fix seen
-        if self.form == "velocity":
-            ep = doppler_velocities(run, ctx.settings, "ekf-vacc")
+        if self.form in VELOCITY_FORMS:
+            ep = doppler_velocities(run, ctx.settings, f"ekf-{VARIANT_SUFFIX[self.form]}")
             self.t, self.epoch, self.vel_window = ep.t, "gnss_vel", doppler_accelerations(ep, acc)
+            self.vel, self.m, self.lever = ep, acc.window, ctx.settings.gnss.lever_arm_b
             self.window = AccelWindow(acc.window, acc.max_gap_s)  # counts no resets here
             return
         fixes = ctx.settings.gnss.fixes(run.gnss)
@@ -150,7 +161,7 @@ class EkfAccel(EkfAid):
         self.window = AccelWindow(acc.window, acc.max_gap_s, acc.sigma_override)
 
     def see(self, j: int) -> None:
-        if self.form != "velocity":
+        if self.form not in VELOCITY_FORMS:
             self.current = self.window.push(self.t[j], self.p_fix[j], self.sigma[j])
             return
         full, a_n, var = self.vel_window
@@ -159,7 +170,28 @@ class EkfAccel(EkfAid):
             self.current = None
             return
         cov = np.diag(np.where(axes, var[j], 1.0))
-        self.current = AccelMeasurement(float(self.t[j]), np.nan_to_num(a_n[j]), cov, None, axes)
+        t_win = self.t[j - self.m + 1 : j + 1]
+        self.current = AccelMeasurement(float(self.t[j]), np.nan_to_num(a_n[j]), cov, t_win, axes)
+        self.current_j = j
+
+    def _velocity_window(self, s, acc, g_n) -> Measurement | None:
+        """The ``velocity-window`` form's update (:mod:`.velocity_window`), or ``None`` when the
+        IMU does not cover the window or a suspect span touches it."""
+        win = window_samples(self.imu.t, acc.t_window, slope_weights)
+        if win is None or self.segments.touch(win[0], win[1]):
+            return None
+        k0, k1, h, w = win
+        imu = self.imu
+        F_b, M, G = kernel_force_integrals(
+            imu.f_b[k0:k1], imu.omega_ib_b[k0:k1], h, w, s.b_a, s.b_g
+        )
+        lever = None
+        if self.lever.any():
+            j = self.current_j
+            om = self.vel.omega_b[j - self.m + 1 : j + 1]
+            lever = lever_term(imu.t, imu.omega_ib_b, acc.t_window, om, self.lever, s.b_g)
+        w_ie = earth_rate_n(s.pos[0])
+        return velocity_window_acceleration(s, acc.a_n, acc.cov, F_b, M, G, g_n, w_ie, lever)
 
     def model(self, s, t: float) -> Measurement | None:
         """The update for the window's acceleration at ``t`` [s], or ``None`` when the specific
@@ -177,12 +209,15 @@ class EkfAccel(EkfAid):
                 self.imu.f_b[k0:k1], self.imu.omega_ib_b[k0:k1], h, w, s.b_a, s.b_g
             )
             return window_acceleration(s, acc.a_n, acc.cov, F_b, M, G, g_n)
-        seg = self.segments
-        f_meas = measured_specific_force(self.imu, t, self.f_avg_s, seg.i0, seg.i1)
-        if f_meas is None:
-            return None
-        m = acceleration(s, acc.a_n, acc.cov, f_meas, g_n)
-        if acc.axes is None or acc.axes.all():
+        if self.form == "velocity-window":
+            m = self._velocity_window(s, acc, g_n)
+        else:
+            seg = self.segments
+            f_meas = measured_specific_force(self.imu, t, self.f_avg_s, seg.i0, seg.i1)
+            if f_meas is None:
+                return None
+            m = acceleration(s, acc.a_n, acc.cov, f_meas, g_n)
+        if m is None or acc.axes is None or acc.axes.all():
             return m
         ax = acc.axes
         return Measurement(m.kind, m.dz[ax], m.H[ax], m.R[np.ix_(ax, ax)], m.gate)
@@ -235,10 +270,12 @@ class SmootherAccel(SmootherAid):
         acc = settings.accel
         self.f_avg = acc.specific_force_avg_s
         self.acc_window = (acc.window, acc.max_gap_s, acc.sigma_override)
-        self.bandwidth = bandwidth(settings) if self.form == "window" else 1
+        windowed = self.form in ("window", "velocity-window")
+        self.bandwidth = bandwidth(settings) if windowed else 1
         self.accel = acc
-        if self.form == "velocity":
-            self.vel = doppler_velocities(run, settings, "smoother-vacc")
+        if self.form in VELOCITY_FORMS:
+            self.vel = doppler_velocities(run, settings, f"smoother-{VARIANT_SUFFIX[self.form]}")
+            self.w_ie = earth_rate_n(origin.lat0)
 
     def _attach_velocity(self, ctx) -> None:
         """The ``velocity`` form: the accelerations of the velocities before the first node and at
@@ -259,12 +296,17 @@ class SmootherAccel(SmootherAid):
             if full[j] and np.isfinite(a_n[j]).any()
         }  # fmt: skip
         self.at_t = {float(t): k for k, t in enumerate(ep.t.tolist())}
+        m = acc.window
+        self.acc_vels = {
+            int(k): pushed[j - m + 1 : j + 1] for j, k in enumerate(pushed.tolist()) if full[j]
+        }
+        self.node_of = {self.at_t[t]: i for i, t in enumerate(times.tolist()) if t in self.at_t}
 
     def attach(self, ctx) -> None:
         """The accelerations of every fix, all at once: the fixes before the first node and those
         at node times, in order, as :class:`gnssacc.estimators.aids.accel_model.AccelWindow` would
         see them; and the node of each fix at a node time."""
-        if self.form == "velocity":
+        if self.form in VELOCITY_FORMS:
             self._attach_velocity(ctx)
             return
         times = ctx.times
@@ -284,10 +326,14 @@ class SmootherAccel(SmootherAid):
         self.node_of = {self.fix_at[t]: i for i, t in enumerate(times.tolist()) if t in self.fix_at}
 
     def node(self, graph, ctx, i: int, t: float, pred) -> None:
-        if self.form == "velocity":
+        if self.form in VELOCITY_FORMS:
             k = self.at_t.get(float(t))
-            if k is not None:
+            if k is None:
+                return
+            if self.form == "velocity":
                 self._paper(graph, i, t, k, ctx.segments)
+            else:
+                self._velocity_window_factor(graph, k, lambda n: n == i or ctx.has_node(n))
             return
         k = self.fix_at.get(float(t))
         if k is None:
@@ -345,6 +391,37 @@ class SmootherAccel(SmootherAid):
                 B_row,
                 meas[0],
                 self.lever,
+                np.diag(meas[1]),
+            )
+        )
+        self.stats["n_acc_factors"] += 1
+
+    def _velocity_window_factor(self, graph, k: int, in_window) -> None:
+        """The ``velocity-window`` factor: the slope of the antenna velocities of the nodes of
+        velocity ``k``'s window (:func:`gnssacc.factors.velocity_window_accel_factor`), when its
+        window is full and all of its nodes are in the smoother."""
+        import gtsam
+
+        from ...factors import velocity_window_accel_factor
+
+        meas = self.acc.get(k)
+        if meas is None:
+            return
+        vels = self.acc_vels[k]
+        nodes = [self.node_of.get(int(v)) for v in vels]
+        if any(n is None or not in_window(n) for n in nodes):
+            self.stats["n_acc_skipped_window"] = self.stats.get("n_acc_skipped_window", 0) + 1
+            return
+        keys = [tuple(gtsam.symbol(c, n) for c in (SYM_X, SYM_V, SYM_B)) for n in nodes]
+        graph.add(
+            velocity_window_accel_factor(
+                keys,
+                slope_coefficients(self.vel.t[vels]),
+                meas[0],
+                meas[2],
+                self.vel.omega_b[vels],
+                self.lever,
+                self.w_ie,
                 np.diag(meas[1]),
             )
         )
