@@ -42,7 +42,8 @@ from .base import Measurement, zero_jacobian
 
 
 def slope_coefficients(t: np.ndarray) -> np.ndarray:
-    """``C_j`` [1/s] of the least-squares slope over velocities at times ``t`` [s] (module notes)."""
+    """``C_j`` [1/s] of the least-squares slope over velocities at times ``t`` [s] (module
+    notes)."""
     u = np.asarray(t, float) - np.mean(t)
     return u / float(u @ u)
 
@@ -123,8 +124,8 @@ def velocity_window_acceleration(
     w_ie_n: np.ndarray,
     lever: tuple[np.ndarray, np.ndarray] | None,
 ) -> Measurement:
-    """The window-consistent update of an acceleration ``a_n`` [m/s^2] (covariance ``cov``) fitted to
-    the antenna's velocities (module notes); ``F_b, M, G`` the slope kernel's integrals at the
+    """The window-consistent update of an acceleration ``a_n`` [m/s^2] (covariance ``cov``) fitted
+    to the antenna's velocities (module notes); ``F_b, M, G`` the slope kernel's integrals at the
     state's biases, ``lever`` the output of :func:`lever_term` (``None``: no lever arm)."""
     u_l, d_ul = lever if lever is not None else (np.zeros(3), np.zeros((3, 3)))
     R = s.R_nb
