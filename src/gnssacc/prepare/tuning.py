@@ -203,7 +203,12 @@ class TuneResult:
 
     def line(self) -> str:
         """One line for the terminal."""
-        parts = [f"{key}={_short(v)}" for sec in self.values.values() for key, v in sec.items()]
+        keys = [key for sec in self.values.values() for key in sec]
+        parts = [  # a key two sections share (sigma_scale) is named with its section
+            f"{f'{s}.' if keys.count(key) > 1 else ''}{key}={_short(v)}"
+            for s, sec in self.values.items()
+            for key, v in sec.items()
+        ]
         nis = (
             f"; position NIS/dof {self.nis_before:.2f} -> {self.nis_after:.2f}"
             if self.nis_before is not None and self.nis_after is not None
