@@ -31,7 +31,7 @@ import gtsam
 import numpy as np
 
 from gnssacc.core.rotations import cross3, skew
-from gnssacc.estimators.layout import B_GYRO, NAVSTATE_POSE, NAVSTATE_VEL, X_ROT
+from gnssacc.estimators.layout import B_GYRO, NAVSTATE, NAVSTATE_POSE, NAVSTATE_VEL, X_ROT
 
 
 def velocity_error_jacobians(
@@ -124,7 +124,7 @@ def preintegrated_velocity_factor(
         R = pred.attitude().matrix()
         term, d_xi, d_bg = velocity_error_jacobians(R, omega_b - bias.gyroscope(), lever_b, w_ie_n)
         if H is not None:
-            D[:, 0:3], D[:, 6:9] = d_xi, R
+            D[:, X_ROT], D[:, NAVSTATE_VEL] = d_xi, R
             A = D @ J_s
             J_bias = D @ J_b
             J_bias[:, B_GYRO] += d_bg
@@ -135,9 +135,9 @@ def preintegrated_velocity_factor(
 
     # The preintegration's rotation and velocity noise through D (at R_f, no lever-arm rate).
     D0 = np.zeros((3, 9))
-    D0[:, 0:3] = velocity_error_jacobians(R_f, omega_b, lever_b, w_ie_n)[1]
-    D0[:, 6:9] = R_f
-    C = np.asarray(pim.preintMeasCov())[:9, :9]
+    D0[:, X_ROT] = velocity_error_jacobians(R_f, omega_b, lever_b, w_ie_n)[1]
+    D0[:, NAVSTATE_VEL] = R_f
+    C = np.asarray(pim.preintMeasCov())[NAVSTATE, NAVSTATE]
     total = np.asarray(cov, float) + D0 @ C @ D0.T
     return gtsam.CustomFactor(_noise(total, axes), keys, error)
 
