@@ -28,6 +28,12 @@ ids):
     velocities with the velocity updates: every one is treated as an independent measurement
     (the same velocity noise counted more than once; the fitted slope is also the acceleration at
     the window's middle, compared with the specific force at its newest epoch as in the paper).
+``velocity-window`` (``ekf-vaccw``, ``smoother-vaccw``)
+    The same acceleration against the window-consistent prediction: the INS acceleration weighted
+    by the slope's kernel, with the antenna's lever-arm term and the Coriolis term
+    (:mod:`gnssacc.estimators.aids.velocity_window`). Smoother: the slope of the window's node
+    antenna velocities (:func:`gnssacc.factors.velocity_window_accel_factor`), which widens the
+    smoother's band of nodes as the ``window`` form does.
 
 The window is fed with every fix, those before the estimator starts too. An update whose specific
 force comes from a suspect IMU span (fabricated or damaged data) is skipped
