@@ -20,7 +20,8 @@ from gnssacc.factors import (
     gnss_velocity_factor,
     preintegrated_velocity_factor,
 )
-from gnssacc.pipeline import prepare
+from gnssacc.core.errors import InputError
+from gnssacc.pipeline import check_velocity_methods, prepare
 from gnssacc.prepare.tuning import measurement_stage
 from gnssacc.sources.gnss_noise import apply_outages
 from gnssacc.sources.sim import grade_config, simulate
@@ -177,8 +178,12 @@ def test_velocity_acceleration_needs_velocities_and_runs_with_them(car):
     sol, _ = _ekf(car, False, "ekf-vacc")
     assert sol.stats["n_acc_updates"] > 0.9 * len(car.gnss_vel)
     bare = replace(car, gnss_vel=None)
-    with pytest.raises(Exception, match="GNSS velocities"):
+    with pytest.raises(InputError, match="GNSS velocities"):
         _ekf(bare, True, "ekf-vacc")
+    # The tool refuses such a method before computing anything, naming the option.
+    with pytest.raises(InputError, match="--methods.*smoother-vaccw fits"):
+        check_velocity_methods(bare, ["ekf", "smoother-vaccw"])
+    check_velocity_methods(car, ["ekf-vacc", "smoother-vaccw"])
 
 
 def test_tuner_identifies_the_velocity_scale_only_where_there_are_velocities(car):
