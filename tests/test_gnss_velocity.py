@@ -230,3 +230,39 @@ def test_window_consistent_velocity_acceleration_has_no_model_error_where_the_pa
     # Noise-free velocities and IMU: the window-consistent prediction (with the lever arm's term)
     # to a fraction of a mm/s^2; the paper's one-epoch specific force off by the window's change.
     assert rms(window) < 2e-3 and rms(paper) > 100 * rms(window), (rms(window), rms(paper))
+
+
+def _smoother(run, velocity: bool, method: str = "smoother"):
+    from gnssacc.estimators.settings import SmootherSettings
+    from gnssacc.estimators.smoother import estimate as smooth
+
+    cfg = load_config(
+        overrides={
+            "imu": grade_config("industrial"),
+            "gnss": {"lever_arm_b_m": LEVER.tolist()},
+            "velocity": {"enabled": velocity},
+            "nhc": {"enabled": False},
+        }
+    )
+    prep = prepare(run, cfg, "none")
+    sol = smooth(prep, SmootherSettings.from_config(prep.cfg), method)[method]
+    tr = run.truth
+    p = run.origin.to_ned(sol.lat, sol.lon, sol.h)
+    p_est = np.column_stack([np.interp(tr.t, sol.t, p[:, i]) for i in range(3)])
+    e = p_est - run.origin.to_ned(tr.lat, tr.lon, tr.h)
+    return sol, float(np.sqrt(np.mean(np.sum(e[:, :2] ** 2, axis=1))))
+
+
+def test_smoother_velocity_factors_shrink_the_horizontal_error_and_are_consistent(car):
+    _, h_off = _smoother(car, False)
+    sol, h_on = _smoother(car, True)
+    assert h_on < 0.7 * h_off, (h_on, h_off)
+    assert sol.stats["n_vel_factors"] > 0.9 * len(car.gnss_vel)
+    assert 0.6 < sol.stats["nis_vel_mean"] < 1.4
+    # 5 Hz velocities, nodes at 2 Hz: the velocities between nodes are folded.
+    fast = simulate(
+        "car", 60.0, "industrial", seed=3, gnss_rate_hz=5, lever_arm_b=tuple(LEVER), give_init=True
+    )
+    sol5, _ = _smoother(fast, True)
+    assert sol5.stats["n_vel_folded"] > 0 and sol5.stats["n_vel_factors"] > 0
+    assert 0.6 < sol5.stats["nis_vel_mean"] < 1.4
