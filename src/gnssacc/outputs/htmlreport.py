@@ -96,7 +96,8 @@ def consistency_html(metrics: dict) -> str:
         "expectation); innovation autocorrelation near 0; fix residual ratio below 1.41 (an estimate as good as "
         "the fixes and independent of them).</p><table><tr><th>method</th><th>NIS position</th>"
         + ("<th>velocity</th>" if "vel" in kinds else "")
-        + "<th>acceleration</th><th>zero velocity</th><th>zero rate</th><th>innovation autocorrelation</th>"
+        + "<th>acceleration</th><th>zero velocity</th><th>zero rate</th>"
+        "<th>innovation autocorrelation</th>"
         f"<th>fix residual ratio</th><th>warnings</th></tr>{rows}</table>"
     )
 
