@@ -173,8 +173,9 @@ def run_ekf(
         GNSS-derived acceleration updates (the paper's method); ``ekf-accw``: the same with the
         window-consistent acceleration prediction; ``ekf-vacc``, ``ekf-vaccw``: the paper's and
         the window-consistent acceleration update with the acceleration fitted to the Doppler
-        velocities. All of them add the other aids the run and the settings have (stationary updates when ``stationary`` is given and ``[zupt]
-        enabled``, the non-holonomic constraint, wheel odometry).
+        velocities. All of them add the other aids the run and the settings have (stationary
+        updates when ``stationary`` is given and ``[zupt] enabled``, the non-holonomic
+        constraint, wheel odometry).
     output_times : ndarray, optional
         Epochs [s] at which to report the state (after any update at the same time). Default:
         :func:`gnssacc.estimators.epochs.default_output_times`. Epochs before the filter starts
