@@ -50,7 +50,9 @@ def prep(request):
             "smoother": {"min_node_spacing_s": 0.5},
         }
     )
-    run = simulate("ugv", 90.0, imu_grade="industrial", gnss_rate_hz=5.0, odom_hz=10.0, seed=7)
+    run = simulate(
+        "ugv", 90.0, imu_grade="industrial", gnss_rate_hz=5.0, odom_hz=10.0, seed=7, velocity=True
+    )
     return prepare(run, cfg, "none")
 
 

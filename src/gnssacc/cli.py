@@ -689,6 +689,7 @@ def _cmd_sim(args) -> int:
         seed=args.seed,
         t_start_s=t_start,
         odom_hz=args.odom_rate,
+        velocity=True,  # the receiver's Doppler velocities, written where the format has them
     )
     path = write_csv_run(run, args.out, gnss_format=args.gnss_format)
     extra = f", {len(run.odometry)} odometry samples" if run.odometry is not None else ""

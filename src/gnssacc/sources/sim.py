@@ -315,7 +315,7 @@ def simulate(
     t_start_s: float = 0.0,
     odom_hz: float | None = None,
     odom_kind: str | None = None,
-    velocity: bool = True,
+    velocity: bool = False,
 ) -> RecordedRun:
     """Simulate a ground-vehicle run with known truth.
 
@@ -366,6 +366,8 @@ def simulate(
         Also simulate the receiver's Doppler velocities of the antenna at the fix times
         (``run.gnss_vel``; :func:`gnssacc.sources.gnss_noise.velocities_from_truth`: white plus a
         small Gauss-Markov error, from their own stream: the fixes and the IMU keep their draws).
+        The ``sim:`` sources and ``gnssacc sim`` have them; off by default here, so that a run
+        made in Python is the position-only run it always was unless asked.
 
     Returns
     -------
@@ -396,8 +398,8 @@ def simulate(
     )
     if odom_hz is not None:
         args.update(odom_hz=odom_hz, odom_kind=odom_kind)
-    if not velocity:
-        args.update(velocity=False)
+    if velocity:
+        args.update(velocity=True)
     name = scenario if isinstance(scenario, str) else scenario.name
     args["scenario"] = name
     where = f"simulator({name}, seed={seed})"
