@@ -3,6 +3,12 @@
 from .accel_factor import accel_error, gnss_accel_factor, smoother_jacobians_from_H_a
 from .accel_window_factor import window_accel_error, window_accel_factor
 from .gnss_error_factors import gauss_markov_factor, gnss_position_gm_factor
+from .gnss_velocity_factor import (
+    gnss_velocity_factor,
+    preintegrated_velocity_factor,
+    velocity_error_jacobians,
+    velocity_window_accel_factor,
+)
 from .preintegrated_position_factor import preintegrated_position_factor
 from .prior_factor import joint_prior_factor
 from .vehicle_factors import nhc_factor, odometry_factor, vehicle_velocity
@@ -12,12 +18,16 @@ __all__ = [
     "gauss_markov_factor",
     "gnss_accel_factor",
     "gnss_position_gm_factor",
+    "gnss_velocity_factor",
     "joint_prior_factor",
     "nhc_factor",
     "odometry_factor",
     "preintegrated_position_factor",
+    "preintegrated_velocity_factor",
     "smoother_jacobians_from_H_a",
     "vehicle_velocity",
+    "velocity_error_jacobians",
+    "velocity_window_accel_factor",
     "window_accel_error",
     "window_accel_factor",
 ]

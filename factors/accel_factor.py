@@ -64,7 +64,13 @@ def accel_error(
 
 
 def gnss_accel_factor(
-    pose_key: int, bias_key: int, f_b: np.ndarray, a_n: np.ndarray, g_n: np.ndarray, cov: np.ndarray
+    pose_key: int,
+    bias_key: int,
+    f_b: np.ndarray,
+    a_n: np.ndarray,
+    g_n: np.ndarray,
+    cov: np.ndarray,
+    axes: np.ndarray | None = None,
 ) -> gtsam.CustomFactor:
     """Build the factor.
 
@@ -80,7 +86,12 @@ def gnss_accel_factor(
         Gravity in NED at the node [m/s^2].
     cov : ndarray (3, 3)
         Covariance of ``a_n`` [m^2/s^4].
+    axes : ndarray (3,) of bool, optional
+        The axes measured (an acceleration fitted to horizontal-only velocities: north and
+        east); the error and its Jacobians keep those rows. Default: all three.
     """
+    if axes is not None and not np.all(axes):
+        return _some_axes(pose_key, bias_key, f_b, a_n, g_n, cov, np.asarray(axes, bool))
     f_b = np.asarray(f_b, float).copy()
     g_minus_a = np.asarray(g_n, float) - np.asarray(a_n, float)
     pose_key, bias_key = int(pose_key), int(bias_key)
@@ -109,3 +120,21 @@ def gnss_accel_factor(
         else gtsam.noiseModel.Gaussian.Covariance(cov)
     )
     return gtsam.CustomFactor(noise, [pose_key, bias_key], error)
+
+
+def _some_axes(pose_key, bias_key, f_b, a_n, g_n, cov, axes) -> gtsam.CustomFactor:
+    """:func:`gnss_accel_factor` on the measured ``axes`` only (the same error and Jacobians)."""
+    keys = [int(pose_key), int(bias_key)]
+    f_b = np.asarray(f_b, float).copy()
+    g_minus_a = np.asarray(g_n, float) - np.asarray(a_n, float)
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
+        R_nb = values.atPose3(keys[0]).rotation().matrix()
+        f_corr = f_b - values.atConstantBias(keys[1]).accelerometer()
+        if H is not None:
+            J_pose, J_bias = smoother_jacobians_from_H_a(R_nb, f_corr)
+            H[0], H[1] = J_pose[axes], J_bias[axes]
+        return (R_nb @ f_corr + g_minus_a)[axes]
+
+    c = np.asarray(cov, float)[np.ix_(axes, axes)]
+    return gtsam.CustomFactor(gtsam.noiseModel.Gaussian.Covariance(c), keys, error)

@@ -50,7 +50,9 @@ def prep(request):
             "smoother": {"min_node_spacing_s": 0.5},
         }
     )
-    run = simulate("ugv", 90.0, imu_grade="industrial", gnss_rate_hz=5.0, odom_hz=10.0, seed=7)
+    run = simulate(
+        "ugv", 90.0, imu_grade="industrial", gnss_rate_hz=5.0, odom_hz=10.0, seed=7, velocity=True
+    )
     return prepare(run, cfg, "none")
 
 
@@ -89,7 +91,7 @@ def _check_ekf(aid, s, j, where: str) -> int:
     return len(models)
 
 
-@pytest.mark.parametrize("method", ["ekf-acc", "ekf-accw"])
+@pytest.mark.parametrize("method", ["ekf-acc", "ekf-accw", "ekf-vacc", "ekf-vaccw"])
 def test_every_ekf_aid_jacobian_matches_central_differences(prep, method, monkeypatch):
     checked: dict[str, int] = {}
     real = ekf_module.ekf_aids
@@ -161,7 +163,9 @@ def _check_factor(factor, rng, where: str) -> None:
         col += dim
 
 
-@pytest.mark.parametrize("method", ["smoother-acc", "smoother-accw"])
+@pytest.mark.parametrize(
+    "method", ["smoother-acc", "smoother-accw", "smoother-vacc", "smoother-vaccw"]
+)
 def test_every_smoother_aid_factor_jacobian_matches_central_differences(prep, method, monkeypatch):
     factors: dict[str, dict] = {}  # aid -> factor type -> factors
     real = smoother_module.smoother_aids

@@ -177,14 +177,14 @@ def _words(name: str) -> set[str]:
 
 
 def _aid_vocabulary() -> set[str]:
-    """The words of :data:`AID_WORDS` and of the registered aids' names (the position and the
-    acceleration are states and IMU words too)."""
+    """The words of :data:`AID_WORDS` and of the registered aids' names (the position, the
+    velocity and the acceleration are states and IMU words too)."""
     from gnssacc.estimators.aids import REGISTRY
 
     words = set(AID_WORDS)
     for spec in REGISTRY:
         words |= _words(spec.name)
-    return words - {"position", "accel"}
+    return words - {"position", "velocity", "accel"}
 
 
 def _layout_names() -> set[str]:

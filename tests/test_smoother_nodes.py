@@ -222,8 +222,16 @@ def test_twenty_hertz_fixes_folded_give_the_estimates_of_a_node_per_fix(method, 
     information: they differ by the IMU noise correlation the folded factors leave out and, for
     -acc, the acceleration windows over the nodes' fixes)."""
     # (the car for the Gauss-Markov fixes: on the slow UGV their 2.5 m wander reads as a unit error)
+    # (fixes only: 20 Hz white Doppler velocities folded 9 to a node leave out the IMU noise they
+    # share, which their precision makes visible, up to 2 sigma in pitch; test_gnss_velocity checks
+    # folded velocities at 5 Hz)
     run = simulate(
-        "car" if gm else "ugv-slow", 60.0, gnss_rate_hz=20.0, seed=7, noise="gm" if gm else "white"
+        "car" if gm else "ugv-slow",
+        60.0,
+        gnss_rate_hz=20.0,
+        seed=7,
+        noise="gm" if gm else "white",
+        velocity=False,
     )
     over = (
         {"gnss": {"gm_sigma_m": [2.5, 2.5, 4.0], "gm_tau_s": 60.0}} if gm else {}
@@ -276,8 +284,14 @@ def test_folded_fixes_with_wheel_odometry_and_the_constraint_on_the_nodes(gm):
     nodes. The odometry is used every 0.5 s ([odometry] interval_s), so that both layouts have a
     node at each sample used (the aids are not folded: at the default 0.2 s a node per fix would
     use 2.5 times as many samples, and its estimates differ by more than the folded fixes')."""
-    run = simulate(
-        "car", 60.0, gnss_rate_hz=10.0, odom_hz=10.0, seed=2, noise="gm" if gm else "white"
+    run = simulate(  # fixes only: see test_twenty_hertz_fixes_folded_give_the_estimates_...
+        "car",
+        60.0,
+        gnss_rate_hz=10.0,
+        odom_hz=10.0,
+        seed=2,
+        noise="gm" if gm else "white",
+        velocity=False,
     )
     over = (
         {"gnss": {"gm_sigma_m": [2.5, 2.5, 4.0], "gm_tau_s": 60.0}} if gm else {}

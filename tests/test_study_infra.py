@@ -85,7 +85,8 @@ def test_sim_campaign_gives_the_rows_of_process_on_the_same_runs(tmp_path):
     ]
     for name, options in zip(sorted({r["source"] for r in rows}), kw):
         for seed in (0, 1):
-            run = simulate(**options, noise="gm", seed=seed)  # the simulator's IMU noise, known
+            # the sim: source's run (with its Doppler velocities); the simulator's IMU noise, known
+            run = simulate(**options, noise="gm", seed=seed, velocity=True)
             res = gnssacc.process(
                 run, methods=methods, tune="none", config={"imu": run.sim.imu_params}
             )

@@ -107,6 +107,13 @@ def _run_parser(sub) -> None:
         "bridging of GNSS outages, for comparison",
     )
     r.add_argument(
+        "--velocity",
+        choices=["on", "off"],
+        default=None,
+        help="the GNSS (Doppler) velocity updates and factors in every method where the recording "
+        "has velocities (default: [velocity] enabled, on); off: positions only, for comparison",
+    )
+    r.add_argument(
         "--strict",
         action="store_true",
         help="refuse the run instead of applying a correction the estimator proves (a clock "
@@ -484,6 +491,10 @@ def _run_locked(args, stack, held) -> int:
     cfg = configure(args.source, preset=args.preset, config=args.config)
     if args.nhc is not None:
         cfg = cfg.with_values({"nhc": {"enabled": args.nhc == "on"}}, f"--nhc {args.nhc}")
+    if args.velocity is not None:
+        cfg = cfg.with_values(
+            {"velocity": {"enabled": args.velocity == "on"}}, f"--velocity {args.velocity}"
+        )
     if args.strict:
         cfg = cfg.with_values({"checks": {"on_proof": "refuse"}}, "--strict")
     run = load(
@@ -688,6 +699,7 @@ def _cmd_sim(args) -> int:
         seed=args.seed,
         t_start_s=t_start,
         odom_hz=args.odom_rate,
+        velocity=True,  # the receiver's Doppler velocities, written where the format has them
     )
     path = write_csv_run(run, args.out, gnss_format=args.gnss_format)
     extra = f", {len(run.odometry)} odometry samples" if run.odometry is not None else ""

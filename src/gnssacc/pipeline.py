@@ -156,9 +156,13 @@ METHODS = {
     "ekf": _ekf,
     "ekf-acc": _ekf,
     "ekf-accw": _ekf,
+    "ekf-vacc": _ekf,
+    "ekf-vaccw": _ekf,
     "smoother": _smoother,
     "smoother-acc": _smoother,
     "smoother-accw": _smoother,
+    "smoother-vacc": _smoother,
+    "smoother-vaccw": _smoother,
     "ekf-gm": _gm,
     "smoother-gm": _gm,
 }
@@ -504,6 +508,23 @@ def common_window(run: RecordedRun, sols: dict[str, NavSolution]) -> tuple[float
     return max(starts), min(ends)
 
 
+#: Method suffixes that fit the acceleration to the GNSS velocities (they need them).
+VELOCITY_SUFFIXES = ("-vacc", "-vaccw")
+
+
+def check_velocity_methods(run: RecordedRun, methods) -> None:
+    """Raise :class:`InputError` naming ``--methods`` when a method fits the acceleration to GNSS
+    velocities and the recording has none (before anything is computed)."""
+    need = [m for m in methods if m.endswith(VELOCITY_SUFFIXES)]
+    vel = run.gnss_vel
+    if need and (vel is None or not vel.measured().any()):
+        raise InputError(
+            "--methods",
+            f"{', '.join(need)} {'fits' if len(need) == 1 else 'fit'} the acceleration to GNSS "
+            f"velocities, and {run.where} has none",
+        )
+
+
 def compare(
     run: RecordedRun,
     cfg: RunConfig,
@@ -537,6 +558,7 @@ def compare(
     prep : Prepared
         The shared start, stationary spans and (tuned) configuration.
     """
+    check_velocity_methods(run, methods)
     told = state_corrections(say, header, run)
     prep = prepare(run, cfg, tune, methods, on_checked=told, cache=cache)
     for line in preparation_lines(prep) if say else ():

@@ -79,20 +79,34 @@ REST_FACTOR = 2.0
 #: below this under Gaussian errors (and at least 3 are beyond): a false alarm once in 10,000 runs.
 TAIL_ALARM = 1e-4
 #: What a warning can be about (:attr:`Consistency.flags`): the position NIS (the table's NIS
-#: column), the comparison with the raw fixes, the position NEES, the attitude NEES, another
-#: update kind's NIS (``acc``, ``zupt``, ``zaru``, ``nhc``, ``odo``) or the configured noise
-#: (``config``). The table marks the columns it has; the others are marked nowhere.
-COLUMNS = ("nis", "fixes", "nees", "nees_att", "acc", "zupt", "zaru", "nhc", "odo", "config")
+#: column), the comparison with the raw fixes, the position NEES, the attitude NEES, the GNSS
+#: velocity's NIS (the table's ``NIS vel`` column), another update kind's NIS (``acc``,
+#: ``zupt``, ``zaru``, ``nhc``, ``odo``) or the configured noise (``config``). The table marks
+#: the columns it has; the others are marked nowhere.
+COLUMNS = (
+    "nis",
+    "fixes",
+    "nees",
+    "nees_att",
+    "vel",
+    "acc",
+    "zupt",
+    "zaru",
+    "nhc",
+    "odo",
+    "config",
+)
 #: Update kinds and their names in messages.
 KIND_NAMES = {
     "pos": "position",
+    "vel": "GNSS velocity",
     "acc": "acceleration",
     "zupt": "zero-velocity",
     "zaru": "zero-rate",
     "nhc": "non-holonomic",
     "odo": "wheel-odometry",
 }
-_DOF = {"pos": 3, "acc": 3, "zupt": 3, "zaru": 3, "nhc": 2, "odo": 1}
+_DOF = {"pos": 3, "vel": 3, "acc": 3, "zupt": 3, "zaru": 3, "nhc": 2, "odo": 1}
 
 
 def shown(value: float, *bounds: float, decimals: int = 2) -> list[str]:

@@ -23,6 +23,12 @@ BASELINES = {
     "smoother-accw": "smoother",
     "smoother-accw-online": "smoother-online",
     "ekf-gm": "ekf",
+    "ekf-vacc": "ekf",
+    "smoother-vacc": "smoother",
+    "smoother-vacc-online": "smoother-online",
+    "ekf-vaccw": "ekf",
+    "smoother-vaccw": "smoother",
+    "smoother-vaccw-online": "smoother-online",
     "smoother-gm": "smoother",
     "smoother-gm-online": "smoother-online",
 }

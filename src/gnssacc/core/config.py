@@ -215,6 +215,17 @@ DEFAULTS: dict[str, dict] = {
         "scale_sigma": 0.03,
         "scale_tau_s": 3600.0,
     },
+    "velocity": {
+        # GNSS (Doppler) velocity of the antenna when the recording has it: EKF updates and
+        # smoother factors beside the fixes (also --velocity on|off). false: positions only.
+        "enabled": True,
+        # Every velocity's 1-sigma is multiplied by this (a receiver's stated speed accuracy, or
+        # a reader's documented default where the format states none); identified from the
+        # innovations by the noise tuner unless set here.
+        "sigma_scale": 1.0,
+        # Reject a velocity whose normalised innovation squared exceeds this (0 = never).
+        "gate_nis": 0.0,
+    },
     # Stationary detection thresholds: the fields of gnssacc.prepare.stationary.StationaryParams, whose
     # docstring gives each one's unit and physical reason (windowed IMU statistics + GNSS agreement).
     "stationary": {f.name: f.default for f in dataclass_fields(StationaryParams)},

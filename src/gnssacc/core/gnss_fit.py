@@ -1,5 +1,7 @@
 """The paper's least-squares GNSS acceleration: a quadratic fitted to the last ``m`` fixes, its
-acceleration ``a~ = B p`` and covariance (Versano & Klein, the design matrix ``A`` and the row ``B``).
+acceleration ``a~ = B p`` and covariance (Versano & Klein, the design matrix ``A`` and the row
+``B``), and its velocity form: the slope of a line fitted to the last ``m`` Doppler velocities
+(:func:`velocity_accelerations`).
 
 One implementation, used wherever a GNSS-derived acceleration is needed: the start's levelling
 (:mod:`gnssacc.prepare.initialise`), the EKF's acceleration update and the smoother's factor
@@ -143,4 +145,51 @@ def window_accelerations(
     var[j] = (Bw[:, :, None] ** 2 * np.asarray(sigma_ned, float)[idx] ** 2).sum(1)
     if sigma_override is not None:
         var[j] = np.asarray(sigma_override, float) ** 2
+    return full, a_n, var
+
+
+def velocity_accelerations(
+    t: np.ndarray, v_n: np.ndarray, sigma_ned: np.ndarray, m: int, max_gap_s: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The least-squares acceleration of the last ``m`` GNSS (Doppler) velocities, for each of a
+    sequence of velocities in order: the slope of a straight line fitted to each window, as
+    :func:`window_accelerations` fits a quadratic to the positions (the same window and gap rule).
+
+    Per axis ``a~ = sum_j C_j v_j`` with ``C_j = (t_j - mean t) / sum_i (t_i - mean t)^2`` [1/s]
+    (for three uniform velocities ``(v_2 - v_0) / (2 dt)``) and, for independent velocities,
+    ``var = sum_j C_j^2 sigma_j^2``.
+
+    Parameters
+    ----------
+    t : ndarray (M,)
+        Velocity times [s], increasing.
+    v_n, sigma_ned : ndarray (M, 3)
+        Velocities [m/s, NED] and their 1-sigma; NaN on an axis not measured.
+    m : int
+        Window length (>= 2).
+    max_gap_s : float
+
+    Returns
+    -------
+    full : ndarray (M,) of bool
+        Whether velocity ``j`` completes a window.
+    a_n, var : ndarray (M, 3)
+        Accelerations [m/s^2, NED] and their variances [m^2/s^4]; NaN where not full and on an
+        axis some velocity of the window does not measure.
+    """
+    t = np.asarray(t, float)
+    M = len(t)
+    full = np.zeros(M, bool)
+    a_n, var = np.full((M, 3), np.nan), np.full((M, 3), np.nan)
+    if M < m:
+        return full, a_n, var
+    bad = np.concatenate([[0], np.cumsum(np.diff(t) > max_gap_s)])
+    j = np.arange(m - 1, M)
+    j = j[bad[j] == bad[j - m + 1]]
+    full[j] = True
+    idx = j[:, None] + np.arange(1 - m, 1)
+    u = t[idx] - t[idx].mean(axis=1, keepdims=True)
+    C = u / (u * u).sum(axis=1, keepdims=True)
+    a_n[j] = np.einsum("km,kmc->kc", C, np.asarray(v_n, float)[idx])
+    var[j] = (C[:, :, None] ** 2 * np.asarray(sigma_ned, float)[idx] ** 2).sum(1)
     return full, a_n, var

@@ -167,12 +167,15 @@ def run_ekf(
     settings : EkfSettings or gnssacc.core.config.RunConfig
         The filter's settings (:class:`gnssacc.estimators.settings.EkfSettings`; a run
         configuration is reduced to them first).
-    method : {"ekf", "ekf-acc", "ekf-accw"}
-        ``ekf``: position updates (the paper's baseline); ``ekf-acc``: position and GNSS-derived
-        acceleration updates (the paper's method); ``ekf-accw``: the same with the
-        window-consistent acceleration prediction. All of them add the other aids the run and
-        the settings have (stationary updates when ``stationary`` is given and ``[zupt]
-        enabled``, the non-holonomic constraint, wheel odometry).
+    method : {"ekf", "ekf-acc", "ekf-accw", "ekf-vacc", "ekf-vaccw"}
+        ``ekf``: position updates (the paper's baseline; with the GNSS velocity updates where the
+        recording has velocities and ``[velocity] enabled``); ``ekf-acc``: position and
+        GNSS-derived acceleration updates (the paper's method); ``ekf-accw``: the same with the
+        window-consistent acceleration prediction; ``ekf-vacc``, ``ekf-vaccw``: the paper's and
+        the window-consistent acceleration update with the acceleration fitted to the Doppler
+        velocities. All of them add the other aids the run and the settings have (stationary
+        updates when ``stationary`` is given and ``[zupt] enabled``, the non-holonomic
+        constraint, wheel odometry).
     output_times : ndarray, optional
         Epochs [s] at which to report the state (after any update at the same time). Default:
         :func:`gnssacc.estimators.epochs.default_output_times`. Epochs before the filter starts

@@ -158,8 +158,9 @@ B_ACC, B_GYRO = slice(0, 3), slice(3, 6)
 #: the GNSS error when modelled.
 PRIOR_POSE, PRIOR_BIAS, PRIOR_G = slice(0, 6), slice(6, 12), slice(12, 15)
 #: GTSAM's NavState tangent (rotation, position, velocity; the preintegration's covariance and
-#: Jacobians): its pose part and its velocity.
+#: Jacobians): its pose part and its velocity, and the whole of it.
 NAVSTATE_POSE, NAVSTATE_VEL = slice(0, 6), slice(6, 9)
+NAVSTATE = slice(0, 9)
 
 
 #: The node variable of each Gauss-Markov block (its GTSAM symbol character).

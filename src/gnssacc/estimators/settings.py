@@ -18,7 +18,7 @@ import numpy as np
 
 from ..checks.quality import SuspectNoise
 from ..core.config import RunConfig, vec3
-from ..core.recording import GnssFixes
+from ..core.recording import GnssFixes, GnssVelocity
 from ..core.rotations import euler_to_dcm
 
 
@@ -240,6 +240,30 @@ class OdometrySettings:
         )
 
 
+@dataclass(frozen=True)
+class VelocitySettings:
+    """The GNSS (Doppler) velocity (``[velocity]``; :mod:`gnssacc.estimators.aids.gnss_velocity`):
+    on or off, the scale of the stated (or default) sigmas, and the NIS gate (0: none)."""
+
+    enabled: bool = True
+    sigma_scale: float = 1.0
+    gate_nis: float = 0.0
+
+    @classmethod
+    def from_config(cls, cfg: RunConfig) -> "VelocitySettings":
+        v = cfg["velocity"]
+        return cls(bool(v["enabled"]), float(v["sigma_scale"]), float(v["gate_nis"]))
+
+    def velocities(self, vel: GnssVelocity | None) -> GnssVelocity | None:
+        """The run's velocities with this model's noise (every sigma times :attr:`sigma_scale`),
+        or ``None`` when off or the run has none."""
+        if vel is None or not self.enabled or len(vel.t) == 0:
+            return None
+        if self.sigma_scale == 1.0:
+            return vel
+        return replace(vel, sigma_ned=vel.sigma_ned * self.sigma_scale)
+
+
 @dataclass(frozen=True, eq=False)
 class _Common:
     """Settings both estimators share (see the subclasses).
@@ -252,6 +276,7 @@ class _Common:
     zupt : ZuptSettings
     nhc : NhcSettings
     odometry : OdometrySettings
+    velocity : VelocitySettings
     suspect : gnssacc.checks.quality.SuspectNoise
         The noise assumed over suspect IMU spans.
     start_sigmas : dict
@@ -265,6 +290,7 @@ class _Common:
     zupt: ZuptSettings
     nhc: NhcSettings
     odometry: OdometrySettings
+    velocity: VelocitySettings
     suspect: SuspectNoise
     start_sigmas: dict
 
@@ -277,6 +303,7 @@ class _Common:
             zupt=ZuptSettings.from_config(cfg),
             nhc=NhcSettings.from_config(cfg),
             odometry=OdometrySettings.from_config(cfg),
+            velocity=VelocitySettings.from_config(cfg),
             suspect=SuspectNoise.from_config(cfg),
             start_sigmas=cfg.initial_sigma_overrides(),
         )

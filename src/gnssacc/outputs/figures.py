@@ -53,6 +53,10 @@ _COLOURS = {
     "smoother-accw": "C5",
     "ekf-gm": "C6",
     "smoother-gm": "C8",
+    "ekf-vacc": "C9",
+    "smoother-vacc": "saddlebrown",
+    "ekf-vaccw": "olive",
+    "smoother-vaccw": "teal",
 }
 #: Horizontal distance [m] under which the raw fixes' CDF is drawn (grey) in ``summary.png``.
 FIX_STYLE = {"color": "0.45", "ls": ":", "lw": 2.0}
@@ -499,6 +503,16 @@ def plot_nis(run: RecordedRun, sols: dict, metrics: dict, path: Path, window: in
             continue
         ax.plot(np.asarray(t) - run.t_start, _moving_mean(nis, window), label=mid, **style(mid))
         drawn = True
+    vel = False
+    for mid, sol in sols.items():  # the GNSS velocities' NIS, where the run has them (dotted)
+        t, nis = sol.stats.get("nis_vel_t"), sol.stats.get("nis_vel")
+        if t is None or nis is None or not len(nis):
+            continue
+        line = {**style(mid), "ls": ":"}
+        ax.plot(
+            np.asarray(t) - run.t_start, _moving_mean(nis, window), label=f"{mid} velocity", **line
+        )
+        vel = True
     if not drawn:
         ax.text(
             0.5,
@@ -511,7 +525,7 @@ def plot_nis(run: RecordedRun, sols: dict, metrics: dict, path: Path, window: in
     ax.set_yscale("log")
     _plain_log_ticks(ax.yaxis, *ax.get_ylim())
     ax.axhline(1.0, color="k", lw=0.8)
-    ax.set_ylabel("position NIS per dof")
+    ax.set_ylabel("position NIS per dof" + (" (velocity dotted)" if vel else ""))
     ax.set_title(f"EKF innovations: moving mean of {window} updates (1 = consistent)")
     ax.legend(fontsize=8, ncol=3)
     for mid, sol in sols.items():

@@ -81,9 +81,12 @@ def consistency_html(metrics: dict) -> str:
     cons = metrics.get("consistency") or {}
     if not cons:
         return "<p>No consistency figures.</p>"
+    kinds = ("pos", "vel", "acc", "zupt", "zaru")
+    if not any(c["nis"].get("vel") is not None for c in cons.values()):
+        kinds = tuple(k for k in kinds if k != "vel")  # a run without GNSS velocities
     rows = "".join(
         f"<tr><td>{html.escape(m)}</td>"
-        + "".join(f"<td>{_fmt(c['nis'].get(k))}</td>" for k in ("pos", "acc", "zupt", "zaru"))
+        + "".join(f"<td>{_fmt(c['nis'].get(k))}</td>" for k in kinds)
         + f"<td>{_fmt(c.get('innovation_acf1'))}</td><td>{_fmt(c.get('fix_residual_ratio'))}</td>"
         + f"<td>{'<br>'.join(html.escape(w) for w in c['warnings']) or 'none'}</td></tr>"
         for m, c in cons.items()
@@ -92,7 +95,9 @@ def consistency_html(metrics: dict) -> str:
         "<p>1 is consistent for every NIS figure (EKF: innovations; smoother: GNSS residuals against their "
         "expectation); innovation autocorrelation near 0; fix residual ratio below 1.41 (an estimate as good as "
         "the fixes and independent of them).</p><table><tr><th>method</th><th>NIS position</th>"
-        "<th>acceleration</th><th>zero velocity</th><th>zero rate</th><th>innovation autocorrelation</th>"
+        + ("<th>velocity</th>" if "vel" in kinds else "")
+        + "<th>acceleration</th><th>zero velocity</th><th>zero rate</th>"
+        "<th>innovation autocorrelation</th>"
         f"<th>fix residual ratio</th><th>warnings</th></tr>{rows}</table>"
     )
 

@@ -263,8 +263,24 @@ def _columns(metrics: dict) -> list[tuple[str, object]]:
                 ),
             )
         )
+    cols.append(
+        ("NIS", lambda mid, m: _cell(cons(mid, "pos"), ".2f", _flagged(metrics, mid, "nis")))
+    )
+    if any(cons(mid, "vel") is not None for mid in ok):  # a run with GNSS velocities
+        if truth:
+            cols.append(
+                (
+                    "vel RMSE [m/s]",
+                    lambda mid, m: _fmt(_get(m, "errors", "velocity", "rmse"), ".3f"),
+                )
+            )
+        cols.append(
+            (
+                "NIS vel",
+                lambda mid, m: _cell(cons(mid, "vel"), ".2f", _flagged(metrics, mid, "vel")),
+            )
+        )
     cols += [
-        ("NIS", lambda mid, m: _cell(cons(mid, "pos"), ".2f", _flagged(metrics, mid, "nis"))),
         ("acc gain [%]", lambda mid, m: _fmt(m.get("improvement_pct"), "+.1f")),
         ("wall [s]", lambda mid, m: f"{m['runtime_s']:.3f}"),
         ("real-time x", lambda mid, m: _fmt(m.get("realtime_factor"), ".0f")),

@@ -1,8 +1,10 @@
 r"""Noise identification from the recording itself (``--tune auto``, the default).
 
-Every IMU noise key the user's configuration does not set (and ``gnss.sigma_scale``, and the
-ground-vehicle aids' noise when they are in use: ``nhc.sigma_lateral_mps``,
-``nhc.sigma_vertical_mps``, ``odometry.speed_sigma_mps``, :func:`aids`) is identified
+Every IMU noise key the user's configuration does not set (and ``gnss.sigma_scale``; on a
+recording with GNSS velocities ``velocity.sigma_scale``, with the velocities' innovations in the
+likelihood, :func:`measurement_stage`; and the ground-vehicle aids' noise when they are in use:
+``nhc.sigma_lateral_mps``, ``nhc.sigma_vertical_mps``, ``odometry.speed_sigma_mps``,
+:func:`aids`) is identified
 without truth, in five steps:
 
 1. **Stationary stretches** (:mod:`gnssacc.prepare.stationary`): the white-noise densities of the
@@ -201,7 +203,12 @@ class TuneResult:
 
     def line(self) -> str:
         """One line for the terminal."""
-        parts = [f"{key}={_short(v)}" for sec in self.values.values() for key, v in sec.items()]
+        keys = [key for sec in self.values.values() for key in sec]
+        parts = [  # a key two sections share (sigma_scale) is named with its section
+            f"{f'{s}.' if keys.count(key) > 1 else ''}{key}={_short(v)}"
+            for s, sec in self.values.items()
+            for key, v in sec.items()
+        ]
         nis = (
             f"; position NIS/dof {self.nis_before:.2f} -> {self.nis_after:.2f}"
             if self.nis_before is not None and self.nis_after is not None
@@ -574,6 +581,23 @@ def aids(run, cfg: RunConfig) -> tuple[tuple, tuple]:
     return params, kinds
 
 
+def measurement_stage(run, cfg: RunConfig) -> tuple[list, tuple]:
+    """The parameters identified with the IMU noise on ``run`` (:data:`PARAMETERS` less those of an
+    aid of that stage that is off or has no data, e.g. the GNSS velocity's scale on a recording
+    without velocities) and the update kinds those aids add to the likelihood (beside the
+    positions' and the zero rate's)."""
+    params, kinds = list(PARAMETERS), ()
+    for spec in REGISTRY:
+        if spec.stage != "imu" or spec.enabled_key is None:
+            continue
+        section, key = spec.enabled_key
+        if cfg[section][key] and spec.in_use(run, cfg):
+            kinds += spec.kinds
+        else:
+            params = [p for p in params if p not in spec.noise_keys]
+    return params, kinds
+
+
 def without_aids(cfg: RunConfig) -> RunConfig:
     """``cfg`` with the ground vehicle's aids off, for the IMU and GNSS noise's passes (step 5)
     and the yaw bank's (:func:`gnssacc.prepare.yawbank.select_yaw`)."""
@@ -633,10 +657,12 @@ def tune(
     """
     t0 = time.perf_counter()
     aid_params, aid_kinds = aids(run, cfg)
-    free = [p for p in PARAMETERS if p not in cfg.explicit]
-    fixed = [f"{s}.{k}" for s, k in PARAMETERS + aid_params if (s, k) in cfg.explicit]
+    params, measured = measurement_stage(run, cfg)
+    free = [p for p in params if p not in cfg.explicit]
+    fixed = [f"{s}.{k}" for s, k in params + list(aid_params) if (s, k) in cfg.explicit]
     start, info = _start_values(cfg, free, noise)
-    kinds = ("pos", "zaru") + (("acc",) if cfg["tune"]["likelihood"] == "position+accel" else ())
+    kinds = ("pos", "zaru") + measured
+    kinds += ("acc",) if cfg["tune"]["likelihood"] == "position+accel" else ()
     method = "ekf-acc" if "acc" in kinds else "ekf"
     raw, n_eval, before, after = {}, 0, {}, {}
     if free:

@@ -38,7 +38,7 @@ from .initialise import StartState, hypothesis, start_state
 from .tuning import without_aids
 
 #: Update kinds whose likelihood scores a hypothesis.
-_SCORED = ("pos", "zupt", "zaru")
+_SCORED = ("pos", "vel", "zupt", "zaru")
 
 
 @dataclass

@@ -53,7 +53,13 @@ from ..core.errors import InputError
 from ..core.memory import release_free_memory
 from ..core.recording import GnssFixes, ImuData, InitialState, RecordedRun, SimTruth
 from ..core.units import DEG
-from .gnss_noise import PROFILE_QUALITY, PROFILES, fixes_from_truth
+from .gnss_noise import (
+    PROFILE_QUALITY,
+    PROFILES,
+    antenna_velocity,
+    fixes_from_truth,
+    velocities_from_truth,
+)
 from .sim_imu_errors import (  # noqa: F401 (re-exported)
     GRADE_KEYS,
     IMU_EXTRA_ERRORS,
@@ -309,6 +315,7 @@ def simulate(
     t_start_s: float = 0.0,
     odom_hz: float | None = None,
     odom_kind: str | None = None,
+    velocity: bool = False,
 ) -> RecordedRun:
     """Simulate a ground-vehicle run with known truth.
 
@@ -355,6 +362,12 @@ def simulate(
     odom_kind : {"car", "skid"}, optional
         The odometry's vehicle: skid steer (large slip in turns) or car; default skid for the
         UGV scenarios, car otherwise.
+    velocity : bool
+        Also simulate the receiver's Doppler velocities of the antenna at the fix times
+        (``run.gnss_vel``; :func:`gnssacc.sources.gnss_noise.velocities_from_truth`: white plus a
+        small Gauss-Markov error, from their own stream: the fixes and the IMU keep their draws).
+        The ``sim:`` sources and ``gnssacc sim`` have them; off by default here, so that a run
+        made in Python is the position-only run it always was unless asked.
 
     Returns
     -------
@@ -385,6 +398,8 @@ def simulate(
     )
     if odom_hz is not None:
         args.update(odom_hz=odom_hz, odom_kind=odom_kind)
+    if velocity:
+        args.update(velocity=True)
     name = scenario if isinstance(scenario, str) else scenario.name
     args["scenario"] = name
     where = f"simulator({name}, seed={seed})"
@@ -448,6 +463,11 @@ def simulate(
     fixes = fixes_from_truth(run, truth_gnss.to_truth(), noise, gnss_seed, p_antenna_n)
     fixes.quality = np.full(len(fixes), PROFILE_QUALITY[noise])
     run = replace(run, gnss=fixes)
+    if velocity:
+        v_ant = antenna_velocity(
+            truth_gnss.v_n, truth_gnss.R_nb, truth_gnss.omega_ib_b, truth_gnss.lat, lever_b
+        )
+        run = replace(run, gnss_vel=velocities_from_truth(t_gnss, v_ant, noise, seed))
     if odom_hz is None:
         return run
     t_odo = sample_times(t_start_s, duration_s, odom_hz)

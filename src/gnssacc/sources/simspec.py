@@ -5,6 +5,8 @@ simulator (:func:`gnssacc.sources.sim.simulate`) instead of a file, wherever a s
 (``gnssacc run``, ``gnssacc batch``, ``gnssacc bench``, :func:`gnssacc.process`). The task's seed
 draws both the IMU errors and the GNSS noise, and the GNSS noise profile is the run's (or the
 campaign's) ``--noise`` (default ``white``), so every seed of a campaign is an independent run.
+The run has the receiver's Doppler velocities at the fix times (``velocity=True`` of
+:func:`gnssacc.sources.sim.simulate`).
 
 Keys (each at most once):
 
@@ -161,7 +163,7 @@ def load_sim(spec: str, noise: str | None, seed: int):
 
     from .sim import simulate
 
-    run = simulate(**parse_sim_spec(spec), noise=noise or "white", seed=seed)
+    run = simulate(**parse_sim_spec(spec), noise=noise or "white", seed=seed, velocity=True)
     return replace(run, meta={**run.meta, "source_spec": spec})
 
 

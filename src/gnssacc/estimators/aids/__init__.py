@@ -5,7 +5,9 @@ an aid is).
 module             measurement
 =================  ===========================================================================
 ``gnss_position``  the GNSS fix of the antenna (with the Gauss-Markov fix error when modelled)
-``gnss_accel``     the GNSS-derived acceleration, the paper's and the window-consistent form
+``gnss_accel``     the GNSS-derived acceleration, the paper's and the window-consistent form, and
+                   the paper's form fitted to the Doppler velocities
+``gnss_velocity``  the receiver's Doppler velocity of the antenna
 ``zupt``           zero velocity and zero angular rate while the vehicle stands still
 ``nhc``            the non-holonomic constraint of a ground vehicle
 ``odometry``       wheel odometry's forward speed with its scale factor
@@ -18,7 +20,7 @@ module here with its ``AID`` added to :data:`REGISTRY` (and its reader and confi
 
 from __future__ import annotations
 
-from . import gnss_accel, gnss_position, nhc, odometry, zupt
+from . import gnss_accel, gnss_position, gnss_velocity, nhc, odometry, zupt
 from .base import (  # noqa: F401 (the aids' vocabulary, re-exported)
     TAIL_P,
     AidSpec,
@@ -35,6 +37,7 @@ from .base import (  # noqa: F401 (the aids' vocabulary, re-exported)
 REGISTRY: tuple[AidSpec, ...] = (
     gnss_position.AID,
     gnss_accel.AID,
+    gnss_velocity.AID,
     zupt.AID,
     nhc.AID,
     odometry.AID,

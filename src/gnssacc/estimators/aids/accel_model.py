@@ -111,14 +111,17 @@ class AccelMeasurement:
         Acceleration in NED [m/s^2].
     cov : ndarray, shape (3, 3)
         Covariance [m^2/s^4].
-    t_window : ndarray, shape (m,)
-        The fix times used.
+    t_window : ndarray, shape (m,) or None
+        The fix times used (``None`` for an acceleration fitted to velocities).
+    axes : ndarray (3,) of bool, or None
+        The axes measured (``None``: all three).
     """
 
     t: float
     a_n: np.ndarray
     cov: np.ndarray
-    t_window: np.ndarray
+    t_window: np.ndarray | None
+    axes: np.ndarray | None = None
 
 
 class AccelWindow:
@@ -207,7 +210,7 @@ def peano_weights(t_fix: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarr
 
 
 def window_samples(
-    t_imu: np.ndarray, t_fix: np.ndarray
+    t_imu: np.ndarray, t_fix: np.ndarray, weights=None
 ) -> tuple[int, int, np.ndarray, np.ndarray] | None:
     """The IMU samples covering the window ``[t_fix[0], t_fix[-1]]`` and their kernel weights.
 
@@ -225,7 +228,8 @@ def window_samples(
     h : ndarray (k1 - k0,)
         Length of each sample's overlap with the window [s].
     w : ndarray (k1 - k0,)
-        ``int K`` over each overlap (:func:`peano_weights`).
+        ``int K`` over each overlap (``weights(t_fix, lo, hi)``, default :func:`peano_weights`:
+        the positions' kernel).
 
     ``None`` when the IMU does not cover the window.
     """
@@ -236,7 +240,7 @@ def window_samples(
         return None
     lo = np.maximum(t_imu[k0 - 1 : k1 - 1], t0)
     hi = np.minimum(t_imu[k0:k1], t1)
-    return k0, k1, hi - lo, peano_weights(t_fix, lo, hi)
+    return k0, k1, hi - lo, (weights or peano_weights)(t_fix, lo, hi)
 
 
 def predicted_acceleration(R_nb: np.ndarray, f_b: np.ndarray, g_n: np.ndarray) -> np.ndarray:

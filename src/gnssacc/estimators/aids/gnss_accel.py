@@ -17,6 +17,24 @@ ids):
     :func:`gnssacc.factors.window_accel_factor` on the poses of the window's fixes
     (``sum_j B_j p_ant(X_j) - a~``), which widens the smoother's band of nodes.
 
+``velocity`` (``ekf-vacc``, ``smoother-vacc``)
+    The paper's form (the same ``H_a`` and factor) with the acceleration fitted by least squares
+    to the last ``[accel] window`` Doppler velocities instead of the fixes (the slope of a line,
+    :func:`gnssacc.core.gnss_fit.velocity_accelerations`; the same gap rule), on the axes the
+    velocities measure, updated at each velocity's epoch; ``[accel] sigma_override`` is for the
+    position forms and is not used. It needs the recording's velocities (``[velocity] enabled``
+    or not: with ``--velocity off`` the acceleration is used without the velocity updates). As
+    for the positions, consecutive accelerations share all but one velocity, and each shares its
+    velocities with the velocity updates: every one is treated as an independent measurement
+    (the same velocity noise counted more than once; the fitted slope is also the acceleration at
+    the window's middle, compared with the specific force at its newest epoch as in the paper).
+``velocity-window`` (``ekf-vaccw``, ``smoother-vaccw``)
+    The same acceleration against the window-consistent prediction: the INS acceleration weighted
+    by the slope's kernel, with the antenna's lever-arm term and the Coriolis term
+    (:mod:`gnssacc.estimators.aids.velocity_window`). Smoother: the slope of the window's node
+    antenna velocities (:func:`gnssacc.factors.velocity_window_accel_factor`), which widens the
+    smoother's band of nodes as the ``window`` form does.
+
 The window is fed with every fix, those before the estimator starts too. An update whose specific
 force comes from a suspect IMU span (fabricated or damaged data) is skipped
 (``n_acc_skipped_suspect_imu``). The EKF evaluates the paper's form without applying it when an
@@ -25,12 +43,17 @@ observer watches a pass without acceleration (the observability analysis' counte
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from ...core.earth import gravity_n, normal_gravity
-from ..layout import ATT, BA, BG, SYM_B, SYM_X
+from ...core.earth import earth_rate_n, gravity_n, normal_gravity
+from ...core.errors import InputError
+from ...core.gnss_fit import velocity_accelerations
+from ..layout import ATT, BA, BG, SYM_B, SYM_V, SYM_X
 from ..mechanization import kernel_force_integrals
 from .accel_model import (
+    AccelMeasurement,
     AccelWindow,
     H_a_blocks,
     H_w_blocks,
@@ -41,9 +64,20 @@ from .accel_model import (
     window_samples,
 )
 from .base import AidSpec, EkfAid, Measurement, SmootherAid, zero_jacobian
+from .gnss_velocity import VelocityEpochs
+from .velocity_window import (
+    lever_term,
+    slope_coefficients,
+    slope_weights,
+    velocity_window_acceleration,
+)
 
 #: The forms of the INS prediction, by the suffix of their method ids (``ekf-acc``, ...).
-FORMS = {"acc": "paper", "accw": "window"}
+FORMS = {"acc": "paper", "accw": "window", "vacc": "velocity", "vaccw": "velocity-window"}
+#: The suffix of each form's method ids.
+VARIANT_SUFFIX = {form: suffix for suffix, form in FORMS.items()}
+#: The forms fitted to the Doppler velocities.
+VELOCITY_FORMS = ("velocity", "velocity-window")
 #: Order at equal times: right after the GNSS position update of the same fix.
 ORDER = 3
 
@@ -84,24 +118,86 @@ def window_acceleration(
     return Measurement("acc", predicted_acceleration(s.R_nb, F_b, g_n) - a_n, H, cov)
 
 
+def doppler_velocities(run, settings, method: str) -> VelocityEpochs:
+    """The velocities the ``velocity`` form fits (the run's, their sigmas times ``[velocity]
+    sigma_scale``, whether or not the velocity updates are on).
+
+    Raises
+    ------
+    InputError
+        The recording has no velocities.
+    """
+    vel = replace(settings.velocity, enabled=True).velocities(getattr(run, "gnss_vel", None))
+    ep = None if vel is None else VelocityEpochs(run, vel)
+    if ep is None or not len(ep):
+        raise InputError(
+            run.where, f"{method} fits the acceleration to GNSS velocities: this recording has none"
+        )
+    return ep
+
+
+def doppler_accelerations(ep: VelocityEpochs, acc) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`gnssacc.core.gnss_fit.velocity_accelerations` of the velocities ``ep`` with the
+    ``[accel]`` window and gap (``acc``: :class:`gnssacc.estimators.settings.AccelSettings`)."""
+    v = np.where(ep.axes, ep.vel.v_ned, np.nan)
+    return velocity_accelerations(ep.t, v, ep.vel.sigma_ned, acc.window, acc.max_gap_s)
+
+
 class EkfAccel(EkfAid):
-    """The acceleration update at every fix whose window is full (module notes)."""
+    """The acceleration update at every fix (every velocity, for the ``velocity`` form) whose
+    window is full (module notes)."""
 
     order, epoch = ORDER, "gnss"
 
     def __init__(self, ctx):
         run, acc = ctx.run, ctx.settings.accel
-        fixes = ctx.settings.gnss.fixes(run.gnss)
-        self.t, self.sigma = fixes.t, fixes.sigma_ned
-        self.p_fix = run.origin.to_ned(fixes.lat, fixes.lon, fixes.h)
-        self.window = AccelWindow(acc.window, acc.max_gap_s, acc.sigma_override)
         self.apply = ctx.variant is not None
         self.form = ctx.variant or "paper"
         self.imu, self.f_avg_s, self.segments = run.imu, acc.specific_force_avg_s, ctx.segments
         self.current = None  # the window's acceleration at the last fix seen
+        if self.form in VELOCITY_FORMS:
+            ep = doppler_velocities(run, ctx.settings, f"ekf-{VARIANT_SUFFIX[self.form]}")
+            self.t, self.epoch, self.vel_window = ep.t, "gnss_vel", doppler_accelerations(ep, acc)
+            self.vel, self.m, self.lever = ep, acc.window, ctx.settings.gnss.lever_arm_b
+            self.window = AccelWindow(acc.window, acc.max_gap_s)  # counts no resets here
+            return
+        fixes = ctx.settings.gnss.fixes(run.gnss)
+        self.t, self.sigma = fixes.t, fixes.sigma_ned
+        self.p_fix = run.origin.to_ned(fixes.lat, fixes.lon, fixes.h)
+        self.window = AccelWindow(acc.window, acc.max_gap_s, acc.sigma_override)
 
     def see(self, j: int) -> None:
-        self.current = self.window.push(self.t[j], self.p_fix[j], self.sigma[j])
+        if self.form not in VELOCITY_FORMS:
+            self.current = self.window.push(self.t[j], self.p_fix[j], self.sigma[j])
+            return
+        full, a_n, var = self.vel_window
+        axes = np.isfinite(a_n[j])
+        if not full[j] or not axes.any():
+            self.current = None
+            return
+        cov = np.diag(np.where(axes, var[j], 1.0))
+        t_win = self.t[j - self.m + 1 : j + 1]
+        self.current = AccelMeasurement(float(self.t[j]), np.nan_to_num(a_n[j]), cov, t_win, axes)
+        self.current_j = j
+
+    def _velocity_window(self, s, acc, g_n) -> Measurement | None:
+        """The ``velocity-window`` form's update (:mod:`.velocity_window`), or ``None`` when the
+        IMU does not cover the window or a suspect span touches it."""
+        win = window_samples(self.imu.t, acc.t_window, slope_weights)
+        if win is None or self.segments.touch(win[0], win[1]):
+            return None
+        k0, k1, h, w = win
+        imu = self.imu
+        F_b, M, G = kernel_force_integrals(
+            imu.f_b[k0:k1], imu.omega_ib_b[k0:k1], h, w, s.b_a, s.b_g
+        )
+        lever = None
+        if self.lever.any():
+            j = self.current_j
+            om = self.vel.omega_b[j - self.m + 1 : j + 1]
+            lever = lever_term(imu.t, imu.omega_ib_b, acc.t_window, om, self.lever, s.b_g)
+        w_ie = earth_rate_n(s.pos[0])
+        return velocity_window_acceleration(s, acc.a_n, acc.cov, F_b, M, G, g_n, w_ie, lever)
 
     def model(self, s, t: float) -> Measurement | None:
         """The update for the window's acceleration at ``t`` [s], or ``None`` when the specific
@@ -119,11 +215,18 @@ class EkfAccel(EkfAid):
                 self.imu.f_b[k0:k1], self.imu.omega_ib_b[k0:k1], h, w, s.b_a, s.b_g
             )
             return window_acceleration(s, acc.a_n, acc.cov, F_b, M, G, g_n)
-        seg = self.segments
-        f_meas = measured_specific_force(self.imu, t, self.f_avg_s, seg.i0, seg.i1)
-        if f_meas is None:
-            return None
-        return acceleration(s, acc.a_n, acc.cov, f_meas, g_n)
+        if self.form == "velocity-window":
+            m = self._velocity_window(s, acc, g_n)
+        else:
+            seg = self.segments
+            f_meas = measured_specific_force(self.imu, t, self.f_avg_s, seg.i0, seg.i1)
+            if f_meas is None:
+                return None
+            m = acceleration(s, acc.a_n, acc.cov, f_meas, g_n)
+        if m is None or acc.axes is None or acc.axes.all():
+            return m
+        ax = acc.axes
+        return Measurement(m.kind, m.dz[ax], m.H[ax], m.R[np.ix_(ax, ax)], m.gate)
 
     def models(self, s, j: int) -> list[Measurement]:
         m = None if self.current is None else self.model(s, float(self.t[j]))
@@ -173,12 +276,45 @@ class SmootherAccel(SmootherAid):
         acc = settings.accel
         self.f_avg = acc.specific_force_avg_s
         self.acc_window = (acc.window, acc.max_gap_s, acc.sigma_override)
-        self.bandwidth = bandwidth(settings) if self.form == "window" else 1
+        windowed = self.form in ("window", "velocity-window")
+        self.bandwidth = bandwidth(settings) if windowed else 1
+        self.accel = acc
+        if self.form in VELOCITY_FORMS:
+            self.vel = doppler_velocities(run, settings, f"smoother-{VARIANT_SUFFIX[self.form]}")
+            self.w_ie = earth_rate_n(origin.lat0)
+
+    def _attach_velocity(self, ctx) -> None:
+        """The ``velocity`` form: the accelerations of the velocities before the first node and at
+        node times, in order (as the position forms take the fixes), by velocity index."""
+        ep, times = self.vel, ctx.times
+        at_node = np.isin(ep.t, times)
+        pushed = np.flatnonzero((ep.t < times[0]) | at_node)
+        sub = ep.vel.select(pushed)
+        v = np.where(ep.axes[pushed], sub.v_ned, np.nan)
+        acc = self.accel
+        full, a_n, var = velocity_accelerations(
+            ep.t[pushed], v, sub.sigma_ned, acc.window, acc.max_gap_s
+        )
+        self.acc = {
+            int(k): (np.nan_to_num(a_n[j]), np.where(np.isfinite(a_n[j]), var[j], 1.0),
+                     np.isfinite(a_n[j]))
+            for j, k in enumerate(pushed.tolist())
+            if full[j] and np.isfinite(a_n[j]).any()
+        }  # fmt: skip
+        self.at_t = {float(t): k for k, t in enumerate(ep.t.tolist())}
+        m = acc.window
+        self.acc_vels = {
+            int(k): pushed[j - m + 1 : j + 1] for j, k in enumerate(pushed.tolist()) if full[j]
+        }
+        self.node_of = {self.at_t[t]: i for i, t in enumerate(times.tolist()) if t in self.at_t}
 
     def attach(self, ctx) -> None:
         """The accelerations of every fix, all at once: the fixes before the first node and those
         at node times, in order, as :class:`gnssacc.estimators.aids.accel_model.AccelWindow` would
         see them; and the node of each fix at a node time."""
+        if self.form in VELOCITY_FORMS:
+            self._attach_velocity(ctx)
+            return
         times = ctx.times
         t_fix = self.fixes.t
         nodes = set(times.tolist())
@@ -196,6 +332,15 @@ class SmootherAccel(SmootherAid):
         self.node_of = {self.fix_at[t]: i for i, t in enumerate(times.tolist()) if t in self.fix_at}
 
     def node(self, graph, ctx, i: int, t: float, pred) -> None:
+        if self.form in VELOCITY_FORMS:
+            k = self.at_t.get(float(t))
+            if k is None:
+                return
+            if self.form == "velocity":
+                self._paper(graph, i, t, k, ctx.segments)
+            else:
+                self._velocity_window_factor(graph, k, lambda n: n == i or ctx.has_node(n))
+            return
         k = self.fix_at.get(float(t))
         if k is None:
             return
@@ -225,6 +370,7 @@ class SmootherAccel(SmootherAid):
                 meas[0],
                 self.g_n,
                 np.diag(meas[1]),
+                meas[2] if len(meas) > 2 else None,
             )
         )
         self.stats["n_acc_factors"] += 1
@@ -251,6 +397,37 @@ class SmootherAccel(SmootherAid):
                 B_row,
                 meas[0],
                 self.lever,
+                np.diag(meas[1]),
+            )
+        )
+        self.stats["n_acc_factors"] += 1
+
+    def _velocity_window_factor(self, graph, k: int, in_window) -> None:
+        """The ``velocity-window`` factor: the slope of the antenna velocities of the nodes of
+        velocity ``k``'s window (:func:`gnssacc.factors.velocity_window_accel_factor`), when its
+        window is full and all of its nodes are in the smoother."""
+        import gtsam
+
+        from ...factors import velocity_window_accel_factor
+
+        meas = self.acc.get(k)
+        if meas is None:
+            return
+        vels = self.acc_vels[k]
+        nodes = [self.node_of.get(int(v)) for v in vels]
+        if any(n is None or not in_window(n) for n in nodes):
+            self.stats["n_acc_skipped_window"] = self.stats.get("n_acc_skipped_window", 0) + 1
+            return
+        keys = [tuple(gtsam.symbol(c, n) for c in (SYM_X, SYM_V, SYM_B)) for n in nodes]
+        graph.add(
+            velocity_window_accel_factor(
+                keys,
+                slope_coefficients(self.vel.t[vels]),
+                meas[0],
+                meas[2],
+                self.vel.omega_b[vels],
+                self.lever,
+                self.w_ie,
                 np.diag(meas[1]),
             )
         )

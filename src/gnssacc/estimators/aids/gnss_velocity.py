@@ -1,0 +1,259 @@
+r"""GNSS velocity: the receiver's Doppler velocity of the antenna, in the EKF and the smoother.
+
+Measurement
+-----------
+The receiver measures the antenna's velocity relative to the earth (NED), not the IMU's. With the
+lever arm ``l_b`` (``[gnss] lever_arm_b_m``), the bias-corrected gyro ``w = omega~ - b_g`` (the
+raw sample held at the velocity's time) and the earth rate ``omega_ie^n``:
+
+    v_ant = v_n + R_nb (w x l_b) - omega_ie^n x (R_nb l_b)
+
+(Groves' loosely coupled lever-arm term; the transport rate's share, below 1e-5 m/s, is left
+out). Under the error convention of :mod:`gnssacc.estimators.aids.base` (``R_est = (I + [phi x])
+R``, bias-corrected rate ``w + db_g``) the EKF's innovation ``dz = v_ant,est - v~`` has
+
+    H = [0, I, -[(R (w x l)) x] + [omega_ie x][(R l) x], 0, -R [l x]]
+
+(blocks dp, dv, phi, b_a, b_g). Only the axes the source measures are used (NMEA speed and course:
+north and east), with their stated (or default) covariance times ``[velocity] sigma_scale``;
+gated by ``[velocity] gate_nis``. Update kind ``vel``: its NIS is reported beside the position's.
+
+Smoother
+--------
+A velocity at a node's time is :func:`gnssacc.factors.gnss_velocity_factor` on the node's (X, V,
+B); one between nodes (faster fixes, folded like them: :mod:`.gnss_position`) is
+:func:`gnssacc.factors.preintegrated_velocity_factor` on the earlier node, through the IMU
+preintegrated up to it. The velocities add no nodes: those at no node time and between no two
+nodes (before the start) are left out. Consistency: the whitened residuals of each estimate to
+its nodes' velocities over their expectation (as the positions', ``nis_vel_mean``).
+
+The velocities are independent of the fixes' noise (Doppler against pseudorange), so they are
+separate measurements; ``[velocity] enabled = false`` (``--velocity off``) leaves them out.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...core.earth import earth_rate_n
+from ...core.rotations import cross3, skew
+from ..layout import ATT, B_GYRO, BG, SYM_B, SYM_V, SYM_X, VEL
+from .base import AidSpec, EkfAid, Measurement, SmootherAid, zero_jacobian
+from .gnss_position import folded_by_node
+from .vehicle import held_samples
+
+#: Order at equal times: after the fixes' epoch (its position and acceleration updates).
+ORDER = 3
+
+
+def antenna_velocity(
+    R_nb: np.ndarray, v_n: np.ndarray, w_b: np.ndarray, lever_b: np.ndarray, w_ie_n: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The antenna's NED velocity [m/s] (module notes) and its Jacobians on the EKF's attitude
+    error ``phi`` (n frame) and bias-corrected gyro error ``db_g`` (3 x 3 each).
+
+    Parameters
+    ----------
+    R_nb : ndarray (3, 3)
+    v_n : ndarray (3,)
+        IMU velocity, NED [m/s].
+    w_b : ndarray (3,)
+        Bias-corrected inertial body rate [rad/s, body].
+    lever_b : ndarray (3,)
+        Antenna from the IMU, body FRD [m].
+    w_ie_n : ndarray (3,)
+        Earth rate, NED [rad/s].
+    """
+    if not lever_b.any():
+        return v_n.copy(), np.zeros((3, 3)), np.zeros((3, 3))
+    l_n = R_nb @ lever_b
+    a_n = R_nb @ cross3(w_b, lever_b)
+    v = v_n + a_n - cross3(w_ie_n, l_n)
+    return v, -skew(a_n) + skew(w_ie_n) @ skew(l_n), -R_nb @ skew(lever_b)
+
+
+def velocity(
+    s,
+    v_meas: np.ndarray,
+    cov: np.ndarray,
+    axes: np.ndarray,
+    omega_meas_b: np.ndarray,
+    lever_b: np.ndarray,
+    w_ie_n: np.ndarray,
+    gate: float = 0.0,
+) -> Measurement:
+    """The velocity update on the measured ``axes`` (boolean (3,)) of ``v_meas`` [m/s, NED] with
+    covariance ``cov`` [m^2/s^2] (3 x 3; rows and columns of the measured axes used);
+    ``omega_meas_b`` the raw gyro [rad/s] (the state's bias is removed here)."""
+    v, d_phi, d_bg = antenna_velocity(s.R_nb, s.v_n, omega_meas_b - s.b_g, lever_b, w_ie_n)
+    H = zero_jacobian(s, 3)
+    H[:, VEL] = np.eye(3)
+    H[:, ATT] = d_phi
+    H[:, BG] = d_bg
+    return Measurement("vel", (v - v_meas)[axes], H[axes], cov[np.ix_(axes, axes)], gate)
+
+
+class VelocityEpochs:
+    """The velocities an estimator uses: those with a measured axis, with the raw gyro held at
+    each (``vel``: :class:`gnssacc.core.recording.GnssVelocity`, its sigmas scaled)."""
+
+    def __init__(self, run, vel):
+        axes = vel.measured()
+        keep = np.flatnonzero(axes.any(axis=1))
+        self.vel = vel.select(keep)
+        self.t = self.vel.t
+        self.axes = axes[keep]
+        self.omega_b = np.asarray(run.imu.omega_ib_b)[held_samples(run.imu.t, self.t)]
+        self.v = np.nan_to_num(self.vel.v_ned)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def cov(self, k: int) -> np.ndarray:
+        """Covariance of velocity ``k`` [m^2/s^2], NaN rows and columns of unmeasured axes
+        zeroed (they are never used)."""
+        return np.nan_to_num(self.vel.cov_ned(k))
+
+
+def epochs_for(run, settings) -> VelocityEpochs | None:
+    """The velocities of a pass (``settings``: either estimator's), or ``None`` when they are off
+    or the run has none."""
+    vel = settings.velocity.velocities(getattr(run, "gnss_vel", None))
+    if vel is None:
+        return None
+    ep = VelocityEpochs(run, vel)
+    return ep if len(ep) else None
+
+
+class EkfVelocity(EkfAid):
+    """The velocity update at every velocity epoch (module notes)."""
+
+    order, epoch = ORDER, "gnss_vel"
+
+    def __init__(self, ctx, ep: VelocityEpochs):
+        self.ep, self.t = ep, ep.t
+        self.lever = ctx.settings.gnss.lever_arm_b
+        self.gate = ctx.settings.velocity.gate_nis
+
+    def models(self, s, j: int) -> list[Measurement]:
+        ep = self.ep
+        w_ie = earth_rate_n(s.pos[0])
+        return [
+            velocity(s, ep.v[j], ep.cov(j), ep.axes[j], ep.omega_b[j], self.lever, w_ie, self.gate)
+        ]
+
+
+def _ekf(ctx) -> EkfVelocity | None:
+    ep = epochs_for(ctx.run, ctx.settings)
+    return None if ep is None else EkfVelocity(ctx, ep)
+
+
+def residual_chi2(rec, idx: np.ndarray, ep: VelocityEpochs, k: np.ndarray, lever_b, w_ie_n, b_g):
+    r"""Whitened squared residuals of the velocity factors at nodes ``idx`` of an estimate (their
+    velocities ``k``) and their expectations, as :func:`.gnss_position.residual_chi2` for the
+    fixes: ``E[r^T W r] = m - tr(W J C J^T)`` with ``C`` the marginal of the node's velocity
+    (``rec.cov_vel``) and ``J = I`` (the lever-arm term's share of the pose and bias marginals is
+    left out: centimetres per second at most against the velocity's own)."""
+    out = []
+    for i, kk in zip(idx.tolist(), k.tolist(), strict=True):
+        axes = ep.axes[kk]
+        R = rec.R[i]
+        v, _, _ = antenna_velocity(R, rec.v_n[i], ep.omega_b[kk] - b_g[i], lever_b, w_ie_n)
+        r = (v - ep.v[kk])[axes]
+        C = ep.cov(kk)[np.ix_(axes, axes)]
+        W = np.linalg.inv(C)
+        JCJ = rec.cov_vel[i][np.ix_(axes, axes)]
+        out.append((float(r @ W @ r), max(float(axes.sum() - np.trace(W @ JCJ)), 0.0)))
+    return np.array(out).reshape(-1, 2)
+
+
+class SmootherVelocity(SmootherAid):
+    """The velocities' factors on the smoother's nodes (module notes)."""
+
+    order = 2
+
+    def __init__(self, ctx, ep: VelocityEpochs):
+        self.ep, self.stats = ep, ctx.stats
+        self.lever = ctx.settings.gnss.lever_arm_b
+        self.w_ie = earth_rate_n(ctx.run.origin.lat0)
+        self.at_t = {float(t): k for k, t in enumerate(ep.t)}
+
+    def attach(self, ctx) -> None:
+        times = ctx.times
+        on_node = np.isin(self.ep.t, times)
+        self.folded = folded_by_node(times, self.ep.t, on_node)
+        self.vel_of = np.full(len(times), -1)
+
+    def interval(self, graph, ctx, i: int) -> None:
+        """The velocities between node ``i - 1`` and node ``i`` on node ``i - 1``'s variables,
+        through the IMU preintegrated from node ``i - 1`` to each."""
+        import gtsam
+
+        from ...factors import preintegrated_velocity_factor
+
+        ep = self.ep
+        for k in self.folded.get(i, ()):
+            pim = ctx.preintegrate_to(i, float(ep.t[k]))
+            prev = ctx.prev
+            R_f = pim.predict(gtsam.NavState(prev.pose, prev.v_n), prev.bias).attitude().matrix()
+            keys = tuple(gtsam.symbol(c, i - 1) for c in (SYM_X, SYM_V, SYM_B))
+            graph.add(
+                preintegrated_velocity_factor(
+                    keys, pim, ep.v[k], ep.axes[k], ep.omega_b[k], self.lever, self.w_ie,
+                    ep.cov(k), R_f,
+                )
+            )  # fmt: skip
+            self.stats["n_vel_folded"] += 1
+
+    def node(self, graph, ctx, i: int, t: float, pred) -> None:
+        """The velocity factor on node ``i`` when a velocity is at its time ``t``."""
+        k = self.at_t.get(float(t))
+        if k is None:
+            return
+        import gtsam
+
+        from ...factors import gnss_velocity_factor
+
+        ep = self.ep
+        keys = tuple(gtsam.symbol(c, i) for c in (SYM_X, SYM_V, SYM_B))
+        graph.add(
+            gnss_velocity_factor(
+                keys, ep.v[k], ep.axes[k], ep.omega_b[k], self.lever, self.w_ie, ep.cov(k)
+            )
+        )
+        self.vel_of[i] = k
+        self.stats["n_vel_factors"] += 1
+
+    def score(self, ctx, rec) -> dict:
+        """``nis_vel_mean``: the estimate's whitened residuals to its nodes' velocities over their
+        expectation (:func:`residual_chi2`; 1 when consistent), and ``n_vel_updates``."""
+        idx = np.flatnonzero((self.vel_of >= 0) & rec.done)
+        c = residual_chi2(
+            rec, idx, self.ep, self.vel_of[idx], self.lever, self.w_ie, rec.bias[:, B_GYRO]
+        )
+        c = c[np.isfinite(c[:, 0])]
+        ratio = float(c[:, 0].sum() / c[:, 1].sum()) if len(c) and c[:, 1].sum() > 0 else None
+        return {"n_vel_updates": len(c), "nis_vel_mean": ratio}
+
+
+def _smoother(ctx) -> SmootherVelocity | None:
+    ep = epochs_for(ctx.run, ctx.settings)
+    return None if ep is None else SmootherVelocity(ctx, ep)
+
+
+def _in_use(run, cfg) -> bool:
+    vel = getattr(run, "gnss_vel", None)
+    return vel is not None and bool(vel.measured().any())
+
+
+AID = AidSpec(
+    name="gnss_velocity",
+    kinds=("vel",),
+    ekf=_ekf,
+    smoother=_smoother,
+    smoother_counts={"n_vel_factors": 0, "n_vel_folded": 0},
+    noise_keys=(("velocity", "sigma_scale"),),
+    stage="imu",
+    enabled_key=("velocity", "enabled"),
+    in_use=_in_use,
+)
