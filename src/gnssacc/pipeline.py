@@ -529,6 +529,7 @@ def compare(
                 judged.cfg.gnss_gm_sigma,
                 errors=scores[m].errors,
                 n_fixes=fixes.get("n"),
+                tuned=prep.tuning is not None,
             )
         except Exception as exc:
             raise_if_interrupted(exc)
@@ -875,7 +876,7 @@ def write_result_files(
     (folder / "config.toml").write_text(resolved_toml(cfg))
     if tuned_toml is not None:
         (folder / "tuned.toml").write_text(tuned_toml)
-    drawn = write_figures(folder, run, sols, metrics, plot_set(plots, report))
+    drawn = write_figures(folder, run, sols, metrics, plot_set(plots, report), cfg=cfg)
     if "tum" in export:
         from .outputs.export import write_truth_tum, write_tum
 
