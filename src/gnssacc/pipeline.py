@@ -595,17 +595,28 @@ def _noise_model_of(prep: Prepared, sid: str, sols: dict, models: dict):
 TRUTH_SHORT_TOLERANCE_S = 2.0
 
 
+#: A step of the truth longer than this many times its median interval is a gap: the scores
+#: interpolate the truth across it, and the table says so.
+TRUTH_GAP_FACTOR = 2.0
+
+
 def truth_coverage(run: RecordedRun) -> dict | None:
-    """The part of the recording (first to last IMU sample) the truth spans, from the start [s]."""
+    """The part of the recording (first to last IMU sample) the truth spans, from the start [s],
+    its sample interval [s] and its gaps (steps above :data:`TRUTH_GAP_FACTOR` intervals)."""
     if run.truth is None:
         return None
     a = max(float(run.truth.t[0]), run.t_start) - run.t_start
     b = min(float(run.truth.t[-1]), run.t_end) - run.t_start
     span = max(b - a, 0.0)
+    dt = np.diff(run.truth.t)
+    interval = float(np.median(dt)) if len(dt) else 0.0
+    gaps = dt[dt > TRUTH_GAP_FACTOR * interval] if len(dt) else dt
     return {
         "first_s": a,
         "last_s": b,
         "fraction": span / run.duration_s if run.duration_s > 0 else 1.0,
+        "interval_s": interval,
+        "gaps": {"n": int(len(gaps)), "longest_s": float(gaps.max()) if len(gaps) else 0.0},
     }
 
 

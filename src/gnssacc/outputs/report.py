@@ -375,8 +375,9 @@ def table_rows(metrics: dict) -> tuple[list[str], list[list[str]]]:
 
 
 def table_notes(metrics: dict) -> tuple[list[str], list[str]]:
-    """The lines above the comparison table (the scored window) and below it (the legend)."""
-    return _window_lines(metrics), _legend(metrics)
+    """The lines above the comparison table (the scored window) and below it (the truth's gaps
+    and the legend)."""
+    return _window_lines(metrics), _truth_lines(metrics) + _legend(metrics)
 
 
 def format_table(metrics: dict) -> str:
@@ -401,9 +402,19 @@ def format_table(metrics: dict) -> str:
 
 
 def _truth_lines(metrics: dict) -> list[str]:
-    """Why a recording's truth is not scored, when the input checks set it aside."""
+    """Why a recording's truth is not scored, when the input checks set it aside; and the gaps
+    the scores interpolate it across, when it has any."""
     why = (metrics.get("input_corrections") or {}).get("truth_not_scored")
-    return [f"truth not scored: {why}"] if why else []
+    if why:
+        return [f"truth not scored: {why}"]
+    cov = metrics.get("truth_coverage") or {}
+    gaps = cov.get("gaps") or {}
+    if not gaps.get("n") or metrics.get("gnss_prmse_m") is None:
+        return []
+    return [
+        f"truth: sampled every {cov['interval_s']:.3g} s; {gaps['n']} gap(s) up to "
+        f"{gaps['longest_s']:.1f} s, across which the scores interpolate it linearly"
+    ]
 
 
 def _start_lines(metrics: dict) -> list[str]:
