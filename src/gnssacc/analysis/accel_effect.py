@@ -45,6 +45,9 @@ class PairedDifference:
         Blocks behind the interval.
     truth : bool
         Whether ``d`` is of errors against the truth (else of distances to the raw fixes).
+    base_mean : float
+        The base method's mean horizontal error (or distance) at the same epochs [m]: the scale
+        of the difference.
     """
 
     base: str
@@ -56,6 +59,7 @@ class PairedDifference:
     hi: float
     n_batches: int
     truth: bool
+    base_mean: float = float("nan")
 
     @property
     def decided(self) -> bool:
@@ -97,20 +101,20 @@ def horizontal_distance(
 
 def paired_difference(
     run: RecordedRun, base: NavSolution, aided: NavSolution, truth: bool
-) -> tuple[np.ndarray, np.ndarray]:
-    """``(t, aided - base)`` at the base's epochs where both are defined (the aided distance
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(t, aided - base, base)`` at the base's epochs where both are defined (the aided distance
     interpolated when its epochs differ)."""
     t0, d0 = horizontal_distance(run, base, truth)
     t1, d1 = horizontal_distance(run, aided, truth)
     if len(t1) != len(t0) or not np.array_equal(t0, t1):
         ok1 = np.isfinite(d1)
         if not np.any(ok1):
-            return t0[:0], d0[:0]
+            return t0[:0], d0[:0], d0[:0]
         inside = (t0 >= t1[ok1][0]) & (t0 <= t1[ok1][-1])
         d1 = np.where(inside, np.interp(t0, t1[ok1], d1[ok1]), np.nan)
     d = d1 - d0
     ok = np.isfinite(d)
-    return t0[ok], d[ok]
+    return t0[ok], d[ok], d0[ok]
 
 
 def accel_effects(run: RecordedRun, sols: dict[str, NavSolution]) -> list[PairedDifference]:
@@ -120,9 +124,9 @@ def accel_effects(run: RecordedRun, sols: dict[str, NavSolution]) -> list[Paired
     for base, aided in PAIRS:
         if base not in sols or aided not in sols:
             continue
-        t, d = paired_difference(run, sols[base], sols[aided], truth)
+        t, d, d0 = paired_difference(run, sols[base], sols[aided], truth)
         if len(d) < 4:
             continue
         mean, lo, hi, k = batch_interval(d)
-        out.append(PairedDifference(base, aided, t, d, mean, lo, hi, k, truth))
+        out.append(PairedDifference(base, aided, t, d, mean, lo, hi, k, truth, float(d0.mean())))
     return out

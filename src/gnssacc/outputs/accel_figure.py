@@ -22,8 +22,14 @@ def _verdict(e) -> str:
     if not np.isfinite(e.lo):
         return "too few epochs for an interval"
     if not e.decided:
-        return "no difference the run can tell from zero"
-    return f"{'smaller' if e.mean < 0 else 'larger'} with the acceleration by {abs(e.mean):.3f} m"
+        return "not told from zero"
+    return f"{'smaller' if e.mean < 0 else 'larger'} with the acceleration"
+
+
+def _decimals(e) -> int:
+    """Decimals that show the interval's width with two significant digits (at least 3)."""
+    width = abs(e.hi - e.lo) if np.isfinite(e.lo) else abs(e.mean)
+    return int(max(3, 1 - np.floor(np.log10(width)))) if width > 0 else 3
 
 
 def _limits(d: np.ndarray) -> tuple[float, float]:
@@ -73,9 +79,14 @@ def plot_accel_effect(run: RecordedRun, sols: dict, metrics: dict, path: Path) -
         )
         inside = e.d[(e.d >= ylim[0]) & (e.d <= ylim[1])]
         hx.hist(inside, bins=40, orientation="horizontal", color=colour, alpha=0.6)
+        n = _decimals(e)
+        rel = (
+            f" ({100 * e.mean / e.base_mean:+.1f} % of {e.base}'s mean)" if e.base_mean > 0 else ""
+        )
         hx.set_title(
-            f"mean {e.mean:+.3f} m, 95 % interval {e.lo:+.3f} .. {e.hi:+.3f}\n{_verdict(e)}",
-            fontsize=9,
+            f"mean {e.mean:+.{n}f} m{rel}\n95 % interval {e.lo:+.{n}f} .. {e.hi:+.{n}f} m; "
+            f"{_verdict(e)}",
+            fontsize=8,
         )
         hx.set_xlabel("epochs")
         hx.tick_params(labelleft=False)

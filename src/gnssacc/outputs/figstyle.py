@@ -57,21 +57,26 @@ def plt():
     return pyplot
 
 
+#: Mantissas tried in turn for a log axis's ticks, coarse to fine.
+MANTISSAS = ((1.0, 2.0, 5.0), (1.0, 1.5, 2.0, 3.0, 5.0, 7.0), tuple(float(m) for m in range(1, 10)))
+
+
 def plain_log_ticks(lo: float, hi: float) -> list[float]:
-    """Major tick values of a log axis over ``[lo, hi]``: the 1-2-5 steps inside it, thinned to at
-    most seven; over a narrow range (fewer than two such steps) two or three rounded values inside
-    it."""
+    """Major tick values of a log axis over ``[lo, hi]``: the 1-2-5 steps inside it (thinned to
+    decades when there are more than seven); over a narrower range the first of finer round steps
+    (1-1.5-2-3-5-7, then every digit) to give two, else two or three rounded values inside it."""
     if not (np.isfinite(lo) and np.isfinite(hi)) or lo <= 0 or hi <= lo:
         return []
     e0, e1 = int(np.floor(np.log10(lo))), int(np.ceil(np.log10(hi)))
-    steps = [m * 10.0**e for e in range(e0, e1 + 1) for m in (1.0, 2.0, 5.0)]
-    ticks = [v for v in steps if lo <= v <= hi]
-    if len(ticks) > 7:  # decades only, then every other one
-        ticks = [v for v in ticks if f"{v:.0e}".startswith("1")]
-    while len(ticks) > 7:
-        ticks = ticks[::2]
-    if len(ticks) >= 2:
-        return ticks
+    for mantissas in MANTISSAS:
+        steps = [m * 10.0**e for e in range(e0, e1 + 1) for m in mantissas]
+        ticks = [float(f"{v:.6g}") for v in steps if lo <= v <= hi]
+        if len(ticks) > 7:  # decades only, then every other one
+            ticks = [v for v in ticks if f"{v:.0e}".startswith("1")]
+        while len(ticks) > 7:
+            ticks = ticks[::2]
+        if len(ticks) >= 2:
+            return ticks
     inner = np.geomspace(lo, hi, 5)[1:-1]
     digits = 2 if hi / lo > 1.1 else 3
     return sorted({float(f"{v:.{digits}g}") for v in inner})
