@@ -38,15 +38,16 @@ def test_the_true_biases_are_written_and_read_back(tmp_path):
 
 @pytest.mark.slow
 def test_a_pivot_scored_against_its_own_truth_has_no_yaw_spike(tmp_path):
-    """The UGV pivots on the spot at 30 deg/s inside a GNSS outage; the smoother's epochs there
-    fall between whole seconds. Scored against a truth at the fixes' 1 Hz, the interpolated truth
-    cut the corner and made a 3.5 deg (6 sigma) yaw "error"; against the truth the simulator now
-    writes (IMU rate) every yaw error of the pivot lies within 3 sigma."""
+    """The UGV turns at up to 36 deg/s (on the spot at 30 deg/s, a 5 m radius at 23 deg/s), some
+    turns inside GNSS outages, where the smoother's epochs fall between whole seconds. Scored
+    against a truth at the fixes' 1 Hz, the interpolated truth cut the corner of the 23 deg/s
+    turn at 217-222 s and made a 3.5 deg (6 sigma) yaw "error"; against the truth the simulator
+    now writes (IMU rate) every yaw error of every turn lies within 3 sigma."""
     run = simulate("ugv", 300.0, imu_grade="consumer", seed=1, odom_hz=10.0)
     folder = write_csv_run(run, tmp_path / "ugv")
     res = gnssacc.process(folder, methods=["smoother"], outage_every="60:20")
-    pivots = [s for s in run.sim.segments if s["kind"] == "turn" and s["speed"] == 0.0]
-    assert len(pivots) >= 2
+    pivots = [s for s in run.sim.segments if s["kind"] == "turn"]
+    assert len(pivots) >= 10 and any(s["speed"] == 0.0 for s in pivots)
     for mid in ("smoother", "smoother-online"):
         sol = res.solutions[mid]
         inside = np.zeros(len(sol.t), bool)

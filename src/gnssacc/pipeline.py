@@ -85,11 +85,16 @@ def check_input(run: RecordedRun, cfg: RunConfig) -> tuple[RecordedRun, RunConfi
 
 
 def prepare(
-    run: RecordedRun, cfg: RunConfig, tune: str | None = None, methods=(), on_checked=None
+    run: RecordedRun,
+    cfg: RunConfig,
+    tune: str | None = None,
+    methods=(),
+    on_checked=None,
+    on_stage=None,
 ) -> Prepared:
     """The prepared recording (:func:`gnssacc.prepare.prepared.prepare`) with the EKF as its filter
     pass, and the ``-gm`` methods' setup when ``methods`` has one; ``on_checked(findings)`` is told
-    the input checks' findings once they are settled."""
+    the input checks' findings once they are settled, ``on_stage(name)`` each stage as it starts."""
     return prepare_recording(
         run,
         cfg,
@@ -97,6 +102,7 @@ def prepare(
         filter_pass=filter_pass,
         gauss_markov=any(METHODS.get(m) is _gm for m in methods),
         on_checked=on_checked,
+        on_stage=on_stage,
     )
 
 
@@ -489,7 +495,17 @@ def compare(
     prep : Prepared
         The shared start, stationary spans and (tuned) configuration.
     """
-    prep = prepare(run, cfg, tune, methods, on_checked=state_corrections(say, header, run))
+    from .core.progress import StageProgress
+
+    stages = StageProgress(
+        3 if (tune or cfg["tune"]["mode"]) == "auto" else 2, say is not None, show_progress
+    )
+    try:
+        prep = prepare(
+            run, cfg, tune, methods, on_checked=state_corrections(say, header, run), on_stage=stages
+        )
+    finally:
+        stages.close()
     for line in preparation_lines(prep) if say else ():
         say(line)
     t = time.perf_counter()

@@ -303,12 +303,12 @@ def _trust(metrics: dict, mid: str) -> str:
         lo, hi = nees["band"]
         if nees["value"] > hi:
             return (
-                f"its stated sigma is too small (position NEES {nees['value']:.1f}, "
+                f"stated sigma is too small (position NEES {nees['value']:.1f}, "
                 f"band up to {hi:.1f})"
             )
         if nees["value"] < lo:
-            return f"its stated sigma is too large (position NEES {nees['value']:.2f})"
-        return f"its stated sigma holds (position NEES {nees['value']:.2f})"
+            return f"stated sigma is too large (position NEES {nees['value']:.2f})"
+        return f"stated sigma holds (position NEES {nees['value']:.2f})"
     nis = _get(metrics, "consistency", mid, "nis", "pos")
     return (
         f"position NIS {nis:.2f} (1 = consistent)" if nis is not None else "no consistency figure"
@@ -338,7 +338,7 @@ def verdict_line(metrics: dict) -> str | None:
             f"verdict: {names}{equal} {'are' if equal else 'is'} most accurate: "
             f"{scored[best]:.2f} m PRMSE at the fixes' epochs, {fixes / scored[best]:.1f}x "
             f"better than the raw fixes ({fixes:.2f} m); "
-            f"{_trust(metrics, best)}"
+            f"{best}'s {_trust(metrics, best)}"
         )
     nis = {
         mid: v
