@@ -246,37 +246,63 @@ def _consistency_panel(ax, sols: dict, metrics: dict, truth: bool) -> None:
 # --------------------------------------------------------------------------------------------
 
 
-#: Longest side over shortest side of a track's extent drawn at equal scale; a longer one (a
-#: straight road) is drawn with its short side stretched, and the title says so.
-MAX_EQUAL_ASPECT = 4.0
+#: A track longer than this many times its width (about its own line) is drawn along and across
+#: that line, the across axis stretched: at equal scale a straight road is a one-pixel strip.
+MAX_EQUAL_ASPECT = 8.0
 
 
-def _track_limits(ax, pts: np.ndarray) -> str:
-    """Fit the axis to the track ``pts`` ((K, 2) east, north [m]) with a margin; at equal scale
-    unless the extent is longer than :data:`MAX_EQUAL_ASPECT` times its width. Returns a note
-    for the title ("" at equal scale)."""
-    pts = pts[np.all(np.isfinite(pts), axis=1)]
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
-    span = np.maximum(hi - lo, 1.0)
-    pad = 0.05 * span.max()
-    ax.set_xlim(lo[0] - pad, hi[0] + pad)
-    ax.set_ylim(lo[1] - pad, hi[1] + pad)
-    ratio = span.max() / span.min()
-    if ratio <= MAX_EQUAL_ASPECT:
-        ax.set_aspect("equal", adjustable="box")  # the limits stay; the box takes their shape
-        return ""
-    short = "north" if span[1] < span[0] else "east"
-    return f"; not to scale: {short} stretched (the track is {ratio:.0f}x longer than wide)"
+class TrackFrame:
+    """The plane a track is drawn in: east/north at equal scale, or, for a straight track
+    (longer than :data:`MAX_EQUAL_ASPECT` times its width), along/across its principal line.
+
+    Parameters
+    ----------
+    pts : ndarray, shape (K, 2)
+        East, north [m] of the truth and the tracks drawn.
+    """
+
+    def __init__(self, pts: np.ndarray):
+        pts = pts[np.all(np.isfinite(pts), axis=1)]
+        self.centre = pts.mean(axis=0)
+        _, _, vt = np.linalg.svd(pts - self.centre, full_matrices=False)
+        self.u, self.v = vt[0], np.array([-vt[0][1], vt[0][0]])
+        along, across = (pts - self.centre) @ self.u, (pts - self.centre) @ self.v
+        self.ratio = np.ptp(along) / max(np.ptp(across), 1.0)
+        self.straight = self.ratio > MAX_EQUAL_ASPECT
+
+    def xy(self, east: np.ndarray, north: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Plot coordinates [m] of points given east, north [m]."""
+        if not self.straight:
+            return east, north
+        d = np.column_stack([east, north]) - self.centre
+        return d @ self.u, d @ self.v
+
+    def label(self, ax) -> None:
+        """Axis labels and, at equal scale, the aspect."""
+        if self.straight:
+            heading = np.degrees(np.arctan2(self.u[0], self.u[1])) % 360.0
+            ax.set_xlabel(f"along the track [m] (heading {heading:.0f} deg)")
+            ax.set_ylabel("across the track [m], stretched")
+        else:
+            ax.set_xlabel("east [m]")
+            ax.set_ylabel("north [m]")
+            ax.set_aspect("equal", adjustable="box")  # the limits stay; the box takes their shape
+
+    def note(self) -> str:
+        """For the title: how the plane is drawn."""
+        if not self.straight:
+            return "x east / y north"
+        return f"straight ({self.ratio:.0f}x longer than wide): along / across its line"
 
 
-def _mark_outages(ax, run: RecordedRun, sol: NavSolution, p: np.ndarray) -> None:
+def _mark_outages(ax, run: RecordedRun, sol: NavSolution, x: np.ndarray, y: np.ndarray) -> None:
     """The track inside each GNSS outage drawn over a wide red band (under the coloured track)."""
     for k, (a, b) in enumerate(run.outages):
         m = (sol.t - run.t_start >= a) & (sol.t - run.t_start <= b)
         if np.any(m):
             ax.plot(
-                p[m, 1],
-                p[m, 0],
+                x[m],
+                y[m],
                 "-",
                 color="tab:red",
                 lw=9,
@@ -285,6 +311,14 @@ def _mark_outages(ax, run: RecordedRun, sol: NavSolution, p: np.ndarray) -> None
                 zorder=2,
                 label="GNSS outage" if k == 0 else None,
             )
+
+
+def _track_values(run: RecordedRun, sols: dict, show: list[str], truth: bool) -> dict:
+    """The colour of each shown track: horizontal error [m], or without truth the stated
+    horizontal 1-sigma [m]."""
+    if truth:
+        return {mid: _horizontal_to(run, sols[mid], True) for mid in show}
+    return {mid: np.hypot(sols[mid].sigma[:, 0], sols[mid].sigma[:, 1]) for mid in show}
 
 
 def plot_trajectory(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> None:
@@ -298,50 +332,61 @@ def plot_trajectory(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> 
         1, len(show), figsize=(6 * len(show) + 1.5, 6.5), squeeze=False, layout="constrained"
     )
     fx = run.origin.to_ned(run.gnss.lat, run.gnss.lon, run.gnss.h)
-    values = {mid: _horizontal_to(run, sols[mid], True) if truth else None for mid in show}
-    for mid in show:
-        if not truth:
-            values[mid] = np.hypot(sols[mid].sigma[:, 0], sols[mid].sigma[:, 1])
+    tracks = {mid: run.origin.to_ned(sols[mid].lat, sols[mid].lon, sols[mid].h) for mid in show}
+    tr = run.origin.to_ned(run.truth.lat, run.truth.lon, run.truth.h) if truth else None
+    frame = TrackFrame(
+        np.concatenate([p[:, [1, 0]] for p in tracks.values()] + ([tr[:, [1, 0]]] if truth else []))
+    )
+    values = _track_values(run, sols, show, truth)
     every = np.concatenate([v[np.isfinite(v)] for v in values.values()] + [np.zeros(1)])
     vmax = max(float(np.percentile(every, 98)), 1e-3)
     clipped = float(every.max()) > vmax
-    note = ""
-    for ax, mid in zip(axes[0], show):
-        sol = sols[mid]
-        p = run.origin.to_ned(sol.lat, sol.lon, sol.h)
-        ax.plot(fx[:, 1], fx[:, 0], ".", ms=2.5, color="0.6", label="GNSS fixes", zorder=1)
-        pts = [p[:, [1, 0]]]
-        if truth:
-            tr = run.origin.to_ned(run.truth.lat, run.truth.lon, run.truth.h)
-            ax.plot(tr[:, 1], tr[:, 0], "-", color="0.2", lw=0.8, label="truth", zorder=4)
-            pts.append(tr[:, [1, 0]])
-        seg = np.stack(
-            [np.column_stack([p[:-1, 1], p[:-1, 0]]), np.column_stack([p[1:, 1], p[1:, 0]])], axis=1
+    for ax, mid in zip(axes[0], show, strict=True):
+        sol, p = sols[mid], tracks[mid]
+        x, y = frame.xy(p[:, 1], p[:, 0])
+        ax.plot(
+            *frame.xy(fx[:, 1], fx[:, 0]), ".", ms=2.5, color="0.6", label="GNSS fixes", zorder=1
         )
+        if truth:
+            ax.plot(
+                *frame.xy(tr[:, 1], tr[:, 0]), "-", color="0.2", lw=0.8, label="truth", zorder=4
+            )
+        seg = np.stack([np.column_stack([x[:-1], y[:-1]]), np.column_stack([x[1:], y[1:]])], axis=1)
         lc = LineCollection(
             seg, array=values[mid][:-1], cmap="viridis", clim=(0, vmax), lw=2.5, zorder=3
         )
         ax.add_collection(lc)
-        _mark_outages(ax, run, sol, p)
-        ax.plot(p[0, 1], p[0, 0], "^", color="tab:green", ms=11, mec="k", zorder=5, label="start")
-        ax.plot(p[-1, 1], p[-1, 0], "s", color="tab:red", ms=10, mec="k", zorder=5, label="end")
-        note = _track_limits(ax, np.concatenate(pts))
+        _mark_outages(ax, run, sol, x, y)
+        ax.plot(x[0], y[0], "^", color="tab:green", ms=11, mec="k", zorder=5, label="start")
+        ax.plot(x[-1], y[-1], "s", color="tab:red", ms=10, mec="k", zorder=5, label="end")
+        xs, ys = [x], [y]
+        if truth:
+            tx, ty = frame.xy(tr[:, 1], tr[:, 0])
+            xs.append(tx)
+            ys.append(ty)
+        _fit(ax, np.concatenate(xs), np.concatenate(ys))
+        frame.label(ax)
         ax.set_title(mid)
-        ax.set_xlabel("east [m]")
         ax.grid(alpha=0.3)
-    axes[0, 0].set_ylabel("north [m]")
     axes[0, 0].legend(fontsize=8, loc="best")
     cb = fig.colorbar(lc, ax=axes[0].tolist(), shrink=0.8, extend="max" if clipped else "neither")
     what = "horizontal error [m]" if truth else "stated horizontal 1-sigma [m] (no truth)"
-    cb.set_label(
-        what
-        + (f", clipped at {vmax:.2f} (98th percentile; max {every.max():.2f})" if clipped else "")
-    )
+    clip = f", clipped at {vmax:.2f} (98th percentile; max {every.max():.2f})" if clipped else ""
+    cb.set_label(what + clip)
     fig.suptitle(
-        f"{run.name}: track, x east / y north (origin {np.degrees(run.origin.lat0):.5f}, "
-        f"{np.degrees(run.origin.lon0):.5f} deg){note}"
+        f"{run.name}: track, {frame.note()}\n(origin {np.degrees(run.origin.lat0):.5f}, "
+        f"{np.degrees(run.origin.lon0):.5f} deg)",
+        fontsize=10,
     )
     _save(fig, path)
+
+
+def _fit(ax, x: np.ndarray, y: np.ndarray) -> None:
+    """Limits around the track and truth (fixes outside them are cut), with a margin."""
+    ok = np.isfinite(x) & np.isfinite(y)
+    for lim, v in ((ax.set_xlim, x[ok]), (ax.set_ylim, y[ok])):
+        pad = 0.05 * max(np.ptp(v), 1.0)
+        lim(v.min() - pad, v.max() + pad)
 
 
 # --------------------------------------------------------------------------------------------
