@@ -394,13 +394,14 @@ def _fit(ax, x: np.ndarray, y: np.ndarray) -> None:
 # --------------------------------------------------------------------------------------------
 
 
-def _band_plot(ax, t, e, s, mid) -> None:
-    """The error line over its +-3 sigma band: a light fill with thin edges, so that several
-    methods' bands stay apart."""
+def _band_plot(ax, t, e, s, mid, fill: bool = True) -> None:
+    """The error line between its +-3 sigma edges (thin lines in its colour), the band filled
+    lightly only when ``fill`` (a panel with one method: several fills make one opaque block)."""
     st = style(mid)
-    ax.fill_between(t, -3 * s, 3 * s, color=st["color"], alpha=BAND_ALPHA, lw=0)
+    if fill:
+        ax.fill_between(t, -3 * s, 3 * s, color=st["color"], alpha=BAND_ALPHA, lw=0)
     for sign in (-3, 3):
-        ax.plot(t, sign * s, color=st["color"], lw=0.6, alpha=0.6, ls=st["ls"])
+        ax.plot(t, sign * s, color=st["color"], lw=0.7, alpha=0.7, ls=st["ls"])
     ax.plot(t, e, label=mid, **st)
 
 
@@ -433,7 +434,7 @@ def plot_errors(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> None
             e = _errors(run, sol)[:, POS]
             t = sol.t - run.t_start
             for i in range(3):
-                _band_plot(axes[i, c], t, e[:, i], sol.sigma[:, i], mid)
+                _band_plot(axes[i, c], t, e[:, i], sol.sigma[:, i], mid, fill=len(ids) == 1)
                 seen[i] += [e[:, i], 3 * sol.sigma[:, i]]
             axes[3, c].semilogy(t, np.linalg.norm(e, axis=1), **style(mid))
         for i, axis in enumerate(("north", "east", "down")):
@@ -441,7 +442,7 @@ def plot_errors(run: RecordedRun, sols: dict, metrics: dict, path: Path) -> None
             axes[i, c].set_ylabel(f"{axis} error [m]")
         axes[3, c].set_ylabel("3-D error [m], log")
         plain_log_axis(axes[3, c].yaxis)
-        axes[0, c].set_title(f"{title}: estimate - truth, lines and light fill +-3 sigma")
+        axes[0, c].set_title(f"{title}: estimate - truth, thin lines +-3 sigma")
         axes[0, c].legend(fontsize=8, ncol=2, loc="upper right")
         axes[3, c].set_xlabel("time since start [s]")
         for ax in axes[:, c]:
@@ -480,7 +481,8 @@ def plot_velocity_attitude(run: RecordedRun, sols: dict, metrics: dict, path: Pa
             for i in range(3):
                 k = sl.start + i
                 if np.any(np.isfinite(e[:, k])):
-                    _band_plot(axes[i, c], t, e[:, k] * scale, sol.sigma[:, k] * scale, mid)
+                    sig = sol.sigma[:, k] * scale
+                    _band_plot(axes[i, c], t, e[:, k] * scale, sig, mid, fill=len(show) == 1)
     for c, (name, unit, labels, _, _) in enumerate(parts):
         for i, lab in enumerate(labels):
             ax = axes[i, c]
@@ -488,7 +490,7 @@ def plot_velocity_attitude(run: RecordedRun, sols: dict, metrics: dict, path: Pa
             _shade_outages(ax, run)
             ax.grid(alpha=0.3)
             _ylim(ax, [np.asarray(ln.get_ydata(), float) for ln in ax.get_lines()])
-        axes[0, c].set_title(f"{name} error, lines and light fill +-3 sigma")
+        axes[0, c].set_title(f"{name} error, thin lines +-3 sigma")
         axes[2, c].set_xlabel("time since start [s]")
     axes[0, 0].legend(fontsize=8)
     missing = {"velocity", "attitude"} - {p[0] for p in parts}
