@@ -144,7 +144,7 @@ CAPTIONS = {
     "accel_effect": "What the GNSS-derived acceleration changes: with minus without, per epoch "
     "and as a distribution, with the 95 % interval of its mean",
     "trajectory": "Where: the track coloured by horizontal error (without truth: by the stated 1-sigma), x east, "
-    "y north, start, end and outages marked",
+    "y north (a straight track: along and across its line), start, end and outages marked",
     "errors": "How the position error evolves, per axis, against each method's +-3 sigma",
     "velocity_attitude": "Velocity and attitude errors against +-3 sigma",
     "nis": "Is each method consistent over time? NIS and distance to the fixes",

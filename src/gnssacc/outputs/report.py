@@ -296,19 +296,29 @@ def _accuracy(m: dict) -> float | None:
 
 
 def _trust(metrics: dict, mid: str) -> str:
-    """How far a method's stated sigma is to be trusted, in a few words."""
+    """How far a method's stated sigma is to be trusted, in a few words: its position NEES (or
+    NIS without truth), and its attitude NEES when that is outside its band."""
+    text = _position_trust(metrics, mid)
+    att = _get(metrics["methods"][mid], "errors", "nees_attitude")
+    if att and att.get("band") and not att["band"][0] <= att["value"] <= att["band"][1]:
+        size = "small" if att["value"] > att["band"][1] else "large"
+        text += f"; its attitude sigma is too {size} (attitude NEES {att['value']:.3g})"
+    return text
+
+
+def _position_trust(metrics: dict, mid: str) -> str:
     m = metrics["methods"][mid]
     nees = _get(m, "errors", "nees_position")
     if nees and nees.get("band"):
         lo, hi = nees["band"]
         if nees["value"] > hi:
             return (
-                f"stated sigma is too small (position NEES {nees['value']:.1f}, "
+                f"stated position sigma is too small (NEES {nees['value']:.1f}, "
                 f"band up to {hi:.1f})"
             )
         if nees["value"] < lo:
-            return f"stated sigma is too large (position NEES {nees['value']:.2f})"
-        return f"stated sigma holds (position NEES {nees['value']:.2f})"
+            return f"stated position sigma is too large (NEES {nees['value']:.2f})"
+        return f"stated position sigma holds (NEES {nees['value']:.2f})"
     nis = _get(metrics, "consistency", mid, "nis", "pos")
     return (
         f"position NIS {nis:.2f} (1 = consistent)" if nis is not None else "no consistency figure"
