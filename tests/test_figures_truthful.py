@@ -201,3 +201,39 @@ def test_a_tuned_run_is_never_advised_to_tune(result):
         text = " ".join(assess(result.run, bad, tuned=tuned).warnings)
         assert "outside the consistent band" in text
         assert ("--tune auto" in text) is (not tuned)
+
+
+# --- a straight road is readable; the preparation says what it does --------------------------------
+
+
+def test_a_straight_track_is_drawn_along_and_across_its_line():
+    from gnssacc.outputs.figures import TrackFrame
+
+    s = np.linspace(0.0, 1000.0, 200)  # 1 km at heading 30 deg, 2 m of wander across
+    heading = np.radians(30.0)
+    across = 2.0 * np.cos(6 * np.pi * s / 1000.0)  # even about the middle: no tilt of the line
+    east = s * np.sin(heading) + across * np.cos(heading)
+    north = s * np.cos(heading) - across * np.sin(heading)
+    frame = TrackFrame(np.column_stack([east, north]))
+    assert frame.straight
+    x, y = frame.xy(east, north)
+    assert np.ptp(x) == pytest.approx(1000.0, rel=1e-3)
+    np.testing.assert_allclose(np.abs(y - y.mean()), np.abs(across - across.mean()), atol=0.05)
+    loop = np.column_stack([100 * np.cos(s / 100), 100 * np.sin(s / 100)])
+    assert not TrackFrame(loop).straight
+
+
+def test_the_preparation_says_each_stage_without_a_terminal(capsys):
+    from gnssacc.core.progress import StageProgress
+
+    stages = StageProgress(2)
+    stages("input checks")
+    stages("start")
+    stages.close()
+    err = capsys.readouterr().err.splitlines()
+    assert err == [
+        "gnssacc: preparing: input checks (1 of 2) ...",
+        "gnssacc: preparing: start (2 of 2) ...",
+    ]
+    StageProgress(2, enable=False)("input checks")
+    assert capsys.readouterr().err == ""
