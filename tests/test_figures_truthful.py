@@ -203,7 +203,7 @@ def test_a_tuned_run_is_never_advised_to_tune(result):
         assert ("--tune auto" in text) is (not tuned)
 
 
-# --- a straight road is readable; the preparation says what it does --------------------------------
+# --- a straight road is readable; the preparation says what it does ------------------------
 
 
 def test_a_straight_track_is_drawn_along_and_across_its_line():
