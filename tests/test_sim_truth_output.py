@@ -78,3 +78,28 @@ def test_the_table_says_when_the_scores_bridge_a_truth_gap():
     assert "1 gap(s) up to 5.0 s, across which the scores interpolate it" in format_table(
         res.metrics
     )
+
+
+def test_true_biases_follow_imu_rows_dropped_for_nan(tmp_path):
+    """IMU rows dropped as NaN leave the true biases matched to the samples kept (interpolated),
+    never a refused run; a bias file of another run (another span) is set aside with a warning."""
+    from gnssacc.core.config import load_config
+
+    run = simulate("car", 20.0, imu_grade="consumer", seed=5)
+    folder = write_csv_run(run, tmp_path / "sim")
+    lines = (folder / "imu.csv").read_text().splitlines()
+    head = next(k for k, ln in enumerate(lines) if not ln.startswith("#"))
+    bad = head + 700  # one IMU sample made unreadable
+    lines[bad] = lines[bad].split(",")[0] + ",nan" * 6
+    (folder / "imu.csv").write_text("\n".join(lines) + "\n")
+    with pytest.warns(Warning):
+        back = load_csv_run(folder, load_config(None))
+    assert len(back.imu.t) == len(run.imu.t) - 1 == len(back.sim.bias)
+    b_a, _ = back.sim.bias.samples()
+    keep = np.ones(len(run.imu.t), bool)
+    keep[699] = False
+    np.testing.assert_allclose(b_a, run.sim.true_bias_a[keep], rtol=0, atol=1e-15)
+    short = (folder / "true_bias.csv").read_text().splitlines()[:500]
+    (folder / "true_bias.csv").write_text("\n".join(short) + "\n")
+    with pytest.warns(Warning, match="true biases are not used"):
+        assert load_csv_run(folder, load_config(None)).sim is None

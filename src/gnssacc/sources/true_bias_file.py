@@ -3,8 +3,8 @@
 Columns ``t, bax, bay, baz, bgx, bgy, bgz``: time [s] on the IMU's clock (one row per IMU
 sample), the accelerometer bias [m/s^2] and the gyro bias [rad/s] in effect at that sample, IMU
 axes (FRD; the body axes of a simulated run). ``gnssacc sim`` writes it; reading the directory
-back gives ``run.sim`` a :class:`TabulatedBias`, so that the bias figures and errors of a
-simulated folder compare with the truth as those of the simulated run in memory do.
+back gives ``run.sim`` a :class:`TabulatedBias` at the IMU's samples, so that the bias figures
+and errors of a simulated folder compare with the truth as those of the run in memory do.
 """
 
 from __future__ import annotations
@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.errors import InputError
 from ..core.recording import SimTruth
 from .common import read_table
 
@@ -24,7 +23,8 @@ COLUMNS = ("t", "bax", "bay", "baz", "bgx", "bgy", "bgz")
 
 
 class TabulatedBias:
-    """True biases held per sample (the interface of :class:`gnssacc.sources.sim_true_bias.TrueBias`).
+    """True biases held per sample (the interface of
+    :class:`gnssacc.sources.sim_true_bias.TrueBias`).
 
     Parameters
     ----------
@@ -70,16 +70,22 @@ def write_true_bias(path: Path, t: np.ndarray, bias, src: str) -> None:
     )
 
 
-def read_true_bias(path: Path, imu_t: np.ndarray, max_bad: float) -> SimTruth:
+def read_true_bias(path: Path, imu_t: np.ndarray, max_bad: float) -> SimTruth | None:
     """``true_bias.csv`` as the ``run.sim`` of a run read from a directory (biases only: no
-    scenario log, no error draws); it must have one row per IMU sample, at the IMU's times."""
+    scenario log, no error draws), per IMU sample: rows at other times (IMU rows dropped for NaN,
+    a file from another rate) are interpolated to the IMU's times. ``None``, with a warning, when
+    the file does not span the IMU's samples (it belongs to another run)."""
+    from ..core.errors import warn_data
+
     tab = read_table(path, COLUMNS, (), max_bad)
-    if len(tab["t"]) != len(imu_t) or not np.allclose(tab["t"], imu_t, rtol=0, atol=1e-6):
-        raise InputError(
+    t = tab["t"]
+    if len(t) < 2 or t[0] > imu_t[0] + 1e-6 or t[-1] < imu_t[-1] - 1e-6 or np.any(np.diff(t) <= 0):
+        warn_data(
             str(path),
-            f"{len(tab['t'])} rows for {len(imu_t)} IMU samples: the true biases must have one row "
-            "per IMU sample, at its time",
+            f"its {len(t)} rows do not span the IMU's samples ({imu_t[0]:g} .. {imu_t[-1]:g} s) "
+            "in increasing time: the true biases are not used",
         )
-    b_a = np.column_stack([tab[c] for c in COLUMNS[1:4]])
-    b_g = np.column_stack([tab[c] for c in COLUMNS[4:7]])
-    return SimTruth(TabulatedBias(tab["t"], b_a, b_g), [], {}, {}, {})
+        return None
+    b_a = np.column_stack([np.interp(imu_t, t, tab[c]) for c in COLUMNS[1:4]])
+    b_g = np.column_stack([np.interp(imu_t, t, tab[c]) for c in COLUMNS[4:7]])
+    return SimTruth(TabulatedBias(imu_t, b_a, b_g), [], {}, {}, {})
