@@ -27,9 +27,10 @@ def _verdict(e) -> str:
 
 
 def _decimals(e) -> int:
-    """Decimals that show the interval's width with two significant digits (at least 3)."""
-    width = abs(e.hi - e.lo) if np.isfinite(e.lo) else abs(e.mean)
-    return int(max(3, 1 - np.floor(np.log10(width)))) if width > 0 else 3
+    """Decimals that show the interval's width and its bounds (their sign against zero) with
+    two significant digits: at least 3, at most 5."""
+    sizes = [abs(v) for v in (e.hi - e.lo, e.lo, e.hi, e.mean) if np.isfinite(v) and v != 0]
+    return int(np.clip(1 - np.floor(np.log10(min(sizes))), 3, 5)) if sizes else 3
 
 
 def _limits(d: np.ndarray) -> tuple[float, float]:
@@ -84,7 +85,7 @@ def plot_accel_effect(run: RecordedRun, sols: dict, metrics: dict, path: Path) -
             f" ({100 * e.mean / e.base_mean:+.1f} % of {e.base}'s mean)" if e.base_mean > 0 else ""
         )
         hx.set_title(
-            f"mean {e.mean:+.{n}f} m{rel}\n95 % interval {e.lo:+.{n}f} .. {e.hi:+.{n}f} m; "
+            f"mean {e.mean:+.{n}f} m{rel}\n95 % interval {e.lo:+.{n}f} .. {e.hi:+.{n}f} m\n"
             f"{_verdict(e)}",
             fontsize=8,
         )
