@@ -13,11 +13,22 @@ from gnssacc.sources.csvdir import load_csv_run, write_csv_run
 from gnssacc.sources.sim import simulate
 
 
-def test_the_truth_is_at_the_imu_rate_by_default():
-    run = simulate("ugv", 20.0, imu_grade="consumer", seed=1)
-    assert len(run.truth.t) == len(run.imu.t) == 2001
-    np.testing.assert_allclose(run.truth.t, run.imu.t)
-    assert run.meta["truth_rate_hz"] == 100.0
+def test_a_simulated_recording_has_its_truth_at_the_imu_rate(tmp_path, capsys):
+    """What ``gnssacc sim`` writes and what a ``sim:`` source scores against: the truth at every
+    IMU sample (100 Hz), not at the fixes' 1 Hz; ``simulate`` itself keeps it at the fixes' epochs
+    unless asked."""
+    from gnssacc.cli import main
+    from gnssacc.core.config import load_config
+    from gnssacc.sources.simspec import load_sim
+
+    assert main(["sim", "--scenario", "ugv", "--duration", "20", str(tmp_path / "s")]) == 0
+    capsys.readouterr()
+    back = load_csv_run(tmp_path / "s", load_config(None))
+    assert len(back.truth.t) == len(back.imu.t) == 2001
+    np.testing.assert_allclose(back.truth.t, back.imu.t)
+    run = load_sim("sim:ugv,duration=20", None, 1)
+    assert len(run.truth.t) == 2001 and run.meta["truth_rate_hz"] == 100.0
+    assert len(simulate("ugv", 20.0, seed=1).truth.t) == 21
 
 
 def test_the_true_biases_are_written_and_read_back(tmp_path):
@@ -43,8 +54,12 @@ def test_a_pivot_scored_against_its_own_truth_has_no_yaw_spike(tmp_path):
     against a truth at the fixes' 1 Hz, the interpolated truth cut the corner of the 23 deg/s
     turn at 217-222 s and made a 3.5 deg (6 sigma) yaw "error"; against the truth the simulator
     now writes (IMU rate) every yaw error of every turn lies within 3 sigma."""
-    run = simulate("ugv", 300.0, imu_grade="consumer", seed=1, odom_hz=10.0)
-    folder = write_csv_run(run, tmp_path / "ugv")
+    from gnssacc.cli import main
+
+    folder = tmp_path / "ugv"
+    argv = ["sim", "--scenario", "ugv", "--grade", "consumer", "--odom-rate", "10"]
+    assert main(argv + ["--duration", "300", "--seed", "1", str(folder)]) == 0
+    run = simulate("ugv", 300.0, imu_grade="consumer", seed=1, odom_hz=10.0)  # its segments
     res = gnssacc.process(folder, methods=["smoother"], outage_every="60:20")
     pivots = [s for s in run.sim.segments if s["kind"] == "turn"]
     assert len(pivots) >= 10 and any(s["speed"] == 0.0 for s in pivots)

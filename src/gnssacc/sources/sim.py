@@ -292,8 +292,14 @@ def simulate_imu(
     )
 
 
-#: Highest default rate of a simulated truth [Hz] (it is the IMU rate up to this).
+#: Highest rate of a simulated truth written to a run folder or made for a ``sim:`` source [Hz].
 TRUTH_RATE_HZ = 100.0
+
+
+def dense_truth_rate(imu_rate_hz: float) -> float:
+    """The truth rate [Hz] of a simulated run written or scored as a recording: the IMU rate, at
+    most :data:`TRUTH_RATE_HZ` (never coarser than 50 Hz unless the IMU is)."""
+    return min(float(imu_rate_hz), TRUTH_RATE_HZ)
 
 
 def simulate(
@@ -349,8 +355,10 @@ def simulate(
         Error parameters to replace: keys of ``gnssacc.core.config.DEFAULTS["imu"]`` or any other key
         of :func:`imu_error_model` (e.g. ``{"vib_road_gyro_dps": 0.0}``).
     truth_rate_hz : float, optional
-        Rate of ``run.truth`` [Hz]; by default the IMU rate, at most :data:`TRUTH_RATE_HZ` (a
-        truth at the fixes' 1 Hz would be interpolated across a 23 deg/s pivot when scored).
+        Rate of ``run.truth`` [Hz]; by default the truth is at the GNSS epochs. ``gnssacc sim``
+        and ``sim:`` sources ask for :func:`dense_truth_rate` (the IMU rate, at most
+        :data:`TRUTH_RATE_HZ`): a truth at the fixes' 1 Hz is interpolated across a 23 deg/s turn
+        when an estimate between whole seconds is scored.
     t_start_s : float
         Absolute time of the first IMU sample [s] (e.g. a UNIX time, for fixes written with
         absolute times: :mod:`gnssacc.sources.rtklib`, :mod:`gnssacc.sources.nmea`).
@@ -414,9 +422,7 @@ def simulate(
         scenario, duration_s, imu_rate_hz, origin_llh_deg, initial_yaw_deg, t_start_s
     )
     t_gnss = sample_times(t_start_s, duration_s, gnss_rate_hz)
-    if truth_rate_hz is None:
-        truth_rate_hz = args["truth_rate_hz"] = min(imu_rate_hz, TRUTH_RATE_HZ)
-    t_truth = sample_times(t_start_s, duration_s, truth_rate_hz)
+    t_truth = None if truth_rate_hz is None else sample_times(t_start_s, duration_s, truth_rate_hz)
     imu, imu_info, positions = simulate_imu(
         traj,
         sample_times(t_start_s, duration_s, imu_rate_hz),
