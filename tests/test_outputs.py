@@ -393,7 +393,7 @@ def test_warnings_that_differ_in_numbers_only_are_one_line():
         ("smoother-acc", "model misfit"),
     ]
     assert group_warnings(items) == [
-        ("ekf, ekf-acc", "PRMSE 3.10/3.40 m at 300 epochs is worse"),
+        ("ekf, ekf-acc", "PRMSE 3.10 (ekf) / 3.40 (ekf-acc) m at 300 epochs is worse"),
         ("smoother, smoother-acc", "model misfit"),
     ]
 

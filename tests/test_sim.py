@@ -391,6 +391,7 @@ def test_gnss_white_noise_statistics():
         gnss_rate_hz=10.0,
         noise="white",
         seed=11,
+        truth_rate_hz=10.0,  # the truth at the fixes' epochs (the default is the IMU rate)
     )
     assert np.array_equal(run.gnss.t, run.truth.t)
     err = ned_error(run.origin, run.truth, run.gnss.lat, run.gnss.lon, run.gnss.h)

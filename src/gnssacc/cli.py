@@ -682,7 +682,7 @@ def _cmd_config(args) -> int:
 
 def _cmd_sim(args) -> int:
     from .sources.csvdir import write_csv_run
-    from .sources.sim import simulate
+    from .sources.sim import dense_truth_rate, simulate
 
     t_start = (
         args.t_start
@@ -700,6 +700,7 @@ def _cmd_sim(args) -> int:
         t_start_s=t_start,
         odom_hz=args.odom_rate,
         velocity=True,  # the receiver's Doppler velocities, written where the format has them
+        truth_rate_hz=dense_truth_rate(args.imu_rate),  # never interpolated across a turn
     )
     path = write_csv_run(run, args.out, gnss_format=args.gnss_format)
     extra = f", {len(run.odometry)} odometry samples" if run.odometry is not None else ""

@@ -96,16 +96,18 @@ def prepare(
     methods=(),
     on_checked=None,
     cache: PreparationCache | None = None,
+    on_stage=None,
 ) -> Prepared:
     """The prepared recording (:func:`gnssacc.prepare.prepared.prepare`) with the EKF as its filter
     pass, and the ``-gm`` methods' setup when ``methods`` has one; ``on_checked(findings)`` is told
-    the input checks' findings once they are settled. With ``cache``, a stored outcome for the same
+    the input checks' findings once they are settled, ``on_stage(name)`` each stage as it starts. With ``cache``, a stored outcome for the same
     recording and settings is reused, else the fresh one stored
     (:func:`gnssacc.prepare.cache.prepared_once`; ``on_checked`` is then also told ``reused=``)."""
     gm = any(METHODS.get(m) is _gm for m in methods)
     if cache is None:
         return prepare_recording(
-            run, cfg, tune, filter_pass=filter_pass, gauss_markov=gm, on_checked=on_checked
+            run, cfg, tune, filter_pass=filter_pass, gauss_markov=gm, on_checked=on_checked,
+            on_stage=on_stage,
         )
     from .prepare.gauss_markov import gm_setup
 
@@ -114,7 +116,9 @@ def prepare(
         cfg,
         tune or cfg["tune"]["mode"],
         cache,
-        lambda told: prepare_recording(run, cfg, tune, filter_pass=filter_pass, on_checked=told),
+        lambda told: prepare_recording(
+            run, cfg, tune, filter_pass=filter_pass, on_checked=told, on_stage=on_stage
+        ),
         (lambda p: replace(p, gauss_markov=gm_setup(p, filter_pass=filter_pass))) if gm else None,
         on_checked,
     )
@@ -558,9 +562,18 @@ def compare(
     prep : Prepared
         The shared start, stationary spans and (tuned) configuration.
     """
+    from .core.progress import StageProgress
+
     check_velocity_methods(run, methods)
     told = state_corrections(say, header, run)
-    prep = prepare(run, cfg, tune, methods, on_checked=told, cache=cache)
+
+    stages = StageProgress(
+        3 if (tune or cfg["tune"]["mode"]) == "auto" else 2, say is not None, show_progress
+    )
+    try:
+        prep = prepare(run, cfg, tune, methods, on_checked=told, on_stage=stages, cache=cache)
+    finally:
+        stages.close()
     for line in preparation_lines(prep) if say else ():
         say(line)
     t = time.perf_counter()
@@ -600,6 +613,7 @@ def compare(
                 judged.cfg.gnss_gm_sigma,
                 errors=scores[m].errors,
                 n_fixes=fixes.get("n"),
+                tuned=prep.tuning is not None,
             )
         except Exception as exc:
             raise_if_interrupted(exc)
@@ -666,17 +680,28 @@ def _noise_model_of(prep: Prepared, sid: str, sols: dict, models: dict):
 TRUTH_SHORT_TOLERANCE_S = 2.0
 
 
+#: A step of the truth longer than this many times its median interval is a gap: the scores
+#: interpolate the truth across it, and the table says so.
+TRUTH_GAP_FACTOR = 2.0
+
+
 def truth_coverage(run: RecordedRun) -> dict | None:
-    """The part of the recording (first to last IMU sample) the truth spans, from the start [s]."""
+    """The part of the recording (first to last IMU sample) the truth spans, from the start [s],
+    its sample interval [s] and its gaps (steps above :data:`TRUTH_GAP_FACTOR` intervals)."""
     if run.truth is None:
         return None
     a = max(float(run.truth.t[0]), run.t_start) - run.t_start
     b = min(float(run.truth.t[-1]), run.t_end) - run.t_start
     span = max(b - a, 0.0)
+    dt = np.diff(run.truth.t)
+    interval = float(np.median(dt)) if len(dt) else 0.0
+    gaps = dt[dt > TRUTH_GAP_FACTOR * interval] if len(dt) else dt
     return {
         "first_s": a,
         "last_s": b,
         "fraction": span / run.duration_s if run.duration_s > 0 else 1.0,
+        "interval_s": interval,
+        "gaps": {"n": int(len(gaps)), "longest_s": float(gaps.max()) if len(gaps) else 0.0},
     }
 
 
@@ -891,7 +916,9 @@ def figure_jobs() -> int:
     return usable_jobs()
 
 
-def draw_figures(folder: Path, run, sols, metrics, which: str, jobs: int | None = None) -> dict:
+def draw_figures(
+    folder: Path, run, sols, metrics, which: str, jobs: int | None = None, cfg=None
+) -> dict:
     """:func:`gnssacc.outputs.figures.write_figures`, the plot set split over ``jobs`` processes
     (default :func:`figure_jobs`; forked after matplotlib is imported, each drawing every
     ``jobs``-th figure, this process one share): what each drew, in the set's order. The figures of
@@ -899,7 +926,7 @@ def draw_figures(folder: Path, run, sols, metrics, which: str, jobs: int | None 
     names = PLOT_SETS[which]
     jobs = min(figure_jobs() if jobs is None else int(jobs), len(names))
     if jobs < 2:
-        return write_figures(folder, run, sols, metrics, which)
+        return write_figures(folder, run, sols, metrics, which, cfg=cfg)
     import multiprocessing
 
     import matplotlib
@@ -910,7 +937,7 @@ def draw_figures(folder: Path, run, sols, metrics, which: str, jobs: int | None 
     ctx = multiprocessing.get_context("fork")
     queue = ctx.SimpleQueue()
     shares = [names[k::jobs] for k in range(jobs)]
-    args = (folder, run, sols, metrics)
+    args = (folder, run, sols, metrics, cfg)
     sys.stdout.flush()  # a child must not write this process's buffers again
     sys.stderr.flush()
     procs = [ctx.Process(target=_draw_share, args=(queue, share, *args)) for share in shares[1:]]
@@ -941,20 +968,20 @@ SHARE_WAIT_FACTOR = 10.0
 SHARE_WAIT_MIN_S = 60.0
 
 
-def _figure_share(names, folder, run, sols, metrics) -> dict:
+def _figure_share(names, folder, run, sols, metrics, cfg=None) -> dict:
     """:func:`write_figures` of the figures ``names`` (a plot set of their own, for this call)."""
     key = f"share-{os.getpid()}"
     PLOT_SETS[key] = tuple(names)
     try:
-        return write_figures(folder, run, sols, metrics, key)
+        return write_figures(folder, run, sols, metrics, key, cfg=cfg)
     finally:
         PLOT_SETS.pop(key, None)
 
 
-def _draw_share(queue, names, folder, run, sols, metrics) -> None:
+def _draw_share(queue, names, folder, run, sols, metrics, cfg=None) -> None:
     """A drawing process: its figures, and what it drew on ``queue``."""
     try:
-        queue.put(_figure_share(names, folder, run, sols, metrics))
+        queue.put(_figure_share(names, folder, run, sols, metrics, cfg))
     except BaseException as exc:  # noqa: BLE001 (reported by name, never raised in a child)
         queue.put({n: f"not drawn: {type(exc).__name__}" for n in names})
 
@@ -1040,7 +1067,7 @@ def write_result_files(
     (folder / "config.toml").write_text(resolved_toml(cfg))
     if tuned_toml is not None:
         (folder / "tuned.toml").write_text(tuned_toml)
-    drawn = draw_figures(folder, run, sols, metrics, plot_set(plots, report), jobs)
+    drawn = draw_figures(folder, run, sols, metrics, plot_set(plots, report), jobs, cfg=cfg)
     if "tum" in export:
         from .outputs.export import write_truth_tum, write_tum
 

@@ -428,6 +428,7 @@ def assess(
     gm_sigma: np.ndarray | None = None,
     errors: dict | None = None,
     n_fixes: int | None = None,
+    tuned: bool = False,
 ) -> Consistency:
     """Consistency figures and warnings of one solution.
 
@@ -437,8 +438,16 @@ def assess(
     noise-model check, reported for methods whose own figures cannot show it; ``gm_sigma``: the
     modelled Gauss-Markov part of the fix errors [m]; ``errors``: the solution's
     :func:`gnssacc.analysis.errorstats.error_statistics`, for the NEES warnings. Each warning is
-    flagged with the table column it is about (:attr:`Consistency.flags`)."""
+    flagged with the table column it is about (:attr:`Consistency.flags`). ``tuned``: the noise
+    was identified from this recording (``--tune auto``), so a misfit is advised as the model's
+    (what it lacks), never as something ``--tune auto`` would find."""
     st = sol.stats
+    advice = (
+        "the noise identified from this recording still misfits: the model lacks an error this "
+        "recording has (see nis.png)"
+        if tuned
+        else "check the noise configuration (--tune auto identifies it from the recording)"
+    )
     nis = {k: st.get(f"nis_{k}_mean") for k in _DOF}
     n = {k: int(st.get(f"n_{k}_updates", 0) or 0) for k in _DOF}
     c = Consistency(sol.method, nis, n, fix_residual_ratio(run, sol, gm_sigma), st.get("acf1_pos"))
@@ -457,8 +466,7 @@ def assess(
             v, a, b = shown(value, lo, hi)
             c.add(
                 f"{KIND_NAMES[kind]} NIS per dof {v}, outside the consistent band [{a}, {b}] "
-                f"({n[kind]} updates): {what}; check the noise configuration (--tune auto "
-                f"identifies it from the recording)",
+                f"({n[kind]} updates): {what}; {advice}",
                 "nis" if kind == "pos" else kind,
             )
     if correlated(c.acf1, n["pos"]):

@@ -15,6 +15,50 @@ def progress(iterable, desc: str = "", enable: bool = True, total: int | None = 
     return tqdm(iterable, desc=desc, total=total, disable=not show, leave=False, dynamic_ncols=True)
 
 
+class StageProgress:
+    """Stages of a long preparation, said as each starts, on stderr: a bar on a terminal;
+    otherwise (``lines``) one plain line per stage, ``gnssacc: preparing: noise identification
+    (3 of 3) ...``.
+
+    Parameters
+    ----------
+    total : int
+        Stages expected.
+    lines : bool
+        Print the plain lines when stderr is not a terminal.
+    enable : bool
+        Show anything at all.
+    """
+
+    def __init__(self, total: int, lines: bool = True, enable: bool = True):
+        self.total, self.k = total, 0
+        self.tty = sys.stderr.isatty()
+        self.lines = enable and lines and not self.tty
+        self.bar = (
+            tqdm(total=total, desc="preparing", leave=False, dynamic_ncols=True)
+            if enable and self.tty
+            else None
+        )
+
+    def __call__(self, stage: str) -> None:
+        """Stage ``stage`` (a few words) starts."""
+        if self.bar is not None:
+            self.bar.update(min(self.k, self.total) - self.bar.n)
+            self.bar.set_description_str(f"preparing: {stage}", refresh=True)
+        elif self.lines:
+            print(
+                f"gnssacc: preparing: {stage} ({self.k + 1} of {self.total}) ...",
+                file=sys.stderr,
+                flush=True,
+            )
+        self.k += 1
+
+    def close(self) -> None:
+        """The preparation is over: the bar goes."""
+        if self.bar is not None:
+            self.bar.close()
+
+
 class CampaignProgress:
     """A campaign's progress: one bar on a terminal (tasks done, failed, running, ETA), otherwise
     one plain line per finished task (when ``lines``), on stderr.

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..core.recording import RecordedRun
 from ..core.solution import NavSolution
-from .report import failed_methods, group_warnings, table_notes, table_rows
+from .report import failed_methods, group_warnings, table_notes, table_rows, verdict_line
 
 
 def observability_html(run: RecordedRun, sols: dict[str, NavSolution], cfg, replay=None) -> str:
@@ -39,7 +39,7 @@ def observability_html(run: RecordedRun, sols: dict[str, NavSolution], cfg, repl
         for n in STATE_NAMES
     )
     return (
-        f"<h2>Observability</h2><p>Motion context (from the IMU and the {html.escape(ref.method)} velocity):</p>"
+        f"<p>Motion context (from the IMU and the {html.escape(ref.method)} velocity):</p>"
         f"<table><tr><th>motion</th><th>share of epochs [%]</th></tr>{motion}</table>"
         "<p>Mean share of each state's predicted variance removed at a GNSS epoch, by the position update alone "
         "and by position + GNSS-derived acceleration (the EKF's own matrices, epochs with an acceleration):</p>"
@@ -48,10 +48,13 @@ def observability_html(run: RecordedRun, sols: dict[str, NavSolution], cfg, repl
 
 
 def comparison_html(metrics: dict) -> str:
-    """The comparison table as an HTML table (numbers right-aligned, '!' cells flagged), with
-    the scored window above it, a row per failed method with its reason, and the NIS legend."""
+    """The verdict, then the comparison table as an HTML table (numbers right-aligned, '!' cells
+    flagged), with the scored window above it, a row per failed method with its reason, and the
+    NIS legend."""
     head, rows = table_rows(metrics)
     above, below = table_notes(metrics)
+    verdict = verdict_line(metrics) if metrics.get("consistency") else None
+    first = f'<p class="verdict">{html.escape(verdict)}</p>' if verdict else ""
     cell = lambda c, i: (
         f'<td class="num{" warn" if c.endswith("!") else ""}">{html.escape(c)}</td>'
         if i
@@ -64,7 +67,8 @@ def comparison_html(metrics: dict) -> str:
         for m, r in failed_methods(metrics).items()
     )
     return (
-        "".join(f"<p>{html.escape(t)}</p>" for t in above)
+        first
+        + "".join(f"<p>{html.escape(t)}</p>" for t in above)
         + "<table><tr>"
         + "".join(f"<th>{html.escape(h)}</th>" for h in head)
         + f"</tr>{body}</table>"
@@ -81,24 +85,36 @@ def consistency_html(metrics: dict) -> str:
     cons = metrics.get("consistency") or {}
     if not cons:
         return "<p>No consistency figures.</p>"
-    kinds = ("pos", "vel", "acc", "zupt", "zaru")
-    if not any(c["nis"].get("vel") is not None for c in cons.values()):
-        kinds = tuple(k for k in kinds if k != "vel")  # a run without GNSS velocities
-    rows = "".join(
-        f"<tr><td>{html.escape(m)}</td>"
-        + "".join(f"<td>{_fmt(c['nis'].get(k))}</td>" for k in kinds)
-        + f"<td>{_fmt(c.get('innovation_acf1'))}</td><td>{_fmt(c.get('fix_residual_ratio'))}</td>"
-        + f"<td>{'<br>'.join(html.escape(w) for w in c['warnings']) or 'none'}</td></tr>"
+    head = ["method", "NIS position", "velocity", "acceleration", "zero velocity", "zero rate"]
+    head += ["innovation autocorrelation", "fix residual ratio", "warnings"]
+    rows = [
+        [html.escape(m)]
+        + [_fmt(c["nis"].get(k)) for k in ("pos", "vel", "acc", "zupt", "zaru")]
+        + [_fmt(c.get("innovation_acf1")), _fmt(c.get("fix_residual_ratio"))]
+        + ["<br>".join(html.escape(w) for w in c["warnings"]) or "none"]
         for m, c in cons.items()
-    )
+    ]
     return (
         "<p>1 is consistent for every NIS figure (EKF: innovations; smoother: GNSS residuals against their "
         "expectation); innovation autocorrelation near 0; fix residual ratio below 1.41 (an estimate as good as "
-        "the fixes and independent of them).</p><table><tr><th>method</th><th>NIS position</th>"
-        + ("<th>velocity</th>" if "vel" in kinds else "")
-        + "<th>acceleration</th><th>zero velocity</th><th>zero rate</th>"
-        "<th>innovation autocorrelation</th>"
-        f"<th>fix residual ratio</th><th>warnings</th></tr>{rows}</table>"
+        "the fixes and independent of them).</p>" + html_table(head, rows)
+    )
+
+
+def html_table(head: list[str], rows: list[list[str]], numeric: bool = False) -> str:
+    """An HTML table of ready-escaped cells without the columns (after the first) whose every
+    cell is ``-`` (nothing drawn for data that do not exist)."""
+    keep = [0] + [i for i in range(1, len(head)) if any(r[i] != "-" for r in rows)]
+    td = '<td class="num">' if numeric else "<td>"
+    return (
+        "<table><tr>"
+        + "".join(f"<th>{html.escape(head[i])}</th>" for i in keep)
+        + "</tr>"
+        + "".join(
+            "<tr>" + "".join(f"{'<td>' if i == 0 else td}{r[i]}</td>" for i in keep) + "</tr>"
+            for r in rows
+        )
+        + "</table>"
     )
 
 
@@ -125,8 +141,10 @@ def tuning_html(metrics: dict) -> str:
 
 #: The figures in the report, with the question each one answers.
 CAPTIONS = {
+    "accel_effect": "What the GNSS-derived acceleration changes: with minus without, per epoch "
+    "and as a distribution, with the 95 % interval of its mean",
     "trajectory": "Where: the track coloured by horizontal error (without truth: by the stated 1-sigma), x east, "
-    "y north, start, end and outages marked",
+    "y north (a straight track: along and across its line), start, end and outages marked",
     "errors": "How the position error evolves, per axis, against each method's +-3 sigma",
     "velocity_attitude": "Velocity and attitude errors against +-3 sigma",
     "nis": "Is each method consistent over time? NIS and distance to the fixes",
@@ -192,28 +210,32 @@ def _img(name: str, caption: str) -> str:
 
 
 def answer_html(metrics: dict, figures: dict) -> str:
-    """The comparison, the warnings and ``summary.png``."""
+    """The verdict and comparison, the warnings, ``summary.png`` and ``accel_effect.png``."""
     out = comparison_html(metrics) + "<h3>Warnings</h3>" + warnings_html(metrics)
+    truth = metrics.get("gnss_prmse_m") is not None
     if figures.get("summary", "not drawn") is None:
         out += _img(
             "summary",
-            "Which method, how good, how sure: horizontal error CDF and consistency per method",
+            "Which method, how good, how sure: horizontal error CDF and consistency per method"
+            if truth
+            else "No truth: each method's distance to the raw fixes (agreement, not accuracy) and "
+            "its consistency (NIS)",
         )
+    if "accel_effect" in figures:
+        out += _figure("accel_effect", figures)
     return out
+
+
+def _figure(name: str, figures: dict) -> str:
+    """A drawn figure with its caption, or one line saying why it was not drawn."""
+    if figures[name] is None:
+        return _img(name, CAPTIONS[name])
+    return f'<p class="note">{html.escape(name)}.png not drawn: {html.escape(figures[name])}.</p>'
 
 
 def figures_html(figures: dict) -> str:
     """Every other figure with its question, and a line for each one not drawn."""
-    parts = []
-    for name, caption in CAPTIONS.items():
-        if name not in figures:
-            continue
-        if figures[name] is None:
-            parts.append(_img(name, caption))
-        else:
-            parts.append(
-                f'<p class="note">{html.escape(name)}.png not drawn: {html.escape(figures[name])}</p>'
-            )
+    parts = [_figure(n, figures) for n in CAPTIONS if n in figures and n != "accel_effect"]
     return "".join(parts) or "<p>No figures (<code>--plots none</code>).</p>"
 
 
@@ -287,20 +309,12 @@ def statistics_html(metrics: dict) -> str:
                 (e.get("nees_attitude") or {}).get("value"),
             ]
         )
-        rows.append(
-            f"<tr><td>{html.escape(mid)}</td>"
-            + "".join(f'<td class="num">{_stat(c)}</td>' for c in cells)
-            + "</tr>"
-        )
+        rows.append([html.escape(mid)] + [_stat(c) for c in cells])
     return (
         "<p>Position error norm [m] over the scored epochs with evo's statistics (<code>evo_ape "
         "--pose_relation trans_part</code>, no alignment), horizontal CEP50/CEP95 [m], per-axis RMSE [m], velocity "
-        "and attitude RMSE, NEES per dof (1 = consistent). The raw fixes are scored at their own epochs.</p>"
-        "<table><tr>"
-        + "".join(f"<th>{html.escape(c)}</th>" for c in head)
-        + "</tr>"
-        + "".join(rows)
-        + "</table>"
+        "and attitude RMSE (where the truth has them), NEES per dof (1 = consistent). The raw "
+        "fixes are scored at their own epochs.</p>" + html_table(head, rows, numeric=True)
     )
 
 
@@ -364,7 +378,8 @@ _STYLE = """body{font-family:sans-serif;max-width:1200px;margin:1.5em auto;paddi
 table{border-collapse:collapse;margin:0.5em 0} td,th{border:1px solid #ccc;padding:2px 6px;font-size:90%}
 th{background:#f0f0f0} td:first-child{white-space:nowrap} td.num{text-align:right;font-variant-numeric:tabular-nums}
 td.warn{background:#fff3cd} p.note,figcaption{font-size:85%;color:#555} p.failed{color:#a00}
-ul.warnings li{margin-bottom:0.3em;font-size:92%} figure{margin:1em 0} nav a{margin-right:1em}"""
+ul.warnings li{margin-bottom:0.3em;font-size:92%}
+p.verdict{font-size:110%;font-weight:bold} figure{margin:1em 0} nav a{margin-right:1em}"""
 
 
 def write_html_report(

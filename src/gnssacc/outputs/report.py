@@ -4,6 +4,7 @@ per-method trajectory CSV, and the error / trajectory figures."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -300,6 +301,91 @@ def _fix_cells(metrics: dict, head: list[str]) -> list[str]:
     return ["gnss (raw fixes)"] + [own.get(h, "-") for h in head[1:]]
 
 
+#: Relative PRMSE difference [-] under which two methods are named together as the best.
+TIE = 0.01
+
+
+def _accuracy(m: dict) -> float | None:
+    """A method's like-for-like accuracy: its PRMSE at the raw fixes' epochs, else its PRMSE."""
+    at_fixes = _get(m, "errors", "at_fixes", "prmse_m")
+    return at_fixes if at_fixes is not None else m.get("prmse_m")
+
+
+def _trust(metrics: dict, mid: str) -> str:
+    """How far a method's stated sigma is to be trusted, in a few words: its position NEES (or
+    NIS without truth), and its attitude NEES when that is outside its band."""
+    text = _position_trust(metrics, mid)
+    att = _get(metrics["methods"][mid], "errors", "nees_attitude")
+    if att and att.get("band") and not att["band"][0] <= att["value"] <= att["band"][1]:
+        size = "small" if att["value"] > att["band"][1] else "large"
+        text += f"; its attitude sigma is too {size} (attitude NEES {att['value']:.3g})"
+    return text
+
+
+def _position_trust(metrics: dict, mid: str) -> str:
+    m = metrics["methods"][mid]
+    nees = _get(m, "errors", "nees_position")
+    if nees and nees.get("band"):
+        lo, hi = nees["band"]
+        if nees["value"] > hi:
+            return (
+                f"stated position sigma is too small (NEES {nees['value']:.1f}, "
+                f"band up to {hi:.1f})"
+            )
+        if nees["value"] < lo:
+            return f"stated position sigma is too large (NEES {nees['value']:.2f})"
+        return f"stated position sigma holds (NEES {nees['value']:.2f})"
+    nis = _get(metrics, "consistency", mid, "nis", "pos")
+    return (
+        f"position NIS {nis:.2f} (1 = consistent)" if nis is not None else "no consistency figure"
+    )
+
+
+def verdict_line(metrics: dict) -> str | None:
+    """The first-screen answer: which method, how good (against the raw fixes), how sure; or
+    that no method beats the fixes. Methods within :data:`TIE` of the best are named with it.
+    Without truth: accuracy cannot be scored; the method whose NIS is nearest 1 is named."""
+    ok = ok_methods(metrics)
+    if not ok:
+        return None
+    scored = {mid: _accuracy(m) for mid, m in ok.items() if _accuracy(m) is not None}
+    fixes = metrics.get("gnss_prmse_m")
+    if scored and fixes is not None:
+        best = min(scored, key=scored.get)
+        ties = [mid for mid, v in scored.items() if v <= scored[best] * (1 + TIE)]
+        names = " and ".join([best] + [m for m in ties if m != best])
+        equal = " (equal within 1 %)" if len(ties) > 1 else ""
+        if scored[best] >= fixes:
+            return (
+                f"verdict: no method beats the raw fixes (best {names}: {scored[best]:.2f} m PRMSE "
+                f"at the fixes' epochs, the fixes {fixes:.2f} m)"
+            )
+        return (
+            f"verdict: {names}{equal} {'are' if equal else 'is'} most accurate: "
+            f"{scored[best]:.2f} m PRMSE at the fixes' epochs, {fixes / scored[best]:.1f}x "
+            f"better than the raw fixes ({fixes:.2f} m); "
+            f"{best}'s {_trust(metrics, best)}"
+        )
+    nis = {
+        mid: v
+        for mid in ok
+        if (v := _get(metrics, "consistency", mid, "nis", "pos")) is not None and v > 0
+    }
+    if not nis:
+        return "verdict: no truth and no NIS: neither accuracy nor consistency can be told"
+    best = min(nis, key=lambda mid: abs(math.log(nis[mid])))
+    return (
+        f"verdict (no truth: accuracy cannot be scored): {best} is the most consistent "
+        f"(position NIS {nis[best]:.2f}, 1 = consistent)"
+    )
+
+
+def _drop_empty(head: list[str], rows: list[list[str]]) -> tuple[list[str], list[list[str]]]:
+    """Without the columns (after the first) whose every cell is ``-``."""
+    keep = [0] + [i for i in range(1, len(head)) if any(r[i] != "-" for r in rows)]
+    return [head[i] for i in keep], [[r[i] for i in keep] for r in rows]
+
+
 def table_rows(metrics: dict) -> tuple[list[str], list[list[str]]]:
     """The comparison table's header and rows (text cells), the raw fixes last; the failed
     methods are :func:`failed_methods`. A warned figure carries ``!`` in its own column: the NIS
@@ -311,12 +397,13 @@ def table_rows(metrics: dict) -> tuple[list[str], list[list[str]]]:
     rows = [[mid] + [f(mid, m) for _, f in cols[1:]] for mid, m in ok_methods(metrics).items()]
     if metrics.get("gnss_prmse_m") is not None:
         rows.append(_fix_cells(metrics, head))
-    return head, rows
+    return _drop_empty(head, rows) if rows else (head, rows)
 
 
 def table_notes(metrics: dict) -> tuple[list[str], list[str]]:
-    """The lines above the comparison table (the scored window) and below it (the legend)."""
-    return _window_lines(metrics), _legend(metrics)
+    """The lines above the comparison table (the scored window) and below it (the truth's gaps
+    and the legend)."""
+    return _window_lines(metrics), _truth_lines(metrics) + _legend(metrics)
 
 
 def format_table(metrics: dict) -> str:
@@ -328,8 +415,10 @@ def format_table(metrics: dict) -> str:
     first = len(lines[1].split("  ")[0])
     # A failed row is not cut into columns: its reason runs on after the method id.
     failed_rows = [f"{mid.ljust(first)}  failed: {reason}" for mid, reason in failed.items()]
+    verdict = verdict_line(metrics) if metrics.get("consistency") else None
     return "\n".join(
-        _window_lines(metrics)
+        ([verdict] if verdict else [])
+        + _window_lines(metrics)
         + lines
         + failed_rows
         + _start_lines(metrics)
@@ -339,9 +428,19 @@ def format_table(metrics: dict) -> str:
 
 
 def _truth_lines(metrics: dict) -> list[str]:
-    """Why a recording's truth is not scored, when the input checks set it aside."""
+    """Why a recording's truth is not scored, when the input checks set it aside; and the gaps
+    the scores interpolate it across, when it has any."""
     why = (metrics.get("input_corrections") or {}).get("truth_not_scored")
-    return [f"truth not scored: {why}"] if why else []
+    if why:
+        return [f"truth not scored: {why}"]
+    cov = metrics.get("truth_coverage") or {}
+    gaps = cov.get("gaps") or {}
+    if not gaps.get("n") or metrics.get("gnss_prmse_m") is None:
+        return []
+    return [
+        f"truth: sampled every {cov['interval_s']:.3g} s; {gaps['n']} gap(s) up to "
+        f"{gaps['longest_s']:.1f} s, across which the scores interpolate it linearly"
+    ]
 
 
 def _start_lines(metrics: dict) -> list[str]:
@@ -404,7 +503,8 @@ def _legend(metrics: dict) -> list[str]:
 
 def group_warnings(items: list[tuple[str, str]]) -> list[tuple[str, str]]:
     """``(method, text)`` warnings folded into fewer lines: warnings that differ only in their
-    numbers become one ``("m1, m2", text)`` whose differing numbers read ``a/b`` in method order.
+    numbers become one ``("m1, m2", text)`` whose differing numbers name their methods,
+    ``"a (m1) / b (m2)"``.
 
     Returns
     -------
@@ -420,11 +520,23 @@ def group_warnings(items: list[tuple[str, str]]) -> list[tuple[str, str]]:
     out = []
     for key, members in groups.items():
         values = [num.findall(text) for _, text in members]
-        slots = iter(["/".join(dict.fromkeys(v[i] for v in values)) for i in range(len(values[0]))])
+        mids = [m for m, _ in members]
+        slots = iter([_whose([v[i] for v in values], mids) for i in range(len(values[0]))])
         parts = key.split("#")
         text = "".join(p + (next(slots) if i < len(parts) - 1 else "") for i, p in enumerate(parts))
         out.append((", ".join(dict.fromkeys(m for m, _ in members)), text))
     return out
+
+
+def _whose(values: list[str], mids: list[str]) -> str:
+    """One number of a grouped warning: itself when every method has it, else each value with
+    the methods it is of, ``"3.10 (ekf) / 3.40 (ekf-acc)"``."""
+    by: dict[str, list[str]] = {}
+    for v, m in zip(values, mids, strict=True):
+        by.setdefault(v, []).append(m)
+    if len(by) == 1:
+        return values[0]
+    return " / ".join(f"{v} ({', '.join(dict.fromkeys(ms))})" for v, ms in by.items())
 
 
 #: Actions of an input-check finding (:class:`gnssacc.checks.findings.Finding`) that changed

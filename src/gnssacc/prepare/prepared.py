@@ -148,6 +148,7 @@ def prepare(
     filter_pass: FilterPass,
     gauss_markov: bool = False,
     on_checked: Callable[[list], None] | None = None,
+    on_stage: Callable[[str], None] | None = None,
 ) -> Prepared:
     """Checks, quality, stationary spans, start state and (``tune_mode="auto"``) noise, in that
     order.
@@ -167,10 +168,15 @@ def prepare(
     on_checked : callable, optional
         Told the input checks' findings as soon as they are settled (before the start and the
         tuning), so that a caller can state the corrections at once.
+    on_stage : callable, optional
+        Told each stage's name as it starts (``"input checks"``, ``"start"``, ``"noise
+        identification"``), for progress.
     """
     tune_mode = tune_mode or cfg["tune"]["mode"]
+    stage = on_stage or (lambda name: None)
     secs = {}
     t = time.perf_counter()
+    stage("input checks")
     run, sigma_note = with_measured_sigmas(run)  # before any decision uses the fixes' noise
     run, cfg, checks, pieces = settled(run, cfg, filter_pass)
     checks = ([sigma_note] if sigma_note else []) + checks
@@ -179,6 +185,7 @@ def prepare(
     release_free_memory()  # the checks' temporaries, before the next stage's
     secs["input_checks_s"] = time.perf_counter() - t
     t = time.perf_counter()
+    stage("start (stationary spans, attitude, yaw)")
     pieces = pieces or start_pieces(run, cfg, filter_pass)  # made once: by a verdict, or here
     bound = clock_bound(run, cfg, checks, pieces, filter_pass)
     checks += [bound] if bound is not None else []
@@ -189,6 +196,7 @@ def prepare(
     noise = noise_from_stationary(run.imu, stationary)
     if tune_mode == "auto":
         t = time.perf_counter()
+        stage("noise identification (EKF passes)")
         cfg, result, init, bank = _tuned(
             run, cfg, stationary, quality, init, bank, noise, filter_pass
         )

@@ -32,6 +32,10 @@ A run directory holds
     imu_time_offset_s`` and by a measured offset). It may span less than the run: the outputs
     still cover the whole run, the scores only the truth's span (with a warning). A truth that
     disagrees with the fixes is not scored (:mod:`gnssacc.checks.truthcheck`).
+``true_bias.csv`` (optional, written by ``gnssacc sim``)
+    A simulated run's true IMU biases, one row per IMU sample: columns ``t, bax, bay, baz, bgx,
+    bgy, bgz`` (time [s] on the IMU's clock, accelerometer bias [m/s^2], gyro bias [rad/s], IMU
+    axes); read back as ``run.sim`` (:mod:`gnssacc.sources.true_bias_file`) for the bias figures.
 ``init.json`` (optional)
     ``{"t", "lat_deg", "lon_deg", "h_m", "vn", "ve", "vd", "roll_deg", "pitch_deg", "yaw_deg",
     "sigma": {"pos_m", "vel_mps", "roll_pitch_deg", "yaw_deg"}}``. ``sigma`` and each of its keys
@@ -68,6 +72,8 @@ from ..core.recording import (
 )
 from ..core.rotations import flu_to_frd
 from .common import apply_mounting, check_degrees, configured_time_offset_s, read_table
+from .true_bias_file import FILE as BIAS_FILE
+from .true_bias_file import read_true_bias, write_true_bias
 from .gnssfile import (
     CORR_COLUMNS,
     POS_COLUMNS,
@@ -154,6 +160,7 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) 
     gnss_file = _gnss_file(root)
     max_bad = float(cfg["data"]["max_bad_fraction"])
     imu = _read_imu(root / "imu.csv", frame, max_bad)
+    imu_unshifted_t = imu.t
     meta = {"source": "csv", "imu_frame": frame}
     if gnss_file.name == "gnss.csv":
         read_fixes, gnss_vel = read_gnss_csv_file(gnss_file, cfg.default_sigma_ned, max_bad)
@@ -182,6 +189,9 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) 
     odometry = None
     if (root / "odom.csv").exists():
         odometry = read_odometry_csv(root / "odom.csv", max_bad).shifted(offset_s)
+    sim = None
+    if (root / BIAS_FILE).exists():  # before the IMU's clock is shifted: the file is on it
+        sim = read_true_bias(root / BIAS_FILE, imu_unshifted_t, max_bad)
     run = RecordedRun(
         name=root.resolve().name,
         where=where,
@@ -194,6 +204,7 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) 
         odometry=odometry,
         truth_on_imu_clock=True,
         gnss_vel=gnss_vel,
+        sim=sim,
     )
     release_free_memory()  # the parser's blocks
     return run.validate()
@@ -439,7 +450,7 @@ def write_csv_run(run: RecordedRun, path, gnss_format: str = "csv") -> Path:
         [imu.t, *imu.f_b.T, *imu.omega_ib_b.T],
         f"{src}\n# body frame FRD; t [s], specific force [m/s^2], angular rate [rad/s]",
     )
-    for stale in ("truth.csv", "init.json", "odom.csv") + GNSS_FILES:
+    for stale in ("truth.csv", "init.json", "odom.csv", BIAS_FILE) + GNSS_FILES:
         (root / stale).unlink(missing_ok=True)
     if gnss_format == "csv":
         write_gnss_csv(root / "gnss.csv", run.gnss, src, vel=run.gnss_vel)
@@ -457,6 +468,8 @@ def write_csv_run(run: RecordedRun, path, gnss_format: str = "csv") -> Path:
         _write_truth(root / "truth.csv", run.truth, src)
     if run.init is not None:
         _write_init(root / "init.json", run.init)
+    if run.sim is not None and run.sim.bias is not None and len(run.sim.bias) == len(imu.t):
+        write_true_bias(root / BIAS_FILE, imu.t, run.sim.bias, src)
     return root
 
 

@@ -298,6 +298,16 @@ def simulate_imu(
     )
 
 
+#: Highest rate of a simulated truth written to a run folder or made for a ``sim:`` source [Hz].
+TRUTH_RATE_HZ = 100.0
+
+
+def dense_truth_rate(imu_rate_hz: float) -> float:
+    """The truth rate [Hz] of a simulated run written or scored as a recording: the IMU rate, at
+    most :data:`TRUTH_RATE_HZ` (never coarser than 50 Hz unless the IMU is)."""
+    return min(float(imu_rate_hz), TRUTH_RATE_HZ)
+
+
 def simulate(
     scenario: str | Scenario = "car",
     duration_s: float = 300.0,
@@ -352,7 +362,10 @@ def simulate(
         Error parameters to replace: keys of ``gnssacc.core.config.DEFAULTS["imu"]`` or any other key
         of :func:`imu_error_model` (e.g. ``{"vib_road_gyro_dps": 0.0}``).
     truth_rate_hz : float, optional
-        Rate of ``run.truth`` [Hz]; by default the truth is at the GNSS epochs.
+        Rate of ``run.truth`` [Hz]; by default the truth is at the GNSS epochs. ``gnssacc sim``
+        and ``sim:`` sources ask for :func:`dense_truth_rate` (the IMU rate, at most
+        :data:`TRUTH_RATE_HZ`): a truth at the fixes' 1 Hz is interpolated across a 23 deg/s turn
+        when an estimate between whole seconds is scored.
     t_start_s : float
         Absolute time of the first IMU sample [s] (e.g. a UNIX time, for fixes written with
         absolute times: :mod:`gnssacc.sources.rtklib`, :mod:`gnssacc.sources.nmea`).

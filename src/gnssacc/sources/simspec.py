@@ -157,13 +157,16 @@ def load_sim(spec: str, noise: str | None, seed: int):
     Returns
     -------
     RecordedRun
-        Named ``sim-<scenario>``, with ``meta["source_spec"] = spec``.
+        Named ``sim-<scenario>``, with ``meta["source_spec"] = spec``; its truth at the IMU rate
+        (:func:`gnssacc.sources.sim.dense_truth_rate`).
     """
     from dataclasses import replace
 
-    from .sim import simulate
+    from .sim import dense_truth_rate, simulate
 
-    run = simulate(**parse_sim_spec(spec), noise=noise or "white", seed=seed, velocity=True)
+    args = parse_sim_spec(spec)
+    rate = dense_truth_rate(args.get("imu_rate_hz", DEFAULTS["imu_hz"][1]))
+    run = simulate(**args, noise=noise or "white", seed=seed, velocity=True, truth_rate_hz=rate)
     return replace(run, meta={**run.meta, "source_spec": spec})
 
 
