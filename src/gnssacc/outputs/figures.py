@@ -630,9 +630,8 @@ def plot_nis(
         if t is None or nis is None or not len(nis):
             continue
         line = {**style(mid), "ls": ":"}
-        ax.plot(
-            np.asarray(t) - run.t_start, _moving_mean(nis, window), label=f"{mid} velocity", **line
-        )
+        t = np.asarray(t, float)
+        ax.plot(t - run.t_start, moving_mean(t, nis, window), label=f"{mid} velocity", **line)
         vel = True
     if not drawn:
         ax.text(0.5, 0.5, "no EKF innovations in this run", transform=ax.transAxes, ha="center")
