@@ -106,7 +106,12 @@ def prepare(
     gm = any(METHODS.get(m) is _gm for m in methods)
     if cache is None:
         return prepare_recording(
-            run, cfg, tune, filter_pass=filter_pass, gauss_markov=gm, on_checked=on_checked,
+            run,
+            cfg,
+            tune,
+            filter_pass=filter_pass,
+            gauss_markov=gm,
+            on_checked=on_checked,
             on_stage=on_stage,
         )
     from .prepare.gauss_markov import gm_setup

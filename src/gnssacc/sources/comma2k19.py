@@ -73,7 +73,9 @@ def _stream(root: Path, rel: Path, what: str, cols: int) -> tuple[np.ndarray, np
     t = _array(root, rel / "t", what)
     v = _array(root, rel / "value", what).reshape(len(t), -1)
     if v.shape[1] < cols:
-        raise InputError(str(root / rel / "value"), f"{what}: {v.shape[1]} columns, expected {cols}")
+        raise InputError(
+            str(root / rel / "value"), f"{what}: {v.shape[1]} columns, expected {cols}"
+        )
     good = np.isfinite(t) & np.all(np.isfinite(v[:, :cols]), axis=1)
     order = np.argsort(t[good], kind="stable")
     t, v = t[good][order], v[good][order]
@@ -140,7 +142,9 @@ def _reference(root: Path) -> Truth:
     r_e = _array(root, POSE_DIR / "frame_positions", "the reference positions").reshape(-1, 3)
     v_e = _array(root, POSE_DIR / "frame_velocities", "the reference velocities").reshape(-1, 3)
     if not (len(t) == len(r_e) == len(v_e)):
-        raise InputError(str(root / POSE_DIR), "frame_times, positions, velocities differ in length")
+        raise InputError(
+            str(root / POSE_DIR), "frame_times, positions, velocities differ in length"
+        )
     lat, lon, h = ecef_to_llh(r_e)
     v_n = np.einsum("kij,kj->ki", R_en_batch(lat, lon), v_e)
     return Truth(t, lat, lon, h, v_n=v_n, caveat=REFERENCE_CAVEAT)

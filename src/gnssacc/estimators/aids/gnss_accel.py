@@ -295,7 +295,7 @@ class SmootherAccel(SmootherAid):
         full, a_n, var = velocity_accelerations(
             ep.t[pushed], v, sub.sigma_ned, acc.window, acc.max_gap_s
         )
-        self.acc = {
+        self.acc: dict[int, tuple] = {
             int(k): (np.nan_to_num(a_n[j]), np.where(np.isfinite(a_n[j]), var[j], 1.0),
                      np.isfinite(a_n[j]))
             for j, k in enumerate(pushed.tolist())
@@ -418,7 +418,7 @@ class SmootherAccel(SmootherAid):
         if any(n is None or not in_window(n) for n in nodes):
             self.stats["n_acc_skipped_window"] = self.stats.get("n_acc_skipped_window", 0) + 1
             return
-        keys = [tuple(gtsam.symbol(c, n) for c in (SYM_X, SYM_V, SYM_B)) for n in nodes]
+        keys = [tuple(gtsam.symbol(c, int(n or 0)) for c in (SYM_X, SYM_V, SYM_B)) for n in nodes]
         graph.add(
             velocity_window_accel_factor(
                 keys,
