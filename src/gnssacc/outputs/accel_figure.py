@@ -95,10 +95,9 @@ def plot_accel_effect(run: RecordedRun, sols: dict, metrics: dict, path: Path) -
     if run.outages:
         axes[0, 0].legend(fontsize=8, loc="upper right")
     fig.suptitle(
-        f"{run.name}: what the GNSS-derived acceleration changes (paired, same epochs; dashed: "
-        f"mean, band: its 95 % interval from {effects[0].n_batches} batch means"
-        + ("" if effects[0].truth else "; no truth: agreement with the fixes, not accuracy")
-        + ")",
+        f"{run.name}: what the GNSS-derived acceleration changes (paired, same epochs)\n"
+        f"dashed: mean, band: its 95 % interval from {effects[0].n_batches} batch means"
+        + ("" if effects[0].truth else "; no truth: agreement with the fixes, not accuracy"),
         fontsize=10,
     )
     fig.tight_layout()
