@@ -385,13 +385,11 @@ def write_gnss_file(
 
 
 def _nmea_speed_course(gnss: GnssFixes, v_fix, truth):
-    """NMEA's speed [m/s] and course [deg] at the fixes: of the velocities, else of the truth's
-    (the simulator's way before velocities existed), else none."""
+    """NMEA's speed [m/s] and course [deg] at the fixes: of the measured velocities, else none.
+    Never the truth's: the reader takes RMC's speed as a measured velocity, and a truth written
+    there would aid the estimators with the answer."""
     if v_fix is not None:
         return speed_course(v_fix)
-    if truth is not None and truth.v_n is not None:
-        v = np.column_stack([np.interp(gnss.t, truth.t, truth.v_n[:, i]) for i in range(3)])
-        return np.hypot(v[:, 0], v[:, 1]), np.degrees(np.arctan2(v[:, 1], v[:, 0]))
     return None, None
 
 
