@@ -66,6 +66,19 @@ FIX_QUALITY = {
 FIX_QUALITY_NAMES = {v: k for k, v in FIX_QUALITY.items()}
 
 
+def cov_from_sigmas(sigma, corr=None) -> np.ndarray:
+    """NED covariances ``diag(sigma) C diag(sigma)`` from 1-sigmas ``sigma`` (shape (..., 3)) and
+    correlations ``corr = (rho_ne, rho_nd, rho_ed)`` (shape (..., 3); None: the identity ``C``)."""
+    s = np.asarray(sigma, float)
+    C = np.broadcast_to(np.eye(3), s.shape[:-1] + (3, 3)).copy()
+    if corr is not None:
+        r = np.asarray(corr, float)
+        C[..., 0, 1] = C[..., 1, 0] = r[..., 0]
+        C[..., 0, 2] = C[..., 2, 0] = r[..., 1]
+        C[..., 1, 2] = C[..., 2, 1] = r[..., 2]
+    return s[..., :, None] * C * s[..., None, :]
+
+
 @dataclass
 class GnssFixes:
     """GNSS position fixes of the antenna.
@@ -123,14 +136,8 @@ class GnssFixes:
         """The NED covariance [m^2] of fix ``k`` (shape (3, 3)) or of fixes ``k`` (an index array:
         shape (K, 3, 3)): ``diag(sigma) C diag(sigma)``, ``C`` from :attr:`corr_ned` (the
         identity without it)."""
-        s = np.asarray(self.sigma_ned[k], float)
-        C = np.broadcast_to(np.eye(3), s.shape[:-1] + (3, 3)).copy()
-        if self.corr_ned is not None:
-            r = np.asarray(self.corr_ned[k], float)
-            C[..., 0, 1] = C[..., 1, 0] = r[..., 0]
-            C[..., 0, 2] = C[..., 2, 0] = r[..., 1]
-            C[..., 1, 2] = C[..., 2, 1] = r[..., 2]
-        return s[..., :, None] * C * s[..., None, :]
+        corr = None if self.corr_ned is None else self.corr_ned[k]
+        return cov_from_sigmas(self.sigma_ned[k], corr)
 
 
 @dataclass
@@ -179,14 +186,8 @@ class GnssVelocity:
     def cov_ned(self, k) -> np.ndarray:
         """The NED covariance [m^2/s^2] of velocity ``k`` (shape (3, 3)) or of velocities ``k``
         (an index array: shape (K, 3, 3)); rows and columns of unmeasured axes are NaN."""
-        s = np.asarray(self.sigma_ned[k], float)
-        C = np.broadcast_to(np.eye(3), s.shape[:-1] + (3, 3)).copy()
-        if self.corr_ned is not None:
-            r = np.asarray(self.corr_ned[k], float)
-            C[..., 0, 1] = C[..., 1, 0] = r[..., 0]
-            C[..., 0, 2] = C[..., 2, 0] = r[..., 1]
-            C[..., 1, 2] = C[..., 2, 1] = r[..., 2]
-        return s[..., :, None] * C * s[..., None, :]
+        corr = None if self.corr_ned is None else self.corr_ned[k]
+        return cov_from_sigmas(self.sigma_ned[k], corr)
 
 
 def check_gnss_velocity(vel: GnssVelocity, where: str) -> None:
