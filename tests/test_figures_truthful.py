@@ -237,3 +237,19 @@ def test_the_preparation_says_each_stage_without_a_terminal(capsys):
     ]
     StageProgress(2, enable=False)("input checks")
     assert capsys.readouterr().err == ""
+
+
+def test_a_truth_with_a_caveat_says_it_on_the_report(result, tmp_path):
+    """A reference that is not an independent truth (comma2k19's optimiser pose) says so at the
+    top of the report, not only in a printed warning."""
+    caveat = "the reference fuses these fixes: not an independent truth"
+    run = replace(result.run, truth=replace(result.run.truth, caveat=caveat))
+    page = write_html_report(
+        tmp_path, run, result.solutions, result.metrics, None, figures={}
+    ).read_text()
+    top = page[: page.index("<nav>")]
+    assert f"<b>Truth:</b> {caveat}" in top
+    plain = write_html_report(
+        tmp_path, result.run, result.solutions, result.metrics, None, figures={}
+    ).read_text()
+    assert "<b>Truth:</b>" not in plain

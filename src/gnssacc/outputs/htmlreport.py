@@ -415,13 +415,15 @@ def write_html_report(
     nav = "".join(
         f'<a href="#s{i}">{html.escape(t.split(":")[0])}</a>' for i, (t, _) in enumerate(sections)
     )
+    caveat = run.truth.caveat if run.truth is not None else ""
+    caveat_html = f"<p><b>Truth:</b> {html.escape(caveat)}</p>" if caveat else ""
     page = f"""<!doctype html>
 <html><head><meta charset="utf-8"><title>gnssacc report: {html.escape(run.name)}</title>
 <style>{_STYLE}</style></head><body>
 <h1>gnssacc report: {html.escape(run.name)}</h1>
 <p>Source: {html.escape(where)}; {run.duration_s:.1f} s, {len(run.imu)} IMU samples, {len(run.gnss)} GNSS fixes;
 configuration: {html.escape(", ".join(metrics.get("config_sources", [])))}.</p>
-<nav>{nav}</nav>
+{caveat_html}<nav>{nav}</nav>
 {body}</body></html>
 """
     path = folder / "report.html"
