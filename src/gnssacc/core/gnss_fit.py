@@ -82,6 +82,14 @@ def ls_acceleration(
     return a_n, cov
 
 
+def full_window_ends(t: np.ndarray, m: int, max_gap_s: float) -> np.ndarray:
+    """Indices ``j`` of the samples that complete a full window ``j - m + 1 .. j`` of times ``t``
+    [s]: one in which no interval exceeds ``max_gap_s`` [s] (a window is cleared at a gap)."""
+    bad = np.concatenate([[0], np.cumsum(np.diff(t) > max_gap_s)])  # gaps before sample j
+    j = np.arange(m - 1, len(t))
+    return j[bad[j] == bad[j - m + 1]]
+
+
 def window_accelerations(
     t: np.ndarray,
     p_n: np.ndarray,
@@ -123,11 +131,7 @@ def window_accelerations(
     a_n, var = np.full((M, 3), np.nan), np.full((M, 3), np.nan)
     if M < m:
         return full, a_n, var
-    gap = np.diff(t) > max_gap_s  # gap[j]: between fixes j and j + 1
-    bad = np.concatenate([[0], np.cumsum(gap)])  # gaps before fix j
-    j = np.arange(m - 1, M)
-    ok = bad[j] == bad[j - m + 1]
-    j = j[ok]
+    j = full_window_ends(t, m, max_gap_s)
     full[j] = True
     idx = j[:, None] + np.arange(1 - m, 1)  # (K, m) fix indices per window
     T = t[idx]
@@ -183,9 +187,7 @@ def velocity_accelerations(
     a_n, var = np.full((M, 3), np.nan), np.full((M, 3), np.nan)
     if M < m:
         return full, a_n, var
-    bad = np.concatenate([[0], np.cumsum(np.diff(t) > max_gap_s)])
-    j = np.arange(m - 1, M)
-    j = j[bad[j] == bad[j - m + 1]]
+    j = full_window_ends(t, m, max_gap_s)
     full[j] = True
     idx = j[:, None] + np.arange(1 - m, 1)
     u = t[idx] - t[idx].mean(axis=1, keepdims=True)

@@ -39,7 +39,7 @@ from ..core.parallel import usable_jobs
 from ..core.recording import InitialState, RecordedRun
 from ..core.states import ATT, BA, BG, POS, VEL
 from .filter_pass import FilterPass
-from .tuning import ungated, without_aids
+from .tuning import run_white_stats, ungated, without_aids
 
 #: IMU seconds each trial pass covers on a windowed run [s].
 SPAN_S = 600.0
@@ -300,21 +300,6 @@ class WindowedPass:
         self.workers, self.jobs = None, 1
 
 
-def _whole_run_stats(run, cfg, init, stationary, quality, method, filter_pass) -> dict:
-    """One pass over the whole run with ``cfg`` (ungated), its start's position sigma scaled with
-    the fixes' as the tuner scales it."""
-    return filter_pass(
-        run,
-        ungated(cfg),
-        method,
-        init=init,
-        stationary=stationary,
-        quality=quality,
-        output_times=np.zeros(0),
-        cov_every=int(cfg["tune"]["cov_every"]),
-    ).stats
-
-
 def tuned_on_windows(run, cfg, stationary, quality, init, noise, *, filter_pass: FilterPass):
     """:func:`gnssacc.prepare.tuning.tune` on the windows of a long run, confirmed over the whole
     run (module notes): ``(cfg, result)`` as :func:`~gnssacc.prepare.tuning.tune` gives them, the
@@ -338,9 +323,13 @@ def tuned_on_windows(run, cfg, stationary, quality, init, noise, *, filter_pass:
     method = "ekf-acc" if cfg["tune"]["likelihood"] == "position+accel" else "ekf"
     kinds += ("acc",) if method == "ekf-acc" else ()
     scale = float(cfg_t["gnss"]["sigma_scale"]) / float(cfg["gnss"]["sigma_scale"])
-    before = _whole_run_stats(run, cfg, init, stationary, quality, method, filter_pass)
+    before = run_white_stats(
+        run, cfg, stationary, quality, init, filter_pass=filter_pass, method=method
+    )
     tuned_init = replace(init, sigma_pos_m=init.sigma_pos_m * scale)
-    after = _whole_run_stats(run, cfg_t, tuned_init, stationary, quality, method, filter_pass)
+    after = run_white_stats(
+        run, cfg_t, stationary, quality, tuned_init, filter_pass=filter_pass, method=method
+    )
     gain = sum(after[f"loglik_{k}"] - before[f"loglik_{k}"] for k in kinds)
     info = dict(result.from_stationary)
     info["windows"] = {

@@ -1002,14 +1002,21 @@ def tune_gauss_markov(
 
 
 def run_white_stats(
-    run, cfg: RunConfig, stationary=None, quality=None, init=None, *, filter_pass: FilterPass
+    run,
+    cfg: RunConfig,
+    stationary=None,
+    quality=None,
+    init=None,
+    *,
+    filter_pass: FilterPass,
+    method: str = "ekf",
 ) -> dict:
-    """The innovation statistics of one EKF pass with ``cfg`` as it is on ``run`` (already
-    scaled)."""
+    """The innovation statistics of one (ungated) EKF pass of ``method`` with ``cfg`` as it is on
+    ``run`` (already scaled)."""
     return filter_pass(
         run,
         ungated(cfg),
-        "ekf",
+        method,
         init=init,
         stationary=stationary,
         quality=quality,
