@@ -181,6 +181,20 @@ def test_verdict_without_truth_names_the_most_consistent():
     assert verdict_line(m).startswith("verdict (no truth: accuracy cannot be scored): smoother")
 
 
+def test_verdict_without_truth_passes_over_a_flagged_nis():
+    # A mean NIS of 1.0 made of innovations a warning flags (correlated, out of band most of the
+    # run) is no evidence of consistency: the unflagged method is named; when all are flagged, the
+    # nearest is named and the verdict says they are flagged.
+    m = _metrics({"ekf": None, "smoother": None}, None, {"ekf": 1.0, "smoother": 1.3})
+    m["consistency"]["ekf"]["flags"] = ["nis"]
+    line = verdict_line(m)
+    assert line.startswith("verdict (no truth: accuracy cannot be scored): smoother"), line
+    assert "flagged" not in line
+    m["consistency"]["smoother"]["flags"] = ["fixes", "nis"]
+    line = verdict_line(m)
+    assert ": ekf is the most consistent" in line and "every method's NIS is flagged" in line, line
+
+
 def test_the_printed_table_starts_with_the_verdict(result):
     assert format_table(result.metrics).splitlines()[0].startswith("verdict: ")
 

@@ -344,7 +344,8 @@ def _position_trust(metrics: dict, mid: str) -> str:
 def verdict_line(metrics: dict) -> str | None:
     """The first-screen answer: which method, how good (against the raw fixes), how sure; or
     that no method beats the fixes. Methods within :data:`TIE` of the best are named with it.
-    Without truth: accuracy cannot be scored; the method whose NIS is nearest 1 is named."""
+    Without truth: accuracy cannot be scored; the method whose NIS is nearest 1 among those no
+    NIS warning flags is named (with a caveat when every method is flagged)."""
     ok = ok_methods(metrics)
     if not ok:
         return None
@@ -373,10 +374,17 @@ def verdict_line(metrics: dict) -> str | None:
     }
     if not nis:
         return "verdict: no truth and no NIS: neither accuracy nor consistency can be told"
-    best = min(nis, key=lambda mid: abs(math.log(nis[mid])))
+    # A mean NIS near 1 says little when a warning flags the innovations (correlated, out of band
+    # most of the run): such a method is named only when every method is flagged, and then so said.
+    flagged = {mid for mid in nis if "nis" in (_get(metrics, "consistency", mid, "flags") or [])}
+    best = min(
+        [mid for mid in nis if mid not in flagged] or list(nis),
+        key=lambda mid: abs(math.log(nis[mid])),
+    )
+    caveat = "; but every method's NIS is flagged (see the warnings)" if best in flagged else ""
     return (
         f"verdict (no truth: accuracy cannot be scored): {best} is the most consistent "
-        f"(position NIS {nis[best]:.2f}, 1 = consistent)"
+        f"(position NIS {nis[best]:.2f}, 1 = consistent){caveat}"
     )
 
 
