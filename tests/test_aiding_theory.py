@@ -67,3 +67,33 @@ def test_uncorrelated_acceleration_is_overconfident():
     np.testing.assert_allclose(dep, r["paper"]["stated_var"] / r["paper"]["error_var"])
     ref = r["position"]["stated_var"] / r["position"]["error_var"]
     assert np.all(dep < ref) and dep[1] < 0.8
+
+
+def test_known_velocity_error_is_the_running_mean_of_the_fix_errors():
+    # Closed form: the floor of velocity aiding is the mean fix error so far (a filter) or up to
+    # the lag (a fixed-lag smoother); between fixes it holds the last one's value.
+    from gnssacc.analysis.aiding_theory import known_velocity_error
+
+    t_fix = np.arange(5.0)
+    err = np.array([[3.0, 0.0], [-1.0, 2.0], [1.0, 4.0], [-3.0, 2.0], [0.0, 2.0]])
+    causal = known_velocity_error(t_fix, err, np.array([0.0, 0.5, 1.0, 2.9, 4.0]))
+    np.testing.assert_allclose(
+        causal, [[3.0, 0.0], [3.0, 0.0], [1.0, 1.0], [1.0, 2.0], [0.0, 2.0]]
+    )
+    lagged = known_velocity_error(t_fix, err, np.array([0.0, 3.0]), lag_s=2.0)
+    np.testing.assert_allclose(lagged, [[1.0, 2.0], [0.0, 2.0]])
+    with pytest.raises(ValueError, match="before the first fix"):
+        known_velocity_error(t_fix, err, np.array([-0.1]))
+
+
+def test_known_velocity_error_falls_as_one_over_root_n_on_white_fixes():
+    # Monte Carlo against the closed form: with white errors of variance s^2 the error after n
+    # fixes has variance s^2 / n.
+    from gnssacc.analysis.aiding_theory import known_velocity_error
+
+    rng = np.random.default_rng(3)
+    n, runs = 100, 4000
+    t_fix = np.arange(float(n))
+    at = np.array([0.0, 9.0, 99.0])
+    e = np.stack([known_velocity_error(t_fix, rng.normal(0, 3.0, (n, 1)), at)[:, 0] for _ in range(runs)])
+    np.testing.assert_allclose(e.var(axis=0), 9.0 / np.array([1, 10, 100]), rtol=0.08)

@@ -500,3 +500,39 @@ def _kl(m: FgChain, Pb: np.ndarray, Pa: np.ndarray, dG: np.ndarray) -> float:
     _, ld_b = np.linalg.slogdet(Pb)
     mean_term = np.trace(np.linalg.solve(Pa, dG @ Sz @ dG.T))
     return float(0.5 * (np.trace(np.linalg.solve(Pa, Pb)) - k + ld_a - ld_b + mean_term))
+
+
+def known_velocity_error(
+    t_fix: np.ndarray, err_fix: np.ndarray, t: np.ndarray, lag_s: float = 0.0
+) -> np.ndarray:
+    """Position error of an estimator that knows the velocity exactly: the floor of velocity aiding.
+
+    Knowing the velocity fixes the trajectory up to one constant offset; from fixes with white
+    errors of equal variance the best estimate of that offset at time ``t`` is the mean error of
+    the fixes up to ``t + lag_s`` (0: a filter; the lag of a fixed-lag smoother), so no estimator
+    aided by the same fixes and any velocity measurement has a smaller mean-square error in
+    expectation (it knows less). With time-correlated fix errors the mean is not the best estimate
+    and this is no bound.
+
+    Parameters
+    ----------
+    t_fix : (n,) array
+        Fix times [s], increasing.
+    err_fix : (n, k) array
+        The fixes' errors against the truth [m] (any frame; NED in the benches).
+    t : (m,) array
+        Times to evaluate [s], none before the first fix.
+    lag_s : float
+        How far past ``t`` the estimator may look [s].
+
+    Returns
+    -------
+    (m, k) array
+        The error at each of ``t`` [m].
+    """
+    err = np.asarray(err_fix, float)
+    mean = np.cumsum(err, axis=0) / np.arange(1, len(err) + 1)[:, None]
+    k = np.searchsorted(np.asarray(t_fix, float), np.asarray(t, float) + lag_s, side="right") - 1
+    if np.any(k < 0):
+        raise ValueError("known_velocity_error: a time before the first fix")
+    return mean[k]
