@@ -95,5 +95,7 @@ def test_known_velocity_error_falls_as_one_over_root_n_on_white_fixes():
     n, runs = 100, 4000
     t_fix = np.arange(float(n))
     at = np.array([0.0, 9.0, 99.0])
-    e = np.stack([known_velocity_error(t_fix, rng.normal(0, 3.0, (n, 1)), at)[:, 0] for _ in range(runs)])
+    e = np.stack(
+        [known_velocity_error(t_fix, rng.normal(0, 3.0, (n, 1)), at)[:, 0] for _ in range(runs)]
+    )
     np.testing.assert_allclose(e.var(axis=0), 9.0 / np.array([1, 10, 100]), rtol=0.08)

@@ -81,3 +81,10 @@ def test_acceleration_aiding_notebook_answers_from_the_stored_study():
     ):
         assert variant in answer, (variant, answer)
     assert len(list((NB_DIR / "data" / "acceleration_aiding").glob("*.csv.gz"))) >= 1
+    # ... and the velocity form's stored runs: the velocity updates against their floor, and each
+    # velocity-derived acceleration against both baselines.
+    assert "5. Doppler velocity" in answer and "knew the velocity exactly" in answer, answer
+    for variant in ("ekf-vacc ", "ekf-vaccw ", "smoother-vacc ", "smoother-vaccw "):
+        for base in ("(pos only)", "(pos+vel)"):
+            assert f"{variant.strip():14s} vs {variant.split('-')[0]} {base}" in answer, answer
+    assert (NB_DIR / "data" / "velocity_aiding" / "white.json").is_file()
