@@ -29,7 +29,7 @@ gyros
    parameters the data barely inform from wandering (the one-step position innovations of 1 Hz
    metre-level fixes say little about the white noise, and will trade it for unmodelled errors
    such as scale factors) and costs a well-informed parameter nothing. ``J`` is minimised by
-   Nelder-Mead (scipy) within
+   Nelder-Mead (scipy's steps, :mod:`gnssacc.prepare.nelder_mead`) within
    ``[tune] max_evaluations`` EKF passes (after a probe of each parameter at +-1 decade,
    :func:`ml_search`), each bounded to +-2 decades; the passes propagate the covariance every
    ``[tune] cov_every`` samples for speed.
@@ -428,8 +428,13 @@ def ml_search(
     The generic part of the tuner: first each coordinate in turn is probed at ``+-probe_decades``
     and moved there when that is better (the starting values can be decades off, e.g. industrial
     defaults for a tactical IMU, and a local simplex does not travel that far within a small
-    budget); then Nelder-Mead (scipy) from there with an initial simplex of ``step_decades`` per
-    axis; at most ``budget`` evaluations in all, each ``theta`` clipped to +-:data:`_BOUND_DECADES`.
+    budget); then Nelder-Mead (scipy's, :func:`gnssacc.prepare.nelder_mead.nelder_mead`) from
+    there with an initial simplex of ``step_decades`` per axis; at most ``budget`` evaluations in
+    all, each ``theta`` clipped to +-:data:`_BOUND_DECADES`. When ``negloglik`` has an
+    ``ahead(points)`` method (:class:`_Objective`: the points evaluated side by side in forked
+    processes), it is told the points the search will, or may, ask for next (both directions of
+    a coordinate's probe, the simplex's vertices, a shrink's); the search asks for the same points
+    in the same order either way, so it ends at the same point.
 
     Parameters
     ----------
