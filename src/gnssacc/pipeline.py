@@ -24,7 +24,7 @@ from .core.config_docs import resolved_toml
 from .core.errors import InputError, warn_data
 from .core.interrupts import raise_if_interrupted
 from .core.memory import release_free_memory
-from .core.parallel import usable_jobs
+from .core.parallel import side_by_side, usable_jobs
 from .core.recording import RecordedRun
 from .core.solution import NavSolution
 from .estimators import kernels
@@ -478,10 +478,11 @@ def run_methods(
     """
     prep = prep or prepare(run, cfg, tune, methods)
     out: dict[str, NavSolution] = {}
+    done = methods_side_by_side(prep, methods, show_progress, observers)
     for m in methods:
         try:
             extra = {"observer": observers[m]} if observers and m in observers else {}
-            got = METHODS[m](prep, m, show_progress, **extra)
+            got = done[m] if m in done else METHODS[m](prep, m, show_progress, **extra)
             out.update(got)
             release_free_memory()  # one method's work arrays, before the next one's
             if say:
@@ -499,6 +500,57 @@ def run_methods(
             if say:
                 say(f"{m}: failed ({failures[m]})")
     return out
+
+
+#: Relative cost of a method, to share the methods among processes (a smoother ~4 EKF passes).
+_SMOOTHER_WEIGHT = 4.0
+
+
+def method_groups(methods, observers: dict | None, jobs: int) -> list[list[str]]:
+    """``methods`` shared among ``jobs`` processes, the heaviest first to the lightest share (a
+    smoother weighs :data:`_SMOOTHER_WEIGHT` EKF passes); the first share is this process's and
+    has every method watched by an observer (it must run here). Empty shares are left out."""
+    groups: list[list[str]] = [[] for _ in range(max(1, jobs))]
+    load = [0.0] * len(groups)
+    for m in (m for m in methods if observers and m in observers):
+        groups[0].append(m)
+        load[0] += 1.0
+    rest = [m for m in methods if not (observers and m in observers)]
+    weight = {m: _SMOOTHER_WEIGHT if METHODS.get(m) is _smoother else 1.0 for m in rest}
+    for m in sorted(rest, key=lambda m: -weight[m]):
+        k = int(np.argmin(load))
+        groups[k].append(m)
+        load[k] += weight[m]
+    return [g for k, g in enumerate(groups) if g or k == 0]
+
+
+def methods_side_by_side(
+    prep: Prepared, methods, show_progress: bool, observers: dict | None
+) -> dict[str, dict[str, NavSolution]]:
+    """The methods' solutions, ``{method: its solutions}``, run side by side in processes
+    (:func:`gnssacc.core.parallel.side_by_side`, shared by :func:`method_groups`) when there are
+    several processes and methods; empty when they run one after the other. A method that failed
+    in a worker is absent (it is run again in this process, which raises or records its failure
+    as it would alone); progress bars only for this process's share."""
+    groups = method_groups(methods, observers, usable_jobs())
+    if len(groups) < 2:
+        return {}
+
+    def share(k: int) -> dict:
+        got: dict = {}
+        for m in groups[k]:
+            extra = {"observer": observers[m]} if observers and m in observers else {}
+            try:
+                got[m] = METHODS[m](prep, m, show_progress and k == 0, **extra)
+            except Exception:  # noqa: BLE001 (run again in this process, which says why)
+                continue
+            release_free_memory()
+        return got
+
+    done: dict = {}
+    for got in side_by_side(share, [(k,) for k in range(len(groups))], jobs=len(groups)):
+        done.update(got)
+    return done
 
 
 def failure_reason(exc: BaseException, limit: int = 200) -> str:

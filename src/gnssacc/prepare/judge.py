@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.config import RunConfig
+from ..core.parallel import side_by_side
 from ..core.recording import RecordedRun
 from .filter_pass import FilterPass
 from .start import StartPieces
@@ -268,9 +269,11 @@ def judge(
 ) -> Verdict:
     """The verdict on ``corrected`` against ``given``, each from its own start (module notes;
     ``vehicle``: with the ground-vehicle model, for a correction of the axes)."""
-    return compare(
-        innovations(given, cfg, given_pieces, filter_pass, vehicle=vehicle),
-        innovations(corrected, cfg, corrected_pieces, filter_pass, vehicle=vehicle),
-        log_jacobian,
-        vehicle=vehicle,
+    pairs = ((given, given_pieces), (corrected, corrected_pieces))
+    # the two passes side by side (forked: each process holds both runs; only the innovations
+    # travel), the same as one after the other
+    as_given, as_corrected = side_by_side(
+        lambda k: innovations(pairs[k][0], cfg, pairs[k][1], filter_pass, vehicle=vehicle),
+        [(0,), (1,)],
     )
+    return compare(as_given, as_corrected, log_jacobian, vehicle=vehicle)

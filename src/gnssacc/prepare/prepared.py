@@ -37,6 +37,7 @@ import numpy as np
 from ..checks.quality import QualityReport
 from ..core.config import RunConfig
 from ..core.memory import release_free_memory
+from ..core.parallel import close_pool
 from ..core.recording import InitialState, RecordedRun
 from ..estimators.settings import GnssModel
 from .filter_pass import FilterPass
@@ -206,4 +207,5 @@ def prepare(
         from .gauss_markov import gm_setup
 
         prep = replace(prep, gauss_markov=gm_setup(prep, filter_pass=filter_pass))
+    close_pool()  # the tuner's workers (evaluating its passes side by side) are done
     return prep

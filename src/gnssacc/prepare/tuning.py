@@ -29,7 +29,7 @@ gyros
    parameters the data barely inform from wandering (the one-step position innovations of 1 Hz
    metre-level fixes say little about the white noise, and will trade it for unmodelled errors
    such as scale factors) and costs a well-informed parameter nothing. ``J`` is minimised by
-   Nelder-Mead (scipy) within
+   Nelder-Mead (scipy's steps, :mod:`gnssacc.prepare.nelder_mead`) within
    ``[tune] max_evaluations`` EKF passes (after a probe of each parameter at +-1 decade,
    :func:`ml_search`), each bounded to +-2 decades; the passes propagate the covariance every
    ``[tune] cov_every`` samples for speed.
@@ -94,9 +94,11 @@ import numpy as np
 
 from ..core.config import RunConfig, toml_value
 from ..core.errors import InputError
+from ..core.parallel import side_by_side, usable_jobs
 from ..estimators.aids import REGISTRY
 from ..estimators.settings import GnssModel
 from .filter_pass import FilterPass
+from .nelder_mead import nelder_mead
 
 #: The IMU noise parameters: (section, key).
 IMU_PARAMETERS = (
@@ -345,6 +347,7 @@ class _Objective:
         self.cov_every = int(cfg["tune"]["cov_every"])
         self.init_scale = float(cfg["gnss"]["sigma_scale"])  # the scale the start was made with
         self.stats: dict = {}
+        self.passes: dict = {}  # theta's bytes -> (negative log-likelihood, stats): passes made
 
     def config(self, theta) -> RunConfig:
         upd: dict = {}
@@ -358,6 +361,41 @@ class _Objective:
         return self.cfg.with_values(upd, "tuned")
 
     def __call__(self, theta) -> float:
+        theta = np.asarray(theta, float)
+        key = theta.tobytes()
+        if key not in self.passes:
+            self.passes[key] = self.evaluate(theta)
+        value, stats = self.passes[key]
+        self.stats[tuple(np.round(theta, 12))] = stats
+        return value
+
+    def ahead(self, thetas) -> None:
+        """Evaluate the points ``thetas`` not yet evaluated side by side
+        (:func:`gnssacc.core.parallel.side_by_side`; the workers kept for this objective), so
+        that the calls that follow find them: the same values as evaluated one by one. A point
+        whose pass raises is left to its call (which raises there, as without this)."""
+        todo = {}
+        for theta in thetas:
+            theta = np.asarray(theta, float)
+            if theta.tobytes() not in self.passes:
+                todo.setdefault(theta.tobytes(), theta)
+        if len(todo) < 2 or usable_jobs() < 2:
+            return
+        for key, got in zip(
+            todo, side_by_side(self.evaluate_safely, [(t,) for t in todo.values()], keep=True)
+        ):
+            if got is not None:
+                self.passes[key] = got
+
+    def evaluate_safely(self, theta: np.ndarray) -> tuple[float, dict] | None:
+        """:meth:`evaluate`, ``None`` where it raises."""
+        try:
+            return self.evaluate(theta)
+        except Exception:  # noqa: BLE001 (raised again when the point is called for)
+            return None
+
+    def evaluate(self, theta: np.ndarray) -> tuple[float, dict]:
+        """One EKF pass at ``theta``: the negative log-likelihood and the pass's statistics."""
         cfg = self.config(theta)
         scale = float(cfg["gnss"]["sigma_scale"])
         # The start's position sigma is that of the fixes it came from: it scales with them.
@@ -372,8 +410,7 @@ class _Objective:
             output_times=np.zeros(0),
             cov_every=self.cov_every,
         )
-        self.stats[tuple(np.round(theta, 12))] = sol.stats
-        return -_loglik(sol.stats, self.kinds)
+        return -_loglik(sol.stats, self.kinds), sol.stats
 
 
 def ml_search(
@@ -391,8 +428,13 @@ def ml_search(
     The generic part of the tuner: first each coordinate in turn is probed at ``+-probe_decades``
     and moved there when that is better (the starting values can be decades off, e.g. industrial
     defaults for a tactical IMU, and a local simplex does not travel that far within a small
-    budget); then Nelder-Mead (scipy) from there with an initial simplex of ``step_decades`` per
-    axis; at most ``budget`` evaluations in all, each ``theta`` clipped to +-:data:`_BOUND_DECADES`.
+    budget); then Nelder-Mead (scipy's, :func:`gnssacc.prepare.nelder_mead.nelder_mead`) from
+    there with an initial simplex of ``step_decades`` per axis; at most ``budget`` evaluations in
+    all, each ``theta`` clipped to +-:data:`_BOUND_DECADES`. When ``negloglik`` has an
+    ``ahead(points)`` method (:class:`_Objective`: the points evaluated side by side in forked
+    processes), it is told the points the search will, or may, ask for next (both directions of
+    a coordinate's probe, the simplex's vertices, a shrink's); the search asks for the same points
+    in the same order either way, so it ends at the same point.
 
     Parameters
     ----------
@@ -418,8 +460,6 @@ def ml_search(
         Its objective value.
     n_evaluations : int
     """
-    from scipy.optimize import minimize
-
     best = [np.inf, np.zeros(n)]
     count = [0]
     lo = (
@@ -438,9 +478,15 @@ def ml_search(
             best[:] = [j, np.array(theta)]
         return j
 
+    def ahead(points, room=None):  # evaluated side by side where the objective can
+        if hasattr(negloglik, "ahead"):
+            room = budget - count[0] if room is None else room
+            negloglik.ahead([np.clip(x, lo, _BOUND_DECADES) for x in points[: max(room, 0)]])
+
     x0 = np.zeros(n) if theta0 is None else np.asarray(theta0, float)
     f0 = objective(x0)
     for i in range(n if probe_decades else 0):
+        ahead([x0 - probe_decades * np.eye(n)[i], x0 + probe_decades * np.eye(n)[i]])
         for d in (-probe_decades, probe_decades):
             if count[0] >= budget:
                 break
@@ -452,12 +498,7 @@ def ml_search(
     left = budget - count[0]
     if left > 1:
         simplex = x0 + np.vstack([np.zeros(n), step_decades * np.eye(n)])
-        minimize(
-            objective,
-            x0,
-            method="Nelder-Mead",
-            options={"maxfev": left, "initial_simplex": simplex, "xatol": 0.02, "fatol": 0.5},
-        )
+        nelder_mead(objective, simplex, left, 0.02, 0.5, ahead=ahead, width=usable_jobs())
     return best[1], best[0], count[0]
 
 
@@ -494,10 +535,14 @@ def draw_back(
     n, moved = (1, []) if value is None else (0, [])
     worst = float(negloglik(theta) if value is None else value) + SHRINK_TOLERANCE
     order = np.argsort(-np.abs(theta / np.broadcast_to(prior_decades, theta.shape)), kind="stable")
+    n_all = len(theta)
     for i in order:
         if abs(theta[i]) < SHRINK_MIN_DECADES or (eligible is not None and not eligible[i]):
             continue
         fails, keeps = 0.0, 1.0  # fractions of theta[i] kept: too little / enough for the data
+        if hasattr(negloglik, "ahead"):  # the first two trials (and the third's two) side by side
+            fracs = (0.0, 0.5, 0.25, 0.75)[: max(2, usable_jobs())]
+            negloglik.ahead([theta * np.where(np.arange(n_all) == i, f, 1.0) for f in fracs])
         for step in range(3):  # all the way back, then bisection: 0, 0.5, 0.25 or 0.75
             frac = 0.5 * (fails + keeps) if step else 0.0
             trial = theta.copy()
