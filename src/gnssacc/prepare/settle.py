@@ -87,6 +87,7 @@ def _evaluate(
             filter_pass,
             finding.details.get("log_jacobian_per_fix", 0.0),
             vehicle=finding.check == "mounting",
+            vel_shift=finding.details.get("vel_shift_s", 0.0),
         ),
         corrected,
         pieces,

@@ -158,6 +158,12 @@ def with_gnss_file(run: RecordedRun, path, cfg: RunConfig) -> RecordedRun:
     fixes); ``meta`` records the file (:func:`load_gnss_data`).
     """
     gnss, vel, meta = load_gnss_data(path, cfg, run.imu.t)
+    if vel is None and run.gnss_vel is not None:
+        warn_data(
+            str(path),
+            f"the file has no GNSS velocities: the source's {len(run.gnss_vel)} velocities are "
+            "dropped with its fixes (they belong to the receiver that made those)",
+        )
     return replace(run, gnss=gnss, gnss_vel=vel, meta={**run.meta, **meta}).validate()
 
 
