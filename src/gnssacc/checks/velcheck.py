@@ -18,7 +18,10 @@ over the fixes' stated variances are the view's cost.
   shifted by ``d`` (``|d|`` up to :data:`MAX_LAG_S`, steps of :data:`LAG_STEP_S`, refined by a
   parabola): a lag ``d`` makes the track lead or trail by the velocity times ``d``. A lag of at
   least :data:`MIN_LAG_S` that gains :data:`VIEW_GAIN` is proposed (the correction subtracts it
-  from the velocities' time tags); the estimator decides.
+  from the velocities' time tags); the estimator refines it by the likelihood and decides
+  (:mod:`gnssacc.prepare.velocity_time`).
+* A reading (or lag) is proposed only when it leaves the fixes explained (:func:`fits`): one that
+  leaves the velocities contradicting the fixes (a biased axis swapped for another) is not.
 * **Each axis** (:func:`axis_contradictions`): the root-mean-square of the fixes less the
   integrated track on one axis, against the fixes' noise on it (the larger of their stated sigma
   and the scatter of their fix-to-fix differences), beyond :data:`CONTRADICTION_RATIO`: the
@@ -164,14 +167,24 @@ def misfit(track: Track, P: np.ndarray, where: np.ndarray, axes: np.ndarray) -> 
 
 def cost(track: Track, r: np.ndarray) -> tuple[float, int]:
     """Sum of the misfits' squares over the stated variances, and its count."""
+    c, n = axis_costs(track, r)
+    return float(c.sum()), int(n.sum())
+
+
+def axis_costs(track: Track, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`cost` per axis: sums (3,) and counts (3,)."""
     ok = np.isfinite(r)
-    return float(np.sum((r[ok] / track.sigma[ok]) ** 2)), int(ok.sum())
+    z = np.where(ok, r / track.sigma, 0.0)
+    return np.sum(z**2, axis=0), np.sum(ok, axis=0)
 
 
-def _reading_cost(track, M, sid, axes, lag: float = 0.0, t_eval=None):
+def _reading_cost(track, M, sid, axes):
+    """The view's cost of the velocities reread by ``M``, its count, and whether the reading
+    explains the fixes on every axis (:func:`fits`)."""
     v = np.nan_to_num(track.vel.v_ned) @ M.T
-    P, where = integrated(track.vel, v, sid, track.t + lag if t_eval is None else t_eval)
-    return cost(track, misfit(track, P, where, axes))
+    P, where = integrated(track.vel, v, sid, track.t)
+    c, n = axis_costs(track, misfit(track, P, where, axes))
+    return float(c.sum()), int(n.sum()), all(fits(a, b) for a, b in zip(c, n, strict=True) if b)
 
 
 def frame_proposal(run: RecordedRun, cfg, where: str) -> Finding | None:
@@ -185,18 +198,19 @@ def frame_proposal(run: RecordedRun, cfg, where: str) -> Finding | None:
     if not axes[:2].all():
         return None
     sid = stretches(track.vel, axes)
-    given, n = _reading_cost(track, np.eye(3), sid, axes)
+    given, n, _ = _reading_cost(track, np.eye(3), sid, axes)
     if n < 2 * MIN_STRETCH_FIXES:
         return None
-    costs = {
-        name: _reading_cost(track, M, sid, axes)[0]
+    readings = {
+        name: _reading_cost(track, M, sid, axes)
         for name, M, _ in READINGS
         if axes[2] or name == "enu"
     }
+    costs = {k: v[0] for k, v in readings.items()}
     scale = max(1.0, min([given, *costs.values()]) / n)  # the noise scale the best reading leaves
     name = min(costs, key=lambda k: costs[k])
     gain = 0.5 * (given - costs[name]) / scale
-    if gain < VIEW_GAIN:
+    if gain < VIEW_GAIN or not readings[name][2]:
         return None
     M, text = next((M, text) for nm, M, text in READINGS if nm == name)
     if not axes[2]:
@@ -223,6 +237,14 @@ def frame_proposal(run: RecordedRun, cfg, where: str) -> Finding | None:
     )
 
 
+def fits(c: float, n: int) -> bool:
+    """Whether a reading whose cost on one axis is ``c`` over ``n`` fixes explains them: its misfit's
+    root-mean-square within :data:`CONTRADICTION_RATIO` of their stated noise (a reading that
+    leaves the velocities contradicting the fixes is not proposed: swapping a biased axis for
+    another moves the contradiction, it does not remove it)."""
+    return c / max(n, 1) < CONTRADICTION_RATIO**2
+
+
 def transformed(vel: GnssVelocity, M: np.ndarray) -> GnssVelocity:
     """``vel`` reread by the signed permutation ``M`` (3 x 3): velocities, sigmas and
     correlations."""
@@ -245,9 +267,10 @@ def with_velocities(run: RecordedRun, vel: GnssVelocity | None) -> RecordedRun:
     return replace(run, gnss_vel=vel)
 
 
-def lag_costs(track: Track, lags: np.ndarray) -> tuple[np.ndarray, int]:
+def lag_costs(track: Track, lags: np.ndarray) -> tuple[np.ndarray, int, np.ndarray]:
     """The view's cost of the velocities' time tags less each lag [s], over the fixes every lag
-    keeps in its stretch (the same fixes for every lag), and their count."""
+    keeps in its stretch (the same fixes for every lag), their count, and whether each lag
+    explains the fixes on every axis (:func:`fits`)."""
     axes = track.axes
     sid = stretches(track.vel, axes)
     v = np.nan_to_num(track.vel.v_ned)
@@ -257,13 +280,14 @@ def lag_costs(track: Track, lags: np.ndarray) -> tuple[np.ndarray, int]:
         P, where = integrated(track.vel, v, sid, track.t + d)
         runs.append((P, where))
         keep &= where >= 0
-    out = []
+    out, ok = [], []
     n = 0
     for P, where in runs:
-        w = np.where(keep, where, -1)
-        c, n = cost(track, misfit(track, P, w, axes))
-        out.append(c)
-    return np.array(out), n
+        c, k = axis_costs(track, misfit(track, P, np.where(keep, where, -1), axes))
+        out.append(float(c.sum()))
+        ok.append(all(fits(a, b) for a, b in zip(c, k, strict=True) if b))
+        n = int(k.sum())
+    return np.array(out), n, np.array(ok)
 
 
 def time_proposal(run: RecordedRun, cfg, where: str) -> Finding | None:
@@ -275,7 +299,7 @@ def time_proposal(run: RecordedRun, cfg, where: str) -> Finding | None:
     if not track.axes[:2].all():
         return None
     lags = np.round(np.arange(-MAX_LAG_S, MAX_LAG_S + 0.5 * LAG_STEP_S, LAG_STEP_S), 6)
-    costs, n = lag_costs(track, lags)
+    costs, n, explained = lag_costs(track, lags)
     if n < 2 * MIN_STRETCH_FIXES or not np.all(np.isfinite(costs)):
         return None
     k = int(np.argmin(costs))
@@ -288,7 +312,7 @@ def time_proposal(run: RecordedRun, cfg, where: str) -> Finding | None:
     zero = costs[int(np.argmin(np.abs(lags)))]
     scale = max(1.0, float(costs[k]) / n)
     gain = 0.5 * (zero - float(costs[k])) / scale
-    if abs(d) < MIN_LAG_S or gain < VIEW_GAIN:
+    if abs(d) < MIN_LAG_S or gain < VIEW_GAIN or not explained[k]:
         return None
     late = "behind" if d > 0 else "ahead of"
     return Finding(
@@ -346,7 +370,7 @@ def axis_contradictions(run: RecordedRun, cfg, where: str) -> Finding | None:
     sid = stretches(track.vel, measured)
     P, at = integrated(track.vel, np.nan_to_num(track.vel.v_ned), sid, track.t)
     r = misfit(track, P, at, measured)
-    said, details = [], {}
+    said, details, named = [], {}, []
     for i in np.flatnonzero(measured):
         ok = np.isfinite(r[:, i])
         if ok.sum() < 2 * MIN_STRETCH_FIXES:
@@ -362,6 +386,7 @@ def axis_contradictions(run: RecordedRun, cfg, where: str) -> Finding | None:
             if np.isfinite(scale)
             else "the velocities show no motion there"
         )
+        named.append(AXES[i])
         said.append(
             f"{AXES[i]}: the fixes depart from the integrated velocities by {rms:.1f} m RMS "
             f"against their noise of {noise:.1f} m ({fit}; velocity bias {bias:+.2f} m/s)"
@@ -374,5 +399,5 @@ def axis_contradictions(run: RecordedRun, cfg, where: str) -> Finding | None:
         "the GNSS velocities contradict the fixes on " + "; ".join(said),
         "check the velocity columns on those axes (units, sign, bias); --velocity off leaves the "
         "velocities out",
-        details={"axes": details},
+        details={"axes": details, "contradicting": named},
     )

@@ -29,6 +29,7 @@ from .clock import evaluate_offset, offset_sigma, unseen_offset
 from .filter_pass import FilterPass
 from .judge import MIN_FIXES, Verdict, compare, innovations, judge
 from .start import StartPieces, start_pieces
+from .velocity_time import evaluate_lag
 
 #: Most proposals settled for one run (each check proposes at most once).
 MAX_ROUNDS = len(CHECKS) + 2
@@ -75,6 +76,9 @@ def _evaluate(
         total = d["configured_s"] + d.get("measured_s", d["stage1_s"])
         finding.repaired = f"imu_time_offset_s = {total:.3f} (the IMU and the streams on its clock)"
         return verdict, corrected, None
+    if finding.check == "velocity_time":
+        verdict, corrected = evaluate_lag(run, cfg, finding, base, filter_pass)
+        return verdict, corrected, base
     corrected = finding.repair(run)
     pieces = start_pieces(corrected, cfg, filter_pass)
     return (
@@ -87,7 +91,6 @@ def _evaluate(
             filter_pass,
             finding.details.get("log_jacobian_per_fix", 0.0),
             vehicle=finding.check == "mounting",
-            vel_shift=finding.details.get("vel_shift_s", 0.0),
         ),
         corrected,
         pieces,
