@@ -142,7 +142,8 @@ def integrated(vel: GnssVelocity, v: np.ndarray, sid: np.ndarray, t_eval: np.nda
         ts, vs = vel.t[m], v[m]
         if len(ts) < 2:
             continue
-        cum = np.vstack([np.zeros(3), np.cumsum(0.5 * (vs[1:] + vs[:-1]) * np.diff(ts)[:, None], 0)])
+        steps = 0.5 * (vs[1:] + vs[:-1]) * np.diff(ts)[:, None]
+        cum = np.vstack([np.zeros(3), np.cumsum(steps, axis=0)])
         hit = (t_eval >= ts[0]) & (t_eval <= ts[-1])
         for i in range(3):
             P[hit, i] = np.interp(t_eval[hit], ts, cum[:, i])
@@ -238,10 +239,10 @@ def frame_proposal(run: RecordedRun, cfg, where: str) -> Finding | None:
 
 
 def fits(c: float, n: int) -> bool:
-    """Whether a reading whose cost on one axis is ``c`` over ``n`` fixes explains them: its misfit's
-    root-mean-square within :data:`CONTRADICTION_RATIO` of their stated noise (a reading that
-    leaves the velocities contradicting the fixes is not proposed: swapping a biased axis for
-    another moves the contradiction, it does not remove it)."""
+    """Whether a reading whose cost on one axis is ``c`` over ``n`` fixes explains them: its
+    misfit's root-mean-square within :data:`CONTRADICTION_RATIO` of their stated noise (a
+    reading that leaves the velocities contradicting the fixes is not proposed: swapping a
+    biased axis for another moves the contradiction, it does not remove it)."""
     return c / max(n, 1) < CONTRADICTION_RATIO**2
 
 

@@ -225,6 +225,10 @@ DEFAULTS: dict[str, dict] = {
         "sigma_scale": 1.0,
         # Reject a velocity whose normalised innovation squared exceeds this (0 = never).
         "gate_nis": 0.0,
+        # 1-sigma N, E, D [m/s] of velocities whose format states none (NMEA speed and course,
+        # comma2k19's u-blox speed, gnss.csv without sigma columns, a bare twist topic): the order
+        # of a consumer receiver's Doppler velocity; sigma_scale (tuned) multiplies it.
+        "default_sigma_mps": [0.1, 0.1, 0.2],
     },
     # Stationary detection thresholds: the fields of gnssacc.prepare.stationary.StationaryParams, whose
     # docstring gives each one's unit and physical reason (windowed IMU statistics + GNSS agreement).
@@ -463,6 +467,11 @@ class RunConfig:
     def default_sigma_ned(self) -> np.ndarray:
         """1-sigma N, E, D [m] of fixes that carry no uncertainty of their own."""
         return vec3(self["gnss"]["default_sigma_m"], "gnss.default_sigma_m", "config")
+
+    @property
+    def default_velocity_sigma(self) -> np.ndarray:
+        """1-sigma N, E, D [m/s] of GNSS velocities that carry no uncertainty of their own."""
+        return vec3(self["velocity"]["default_sigma_mps"], "velocity.default_sigma_mps", "config")
 
     @property
     def lever_arm_b(self) -> np.ndarray:

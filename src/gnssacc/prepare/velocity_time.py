@@ -15,7 +15,6 @@ within a few tenths), to :data:`SEARCH_TOL_S`: about ten EKF passes.
 
 from __future__ import annotations
 
-import numpy as np
 
 from ..checks.findings import Finding
 from ..checks.velcheck import MAX_LAG_S, shifted_velocities, with_velocities
