@@ -4,10 +4,14 @@ One mechanism for every input check (units, clocks, coordinates, mounting, a giv
 EKF (position and stationary updates, the configured noise) runs on the run as given and on the
 run as corrected, each from its own start (:mod:`gnssacc.prepare.start`), and the Gaussian
 log-likelihood of the position innovations is summed over the fixes both passes score (those
-:data:`BURN_IN_S` after the later start, inside both IMU spans). The correction is *decisive*
+:data:`BURN_IN_S` after the later start, inside both IMU spans), and with it that of the GNSS
+velocity innovations both passes score in the same span, when the run has velocities (the
+likelihood of all the data: a correction of the velocities themselves, their frame or time tags,
+is seen there first; a correction of their time tags compares the same velocities by their tags
+as given). The correction is *decisive*
 when it raises that log-likelihood by at least :data:`LR_MIN` and by :data:`RATE_MIN` per minute
-of scored data, and the corrected pass is consistent: its position NIS per dof within
-:data:`NIS_MAX`, or no worse than the data's as given (the noise model is not tuned yet: with
+of scored data, and the corrected pass is consistent: its position NIS per dof (and velocity NIS)
+within :data:`NIS_MAX`, or no worse than the data's as given (the noise model is not tuned yet: with
 centimetre fixes and a default IMU noise both can read several).
 
 :data:`LR_MIN` = 12 is the likelihood-ratio bound of one fitted parameter at a false-alarm
