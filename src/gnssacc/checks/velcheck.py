@@ -5,7 +5,9 @@ each stretch of velocities without a gap (:data:`GAP_FACTOR` median intervals; :
 at most, which bounds what a slowly varying velocity error integrates to) the velocities are
 integrated (trapezoid) and evaluated at the fixes' times; the fixes less that track, less one
 constant per stretch, are the fixes' own errors when the velocities are right. Their squares
-over the fixes' stated variances are the view's cost.
+over the fixes' noise (their stated variance plus the velocities' white noise integrated over a
+stretch) are the view's cost. A stretch is as long as that integrated noise stays within the
+fixes' own (:data:`MIN_WINDOW_S` to :data:`WINDOW_S`).
 
 * **Frame and sign** (:func:`frame_proposal`): the velocities as given against two readings of
   them: ENU written where NED is meant (north and east swapped, the vertical negated; with
@@ -46,8 +48,15 @@ from .findings import Finding
 
 #: A gap between velocities of more than this many median intervals splits the integration.
 GAP_FACTOR = 2.5
-#: Longest stretch integrated in one piece [s] (module notes).
+#: Longest stretch integrated in one piece [s] (module notes), and the shortest: a stretch is
+#: as long as the velocities' integrated white noise stays within the fixes' (``6 sigma_fix^2 /
+#: (sigma_v^2 dt)``: 300 s for 3 m fixes beside 0.05 m/s velocities, 10 s for 3 cm fixes).
 WINDOW_S = 300.0
+MIN_WINDOW_S = 10.0
+#: A reading is tried only where it changes something: the velocities on the axes it rereads
+#: show motion beyond their noise (mean square at least this many times their variance; a flat
+#: road's vertical velocity is noise, and its sign cannot be told, nor does it matter).
+MOTION_RATIO = 2.0
 #: A velocity whose sigma exceeds this many times the median splits the integration too (a course
 #: not used at walking pace: the velocity is taken as zero with a speed-sized sigma).
 SIGMA_BREAK = 5.0
@@ -89,18 +98,29 @@ def in_use(run: RecordedRun, cfg) -> bool:
 
 @dataclass
 class Track:
-    """The fixes in a local NED frame [m] with their stated sigmas [m], and the velocities."""
+    """The fixes in a local NED frame [m], their noise beside the integrated velocities
+    (``sigma``, [m]), the velocities, and the stretch length [s]."""
 
     t: np.ndarray
     p: np.ndarray
     sigma: np.ndarray
     vel: GnssVelocity
+    window_s: float = WINDOW_S
 
     @classmethod
     def of(cls, run: RecordedRun) -> "Track":
-        g = run.gnss
+        """The run's fixes, their noise beside the integrated velocities' (module notes: the
+        stated sigma and the velocities' white noise integrated over a stretch, mean removed,
+        ``sigma_v^2 dt L / 6``), and the stretch length."""
+        g, vel = run.gnss, run.gnss_vel
         frame = LocalTangentFrame(float(g.lat[0]), float(g.lon[0]), float(g.h[0]))
-        return cls(g.t, frame.to_ned(g.lat, g.lon, g.h), g.sigma_ned, run.gnss_vel)
+        dt = float(np.median(np.diff(vel.t))) if len(vel) > 1 else 1.0
+        var_v = np.nan_to_num(np.nanmedian(vel.sigma_ned**2, axis=0), nan=0.0)
+        h_fix, h_v = float(np.median(g.sigma_ned[:, :2] ** 2)), float(np.max(var_v[:2]))
+        window = WINDOW_S if h_v <= 0 else 6.0 * h_fix / (h_v * max(dt, 1e-3))
+        window = float(np.clip(window, MIN_WINDOW_S, WINDOW_S))
+        noise = np.sqrt(g.sigma_ned**2 + var_v * dt * window / 6.0)
+        return cls(g.t, frame.to_ned(g.lat, g.lon, g.h), noise, vel, window)
 
     @property
     def axes(self) -> np.ndarray:
@@ -108,10 +128,10 @@ class Track:
         return np.all(self.vel.measured(), axis=0)
 
 
-def stretches(vel: GnssVelocity, axes: np.ndarray) -> np.ndarray:
+def stretches(vel: GnssVelocity, axes: np.ndarray, window_s: float = WINDOW_S) -> np.ndarray:
     """Stretch id of each velocity (module notes): a new one after a gap, after a velocity whose
     sigma is :data:`SIGMA_BREAK` times the median or more (it belongs to none: -1), and every
-    :data:`WINDOW_S`."""
+    ``window_s`` [s]."""
     t = vel.t
     if len(t) < 2:
         return np.full(len(t), -1)
@@ -125,7 +145,7 @@ def stretches(vel: GnssVelocity, axes: np.ndarray) -> np.ndarray:
     nxt = 0
     for s in np.unique(sid):
         m = sid == s
-        w = np.floor((t[m] - t[m][0]) / WINDOW_S).astype(int)
+        w = np.floor((t[m] - t[m][0]) / window_s).astype(int)
         out[m] = nxt + w
         nxt += int(w.max()) + 1
     out[bad] = -1
@@ -167,7 +187,7 @@ def misfit(track: Track, P: np.ndarray, where: np.ndarray, axes: np.ndarray) -> 
 
 
 def cost(track: Track, r: np.ndarray) -> tuple[float, int]:
-    """Sum of the misfits' squares over the stated variances, and its count."""
+    """Sum of the misfits' squares over the fixes' noise variances, and its count."""
     c, n = axis_costs(track, r)
     return float(c.sum()), int(n.sum())
 
@@ -180,12 +200,34 @@ def axis_costs(track: Track, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _reading_cost(track, M, sid, axes):
-    """The view's cost of the velocities reread by ``M``, its count, and whether the reading
-    explains the fixes on every axis (:func:`fits`)."""
+    """The view's cost of the velocities reread by ``M``, its count, whether the reading
+    explains the fixes on every axis (:func:`fits`), and the misfits."""
     v = np.nan_to_num(track.vel.v_ned) @ M.T
     P, where = integrated(track.vel, v, sid, track.t)
-    c, n = axis_costs(track, misfit(track, P, where, axes))
-    return float(c.sum()), int(n.sum()), all(fits(a, b) for a, b in zip(c, n, strict=True) if b)
+    r = misfit(track, P, where, axes)
+    c, n = axis_costs(track, r)
+    explained = all(fits(a, b) for a, b in zip(c, n, strict=True) if b)
+    return float(c.sum()), int(n.sum()), explained, r
+
+
+def correlation_factor(track: Track, r: np.ndarray) -> float:
+    """How much the misfits' correlation in time overstates a view's evidence: ``(1 + rho) /
+    (1 - rho)`` of their lag-1 autocorrelation (whitened, over consecutive fixes of a stretch
+    and every axis), at least 1. Fixes with time-correlated errors (a receiver's filter,
+    multipath, the atmosphere) sum to far less evidence than white ones."""
+    z = r / track.sigma
+    ok = np.isfinite(z[1:]) & np.isfinite(z[:-1])
+    if ok.sum() < 2 * MIN_STRETCH_FIXES:
+        return 1.0
+    a, b = z[1:][ok], z[:-1][ok]
+    rho = float(np.clip(np.sum(a * b) / np.sqrt(np.sum(a * a) * np.sum(b * b)), 0.0, 0.95))
+    return (1.0 + rho) / (1.0 - rho)
+
+
+def moving(vel: GnssVelocity, axes) -> bool:
+    """Whether the velocities on ``axes`` show motion beyond their noise (:data:`MOTION_RATIO`)."""
+    v, s = vel.v_ned[:, axes], vel.sigma_ned[:, axes]
+    return float(np.nanmean(np.sum(v**2, 1))) >= MOTION_RATIO * float(np.nanmean(np.sum(s**2, 1)))
 
 
 def frame_proposal(run: RecordedRun, cfg, where: str) -> Finding | None:
@@ -198,18 +240,18 @@ def frame_proposal(run: RecordedRun, cfg, where: str) -> Finding | None:
     axes = track.axes
     if not axes[:2].all():
         return None
-    sid = stretches(track.vel, axes)
-    given, n, _ = _reading_cost(track, np.eye(3), sid, axes)
+    sid = stretches(track.vel, axes, track.window_s)
+    given, n, _, _ = _reading_cost(track, np.eye(3), sid, axes)
     if n < 2 * MIN_STRETCH_FIXES:
         return None
-    readings = {
-        name: _reading_cost(track, M, sid, axes)
-        for name, M, _ in READINGS
-        if axes[2] or name == "enu"
-    }
+    tried = {"enu": moving(track.vel, [0, 1]), "up": axes[2] and moving(track.vel, [2])}
+    readings = {name: _reading_cost(track, M, sid, axes) for name, M, _ in READINGS if tried[name]}
+    if not readings:
+        return None
     costs = {k: v[0] for k, v in readings.items()}
-    scale = max(1.0, min([given, *costs.values()]) / n)  # the noise scale the best reading leaves
     name = min(costs, key=lambda k: costs[k])
+    # the noise scale the best reading leaves, and its correlation in time
+    scale = max(1.0, min(given, costs[name]) / n) * correlation_factor(track, readings[name][3])
     gain = 0.5 * (given - costs[name]) / scale
     if gain < VIEW_GAIN or not readings[name][2]:
         return None
@@ -234,7 +276,12 @@ def frame_proposal(run: RecordedRun, cfg, where: str) -> Finding | None:
         fix,
         lambda r: with_velocities(r, transformed(r.gnss_vel, M)),
         text,
-        details={"reading": name, "view_gain": gain, "view_scale": scale},
+        details={
+            "reading": name,
+            "view_gain": gain,
+            "view_scale": scale,
+            "window_s": track.window_s,
+        },
     )
 
 
@@ -268,12 +315,12 @@ def with_velocities(run: RecordedRun, vel: GnssVelocity | None) -> RecordedRun:
     return replace(run, gnss_vel=vel)
 
 
-def lag_costs(track: Track, lags: np.ndarray) -> tuple[np.ndarray, int, np.ndarray]:
+def lag_costs(track: Track, lags: np.ndarray) -> tuple[np.ndarray, int, np.ndarray, list]:
     """The view's cost of the velocities' time tags less each lag [s], over the fixes every lag
-    keeps in its stretch (the same fixes for every lag), their count, and whether each lag
-    explains the fixes on every axis (:func:`fits`)."""
+    keeps in its stretch (the same fixes for every lag), their count, whether each lag explains
+    the fixes on every axis (:func:`fits`), and each lag's misfits."""
     axes = track.axes
-    sid = stretches(track.vel, axes)
+    sid = stretches(track.vel, axes, track.window_s)
     v = np.nan_to_num(track.vel.v_ned)
     keep = np.ones(len(track.t), bool)
     runs = []
@@ -281,14 +328,16 @@ def lag_costs(track: Track, lags: np.ndarray) -> tuple[np.ndarray, int, np.ndarr
         P, where = integrated(track.vel, v, sid, track.t + d)
         runs.append((P, where))
         keep &= where >= 0
-    out, ok = [], []
+    out, ok, rs = [], [], []
     n = 0
     for P, where in runs:
-        c, k = axis_costs(track, misfit(track, P, np.where(keep, where, -1), axes))
+        r = misfit(track, P, np.where(keep, where, -1), axes)
+        c, k = axis_costs(track, r)
         out.append(float(c.sum()))
         ok.append(all(fits(a, b) for a, b in zip(c, k, strict=True) if b))
+        rs.append(r)
         n = int(k.sum())
-    return np.array(out), n, np.array(ok)
+    return np.array(out), n, np.array(ok), rs
 
 
 def time_proposal(run: RecordedRun, cfg, where: str) -> Finding | None:
@@ -300,7 +349,7 @@ def time_proposal(run: RecordedRun, cfg, where: str) -> Finding | None:
     if not track.axes[:2].all():
         return None
     lags = np.round(np.arange(-MAX_LAG_S, MAX_LAG_S + 0.5 * LAG_STEP_S, LAG_STEP_S), 6)
-    costs, n, explained = lag_costs(track, lags)
+    costs, n, explained, misfits = lag_costs(track, lags)
     if n < 2 * MIN_STRETCH_FIXES or not np.all(np.isfinite(costs)):
         return None
     k = int(np.argmin(costs))
@@ -311,7 +360,7 @@ def time_proposal(run: RecordedRun, cfg, where: str) -> Finding | None:
         if den > 0:
             d += float(np.clip(0.5 * LAG_STEP_S * (c_m - c_p) / den, -LAG_STEP_S, LAG_STEP_S))
     zero = costs[int(np.argmin(np.abs(lags)))]
-    scale = max(1.0, float(costs[k]) / n)
+    scale = max(1.0, float(costs[k]) / n) * correlation_factor(track, misfits[k])
     gain = 0.5 * (zero - float(costs[k])) / scale
     if abs(d) < MIN_LAG_S or gain < VIEW_GAIN or not explained[k]:
         return None
@@ -334,9 +383,9 @@ def shifted_velocities(vel: GnssVelocity, d: float) -> GnssVelocity:
 
 
 def noise_scale(track: Track, P: np.ndarray, stretch_of_fix: np.ndarray, axis: int) -> float:
-    """The fixes' noise on one axis [m]: the larger of their median stated sigma and the scatter
-    of the fix-to-fix differences of the fixes less the integrated track ``P`` within the
-    stretches (over sqrt(2))."""
+    """The fixes' noise on one axis [m]: the larger of their median noise (:class:`Track`) and
+    the scatter of the fix-to-fix differences of the fixes less the integrated track ``P``
+    within the stretches (over sqrt(2))."""
     stated = float(np.median(track.sigma[:, axis]))
     same = (stretch_of_fix[1:] == stretch_of_fix[:-1]) & (stretch_of_fix[1:] >= 0)
     if same.sum() < MIN_STRETCH_FIXES:
@@ -368,7 +417,7 @@ def axis_contradictions(run: RecordedRun, cfg, where: str) -> Finding | None:
     measured = track.axes
     if not measured.any():
         return None
-    sid = stretches(track.vel, measured)
+    sid = stretches(track.vel, measured, track.window_s)
     P, at = integrated(track.vel, np.nan_to_num(track.vel.v_ned), sid, track.t)
     r = misfit(track, P, at, measured)
     said, details, named = [], {}, []
