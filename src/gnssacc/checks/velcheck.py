@@ -258,7 +258,7 @@ def frame_proposal(run: RecordedRun, cfg, where: str) -> Finding | None:
     M, text = next((M, text) for nm, M, text in READINGS if nm == name)
     if not axes[2]:
         M, text = np.diag([1.0, 1.0, 1.0])[[1, 0, 2]], "swapped the north and east velocities"
-    rms = {k: float(np.sqrt(c / n * scale)) for k, c in (("given", given), (name, costs[name]))}
+    rms = {k: float(np.sqrt(c / n)) for k, c in (("given", given), (name, costs[name]))}
     problem = (
         f"the GNSS velocities integrate to a track {rms['given']:.2f} fix sigmas off the fixes "
         f"(root-mean-square), {rms[name]:.2f} when "
