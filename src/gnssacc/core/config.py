@@ -73,12 +73,15 @@ DEFAULTS: dict[str, dict] = {
         # refused either way, naming both.
         "on_proof": "apply",
         # Unit and layout repairs (accelerometer in g, gyro in deg/s, IMU stamps in ms/us/ns,
-        # latitude/longitude in radians) under on_proof = "apply": "auto" lets them be applied,
+        # latitude/longitude in radians, the GNSS velocities' frame and time tags) under
+        # on_proof = "apply": "auto" lets them be applied,
         # "never" refuses them as on_proof = "refuse" does.
         "repair": "auto",
         # Checks to leave out, comma-separated, for a recording that really is unusual: time_units,
         # fix_count, heights, accel_units, gyro_units, latlon, init_position, time_offset, mounting,
-        # truth (the truth against the fixes: one that disagrees is not scored).
+        # velocity_frame, velocity_time, velocity (the GNSS velocities: ENU as NED or the vertical
+        # as up, their time tags, an axis against the fixes), truth (the truth against the fixes:
+        # one that disagrees is not scored).
         "skip": "",
     },
     "gnss": {
