@@ -255,10 +255,17 @@ def frame_proposal(run: RecordedRun, cfg, where: str) -> Finding | None:
     gain = 0.5 * (given - costs[name]) / scale
     if gain < VIEW_GAIN or not readings[name][2]:
         return None
-    M, text = next((M, text) for nm, M, text in READINGS if nm == name)
-    if not axes[2]:
-        M, text = np.diag([1.0, 1.0, 1.0])[[1, 0, 2]], "swapped the north and east velocities"
     rms = {k: float(np.sqrt(c / n)) for k, c in (("given", given), (name, costs[name]))}
+    details = {"reading": name, "view_gain": gain, "view_scale": scale, "window_s": track.window_s}
+    return _frame_finding(name, bool(axes[2]), rms, where, details)
+
+
+def _frame_finding(name: str, vertical: bool, rms: dict, where: str, details: dict) -> Finding:
+    """The proposal of reading ``name`` (of :data:`READINGS`; without a ``vertical``, ENU is north
+    and east swapped) with the view's misfits ``rms`` (in fix sigmas) for the message."""
+    M, text = next((M, text) for nm, M, text in READINGS if nm == name)
+    if not vertical:
+        M, text = np.eye(3)[[1, 0, 2]], "swapped the north and east velocities"
     problem = (
         f"the GNSS velocities integrate to a track {rms['given']:.2f} fix sigmas off the fixes "
         f"(root-mean-square), {rms[name]:.2f} when "
@@ -276,12 +283,7 @@ def frame_proposal(run: RecordedRun, cfg, where: str) -> Finding | None:
         fix,
         lambda r: with_velocities(r, transformed(r.gnss_vel, M)),
         text,
-        details={
-            "reading": name,
-            "view_gain": gain,
-            "view_scale": scale,
-            "window_s": track.window_s,
-        },
+        details=details,
     )
 
 
