@@ -244,3 +244,19 @@ def test_gnss_file_brings_its_own_velocities(car_dirs, tmp_path):
     with pytest.warns(DataWarning, match="no GNSS velocities: the source's .* dropped"):
         got = load_source(str(clean), cfg, gnss=str(bare))
     assert got.gnss_vel is None
+
+
+def test_cli_velocities_tagged_at_the_next_fix_are_moved_back(car_dirs, tmp_path, capsys):
+    """Each velocity written beside the next fix (tags 1 s late, as a CSV run can hold them):
+    corrected by the likelihood's shift (within 20 ms of 1 s), stated, and the EKF's PRMSE and
+    velocity NIS as the correct run's."""
+    run, _, clean = car_dirs
+    late = write_csv_run(_late(1.0)(run), tmp_path / "late")
+    assert cli.main(["run", str(late), "--out", str(tmp_path / "o"), *FAST]) == 0
+    assert "from the velocities' time tags" in capsys.readouterr().out.splitlines()[0]
+    m = json.loads((tmp_path / "o" / "metrics.json").read_text())
+    got = [c for c in m["input_checks"] if c["check"] == "velocity_time"]
+    assert got[0]["action"] == "repaired" and abs(got[0]["details"]["lag_s"] - 1.0) < 0.02
+    e, c = m["methods"]["ekf"], clean["methods"]["ekf"]
+    assert e["prmse_m"] == pytest.approx(c["prmse_m"], rel=0.05)
+    assert e["stats"]["nis_vel_mean"] == pytest.approx(c["stats"]["nis_vel_mean"], rel=0.1)

@@ -77,8 +77,7 @@ def _evaluate(
         finding.repaired = f"imu_time_offset_s = {total:.3f} (the IMU and the streams on its clock)"
         return verdict, corrected, None
     if finding.check == "velocity_time":
-        verdict, corrected = evaluate_lag(run, cfg, finding, base, filter_pass)
-        return verdict, corrected, base
+        return evaluate_lag(run, cfg, finding, base, filter_pass)
     corrected = finding.repair(run)
     pieces = start_pieces(corrected, cfg, filter_pass)
     return (
