@@ -28,7 +28,15 @@ On the clean run nothing may be applied, refused or warned of in any configurati
 (``../shared/data``) through the checks alone (no false alarm), clock offsets with RTK-grade
 fixes, and the time the checks add to a 10-minute run (median of 3).
 
-    python bench/bench_input_checks.py [--seeds 0] [--all-grades] [--quick]
+GNSS velocities (issue 31): the same scenarios simulated with Doppler velocities, written with
+one error each (ENU as NED, the vertical as up, time tags 1 s late and 1 s early: each velocity
+beside the next or the previous fix, as a CSV run holds one per fix; the estimator
+must prove and apply the correction, PRMSE within 10 % of the clean run's and a time tag within
+50 ms; an east velocity biased by 0.5 m/s and a north velocity zeroed: a warning naming that
+axis alone, the run not refused), each in the default configuration and with ``--strict``
+(``caught``: exit 2 and one error line). ``--velocity-only`` runs those alone.
+
+    python bench/bench_input_checks.py [--seeds 0] [--all-grades] [--quick] [--velocity-only]
 """
 
 from __future__ import annotations
@@ -155,6 +163,100 @@ CASES = (
         ("imu.csv", "imu_to_body_rpy_deg"),
     ),
 )
+
+
+def _vel_reading(M):
+    from gnssacc.checks.velcheck import transformed
+
+    return lambda r: replace(r, gnss_vel=transformed(r.gnss_vel, np.asarray(M, float)))
+
+
+def _vel_tags(d):
+    return lambda r: replace(r, gnss_vel=replace(r.gnss_vel, t=r.gnss_vel.t + d))
+
+
+def _vel_axis(i, how):
+    def corrupt(r):
+        v = r.gnss_vel.v_ned.copy()
+        v[:, i] = how(v[:, i])
+        return replace(r, gnss_vel=replace(r.gnss_vel, v_ned=v))
+
+    return corrupt
+
+
+@dataclass(frozen=True)
+class VelCase:
+    """A velocity corruption: the check that must correct it (and the time-tag error it must
+    find [s]), or the axis a warning must name."""
+
+    name: str
+    corrupt: object
+    check: str | None = None
+    lag_s: float | None = None
+    axis: str | None = None
+
+
+VEL_CASES = (
+    VelCase("vel-enu-as-ned", _vel_reading([[0, 1, 0], [1, 0, 0], [0, 0, -1]]), "velocity_frame"),
+    VelCase("vel-vertical-up", _vel_reading(np.diag([1, 1, -1])), "velocity_frame"),
+    VelCase("vel-tags-1s-late", _vel_tags(1.0), "velocity_time", lag_s=1.0),
+    # A CSV run holds one velocity per fix row: a time-tag error is whole epochs there (the
+    # velocity written beside the next or the previous fix)
+    VelCase("vel-tags-1s-early", _vel_tags(-1.0), "velocity_time", lag_s=-1.0),
+    VelCase("vel-east-bias-0.5", _vel_axis(1, lambda v: v + 0.5), axis="east"),
+    VelCase("vel-north-zeroed", _vel_axis(0, lambda v: 0.0 * v), axis="north"),
+)
+VEL_LAG_TOL_S = 0.05
+
+
+def _vel_judge(case: VelCase, code, err, metrics, ratio) -> str:
+    """The outcome of one velocity run (module notes)."""
+    if "Traceback" in err:
+        return "TRACEBACK"
+    errors = [ln for ln in err.splitlines() if ln.startswith("gnssacc: error:")]
+    if code == 2:
+        return "caught" if len(errors) == 1 and "veloc" in errors[0] else f"WRONG {errors[:1]}"
+    if code != 0:
+        return f"FAILED exit {code}"
+    applied = _applied(metrics, err)
+    said = [ln for ln in err.splitlines() if "contradict the fixes on" in ln]
+    if case.axis is not None:
+        named = [a for a in ("north", "east", "down") if f"{a}: the fixes depart" in " ".join(said)]
+        if applied:
+            return f"WRONG applied {sorted(applied)}"
+        return "warned" if named == [case.axis] else f"MISSED (named {named})"
+    if case.check not in applied:
+        return f"MISSED, PRMSE x{ratio:.3f}"
+    text = f"PRMSE x{ratio:.3f}"
+    off = False
+    if case.lag_s is not None:
+        lag = applied[case.check].get("lag_s", np.nan)
+        off = not abs(lag - case.lag_s) <= VEL_LAG_TOL_S
+        text += f", tags {lag:+.3f} s late"
+    return ("WRONG " if off or abs(ratio - 1) > PRMSE_TOL else "repaired ") + text
+
+
+def vel_sweep(scenario: str, grade: str, seed: int, tmp: Path, configs: dict, tally: dict) -> None:
+    """Every velocity case on one simulated run with velocities, default and ``--strict``."""
+    kw = dict(imu_grade=grade, noise="white", seed=seed, t_start_s=T0_UNIX, velocity=True)
+    run = simulate(scenario, SCENARIOS[scenario], **kw)
+    tag = f"{scenario}/{grade}/{seed}"
+    ref = {}
+    folder = write_csv_run(run, tmp / "vel-clean")
+    for cname in ("default", "strict"):
+        code, err, metrics = _run(folder, tmp / "out", configs[cname])
+        ref[cname] = prmse_against(run.truth, tmp / "out") if code == 0 else np.nan
+        verdict = _judge(None, code, err, metrics, 1.0)
+        _report(tally, tag, f"vel-clean/{cname}", verdict, f"PRMSE {ref[cname]:.2f}")
+    for case in VEL_CASES:
+        folder = write_csv_run(case.corrupt(run), tmp / case.name)
+        for cname in ("default", "strict"):
+            code, err, metrics = _run(folder, tmp / "out", configs[cname])
+            ratio = prmse_against(run.truth, tmp / "out") / ref[cname] if code == 0 else np.nan
+            verdict = _vel_judge(case, code, err, metrics, ratio)
+            if cname == "strict" and case.axis is None and verdict.startswith("MISSED"):
+                verdict = "MISSED"
+            _report(tally, tag, f"{case.name}/{cname}", verdict, "")
 
 
 def _cli(args: list) -> tuple[int, str]:
@@ -359,6 +461,32 @@ def _median_time(fn, rounds: int) -> tuple[float, float, float]:
     return statistics.median(times), min(times), max(times)
 
 
+def velocity_check_time(duration_s: float = 600.0, rounds: int = 3) -> None:
+    """What the velocity checks add to the input checks on a clean run with velocities (median of
+    ``rounds``): the same run with and without its velocities; and on KITTI (none)."""
+    from gnssacc.pipeline import load_source
+
+    run = simulate(
+        "car-city", duration_s, imu_grade="consumer", noise="white", seed=0, velocity=True
+    )
+    cfg = load_config()
+    warnings.simplefilter("ignore")
+    check_input(run, cfg)  # compile
+    with_vel = _median_time(lambda: check_input(run, cfg), rounds)
+    without = _median_time(lambda: check_input(replace(run, gnss_vel=None), cfg), rounds)
+    print(
+        f"input checks of a {duration_s:.0f} s car-city run (consumer IMU), median of {rounds}: "
+        f"with velocities {with_vel[0]:.2f} s (min {with_vel[1]:.2f}, max {with_vel[2]:.2f}), "
+        f"without {without[0]:.2f} s (min {without[1]:.2f}, max {without[2]:.2f})"
+    )
+    kitti = load_source("kitti", load_config("kitti"), noise="white", seed=0)
+    kcfg = load_config("kitti")
+    med = _median_time(lambda: check_input(kitti, kcfg), rounds)
+    print(
+        f"input checks of KITTI (no velocities): {med[0]:.2f} s (min {med[1]:.2f}, max {med[2]:.2f})"
+    )
+
+
 def check_time(duration_s: float = 600.0, rounds: int = 3) -> None:
     """Time of the checks on a clean run (median of ``rounds``), with the default configuration
     and with the measured offset and mounting applied ("auto": EKF passes for the offset), against
@@ -394,6 +522,7 @@ def main() -> None:
     ap.add_argument("--seeds", default="0", help="comma-separated noise seeds (default 0)")
     ap.add_argument("--all-grades", action="store_true", help="also the -basic IMU grades")
     ap.add_argument("--quick", action="store_true", help="industrial grade only, no timing")
+    ap.add_argument("--velocity-only", action="store_true", help="only the velocity cases")
     a = ap.parse_args()
     grades = ("industrial",) if a.quick else GRADES + (BASIC if a.all_grades else ())
     tally: dict = {}
@@ -407,17 +536,24 @@ def main() -> None:
         for seed in (int(s) for s in a.seeds.split(",")):
             for scenario in SCENARIOS:
                 for grade in grades:
-                    sweep(scenario, grade, seed, Path(tmp), configs, tally)
+                    if not a.velocity_only:
+                        sweep(scenario, grade, seed, Path(tmp), configs, tally)
+                    vel_sweep(scenario, grade, seed, Path(tmp), configs, tally)
     print(
         f"\n{sum(sum(v.values()) for v in tally.values())} runs in {time.perf_counter() - t0:.0f} s; outcomes:"
     )
     for case, words in tally.items():
         print(f"  {case:28s} " + ", ".join(f"{w} {n}" for w, n in sorted(words.items())))
     print()
+    if a.velocity_only:
+        if not a.quick:
+            velocity_check_time()
+        return
     real_recordings(load_config())
     offsets_rtk(grades)
     if not a.quick:
         check_time()
+        velocity_check_time()
 
 
 if __name__ == "__main__":

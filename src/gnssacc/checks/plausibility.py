@@ -16,7 +16,11 @@ each of these in the data themselves, in order:
 4. ``mounting``: the IMU axes against the body axes (:mod:`gnssacc.checks.mountcheck`), and the
    IMU's gyro and accelerometer against each other (handedness).
 5. ``init_position``: a given start near the fixes.
-6. ``truth``: once every proven correction is applied, the truth against the fixes
+6. The GNSS velocities against the fixes (:mod:`gnssacc.checks.velcheck`), when the run has
+   them: ``velocity_frame``: ENU written as NED, the vertical sign; ``velocity_time``: their time
+   tags against the fixes'; ``velocity``: an axis (north, east, down) on which they contradict
+   the fixes (a warning naming it).
+7. ``truth``: once every proven correction is applied, the truth against the fixes
    (:mod:`gnssacc.checks.truthcheck`, run by the preparation stage): a truth that disagrees is
    reported and not scored.
 
@@ -65,7 +69,7 @@ from ..core.config import RunConfig
 from ..core.earth import normal_gravity
 from ..core.errors import InputError, warn_data
 from ..core.recording import ImuData, RecordedRun
-from . import gnsscheck, unitcheck
+from . import gnsscheck, unitcheck, velcheck
 from .corrections import mount_proposal, mounting_rpy_deg, offset_proposal
 from .findings import Finding
 from .views import measure_motion, rest_rate
@@ -80,6 +84,9 @@ CHECKS = (
     "init_position",
     "time_offset",
     "mounting",
+    "velocity_frame",
+    "velocity_time",
+    "velocity",
     "truth",
 )
 REPAIR_MODES = ("never", "auto")
@@ -326,6 +333,20 @@ def _motion_steps(run, cfg, policy, findings, declined, imu_w, gnss_w) -> RunCon
     return cfg
 
 
+def _velocity_steps(run, cfg, policy, findings, declined, gnss_w) -> None:
+    """Step 6 of the module notes (raise :class:`_Proposed` at a proposal); nothing to do, and
+    nothing computed, without velocities."""
+    if not velcheck.in_use(run, cfg):
+        return
+    for check, step in (
+        ("velocity_frame", velcheck.frame_proposal),
+        ("velocity_time", velcheck.time_proposal),
+        ("velocity", velcheck.axis_contradictions),
+    ):
+        if check not in policy.skip:
+            consider(step(run, cfg, gnss_w), policy, findings, declined)
+
+
 def check_run(run: RecordedRun, cfg: RunConfig, declined=frozenset()) -> CheckResult:
     """Check a run against itself before estimation (module notes), up to the first proposal.
 
@@ -357,6 +378,7 @@ def check_run(run: RecordedRun, cfg: RunConfig, declined=frozenset()) -> CheckRe
             consider(check(run), policy, findings, declined)
         cfg = _motion_steps(run, cfg, policy, findings, declined, imu_w, gnss_w)
         consider(gnsscheck.init_position(run, init_w), policy, findings, declined)
+        _velocity_steps(run, cfg, policy, findings, declined, gnss_w)
     except _Proposed as p:
         return CheckResult(run, cfg, findings, p.finding)
     return CheckResult(run, cfg, findings)

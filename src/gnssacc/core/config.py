@@ -73,12 +73,15 @@ DEFAULTS: dict[str, dict] = {
         # refused either way, naming both.
         "on_proof": "apply",
         # Unit and layout repairs (accelerometer in g, gyro in deg/s, IMU stamps in ms/us/ns,
-        # latitude/longitude in radians) under on_proof = "apply": "auto" lets them be applied,
+        # latitude/longitude in radians, the GNSS velocities' frame and time tags) under
+        # on_proof = "apply": "auto" lets them be applied,
         # "never" refuses them as on_proof = "refuse" does.
         "repair": "auto",
         # Checks to leave out, comma-separated, for a recording that really is unusual: time_units,
         # fix_count, heights, accel_units, gyro_units, latlon, init_position, time_offset, mounting,
-        # truth (the truth against the fixes: one that disagrees is not scored).
+        # velocity_frame, velocity_time, velocity (the GNSS velocities: ENU as NED or the vertical
+        # as up, their time tags, an axis against the fixes), truth (the truth against the fixes:
+        # one that disagrees is not scored).
         "skip": "",
     },
     "gnss": {
@@ -225,6 +228,10 @@ DEFAULTS: dict[str, dict] = {
         "sigma_scale": 1.0,
         # Reject a velocity whose normalised innovation squared exceeds this (0 = never).
         "gate_nis": 0.0,
+        # 1-sigma N, E, D [m/s] of velocities whose format states none (NMEA speed and course,
+        # comma2k19's u-blox speed, gnss.csv without sigma columns, a bare twist topic): the order
+        # of a consumer receiver's Doppler velocity; sigma_scale (tuned) multiplies it.
+        "default_sigma_mps": [0.1, 0.1, 0.2],
     },
     # Stationary detection thresholds: the fields of gnssacc.prepare.stationary.StationaryParams, whose
     # docstring gives each one's unit and physical reason (windowed IMU statistics + GNSS agreement).
@@ -463,6 +470,11 @@ class RunConfig:
     def default_sigma_ned(self) -> np.ndarray:
         """1-sigma N, E, D [m] of fixes that carry no uncertainty of their own."""
         return vec3(self["gnss"]["default_sigma_m"], "gnss.default_sigma_m", "config")
+
+    @property
+    def default_velocity_sigma(self) -> np.ndarray:
+        """1-sigma N, E, D [m/s] of GNSS velocities that carry no uncertainty of their own."""
+        return vec3(self["velocity"]["default_sigma_mps"], "velocity.default_sigma_mps", "config")
 
     @property
     def lever_arm_b(self) -> np.ndarray:

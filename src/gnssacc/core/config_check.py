@@ -101,6 +101,7 @@ BOUNDS: dict[tuple[str, str], Bound] = {
     **_all("nhc", "pitch_offset_deg yaw_offset_deg", Bound(-10.0, 10.0)),
     ("velocity", "sigma_scale"): Bound(0.0, 1e6, lo_open=True),
     ("velocity", "gate_nis"): Bound(0.0, 1e9),
+    ("velocity", "default_sigma_mps"): Bound(0.0, 1e3, lo_open=True),
     ("odometry", "interval_s"): Bound(0.0, 3600.0),
     ("odometry", "speed_sigma_mps"): Bound(0.0, 100.0, lo_open=True),
     ("odometry", "lever_arm_b_m"): Bound(-1e3, 1e3),

@@ -162,12 +162,16 @@ class _Shifts:
         return self.cache[key]
 
     def cost(self, d: float) -> float:
-        """Negative log-likelihood over the fixed fix set (``inf`` when a pass misses some of them)."""
+        """Negative log-likelihood over the fixed fix set and the GNSS velocities among them
+        (``inf`` when a pass misses some fixes)."""
         inn = self.at(d)
         if inn is None:
             return float("inf")
         m = (inn.t >= self.t_from) & (inn.t <= self.t_to)
-        return -float(inn.loglik[m].sum()) if m.sum() == self.n_scored else float("inf")
+        if m.sum() != self.n_scored:
+            return float("inf")
+        mv = (inn.t_vel >= self.t_from) & (inn.t_vel <= self.t_to)  # GNSS velocities, if any
+        return -float(inn.loglik[m].sum()) - float(inn.loglik_vel[mv].sum())
 
     @property
     def n_scored(self) -> int:

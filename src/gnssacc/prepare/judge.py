@@ -4,10 +4,14 @@ One mechanism for every input check (units, clocks, coordinates, mounting, a giv
 EKF (position and stationary updates, the configured noise) runs on the run as given and on the
 run as corrected, each from its own start (:mod:`gnssacc.prepare.start`), and the Gaussian
 log-likelihood of the position innovations is summed over the fixes both passes score (those
-:data:`BURN_IN_S` after the later start, inside both IMU spans). The correction is *decisive*
+:data:`BURN_IN_S` after the later start, inside both IMU spans), and with it that of the GNSS
+velocity innovations both passes score in the same span, when the run has velocities (the
+likelihood of all the data: a correction of the velocities themselves, their frame or time tags,
+is seen there first; a correction of their time tags compares the same velocities by their tags
+as given). The correction is *decisive*
 when it raises that log-likelihood by at least :data:`LR_MIN` and by :data:`RATE_MIN` per minute
-of scored data, and the corrected pass is consistent: its position NIS per dof within
-:data:`NIS_MAX`, or no worse than the data's as given (the noise model is not tuned yet: with
+of scored data, and the corrected pass is consistent: its position NIS per dof (and velocity NIS)
+within :data:`NIS_MAX`, or no worse than the data's as given (the noise model is not tuned yet: with
 centimetre fixes and a default IMU noise both can read several).
 
 :data:`LR_MIN` = 12 is the likelihood-ratio bound of one fitted parameter at a false-alarm
@@ -35,7 +39,7 @@ constraint). Its Gaussian log-likelihood at every scored fix joins the innovatio
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -69,16 +73,23 @@ MOVING_MPS = 1.0
 REFUTE_GAIN = 2.0
 
 
+_NONE = np.zeros(0)
+
+
 @dataclass(frozen=True)
 class Innovations:
     """One pass's position innovations: fix times [s], log-likelihood (with the ground-vehicle
-    model's when asked) and NIS per dof of each."""
+    model's when asked) and NIS per dof of each; and its GNSS velocity innovations' (``*_vel``:
+    velocity time tags [s], log-likelihood, NIS per dof; empty without velocities)."""
 
     t: np.ndarray
     loglik: np.ndarray
     nis: np.ndarray
     t_start: float
     t_end: float
+    t_vel: np.ndarray = field(default_factory=lambda: _NONE)
+    loglik_vel: np.ndarray = field(default_factory=lambda: _NONE)
+    nis_vel: np.ndarray = field(default_factory=lambda: _NONE)
 
 
 def vehicle_loglik(sol) -> np.ndarray:
@@ -132,7 +143,16 @@ def innovations(
     t, ll = np.asarray(st["nis_pos_t"], float), np.asarray(st["loglik_pos_series"], float)
     if vehicle and len(sol.t):
         ll = ll + np.interp(t, sol.t, vehicle_loglik(sol))  # outputs at the fixes' epochs
-    return Innovations(t, ll, np.asarray(st["nis_pos"], float), float(init.t), float(run.t_end))
+    return Innovations(
+        t,
+        ll,
+        np.asarray(st["nis_pos"], float),
+        float(init.t),
+        float(run.t_end),
+        np.asarray(st.get("nis_vel_t", _NONE), float),
+        np.asarray(st.get("loglik_vel_series", _NONE), float),
+        np.asarray(st.get("nis_vel", _NONE), float),
+    )
 
 
 @dataclass(frozen=True)
@@ -154,6 +174,11 @@ class Verdict:
     loglik_given : float or None
         The log-likelihood of the data as given over the scored fixes (the corrected's is it plus
         ``gain``).
+    n_vel : int
+        GNSS velocities scored beside the fixes (their log-likelihood is in ``gain`` and
+        ``loglik_given``; 0 without velocities).
+    nis_vel, nis_vel_given : float or None
+        Mean velocity NIS per dof of the corrected pass and of the pass as given over them.
     """
 
     gain: float
@@ -163,6 +188,9 @@ class Verdict:
     vehicle: bool = False
     nis_given: float | None = None
     loglik_given: float | None = None
+    n_vel: int = 0
+    nis_vel: float | None = None
+    nis_vel_given: float | None = None
 
     @property
     def needed(self) -> float:
@@ -171,10 +199,8 @@ class Verdict:
 
     @property
     def decisive(self) -> bool:
-        consistent = (
-            self.nis is None
-            or self.nis <= NIS_MAX
-            or (self.nis_given is not None and self.nis <= self.nis_given)
+        consistent = _consistent(self.nis, self.nis_given) and _consistent(
+            self.nis_vel, self.nis_vel_given
         )
         return self.n_fixes >= MIN_FIXES and self.gain >= self.needed and consistent
 
@@ -193,14 +219,16 @@ class Verdict:
             return f"the data {side} cannot be estimated at all ({self.n_fixes} fixes)"
         rate = self.gain / self.minutes if self.minutes > 0 else float("nan")
         nis = f", NIS {self.nis:.2f} as corrected" if self.nis is not None else ""
-        what = "position and ground-vehicle-model" if self.vehicle else "position"
+        what = "position" + (" and velocity" if self.n_vel else "")
+        what += " and ground-vehicle-model" if self.vehicle else ""
+        fixes = f"{self.n_fixes} fixes" + (f" and {self.n_vel} velocities" if self.n_vel else "")
         both = (
             f"{self.loglik_given:.0f} as given, {self.loglik_given + self.gain:.0f} as corrected: "
             if self.loglik_given is not None
             else ""
         )
         return (
-            f"EKF {what} log-likelihood {both}{self.gain:+.0f} over {self.n_fixes} fixes "
+            f"EKF {what} log-likelihood {both}{self.gain:+.0f} over {fixes} "
             f"({rate:+.1f} per minute{nis}; decisive needs {self.needed:+.0f})"
         )
 
@@ -215,7 +243,15 @@ class Verdict:
             "refuted": self.refuted,
             "needed": self.needed,
             "loglik_given": self.loglik_given,
+            "n_vel": self.n_vel,
+            "nis_vel_corrected": self.nis_vel,
+            "nis_vel_given": self.nis_vel_given,
         }
+
+
+def _consistent(nis: float | None, nis_given: float | None) -> bool:
+    """A corrected pass's mean NIS per dof within :data:`NIS_MAX`, or no worse than as given."""
+    return nis is None or nis <= NIS_MAX or (nis_given is not None and nis <= nis_given)
 
 
 def compare(
@@ -225,9 +261,12 @@ def compare(
     t_from: float | None = None,
     t_to: float | None = None,
     vehicle: bool = False,
+    vel_shift: float = 0.0,
 ) -> Verdict:
-    """The verdict over the fixes both passes score (module notes); ``t_from``, ``t_to``: score
-    no earlier, no later [s]."""
+    """The verdict over the fixes both passes score (module notes), and over the GNSS velocities
+    both score; ``t_from``, ``t_to``: score no earlier, no later [s]; ``vel_shift``: the
+    corrected velocities' time tags minus the given's [s] (a correction of their time tags; the
+    same measurements are compared)."""
     if corrected is None or given is None:
         ref = corrected if given is None else given
         n = 0 if ref is None else len(ref.t)
@@ -244,8 +283,11 @@ def compare(
         n = len(scored_c) if len(scored_g) == 0 else 0
         return Verdict(math.inf if n else 0.0, n, 0.0, None, vehicle)
     ig, ic = np.isin(given.t, common), np.isin(corrected.t, common)
-    ll_given = float(given.loglik[ig].sum())
-    gain = float(corrected.loglik[ic].sum()) - ll_given + float(log_jacobian) * len(common)
+    vg, vc = _common_velocities(given, corrected, t_lo, t_hi, vel_shift)
+    ll_given = float(given.loglik[ig].sum()) + float(given.loglik_vel[vg].sum())
+    ll_corrected = float(corrected.loglik[ic].sum()) + float(corrected.loglik_vel[vc].sum())
+    gain = ll_corrected - ll_given + float(log_jacobian) * len(common)
+    n_vel = int(vg.sum())
     return Verdict(
         gain,
         len(common),
@@ -254,7 +296,24 @@ def compare(
         vehicle,
         float(np.mean(given.nis[ig])),
         ll_given,
+        n_vel,
+        float(np.mean(corrected.nis_vel[vc])) if n_vel else None,
+        float(np.mean(given.nis_vel[vg])) if n_vel else None,
     )
+
+
+def _common_velocities(
+    given: Innovations, corrected: Innovations, t_lo: float, t_hi: float, shift: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Masks of the velocity innovations both passes score within ``[t_lo, t_hi]`` (the given's
+    time tags; the corrected's less ``shift``), matched to the microsecond."""
+    tg = np.round(given.t_vel * 1e6)
+    tc = np.round((corrected.t_vel - shift) * 1e6)
+    both = np.intersect1d(tg, tc)
+    both = both[(both >= np.round(t_lo * 1e6)) & (both <= np.round(t_hi * 1e6))]
+    both = both[(both + np.round(shift * 1e6) >= np.round(t_lo * 1e6))]
+    both = both[(both + np.round(shift * 1e6) <= np.round(t_hi * 1e6))]
+    return np.isin(tg, both), np.isin(tc, both)
 
 
 def judge(
@@ -266,9 +325,11 @@ def judge(
     filter_pass: FilterPass,
     log_jacobian: float = 0.0,
     vehicle: bool = False,
+    vel_shift: float = 0.0,
 ) -> Verdict:
     """The verdict on ``corrected`` against ``given``, each from its own start (module notes;
-    ``vehicle``: with the ground-vehicle model, for a correction of the axes)."""
+    ``vehicle``: with the ground-vehicle model, for a correction of the axes; ``vel_shift``:
+    :func:`compare`)."""
     pairs = ((given, given_pieces), (corrected, corrected_pieces))
     # the two passes side by side (forked: each process holds both runs; only the innovations
     # travel), the same as one after the other
@@ -276,4 +337,4 @@ def judge(
         lambda k: innovations(pairs[k][0], cfg, pairs[k][1], filter_pass, vehicle=vehicle),
         [(0,), (1,)],
     )
-    return compare(as_given, as_corrected, log_jacobian, vehicle=vehicle)
+    return compare(as_given, as_corrected, log_jacobian, vehicle=vehicle, vel_shift=vel_shift)

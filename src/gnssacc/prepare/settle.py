@@ -29,6 +29,7 @@ from .clock import evaluate_offset, offset_sigma, unseen_offset
 from .filter_pass import FilterPass
 from .judge import MIN_FIXES, Verdict, compare, innovations, judge
 from .start import StartPieces, start_pieces
+from .velocity_time import evaluate_lag
 
 #: Most proposals settled for one run (each check proposes at most once).
 MAX_ROUNDS = len(CHECKS) + 2
@@ -75,6 +76,8 @@ def _evaluate(
         total = d["configured_s"] + d.get("measured_s", d["stage1_s"])
         finding.repaired = f"imu_time_offset_s = {total:.3f} (the IMU and the streams on its clock)"
         return verdict, corrected, None
+    if finding.check == "velocity_time":
+        return evaluate_lag(run, cfg, finding, base, filter_pass)
     corrected = finding.repair(run)
     pieces = start_pieces(corrected, cfg, filter_pass)
     return (

@@ -64,7 +64,12 @@ class VelocityChoice:
 
 
 def choose_velocity(
-    candidates: list, dec, gnss: GnssFixes, origin: LocalTangentFrame, where: str
+    candidates: list,
+    dec,
+    gnss: GnssFixes,
+    origin: LocalTangentFrame,
+    where: str,
+    default_sigma_ned: np.ndarray = DEFAULT_VELOCITY_SIGMA_MPS,
 ) -> VelocityChoice:
     """The GNSS velocity among the twist topics ``candidates`` (module rules).
 
@@ -78,6 +83,8 @@ def choose_velocity(
     gnss : GnssFixes
     origin : LocalTangentFrame
     where : str
+    default_sigma_ned : ndarray, shape (3,)
+        Sigmas [m/s] of a topic that states none (``[velocity] default_sigma_mps``).
     """
     out = VelocityChoice()
     passed = []
@@ -97,7 +104,7 @@ def choose_velocity(
             out.reasons.append(f"not GNSS velocity {stat.topic}: {check['why']}")
     if len(passed) == 1:
         topic, tab, frame, check = passed[0]
-        out.topic, out.velocity = topic, velocity_of(tab, where)
+        out.topic, out.velocity = topic, velocity_of(tab, where, default_sigma_ned)
         out.reasons.append(f"GNSS velocity {topic} (frame {frame!r}): {check['why']}")
     elif len(passed) > 1:
         out.reasons.append(
@@ -181,8 +188,11 @@ def _agreement(tab: np.ndarray, gnss: GnssFixes, origin: LocalTangentFrame):
     return chi2, chi2_motion
 
 
-def velocity_of(tab: np.ndarray, where: str) -> GnssVelocity:
-    """Twist rows (ENU linear velocity and covariance) as a NED :class:`GnssVelocity`."""
+def velocity_of(
+    tab: np.ndarray, where: str, default_sigma_ned: np.ndarray = DEFAULT_VELOCITY_SIGMA_MPS
+) -> GnssVelocity:
+    """Twist rows (ENU linear velocity and covariance) as a NED :class:`GnssVelocity`; rows
+    without a covariance get ``default_sigma_ned`` [m/s]."""
     v_ned = tab[:, 1:4] @ ENU_NED.T
     lin = tab[:, 7:13]
     if np.all(np.isfinite(lin)) and np.any(lin[:, :3] > 0):
@@ -191,8 +201,8 @@ def velocity_of(tab: np.ndarray, where: str) -> GnssVelocity:
             cov[:, a, b] = cov[:, b, a] = lin[:, k]
         cov[:, (0, 1, 2), (0, 1, 2)] = np.where(lin[:, :3] > 0, lin[:, :3], 0.0)
         cov = ENU_NED @ cov @ ENU_NED.T
-        vel = velocity_from_covariance(tab[:, 0], v_ned, cov, where)
+        vel = velocity_from_covariance(tab[:, 0], v_ned, cov, where, default_sigma_ned)
         if vel is not None:
             return vel
-    sig = np.tile(DEFAULT_VELOCITY_SIGMA_MPS, (len(tab), 1))
+    sig = np.tile(np.asarray(default_sigma_ned, float), (len(tab), 1))
     return GnssVelocity(tab[:, 0].copy(), v_ned, sig, None, sigma_stated=False)

@@ -114,7 +114,11 @@ def load_comma2k19(
     gnss = GnssFixes(
         t_fix, np.radians(ub[:, 0]), np.radians(ub[:, 1]), ub[:, 4], sigma, sigma_stated=False
     )
-    vel = velocity_from_speed_course(t_fix, ub[:, 2], ub[:, 5]) if velocity else None
+    vel = (
+        velocity_from_speed_course(t_fix, ub[:, 2], ub[:, 5], float(cfg.default_velocity_sigma[0]))
+        if velocity
+        else None
+    )
     odo = None
     if odometry and (root / CAN_SPEED_DIR).exists():
         t_o, v_o = _stream(root, CAN_SPEED_DIR, "the CAN speed", 1)

@@ -163,7 +163,9 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) 
     imu_unshifted_t = imu.t
     meta = {"source": "csv", "imu_frame": frame}
     if gnss_file.name == "gnss.csv":
-        read_fixes, gnss_vel = read_gnss_csv_file(gnss_file, cfg.default_sigma_ned, max_bad)
+        read_fixes, gnss_vel = read_gnss_csv_file(
+            gnss_file, cfg.default_sigma_ned, max_bad, cfg.default_velocity_sigma
+        )
         gnss, _ = apply_quality_policy(read_fixes, cfg["gnss"]["quality"], str(gnss_file))
         gnss_vel = velocities_of_kept_fixes(gnss_vel, read_fixes.t, gnss.t)
         # Stamps in ms/us/ns would never meet the fixes: found (and rescaled, or named) before the

@@ -4,8 +4,9 @@ course to north and east, and the documented defaults where a format states no s
 
 Defaults (a stated assumption, not a measurement; ``sigma_stated`` is then False and the tuner
 scales them)
-    :data:`DEFAULT_VELOCITY_SIGMA_MPS`: 0.1 m/s north and east, 0.2 m/s down: the order of a
-    consumer receiver's Doppler velocity accuracy (u-blox states 0.05-0.5 m/s ``sAcc``).
+    ``[velocity] default_sigma_mps``, by default :data:`DEFAULT_VELOCITY_SIGMA_MPS`: 0.1 m/s
+    north and east, 0.2 m/s down: the order of a consumer receiver's Doppler velocity accuracy
+    (u-blox states 0.05-0.5 m/s ``sAcc``).
 Speed and course (NMEA RMC/VTG, comma2k19's u-blox speed and bearing)
     A receiver's speed over ground and course are the horizontal part of its Doppler velocity:
     ``v_n = s cos(c)``, ``v_e = s sin(c)``, no down component (NaN). With an isotropic
@@ -21,11 +22,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.config import DEFAULTS
 from ..core.errors import warn_data
 from ..core.recording import GnssVelocity
 
-#: 1-sigma N, E, D [m/s] of velocities whose format states none.
-DEFAULT_VELOCITY_SIGMA_MPS = np.array([0.1, 0.1, 0.2])
+#: 1-sigma N, E, D [m/s] of velocities whose format states none: ``[velocity] default_sigma_mps``
+#: as shipped (the readers take the configured one).
+DEFAULT_VELOCITY_SIGMA_MPS = np.array(DEFAULTS["velocity"]["default_sigma_mps"], float)
 #: Below this speed over ground [m/s] a course is not used (see the module docstring).
 COURSE_MIN_SPEED_MPS = 1.0
 #: A velocity covariance whose correlation matrix has a determinant below this is taken as

@@ -123,7 +123,10 @@ def load_gnss_data(
     meta: dict = {"gnss_file": where, "gnss_format": FORMAT_NAMES[kind]}
     if kind == "csv":
         gnss, vel = read_gnss_csv_file(
-            path, cfg.default_sigma_ned, float(cfg["data"]["max_bad_fraction"])
+            path,
+            cfg.default_sigma_ned,
+            float(cfg["data"]["max_bad_fraction"]),
+            cfg.default_velocity_sigma,
         )
     else:
         gnss, times, vel = _absolute_fixes(path, kind, cfg, meta)
@@ -158,6 +161,12 @@ def with_gnss_file(run: RecordedRun, path, cfg: RunConfig) -> RecordedRun:
     fixes); ``meta`` records the file (:func:`load_gnss_data`).
     """
     gnss, vel, meta = load_gnss_data(path, cfg, run.imu.t)
+    if vel is None and run.gnss_vel is not None:
+        warn_data(
+            str(path),
+            f"the file has no GNSS velocities: the source's {len(run.gnss_vel)} velocities are "
+            "dropped with its fixes (they belong to the receiver that made those)",
+        )
     return replace(run, gnss=gnss, gnss_vel=vel, meta={**run.meta, **meta}).validate()
 
 
@@ -179,7 +188,9 @@ def _absolute_fixes(path: Path, kind: str, cfg: RunConfig, meta: dict):
         sig, corr = sigmas_and_correlations(pos.cov_ned, cfg.default_sigma_ned, where, pos.times.t)
         vel = None
         if pos.vel_ned is not None:
-            vel = velocity_from_covariance(pos.times.t, pos.vel_ned, pos.vel_cov_ned, where)
+            vel = velocity_from_covariance(
+                pos.times.t, pos.vel_ned, pos.vel_cov_ned, where, cfg.default_velocity_sigma
+            )
         fixes = GnssFixes(pos.times.t, pos.lat, pos.lon, pos.h, sig, pos.quality, corr)
         return fixes, pos.times, vel
     if kind == "ubx":
@@ -205,7 +216,9 @@ def _absolute_fixes(path: Path, kind: str, cfg: RunConfig, meta: dict):
             f"{nm.meta['sigma_from']['hdop']} fix(es) without GST: sigmas assumed from HDOP x UERE "
             f"([gnss] nmea_uere_m, nmea_vertical_factor), not measured",
         )
-    vel = velocity_from_speed_course(nm.times.t, nm.speed_mps, nm.course_deg)
+    vel = velocity_from_speed_course(
+        nm.times.t, nm.speed_mps, nm.course_deg, float(cfg.default_velocity_sigma[0])
+    )
     fixes = GnssFixes(nm.times.t, nm.lat, nm.lon, nm.h, nm.sigma_ned, nm.quality, nm.corr_ned)
     return fixes, nm.times, vel
 
@@ -495,19 +508,27 @@ def read_gnss_csv(path: Path, default_sigma_ned: np.ndarray, max_bad: float) -> 
 
 
 def read_gnss_csv_file(
-    path: Path, default_sigma_ned: np.ndarray, max_bad: float
+    path: Path,
+    default_sigma_ned: np.ndarray,
+    max_bad: float,
+    default_velocity_sigma: np.ndarray = DEFAULT_VELOCITY_SIGMA_MPS,
 ) -> tuple[GnssFixes, GnssVelocity | None]:
     """``gnss.csv``'s fixes (:func:`read_gnss_csv`) and its optional velocities
-    (:func:`read_gnss_csv_velocity`)."""
-    return read_gnss_csv(path, default_sigma_ned, max_bad), read_gnss_csv_velocity(path)
+    (:func:`read_gnss_csv_velocity`; ``default_velocity_sigma`` [m/s]: ``[velocity]
+    default_sigma_mps``)."""
+    return read_gnss_csv(path, default_sigma_ned, max_bad), read_gnss_csv_velocity(
+        path, default_velocity_sigma
+    )
 
 
-def read_gnss_csv_velocity(path: Path) -> GnssVelocity | None:
+def read_gnss_csv_velocity(
+    path: Path, default_sigma_ned: np.ndarray = DEFAULT_VELOCITY_SIGMA_MPS
+) -> GnssVelocity | None:
     """The optional velocity columns of ``gnss.csv``, None without them.
 
     ``vn, ve`` [m/s] (together), ``vd`` [m/s] (with them; without it the velocities are
     horizontal), ``sigma_vn, sigma_ve`` and ``sigma_vd`` [m/s] (for the axes given, all or none:
-    without them :data:`~gnssacc.sources.gnss_vel.DEFAULT_VELOCITY_SIGMA_MPS`, not stated), and
+    without them ``default_sigma_ned``, ``[velocity] default_sigma_mps``, not stated), and
     ``rho_vne, rho_vnd, rho_ved`` (correlations, with the sigmas). A row with an empty (or
     ``nan``) velocity cell has no velocity: only the fix is used.
     """
@@ -538,7 +559,7 @@ def read_gnss_csv_velocity(path: Path) -> GnssVelocity | None:
     given = optional_group(tab, sig_names, where)
     if given is None and any(c in tab for c in VEL_SIGMA_H_COLUMNS + (VEL_SIGMA_D_COLUMN,)):
         raise InputError(where, f"give the velocity sigmas {', '.join(sig_names)} or none")
-    sig[:, :k] = np.tile(DEFAULT_VELOCITY_SIGMA_MPS[:k], (n, 1)) if given is None else given
+    sig[:, :k] = np.tile(np.asarray(default_sigma_ned)[:k], (n, 1)) if given is None else given
     corr = optional_group(tab, VEL_CORR_COLUMNS, where)
     if corr is not None and (given is None or k < 3):
         raise InputError(

@@ -184,7 +184,9 @@ def load_bag_run(
         truth = pose_truth(dec.cols[sel.truth.topic], porigin, where, max_bad, meta)
     vel = VelocityChoice()
     if sel.gnss is not None:  # a receiver's velocity belongs with its own fixes only
-        vel = choose_velocity(sel.vel_candidates, dec, gnss, origin, where)
+        vel = choose_velocity(
+            sel.vel_candidates, dec, gnss, origin, where, cfg.default_velocity_sigma
+        )
         sel = replace(sel, odom_candidates=[s for s in sel.odom_candidates if s.topic != vel.topic])
     chosen = choose(
         sel,
@@ -508,7 +510,9 @@ def _decide_candidates(path: Path, sel: Selection, mappings: dict) -> list[str]:
                 given = Truth(rows[:, 0], rows[:, 1] * DEG, rows[:, 2] * DEG, rows[:, 3])
             else:
                 given = pose_truth(col, origin, where, max_bad, {})
-        vel = choose_velocity(sel.vel_candidates, dec, gnss, origin, where)
+        vel = choose_velocity(
+            sel.vel_candidates, dec, gnss, origin, where, cfg.default_velocity_sigma
+        )
         sel = replace(sel, odom_candidates=[s for s in sel.odom_candidates if s.topic != vel.topic])
         chosen = choose(sel, dec, Context(where, gnss, origin, None, 0.0, max_bad, {}), given)
     out = list(chosen.reasons) + list(vel.reasons)
