@@ -40,6 +40,7 @@ import numpy as np
 
 import gnssacc
 from gnssacc.analysis.aiding_theory import known_velocity_error
+from gnssacc.analysis.metrics import truth_at
 from gnssacc.analysis.montecarlo import parse_seeds
 from gnssacc.analysis.study import paired_effect
 
@@ -81,13 +82,11 @@ def late_prmse(res, mid: str) -> float | None:
 
 
 def fix_errors(run) -> tuple[np.ndarray, np.ndarray]:
-    """The fixes' times [s] and their errors against the truth, NED [m] (one row per fix)."""
-    tr = run.truth
-    p_true = run.origin.to_ned(tr.lat, tr.lon, tr.h)
+    """The fixes' times [s] and their errors against the truth, NED [m] (one row per fix inside
+    the truth's span: :func:`gnssacc.analysis.metrics.truth_at`)."""
     g = run.gnss
-    p_fix = run.origin.to_ned(g.lat, g.lon, g.h)
-    at_fix = np.column_stack([np.interp(g.t, tr.t, p_true[:, i]) for i in range(3)])
-    return g.t, p_fix - at_fix
+    p_true, valid = truth_at(run, g.t)
+    return g.t[valid], (run.origin.to_ned(g.lat, g.lon, g.h) - p_true)[valid]
 
 
 def oracle_prmse(run, lag_s: float | None) -> float | None:
