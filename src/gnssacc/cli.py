@@ -71,6 +71,13 @@ def _run_parser(sub) -> None:
         metavar="PERIOD:LEN",
         help="drop GNSS for LEN s at the end of every PERIOD s",
     )
+    _estimation_arguments(r)
+    _recording_arguments(r)
+    _output_arguments(r)
+
+
+def _estimation_arguments(r: argparse.ArgumentParser) -> None:
+    """``run``'s configuration, tuning, aid switches and input-check policy."""
     r.add_argument(
         "--config", default=None, help="run configuration TOML (see 'gnssacc config --show')"
     )
@@ -120,6 +127,10 @@ def _run_parser(sub) -> None:
         "offset, a mounting, a unit), naming the setting that makes the data right: [checks] "
         'on_proof = "refuse"',
     )
+
+
+def _recording_arguments(r: argparse.ArgumentParser) -> None:
+    """``run``'s options of how a recording is read: a GNSS file, bag topics, time stamps."""
     _gnss_argument(r)
     _bag_arguments(r)
     r.add_argument(
@@ -136,6 +147,10 @@ def _run_parser(sub) -> None:
         help="bag whose only GNSS is an RTK reference: make the estimators' fixes by subsampling it at "
         "RATE_HZ and adding --noise (default white); the reference stays the truth",
     )
+
+
+def _output_arguments(r: argparse.ArgumentParser) -> None:
+    """``run``'s outputs: folder, figures, report, trajectory exports."""
     r.add_argument(
         "--out", default=None, help="output folder (default ./gnssacc-out/<source>-<timestamp>/)"
     )
@@ -324,6 +339,12 @@ def _batch_parser(sub) -> None:
         metavar="PERIOD:LEN",
         help="a periodic outage pattern (repeatable)",
     )
+    _batch_run_arguments(b)
+    _batch_campaign_arguments(b)
+
+
+def _batch_run_arguments(b: argparse.ArgumentParser) -> None:
+    """``batch``'s per-task options, as for ``run``."""
     b.add_argument("--config", default=None)
     b.add_argument("--preset", default=None, choices=PRESETS + ("none",))
     b.add_argument("--tune", choices=["auto", "none"], default=None)
@@ -344,6 +365,10 @@ def _batch_parser(sub) -> None:
         metavar="tum,bag,ros1bag",
         help="trajectory exports per task, as for 'run' (a comma list, or repeated)",
     )
+
+
+def _batch_campaign_arguments(b: argparse.ArgumentParser) -> None:
+    """``batch``'s campaign options: folder, resume, workers, cluster."""
     b.add_argument(
         "--out", default=None, help="campaign folder (default ./gnssacc-out/campaign-<timestamp>/)"
     )
@@ -480,7 +505,7 @@ def _lock_out(path, args, stack, held):
 
 def _run_locked(args, stack, held) -> int:
     """Compute and write; exit code 0 when at least one method succeeded, 1 when none did."""
-    from .api import configure, evaluate, load
+    from .api import evaluate
     from .core.interrupts import raise_if_arrived
     from .outputs.report import failed_methods
     from .pipeline import default_out_dir, parse_methods
@@ -488,31 +513,8 @@ def _run_locked(args, stack, held) -> int:
 
     target = _lock_out(args.out, args, stack, held) if args.out else None
     methods = parse_methods(args.methods)
-    cfg = configure(args.source, preset=args.preset, config=args.config)
-    if args.nhc is not None:
-        cfg = cfg.with_values({"nhc": {"enabled": args.nhc == "on"}}, f"--nhc {args.nhc}")
-    if args.velocity is not None:
-        cfg = cfg.with_values(
-            {"velocity": {"enabled": args.velocity == "on"}}, f"--velocity {args.velocity}"
-        )
-    if args.strict:
-        cfg = cfg.with_values({"checks": {"on_proof": "refuse"}}, "--strict")
-    run = load(
-        args.source,
-        config=cfg,
-        noise=args.noise,
-        seed=args.seed,
-        outage=args.outage,
-        outage_every=args.outage_every,
-        imu_frame=args.imu_frame,
-        gnss=args.gnss,
-        imu_topic=args.imu_topic,
-        gnss_topic=args.gnss_topic,
-        truth_topic=args.truth_topic,
-        time_source=args.time_source,
-        gnss_from_truth_hz=args.gnss_from_truth,
-        odom_topic=args.odom_topic,
-    )
+    cfg = _run_config(args)
+    run = _load_run(args, cfg)
     target = target or _lock_out(default_out_dir(run), args, stack, held)
     console = _Console()
     header = (
@@ -547,6 +549,45 @@ def _run_locked(args, stack, held) -> int:
         f"results: {out}" + (" (replaced the earlier result there)" if target.had_result else "")
     )
     return console.gone
+
+
+def _run_config(args):
+    """The configuration of ``run``: ``--config``/``--preset`` with the switches ``--nhc``,
+    ``--velocity`` and ``--strict`` over them."""
+    from .api import configure
+
+    cfg = configure(args.source, preset=args.preset, config=args.config)
+    if args.nhc is not None:
+        cfg = cfg.with_values({"nhc": {"enabled": args.nhc == "on"}}, f"--nhc {args.nhc}")
+    if args.velocity is not None:
+        cfg = cfg.with_values(
+            {"velocity": {"enabled": args.velocity == "on"}}, f"--velocity {args.velocity}"
+        )
+    if args.strict:
+        cfg = cfg.with_values({"checks": {"on_proof": "refuse"}}, "--strict")
+    return cfg
+
+
+def _load_run(args, cfg):
+    """The recording ``run`` names, loaded with ``cfg`` and its source options."""
+    from .api import load
+
+    return load(
+        args.source,
+        config=cfg,
+        noise=args.noise,
+        seed=args.seed,
+        outage=args.outage,
+        outage_every=args.outage_every,
+        imu_frame=args.imu_frame,
+        gnss=args.gnss,
+        imu_topic=args.imu_topic,
+        gnss_topic=args.gnss_topic,
+        truth_topic=args.truth_topic,
+        time_source=args.time_source,
+        gnss_from_truth_hz=args.gnss_from_truth,
+        odom_topic=args.odom_topic,
+    )
 
 
 class _Console:

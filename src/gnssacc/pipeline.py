@@ -258,17 +258,12 @@ def load_source(
         (:func:`gnssacc.sources.gnssfile.with_gnss_file`: absolute times need an absolute IMU clock).
     """
     if gnss is not None:
-        if noise is not None or gnss_from_truth_hz is not None:
-            raise InputError(
-                "--gnss",
-                "the fixes come from the GNSS file: --noise and --gnss-from-truth (fixes made "
-                "from the truth) do not apply",
-            )
-        from .sources.gnssfile import with_gnss_file
-
-        run = load_source(
+        return _with_gnss_file(
             source,
             cfg,
+            gnss,
+            noise,
+            gnss_from_truth_hz,
             seed=seed,
             imu_frame=imu_frame,
             imu_topic=imu_topic,
@@ -277,7 +272,6 @@ def load_source(
             time_source=time_source,
             odom_topic=odom_topic,
         )
-        return with_gnss_file(run, gnss, cfg)
     if source in (None, "kitti"):
         from .sources.kitti import load_kitti
 
@@ -304,46 +298,68 @@ def load_source(
         )
     public = _load_public_recording(path, cfg)
     if public is not None:
-        if noise is not None:
-            from .sources.common import with_noisy_fixes
-
-            if public.truth is None:
-                raise InputError(str(path), "--noise makes fixes from the truth; it has none")
-            public = with_noisy_fixes(public, public.truth, noise, seed)
-        return public
+        return _noisy_if_asked(public, noise, seed, path, "it has none")
     if path.is_dir():
-        from .checks.plausibility import fix_imu_time_units
-        from .sources.common import with_noisy_fixes
-        from .sources.csvdir import load_csv_run
-
-        if not (path / "imu.csv").exists() and not any(
-            (path / n).exists() for n in ("gnss.csv", "gnss.pos", "gnss.nmea")
-        ):
-            names = sorted(p.name for p in path.iterdir())
-            held = (
-                f"it holds {', '.join(names[:5])}{', ...' if len(names) > 5 else ''}"
-                if names
-                else "it is empty"
-            )
-            raise InputError(
-                source,
-                f"not a run directory: no imu.csv and gnss.csv (a CSV run) and no metadata.yaml "
-                f"(a ROS 2 bag); {held}",
-            )
-        run = load_csv_run(path, cfg, imu_frame=imu_frame, time_units=fix_imu_time_units)
-        if noise is not None:
-            if run.truth is None:
-                raise InputError(
-                    str(path), "--noise makes fixes from the truth, but the run has no truth.csv"
-                )
-            run = with_noisy_fixes(run, run.truth, noise, seed)
-        return run
+        return _load_run_directory(path, cfg, imu_frame, noise, seed)
     raise InputError(
         source,
         "not a run: expected a CSV run directory (imu.csv, gnss.csv), a ROS 1 .bag, "
         "a .mcap file, a ROS 2 bag directory, a comma2k19 segment folder or a VectorNav "
         "export (X-imu.csv with X-gnss.csv)",
     )
+
+
+def _with_gnss_file(source, cfg, gnss: str, noise, gnss_from_truth_hz, **options) -> RecordedRun:
+    """:func:`load_source` of ``source`` with its fixes replaced by the GNSS file ``gnss``."""
+    if noise is not None or gnss_from_truth_hz is not None:
+        raise InputError(
+            "--gnss",
+            "the fixes come from the GNSS file: --noise and --gnss-from-truth (fixes made "
+            "from the truth) do not apply",
+        )
+    from .sources.gnssfile import with_gnss_file
+
+    return with_gnss_file(load_source(source, cfg, **options), gnss, cfg)
+
+
+def _noisy_if_asked(
+    run: RecordedRun, noise: str | None, seed: int, where: Path, lack: str
+) -> RecordedRun:
+    """``run`` with fixes made from its truth with ``noise`` when ``noise`` is given (else as it
+    is); an :class:`InputError` naming ``where`` and ``lack`` when the run has no truth."""
+    if noise is None:
+        return run
+    from .sources.common import with_noisy_fixes
+
+    if run.truth is None:
+        raise InputError(str(where), f"--noise makes fixes from the truth; {lack}")
+    return with_noisy_fixes(run, run.truth, noise, seed)
+
+
+def _load_run_directory(
+    path: Path, cfg: RunConfig, imu_frame: str, noise, seed: int
+) -> RecordedRun:
+    """A CSV run directory (``imu.csv``, ``gnss.csv``, ...), with noisy fixes from its truth when
+    ``noise`` is given; :class:`InputError` naming what it holds when it is not one."""
+    from .checks.plausibility import fix_imu_time_units
+    from .sources.csvdir import load_csv_run
+
+    if not (path / "imu.csv").exists() and not any(
+        (path / n).exists() for n in ("gnss.csv", "gnss.pos", "gnss.nmea")
+    ):
+        names = sorted(p.name for p in path.iterdir())
+        held = (
+            f"it holds {', '.join(names[:5])}{', ...' if len(names) > 5 else ''}"
+            if names
+            else "it is empty"
+        )
+        raise InputError(
+            str(path),
+            f"not a run directory: no imu.csv and gnss.csv (a CSV run) and no metadata.yaml "
+            f"(a ROS 2 bag); {held}",
+        )
+    run = load_csv_run(path, cfg, imu_frame=imu_frame, time_units=fix_imu_time_units)
+    return _noisy_if_asked(run, noise, seed, path, "the run has no truth.csv")
 
 
 def _load_public_recording(path: Path, cfg: RunConfig) -> RecordedRun | None:
@@ -654,9 +670,27 @@ def compare(
     window = scored_window(run, sols)
     raw = gnss_score(run, window)
     raw.errors = fix_statistics(run, window)
+    scores, cons = score_solutions(prep, sols, window, models, failed)
+    for who, text in group_warnings([(m, w) for m, c in cons.items() for w in c.warnings]):
+        warn_data(who, text)
+    for m, reason in failed.items():
+        warn_data(m, f"failed: {reason}; the other methods' results are kept")
+    extra = {
+        "jit_compile_s": jit_s,
+        "identify_s": seconds,
+        **_run_facts(prep, sols, window, cons, models, str(cfg["checks"]["on_proof"])),
+    }
+    return metrics_dict(run, sols, scores, raw, extra, failed), sols, prep
+
+
+def score_solutions(prep: Prepared, sols: dict, window, models: dict, failed: dict):
+    """Each solution's score and error statistics over ``window`` and its consistency
+    (:func:`gnssacc.analysis.consistency.assess`), ``(scores, consistency)`` by solution id; a
+    solution whose scoring fails is moved from ``sols`` to ``failed`` (it costs no other)."""
+    run = prep.run
     scores, cons = {}, {}
     for m, s in list(sols.items()):
-        try:  # scoring one solution must not cost the others either
+        try:
             scores[m] = score(run, s, window)
             scores[m].errors = error_statistics(run, s, window)
             fixes = scores[m].errors.get("at_fixes") or {}
@@ -677,13 +711,15 @@ def compare(
             failed[m] = failure_reason(exc)
             del sols[m]
             scores.pop(m, None)
-    for who, text in group_warnings([(m, w) for m, c in cons.items() for w in c.warnings]):
-        warn_data(who, text)
-    for m, reason in failed.items():
-        warn_data(m, f"failed: {reason}; the other methods' results are kept")
-    extra = {
-        "jit_compile_s": jit_s,
-        "identify_s": seconds,
+    return scores, cons
+
+
+def _run_facts(prep: Prepared, sols: dict, window, cons: dict, models: dict, on_proof: str) -> dict:
+    """The run's part of ``metrics.json`` beside the methods': preparation, start, checks,
+    coverage, consistency, model checks and tuning."""
+    run = prep.run
+    checks = check_dicts(run, prep.checks)
+    return {
         "quality": prep.quality.to_dict(),
         "config_sources": prep.cfg.sources,
         "scored_window_s": [window[0], window[1]],
@@ -693,16 +729,13 @@ def compare(
         "init": prep.init.how,
         "start": start_dict(prep.init),
         "stationary": prep.stationary.to_dict(),
-        "input_checks": check_dicts(run, prep.checks),
-        "input_corrections": corrections_summary(
-            check_dicts(run, prep.checks), str(cfg["checks"]["on_proof"])
-        ),
+        "input_checks": checks,
+        "input_corrections": corrections_summary(checks, on_proof),
         "model_check": models[""].to_dict(),
         "model_check_gm": models["gm"].to_dict() if "gm" in models else None,
         "tuning": prep.tuning.to_dict() if prep.tuning is not None else None,
         "preparation_cache": prep.cache,
     }
-    return metrics_dict(run, sols, scores, raw, extra, failed), sols, prep
 
 
 def start_dict(init) -> dict:

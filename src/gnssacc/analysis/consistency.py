@@ -451,7 +451,18 @@ def assess(
     nis = {k: st.get(f"nis_{k}_mean") for k in _DOF}
     n = {k: int(st.get(f"n_{k}_updates", 0) or 0) for k in _DOF}
     c = Consistency(sol.method, nis, n, fix_residual_ratio(run, sol, gm_sigma), st.get("acf1_pos"))
-    for kind, value in nis.items():
+    _nis_warnings(c, st, n, advice)
+    _model_warnings(c, model)
+    _fix_warnings(c, prmse_m, gnss_prmse_m, n_fixes)
+    for text, column in nees_warnings(errors or {}):
+        c.add(text, column)
+    return c
+
+
+def _nis_warnings(c: Consistency, st: dict, n: dict, advice: str) -> None:
+    """Warnings into ``c`` for each update kind's NIS outside its band, correlated position
+    innovations and heavy tails (``st``: the solution's stats, ``n``: updates per kind)."""
+    for kind, value in c.nis.items():
         if value is None or n[kind] == 0:
             continue
         lo, hi = band(n[kind], _DOF[kind], st.get(f"acf1_{kind}"))
@@ -484,12 +495,22 @@ def assess(
     )
     if tails:
         c.add(tails, "nis")
+
+
+def _model_warnings(c: Consistency, model: ModelCheck | None) -> None:
+    """The run's noise-model check into ``c``: its warnings for a method whose own figures cannot
+    show them (not an EKF), and the rest for every method."""
     if model is not None and c.acf1 is None:  # not an EKF: its own figures cannot see the model
         for text in model.warnings():
             c.add(text, "nis")
     if model is not None:  # no method's own figures can see it
         for text in model.rest:
             c.add(text, "config")
+
+
+def _fix_warnings(c: Consistency, prmse_m, gnss_prmse_m, n_fixes) -> None:
+    """Warnings into ``c`` when the solution is no better than the raw fixes it is fed: by its
+    residuals to them, or by its PRMSE [m] against the fixes' at the same ``n_fixes`` epochs."""
     if c.fix_ratio is not None and c.fix_ratio > FIX_RATIO_MAX:
         c.add(
             f"its positions are as far from the GNSS fixes as an independent estimate no better "
@@ -516,9 +537,6 @@ def assess(
             f"the fixes on this recording",
             "fixes",
         )
-    for text, column in nees_warnings(errors or {}):
-        c.add(text, column)
-    return c
 
 
 def nees_warnings(stats: dict) -> list[tuple[str, str]]:

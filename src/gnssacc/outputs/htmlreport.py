@@ -251,20 +251,7 @@ def statistics_html(metrics: dict) -> str:
     ok = ok_methods(metrics)
     truth = any((m.get("errors") or {}).get("position") for m in ok.values())
     if not truth:
-        rows = "".join(
-            f"<tr><td>{html.escape(mid)}</td>"
-            + "".join(
-                f'<td class="num">{_stat(((m.get("errors") or {}).get("fix_residual") or {}).get(k))}</td>'
-                for k in ("rmse", "mean", "median", "std", "max")
-            )
-            + "</tr>"
-            for mid, m in ok.items()
-        )
-        return (
-            "<p>No truth: accuracy cannot be scored. Distance from each method to the raw fixes [m] "
-            "(agreement with them, not accuracy):</p><table><tr><th>method</th><th>RMS</th><th>mean</th>"
-            f"<th>median</th><th>std</th><th>max</th></tr>{rows}</table>"
-        )
+        return _fix_residual_html(ok)
     head = [
         "method",
         "RMSE",
@@ -284,37 +271,53 @@ def statistics_html(metrics: dict) -> str:
         "NEES pos",
         "NEES att",
     ]
-    rows = []
-    for mid, m in list(ok.items()) + [
-        ("gnss (raw fixes)", {"errors": metrics.get("gnss_errors") or {}})
-    ]:
-        e = m.get("errors") or {}
-        p, h, ax = e.get("position") or {}, e.get("horizontal") or {}, e.get("position_axes") or {}
-        att = e.get("attitude_axes") or {}
-        cells = (
-            [
-                p.get("rmse"),
-                p.get("mean"),
-                p.get("median"),
-                p.get("std"),
-                p.get("max"),
-                h.get("cep50"),
-                h.get("cep95"),
-            ]
-            + [(ax.get(a) or {}).get("rmse") for a in "NED"]
-            + [(e.get("velocity") or {}).get("rmse")]
-            + [(att.get(a) or {}).get("rmse") for a in ("roll", "pitch", "yaw")]
-            + [
-                (e.get("nees_position") or {}).get("value"),
-                (e.get("nees_attitude") or {}).get("value"),
-            ]
-        )
-        rows.append([html.escape(mid)] + [_stat(c) for c in cells])
+    rows = [
+        [html.escape(mid)] + [_stat(c) for c in _error_cells(m.get("errors") or {})]
+        for mid, m in list(ok.items())
+        + [("gnss (raw fixes)", {"errors": metrics.get("gnss_errors") or {}})]
+    ]
     return (
         "<p>Position error norm [m] over the scored epochs with evo's statistics (<code>evo_ape "
         "--pose_relation trans_part</code>, no alignment), horizontal CEP50/CEP95 [m], per-axis RMSE [m], velocity "
         "and attitude RMSE (where the truth has them), NEES per dof (1 = consistent). The raw "
         "fixes are scored at their own epochs.</p>" + html_table(head, rows, numeric=True)
+    )
+
+
+def _fix_residual_html(ok: dict) -> str:
+    """Without truth: each method's distance to the raw fixes [m] (agreement, not accuracy)."""
+    rows = "".join(
+        f"<tr><td>{html.escape(mid)}</td>"
+        + "".join(
+            f'<td class="num">{_stat(((m.get("errors") or {}).get("fix_residual") or {}).get(k))}</td>'
+            for k in ("rmse", "mean", "median", "std", "max")
+        )
+        + "</tr>"
+        for mid, m in ok.items()
+    )
+    return (
+        "<p>No truth: accuracy cannot be scored. Distance from each method to the raw fixes [m] "
+        "(agreement with them, not accuracy):</p><table><tr><th>method</th><th>RMS</th><th>mean</th>"
+        f"<th>median</th><th>std</th><th>max</th></tr>{rows}</table>"
+    )
+
+
+def _error_cells(e: dict) -> list:
+    """The statistics row of one solution's error statistics ``e``: position norm (RMSE, mean,
+    median, std, max), CEP50/95, N/E/D RMSE [m], velocity RMSE [m/s], roll/pitch/yaw RMSE [deg],
+    position and attitude NEES (``None`` where absent)."""
+    p, h, ax = e.get("position") or {}, e.get("horizontal") or {}, e.get("position_axes") or {}
+    att = e.get("attitude_axes") or {}
+    return (
+        [p.get(k) for k in ("rmse", "mean", "median", "std", "max")]
+        + [h.get("cep50"), h.get("cep95")]
+        + [(ax.get(a) or {}).get("rmse") for a in "NED"]
+        + [(e.get("velocity") or {}).get("rmse")]
+        + [(att.get(a) or {}).get("rmse") for a in ("roll", "pitch", "yaw")]
+        + [
+            (e.get("nees_position") or {}).get("value"),
+            (e.get("nees_attitude") or {}).get("value"),
+        ]
     )
 
 

@@ -142,41 +142,13 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) 
     """
     root = Path(path)
     where = str(root)
-    frame = str(imu_frame).lower()
-    if frame not in IMU_FRAMES:
-        raise InputError(
-            where, f"imu_frame must be one of {', '.join(IMU_FRAMES)}, got {imu_frame!r}"
-        )
-    if not root.exists():
-        raise InputError(where, "run directory not found")
-    if not root.is_dir():
-        raise InputError(
-            where, "not a directory: a CSV run is a directory holding imu.csv and gnss.csv"
-        )
-    if (root / "imu.csv").is_dir():
-        raise InputError(str(root / "imu.csv"), "is a directory, expected a CSV file")
-    if not (root / "imu.csv").is_file():
-        raise InputError(str(root / "imu.csv"), "file not found: a CSV run directory needs imu.csv")
+    frame = _checked_directory(root, imu_frame)
     gnss_file = _gnss_file(root)
     max_bad = float(cfg["data"]["max_bad_fraction"])
     imu = _read_imu(root / "imu.csv", frame, max_bad)
     imu_unshifted_t = imu.t
     meta = {"source": "csv", "imu_frame": frame}
-    if gnss_file.name == "gnss.csv":
-        read_fixes, gnss_vel = read_gnss_csv_file(
-            gnss_file, cfg.default_sigma_ned, max_bad, cfg.default_velocity_sigma
-        )
-        gnss, _ = apply_quality_policy(read_fixes, cfg["gnss"]["quality"], str(gnss_file))
-        gnss_vel = velocities_of_kept_fixes(gnss_vel, read_fixes.t, gnss.t)
-        # Stamps in ms/us/ns would never meet the fixes: found (and rescaled, or named) before the
-        # overlap check, which could only say "different clocks?".
-        if time_units is not None:
-            imu = _rescaled(imu, time_units(imu, gnss.t, str(root / "imu.csv"), cfg), root, meta)
-        imu = apply_mounting(imu, cfg)
-    else:  # absolute fix times are put on the IMU's clock, which must be absolute too
-        imu = apply_mounting(imu, cfg)
-        gnss, gnss_vel, read = load_gnss_data(gnss_file, cfg, imu.t)
-        meta.update(read)
+    imu, gnss, gnss_vel = _imu_and_fixes(root, gnss_file, imu, cfg, max_bad, meta, time_units)
     offset_s = configured_time_offset_s(cfg)  # what puts the IMU's clock on the fixes'
     truth = (
         _shifted_truth(_read_truth(root / "truth.csv", max_bad), offset_s)
@@ -210,6 +182,59 @@ def load_csv_run(path, cfg: RunConfig, imu_frame: str = "frd", time_units=None) 
     )
     release_free_memory()  # the parser's blocks
     return run.validate()
+
+
+def _checked_directory(root: Path, imu_frame: str) -> str:
+    """The IMU axes (``"frd"`` or ``"flu"``) once ``root`` is known to be a directory holding an
+    ``imu.csv`` file; an :class:`InputError` naming the option or file otherwise."""
+    where = str(root)
+    frame = str(imu_frame).lower()
+    if frame not in IMU_FRAMES:
+        raise InputError(
+            where, f"imu_frame must be one of {', '.join(IMU_FRAMES)}, got {imu_frame!r}"
+        )
+    if not root.exists():
+        raise InputError(where, "run directory not found")
+    if not root.is_dir():
+        raise InputError(
+            where, "not a directory: a CSV run is a directory holding imu.csv and gnss.csv"
+        )
+    if (root / "imu.csv").is_dir():
+        raise InputError(str(root / "imu.csv"), "is a directory, expected a CSV file")
+    if not (root / "imu.csv").is_file():
+        raise InputError(str(root / "imu.csv"), "file not found: a CSV run directory needs imu.csv")
+    return frame
+
+
+def _imu_and_fixes(
+    root: Path,
+    gnss_file: Path,
+    imu: ImuData,
+    cfg: RunConfig,
+    max_bad: float,
+    meta: dict,
+    time_units,
+):
+    """(IMU in body axes, fixes, velocities or None) of a run directory: the fixes of its one GNSS
+    file ``gnss_file``, IMU stamps in other units than seconds found by ``time_units``
+    (``gnss.csv``: relative times) and the ``[mounting]`` applied; absolute fix times put on the
+    IMU's clock."""
+    if gnss_file.name == "gnss.csv":
+        read_fixes, gnss_vel = read_gnss_csv_file(
+            gnss_file, cfg.default_sigma_ned, max_bad, cfg.default_velocity_sigma
+        )
+        gnss, _ = apply_quality_policy(read_fixes, cfg["gnss"]["quality"], str(gnss_file))
+        gnss_vel = velocities_of_kept_fixes(gnss_vel, read_fixes.t, gnss.t)
+        # Stamps in ms/us/ns would never meet the fixes: found (and rescaled, or named) before the
+        # overlap check, which could only say "different clocks?".
+        if time_units is not None:
+            imu = _rescaled(imu, time_units(imu, gnss.t, str(root / "imu.csv"), cfg), root, meta)
+        imu = apply_mounting(imu, cfg)
+    else:  # absolute fix times are put on the IMU's clock, which must be absolute too
+        imu = apply_mounting(imu, cfg)
+        gnss, gnss_vel, read = load_gnss_data(gnss_file, cfg, imu.t)
+        meta.update(read)
+    return imu, gnss, gnss_vel
 
 
 def _rescaled(imu: ImuData, scaled: ImuData, root: Path, meta: dict) -> ImuData:

@@ -167,28 +167,10 @@ def load_bag_run(
     )
 
     itab, imu, R_bi_total = _imu(dec.cols[sel.imu.topic], tf, cfg, where, max_bad, meta)
-    truth = None
-    if sel.truth is not None and sel.truth_kind == "fix":
-        rows = fix_table(dec.cols[sel.truth.topic], where, "truth", max_bad, meta, "truth")
-        truth = Truth(rows[:, 0], rows[:, 1] * DEG, rows[:, 2] * DEG, rows[:, 3])
-    if sel.gnss is not None:
-        gnss = fixes_of(fix_table(dec.cols[sel.gnss.topic], where, "GNSS", max_bad, meta, "gnss"))
-        origin = LocalTangentFrame(gnss.lat[0], gnss.lon[0], gnss.h[0])
-    else:
-        gnss, origin = _gnss_from_truth(
-            truth, imu, where, float(gnss_from_truth_hz), noise or "white", seed, meta
-        )
-    meta["gaps"]["gnss"] = find_gaps(gnss.t, float(cfg["quality"]["gap_factor"]))
-    if sel.truth is not None and sel.truth_kind == "pose":
-        porigin, meta["truth_origin"] = pose_origin(origin, truth_origin_llh_deg)
-        truth = pose_truth(dec.cols[sel.truth.topic], porigin, where, max_bad, meta)
-    vel = VelocityChoice()
-    if sel.gnss is not None:  # a receiver's velocity belongs with its own fixes only
-        vel = choose_velocity(
-            sel.vel_candidates, dec, gnss, origin, where, cfg.default_velocity_sigma
-        )
-        sel = replace(sel, odom_candidates=[s for s in sel.odom_candidates if s.topic != vel.topic])
-    chosen = choose(
+    gnss, origin, truth = _fixes_and_truth(
+        sel, dec, imu, cfg, where, meta, gnss_from_truth_hz, noise, seed, truth_origin_llh_deg
+    )
+    vel, chosen = _velocity_and_choices(
         sel,
         dec,
         Context(
@@ -201,11 +183,8 @@ def load_bag_run(
             meta,
         ),
         truth,
+        cfg.default_velocity_sigma,
     )
-    _record_choice(chosen, sel, meta, truth_origin_llh_deg, origin)
-    if vel.topic:
-        meta["topics"]["gnss_velocity"] = vel.topic
-    meta["selection"] += vel.reasons
     odometry = (
         None if chosen.odometry is None else chosen.odometry.shifted(configured_time_offset_s(cfg))
     )
@@ -227,6 +206,60 @@ def load_bag_run(
     )
     release_free_memory()  # the decoded message columns
     return run.validate()
+
+
+def _fixes_and_truth(
+    sel: Selection,
+    dec: Decoded,
+    imu: ImuData,
+    cfg: RunConfig,
+    where: str,
+    meta: dict,
+    gnss_from_truth_hz,
+    noise: str | None,
+    seed: int,
+    truth_origin_llh_deg,
+):
+    """(fixes, origin at the first fix, truth or None) of the selected topics: the GNSS fix topic,
+    or fixes made from a fix-type truth with ``noise`` at ``gnss_from_truth_hz`` [Hz]; a pose
+    truth in the ENU frame at ``truth_origin_llh_deg`` (default: the first fix)."""
+    max_bad = float(cfg["data"]["max_bad_fraction"])
+    truth = None
+    if sel.truth is not None and sel.truth_kind == "fix":
+        rows = fix_table(dec.cols[sel.truth.topic], where, "truth", max_bad, meta, "truth")
+        truth = Truth(rows[:, 0], rows[:, 1] * DEG, rows[:, 2] * DEG, rows[:, 3])
+    if sel.gnss is not None:
+        gnss = fixes_of(fix_table(dec.cols[sel.gnss.topic], where, "GNSS", max_bad, meta, "gnss"))
+        origin = LocalTangentFrame(gnss.lat[0], gnss.lon[0], gnss.h[0])
+    else:
+        gnss, origin = _gnss_from_truth(
+            truth, imu, where, float(gnss_from_truth_hz), noise or "white", seed, meta
+        )
+    meta["gaps"]["gnss"] = find_gaps(gnss.t, float(cfg["quality"]["gap_factor"]))
+    if sel.truth is not None and sel.truth_kind == "pose":
+        porigin, meta["truth_origin"] = pose_origin(origin, truth_origin_llh_deg)
+        truth = pose_truth(dec.cols[sel.truth.topic], porigin, where, max_bad, meta)
+    return gnss, origin, truth
+
+
+def _velocity_and_choices(
+    sel: Selection, dec: Decoded, ctx: Context, truth, velocity_sigma
+) -> tuple[VelocityChoice, object]:
+    """The receiver's velocity topic (only with the bag's own fixes) and the truth and odometry
+    decided from the data (:func:`gnssacc.sources.bag_tables.choose`), recorded into the
+    context's ``meta``: ``(velocity, chosen)``."""
+    vel = VelocityChoice()
+    if sel.gnss is not None:  # a receiver's velocity belongs with its own fixes only
+        vel = choose_velocity(
+            sel.vel_candidates, dec, ctx.gnss, ctx.origin, ctx.where, velocity_sigma
+        )
+        sel = replace(sel, odom_candidates=[s for s in sel.odom_candidates if s.topic != vel.topic])
+    chosen = choose(sel, dec, ctx, truth)
+    _record_choice(chosen, sel, ctx.meta, ctx.truth_origin_llh_deg, ctx.origin)
+    if vel.topic:
+        ctx.meta["topics"]["gnss_velocity"] = vel.topic
+    ctx.meta["selection"] += vel.reasons
+    return vel, chosen
 
 
 def _record_choice(chosen, sel: Selection, meta: dict, truth_origin_llh_deg, origin) -> None:
