@@ -417,21 +417,8 @@ def simulate(
     args["scenario"] = name
     where = f"simulator({name}, seed={seed})"
     model = imu_error_model(imu_grade, imu_overrides)
-    if noise not in PROFILES:
-        raise InputError(
-            where, f"unknown GNSS noise profile {noise!r} (known: {', '.join(PROFILES)})"
-        )
-    if not 0 < gnss_rate_hz <= imu_rate_hz:
-        raise InputError(
-            where, f"gnss_rate_hz must be positive and at most the IMU rate, got {gnss_rate_hz}"
-        )
+    _check_arguments(where, noise, gnss_rate_hz, imu_rate_hz, odom_hz, odom_kind)
     lever_b = np.asarray(lever_arm_b, float).reshape(3)
-    if odom_hz is not None and not 0 < odom_hz <= imu_rate_hz:
-        raise InputError(where, f"odom_hz must be positive and at most the IMU rate, got {odom_hz}")
-    if odom_kind is not None and odom_kind not in ODOMETRY_KINDS:
-        raise InputError(
-            where, f"unknown odometry kind {odom_kind!r} (known: {', '.join(ODOMETRY_KINDS)})"
-        )
 
     traj = build_trajectory(
         scenario, duration_s, imu_rate_hz, origin_llh_deg, initial_yaw_deg, t_start_s
@@ -472,6 +459,45 @@ def simulate(
         sim=truths,
         meta=meta,
     )
+    run = _with_receiver(run, truth_gnss, lever_b, noise, gnss_seed, seed, velocity)
+    if odom_hz is None:
+        return run
+    return _with_odometry(
+        run, traj, t_start_s, duration_s, odom_hz, odom_kind or odometry_kind(name), seed
+    )
+
+
+def _check_arguments(where: str, noise: str, gnss_rate_hz, imu_rate_hz, odom_hz, odom_kind) -> None:
+    """:class:`InputError` naming the simulator for a noise profile, fix rate [Hz], odometry rate
+    [Hz] or odometry kind it cannot make."""
+    if noise not in PROFILES:
+        raise InputError(
+            where, f"unknown GNSS noise profile {noise!r} (known: {', '.join(PROFILES)})"
+        )
+    if not 0 < gnss_rate_hz <= imu_rate_hz:
+        raise InputError(
+            where, f"gnss_rate_hz must be positive and at most the IMU rate, got {gnss_rate_hz}"
+        )
+    if odom_hz is not None and not 0 < odom_hz <= imu_rate_hz:
+        raise InputError(where, f"odom_hz must be positive and at most the IMU rate, got {odom_hz}")
+    if odom_kind is not None and odom_kind not in ODOMETRY_KINDS:
+        raise InputError(
+            where, f"unknown odometry kind {odom_kind!r} (known: {', '.join(ODOMETRY_KINDS)})"
+        )
+
+
+def _with_receiver(
+    run: RecordedRun,
+    truth_gnss,
+    lever_b: np.ndarray,
+    noise: str,
+    gnss_seed: int,
+    seed: int,
+    velocity: bool,
+) -> RecordedRun:
+    """``run`` with the antenna's fixes (``noise`` drawn from ``gnss_seed``) at the epochs of
+    ``truth_gnss`` (the IMU's truth there) and, with ``velocity``, its Doppler velocities (their
+    own stream of ``seed``); ``lever_b``: the antenna from the IMU, body FRD [m]."""
     p_antenna_n = truth_gnss.R_nb @ lever_b
     fixes = fixes_from_truth(run, truth_gnss.to_truth(), noise, gnss_seed, p_antenna_n)
     fixes.quality = np.full(len(fixes), PROFILE_QUALITY[noise])
@@ -480,14 +506,24 @@ def simulate(
         v_ant = antenna_velocity(
             truth_gnss.v_n, truth_gnss.R_nb, truth_gnss.omega_ib_b, truth_gnss.lat, lever_b
         )
-        run = replace(run, gnss_vel=velocities_from_truth(t_gnss, v_ant, noise, seed))
-    if odom_hz is None:
-        return run
+        run = replace(run, gnss_vel=velocities_from_truth(truth_gnss.t, v_ant, noise, seed))
+    return run
+
+
+def _with_odometry(
+    run: RecordedRun,
+    traj: Trajectory,
+    t_start_s: float,
+    duration_s: float,
+    odom_hz: float,
+    kind: str,
+    seed: int,
+) -> RecordedRun:
+    """``run`` with wheel odometry of the vehicle ``kind`` at ``odom_hz`` [Hz] along ``traj``, its
+    draws in ``run.sim.odometry``."""
     t_odo = sample_times(t_start_s, duration_s, odom_hz)
     kin = traj.kinematics(t_odo)
-    odo, draws = simulate_odometry(
-        t_odo, kin.speed, kin.accel, kin.omega_nb_b[:, 2], odom_kind or odometry_kind(name), seed
-    )
+    odo, draws = simulate_odometry(t_odo, kin.speed, kin.accel, kin.omega_nb_b[:, 2], kind, seed)
     return replace(run, odometry=odo, sim=replace(run.sim, odometry=draws))
 
 
