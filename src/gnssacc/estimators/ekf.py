@@ -29,6 +29,7 @@ from ..checks.quality import QualityReport, inflation_segments
 from ..core.progress import progress
 from ..core.recording import InitialState, RecordedRun
 from ..core.solution import NavSolution
+from .aids.zupt import rest_for
 from .aids import EKF_METHODS, EkfAid, EkfContext, Measurement, ekf_aids, ekf_counts
 from .ekf_record import Recorder, Tally
 from .epochs import default_output_times
@@ -44,10 +45,11 @@ _LOG_2PI = math.log(2.0 * math.pi)
 
 
 def kalman_update(s: FilterState, m: Measurement) -> tuple[float, float, bool, np.ndarray]:
-    """Joseph-form update; returns the NIS, the Gaussian log-likelihood of the innovation, whether
-    it was applied (a positive ``m.gate`` rejects it when NIS exceeds the gate) and the whitened
-    innovation."""
-    dx, nis, logdet, used, wz = joseph_update(s.P, m.H, m.R, np.asarray(m.dz, float), float(m.gate))
+    """Joseph-form update (``s.consider``: a Schmidt consider state, :attr:`FilterState.consider`);
+    returns the NIS, the Gaussian log-likelihood of the innovation, whether it was applied (a
+    positive ``m.gate`` rejects it when NIS exceeds the gate) and the whitened innovation."""
+    dz = np.asarray(m.dz, float)
+    dx, nis, logdet, used, wz = joseph_update(s.P, m.H, m.R, dz, float(m.gate), s.consider)
     if used:
         correct(s, dx)
     return nis, -0.5 * (nis + logdet + len(m.dz) * _LOG_2PI), used, wz
@@ -98,7 +100,9 @@ def make_setup(
 ) -> EkfSetup:
     """The pass's aids (:func:`gnssacc.estimators.aids.ekf_aids`), the state they make and its
     initial covariance, and the IMU propagator with the noise and the inflation of suspect spans
-    (``stationary``: a :class:`gnssacc.prepare.stationary.StationaryReport` or ``None``)."""
+    (``stationary``: a :class:`gnssacc.prepare.stationary.StationaryReport` or ``None``; the
+    covariance propagated about the specific force at rest in its spans,
+    :func:`gnssacc.estimators.aids.zupt.rest_for`)."""
     segments = inflation_segments(run.imu, quality, settings.suspect)
     ctx = EkfContext(run, settings, init, stationary, variant, observed, segments)
     aids = ekf_aids(ctx)
@@ -116,6 +120,7 @@ def make_setup(
         settings.phi_order,
         cov_every,
         layout=layout,
+        rest=rest_for(run, settings.zupt, stationary),
     )
     k = int(np.searchsorted(prop.t, float(init.t), side="right"))
     return EkfSetup(init, initial_state(init, settings, layout), prop, aids, k)

@@ -19,7 +19,9 @@ Measurements
     ``dz = b_g - R^T [omega_ie x] phi + noise``, so ``H = [0, 0, -R^T [omega_ie x], 0, I]``.
 
 The EKF applies both at every epoch (gated by ``[zupt] gate_nis``). The smoother puts a
-zero-velocity prior on V and the zero-rate reading on the gyro half of B at the node nearest
+zero-velocity prior on V and the zero-rate reading on the pose and the gyro half of B
+(:func:`gnssacc.factors.zero_rate_factor`, the same model as the EKF's: the earth rate in body
+axes needs the yaw, so neither pins the bias at a yaw it does not know) at the node nearest
 each epoch (nodes are added where no fix is near, e.g. a stop inside a GNSS outage); a span the
 fixes did not vet (:func:`vetted_by_fixes`) is gated there like the EKF's.
 """
@@ -33,7 +35,7 @@ import numpy as np
 from ...core.earth import earth_rate_n
 from ...core.recording import ImuData
 from ...core.rotations import skew
-from ..layout import ATT, BG, SYM_B, SYM_V, VEL
+from ..layout import ATT, BG, SYM_B, SYM_V, SYM_X, VEL
 from .base import AidSpec, EkfAid, Measurement, SmootherAid, zero_jacobian
 
 #: Order at equal times: after the GNSS epoch's updates.
@@ -140,6 +142,32 @@ def epochs_for(run, zupt, gyro_psd: np.ndarray, stationary) -> StationaryEpochs:
     return stationary_epochs(run.imu, stationary.spans, zupt.interval_s, gyro_psd)
 
 
+def rest_ranges(t: np.ndarray, spans) -> tuple[np.ndarray, np.ndarray]:
+    """Sample ranges ``[i0, i1)`` of the IMU times ``t`` [s] inside each stationary span (sorted,
+    disjoint): where the EKF propagates its covariance about the specific force at rest
+    (:class:`gnssacc.estimators.mechanization.Propagator`). At rest the samples' horizontal
+    specific force is noise (vibration, white noise) plus the filter's own tilt-bias error; taken
+    as true it turns with a yaw error (``-[f x] phi``), and the zero-velocity updates then seem to
+    tell the yaw (false observability: a few degrees after a minute on a consumer IMU that never
+    moved; docs/consistency.md)."""
+    if not len(spans):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    t0 = np.array([sp.t_start for sp in spans])
+    t1 = np.array([sp.t_end for sp in spans])
+    return (
+        np.searchsorted(t, t0, side="right").astype(np.int64),
+        np.searchsorted(t, t1, side="right").astype(np.int64),
+    )
+
+
+def rest_for(run, zupt, stationary) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`rest_ranges` of ``stationary``'s spans when given and ``zupt.enabled`` (the spans
+    the estimator treats as at rest), else none."""
+    if stationary is None or not zupt.enabled:
+        return rest_ranges(run.imu.t, [])
+    return rest_ranges(run.imu.t, stationary.spans)
+
+
 def zero_velocity(s, sigma_mps: float, gate: float = 0.0) -> Measurement:
     """The vehicle stands still: NED velocity zero within ``sigma_mps`` [m/s]."""
     H = zero_jacobian(s, 3)
@@ -243,9 +271,9 @@ class SmootherZupt(SmootherAid):
         self.at = attach_epochs(ctx.times, self.ep.t, self.interval_s)
 
     def node(self, graph, ctx, i: int, t: float, pred) -> None:
-        """Zero velocity on V_i and the zero-rate reading of the node's epoch on B_i's gyro part,
-        unless the velocity predicted for the node rejects standing still: its NIS against zero
-        above ``[zupt] gate_nis``, the EKF's gate. Only spans the fixes have not vetted
+        """Zero velocity on V_i and the zero-rate reading of the node's epoch on X_i and B_i's
+        gyro part, unless the velocity predicted for the node rejects standing still: its NIS
+        against zero above ``[zupt] gate_nis``, the EKF's gate. Only spans the fixes have not vetted
         (:func:`vetted_by_fixes`: found on IMU evidence alone, in a GNSS outage) are gated: they
         may be a constant-speed cruise, and a zero-velocity factor there drags the whole window
         to a stop; the fixes have vetted the others, whose first epochs the gate would wrongly
@@ -262,15 +290,18 @@ class SmootherZupt(SmootherAid):
             if not nis <= self.gate:
                 self.stats["n_zupt_gated"] += 1
                 return
+        from ...factors import zero_rate_factor
+
         graph.add(gtsam.PriorFactorVector(gtsam.symbol(SYM_V, i), np.zeros(3), self.noise))
-        # Only the gyro half is measured; the accelerometer half gets a vanishing weight.
-        b_g = self.ep.omega_mean_b[j] - pred.R_nb.T @ self.w_ie
-        sig = np.concatenate([np.full(3, 1e3), np.sqrt(self.ep.omega_var_b[j])])
+        # The reading on the gyro half of B with the attitude a variable: the earth rate in body
+        # axes needs the yaw, which a bias prior at the predicted yaw would pretend to know.
         graph.add(
-            gtsam.PriorFactorConstantBias(
+            zero_rate_factor(
+                gtsam.symbol(SYM_X, i),
                 gtsam.symbol(SYM_B, i),
-                gtsam.imuBias.ConstantBias(pred.bias.accelerometer(), b_g),
-                gtsam.noiseModel.Diagonal.Sigmas(sig),
+                self.ep.omega_mean_b[j],
+                self.ep.omega_var_b[j],
+                self.w_ie,
             )
         )
         self.stats["n_zupt_factors"] += 1
