@@ -160,14 +160,6 @@ def rest_ranges(t: np.ndarray, spans) -> tuple[np.ndarray, np.ndarray]:
     )
 
 
-def rest_for(run, zupt, stationary) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`rest_ranges` of ``stationary``'s spans when given and ``zupt.enabled`` (the spans
-    the estimator treats as at rest), else none."""
-    if stationary is None or not zupt.enabled:
-        return rest_ranges(run.imu.t, [])
-    return rest_ranges(run.imu.t, stationary.spans)
-
-
 def zero_velocity(s, sigma_mps: float, gate: float = 0.0) -> Measurement:
     """The vehicle stands still: NED velocity zero within ``sigma_mps`` [m/s]."""
     H = zero_jacobian(s, 3)
@@ -197,6 +189,7 @@ class EkfZupt(EkfAid):
         z = ctx.settings.zupt
         self.ep, self.t = epochs, epochs.t
         self.sigma, self.gate = z.velocity_sigma_mps, z.gate_nis
+        self.at_rest = rest_ranges(ctx.run.imu.t, ctx.stationary.spans)
 
     def _zaru(self, s, j: int) -> Measurement:
         w_ie = earth_rate_n(s.pos[0])
