@@ -99,9 +99,7 @@ def make_setup(
 ) -> EkfSetup:
     """The pass's aids (:func:`gnssacc.estimators.aids.ekf_aids`), the state they make and its
     initial covariance, and the IMU propagator with the noise and the inflation of suspect spans
-    (``stationary``: a :class:`gnssacc.prepare.stationary.StationaryReport` or ``None``), the
-    covariance propagated about the specific force at rest where an aid holds the vehicle at rest
-    (:attr:`gnssacc.estimators.aids.EkfAid.at_rest`)."""
+    (``stationary``: a :class:`gnssacc.prepare.stationary.StationaryReport` or ``None``)."""
     segments = inflation_segments(run.imu, quality, settings.suspect)
     ctx = EkfContext(run, settings, init, stationary, variant, observed, segments)
     aids = ekf_aids(ctx)
@@ -119,19 +117,9 @@ def make_setup(
         settings.phi_order,
         cov_every,
         layout=layout,
-        rest=_at_rest(aids),
     )
     k = int(np.searchsorted(prop.t, float(init.t), side="right"))
     return EkfSetup(init, initial_state(init, settings, layout), prop, aids, k)
-
-
-def _at_rest(aids: list[EkfAid]) -> tuple[np.ndarray, np.ndarray]:
-    """The IMU sample ranges where the aids hold the vehicle at rest (:attr:`EkfAid.at_rest`),
-    sorted by start."""
-    i0 = np.concatenate([a.at_rest[0] for a in aids] + [np.zeros(0, np.int64)])
-    i1 = np.concatenate([a.at_rest[1] for a in aids] + [np.zeros(0, np.int64)])
-    order = np.argsort(i0, kind="stable")
-    return i0[order].astype(np.int64), i1[order].astype(np.int64)
 
 
 def _events(aids: list[EkfAid], out_t: np.ndarray):

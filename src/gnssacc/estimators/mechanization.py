@@ -518,8 +518,6 @@ def propagate(
     seg_i1,
     seg_qa,
     seg_qg,
-    rest_i0,
-    rest_i1,
     phi_order,
     with_cov,
     cov_every,
@@ -548,10 +546,6 @@ def propagate(
     seg_qa, seg_qg : ndarray (S, 3)
         Data-quality inflation as disjoint sample segments ``[i0, i1)`` with additive accel and
         gyro PSDs per body axis (:func:`gnssacc.checks.quality.inflation_segments`).
-    rest_i0, rest_i1 : ndarray (R,) of int
-        Disjoint sorted sample ranges ``[i0, i1)`` where the vehicle is at rest: there the
-        covariance is propagated about the specific force at rest, ``R_nb^T (-g^n)``, not the
-        sample's (:class:`Propagator`).
     phi_order : int
         1 or 2.
     with_cov : bool
@@ -589,7 +583,6 @@ def propagate(
     qg_int = np.zeros(3)
     dt_acc = 0.0
     count = 0
-    at_rest = False
     while t_cur < t_to and k < n:
         t_end = t_imu[k] if t_imu[k] < t_to else t_to
         dt = t_end - t_cur
@@ -604,7 +597,6 @@ def propagate(
                     qg_int[i] += (q_g[i] + (seg_qg[j, i] if j >= 0 else 0.0)) * dt
                 dt_acc += dt
                 count += 1
-                at_rest = _segment_index(k, rest_i0, rest_i1) >= 0
                 if count >= cov_every or t_end >= t_to:
                     _cov_step(
                         P,
@@ -616,7 +608,6 @@ def propagate(
                         v_n,
                         R_nb,
                         f,
-                        at_rest,
                         w_ie_sign,
                         qa_int,
                         qg_int,
@@ -646,7 +637,6 @@ def propagate(
             v_n,
             R_nb,
             f,
-            at_rest,
             w_ie_sign,
             qa_int,
             qg_int,
@@ -673,7 +663,6 @@ def _cov_step(
     v_n,
     R_nb,
     f,
-    at_rest,
     w_ie_sign,
     qa_int,
     qg_int,
@@ -688,14 +677,8 @@ def _cov_step(
 ):
     """One covariance (and transition-matrix) step over ``dt_acc`` [s] with the noise integrated
     over it (``qa_int``, ``qg_int``: PSD x time, reset to zero here; ``qa_k``, ``qg_k``:
-    scratch); ``at_rest``: about the specific force at rest instead of ``f`` (:func:`propagate`)."""
-    f_lin = f
-    if at_rest:
-        g, _ = _gravity(pos[0], pos[2])
-        f_lin = np.empty(3)
-        for i in range(3):
-            f_lin[i] = -R_nb[2, i] * g  # R_nb^T (0, 0, -g)
-    _system_matrix_into(F, pos, v_n, R_nb, f_lin, w_ie_sign)
+    scratch)."""
+    _system_matrix_into(F, pos, v_n, R_nb, f, w_ie_sign)
     for i in range(3):
         qa_k[i] = qa_int[i] / dt_acc
         qg_k[i] = qg_int[i] / dt_acc
@@ -725,13 +708,6 @@ class Propagator:
         White-noise and bias random-walk PSDs (see :func:`propagate`).
     segments : gnssacc.checks.quality.InflationSegments
         The extra noise over suspect IMU spans (:func:`gnssacc.checks.quality.inflation_segments`).
-    rest : tuple of ndarray, optional
-        ``(i0, i1)``: sample ranges ``[i0, i1)`` where the vehicle is at rest (default: none).
-        There the covariance is propagated about the specific force at rest, ``R_nb^T (-g^n)``:
-        the samples' horizontal part is noise (vibration, white noise) and the filter's own
-        tilt-bias error, and taken as a true specific force it rotates with a yaw error, so the
-        zero-velocity updates seem to tell a yaw the data never told (false observability,
-        docs/consistency.md). The nominal state integrates the samples as they are.
     phi_order : int
         1 or 2.
     cov_every : int
@@ -757,7 +733,6 @@ class Propagator:
         cov_every: int = 1,
         w_ie_sign: float = 1.0,
         layout: StateLayout | None = None,
-        rest: tuple | None = None,
     ):
         self.t, self.f, self.w = (kernel_array(x, float) for x in (t, f_b, omega_ib_b))
         self.q = tuple(np.array(q, float) for q in (q_a, q_g, q_ba, q_bg))
@@ -769,8 +744,6 @@ class Propagator:
             np.array(segments.q_accel, float).reshape(-1, 3),
             np.array(segments.q_gyro, float).reshape(-1, 3),
         )
-        rest = rest if rest is not None else (np.zeros(0), np.zeros(0))
-        self.rest = tuple(np.asarray(r, np.int64) for r in rest)
         self.phi_order, self.cov_every, self.w_ie_sign = (
             int(phi_order),
             max(int(cov_every), 1),
@@ -812,7 +785,6 @@ class Propagator:
             seg_i1,
             seg_qa,
             seg_qg,
-            *self.rest,
             self.phi_order,
             with_cov,
             self.cov_every,

@@ -99,10 +99,6 @@ class EkfAid:
         Its epochs [s], in time order.
     states : tuple of MarkovBlock
         The states it adds to the filter.
-    at_rest : tuple of ndarray
-        ``(i0, i1)``: IMU sample ranges ``[i0, i1)`` where it holds the vehicle at rest (sorted,
-        disjoint; default none): the pass propagates its covariance there about the specific
-        force at rest (:class:`gnssacc.estimators.mechanization.Propagator`).
     """
 
     name: str = ""
@@ -110,7 +106,6 @@ class EkfAid:
     epoch: str = ""
     t: np.ndarray = np.zeros(0)
     states: tuple[MarkovBlock, ...] = ()
-    at_rest: tuple[np.ndarray, np.ndarray] = (np.zeros(0, np.int64), np.zeros(0, np.int64))
 
     def see(self, j: int) -> None:
         """Epoch ``j`` comes (every epoch up to the pass's end in time order, those before the

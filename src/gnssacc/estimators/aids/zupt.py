@@ -142,24 +142,6 @@ def epochs_for(run, zupt, gyro_psd: np.ndarray, stationary) -> StationaryEpochs:
     return stationary_epochs(run.imu, stationary.spans, zupt.interval_s, gyro_psd)
 
 
-def rest_ranges(t: np.ndarray, spans) -> tuple[np.ndarray, np.ndarray]:
-    """Sample ranges ``[i0, i1)`` of the IMU times ``t`` [s] inside each stationary span (sorted,
-    disjoint): where the EKF propagates its covariance about the specific force at rest
-    (:class:`gnssacc.estimators.mechanization.Propagator`). At rest the samples' horizontal
-    specific force is noise (vibration, white noise) plus the filter's own tilt-bias error; taken
-    as true it turns with a yaw error (``-[f x] phi``), and the zero-velocity updates then seem to
-    tell the yaw (false observability: a few degrees after a minute on a consumer IMU that never
-    moved; docs/consistency.md)."""
-    if not len(spans):
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    t0 = np.array([sp.t_start for sp in spans])
-    t1 = np.array([sp.t_end for sp in spans])
-    return (
-        np.searchsorted(t, t0, side="right").astype(np.int64),
-        np.searchsorted(t, t1, side="right").astype(np.int64),
-    )
-
-
 def zero_velocity(s, sigma_mps: float, gate: float = 0.0) -> Measurement:
     """The vehicle stands still: NED velocity zero within ``sigma_mps`` [m/s]."""
     H = zero_jacobian(s, 3)
@@ -189,7 +171,6 @@ class EkfZupt(EkfAid):
         z = ctx.settings.zupt
         self.ep, self.t = epochs, epochs.t
         self.sigma, self.gate = z.velocity_sigma_mps, z.gate_nis
-        self.at_rest = rest_ranges(ctx.run.imu.t, ctx.stationary.spans)
 
     def _zaru(self, s, j: int) -> Measurement:
         w_ie = earth_rate_n(s.pos[0])
