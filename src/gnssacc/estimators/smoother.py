@@ -41,6 +41,7 @@ from ..core.earth import earth_rate_n, normal_gravity
 from ..core.progress import progress
 from ..core.recording import InitialState, RecordedRun
 from ..core.solution import NavSolution
+from ..core.states import YAW
 from ..factors import gauss_markov_factor, joint_prior_factor
 from .aids import (
     SMOOTHER_METHODS,
@@ -75,7 +76,6 @@ from .smoother_graph import (
     preintegrate,
     touches,
 )
-from ..core.states import YAW
 from .state import start_of_pass
 
 #: Method ids and the acceleration form each applies (``None``: none).
