@@ -12,6 +12,7 @@ from .gnss_velocity_factor import (
 from .preintegrated_position_factor import preintegrated_position_factor
 from .prior_factor import joint_prior_factor
 from .vehicle_factors import nhc_factor, odometry_factor, vehicle_velocity
+from .zero_rate_factor import zero_rate_error, zero_rate_factor
 
 __all__ = [
     "accel_error",
@@ -30,4 +31,6 @@ __all__ = [
     "velocity_window_accel_factor",
     "window_accel_error",
     "window_accel_factor",
+    "zero_rate_error",
+    "zero_rate_factor",
 ]

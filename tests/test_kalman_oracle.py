@@ -132,3 +132,34 @@ def test_nis_is_chi_square_over_draws_consistent_with_the_model():
     # Each entry of the whitened sample covariance has sd ~ 1/sqrt(n) ~ 0.022 (0.032 on the
     # diagonal); 0.12 is above 3.7 sd for each of the six distinct entries.
     np.testing.assert_allclose(wz.T @ wz / n, np.eye(m), atol=0.12)
+
+
+@pytest.mark.parametrize("seed, consider", [(300, 8), (301, 0), (302, 14)])
+def test_a_consider_state_is_held_while_the_others_get_the_optimal_update(seed, consider):
+    """Schmidt's consider state (``consider``): its estimate and variance stay as they were, the
+    other states get the optimal update (the scipy oracle's rows), and the stated covariance is
+    that of the errors the held gain leaves (sampled: prior draws, measurement noise)."""
+    P, H, R, dz = _case(seed, 15, 3)
+    ref = _oracle(P, H, R, dz)
+    P_k = P.copy()
+    dx, _, _, used, _ = joseph_update(P_k, H, R, dz, 0.0, consider)
+    assert used and dx[consider] == 0.0
+    assert P_k[consider, consider] == pytest.approx(P[consider, consider], rel=1e-12)
+    s = np.delete(np.arange(15), consider)
+    scale = np.sqrt(np.diag(P))
+    np.testing.assert_allclose(dx[s] / scale[s], ref["dx"][s] / scale[s], atol=1e-10)
+    np.testing.assert_allclose(
+        (P_k / np.outer(scale, scale))[np.ix_(s, s)],
+        (ref["P"] / np.outer(scale, scale))[np.ix_(s, s)],
+        atol=1e-10,
+    )
+    rng = np.random.default_rng(seed)
+    x = rng.multivariate_normal(np.zeros(15), P, size=100_000)
+    v = rng.multivariate_normal(np.zeros(3), R, size=len(x))
+    K = np.zeros((15, 3))
+    for j in range(3):  # the held gain, recovered column by column from the update itself
+        e = np.zeros(3)
+        e[j] = 1.0
+        K[:, j] = joseph_update(P.copy(), H, R, e, 0.0, consider)[0]
+    err = (x - (x @ H.T + v) @ K.T) / scale  # the error left after the update
+    np.testing.assert_allclose(np.cov(err.T), P_k / np.outer(scale, scale), atol=0.02)

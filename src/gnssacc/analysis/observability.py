@@ -277,7 +277,7 @@ class EkfReplay:
 def _cov_update(P: np.ndarray, H: np.ndarray, R: np.ndarray) -> np.ndarray:
     """Joseph-form covariance update with the optimal gain (:func:`gnssacc.estimators.kalman.joseph_update`)."""
     P = P.copy()
-    joseph_update(P, H, R, np.zeros(len(H)), 0.0)
+    joseph_update(P, H, R, np.zeros(len(H)), 0.0, -1)
     return P
 
 

@@ -319,6 +319,10 @@ class InitialState:
     levelled : bool
         Roll and pitch come from accelerometer levelling: their error is then tied to the
         accelerometer bias (the estimators start with that correlation).
+    gyro_bias_at_rest : bool
+        ``b_g`` was measured at rest as the mean gyro rate minus the earth rate at this attitude:
+        its error is then tied to the attitude error, the yaw's above all (the estimators start
+        with that correlation, so the earth rate tells them no more of the yaw than the data do).
     yaw_evidence : str
         What the yaw rests on: ``"given"`` (the source states the start, e.g. ``init.json``),
         ``"orientation"`` (an IMU's own orientation field: magnetometer-grade until the motion
@@ -343,6 +347,7 @@ class InitialState:
     fit_window: tuple | None = None
     levelled: bool = False
     yaw_evidence: str = "given"
+    gyro_bias_at_rest: bool = False
 
     @property
     def yaw_determined(self) -> bool:

@@ -44,10 +44,11 @@ _LOG_2PI = math.log(2.0 * math.pi)
 
 
 def kalman_update(s: FilterState, m: Measurement) -> tuple[float, float, bool, np.ndarray]:
-    """Joseph-form update; returns the NIS, the Gaussian log-likelihood of the innovation, whether
-    it was applied (a positive ``m.gate`` rejects it when NIS exceeds the gate) and the whitened
-    innovation."""
-    dx, nis, logdet, used, wz = joseph_update(s.P, m.H, m.R, np.asarray(m.dz, float), float(m.gate))
+    """Joseph-form update (``s.consider``: a Schmidt consider state, :attr:`FilterState.consider`);
+    returns the NIS, the Gaussian log-likelihood of the innovation, whether it was applied (a
+    positive ``m.gate`` rejects it when NIS exceeds the gate) and the whitened innovation."""
+    dz = np.asarray(m.dz, float)
+    dx, nis, logdet, used, wz = joseph_update(s.P, m.H, m.R, dz, float(m.gate), s.consider)
     if used:
         correct(s, dx)
     return nis, -0.5 * (nis + logdet + len(m.dz) * _LOG_2PI), used, wz

@@ -128,9 +128,11 @@ def _joseph(P, K, H, R):
 
 
 @njit(cache=True)
-def joseph_update(P, H, R, dz, gate):
+def joseph_update(P, H, R, dz, gate, consider=-1):
     """Kalman update of ``P`` (n x n, in place) with ``H`` (m x n), ``R`` (m x m), innovation
-    ``dz``.
+    ``dz``; state ``consider`` (``>= 0``) is a Schmidt consider state: its row of the gain is zero,
+    so the update neither moves its estimate nor shrinks its variance, while its uncertainty and
+    correlations still weigh on the others (the Joseph form holds for any gain).
 
     Returns
     -------
@@ -161,5 +163,9 @@ def joseph_update(P, H, R, dz, gate):
     if gate > 0.0 and nis > gate:
         return np.zeros(n), nis, logdet, False, wz
     K, dx = _gain(PHt, S_inv, dz)
+    if consider >= 0:
+        for j in range(m):
+            K[consider, j] = 0.0
+        dx[consider] = 0.0
     _joseph(P, K, H, R)
     return dx, nis, logdet, True, wz

@@ -831,7 +831,8 @@ def warm_up(propagation: bool = True, update: bool = True) -> float:
     if update:
         H = np.zeros((3, N_NAV))
         H[:, POS] = np.eye(3)
-        dx = joseph_update(s.P, H, np.eye(3), np.ones(3), 0.0)[0]
+        # ``consider`` passed as the EKF passes it (an omitted default is another signature).
+        dx = joseph_update(s.P, H, np.eye(3), np.ones(3), 0.0, -1)[0]
         apply_correction(s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, np.zeros(0), dx)
     return time.perf_counter() - t0
 

@@ -30,6 +30,7 @@ is counted in ``stats``.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from functools import partial
 
 import gtsam
@@ -40,6 +41,7 @@ from ..core.earth import earth_rate_n, normal_gravity
 from ..core.progress import progress
 from ..core.recording import InitialState, RecordedRun
 from ..core.solution import NavSolution
+from ..core.states import YAW
 from ..factors import gauss_markov_factor, joint_prior_factor
 from .aids import (
     SMOOTHER_METHODS,
@@ -148,8 +150,27 @@ def run_smoother(
     out = {}
     for mid, rec in ((method, loop.fixed), (method + "-online", loop.online)):
         scored = {k: v for aid in aids for k, v in aid.score(loop, rec).items()}
-        out[mid] = rec.solution(run, mid, times, runtime, {**stats, **scored})
+        out[mid] = with_considered_yaw(
+            rec.solution(run, mid, times, runtime, {**stats, **scored}), init
+        )
     return out
+
+
+def with_considered_yaw(sol: NavSolution, init: InitialState) -> NavSolution:
+    """``sol`` with the yaw held as the EKF holds it when the start found the yaw undetermined
+    (:func:`gnssacc.estimators.state.consider_for`): its stated yaw sigma [rad] is the marginal's
+    and the start's in quadrature.
+
+    A factor graph cannot hold a Schmidt consider state: its yaw marginal then comes from
+    linearising about a specific force that is noise or the smoother's own tilt-bias error,
+    turned by the yaw error (false observability, docs/consistency.md), a few degrees where the
+    run never told the yaw; its estimate stays near the start's guess, whose sigma says how far
+    off that may be."""
+    if init.yaw_evidence != "undetermined":
+        return sol
+    sigma = sol.sigma.copy()
+    sigma[:, YAW] = np.hypot(sigma[:, YAW], float(init.sigma_att_rad[2]))
+    return replace(sol, sigma=sigma)
 
 
 def estimate(

@@ -14,9 +14,10 @@ import numpy as np
 
 from ..checks.quality import QualityReport, check_imu
 from ..core.config import RunConfig
-from ..core.earth import gravity_n
+from ..core.earth import earth_rate_n, gravity_n
 from ..core.recording import InitialState, RecordedRun
-from .layout import ATT, BA, GNSS_ERROR, ODOMETRY_SCALE, POS, StateLayout
+from ..core.rotations import skew
+from .layout import ATT, BA, BG, GNSS_ERROR, I_ATT, ODOMETRY_SCALE, POS, StateLayout
 from .mechanization import apply_correction
 
 
@@ -70,6 +71,9 @@ class FilterState:
     x_e : ndarray (n - 15,)
         Nominal values of the states after the navigation ones, in the order of :attr:`layout`.
     layout : StateLayout
+    consider : int
+        Index of a Schmidt consider state (-1: none): the yaw error when the start found the yaw
+        undetermined (:func:`initial_state`).
     """
 
     pos: np.ndarray
@@ -80,6 +84,7 @@ class FilterState:
     P: np.ndarray
     x_e: np.ndarray = field(default_factory=lambda: np.zeros(0))
     layout: StateLayout = field(default_factory=StateLayout)
+    consider: int = -1
 
     def extra(self, name: str) -> np.ndarray:
         """The nominal values of block ``name`` (a view into :attr:`x_e`; empty without it)."""
@@ -125,6 +130,8 @@ def initial_state(init: InitialState, settings, layout: StateLayout | None = Non
     )
     if init.levelled:
         _tie_tilt_to_accel_bias(P, init)
+    if init.gyro_bias_at_rest:
+        P = _tie_gyro_bias_to_attitude(P, init)
     if layout.has(GNSS_ERROR) and init.fit_window is not None:
         # A start taken from the fixes carries their correlated error x_g: dp = x_g while the
         # x_g state starts at zero (dx_g = -x_g), so the two are known only in sum.
@@ -141,7 +148,20 @@ def initial_state(init: InitialState, settings, layout: StateLayout | None = Non
         P,
         np.zeros(layout.n - layout.nav),
         layout,
+        consider_for(init),
     )
+
+
+def consider_for(init: InitialState) -> int:
+    """The state the filter holds as a Schmidt consider state: the yaw error (``phi`` down) when
+    the start found the yaw undetermined (``init.yaw_evidence``), else none (-1).
+
+    Such a run never told the yaw (the yaw bank's verdict over the whole run): an update can
+    then only "learn" it from the filter's own linearisation, a specific force that is noise or
+    the filter's tilt-bias error turned by a yaw error (false observability; docs/
+    consistency.md). Considered, the yaw keeps the start's guess and the start's sigma (grown by
+    the gyro noise), and its uncertainty still weighs on every other state."""
+    return I_ATT + 2 if init.yaw_evidence == "undetermined" else -1
 
 
 def _tie_tilt_to_accel_bias(P: np.ndarray, init: InitialState) -> None:
@@ -155,6 +175,36 @@ def _tie_tilt_to_accel_bias(P: np.ndarray, init: InitialState) -> None:
     P[ATT, ATT] += MP @ M.T
     P[ATT, BA] = MP
     P[BA, ATT] = MP.T
+
+
+def gyro_bias_attitude_jacobian(init: InitialState) -> np.ndarray:
+    """``d b_g / d phi`` (3, 3) of a gyro bias measured at rest, ``b_g = omega_mean - R^T w``
+    with ``w`` the earth rate [rad/s, NED] and ``R`` the start's attitude (``init.R_nb``).
+
+    With ``R_est = (I + [phi x]) R`` and the residual bias ``x_bg = b_g - b_g_est`` (the EKF's
+    conventions, :mod:`gnssacc.estimators.mechanization`), ``x_bg = R^T [w x] phi`` to first order:
+    a yaw error of the start is a bias error of ``|w_h|`` per radian, along the body's image of
+    the horizontal earth rate turned by 90 deg."""
+    return init.R_nb.T @ skew(earth_rate_n(init.lat))
+
+
+def _tie_gyro_bias_to_attitude(P: np.ndarray, init: InitialState) -> np.ndarray:
+    """The covariance of ``x_bg = n_psi psi + n`` (``n_psi`` the yaw column of
+    :func:`gyro_bias_attitude_jacobian`, ``psi`` the yaw error ``phi`` down; ``n`` the mean rate's
+    own error, ``P``'s gyro-bias block as given): ``A P A^T`` with ``A`` the identity but
+    ``A[BG, yaw] = n_psi``. The bias then is as uncertain as the yaw makes it and correlated with
+    it, so the earth rate it would have to tell the yaw from is cancelled by the bias error the
+    same yaw error made (module notes of :mod:`gnssacc.prepare.initialise`).
+
+    The tilt columns are left out. Their share of the bias error, ``Omega`` times the tilt sigma
+    (0.1-0.4 deg/h for 0.5-1.5 deg), is below the mean rate's own sigma (at least 1 deg/h), and
+    where the tie matters, a yaw undetermined, they are evaluated at a yaw that may be half a turn
+    off: the tilt-bias correlation through the horizontal earth rate then has a guessed sign,
+    which the zero-rate updates act on. Measured without them: the static runs' yaw as with them,
+    their tilt NEES within the seeds' spread; the moving runs' unchanged (docs/consistency.md)."""
+    A = np.eye(P.shape[0])
+    A[BG, I_ATT + 2] = gyro_bias_attitude_jacobian(init)[:, 2]
+    return A @ P @ A.T
 
 
 def initial_sigmas(init: InitialState, over: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

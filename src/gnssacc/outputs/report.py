@@ -13,7 +13,7 @@ from ..analysis.metrics import BASELINES, Score, improvement_pct
 from ..core.display import DISPLAY_SCALE, TRAJECTORY_COLUMNS, text_table
 from ..core.recording import RecordedRun
 from ..core.solution import NavSolution
-from ..core.states import BA, BG
+from ..core.states import BA, BG, YAW
 
 #: Columns of ``trajectory_<id>.csv`` (display units, :mod:`gnssacc.core.display`).
 TRAJECTORY_COLUMNS = list(TRAJECTORY_COLUMNS)
@@ -34,6 +34,25 @@ def trajectory_table(sol: NavSolution) -> np.ndarray:
             sol.sigma * DISPLAY_SCALE,
         ]
     )
+
+
+#: A stated yaw 1-sigma above this says the data never told the yaw [deg]: the table says "yaw
+#: undetermined" for every method whose trajectory has it (a third of a half turn: a heading
+#: either side of the truth by more than a right angle is then within three sigma).
+YAW_UNDETERMINED_SIGMA_DEG = 30.0
+
+
+def yaw_sigma_summary(sol: NavSolution) -> dict:
+    """The stated yaw 1-sigma of a solution: at the end and its largest [deg], and the share of
+    epochs where it exceeds :data:`YAW_UNDETERMINED_SIGMA_DEG` (``metrics.json`` per method)."""
+    sig = np.degrees(sol.sigma[:, YAW][:, 0]) if len(sol) else np.zeros(0)
+    if not len(sig):
+        return {"end_deg": None, "max_deg": None, "undetermined_share": 0.0}
+    return {
+        "end_deg": float(sig[-1]),
+        "max_deg": float(np.max(sig)),
+        "undetermined_share": float(np.mean(sig > YAW_UNDETERMINED_SIGMA_DEG)),
+    }
 
 
 def write_trajectory_csv(sol: NavSolution, path: Path) -> None:
@@ -123,6 +142,7 @@ def metrics_dict(
             "prmse_outage_m": sc.prmse_outage_m,
             "rpy_rmse_deg": sc.rpy_rmse_deg,
             "n_epochs": sc.n_epochs,
+            "yaw_sigma": yaw_sigma_summary(sol),
             **sc.truth,
             "errors": sc.errors,
             "improvement_pct": improvement_pct(scores[base].prmse_m, sc.prmse_m)
@@ -452,13 +472,35 @@ def _truth_lines(metrics: dict) -> list[str]:
 
 
 def _start_lines(metrics: dict) -> list[str]:
-    """What the estimates' yaw rests on, when nothing does: said in the table, not only in a log."""
+    """What the estimates' yaw rests on, when nothing does: said in the table, not only in a log
+    (the start's, and each method's along the run: :data:`YAW_UNDETERMINED_SIGMA_DEG`)."""
     start = metrics.get("start") or {}
-    if start.get("yaw_determined", True):
+    out = []
+    if not start.get("yaw_determined", True):
+        out.append(
+            f"yaw undetermined (sigma {start['yaw_sigma_deg']:.0f} deg): "
+            f"{start.get('why', 'the motion never told it')}; heading and attitude figures of "
+            "every method rest on that guess"
+        )
+    return out + _trajectory_yaw_lines(metrics)
+
+
+def _trajectory_yaw_lines(metrics: dict) -> list[str]:
+    """The methods whose stated yaw sigma exceeds :data:`YAW_UNDETERMINED_SIGMA_DEG` somewhere."""
+    parts = []
+    for mid, m in ok_methods(metrics).items():
+        ys = m.get("yaw_sigma") or {}
+        if ys.get("undetermined_share", 0.0) > 0.0:
+            parts.append(
+                f"{mid} {100 * ys['undetermined_share']:.0f} % of epochs "
+                f"(sigma {ys['end_deg']:.0f} deg at the end)"
+            )
+    if not parts:
         return []
     return [
-        f"yaw undetermined (sigma {start['yaw_sigma_deg']:.0f} deg): {start.get('why', 'the motion never told it')};"
-        " heading and attitude figures of every method rest on that guess"
+        f"yaw undetermined (stated sigma > {YAW_UNDETERMINED_SIGMA_DEG:.0f} deg): "
+        + ", ".join(parts)
+        + "; their heading is a guess there"
     ]
 
 

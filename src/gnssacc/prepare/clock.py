@@ -128,6 +128,7 @@ def state_at(
         b_g=sol.b_g[-1].copy(),
         sigma_b_a=sig[BA].copy(),
         sigma_b_g=sig[BG].copy(),
+        yaw_evidence=init.yaw_evidence,  # a yaw the run never told stays considered
     )
 
 

@@ -242,7 +242,9 @@ def hypothesis(
     sigma_tilt = max(np.sqrt(var_tilt), c["roll_pitch_sigma_min_deg"] * DEG)
     b_g, sigma_b_g = np.zeros(3), None
     if start.omega_mean_b is not None:
-        # The still gyro reads its bias plus the earth rate in body axes (which needs the yaw).
+        # The still gyro reads its bias plus the earth rate in body axes (which needs the yaw):
+        # the bias is only as good as the yaw, which the estimators' start covariance states
+        # (``gyro_bias_at_rest``; its sigma here is the mean rate's own).
         b_g = start.omega_mean_b - euler_to_dcm(roll, pitch, yaw).T @ earth_rate_n(lat)
         sigma_b_g = np.maximum(start.omega_se_b, 1.0 * DEG / 3600.0)
     return InitialState(
@@ -260,6 +262,7 @@ def hypothesis(
         sigma_b_g=sigma_b_g,
         fit_window=start.fit_window,
         levelled=True,
+        gyro_bias_at_rest=start.omega_mean_b is not None,
     )
 
 

@@ -137,6 +137,7 @@ def states_at(run, cfg, init, quality, times, filter_pass: FilterPass) -> list[I
                 b_g=sol.b_g[k].copy(),
                 sigma_b_a=sig[BA].copy(),
                 sigma_b_g=sig[BG].copy(),
+                yaw_evidence=init.yaw_evidence,  # a yaw the run never told stays considered
             )
         )
     return out

@@ -19,8 +19,8 @@ hypotheses a quarter of the spacing apart, centred on the best, are scored over 
 and the most likely starts the estimators with a yaw sigma covering their posterior spread. The
 horizon starts ``[init] yaw_horizon_s`` after the vehicle starts to move and doubles until the
 sector is found or the run ends. When the data never tell (a vehicle that never accelerates or
-turns), the best hypothesis is kept with a yaw sigma that covers the hypotheses still in play,
-and the account says so; so does a recording in which the vehicle never moves (its yaw would
+turns), the best hypothesis is kept with the yaw sigma of a yaw uniform on the circle (104
+deg), and the account says so; so does a recording in which the vehicle never moves (its yaw would
 show only through the earth rate, gyrocompassing, which this bank does not attempt).
 """
 
@@ -199,11 +199,19 @@ def select_yaw(
     )
 
 
+#: 1-sigma of a yaw uniform on the circle, ``pi / sqrt(3)`` [rad] (104 deg).
+UNIFORM_YAW_SIGMA = float(np.pi / np.sqrt(3.0))
+
+
 def _undetermined(start, hyps, yaws, best, mass, post, t_h) -> BankResult:
-    """Keep the best hypothesis, with a yaw sigma covering those still in play."""
+    """Keep the best hypothesis with the yaw sigma of a yaw uniform on the circle (or the
+    posterior's spread, were it wider): a bank that never reached its confidence has not told
+    the yaw. A vehicle that never moved shows it the plainest: its hypotheses differ only in how
+    each turns the same IMU noise, and the posterior they reach by chance (0.15-0.4 on one of
+    twelve) would state a 30-deg sigma for a yaw 90-180 deg off."""
     chosen, n = hyps[best], len(yaws)
     spread = float(np.sqrt(np.sum(post * wrap_angle(yaws - yaws[best]) ** 2)))
-    sigma = max(spread, float(chosen.sigma_att_rad[2]))
+    sigma = max(spread, float(chosen.sigma_att_rad[2]), UNIFORM_YAW_SIGMA)
     att = chosen.sigma_att_rad.copy()
     att[2] = sigma
     how = (

@@ -19,7 +19,9 @@ Measurements
     ``dz = b_g - R^T [omega_ie x] phi + noise``, so ``H = [0, 0, -R^T [omega_ie x], 0, I]``.
 
 The EKF applies both at every epoch (gated by ``[zupt] gate_nis``). The smoother puts a
-zero-velocity prior on V and the zero-rate reading on the gyro half of B at the node nearest
+zero-velocity prior on V and the zero-rate reading on the pose and the gyro half of B
+(:func:`gnssacc.factors.zero_rate_factor`, the same model as the EKF's: the earth rate in body
+axes needs the yaw, so neither pins the bias at a yaw it does not know) at the node nearest
 each epoch (nodes are added where no fix is near, e.g. a stop inside a GNSS outage); a span the
 fixes did not vet (:func:`vetted_by_fixes`) is gated there like the EKF's.
 """
@@ -33,7 +35,7 @@ import numpy as np
 from ...core.earth import earth_rate_n
 from ...core.recording import ImuData
 from ...core.rotations import skew
-from ..layout import ATT, BG, SYM_B, SYM_V, VEL
+from ..layout import ATT, BG, SYM_B, SYM_V, SYM_X, VEL
 from .base import AidSpec, EkfAid, Measurement, SmootherAid, zero_jacobian
 
 #: Order at equal times: after the GNSS epoch's updates.
@@ -243,9 +245,9 @@ class SmootherZupt(SmootherAid):
         self.at = attach_epochs(ctx.times, self.ep.t, self.interval_s)
 
     def node(self, graph, ctx, i: int, t: float, pred) -> None:
-        """Zero velocity on V_i and the zero-rate reading of the node's epoch on B_i's gyro part,
-        unless the velocity predicted for the node rejects standing still: its NIS against zero
-        above ``[zupt] gate_nis``, the EKF's gate. Only spans the fixes have not vetted
+        """Zero velocity on V_i and the zero-rate reading of the node's epoch on X_i and B_i's
+        gyro part, unless the velocity predicted for the node rejects standing still: its NIS
+        against zero above ``[zupt] gate_nis``, the EKF's gate. Only spans the fixes have not vetted
         (:func:`vetted_by_fixes`: found on IMU evidence alone, in a GNSS outage) are gated: they
         may be a constant-speed cruise, and a zero-velocity factor there drags the whole window
         to a stop; the fixes have vetted the others, whose first epochs the gate would wrongly
@@ -262,15 +264,18 @@ class SmootherZupt(SmootherAid):
             if not nis <= self.gate:
                 self.stats["n_zupt_gated"] += 1
                 return
+        from ...factors import zero_rate_factor
+
         graph.add(gtsam.PriorFactorVector(gtsam.symbol(SYM_V, i), np.zeros(3), self.noise))
-        # Only the gyro half is measured; the accelerometer half gets a vanishing weight.
-        b_g = self.ep.omega_mean_b[j] - pred.R_nb.T @ self.w_ie
-        sig = np.concatenate([np.full(3, 1e3), np.sqrt(self.ep.omega_var_b[j])])
+        # The reading on the gyro half of B with the attitude a variable: the earth rate in body
+        # axes needs the yaw, which a bias prior at the predicted yaw would pretend to know.
         graph.add(
-            gtsam.PriorFactorConstantBias(
+            zero_rate_factor(
+                gtsam.symbol(SYM_X, i),
                 gtsam.symbol(SYM_B, i),
-                gtsam.imuBias.ConstantBias(pred.bias.accelerometer(), b_g),
-                gtsam.noiseModel.Diagonal.Sigmas(sig),
+                self.ep.omega_mean_b[j],
+                self.ep.omega_var_b[j],
+                self.w_ie,
             )
         )
         self.stats["n_zupt_factors"] += 1
