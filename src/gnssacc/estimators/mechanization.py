@@ -24,6 +24,8 @@ times (GNSS epochs, outputs).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -526,6 +528,7 @@ def propagate(
     w_ie_sign,
     gm_tau,
     gm_var,
+    q_turn,
 ):
     """Propagate nominal state and covariance from ``t_cur`` to ``t_to`` (in place).
 
@@ -563,6 +566,10 @@ def propagate(
         Correlation time [s] and stationary variance of the first-order Gauss-Markov states
         after the fifteenth, when P has them (n x n): the GNSS error [m^2], the odometry scale
         factor [-].
+    q_turn : float
+        Gyro PSD per unit rotation rate [rad^2/s per rad/s]: ``q_turn |omega|`` is added to each
+        body axis's gyro PSD, ``omega`` the bias-corrected rate [rad/s] of the sample
+        (:attr:`gnssacc.estimators.settings.ImuNoise.gyro_turn_psd`).
 
     Returns
     -------
@@ -592,9 +599,10 @@ def propagate(
                 w[i] = w_imu[k, i] - b_g[i]
             if with_cov:
                 j = _segment_index(k, seg_i0, seg_i1)
+                q_w = q_turn * math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
                 for i in range(3):
                     qa_int[i] += (q_a[i] + (seg_qa[j, i] if j >= 0 else 0.0)) * dt
-                    qg_int[i] += (q_g[i] + (seg_qg[j, i] if j >= 0 else 0.0)) * dt
+                    qg_int[i] += (q_g[i] + q_w + (seg_qg[j, i] if j >= 0 else 0.0)) * dt
                 dt_acc += dt
                 count += 1
                 if count >= cov_every or t_end >= t_to:
@@ -717,6 +725,8 @@ class Propagator:
     layout : gnssacc.estimators.layout.StateLayout, optional
         The states the filter carries: the Gauss-Markov ones after the navigation states are
         propagated with their correlation times and variances (default: none).
+    q_turn : float
+        Gyro PSD per unit rotation rate [rad^2/s per rad/s] (see :func:`propagate`; default 0).
     """
 
     def __init__(
@@ -733,9 +743,11 @@ class Propagator:
         cov_every: int = 1,
         w_ie_sign: float = 1.0,
         layout: StateLayout | None = None,
+        q_turn: float = 0.0,
     ):
         self.t, self.f, self.w = (kernel_array(x, float) for x in (t, f_b, omega_ib_b))
         self.q = tuple(np.array(q, float) for q in (q_a, q_g, q_ba, q_bg))
+        self.q_turn = float(q_turn)
         segments = InflationSegments._make(segments)
         # In the kernel's argument order: sample ranges, accelerometer, gyro.
         self.segments = (
@@ -793,6 +805,7 @@ class Propagator:
             self.w_ie_sign,
             self.extra_tau,
             self.extra_var,
+            self.q_turn,
         )
 
 
