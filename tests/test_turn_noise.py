@@ -1,4 +1,4 @@
-"""The gyro noise that grows with the rotation performed (``[imu] gyro_cross_axis_ppm``) against
+"""The gyro noise that grows with the rotation performed (``[imu] gyro_turn_error_ppm``) against
 a Monte Carlo of what it stands for: constant gyro cross-axis and scale-factor errors.
 
 A level platform turns about its down axis at a constant rate ``r`` through ``a = r T`` radians.
@@ -22,7 +22,7 @@ from scipy.spatial.transform import Rotation
 
 from gnssacc.core.config import load_config
 from gnssacc.estimators.layout import ATT, N_NAV
-from gnssacc.estimators.mechanization import Propagator
+from gnssacc.estimators.mechanization import Propagator, turn_rates
 from gnssacc.estimators.settings import EkfSettings, SmootherSettings
 from gnssacc.estimators.smoother_graph import ImuModel, preintegrate
 
@@ -76,7 +76,7 @@ def test_monte_carlo_matches_the_closed_form(mc):
 
 def _settings(ppm: float):
     """Defaults with a small white gyro noise and no gyro bias walk, and ``ppm``."""
-    imu = {"gyro_cross_axis_ppm": ppm, "gyro_arw_deg_rth": 0.01, "gyro_bias_instability_deg_h": 0.0}
+    imu = {"gyro_turn_error_ppm": ppm, "gyro_arw_deg_rth": 0.01, "gyro_bias_instability_deg_h": 0.0}
     return load_config(overrides={"imu": imu})
 
 
@@ -113,7 +113,8 @@ def _smoother_rotation_cov(ppm: float) -> np.ndarray:
     d = _turning_imu()
     dt_all = np.diff(d.t, prepend=d.t[0])
     bias = gtsam.imuBias.ConstantBias()
-    pim = preintegrate(d, model, bias, 0.0, T, 1, len(d.t), (None, None), dt_all)
+    w_turn = turn_rates(d.t, d.omega_ib_b)
+    pim = preintegrate(d, model, bias, 0.0, T, 1, len(d.t), (None, None), dt_all, w_turn)
     return _right_perturbation(np.asarray(pim.preintMeasCov())[:3, :3], RATE * T)
 
 
@@ -150,6 +151,7 @@ def test_no_turn_no_extra_noise():
     model = ImuModel(SmootherSettings.from_config(_settings(PPM)), G, np.zeros(3))
     dt_all = np.diff(d.t, prepend=d.t[0])
     bias = gtsam.imuBias.ConstantBias()
-    pim = preintegrate(d, model, bias, 0.0, T, 1, len(d.t), (None, None), dt_all)
+    w_turn = turn_rates(d.t, d.omega_ib_b)
+    pim = preintegrate(d, model, bias, 0.0, T, 1, len(d.t), (None, None), dt_all, w_turn)
     cov = np.diag(np.asarray(pim.preintMeasCov())[:3, :3])
     np.testing.assert_allclose(cov, imu.gyro_psd * T, rtol=1e-4)

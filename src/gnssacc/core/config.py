@@ -55,7 +55,7 @@ DEFAULTS: dict[str, dict] = {
         # carry them: every turn tilts the attitude by that fraction of the angle turned. Both
         # estimators cover it with gyro noise that grows with the rotation performed
         # (gnssacc.estimators.settings.ImuNoise.gyro_turn_psd); 0: none.
-        "gyro_cross_axis_ppm": 1000.0,
+        "gyro_turn_error_ppm": 1000.0,
     },
     "mounting": {
         # Rotation from IMU axes to body (FRD) axes as roll, pitch, yaw [deg]:
@@ -431,9 +431,9 @@ class RunConfig:
     @property
     def gyro_turn_psd(self) -> float:
         """Gyro noise per unit rotation rate for the constant scale-factor and cross-axis errors
-        [rad^2/s per rad/s = rad]: ``(gyro_cross_axis_ppm 1e-6)^2`` times one radian
+        [rad^2/s per rad/s = rad]: ``(gyro_turn_error_ppm 1e-6)^2`` times one radian
         (:data:`TURN_DECORRELATION_RAD`), see :class:`gnssacc.estimators.settings.ImuNoise`."""
-        ppm = float(self["imu"]["gyro_cross_axis_ppm"])
+        ppm = float(self["imu"]["gyro_turn_error_ppm"])
         return (ppm * 1e-6) ** 2 * TURN_DECORRELATION_RAD
 
     @property

@@ -133,16 +133,16 @@ class ImuModel:
             self._cache[key] = self._make(qa_extra, qg_extra + q_w)
         return self._cache[key]
 
-    def _make(self, qa_extra: np.ndarray, qg_extra: np.ndarray) -> gtsam.PreintegrationCombinedParams:
+    def _make(
+        self, qa_extra: np.ndarray, qg_extra: np.ndarray
+    ) -> gtsam.PreintegrationCombinedParams:
         """New parameters with the settings' noise plus ``qa_extra``, ``qg_extra``."""
         imu = self.settings.imu
         p = gtsam.PreintegrationCombinedParams.MakeSharedD(self.g)
         p.setAccelerometerCovariance(np.diag(imu.accel_psd + qa_extra))
         p.setGyroscopeCovariance(np.diag(imu.gyro_psd + qg_extra))
         p.setBiasAccCovariance(np.diag(np.maximum(imu.accel_bias_rw_psd, ACCEL_BIAS_RW_FLOOR**2)))
-        p.setBiasOmegaCovariance(
-            np.diag(np.maximum(imu.gyro_bias_rw_psd, GYRO_BIAS_RW_FLOOR**2))
-        )
+        p.setBiasOmegaCovariance(np.diag(np.maximum(imu.gyro_bias_rw_psd, GYRO_BIAS_RW_FLOOR**2)))
         p.setIntegrationCovariance(np.eye(3) * self.settings.integration_sigma**2)
         p.setOmegaCoriolis(self.omega)
         return p
@@ -365,15 +365,17 @@ def is_ill_posed(exc: Exception) -> bool:
     return "indeterminant" in text or "indeterminate" in text or "ill-posed" in text
 
 
-def preintegrate(imu, model, bias, t_prev, t, j_start, k_end, inflation, dt_all):
+def preintegrate(imu, model, bias, t_prev, t, j_start, k_end, inflation, dt_all, w_turn=None):
     """PreintegratedCombinedMeasurements over ``(t_prev, t]``; samples held over (t[k-1], t[k]].
 
     ``dt_all[k] = t[k] - t[k-1]``: only the first and last samples' spans are cut at the node times.
     A sample is the interval's mean specific force in the body frame at the middle of the interval
     (the convention of the EKF's mechanization and of the simulator), while GTSAM rotates it with
     the attitude at the interval's start: each sample is first turned by the half-interval rotation
-    (:func:`mid_interval_force`). The gyro noise grows with the interval's mean bias-corrected
-    rotation rate (:meth:`ImuModel.turn_psd`).
+    (:func:`mid_interval_force`). The gyro noise grows with the interval's mean rotation rate
+    (:meth:`ImuModel.turn_psd`): the time average of ``|w_turn - b_g|``, ``w_turn`` the rotation
+    the body performs per sample [rad/s] (:func:`gnssacc.estimators.mechanization.turn_rates`;
+    ``None``: no such noise).
     """
     if k_end <= j_start:
         return gtsam.PreintegratedCombinedMeasurements(model.params(*inflation), bias)
@@ -383,13 +385,16 @@ def preintegrate(imu, model, bias, t_prev, t, j_start, k_end, inflation, dt_all)
     if k_end - j_start > 1 and imu_t[k_end - 1] > t:
         dts[-1] = t - imu_t[k_end - 2]
     f_b, w_b = imu.f_b[j_start:k_end], imu.omega_ib_b[j_start:k_end]
+    w_t = np.zeros_like(w_b) if w_turn is None else w_turn[j_start:k_end]
     if min(dts) <= 0.0:  # repeated time stamps: nothing to integrate
         keep = [k for k, dt in enumerate(dts) if dt > 0.0]
-        f_b, w_b, dts = f_b[keep], w_b[keep], [dts[k] for k in keep]
-    w_c, dt = w_b - bias.gyroscope(), np.asarray(dts)
-    rate = float(np.linalg.norm(w_c, axis=1) @ dt / dt.sum()) if len(dts) else 0.0
+        f_b, w_b, w_t, dts = f_b[keep], w_b[keep], w_t[keep], [dts[k] for k in keep]
+    dt = np.asarray(dts)
+    rate = 0.0
+    if w_turn is not None and len(dts):
+        rate = float(np.linalg.norm(w_t - bias.gyroscope(), axis=1) @ dt / dt.sum())
     pim = gtsam.PreintegratedCombinedMeasurements(model.params(*inflation, rate=rate), bias)
-    f_b = mid_interval_force(f_b, w_c, dt)
+    f_b = mid_interval_force(f_b, w_b - bias.gyroscope(), dt)
     # map() drives the C++ calls without a Python loop body (the samples are most of the run's
     # calls).
     deque(map(pim.integrateMeasurement, f_b, w_b, dts), maxlen=0)
