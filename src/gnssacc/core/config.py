@@ -28,6 +28,13 @@ from .stationary_params import StationaryParams
 from .units import DEG, G0  # noqa: F401 (re-exported: the configuration's units)
 
 
+#: The turn angle [rad] over which the attitude error of a constant gyro cross-axis or scale-factor
+#: error decorrelates: the error's direction turns with the body, so the tilt it builds over a turn
+#: of angle ``a`` is ``2 sin(a / 2)`` times the error (per-axis variance ``sigma^2 (2 - 2 cos a)``,
+#: ``0.92 sigma^2`` at one radian, at most ``4 sigma^2``). A random walk in the angle turned whose
+#: variance grows by ``sigma^2`` per radian matches it at one radian.
+TURN_DECORRELATION_RAD = 1.0
+
 #: Built-in defaults. Comments double as the documentation of each key.
 DEFAULTS: dict[str, dict] = {
     "imu": {
@@ -43,6 +50,12 @@ DEFAULTS: dict[str, dict] = {
         # 1-sigma of the biases at start-up (turn-on bias) [deg/h] and [mg].
         "gyro_bias_sigma0_deg_h": 100.0,
         "accel_bias_sigma0_mg": 20.0,
+        # 1-sigma of each gyro's constant scale-factor and cross-axis error [ppm] (datasheet:
+        # scale-factor error, cross-axis sensitivity or misalignment). The 15-state model does not
+        # carry them: every turn tilts the attitude by that fraction of the angle turned. Both
+        # estimators cover it with gyro noise that grows with the rotation performed
+        # (gnssacc.estimators.settings.ImuNoise.gyro_turn_psd); 0: none.
+        "gyro_turn_error_ppm": 1000.0,
     },
     "mounting": {
         # Rotation from IMU axes to body (FRD) axes as roll, pitch, yaw [deg]:
@@ -416,6 +429,14 @@ class RunConfig:
         ) ** 2
 
     @property
+    def gyro_turn_psd(self) -> float:
+        """Gyro noise per unit rotation rate for the constant scale-factor and cross-axis errors
+        [rad^2/s per rad/s = rad]: ``(gyro_turn_error_ppm 1e-6)^2`` times one radian
+        (:data:`TURN_DECORRELATION_RAD`), see :class:`gnssacc.estimators.settings.ImuNoise`."""
+        ppm = float(self["imu"]["gyro_turn_error_ppm"])
+        return (ppm * 1e-6) ** 2 * TURN_DECORRELATION_RAD
+
+    @property
     def accel_psd(self) -> np.ndarray:
         """White accelerometer noise PSD per axis [(m/s^2)^2/s]."""
         return (vec3(self["imu"]["accel_vrw_mps_rth"], "accel_vrw_mps_rth", "config") / 60.0) ** 2
@@ -607,6 +628,7 @@ def _validate(cfg: RunConfig, where: str, origin: dict | None = None) -> None:
     # Touch every derived quantity so malformed values fail now, naming the file.
     for name in (
         "gyro_psd",
+        "gyro_turn_psd",
         "accel_psd",
         "gyro_bias_rw_psd",
         "accel_bias_rw_psd",

@@ -75,6 +75,7 @@ BOUNDS: dict[tuple[str, str], Bound] = {
     **_all("imu", "gyro_bias_instability_deg_h accel_bias_instability_mg", Bound(0.0, 1e6)),
     **_all("imu", "gyro_bias_sigma0_deg_h accel_bias_sigma0_mg", Bound(0.0, 1e6)),
     ("imu", "bias_correlation_time_s"): Bound(0.0, 1e9, lo_open=True),
+    ("imu", "gyro_turn_error_ppm"): Bound(0.0, 1e6),
     ("gnss", "lever_arm_b_m"): Bound(-1e3, 1e3),
     **_all("gnss", "default_sigma_m gm_tau_s", Bound(0.0, 1e9, lo_open=True)),
     ("gnss", "sigma_scale"): Bound(0.0, 1e6, lo_open=True),

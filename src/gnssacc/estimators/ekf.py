@@ -117,6 +117,7 @@ def make_setup(
         settings.phi_order,
         cov_every,
         layout=layout,
+        q_turn=imu.gyro_turn_psd,
     )
     k = int(np.searchsorted(prop.t, float(init.t), side="right"))
     return EkfSetup(init, initial_state(init, settings, layout), prop, aids, k)

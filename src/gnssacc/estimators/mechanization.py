@@ -24,12 +24,19 @@ times (GNSS epochs, outputs).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
 from ..core import earth
 from ..checks.quality import InflationSegments
 from .layout import I_ATT, I_BA, I_BG, I_POS, I_VEL, N_NAV, POS, StateLayout
+
+#: Window [s] over which the body rates are averaged into the rotation performed
+#: (:func:`turn_rates`): longer than vibration's and the suspension's sway's periods, shorter than
+#: a turn.
+TURN_WINDOW_S = 1.0
 
 _A, _E2, _W, _F = earth.A, earth.E2, earth.OMEGA_IE, earth.F
 _GE, _K, _M = earth.GAMMA_E, earth.SOMIGLIANA_K, earth.M_RATIO
@@ -526,6 +533,8 @@ def propagate(
     w_ie_sign,
     gm_tau,
     gm_var,
+    q_turn,
+    w_turn,
 ):
     """Propagate nominal state and covariance from ``t_cur`` to ``t_to`` (in place).
 
@@ -563,6 +572,12 @@ def propagate(
         Correlation time [s] and stationary variance of the first-order Gauss-Markov states
         after the fifteenth, when P has them (n x n): the GNSS error [m^2], the odometry scale
         factor [-].
+    q_turn : float
+        Gyro PSD per unit rotation rate [rad^2/s per rad/s]: ``q_turn |w_turn - b_g|`` is added to
+        each body axis's gyro PSD (:attr:`gnssacc.estimators.settings.ImuNoise.gyro_turn_psd`).
+    w_turn : ndarray (N, 3)
+        The rotation the body performs: each sample's rate averaged over
+        :data:`TURN_WINDOW_S` [rad/s, body] (:func:`turn_rates`).
 
     Returns
     -------
@@ -592,9 +607,15 @@ def propagate(
                 w[i] = w_imu[k, i] - b_g[i]
             if with_cov:
                 j = _segment_index(k, seg_i0, seg_i1)
+                q_w = 0.0
+                if q_turn > 0.0:
+                    r2 = 0.0
+                    for i in range(3):
+                        r2 += (w_turn[k, i] - b_g[i]) ** 2
+                    q_w = q_turn * math.sqrt(r2)
                 for i in range(3):
                     qa_int[i] += (q_a[i] + (seg_qa[j, i] if j >= 0 else 0.0)) * dt
-                    qg_int[i] += (q_g[i] + (seg_qg[j, i] if j >= 0 else 0.0)) * dt
+                    qg_int[i] += (q_g[i] + q_w + (seg_qg[j, i] if j >= 0 else 0.0)) * dt
                 dt_acc += dt
                 count += 1
                 if count >= cov_every or t_end >= t_to:
@@ -689,6 +710,21 @@ def _cov_step(
         _step_phi(Phi, F, dt_acc, phi_order)
 
 
+def turn_rates(t: np.ndarray, omega_b: np.ndarray, window_s: float = TURN_WINDOW_S) -> np.ndarray:
+    """The rotation the body performs: each sample's rate averaged over the samples within
+    ``window_s / 2`` of it [rad/s, body], (N, 3), C-contiguous.
+
+    A constant gyro cross-axis or scale-factor error grows an attitude error with the angle turned;
+    vibration and the sensor's own noise turn the body back and forth, and the error they make
+    averages out. ``t`` [s] (N,), ``omega_b`` [rad/s] (N, 3).
+    """
+    t = np.asarray(t, float)
+    c = np.vstack([np.zeros(3), np.cumsum(np.asarray(omega_b, float), axis=0)])
+    lo = np.searchsorted(t, t - 0.5 * window_s, side="left")
+    hi = np.searchsorted(t, t + 0.5 * window_s, side="right")
+    return np.ascontiguousarray((c[hi] - c[lo]) / (hi - lo)[:, None])
+
+
 def kernel_array(x, dtype) -> np.ndarray:
     """``x`` as the kernels take it: C-contiguous and writable. numba compiles a separate version
     of a kernel for read-only arrays (a broadcast, a memory map), which would cost a second full
@@ -717,6 +753,8 @@ class Propagator:
     layout : gnssacc.estimators.layout.StateLayout, optional
         The states the filter carries: the Gauss-Markov ones after the navigation states are
         propagated with their correlation times and variances (default: none).
+    q_turn : float
+        Gyro PSD per unit rotation rate [rad^2/s per rad/s] (see :func:`propagate`; default 0).
     """
 
     def __init__(
@@ -733,9 +771,12 @@ class Propagator:
         cov_every: int = 1,
         w_ie_sign: float = 1.0,
         layout: StateLayout | None = None,
+        q_turn: float = 0.0,
     ):
         self.t, self.f, self.w = (kernel_array(x, float) for x in (t, f_b, omega_ib_b))
         self.q = tuple(np.array(q, float) for q in (q_a, q_g, q_ba, q_bg))
+        self.q_turn = float(q_turn)
+        self.w_turn = turn_rates(self.t, self.w) if self.q_turn > 0.0 else np.zeros((1, 3))
         segments = InflationSegments._make(segments)
         # In the kernel's argument order: sample ranges, accelerometer, gyro.
         self.segments = (
@@ -793,6 +834,8 @@ class Propagator:
             self.w_ie_sign,
             self.extra_tau,
             self.extra_var,
+            self.q_turn,
+            self.w_turn,
         )
 
 

@@ -34,6 +34,12 @@ class ImuNoise:
         Bias random-walk PSD [(m/s^2)^2/s^3 s], [(rad/s)^2/s].
     accel_bias_sigma0, gyro_bias_sigma0 : ndarray (3,)
         Turn-on bias 1-sigma [m/s^2], [rad/s].
+    gyro_turn_psd : float
+        Gyro noise per unit rotation rate [rad^2/s per rad/s]: both estimators add
+        ``gyro_turn_psd |omega|`` to each body axis's gyro PSD, ``omega`` the bias-corrected
+        body rate [rad/s]. It stands for the constant scale-factor and cross-axis errors the
+        model does not carry (:attr:`gnssacc.core.config.RunConfig.gyro_turn_psd`): the attitude
+        variance they add grows with the angle turned, not with time.
     """
 
     accel_psd: np.ndarray
@@ -42,6 +48,7 @@ class ImuNoise:
     gyro_bias_rw_psd: np.ndarray
     accel_bias_sigma0: np.ndarray
     gyro_bias_sigma0: np.ndarray
+    gyro_turn_psd: float = 0.0
 
     @classmethod
     def from_config(cls, cfg: RunConfig) -> "ImuNoise":
@@ -52,6 +59,7 @@ class ImuNoise:
             cfg.gyro_bias_rw_psd,
             cfg.accel_bias_sigma0,
             cfg.gyro_bias_sigma0,
+            cfg.gyro_turn_psd,
         )
 
 

@@ -63,6 +63,7 @@ from .layout import (
     NodeLayout,
     StateLayout,
 )
+from .mechanization import turn_rates
 from .settings import SmootherSettings
 from .smoother_graph import (
     ImuModel,
@@ -346,7 +347,9 @@ class _Loop:
             if self._touches[i]
             else (None, None)
         )
-        return preintegrate(imu, self.model, self.prev.bias, t_prev, t_to, j0, k_to, infl, self._dt)
+        return preintegrate(
+            imu, self.model, self.prev.bias, t_prev, t_to, j0, k_to, infl, self._dt, self._w_turn
+        )
 
     def feed(self, method, show_progress):
         imu, times, n = self.run.imu, self.times, len(self.times)
@@ -356,6 +359,7 @@ class _Loop:
         # (preintegrate_to takes the samples up to a node as last[i] does.)
         self._touches = touches(first, last, segs.i0, segs.i1).tolist()
         self._dt = np.diff(imu.t, prepend=imu.t[0])
+        self._w_turn = turn_rates(imu.t, imu.omega_ib_b)
         # Python scalars: the loop runs once per node and numpy scalars cost more than floats.
         times_l, first = (times.tolist() + [np.inf]), first.tolist()
         for i in progress(range(1, n), desc=method, enable=show_progress):

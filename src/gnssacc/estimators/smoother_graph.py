@@ -59,6 +59,11 @@ GYRO_BIAS_RW_FLOOR = 1e-8
 #: Symbol character of the bias variables ``B(i)``: relinearised before they are marginalised
 #: when far from their linearisation point (the IMU factors' first-order bias correction).
 BIAS_SYMBOL = SYM_B
+#: Mean rotation rates of a node interval are rounded to a geometric grid of this ratio before
+#: they set its gyro noise (:meth:`ImuModel.turn_psd`; 5 %: the PSD within 2.5 %).
+TURN_RATE_STEP = 1.05
+#: Below this mean rotation rate [rad/s] (about the earth's rate) an interval gets no turn noise.
+TURN_RATE_FLOOR = 1e-4
 
 
 class NodeEstimate(NamedTuple):
@@ -92,36 +97,55 @@ def node_times(t0: float, t_end: float, epochs: np.ndarray, max_spacing: float) 
 
 
 class ImuModel:
-    """Preintegration parameters, with cached copies inflated for suspect IMU data."""
+    """Preintegration parameters, with cached copies inflated for suspect IMU data and for the
+    rotation an interval performs."""
 
     def __init__(self, settings: SmootherSettings, g: float, omega_ie_n: np.ndarray):
         self.settings, self.g, self.omega = settings, g, omega_ie_n
         self._cache: dict = {}
         self.base = self.params(np.zeros(3), np.zeros(3))  # first call fills the cache
 
+    def turn_psd(self, rate: float) -> float:
+        """The gyro PSD [rad^2/s] the constant scale-factor and cross-axis errors add at the mean
+        rotation rate ``rate`` [rad/s]: ``gyro_turn_psd rate``
+        (:attr:`gnssacc.estimators.settings.ImuNoise.gyro_turn_psd`), the rate rounded to a grid
+        of :data:`TURN_RATE_STEP` (so that few parameter sets are made) and nothing below
+        :data:`TURN_RATE_FLOOR`."""
+        q = float(self.settings.imu.gyro_turn_psd)
+        if q <= 0.0 or rate < TURN_RATE_FLOOR:
+            return 0.0
+        step = np.log(TURN_RATE_STEP)
+        return q * float(np.exp(np.round(np.log(rate) / step) * step))
+
     def params(
-        self, qa_extra: np.ndarray | None, qg_extra: np.ndarray | None
+        self, qa_extra: np.ndarray | None, qg_extra: np.ndarray | None, rate: float = 0.0
     ) -> gtsam.PreintegrationCombinedParams:
-        if qa_extra is None and self._cache:
+        """The parameters with the extra white PSDs ``qa_extra`` [(m/s^2)^2/s], ``qg_extra``
+        [rad^2/s] per body axis (``None``: none) and the interval's mean rotation rate ``rate``
+        [rad/s] (:meth:`turn_psd`)."""
+        q_w = self.turn_psd(rate)
+        if qa_extra is None and qg_extra is None and q_w == 0.0 and self._cache:
             return self.base
         qa_extra = np.zeros(3) if qa_extra is None else qa_extra
         qg_extra = np.zeros(3) if qg_extra is None else qg_extra
-        key = (tuple(np.round(qa_extra, 15)), tuple(np.round(qg_extra, 15)))
+        key = (tuple(np.round(qa_extra, 15)), tuple(np.round(qg_extra, 15)), q_w)
         if key not in self._cache:
-            imu = self.settings.imu
-            p = gtsam.PreintegrationCombinedParams.MakeSharedD(self.g)
-            p.setAccelerometerCovariance(np.diag(imu.accel_psd + qa_extra))
-            p.setGyroscopeCovariance(np.diag(imu.gyro_psd + qg_extra))
-            p.setBiasAccCovariance(
-                np.diag(np.maximum(imu.accel_bias_rw_psd, ACCEL_BIAS_RW_FLOOR**2))
-            )
-            p.setBiasOmegaCovariance(
-                np.diag(np.maximum(imu.gyro_bias_rw_psd, GYRO_BIAS_RW_FLOOR**2))
-            )
-            p.setIntegrationCovariance(np.eye(3) * self.settings.integration_sigma**2)
-            p.setOmegaCoriolis(self.omega)
-            self._cache[key] = p
+            self._cache[key] = self._make(qa_extra, qg_extra + q_w)
         return self._cache[key]
+
+    def _make(
+        self, qa_extra: np.ndarray, qg_extra: np.ndarray
+    ) -> gtsam.PreintegrationCombinedParams:
+        """New parameters with the settings' noise plus ``qa_extra``, ``qg_extra``."""
+        imu = self.settings.imu
+        p = gtsam.PreintegrationCombinedParams.MakeSharedD(self.g)
+        p.setAccelerometerCovariance(np.diag(imu.accel_psd + qa_extra))
+        p.setGyroscopeCovariance(np.diag(imu.gyro_psd + qg_extra))
+        p.setBiasAccCovariance(np.diag(np.maximum(imu.accel_bias_rw_psd, ACCEL_BIAS_RW_FLOOR**2)))
+        p.setBiasOmegaCovariance(np.diag(np.maximum(imu.gyro_bias_rw_psd, GYRO_BIAS_RW_FLOOR**2)))
+        p.setIntegrationCovariance(np.eye(3) * self.settings.integration_sigma**2)
+        p.setOmegaCoriolis(self.omega)
+        return p
 
 
 def initial_prior(
@@ -341,28 +365,36 @@ def is_ill_posed(exc: Exception) -> bool:
     return "indeterminant" in text or "indeterminate" in text or "ill-posed" in text
 
 
-def preintegrate(imu, model, bias, t_prev, t, j_start, k_end, inflation, dt_all):
+def preintegrate(imu, model, bias, t_prev, t, j_start, k_end, inflation, dt_all, w_turn=None):
     """PreintegratedCombinedMeasurements over ``(t_prev, t]``; samples held over (t[k-1], t[k]].
 
     ``dt_all[k] = t[k] - t[k-1]``: only the first and last samples' spans are cut at the node times.
     A sample is the interval's mean specific force in the body frame at the middle of the interval
     (the convention of the EKF's mechanization and of the simulator), while GTSAM rotates it with
     the attitude at the interval's start: each sample is first turned by the half-interval rotation
-    (:func:`mid_interval_force`).
+    (:func:`mid_interval_force`). The gyro noise grows with the interval's mean rotation rate
+    (:meth:`ImuModel.turn_psd`): the time average of ``|w_turn - b_g|``, ``w_turn`` the rotation
+    the body performs per sample [rad/s] (:func:`gnssacc.estimators.mechanization.turn_rates`;
+    ``None``: no such noise).
     """
-    pim = gtsam.PreintegratedCombinedMeasurements(model.params(*inflation), bias)
     if k_end <= j_start:
-        return pim
+        return gtsam.PreintegratedCombinedMeasurements(model.params(*inflation), bias)
     imu_t = imu.t
     dts = dt_all[j_start:k_end].tolist()
     dts[0] = min(imu_t[j_start], t) - t_prev
     if k_end - j_start > 1 and imu_t[k_end - 1] > t:
         dts[-1] = t - imu_t[k_end - 2]
     f_b, w_b = imu.f_b[j_start:k_end], imu.omega_ib_b[j_start:k_end]
+    w_t = np.zeros_like(w_b) if w_turn is None else w_turn[j_start:k_end]
     if min(dts) <= 0.0:  # repeated time stamps: nothing to integrate
         keep = [k for k, dt in enumerate(dts) if dt > 0.0]
-        f_b, w_b, dts = f_b[keep], w_b[keep], [dts[k] for k in keep]
-    f_b = mid_interval_force(f_b, w_b - bias.gyroscope(), np.asarray(dts))
+        f_b, w_b, w_t, dts = f_b[keep], w_b[keep], w_t[keep], [dts[k] for k in keep]
+    dt = np.asarray(dts)
+    rate = 0.0
+    if w_turn is not None and len(dts):
+        rate = float(np.linalg.norm(w_t - bias.gyroscope(), axis=1) @ dt / dt.sum())
+    pim = gtsam.PreintegratedCombinedMeasurements(model.params(*inflation, rate=rate), bias)
+    f_b = mid_interval_force(f_b, w_b - bias.gyroscope(), dt)
     # map() drives the C++ calls without a Python loop body (the samples are most of the run's
     # calls).
     deque(map(pim.integrateMeasurement, f_b, w_b, dts), maxlen=0)
