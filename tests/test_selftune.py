@@ -130,8 +130,9 @@ def _ekf(run, ident):
 def test_tuner_recovers_the_white_noise_of_a_model_exact_imu():
     # An IMU whose errors the filter models exactly (white noise, Gauss-Markov bias, turn-on
     # bias), 35 s parked at the start: the densities are read there and refined by the likelihood.
+    # It has no scale-factor or cross-axis errors, and the configuration says so.
     run = simulate("car-city", 280.0, imu_grade="industrial-basic", noise="white", seed=3)
-    res = prepare(run, load_config(), "auto").tuning
+    res = prepare(run, load_config(overrides={"imu": {"gyro_turn_error_ppm": 0.0}}), "auto").tuning
     p = grade_config("industrial-basic")
     assert res.from_stationary["stationary_s"] > 30.0
     assert np.mean(res.values["imu"]["gyro_arw_deg_rth"]) == pytest.approx(
