@@ -407,14 +407,18 @@ def test_an_error_after_a_swallowed_signal_is_the_interruption(sig, expected):
     assert {s: signal.getsignal(s) for s in handlers} == handlers
 
 
+@pytest.mark.parametrize("jobs", ["1", "2"])
 @pytest.mark.parametrize(
     "sig, then", [(signal.SIGTERM, "raise"), (signal.SIGINT, "raise"), (signal.SIGTERM, "return")]
 )
 def test_a_signal_swallowed_while_plotting_interrupts_the_run(
-    run_dir, tmp_path, capsys, monkeypatch, sig, then
+    run_dir, tmp_path, capsys, monkeypatch, sig, then, jobs
 ):
     """The CI failure of 2026-11-24: SIGTERM inside matplotlib came back as 'ValueError: Invalid
-    bounding box' and the run ended as an internal error (exit 1) instead of an interruption."""
+    bounding box' and the run ended as an internal error (exit 1) instead of an interruption.
+    With two processes the patched figure (``errors``, the second share's) is drawn in a forked
+    drawing process, whose interruption must reach the run as this process's own would."""
+    monkeypatch.setenv("GNSSACC_JOBS", jobs)
     out = tmp_path / "res"
     assert _cli(["run", run_dir, "--methods", "ekf", "--out", out] + FAST, capsys)[0] == 0
     before = _snapshot(out)

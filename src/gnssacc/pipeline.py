@@ -22,7 +22,7 @@ from .analysis.metrics import gnss_score, score
 from .core.config import RunConfig, load_config
 from .core.config_docs import resolved_toml
 from .core.errors import InputError, warn_data
-from .core.interrupts import raise_if_interrupted
+from .core.interrupts import arrived, raise_if_arrived, raise_if_interrupted
 from .core.memory import release_free_memory
 from .core.parallel import side_by_side, usable_jobs
 from .core.recording import RecordedRun
@@ -1041,6 +1041,7 @@ def draw_figures(
             p.join(timeout=max(0.0, wait - (time.perf_counter() - t)))
         while not queue.empty():
             got.update(queue.get())
+        _pass_on_interruption(got.pop(_INTERRUPTED, None), got)
     finally:
         for p in procs:
             if p.is_alive():
@@ -1068,12 +1069,34 @@ def _figure_share(names, folder, run, sols, metrics, cfg=None) -> dict:
         PLOT_SETS.pop(key, None)
 
 
+#: Key of a drawing process's answer that carries the signal it was interrupted by.
+_INTERRUPTED = "__interrupted__"
+
+
 def _draw_share(queue, names, folder, run, sols, metrics, cfg=None) -> None:
-    """A drawing process: its figures, and what it drew on ``queue``."""
+    """A drawing process: its figures, and what it drew on ``queue``, with the signal that
+    interrupted it (even one that compiled code swallowed) under :data:`_INTERRUPTED`."""
     try:
-        queue.put(_figure_share(names, folder, run, sols, metrics, cfg))
+        got = _figure_share(names, folder, run, sols, metrics, cfg)
     except BaseException as exc:  # noqa: BLE001 (reported by name, never raised in a child)
-        queue.put({n: f"not drawn: {type(exc).__name__}" for n in names})
+        got = {n: f"not drawn: {type(exc).__name__}" for n in names}
+    queue.put({**got, _INTERRUPTED: arrived()} if arrived() is not None else got)
+
+
+def _pass_on_interruption(signum: int | None, got: dict) -> None:
+    """A drawing process was interrupted: so is this one, by the same signal, as if compiled code
+    had swallowed it here (its handler records it; the run's next checkpoint raises it, after the
+    result is written when every figure was drawn); at once when the interruption cut a figure
+    (``got``: what each figure came to), as a figure cut in this process would."""
+    if signum is None:
+        return
+    try:
+        os.kill(os.getpid(), signum)
+    except BaseException:  # noqa: BLE001 (the interruption itself: recorded, raised below or later)
+        pass
+    cut = {"not drawn: Terminated", "not drawn: KeyboardInterrupt"}
+    if any(isinstance(v, str) and v in cut for v in got.values()):
+        raise_if_arrived()
 
 
 def default_out_dir(run: RecordedRun) -> Path:
