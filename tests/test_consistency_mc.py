@@ -143,7 +143,7 @@ def monte_carlo(
     filter's Q (white noise and bias random-walk PSDs) and R (fix covariances) scaled by the given
     factors against the simulator's truth."""
     grade = grade_config(GRADE)
-    told = dict(grade)
+    told = {**grade, "gyro_turn_error_ppm": 0.0}  # the runs' IMU has no cross-axis/scale errors
     for key in (
         "gyro_arw_deg_rth",
         "accel_vrw_mps_rth",
@@ -258,7 +258,8 @@ def smoother_z2(runs: int = RUNS) -> tuple[dict[str, np.ndarray], dict[str, np.n
     from gnssacc.prepare.passes import run_smoother
 
     grade = grade_config(GRADE)
-    cfg, grade_si = load_config(overrides={"imu": grade}), imu_sigmas_si(grade)
+    told = {**grade, "gyro_turn_error_ppm": 0.0}  # the runs' IMU has no cross-axis/scale errors
+    cfg, grade_si = load_config(overrides={"imu": told}), imu_sigmas_si(grade)
     out, ratio = {"smoother": [], "smoother-online": []}, {"smoother": [], "smoother-online": []}
     for seed in range(SM_SEED0, SM_SEED0 + runs):
         run = simulate(
