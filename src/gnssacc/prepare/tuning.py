@@ -104,6 +104,7 @@ from ..core.errors import InputError
 from ..core.parallel import side_by_side, usable_jobs
 from ..estimators.aids import REGISTRY
 from ..estimators.settings import GnssModel
+from . import aid_inflation
 from .filter_pass import FilterPass
 from .nelder_mead import nelder_mead
 
@@ -878,30 +879,45 @@ def _significant_offsets(obj: "_Objective", theta: np.ndarray) -> tuple[np.ndarr
 
 
 def _inflate(raw: dict, obj: "_Objective", theta: np.ndarray) -> bool:
-    """Each aid's sigma in ``raw`` times :func:`correlation_inflation` of its innovations (at the
-    tuned point ``theta`` of ``obj``), in place; whether any grew.
+    """Each aid's sigmas in ``raw`` times :func:`correlation_inflation` (searched from the tuned
+    point ``theta`` of ``obj``, one aid after the other), in place; whether any grew.
 
     Not a sigma the search left at its lower limit (the floor of the constraint's, or two decades
-    below its start): the data wanted it smaller, so the aid is better than its sigma says, and a
-    filter that under-weights a measurement leaves its innovations correlated too (an exact
-    simulated constraint gave a lag-1 autocorrelation of 0.7 at the floor)."""
-    stats = obj.stats[tuple(np.round(theta, 12))]
+    below its start): the data wanted it smaller, so the aid is better than its sigma says."""
+    theta = np.array(theta, float)
+    others = tuple(k for k in obj.kinds if k not in {k for s in VEHICLE_AIDS for k in s.kinds})
     inflated = False
     for spec in VEHICLE_AIDS:
-        (kind,) = spec.kinds
-        factor = correlation_inflation(
-            stats.get(f"acf1_{kind}"), int(stats.get(f"n_{kind}_updates", 0) or 0)
-        )
-        for p in spec.inflated_keys:
-            if p not in obj.free or factor <= 1.0:
-                continue
-            value = float(raw[p[0]][p[1]])
-            if theta[obj.free.index(p)] <= -_BOUND_DECADES + 1e-9 or (
-                p in FLOORED and value <= float(obj.cfg[FLOORED[p][0]][FLOORED[p][1]]) * (1 + 1e-9)
-            ):
-                continue
-            raw[p[0]][p[1]] = value * factor
-            inflated = True
+        keys = [p for p in spec.inflated_keys if p in obj.free]
+        keys = [
+            p
+            for p in keys
+            if theta[obj.free.index(p)] > -_BOUND_DECADES + 1e-9
+            and not (
+                p in FLOORED
+                and float(raw[p[0]][p[1]])
+                <= float(obj.cfg[FLOORED[p][0]][FLOORED[p][1]]) * (1 + 1e-9)
+            )
+        ]
+        if not keys:
+            continue
+        idx = [obj.free.index(p) for p in keys]
+
+        def loglik(d: float, idx=idx) -> float:  # the other updates', the aid's sigmas d up
+            th = theta.copy()
+            th[idx] += d
+            key = tuple(np.round(th, 12))
+            if key not in obj.stats:
+                obj(th)
+            return _loglik(obj.stats[key], others)
+
+        factor = correlation_inflation(loglik)
+        if factor <= 1.0:
+            continue
+        theta[idx] += np.log10(factor)
+        for p in keys:
+            raw[p[0]][p[1]] = float(raw[p[0]][p[1]]) * factor
+        inflated = True
     return inflated
 
 
@@ -947,21 +963,13 @@ def _settle_offsets(obj: "_Objective", tuned, raw: dict, offsets: list, cfg, sea
     return n + n_test
 
 
-def correlation_inflation(acf1: float | None, n: int) -> float:
-    """The factor on an aid's white sigma that makes it stand for errors correlated in time.
-
-    For errors with lag-1 autocorrelation ``rho`` from one update to the next (first order), the
-    mean of ``n`` of them has the variance of ``n (1 - rho) / (1 + rho)`` independent ones; a
-    filter that takes them as white averages them as if they were all independent. A sigma
-    larger by ``sqrt((1 + rho) / (1 - rho))`` restores the variance of what it averages. ``rho``
-    is the lag-1 autocorrelation of the aid's whitened innovations at the tuned point (slip in
-    turns, suspension pitch under acceleration: the one-step likelihood fits them as white
-    noise); 1 when it is not above three of its standard errors (``3 / sqrt(n)``), at most 0.9.
-    """
-    if acf1 is None or n < 10 or acf1 <= 3.0 / np.sqrt(n):
-        return 1.0
-    rho = min(float(acf1), 0.9)
-    return float(np.sqrt((1.0 + rho) / (1.0 - rho)))
+def correlation_inflation(loglik) -> float:
+    """The factor on an aid's white sigma that makes it stand for errors correlated in time,
+    identified by the predictive likelihood ``loglik`` (``d`` [decades] -> the log-likelihood of
+    the updates the aid's errors do not enter with the aid's sigmas times ``10**d``):
+    :func:`gnssacc.prepare.aid_inflation.correlation_inflation`, which says why the aid's own
+    innovations cannot tell it."""
+    return aid_inflation.correlation_inflation(loglik)[0]
 
 
 def tune_gauss_markov(
