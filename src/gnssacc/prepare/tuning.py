@@ -72,9 +72,11 @@ gyros
    60 mg). The constraint's sigmas stay at or above ``[zupt] velocity_sigma_mps`` (a rolling
    vehicle sways at least as much as a parked one). The aids' errors are correlated in time
    (slip through a turn, the suspension's pitch under acceleration), which the one-step
-   likelihood fits as white noise too small for what the filter averages: each sigma is then
-   inflated by the factor of :func:`correlation_inflation` (unless the search left it at its
-   lower limit, :func:`_inflate`), and the vehicle's axes searched
+   likelihood fits as white noise too small for what the filter averages (the filter follows
+   their slow part, so the aid's own innovations do not show it): each aid's sigmas are then
+   inflated by the factor of :func:`correlation_inflation`, the one that best predicts the
+   updates the aid's errors do not enter (the fixes, the zero-rate updates; unless the search
+   left a sigma at its lower limit, :func:`_inflate`), and the vehicle's axes searched
    again under it. An angle of the vehicle's axes is kept only when it raises the
    log-likelihood by more than :data:`OFFSET_MIN_GAIN` (on a simulated UGV, exact axes and
    fixes with 2.3 m of correlated error, a fitted 0.33 deg of yaw made the EKF's position NEES
