@@ -853,7 +853,9 @@ def _aids_stage(
     raw: dict = {}
     for sec, key in free:
         raw.setdefault(sec, {})[key] = best[sec][key]
+    n_passes = len(obj.stats)
     inflated = _inflate(raw, obj, theta)
+    n_eval += len(obj.stats) - n_passes  # the inflation's passes
     offsets = [p for p in free if p in ADDITIVE]
     n_again = _settle_offsets(obj, tuned, raw, offsets, cfg, inflated) if offsets else 0
     return raw, n_eval + n_again
