@@ -8,6 +8,8 @@ error taken as white."""
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -142,3 +144,70 @@ def test_kitti_positions_are_consistent_with_the_identified_inflation():
         res = gnssacc.process("kitti", methods=["ekf"], seed=0)
     nees = res.metrics["methods"]["ekf"]["errors"]["nees_position"]["value"]
     assert 0.5 < nees < 1.5, nees
+
+
+@dataclass(frozen=True)
+class _Start:
+    sigma_pos_m: float = SIGMA_FIX
+
+
+class _Pass:
+    """A filter pass of the tuner (:class:`gnssacc.prepare.filter_pass.FilterPass`) over the
+    lateral channel above: the constraint's 1-sigma is the configuration's ``key``."""
+
+    def __init__(self, key, kind: str, fixes, constraint, q: float):
+        self.key, self.kind, self.fixes, self.constraint, self.q = key, kind, fixes, constraint, q
+
+    def __call__(self, run, cfg, method, **_):
+        ll_fix, ll_con = _filter(
+            self.fixes, self.constraint, float(cfg[self.key[0]][self.key[1]]), self.q
+        )[:2]
+        return SimpleNamespace(stats={"loglik_pos": ll_fix, f"loglik_{self.kind}": ll_con})
+
+
+@pytest.mark.parametrize(
+    "key, kind, start, lowest",
+    [
+        # the constraint's sigma at its floor, [zupt] velocity_sigma_mps (0.05 m/s here)
+        (("nhc", "sigma_lateral_mps"), "nhc", 0.5, -1.0 - 0.3),
+        # the odometry's at the search's lower limit, two decades below its start
+        (("odometry", "speed_sigma_mps"), "odo", 5.0, -2.0),
+    ],
+)
+def test_a_search_ending_at_a_lower_limit_or_a_hair_above_it_ends_inflated_alike(
+    key, kind, start, lowest
+):
+    """Two tuner states that differ only by where the search stopped, on the aid's lower limit
+    (0.05 m/s) or 0.1 % above it, give nearly the same final sigma: the fixes' likelihood decides
+    the inflation wherever the sigma sits. The aid's error is a slip correlated at 0.9 per update
+    (sigma 0.1 m/s), for which inflation is decisive from 0.05 m/s. A rule that skipped a sigma at
+    its lower limit kept 0.05 there and inflated the other by several times."""
+    from gnssacc.core.config import load_config
+    from gnssacc.prepare import tuning
+
+    q = 1e-3
+    _, _, fixes, con = _draw(0.9, q, 3000, 0)
+    cfg = load_config(overrides={"zupt": {"velocity_sigma_mps": 0.05}})
+    finals = []
+    for theta in (lowest, math.log10(0.05 * 1.001 / start)):
+        obj = tuning._Objective(
+            None,
+            cfg,
+            [key],
+            {key: np.array([start])},
+            None,
+            None,
+            _Start(),
+            "ekf",
+            ("pos", kind),
+            _Pass(key, kind, fixes, con, q),
+        )
+        obj(np.array([theta]))  # the search's end point, evaluated by the search
+        raw = {key[0]: {key[1]: obj.config(np.array([theta]))[key[0]][key[1]]}}
+        sigma = float(raw[key[0]][key[1]])
+        tuning._inflate(raw, obj, np.array([theta]))  # in place
+        finals.append((sigma, float(raw[key[0]][key[1]])))
+    (at_limit, final_at), (above, final_above) = finals
+    assert at_limit == pytest.approx(0.05) and above == pytest.approx(0.05 * 1.001)
+    assert final_at > 2.0 * at_limit, finals  # decided by the likelihood at the limit too
+    assert final_at == pytest.approx(final_above, rel=0.02), finals
