@@ -133,3 +133,56 @@ def test_a_method_failing_in_a_worker_is_reported_as_alone(monkeypatch, prepared
     )
     assert "smoother" in got and "ekf-acc" not in got
     assert "no convergence" in failures["ekf-acc"]
+
+
+def test_the_yaw_bank_side_by_side_chooses_as_alone(monkeypatch):
+    from gnssacc.estimators.ekf import run_ekf
+    from gnssacc.prepare.stationary import detect_stationary
+    from gnssacc.prepare.yawbank import select_yaw
+
+    run = gnssacc.simulate("car", 90.0, seed=5)
+    cfg = pipeline.configure()
+    report = detect_stationary(run.imu, run.gnss, run.origin)
+    banks = {}
+    for jobs in ("1", "2"):
+        monkeypatch.setenv(parallel.JOBS_ENV, jobs)
+        banks[jobs] = select_yaw(run, cfg, report, filter_pass=run_ekf)
+    alone, side = banks["1"], banks["2"]
+    np.testing.assert_array_equal(side.posterior, alone.posterior)
+    np.testing.assert_array_equal(side.init.rpy, alone.init.rpy)
+    np.testing.assert_array_equal(side.init.sigma_att_rad, alone.init.sigma_att_rad)
+    assert side.t_decided == alone.t_decided and side.init.how == alone.init.how
+    err = (alone.init.rpy[2] - run.truth.rpy[0, 2] + np.pi) % (2 * np.pi) - np.pi
+    assert abs(err) < 3.0 * alone.init.sigma_att_rad[2]  # and it is the right yaw
+
+
+def test_no_fork_while_a_thread_holds_them(monkeypatch):
+    # a child forked while the kernels' thread compiles inherits its locks held and waits for
+    # ever on the first one it needs: the calls are made here until the thread is done
+    monkeypatch.setenv(parallel.JOBS_ENV, "2")
+    parallel.hold_forks()
+    try:
+        got = parallel.side_by_side(_pid_and_square, [(x,) for x in range(4)])
+    finally:
+        parallel.release_forks()
+    assert [r[1] for r in got] == [0, 1, 4, 9]
+    assert {r[0] for r in got} == {os.getpid()}
+    assert not parallel.forks_held()
+    again = parallel.side_by_side(_pid_and_square, [(x,) for x in range(4)])
+    assert len({r[0] for r in again}) == 2  # released: the workers take their share again
+
+
+def test_the_kernels_thread_holds_forks_until_it_is_done(monkeypatch):
+    import threading
+
+    from gnssacc.estimators import kernels
+
+    go = threading.Event()
+    monkeypatch.setattr(kernels, "compile_groups", lambda groups: go.wait(10.0))
+    warm = kernels.BackgroundWarmUp(groups=(), processes=False)
+    assert not parallel.forks_held()
+    warm.start()
+    assert parallel.forks_held()  # the thread is loading: no fork now
+    go.set()
+    warm.wait_all()
+    assert not parallel.forks_held()

@@ -70,7 +70,7 @@ class PairedDifference:
 def batch_interval(d: np.ndarray, n_batches: int = N_BATCHES) -> tuple[float, float, float, int]:
     """``(mean, lo, hi, k)``: the mean of ``d`` and its 95 % Student-t interval over ``k``
     consecutive block means (``k`` at most ``n_batches``, each block at least 2 values)."""
-    from scipy.stats import t as student
+    from ..core.distributions import t_ppf
 
     d = np.asarray(d, float)
     d = d[np.isfinite(d)]
@@ -79,7 +79,7 @@ def batch_interval(d: np.ndarray, n_batches: int = N_BATCHES) -> tuple[float, fl
     if k < 2:
         return mean, float("nan"), float("nan"), k
     means = np.array([b.mean() for b in np.array_split(d, k)])
-    half = student.ppf(0.975, k - 1) * means.std(ddof=1) / np.sqrt(k)
+    half = t_ppf(0.975, k - 1) * means.std(ddof=1) / np.sqrt(k)
     return mean, mean - half, mean + half, k
 
 

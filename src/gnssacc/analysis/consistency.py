@@ -55,6 +55,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.distributions import binom_sf
 from ..core.solution import NavSolution
 from ..estimators.ekf import run_ekf
 from ..estimators.aids import TAIL_P, tail_bound
@@ -156,9 +157,7 @@ def heavy_tails(n_beyond: int, n: int, who: str, acf1: float | None = None) -> s
     model is already reported as missing a slowly varying error, whose excursions it would count."""
     if n <= 0 or n_beyond < 3 or correlated(acf1, n):
         return None
-    from scipy.stats import binom
-
-    if binom.sf(n_beyond - 1, n, TAIL_P) >= TAIL_ALARM:
+    if binom_sf(n_beyond - 1, n, TAIL_P) >= TAIL_ALARM:
         return None
     return (
         f"the fixes carry outliers the noise model does not cover: {n_beyond} of {who} {n} position "

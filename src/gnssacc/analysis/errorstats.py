@@ -28,6 +28,7 @@ import math
 
 import numpy as np
 
+from ..core.distributions import chi2_ppf
 from ..core.recording import RecordedRun
 from ..core.solution import NavSolution
 from ..core.states import ATT, POS, VEL
@@ -127,10 +128,8 @@ def chi2_band(n_eff: float, dof: int, alpha: float = NEES_ALPHA) -> tuple[float,
     """The chi-square interval of probability ``1 - alpha`` of a mean NEES per dof over ``n_eff``
     independent epochs of ``dof`` each (``n_eff dof`` degrees of freedom; with correlated epochs,
     :func:`effective_count`, the scaled chi-square of the same variance)."""
-    from scipy.stats import chi2
-
     k = max(n_eff * dof, 1.0)
-    return float(chi2.ppf(alpha / 2, k) / k), float(chi2.ppf(1.0 - alpha / 2, k) / k)
+    return chi2_ppf(alpha / 2, k) / k, chi2_ppf(1.0 - alpha / 2, k) / k
 
 
 def nees_band(n_eff: float, dof: int) -> tuple[float, float]:

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.distributions import chi2_ppf
+
 #: Updates averaged by the moving mean (``nis.png``'s window).
 WINDOW = 20
 #: A step between updates longer than this many times their median step ends a segment (an outage).
@@ -43,11 +45,9 @@ def moving_mean(t: np.ndarray, x: np.ndarray, window: int = WINDOW) -> np.ndarra
 
 def band_of_mean(window: int = WINDOW, dof: int = 3, level: float = 0.997) -> tuple[float, float]:
     """Two-sided ``level`` band of a mean of ``window`` independent NIS values per dof."""
-    from scipy.stats import chi2
-
     k = dof * window
     a = (1.0 - level) / 2.0
-    return float(chi2.ppf(a, k) / k), float(chi2.ppf(1.0 - a, k) / k)
+    return chi2_ppf(a, k) / k, chi2_ppf(1.0 - a, k) / k
 
 
 def fraction_in_band(t: np.ndarray, nis: np.ndarray, window: int = WINDOW) -> float | None:

@@ -42,15 +42,11 @@ def prmse_by(records: list[dict]) -> dict:
 
 def paired_effect(diff: np.ndarray) -> dict:
     """Mean of paired differences with its 95 % t interval and the sign-flip p-value."""
-    from scipy.stats import t as student
+    from ..core.distributions import t_ppf
 
     n = len(diff)
     mean = float(np.mean(diff))
-    half = (
-        float(student.ppf(0.975, n - 1) * np.std(diff, ddof=1) / np.sqrt(n))
-        if n > 1
-        else float("nan")
-    )
+    half = float(t_ppf(0.975, n - 1) * np.std(diff, ddof=1) / np.sqrt(n)) if n > 1 else float("nan")
     return {
         "n": n,
         "mean": mean,

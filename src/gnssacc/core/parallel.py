@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -30,6 +31,9 @@ MAX_JOBS = 4
 JOBS_ENV = "GNSSACC_JOBS"
 
 _POOL: dict = {"target": None, "executor": None}  # the one kept pool
+#: Threads of this process at work a fork would copy midway (:func:`hold_forks`).
+_HELD = [0]
+_HELD_LOCK = threading.Lock()
 _TARGET: list = [None]  # in a worker: the function it was forked for
 
 
@@ -42,6 +46,26 @@ def usable_jobs() -> int:
         return 1
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return max(1, min(MAX_JOBS, cores or 1))
+
+
+def hold_forks() -> None:
+    """A thread of this process starts work whose locks a forked child would inherit held
+    (numba compiling or loading kernels, importing modules): a child that needed one would wait
+    for ever. Until :func:`release_forks`, :func:`side_by_side` makes its calls here, one after
+    the other (the same results)."""
+    with _HELD_LOCK:
+        _HELD[0] += 1
+
+
+def release_forks() -> None:
+    """The work :func:`hold_forks` announced is done."""
+    with _HELD_LOCK:
+        _HELD[0] = max(_HELD[0] - 1, 0)
+
+
+def forks_held() -> bool:
+    """Whether a thread's work makes forking unsafe now (:func:`hold_forks`)."""
+    return _HELD[0] > 0
 
 
 def side_by_side(
@@ -59,6 +83,7 @@ def side_by_side(
     keep : bool
         Keep the workers for further calls of the same ``target`` (:func:`close_pool` ends them).
     jobs : int, optional
+        Default :func:`usable_jobs`; the calls are made here while :func:`forks_held`.
 
     Returns
     -------
@@ -71,7 +96,7 @@ def side_by_side(
         The first call's (in order) that raised, as the calls one after the other would.
     """
     jobs = usable_jobs() if jobs is None else max(1, int(jobs))
-    if jobs < 2 or len(calls) < 2:
+    if jobs < 2 or len(calls) < 2 or forks_held():
         return [target(*args) for args in calls]
     executor = _executor(target, min(jobs, len(calls)) - 1, keep)
     try:

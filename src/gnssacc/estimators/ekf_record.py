@@ -71,7 +71,7 @@ class Tally:
     def __init__(self, keep: bool):
         self.keep = keep
         self.prev: dict[str, np.ndarray | None] = {k: None for k in KINDS}
-        self.lag1 = {k: np.zeros(2) for k in KINDS}  # sum w_k w_(k-1), sum w_k^2
+        self.lag1 = {k: [0.0, 0.0] for k in KINDS}  # sum w_k w_(k-1), sum w_k^2
         self.n = {k: 0 for k in KINDS}
         self.rejected = {k: 0 for k in KINDS}
         self.nis_sum = {k: 0.0 for k in KINDS}
@@ -86,8 +86,11 @@ class Tally:
         if not used:
             self.rejected[k] += 1
             return
-        if self.prev[k] is not None:
-            self.lag1[k] += (float(wz @ self.prev[k]), float(wz @ wz))
+        prev = self.prev[k]
+        if prev is not None:
+            lag = self.lag1[k]
+            lag[0] += float(wz @ prev)
+            lag[1] += float(wz @ wz)
         self.prev[k] = wz
         self.n[k] += 1
         self.nis_sum[k] += nis

@@ -26,6 +26,7 @@ import threading
 import time
 
 from ..core.jit import KERNEL_DIR, PACKAGE_DIR, cache_folder, kernel_cached
+from ..core.parallel import hold_forks, release_forks
 
 #: The kernels Python calls, by group, as ``(module file in gnssacc/estimators, function names)``
 #: pairs (numba compiles and caches each kernel's callees with it).
@@ -175,6 +176,7 @@ class BackgroundWarmUp:
             rest = [g for g in self.missing if g != "propagation"]
             self._children = {tuple(part): _spawn(part) for part in (first, rest) if part}
             atexit.register(self.stop)
+        hold_forks()  # until the thread is done (released at the end of _run)
         self._thread.start()
         return self
 
@@ -192,6 +194,13 @@ class BackgroundWarmUp:
                 compile_groups(part)
 
     def _run(self) -> None:
+        try:
+            self._load_all()
+        finally:
+            release_forks()
+            self._all_done.set()
+
+    def _load_all(self) -> None:
         t0 = time.perf_counter()
         try:
             self._wait_children(["propagation"])
@@ -207,7 +216,6 @@ class BackgroundWarmUp:
                 compile_groups(others)
         except Exception:  # an estimator compiles them itself when it first runs
             pass
-        self._all_done.set()
 
     def wait_all(self) -> float:
         """Block until every group is ready (:meth:`wait` is the EKF's)."""

@@ -25,6 +25,7 @@ times (GNSS epochs, outputs).
 from __future__ import annotations
 
 import math
+import weakref
 
 import numpy as np
 from numba import njit
@@ -710,14 +711,35 @@ def _cov_step(
         _step_phi(Phi, F, dt_acc, phi_order)
 
 
+#: :func:`turn_rates` kept for the last few IMU arrays (weak references, checked on use).
+_TURN_RATES: dict = {}
+
+
 def turn_rates(t: np.ndarray, omega_b: np.ndarray, window_s: float = TURN_WINDOW_S) -> np.ndarray:
     """The rotation the body performs: each sample's rate averaged over the samples within
-    ``window_s / 2`` of it [rad/s, body], (N, 3), C-contiguous.
+    ``window_s / 2`` of it [rad/s, body], (N, 3), C-contiguous (not to be written to).
 
     A constant gyro cross-axis or scale-factor error grows an attitude error with the angle turned;
     vibration and the sensor's own noise turn the body back and forth, and the error they make
-    averages out. ``t`` [s] (N,), ``omega_b`` [rad/s] (N, 3).
+    averages out. ``t`` [s] (N,), ``omega_b`` [rad/s] (N, 3). The same two array objects give
+    the array computed for them before (a tuner's passes share the recording's IMU arrays).
     """
+    key = (id(t), id(omega_b), float(window_s))
+    hit = _TURN_RATES.get(key)
+    if hit is not None and hit[0]() is t and hit[1]() is omega_b:
+        return hit[2]
+    out = _turn_rates(t, omega_b, window_s)  # writable: numba would compile a read-only variant
+    try:
+        refs = (weakref.ref(t), weakref.ref(omega_b))
+    except TypeError:  # not arrays: nothing to key on
+        return out
+    while len(_TURN_RATES) >= 4:
+        _TURN_RATES.pop(next(iter(_TURN_RATES)))
+    _TURN_RATES[key] = (*refs, out)
+    return out
+
+
+def _turn_rates(t, omega_b, window_s: float) -> np.ndarray:
     t = np.asarray(t, float)
     c = np.vstack([np.zeros(3), np.cumsum(np.asarray(omega_b, float), axis=0)])
     lo = np.searchsorted(t, t - 0.5 * window_s, side="left")

@@ -107,7 +107,7 @@ import numpy as np
 
 from ..core.config import RunConfig, toml_value
 from ..core.errors import InputError
-from ..core.parallel import side_by_side, usable_jobs
+from ..core.parallel import forks_held, side_by_side, usable_jobs
 from ..estimators.aids import REGISTRY
 from ..estimators.settings import GnssModel
 from . import aid_inflation
@@ -393,7 +393,7 @@ class _Objective:
             theta = np.asarray(theta, float)
             if theta.tobytes() not in self.passes:
                 todo.setdefault(theta.tobytes(), theta)
-        if len(todo) < 2 or usable_jobs() < 2:
+        if len(todo) < 2 or usable_jobs() < 2 or forks_held():  # guesses: not made one by one
             return
         for key, got in zip(
             todo, side_by_side(self.evaluate_safely, [(t,) for t in todo.values()], keep=True)

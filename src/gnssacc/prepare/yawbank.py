@@ -31,6 +31,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..core.config import RunConfig
+from ..core.parallel import side_by_side
 from ..core.recording import InitialState, RecordedRun
 from ..core.rotations import wrap_angle
 from .filter_pass import FilterPass
@@ -70,15 +71,17 @@ class BankResult:
 
 
 def _score(run, cfg, hyps, stationary, quality, t_h, filter_pass: FilterPass):
-    """Cumulative log-likelihood of each hypothesis on a common time grid up to ``t_h``."""
+    """Cumulative log-likelihood of each hypothesis on a common time grid up to ``t_h``; the
+    hypotheses' passes side by side (:func:`gnssacc.core.parallel.side_by_side`: forked, each
+    process holds the run; only the likelihood rows travel), the same as one after the other."""
     grid = run.gnss.t[(run.gnss.t > hyps[0].t) & (run.gnss.t <= t_h)]
-    L = np.zeros((len(hyps), len(grid)))
-    for k, h in enumerate(hyps):
+
+    def row(k: int) -> np.ndarray:
         sol = filter_pass(
             run,
             cfg,
             "ekf",
-            init=h,
+            init=hyps[k],
             stationary=stationary,
             quality=quality,
             output_times=np.zeros(0),
@@ -91,8 +94,10 @@ def _score(run, cfg, hyps, stationary, quality, t_h, filter_pass: FilterPass):
         ll = np.concatenate([st[f"loglik_{kind}_series"] for kind in _SCORED])
         order = np.argsort(t, kind="stable")
         cum = np.concatenate([[0.0], np.cumsum(ll[order])])
-        L[k] = cum[np.searchsorted(t[order], grid, side="right")]
-    return grid, L
+        return cum[np.searchsorted(t[order], grid, side="right")]
+
+    rows = side_by_side(row, [(k,) for k in range(len(hyps))])
+    return grid, np.array(rows).reshape(len(hyps), len(grid))
 
 
 def _decide(L, yaws, level):

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 import numpy as np
 
+from ...core.distributions import chi2_isf
 from ..layout import MarkovBlock
 
 if TYPE_CHECKING:
@@ -42,9 +43,7 @@ _TAIL_BOUNDS: dict = {}
 def tail_bound(dof: int) -> float:
     """The NIS exceeded with probability :data:`TAIL_P` by Gaussian innovations of ``dof``."""
     if dof not in _TAIL_BOUNDS:
-        from scipy.stats import chi2
-
-        _TAIL_BOUNDS[dof] = float(chi2.isf(TAIL_P, dof))
+        _TAIL_BOUNDS[dof] = chi2_isf(TAIL_P, dof)
     return _TAIL_BOUNDS[dof]
 
 

@@ -57,29 +57,35 @@ def position(
     """GNSS antenna position fix (lat, lon [rad], h [m]) with 1-sigma ``sigma_ned`` [m], or with
     the full NED covariance ``cov_ned`` [m^2] (correlated axes, e.g. an RTKLIB solution's) when
     given (module notes)."""
-    R_M, R_N = radii(s.pos[0])
+    pos = s.pos
+    R_M, R_N = radii(pos[0])
     l_n = s.R_nb @ lever_arm_b
     dz = (
         np.array(
             [
-                (s.pos[0] - lat) * (R_M + s.pos[2]),
-                (s.pos[1] - lon) * (R_N + s.pos[2]) * np.cos(s.pos[0]),
-                -(s.pos[2] - h),
+                (pos[0] - lat) * (R_M + pos[2]),
+                (pos[1] - lon) * (R_N + pos[2]) * np.cos(pos[0]),
+                -(pos[2] - h),
             ]
         )
         + l_n
     )
+    # H = [I, 0, -[l_n x], 0 ...], element by element (a per-fix path: no temporaries)
     H = zero_jacobian(s, 3)
-    H[:, POS] = np.eye(3)
-    H[:, ATT] = -skew(l_n)
+    p, a = POS.start, ATT.start
+    H[0, p] = H[1, p + 1] = H[2, p + 2] = 1.0
+    H[0, a + 1], H[0, a + 2] = l_n[2], -l_n[1]
+    H[1, a], H[1, a + 2] = -l_n[2], l_n[0]
+    H[2, a], H[2, a + 1] = l_n[1], -l_n[0]
     if s.layout.has(GNSS_ERROR):
         dz += s.gm
-        H[:, s.layout.block(GNSS_ERROR)] = np.eye(3)
-    R = (
-        np.diag(np.asarray(sigma_ned, float) ** 2)
-        if cov_ned is None
-        else np.asarray(cov_ned, float)
-    )
+        g = s.layout.offset(GNSS_ERROR)
+        H[0, g] = H[1, g + 1] = H[2, g + 2] = 1.0
+    if cov_ned is None:
+        R = np.zeros((3, 3))
+        R[0, 0], R[1, 1], R[2, 2] = sigma_ned[0] ** 2, sigma_ned[1] ** 2, sigma_ned[2] ** 2
+    else:
+        R = np.asarray(cov_ned, float)
     return Measurement("pos", dz, H, R, gate)
 
 

@@ -189,6 +189,7 @@ class EkfNhc(EkfAid):
 
     def __init__(self, ctx, epochs: NhcEpochs):
         self.ep, self.t, self.cfg = epochs, epochs.t, ctx.settings.nhc
+        self.R = np.diag(np.asarray(self.cfg.sigma_mps, float) ** 2)  # one for every update
 
     def models(self, s, j: int) -> list[Measurement]:
         cfg = self.cfg
@@ -216,7 +217,7 @@ class EkfNhc(EkfAid):
         if why != APPLY:
             stats[SKIPPED[why]] += 1
             return
-        yield nhc_measurement(v_b, H, nhc.sigma_mps), True
+        yield Measurement("nhc", v_b[1:3], H[1:3], self.R), True  # nhc_measurement's
 
 
 def _ekf(ctx) -> EkfNhc | None:
