@@ -326,15 +326,6 @@ def test_an_axis_angle_is_kept_only_on_a_decisive_likelihood_gain():
     assert theta.tolist() == [1.0, 1.0, 0.0] and n == 3 and dropped == [2]
 
 
-def test_correlation_inflation_is_the_ar1_variance_factor():
-    from gnssacc.prepare.tuning import correlation_inflation
-
-    assert correlation_inflation(0.5, 400) == pytest.approx(np.sqrt(3.0))  # (1 + 0.5) / (1 - 0.5)
-    assert correlation_inflation(0.1, 400) == 1.0  # within three standard errors (0.15) of zero
-    assert correlation_inflation(0.99, 400) == pytest.approx(np.sqrt(1.9 / 0.1))  # capped at 0.9
-    assert correlation_inflation(None, 400) == 1.0 and correlation_inflation(0.5, 5) == 1.0
-
-
 def test_the_clock_check_decides_without_the_aids():
     """The clock offset's likelihood stage runs the IMU and GNSS model alone: with the constraint
     (its axes not identified yet) KITTI seed 3 with outages measured a -0.148 s offset, decisively,

@@ -72,10 +72,16 @@ gyros
    60 mg). The constraint's sigmas stay at or above ``[zupt] velocity_sigma_mps`` (a rolling
    vehicle sways at least as much as a parked one). The aids' errors are correlated in time
    (slip through a turn, the suspension's pitch under acceleration), which the one-step
-   likelihood fits as white noise too small for what the filter averages: each sigma is then
-   inflated by the factor of :func:`correlation_inflation` (unless the search left it at its
-   lower limit, :func:`_inflate`), and the vehicle's axes searched
-   again under it. An angle of the vehicle's axes is kept only when it raises the
+   likelihood fits as white noise too small for what the filter averages (the filter follows
+   their slow part, so the aid's own innovations do not show it): each aid's sigmas are then
+   inflated by the factor of :func:`correlation_inflation`, the one that best predicts the
+   updates the aid's errors do not enter (the fixes, the zero-rate updates), searched from the
+   sigmas in use wherever the search left them, its floor included (:func:`_inflate`: a rule
+   that skipped a sigma at a lower limit inflated 0.0201 m/s to 0.069 on a simulated car and
+   left 0.0200 alone), and the vehicle's axes searched again under the final sigmas (inflated
+   or not: the joint search's budget of :data:`AIDS_EVALUATIONS` can leave them short; on a
+   simulated car turned 0.8 deg in pitch and -0.6 in yaw it stopped at 0.70 / -0.30, searched
+   again 0.91 / -0.64). An angle of the vehicle's axes is kept only when it raises the
    log-likelihood by more than :data:`OFFSET_MIN_GAIN` (on a simulated UGV, exact axes and
    fixes with 2.3 m of correlated error, a fitted 0.33 deg of yaw made the EKF's position NEES
    12) (on KITTI, the white fit made the constraint cost the smoother 0.2 m of PRMSE
@@ -104,6 +110,7 @@ from ..core.errors import InputError
 from ..core.parallel import forks_held, side_by_side, usable_jobs
 from ..estimators.aids import REGISTRY
 from ..estimators.settings import GnssModel
+from . import aid_inflation
 from .filter_pass import FilterPass
 from .nelder_mead import nelder_mead
 
@@ -146,7 +153,7 @@ CHECK_AFTER = 20
 # : Budget of EKF passes of the aids' search (step 5; its coordinate probe of four parameters takes
 # 9).
 AIDS_EVALUATIONS = 25
-#: ... and of the search of the vehicle's axes again once the sigmas were inflated.
+#: ... and of the search of the vehicle's axes again under the final (inflated) sigmas.
 OFFSET_EVALUATIONS = 12
 #: Log-likelihood gain an angle of the vehicle's axes must bring to be kept: half the 1e-4
 #: quantile of chi-square with 1 dof (a likelihood-ratio test; zero is the model without it).
@@ -850,9 +857,9 @@ def _aids_stage(
     raw: dict = {}
     for sec, key in free:
         raw.setdefault(sec, {})[key] = best[sec][key]
-    inflated = _inflate(raw, obj, theta)
+    n_eval += _inflate(raw, obj, theta)
     offsets = [p for p in free if p in ADDITIVE]
-    n_again = _settle_offsets(obj, tuned, raw, offsets, cfg, inflated) if offsets else 0
+    n_again = _settle_offsets(obj, raw, offsets, cfg) if offsets else 0
     return raw, n_eval + n_again
 
 
@@ -877,50 +884,59 @@ def _significant_offsets(obj: "_Objective", theta: np.ndarray) -> tuple[np.ndarr
     return theta, n, dropped
 
 
-def _inflate(raw: dict, obj: "_Objective", theta: np.ndarray) -> bool:
-    """Each aid's sigma in ``raw`` times :func:`correlation_inflation` of its innovations (at the
-    tuned point ``theta`` of ``obj``), in place; whether any grew.
+def _inflate(raw: dict, obj: "_Objective", theta: np.ndarray) -> int:
+    """Each aid's sigmas in ``raw`` (the values ``obj`` takes at its tuned point ``theta``) times
+    :func:`correlation_inflation`, one aid after the other, in place; returns the passes made.
 
-    Not a sigma the search left at its lower limit (the floor of the constraint's, or two decades
-    below its start): the data wanted it smaller, so the aid is better than its sigma says, and a
-    filter that under-weights a measurement leaves its innovations correlated too (an exact
-    simulated constraint gave a lag-1 autocorrelation of 0.7 at the floor)."""
-    stats = obj.stats[tuple(np.round(theta, 12))]
-    inflated = False
+    The factor multiplies the sigmas in use, wherever the search left them (at the floor of the
+    constraint's, at two decades below the start, or anywhere between): the likelihood of the
+    updates the aid's errors do not enter decides, so two searches that end a hair apart end with
+    nearly equal sigmas (a rule that skipped the sigmas at a lower limit inflated 0.0201 m/s to
+    0.069 and left 0.0200 alone)."""
+    keys = [p for spec in VEHICLE_AIDS for p in spec.inflated_keys if p in obj.free]
+    if not keys:
+        return 0
+    at = _objective_at(obj, raw, keys)
+    here = np.zeros(len(keys))  # the sigmas of ``raw``
+    tuned_stats = obj.stats.get(tuple(np.round(np.asarray(theta, float), 12)))
+    if tuned_stats is not None:  # the same configuration: its pass is made
+        at.stats[tuple(here)] = tuned_stats
+    others = tuple(k for k in obj.kinds if k not in {k for s in VEHICLE_AIDS for k in s.kinds})
     for spec in VEHICLE_AIDS:
-        (kind,) = spec.kinds
-        factor = correlation_inflation(
-            stats.get(f"acf1_{kind}"), int(stats.get(f"n_{kind}_updates", 0) or 0)
-        )
-        for p in spec.inflated_keys:
-            if p not in obj.free or factor <= 1.0:
-                continue
-            value = float(raw[p[0]][p[1]])
-            if theta[obj.free.index(p)] <= -_BOUND_DECADES + 1e-9 or (
-                p in FLOORED and value <= float(obj.cfg[FLOORED[p][0]][FLOORED[p][1]]) * (1 + 1e-9)
-            ):
-                continue
-            raw[p[0]][p[1]] = value * factor
-            inflated = True
-    return inflated
+        idx = [keys.index(p) for p in spec.inflated_keys if p in keys]
+        if not idx:
+            continue
+
+        def loglik(d: float, idx=idx) -> float:  # the other updates', the aid's sigmas d up
+            th = here.copy()
+            th[idx] += d
+            key = tuple(np.round(th, 12))
+            if key not in at.stats:
+                at(th)
+            return _loglik(at.stats[key], others)
+
+        factor = correlation_inflation(loglik)
+        if factor <= 1.0:
+            continue
+        here[idx] += np.log10(factor)
+        for i in idx:
+            sec, key = keys[i]
+            raw[sec][key] = float(raw[sec][key]) * factor
+    return len(at.passes)
 
 
-def _settle_offsets(obj: "_Objective", tuned, raw: dict, offsets: list, cfg, search: bool) -> int:
-    """The vehicle's axes ``offsets`` under the final sigmas (in ``raw``, held): searched again
-    from their values in ``raw`` when the sigmas were inflated (``search``), then each kept only
-    on :func:`_significant_offsets`' test; ``raw`` updated in place; returns the passes made."""
-    held = tuned.with_values(
-        {
-            sec: {k: v for k, v in vals.items() if (sec, k) not in ADDITIVE}
-            for sec, vals in raw.items()
-        },
+def _objective_at(obj: "_Objective", raw: dict, keys: list) -> "_Objective":
+    """An :class:`_Objective` like ``obj`` over ``keys`` alone, started at their values in
+    ``raw`` (``theta = 0``), the other values of ``raw`` held (on ``obj``'s configuration)."""
+    held = obj.cfg.with_values(
+        {sec: {k: v for k, v in vals.items() if (sec, k) not in keys} for sec, vals in raw.items()},
         "tuned",
     )
-    obj2 = _Objective(
+    at = _Objective(
         obj.run,
         held,
-        offsets,
-        {p: np.atleast_1d(float(raw[p[0]][p[1]])) for p in offsets},
+        keys,
+        {p: np.atleast_1d(np.asarray(raw[p[0]][p[1]], float)) for p in keys},
         obj.stationary,
         obj.quality,
         obj.init,
@@ -928,18 +944,26 @@ def _settle_offsets(obj: "_Objective", tuned, raw: dict, offsets: list, cfg, sea
         obj.kinds,
         obj.filter_pass,
     )
-    obj2.init_scale = obj.init_scale
-    theta, n = np.zeros(len(offsets)), 0
-    if search:
-        found, j, n = ml_search(
-            obj2,
-            len(offsets),
-            OFFSET_EVALUATIONS,
-            _prior_widths(cfg, offsets, {}),
-            step_decades=0.2,
-            probe_decades=None,
-        )
-        theta = found if np.isfinite(j) else theta
+    at.init_scale = obj.init_scale
+    return at
+
+
+def _settle_offsets(obj: "_Objective", raw: dict, offsets: list, cfg) -> int:
+    """The vehicle's axes ``offsets`` under the final sigmas (in ``raw``, held): searched again
+    from their values in ``raw`` (inflated or not: the joint search's budget can leave them short,
+    and a search only after an inflation would switch the axes with the inflation's decision),
+    then each kept only on :func:`_significant_offsets`' test; ``raw`` updated in place; returns
+    the passes made."""
+    obj2 = _objective_at(obj, raw, offsets)
+    found, j, n = ml_search(
+        obj2,
+        len(offsets),
+        OFFSET_EVALUATIONS,
+        _prior_widths(cfg, offsets, {}),
+        step_decades=0.2,
+        probe_decades=None,
+    )
+    theta = found if np.isfinite(j) else np.zeros(len(offsets))
     theta, n_test, dropped = _significant_offsets(obj2, theta)
     settled = obj2.config(theta)
     for i, (sec, key) in enumerate(offsets):
@@ -947,21 +971,13 @@ def _settle_offsets(obj: "_Objective", tuned, raw: dict, offsets: list, cfg, sea
     return n + n_test
 
 
-def correlation_inflation(acf1: float | None, n: int) -> float:
-    """The factor on an aid's white sigma that makes it stand for errors correlated in time.
-
-    For errors with lag-1 autocorrelation ``rho`` from one update to the next (first order), the
-    mean of ``n`` of them has the variance of ``n (1 - rho) / (1 + rho)`` independent ones; a
-    filter that takes them as white averages them as if they were all independent. A sigma
-    larger by ``sqrt((1 + rho) / (1 - rho))`` restores the variance of what it averages. ``rho``
-    is the lag-1 autocorrelation of the aid's whitened innovations at the tuned point (slip in
-    turns, suspension pitch under acceleration: the one-step likelihood fits them as white
-    noise); 1 when it is not above three of its standard errors (``3 / sqrt(n)``), at most 0.9.
-    """
-    if acf1 is None or n < 10 or acf1 <= 3.0 / np.sqrt(n):
-        return 1.0
-    rho = min(float(acf1), 0.9)
-    return float(np.sqrt((1.0 + rho) / (1.0 - rho)))
+def correlation_inflation(loglik) -> float:
+    """The factor on an aid's white sigma that makes it stand for errors correlated in time,
+    identified by the predictive likelihood ``loglik`` (``d`` [decades] -> the log-likelihood of
+    the updates the aid's errors do not enter with the aid's sigmas times ``10**d``):
+    :func:`gnssacc.prepare.aid_inflation.correlation_inflation`, which says why the aid's own
+    innovations cannot tell it."""
+    return aid_inflation.correlation_inflation(loglik)[0]
 
 
 def tune_gauss_markov(
