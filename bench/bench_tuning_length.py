@@ -106,8 +106,14 @@ def part2(seeds: int) -> None:
         )
     print("tuned values per seed (windows | whole run):")
     for w, f in zip(rows["windows"], rows["whole run"], strict=True):
-        imu_w, imu_f = w["values"].get("imu", {}), f["values"].get("imu", {})
-        print("  " + ", ".join(f"{k} {imu_w[k]} | {imu_f.get(k)}" for k in imu_w))
+        print(
+            "  "
+            + ", ".join(
+                f"{k} {v} | {f['values'].get(sec, {}).get(k)}"
+                for sec, vals in w["values"].items()
+                for k, v in vals.items()
+            )
+        )
 
 
 def main() -> None:

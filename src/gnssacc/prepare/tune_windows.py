@@ -4,8 +4,7 @@ bounded, representative part of a long run, confirmed over the whole of it.
 The tuner (:mod:`gnssacc.prepare.tuning`) maximises the innovation likelihood of ~90 EKF passes;
 over the whole run each pass costs its length, so a one-hour drive spent most of a minute before
 its first estimate. A run longer than :data:`WINDOWED_FROM_S` is instead identified on windows
-that together span :data:`SPAN_S` of IMU data, whatever the run's length (off by default: see
-:data:`WINDOWED_FROM_S`):
+that together span :data:`SPAN_S` of IMU data, whatever the run's length:
 
 - the first :data:`FIRST_S` from the tuner's start, as the whole-run pass begins (the turn-on
   biases are learnt there: their sigmas are the start's);
@@ -13,43 +12,59 @@ that together span :data:`SPAN_S` of IMU data, whatever the run's length (off by
   each placed within its stratum where its share of rest (the stationary spans) and of turning
   (yaw rate above :data:`TURN_RATE_DEG_S`) is closest to the stratum's own: the motion, rests and
   turns of the run keep their weight. Each starts :data:`LEAD_S` before its scored part from the
-  state and covariance of one reference pass over the whole run (the configured noise); the
-  updates of the lead are not scored (the covariance settles to the trial noise there).
+  state and the full covariance (correlations kept: a start with the sigmas alone makes the first
+  innovations look larger than they are, and the search answers with more process noise) of one
+  reference pass over the whole run with the search's starting noise; the updates of the lead are
+  not scored (the covariance settles to the trial noise there).
 
 Each trial point is one pass per window (:class:`WindowedPass`, a
 :class:`~gnssacc.prepare.filter_pass.FilterPass` whose statistics add the windows' scored updates),
-so the search itself is unchanged; the windows of a trial point are shared among the usable cores
+so the search itself is unchanged. The windows' log-likelihoods are added as a **stratified
+estimate of the whole run's**: each later window's counts the length of its stratum over its
+scored seconds (:attr:`Window.weight`), the first window's once. Added as they are, the first
+window (where the filter converges from the start) would weigh 40 % of the objective instead of
+the tenth of a 2,400 s run it is, and the search would answer that transient with more process
+noise; weighted, the objective estimates the one the whole-run tuner maximises, and the
+likelihood-ratio tests of its later steps (the Gauss-Markov fixes, the vehicle's axes) are made
+on the scale of the whole run. The windows of a trial point are shared among the usable cores
 (:func:`gnssacc.core.parallel.usable_jobs`, forked workers: the same numbers as in one process).
-Then two passes over the whole run, with the starting and the
-tuned noise, confirm it: the tuned noise must explain the whole run at least as well as the
-starting noise (log-likelihood gain >= 0), else the run is tuned over its whole length as before
-(:func:`tuned_on_windows` returns ``None``). The NIS the tuner reports is the whole run's.
 
-A run up to :data:`WINDOWED_FROM_S` long is tuned over its whole length (windows would save little:
-the reference and the confirming passes cost three whole-run passes).
+Then two passes over the whole run, with the starting and the tuned noise, confirm it: the tuned
+noise must explain the whole run at least as well as the starting noise (log-likelihood gain
+>= 0), else the run is tuned over its whole length as before (:func:`tuned_on_windows` returns
+``None``). The NIS the tuner reports is the whole run's.
+
+**The budget.** :data:`SPAN_S` is set by what a noise estimate needs, not by any recording: the
+scored part (480 s: the first window and four of 60 s after their leads) holds ~1,400 components
+of 1 Hz fixes, a standard error of ~2 % on the fixes' sigma (``1 / sqrt(2 N)``); the first window
+is a few times the ~100 s over which metre-level fixes resolve a vehicle IMU's turn-on biases,
+and each later window is one car manoeuvre long (a turn, a stop and the speed changes around
+it). What the windows cannot give is the whole run's precision: their estimate scatters as a
+600 s recording's does (``bench/bench_tuning_length.py --accuracy`` shows that scatter beside the
+whole run's). A run up to :data:`WINDOWED_FROM_S` long is tuned over its whole length exactly as
+before (the windows, their leads and the three whole-run passes would save little there).
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..core.parallel import usable_jobs
 from ..core.recording import InitialState, RecordedRun
-from ..core.states import ATT, BA, BG, POS, VEL
+from ..core.states import ATT, BA, BG, NAV, POS, VEL
 from .filter_pass import FilterPass
-from .tuning import run_white_stats, ungated, without_aids
+from .tuning import run_white_stats, starting_config, ungated, without_aids
 
 #: IMU seconds each trial pass covers on a windowed run [s].
 SPAN_S = 600.0
-#: A run longer than this is tuned on windows [s]. Off (infinite) by default: on a simulated
-#: 2,400 s car the windows held the accuracy for two seeds of three (PRMSE +0.2 % and +2.8 %) but
-#: not for the third (+72 %: the windows, 90 s each, cannot tell the small accelerometer noise
-#: and bias instability the whole run shows; a longer first window or longer leads did not help),
-#: so a long run is still tuned whole (``bench/bench_tuning_length.py --accuracy``). 900 s is where
-#: windows would start to pay (below it the whole run costs about as much).
-WINDOWED_FROM_S = float("inf")
+#: A run longer than this is tuned on windows [s]: one and a half budgets. A trial point on
+#: windows costs :data:`SPAN_S` plus the leads (720 s of IMU), and the windowed tuning three
+#: whole-run passes more (the reference and the two confirming ones); below ~750 s the whole run
+#: costs no more, and up to 900 s the saving would be small against a change of method.
+WINDOWED_FROM_S = 900.0
 #: The first window, from the tuner's start [s].
 FIRST_S = 240.0
 #: Later windows (one per stratum of the rest of the run) and the unscored lead of each [s].
@@ -64,12 +79,14 @@ PLACEMENT_STEP_S = 10.0
 @dataclass(frozen=True)
 class Window:
     """One window: the pass runs from ``start`` (``None``: the tuner's own) over ``t_from`` ..
-    ``t_to`` and scores the updates from ``t_scored`` [s]."""
+    ``t_to`` and scores the updates from ``t_scored`` [s]; its log-likelihood counts ``weight``
+    times (the seconds of the run it stands for over its scored seconds)."""
 
     t_from: float
     t_scored: float
     t_to: float
     start: InitialState | None = None
+    weight: float = 1.0
 
 
 def _shares(run: RecordedRun, stationary, t: np.ndarray) -> np.ndarray:
@@ -138,22 +155,30 @@ def states_at(run, cfg, init, quality, times, filter_pass: FilterPass) -> list[I
                 sigma_b_a=sig[BA].copy(),
                 sigma_b_g=sig[BG].copy(),
                 yaw_evidence=init.yaw_evidence,  # a yaw the run never told stays considered
+                cov=None if sol.P is None else np.array(sol.P[k][NAV, NAV]),
             )
         )
     return out
 
 
-def windows(run: RecordedRun, cfg, init, quality, stationary, filter_pass) -> list[Window]:
-    """The windows of a long run (module notes); empty when the run is tuned whole."""
+def windows(
+    run: RecordedRun, cfg, init, quality, stationary, filter_pass, noise=None
+) -> list[Window]:
+    """The windows of a long run (module notes); empty when the run is tuned whole. ``noise``
+    (:class:`~gnssacc.prepare.stationary.StationaryNoise`, optional): the densities measured at
+    rest, with which the reference pass runs (the search's start)."""
     t0 = float(init.t)
     if run.t_end - t0 <= WINDOWED_FROM_S:
         return []
     first = Window(t0, t0, t0 + FIRST_S)
     spans = placements(run, stationary, first.t_to)
-    starts = states_at(run, cfg, init, quality, [a for a, _ in spans], filter_pass)
-    later = [
-        Window(s.t, min(s.t + LEAD_S, b), b, s) for s, (_, b) in zip(starts, spans, strict=False)
-    ]
+    ref = starting_config(run, cfg, noise)
+    starts = states_at(run, ref, init, quality, [a for a, _ in spans], filter_pass)
+    stratum = (float(run.t_end) - first.t_to) / N_LATER  # each later window stands for one
+    later = []
+    for s, (_, b) in zip(starts, spans, strict=False):
+        scored = min(s.t + LEAD_S, b)
+        later.append(Window(s.t, scored, b, s, stratum / max(b - scored, 1e-9)))
     return [first] + later
 
 
@@ -172,17 +197,22 @@ def _scored(stats: dict, t_scored: float) -> dict:
     return out
 
 
-def merged(parts: list[dict]) -> dict:
-    """The windows' statistics as one pass's: log-likelihoods and counts added, the mean NIS and
-    the lag-1 autocorrelation weighted by the updates."""
+def merged(parts: list[dict], weights=None) -> dict:
+    """The windows' statistics as one pass's over the run they stand for: the log-likelihoods
+    added, each times its window's weight (default 1: a stratified estimate of the whole run's),
+    the counts added as they are (the updates scored), the mean NIS and the lag-1 autocorrelation
+    weighted by the updates times the weights."""
     out: dict = {}
+    wts = np.ones(len(parts)) if weights is None else np.asarray(weights, float)
     kinds = {k[len("n_") : -len("_updates")] for p in parts for k in p if k.endswith("_updates")}
     for kind in kinds:
         n = np.array([p.get(f"n_{kind}_updates", 0) for p in parts], float)
         out[f"n_{kind}_updates"] = int(n.sum())
-        out[f"loglik_{kind}"] = float(sum(p.get(f"loglik_{kind}", 0.0) for p in parts))
+        out[f"loglik_{kind}"] = float(
+            sum(p.get(f"loglik_{kind}", 0.0) * w for p, w in zip(parts, wts, strict=True))
+        )
         for stat in (f"nis_{kind}_mean", f"acf1_{kind}"):
-            vals = [(p.get(stat), w) for p, w in zip(parts, n, strict=True) if w > 0]
+            vals = [(p.get(stat), w) for p, w in zip(parts, n * wts, strict=True) if w > 0]
             vals = [(v, w) for v, w in vals if v is not None]
             wsum = sum(w for _, w in vals)
             out[stat] = float(sum(v * w for v, w in vals) / wsum) if wsum > 0 else None
@@ -200,13 +230,16 @@ class WindowedPass:
     forked on the first call, which hold the recording as this process does; the windows of a
     share are every ``jobs``-th): the same passes, merged in the same order, so the same numbers
     as in one process. A worker that fails is replaced by this process (its windows run here).
-    :meth:`close` ends the workers.
+    A process forked from this one (the tuner's trial points side by side) runs all the windows
+    itself: it must not share the workers' pipes with this process. :meth:`close` ends the
+    workers.
     """
 
     def __init__(self, wins: list[Window], filter_pass: FilterPass, jobs: int = 1):
         self.wins, self.filter_pass, self.passes = wins, filter_pass, 0
         self.jobs = max(1, min(int(jobs), len(wins)))
         self.workers: list | None = None
+        self.owner = os.getpid()  # only the process that made it talks to its workers
 
     def _window(self, k: int, run, cfg, method, init, kw) -> tuple[dict, object]:
         w = self.wins[k]
@@ -239,11 +272,20 @@ class WindowedPass:
             for k in [k for k in self._share(j) if k not in parts]:
                 parts[k], _ = self._window(k, run, cfg, method, init, kw)
         self.passes += 1
-        return replace(first, stats=merged([parts[k] for k in range(len(self.wins))]))
+        return replace(
+            first,
+            stats=merged(
+                [parts[k] for k in range(len(self.wins))],
+                [w.weight for w in self.wins],
+            ),
+        )
 
     def _ask(self, run, job) -> list:
         """Send ``job`` to the workers (started on the first call); ``[(share, connection)]``."""
-        if self.jobs < 2:
+        if self.jobs < 2 or os.getpid() != self.owner:
+            # A process forked from the owner (the tuner evaluating trial points side by side,
+            # gnssacc.core.parallel) holds the owner's pipes: used from both, the workers' answers
+            # would go to either. It runs every window itself.
             return []
         if self.workers is None:
             self._start(run)
@@ -312,7 +354,7 @@ def tuned_on_windows(run, cfg, stationary, quality, init, noise, *, filter_pass:
     from .tuning import aids, tune
 
     t0 = time.perf_counter()
-    wins = windows(run, cfg, init, quality, stationary, filter_pass)
+    wins = windows(run, cfg, init, quality, stationary, filter_pass, noise)
     if not wins:
         return None
     windowed = WindowedPass(wins, filter_pass, usable_jobs())

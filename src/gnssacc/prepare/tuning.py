@@ -321,6 +321,17 @@ def _start_values(cfg: RunConfig, free: list, noise) -> tuple[dict, dict]:
     return start, info
 
 
+def starting_config(run, cfg: RunConfig, noise) -> RunConfig:
+    """``cfg`` with the free parameters of step 2 at :func:`tune`'s starting values (the white-noise
+    densities measured at rest, where ``noise`` has them), e.g. for a pass before the search."""
+    params, _ = measurement_stage(run, cfg)
+    start, _ = _start_values(cfg, [p for p in params if p not in cfg.explicit], noise)
+    upd: dict = {}
+    for (sec, key), v in start.items():
+        upd.setdefault(sec, {})[key] = v.tolist() if v.size > 1 else float(v[0])
+    return cfg.with_values(upd, "the tuner's start") if upd else cfg
+
+
 class _Objective:
     """Negative innovation log-likelihood of one EKF pass at log10 scale factors ``theta``."""
 
