@@ -1,21 +1,19 @@
 """Tuning time against the recording's length, and the accuracy of tuning on windows.
 
-Windows are off by default (:data:`gnssacc.prepare.tune_windows.WINDOWED_FROM_S`: the accuracy
-was not held on every seed); this bench turns them on from 900 s.
+Part 1: the noise identification (``--tune auto``, default settings) of a simulated car (the
+``car`` scenario, industrial IMU, 3 m white fixes at 1 Hz, seed 0) of 600, 1,200, 2,400 and
+4,800 s: the time of the tuning step (median of ``--repeats``, the lengths interleaved), its EKF
+passes and the ratio to 600 s (target: 2,400 s at most 1.5x 600 s). Runs longer than
+:data:`gnssacc.prepare.tune_windows.WINDOWED_FROM_S` (900 s) are tuned on windows of
+:data:`~gnssacc.prepare.tune_windows.SPAN_S` in all (:mod:`gnssacc.prepare.tune_windows`); the
+600 s run is tuned whole, as before.
 
-Part 1: the noise identification (``--tune auto``) of a simulated car (the ``car`` scenario,
-industrial IMU, 3 m white fixes at 1 Hz, seed 0) of 600, 1,200, 2,400 and 4,800 s: the time of
-the tuning step (median of ``--repeats``, the lengths interleaved), its EKF passes and the ratio to
-600 s (target: 2,400 s at most 1.5x 600 s). Runs longer than
-:data:`gnssacc.prepare.tune_windows.WINDOWED_FROM_S` are tuned on windows of
-:data:`~gnssacc.prepare.tune_windows.SPAN_S` in all (:mod:`gnssacc.prepare.tune_windows`).
+Part 2 (``--accuracy``): at 2,400 s, seeds 0 .. ``--seeds``-1, the windowed tuning (the default)
+against the whole-run tuning (windows off): the tuned values, the EKF's and the smoother's PRMSE;
+the difference between the two against their spread over the seeds (hold the accuracy, not the
+digits).
 
-Part 2 (``--accuracy``): at 2,400 s, seeds 0 .. ``--seeds``-1, the windowed tuning against the
-whole-run tuning (windows off): the tuned values, the EKF's and the smoother's PRMSE and the
-position NIS; the difference between the two against their spread over the seeds (hold the
-accuracy, not the digits).
-
-    python bench/bench_tuning_length.py [--repeats 3] [--accuracy] [--seeds 3]
+    python bench/bench_tuning_length.py [--repeats 3] [--accuracy] [--seeds 3] [--no-timing]
 """
 
 from __future__ import annotations
@@ -43,7 +41,6 @@ def tuning_time(run) -> tuple[float, int]:
 
 
 def part1(repeats: int) -> None:
-    tw.WINDOWED_FROM_S = 900.0  # the windows on (off by default)
     runs = {d: gnssacc.simulate("car", d, seed=0) for d in LENGTHS}
     times: dict = {d: [] for d in LENGTHS}
     passes: dict = {}
@@ -66,11 +63,12 @@ def part1(repeats: int) -> None:
 
 
 def part2(seeds: int) -> None:
-    rows = {"windows": [], "whole run": []}
+    rows: dict = {"windows": [], "whole run": []}
+    windowed_from = tw.WINDOWED_FROM_S
     for seed in range(seeds):
         run = gnssacc.simulate("car", 2400.0, seed=seed)
         for mode in rows:
-            tw.WINDOWED_FROM_S = 900.0 if mode == "windows" else float("inf")
+            tw.WINDOWED_FROM_S = windowed_from if mode == "windows" else float("inf")
             t = time.perf_counter()
             res = gnssacc.process(run, methods=["ekf", "smoother"])
             m = res.metrics["methods"]
@@ -89,7 +87,7 @@ def part2(seeds: int) -> None:
                 f"{rows[mode][-1]['ekf']:.3f} m, smoother {rows[mode][-1]['smoother']:.3f} m",
                 flush=True,
             )
-    tw.WINDOWED_FROM_S = 900.0
+    tw.WINDOWED_FROM_S = windowed_from
     print(f"\n2400 s car, seeds 0..{seeds - 1}: windowed against whole-run tuning")
     print(f"{'':10s} {'PRMSE ekf [m]':>22s} {'PRMSE smoother [m]':>22s} {'tuning [s]':>11s}")
     for mode, r in rows.items():

@@ -116,6 +116,7 @@ def test_a_long_run_is_tuned_on_a_bounded_span_and_confirmed(long_drive, monkeyp
     cfg, result = got
     info = result.from_stationary["windows"]
     assert info["confirmed"] and info["whole_run_loglik_gain"] >= 0.0
+    assert "on windows of 600 s of the run's 1500 s" in result.line()  # said on the terminal
     whole = [s for s in spans if s > 0.9 * run.duration_s]
     assert len(whole) == 3  # the reference pass and the two confirming ones
     assert sum(s for s in spans if s <= 0.9 * run.duration_s) <= tw.SPAN_S * (result.n_evaluations)
@@ -246,3 +247,30 @@ def test_the_windows_noise_agrees_with_the_whole_runs_within_its_spread(long_dri
     for key, spread in (("gyro_arw_deg_rth", 0.2), ("accel_vrw_mps_rth", 0.3)):
         ratio = np.log10(np.asarray(windowed["imu"][key]) / np.asarray(whole["imu"][key]))
         assert np.all(np.abs(ratio) <= 3.0 * spread), (key, windowed["imu"][key], whole["imu"][key])
+
+
+def test_a_pass_over_a_window_makes_the_same_stationary_epochs_as_the_whole_run(long_drive):
+    """A pass from t0 to t_stop computes the zero-velocity epochs of the rest spans that reach into
+    it only (its cost the window's, not the run's): the same epochs, means, variances and span
+    indices as those of the whole run in that time."""
+    from gnssacc.estimators.aids import zupt
+    from gnssacc.estimators.settings import EkfSettings
+
+    run, prep = long_drive
+    settings = EkfSettings.from_config(prep.cfg)
+    args = (run, settings.zupt, settings.imu.gyro_psd, prep.stationary)
+    whole = zupt.epochs_for(*args)
+    t0, t1 = run.t_start + 500.0, run.t_start + 800.0
+    part = zupt.epochs_for(*args, t0, t1)
+    spans = prep.stationary.spans
+    inside = [
+        k
+        for k in range(len(whole))
+        if spans[whole.span[k]].t_end >= t0 and spans[whole.span[k]].t_start <= t1
+    ]
+    assert 0 < len(part) == len(inside) < len(whole)
+    np.testing.assert_array_equal(part.t, whole.t[inside])
+    np.testing.assert_array_equal(part.omega_mean_b, whole.omega_mean_b[inside])
+    np.testing.assert_array_equal(part.omega_var_b, whole.omega_var_b[inside])
+    np.testing.assert_array_equal(part.span, whole.span[inside])
+    assert np.any((part.t >= t0) & (part.t <= t1))

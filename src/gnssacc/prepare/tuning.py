@@ -224,8 +224,15 @@ class TuneResult:
             else ""
         )
         back = [k.split(".")[-1] for k in self.from_stationary.get("drawn_back", [])]
+        win = self.from_stationary.get("windows")
+        where = (
+            f", on windows of {win['imu_seconds_per_pass']:.0f} s of the run's "
+            f"{win['run_seconds']:.0f} s, confirmed over the whole run"
+            if win
+            else ""
+        )
         return (
-            f"tuned noise ({self.n_evaluations} EKF passes, {self.seconds:.1f} s): "
+            f"tuned noise ({self.n_evaluations} EKF passes, {self.seconds:.1f} s{where}): "
             + ", ".join(parts)
             + nis
             + (
