@@ -14,8 +14,9 @@ that together span :data:`SPAN_S` of IMU data, whatever the run's length:
   turns of the run keep their weight. Each starts :data:`LEAD_S` before its scored part from the
   state and the full covariance (correlations kept: a start with the sigmas alone makes the first
   innovations look larger than they are, and the search answers with more process noise) of one
-  reference pass over the whole run with the search's starting noise; the updates of the lead are
-  not scored (the covariance settles to the trial noise there).
+  reference pass over the whole run with the search's starting noise (every aid in use, the
+  covariance propagated as in the tuner's passes); the updates of the lead are not scored (the
+  covariance settles to the trial noise there).
 
 Each trial point is one pass per window (:class:`WindowedPass`, a
 :class:`~gnssacc.prepare.filter_pass.FilterPass` whose statistics add the windows' scored updates),
@@ -29,10 +30,10 @@ likelihood-ratio tests of its later steps (the Gauss-Markov fixes, the vehicle's
 on the scale of the whole run. The windows of a trial point are shared among the usable cores
 (:func:`gnssacc.core.parallel.usable_jobs`, forked workers: the same numbers as in one process).
 
-Then two passes over the whole run, with the starting and the tuned noise, confirm it: the tuned
-noise must explain the whole run at least as well as the starting noise (log-likelihood gain
->= 0), else the run is tuned over its whole length as before (:func:`tuned_on_windows` returns
-``None``). The NIS the tuner reports is the whole run's.
+Then one more pass over the whole run, with the tuned noise, confirms it against the reference
+pass (the starting noise): the tuned noise must explain the whole run at least as well as the
+starting noise (log-likelihood gain >= 0), else the run is tuned over its whole length as before
+(:func:`tuned_on_windows` returns ``None``). The NIS the tuner reports is the whole run's.
 
 **The budget.** :data:`SPAN_S` is set by what a noise estimate needs, not by any recording: the
 scored part (480 s: the first window and four of 60 s after their leads) holds ~1,400 components
@@ -42,7 +43,7 @@ and each later window is one car manoeuvre long (a turn, a stop and the speed ch
 it). What the windows cannot give is the whole run's precision: their estimate scatters as a
 600 s recording's does (``bench/bench_tuning_length.py --accuracy`` shows that scatter beside the
 whole run's). A run up to :data:`WINDOWED_FROM_S` long is tuned over its whole length exactly as
-before (the windows, their leads and the three whole-run passes would save little there).
+before (the windows, their leads and the two whole-run passes would save little there).
 """
 
 from __future__ import annotations
@@ -56,13 +57,13 @@ from ..core.parallel import usable_jobs
 from ..core.recording import InitialState, RecordedRun
 from ..core.states import ATT, BA, BG, NAV, POS, VEL
 from .filter_pass import FilterPass
-from .tuning import run_white_stats, starting_config, ungated, without_aids
+from .tuning import run_white_stats, starting_config, ungated
 
 #: IMU seconds each trial pass covers on a windowed run [s].
 SPAN_S = 600.0
 #: A run longer than this is tuned on windows [s]: one and a half budgets. A trial point on
-#: windows costs :data:`SPAN_S` plus the leads (720 s of IMU), and the windowed tuning three
-#: whole-run passes more (the reference and the two confirming ones); below ~750 s the whole run
+#: windows costs :data:`SPAN_S` plus the leads (720 s of IMU), and the windowed tuning two
+#: whole-run passes more (the reference and the confirming one); below ~750 s the whole run
 #: costs no more, and up to 900 s the saving would be small against a change of method.
 WINDOWED_FROM_S = 900.0
 #: The first window, from the tuner's start [s].
@@ -120,17 +121,22 @@ def placements(run: RecordedRun, stationary, t0: float) -> list[tuple[float, flo
     return out
 
 
-def states_at(run, cfg, init, quality, times, filter_pass: FilterPass) -> list[InitialState]:
-    """The filter's state and sigmas at ``times`` [s] (one pass from ``init`` with ``cfg``'s noise,
-    the aids off and ungated), each as a start."""
+def states_at(
+    run, cfg, init, quality, times, filter_pass: FilterPass, stationary=None, method: str = "ekf"
+) -> tuple[list[InitialState], dict]:
+    """The filter's state and covariance at ``times`` [s], each as a start, and the statistics of
+    the pass that gave them: one ungated pass of ``method`` from ``init`` with ``cfg`` (its noise,
+    its aids), the covariance propagated as the tuner's passes propagate it."""
     sol = filter_pass(
         run,
-        ungated(without_aids(cfg)),
-        "ekf",
+        ungated(cfg),
+        method,
         init=init,
+        stationary=stationary,
         quality=quality,
         output_times=np.asarray(times, float),
         store_P=True,
+        cov_every=int(cfg["tune"]["cov_every"]),
     )
     out = []
     for k in range(len(sol.t)):
@@ -158,7 +164,7 @@ def states_at(run, cfg, init, quality, times, filter_pass: FilterPass) -> list[I
                 cov=None if sol.P is None else np.array(sol.P[k][NAV, NAV]),
             )
         )
-    return out
+    return out, sol.stats
 
 
 def windows(
@@ -167,19 +173,29 @@ def windows(
     """The windows of a long run (module notes); empty when the run is tuned whole. ``noise``
     (:class:`~gnssacc.prepare.stationary.StationaryNoise`, optional): the densities measured at
     rest, with which the reference pass runs (the search's start)."""
+    return windows_and_reference(run, cfg, init, quality, stationary, filter_pass, noise)[0]
+
+
+def windows_and_reference(
+    run: RecordedRun, cfg, init, quality, stationary, filter_pass, noise=None, method: str = "ekf"
+) -> tuple[list[Window], dict]:
+    """:func:`windows`, and the statistics of the reference pass over the whole run (``method``,
+    the search's starting noise, every aid ``cfg`` has: the whole run's likelihood before the
+    tuning, :func:`tuned_on_windows`); ``([], {})`` when the run is tuned whole."""
     t0 = float(init.t)
     if run.t_end - t0 <= WINDOWED_FROM_S:
-        return []
+        return [], {}
     first = Window(t0, t0, t0 + FIRST_S)
     spans = placements(run, stationary, first.t_to)
     ref = starting_config(run, cfg, noise)
-    starts = states_at(run, ref, init, quality, [a for a, _ in spans], filter_pass)
+    times = [a for a, _ in spans]
+    starts, before = states_at(run, ref, init, quality, times, filter_pass, stationary, method)
     stratum = (float(run.t_end) - first.t_to) / N_LATER  # each later window stands for one
     later = []
     for s, (_, b) in zip(starts, spans, strict=False):
         scored = min(s.t + LEAD_S, b)
         later.append(Window(s.t, scored, b, s, stratum / max(b - scored, 1e-9)))
-    return [first] + later
+    return [first] + later, before
 
 
 def _scored(stats: dict, t_scored: float) -> dict:
@@ -354,7 +370,10 @@ def tuned_on_windows(run, cfg, stationary, quality, init, noise, *, filter_pass:
     from .tuning import aids, tune
 
     t0 = time.perf_counter()
-    wins = windows(run, cfg, init, quality, stationary, filter_pass, noise)
+    method = "ekf-acc" if cfg["tune"]["likelihood"] == "position+accel" else "ekf"
+    wins, before = windows_and_reference(
+        run, cfg, init, quality, stationary, filter_pass, noise, method
+    )
     if not wins:
         return None
     windowed = WindowedPass(wins, filter_pass, usable_jobs())
@@ -363,12 +382,8 @@ def tuned_on_windows(run, cfg, stationary, quality, init, noise, *, filter_pass:
     finally:
         windowed.close()
     kinds = ("pos", "zaru") + aids(run, cfg_t)[1]
-    method = "ekf-acc" if cfg["tune"]["likelihood"] == "position+accel" else "ekf"
     kinds += ("acc",) if method == "ekf-acc" else ()
     scale = float(cfg_t["gnss"]["sigma_scale"]) / float(cfg["gnss"]["sigma_scale"])
-    before = run_white_stats(
-        run, cfg, stationary, quality, init, filter_pass=filter_pass, method=method
-    )
     tuned_init = replace(init, sigma_pos_m=init.sigma_pos_m * scale)
     after = run_white_stats(
         run, cfg_t, stationary, quality, tuned_init, filter_pass=filter_pass, method=method
@@ -383,7 +398,7 @@ def tuned_on_windows(run, cfg, stationary, quality, init, noise, *, filter_pass:
         "whole_run_loglik_gain": float(gain),
         "confirmed": bool(gain >= 0.0),
     }
-    if gain < 0.0:  # the windows' noise explains the whole run worse than the configured noise
+    if gain < 0.0:  # the windows' noise explains the whole run worse than the starting noise
         return None
     result = replace(
         result,
@@ -392,7 +407,7 @@ def tuned_on_windows(run, cfg, stationary, quality, init, noise, *, filter_pass:
         nis_after=after.get("nis_pos_mean"),
         loglik_before=float(sum(before[f"loglik_{k}"] for k in kinds)),
         loglik_after=float(sum(after[f"loglik_{k}"] for k in kinds)),
-        n_evaluations=result.n_evaluations + 3,  # the reference and the two confirming passes
+        n_evaluations=result.n_evaluations + 2,  # the reference (the start's) and the tuned one
         seconds=time.perf_counter() - t0,
     )
     return cfg_t, result
