@@ -5,6 +5,7 @@ and turns, their likelihoods those of passes over each window; the whole run con
 from __future__ import annotations
 
 import os
+from collections import defaultdict
 from types import SimpleNamespace
 
 import numpy as np
@@ -13,6 +14,7 @@ import pytest
 import gnssacc
 import gnssacc.prepare.tune_windows as tw
 from gnssacc.core.config import load_config
+from gnssacc.core.recording import InitialState
 from gnssacc.pipeline import prepare
 from gnssacc.prepare.passes import filter_pass
 from gnssacc.prepare.tuning import tune, ungated
@@ -118,7 +120,9 @@ def test_a_long_run_is_tuned_on_a_bounded_span_and_confirmed(long_drive, monkeyp
     assert info["confirmed"] and info["whole_run_loglik_gain"] >= 0.0
     assert "on windows of 600 s of the run's 1500 s" in result.line()  # said on the terminal
     whole = [s for s in spans if s > 0.9 * run.duration_s]
-    assert len(whole) == 2  # the reference pass (the start) and the confirming one (as tuned)
+    # the reference pass (the start), the slow terms' line search, the confirming one (as tuned)
+    assert len(whole) == 2 + len(tw.REFINED) * len(tw.REFINE_OFFSETS)
+    assert set(info["refined_over_whole_run"]) == {f"{s}.{k}" for s, k in tw.REFINED}
     assert sum(s for s in spans if s <= 0.9 * run.duration_s) <= tw.SPAN_S * (result.n_evaluations)
     assert result.nis_after == pytest.approx(1.0, abs=0.3)  # the whole run's, as tuned
 
@@ -274,3 +278,45 @@ def test_a_pass_over_a_window_makes_the_same_stationary_epochs_as_the_whole_run(
     np.testing.assert_array_equal(part.omega_var_b, whole.omega_var_b[inside])
     np.testing.assert_array_equal(part.span, whole.span[inside])
     assert np.any((part.t >= t0) & (part.t <= t1))
+
+
+@pytest.mark.parametrize("slope", [0.0, 30.0])
+def test_the_whole_run_line_search_finds_the_maximum_of_likelihood_and_prior(slope):
+    """``refined_whole`` on passes whose log-likelihood is known in closed form, a parabola in the
+    log of the accelerometer's bias instability with its peak at 0.05 mg (plus ``slope`` per
+    decade): the value maximising it plus the log-normal prior around the tuner's start, found by
+    hand; where that lies beyond the offsets searched, the farthest one that way."""
+    from gnssacc.prepare.tuning import refined_whole
+
+    run = gnssacc.simulate("car", 120.0, seed=1)
+    key = ("imu", "accel_bias_instability_mg")
+    cfg = load_config().with_values({"imu": {key[1]: 0.2}}, "the windows' value")
+
+    def known(r, c, method="ekf", *, init=None, **kw):
+        x = np.log10(float(c["imu"][key[1]]) / 0.05)
+        stats = defaultdict(float, loglik_pos=-8.0 * x * x + slope * x)
+        return SimpleNamespace(stats=stats)
+
+    start, width = 0.5, float(cfg["tune"]["prior_decades"])
+    init = InitialState(0.0, 0.0, 0.0, 0.0, *np.zeros((2, 3)), *np.ones((3, 3)))
+    got, passes, profile = refined_whole(
+        run,
+        cfg,
+        key,
+        start,
+        (-1.0, -0.5, 0.0, 0.5),
+        None,
+        None,
+        init,
+        init_scale=1.0,
+        filter_pass=known,
+    )
+    # d/dx [8 x^2 - slope x + (x - log10(start / 0.05))^2 / (2 width^2)] = 0
+    u = np.log10(start / 0.05)
+    x = (slope + u / width**2) / (16.0 + 1.0 / width**2)
+    x = np.clip(x, np.log10(0.2 / 0.05) - 1.0, np.log10(0.2 / 0.05) + 0.5)
+    assert got == pytest.approx(0.05 * 10.0**x, rel=1e-6)
+    xs = np.log10(0.2 / 0.05) + np.array([-1.0, -0.5, 0.0, 0.5])  # the points evaluated
+    j = 8.0 * xs**2 - slope * xs + 0.5 * ((xs - u) / width) ** 2
+    assert passes == 4 and profile["objective"] == pytest.approx(j - j.min())
+    assert profile["d"] == pytest.approx(np.log10(got / 0.2))

@@ -75,6 +75,12 @@ LEAD_S = 30.0
 TURN_RATE_DEG_S = 3.0
 #: Steps at which the placements within a stratum are compared [s].
 PLACEMENT_STEP_S = 10.0
+#: The parameters refined over the whole run after the search on windows (module notes): the
+#: accelerometer's bias instability, a slow error that windows of a minute or two cannot tell
+#: from white noise.
+REFINED = (("imu", "accel_bias_instability_mg"),)
+#: Where each is evaluated over the whole run, from the windows' value [decades].
+REFINE_OFFSETS = (-1.0, -0.5, 0.0, 0.5)
 
 
 @dataclass(frozen=True)
@@ -381,6 +387,9 @@ def tuned_on_windows(run, cfg, stationary, quality, init, noise, *, filter_pass:
         cfg_t, result = tune(run, cfg, stationary, quality, init, noise, filter_pass=windowed)
     finally:
         windowed.close()
+    cfg_t, result, refined = _refined(
+        run, cfg, cfg_t, result, stationary, quality, init, filter_pass
+    )
     kinds = ("pos", "zaru") + aids(run, cfg_t)[1]
     kinds += ("acc",) if method == "ekf-acc" else ()
     scale = float(cfg_t["gnss"]["sigma_scale"]) / float(cfg["gnss"]["sigma_scale"])
@@ -397,6 +406,7 @@ def tuned_on_windows(run, cfg, stationary, quality, init, noise, *, filter_pass:
         "run_seconds": float(run.duration_s),
         "whole_run_loglik_gain": float(gain),
         "confirmed": bool(gain >= 0.0),
+        "refined_over_whole_run": refined,
     }
     if gain < 0.0:  # the windows' noise explains the whole run worse than the starting noise
         return None
@@ -411,3 +421,35 @@ def tuned_on_windows(run, cfg, stationary, quality, init, noise, *, filter_pass:
         seconds=time.perf_counter() - t0,
     )
     return cfg_t, result
+
+
+def _refined(run, cfg, cfg_t, result, stationary, quality, init, filter_pass):
+    """``(cfg_t, result)`` with each free parameter of :data:`REFINED` refined over the whole run
+    (:func:`gnssacc.prepare.tuning.refined_whole`, from the windows' value), and what was done per
+    parameter (``section.key`` -> the windows' value, the refined one and the profile)."""
+    from .tuning import refined_whole
+
+    done: dict = {}
+    values = {sec: dict(vals) for sec, vals in result.values.items()}
+    n = 0
+    for sec, key in REFINED:
+        name = f"{sec}.{key}"
+        if key not in values.get(sec, {}) or np.size(cfg_t[sec][key]) != 1:
+            continue  # set by the user, not identified on this run, or per axis
+        got, passes, profile = refined_whole(
+            run,
+            cfg_t,
+            (sec, key),
+            float(np.asarray(result.start.get(name, cfg_t[sec][key])).ravel()[0]),
+            REFINE_OFFSETS,
+            stationary,
+            quality,
+            init,
+            init_scale=float(cfg["gnss"]["sigma_scale"]),
+            filter_pass=filter_pass,
+        )
+        n += passes
+        done[name] = {"windows": float(cfg_t[sec][key]), "refined": got, **profile}
+        values[sec][key] = float(f"{got:.4g}")
+        cfg_t = cfg_t.with_values({sec: {key: values[sec][key]}}, "tuned")
+    return cfg_t, replace(result, values=values, n_evaluations=result.n_evaluations + n), done

@@ -1071,6 +1071,80 @@ def tune_gauss_markov(
     }
 
 
+def refined_whole(
+    run,
+    cfg: RunConfig,
+    key: tuple,
+    start: float,
+    offsets,
+    stationary=None,
+    quality=None,
+    init=None,
+    *,
+    init_scale: float,
+    filter_pass: FilterPass,
+) -> tuple[float, int, dict]:
+    """One noise parameter ``key`` of ``cfg`` (the others held) by a short line search over the
+    whole run: the objective of step 2 of the module docstring (the EKF's innovation
+    log-likelihood, the ground vehicle's aids off, plus the log-normal prior around the tuner's
+    starting value ``start``) at ``cfg``'s value times ``10**d`` for each ``d`` in ``offsets``
+    [decades] (the passes side by side), then the vertex of the parabola through them (within
+    their span) or, where they show no maximum, the best of them.
+
+    Parameters
+    ----------
+    run, cfg, stationary, quality, init
+        As :func:`tune` takes them; ``cfg`` the tuned configuration (``key`` at the value the
+        line starts from).
+    key : tuple
+        ``(section, key)``, a positive scalar parameter of :data:`PARAMETERS`.
+    start : float
+        The tuner's starting value of ``key`` (the centre of its prior).
+    offsets : sequence of float
+        At least three offsets [decades] from ``cfg``'s value.
+    init_scale : float
+        ``gnss.sigma_scale`` the start ``init`` was made with.
+    filter_pass : FilterPass
+
+    Returns
+    -------
+    value : float
+        The refined value (configuration units).
+    passes : int
+    profile : dict
+        ``offsets`` and the objective at each (the negative log-likelihood plus the prior, less
+        its smallest), and the chosen offset ``d`` [decades].
+    """
+    _, measured = measurement_stage(run, cfg)
+    kinds = ("pos", "zaru") + measured
+    kinds += ("acc",) if cfg["tune"]["likelihood"] == "position+accel" else ()
+    value = float(cfg[key[0]][key[1]])
+    obj = _Objective(
+        run,
+        without_aids(cfg),
+        [key],
+        {key: np.atleast_1d(value)},
+        stationary,
+        quality,
+        init,
+        "ekf-acc" if "acc" in kinds else "ekf",
+        kinds,
+        filter_pass,
+    )
+    obj.init_scale = init_scale
+    d = np.asarray(offsets, float)
+    width = float(_prior_widths(cfg, [key], {})[0])
+    obj.ahead([np.array([x]) for x in d])
+    theta0 = np.log10(value / start)
+    j = np.array([obj(np.array([x])) + 0.5 * ((theta0 + x) / width) ** 2 for x in d])
+    a, b, _ = np.polyfit(d, j, 2) if np.all(np.isfinite(j)) else (0.0, 0.0, 0.0)
+    best = float(d[int(np.argmin(j))])
+    if a > 0.0:
+        best = float(np.clip(-b / (2.0 * a), d.min(), d.max()))
+    profile = {"offsets": d.tolist(), "objective": (j - np.nanmin(j)).tolist(), "d": best}
+    return value * 10.0**best, len(d), profile
+
+
 def run_white_stats(
     run,
     cfg: RunConfig,
