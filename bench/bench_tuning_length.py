@@ -13,7 +13,8 @@ against the whole-run tuning (windows off): the tuned values, the EKF's and the 
 the difference between the two against their spread over the seeds (hold the accuracy, not the
 digits).
 
-    python bench/bench_tuning_length.py [--repeats 3] [--accuracy] [--seeds 3] [--no-timing]
+    python bench/bench_tuning_length.py [--repeats 3] [--lengths 600,1200,2400,4800] [--accuracy]
+        [--seeds 3] [--no-timing]
 """
 
 from __future__ import annotations
@@ -40,12 +41,12 @@ def tuning_time(run) -> tuple[float, int]:
     return prep.seconds["tuning_s"], prep.tuning.n_evaluations
 
 
-def part1(repeats: int) -> None:
-    runs = {d: gnssacc.simulate("car", d, seed=0) for d in LENGTHS}
-    times: dict = {d: [] for d in LENGTHS}
+def part1(repeats: int, lengths=LENGTHS) -> None:
+    runs = {d: gnssacc.simulate("car", d, seed=0) for d in lengths}
+    times: dict = {d: [] for d in lengths}
     passes: dict = {}
     for r in range(repeats):
-        for d in LENGTHS:
+        for d in lengths:
             s, passes[d] = tuning_time(runs[d])
             times[d].append(s)
         print(f"round {r + 1}/{repeats} done", flush=True)
@@ -55,7 +56,7 @@ def part1(repeats: int) -> None:
         f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)"
     )
     print(f"{'length [s]':>10s} {'tuning [s]':>10s} {'passes':>7s} {'x 600 s':>8s}  windows")
-    for d in LENGTHS:
+    for d in lengths:
         med = float(np.median(times[d]))
         windowed = "yes" if d > tw.WINDOWED_FROM_S else "no (whole run)"
         print(f"{d:10.0f} {med:10.2f} {passes[d]:7d} {med / base:8.2f}  {windowed}")
@@ -120,10 +121,13 @@ def main() -> None:
     ap.add_argument("--accuracy", action="store_true")
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--no-timing", action="store_true")
+    ap.add_argument(
+        "--lengths", default=",".join(f"{d:.0f}" for d in LENGTHS), help="recording lengths [s]"
+    )
     a = ap.parse_args()
     warnings.simplefilter("ignore")
     if not a.no_timing:
-        part1(a.repeats)
+        part1(a.repeats, tuple(float(x) for x in a.lengths.split(",")))
     if a.accuracy:
         part2(a.seeds)
 

@@ -118,11 +118,15 @@ def test_a_long_run_is_tuned_on_a_bounded_span_and_confirmed(long_drive, monkeyp
     cfg, result = got
     info = result.from_stationary["windows"]
     assert info["confirmed"] and info["whole_run_loglik_gain"] >= 0.0
-    assert "on windows of 600 s of the run's 1500 s" in result.line()  # said on the terminal
+    line = result.line()  # said on the terminal
+    assert "on windows of 600 s of the run's 1500 s, refined and confirmed over the whole" in line
     whole = [s for s in spans if s > 0.9 * run.duration_s]
-    # the reference pass (the start), the slow terms' line search, the confirming one (as tuned)
-    assert len(whole) == 2 + len(tw.REFINED) * len(tw.REFINE_OFFSETS)
-    assert set(info["refined_over_whole_run"]) == {f"{s}.{k}" for s, k in tw.REFINED}
+    # the reference pass (the start), the slow terms' line searches, the confirming one (as tuned)
+    refined = info["refined_over_whole_run"]
+    assert set(refined) == {f"{s}.{k}" for s, k in tw.REFINED}
+    assert len(whole) == 2 + sum(len(r["offsets"]) for r in refined.values())
+    for (sec, key), r in zip(tw.REFINED, refined.values(), strict=True):
+        assert cfg[sec][key] == pytest.approx(r["windows"] * 10 ** r["d"], rel=1e-3)
     assert sum(s for s in spans if s <= 0.9 * run.duration_s) <= tw.SPAN_S * (result.n_evaluations)
     assert result.nis_after == pytest.approx(1.0, abs=0.3)  # the whole run's, as tuned
 

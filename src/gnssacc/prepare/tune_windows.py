@@ -30,6 +30,18 @@ likelihood-ratio tests of its later steps (the Gauss-Markov fixes, the vehicle's
 on the scale of the whole run. The windows of a trial point are shared among the usable cores
 (:func:`gnssacc.core.parallel.usable_jobs`, forked workers: the same numbers as in one process).
 
+**The slow terms over the whole run.** Windows of a minute or two cannot tell a slow
+accelerometer error from white noise. On a 2,400 s simulated car (seed 0, the other values the
+whole run's) the whole run's log-likelihood falls by 14 and 11 from its peak at a quarter and at
+four times its tuned accelerometer bias instability; the windows' (weighted to the whole run's
+scale) rises by 0.3 at the quarter and falls by 3 at four times: they hardly tell it. Nor the
+white noise, which the whole run's likelihood hardly tells either (its prior, around the density
+measured at rest, holds it there), while the windows' weighted likelihood, noisier, moved it up
+to 6x away. So each parameter of :data:`REFINED` is refined over the whole run, in turn, from the
+windows' value: four passes at :data:`REFINE_OFFSETS` (side by side), the value at the vertex of
+the parabola through their objective (the tuner's: likelihood plus prior, within its bounds;
+:func:`gnssacc.prepare.tuning.refined_whole`).
+
 Then one more pass over the whole run, with the tuned noise, confirms it against the reference
 pass (the starting noise): the tuned noise must explain the whole run at least as well as the
 starting noise (log-likelihood gain >= 0), else the run is tuned over its whole length as before
@@ -43,7 +55,7 @@ and each later window is one car manoeuvre long (a turn, a stop and the speed ch
 it). What the windows cannot give is the whole run's precision: their estimate scatters as a
 600 s recording's does (``bench/bench_tuning_length.py --accuracy`` shows that scatter beside the
 whole run's). A run up to :data:`WINDOWED_FROM_S` long is tuned over its whole length exactly as
-before (the windows, their leads and the two whole-run passes would save little there).
+before (the windows and the six whole-run passes would save little there).
 """
 
 from __future__ import annotations
@@ -62,9 +74,10 @@ from .tuning import run_white_stats, starting_config, ungated
 #: IMU seconds each trial pass covers on a windowed run [s].
 SPAN_S = 600.0
 #: A run longer than this is tuned on windows [s]: one and a half budgets. A trial point on
-#: windows costs :data:`SPAN_S` plus the leads (720 s of IMU), and the windowed tuning two
-#: whole-run passes more (the reference and the confirming one); below ~750 s the whole run
-#: costs no more, and up to 900 s the saving would be small against a change of method.
+#: windows costs :data:`SPAN_S` of IMU (and the windows' starts), and the windowed tuning six
+#: whole-run passes more (the reference, the slow terms' four, the confirming one): with ~80
+#: trial points the whole run costs no more below ~700 s, and up to 900 s the saving (a quarter
+#: at most) would be small against a change of method.
 WINDOWED_FROM_S = 900.0
 #: The first window, from the tuner's start [s].
 FIRST_S = 240.0
@@ -75,10 +88,10 @@ LEAD_S = 30.0
 TURN_RATE_DEG_S = 3.0
 #: Steps at which the placements within a stratum are compared [s].
 PLACEMENT_STEP_S = 10.0
-#: The parameters refined over the whole run after the search on windows (module notes): the
-#: accelerometer's bias instability, a slow error that windows of a minute or two cannot tell
-#: from white noise.
-REFINED = (("imu", "accel_bias_instability_mg"),)
+#: The parameters refined over the whole run after the search on windows, in turn (module
+#: notes): the accelerometer's white noise and bias instability, which windows of a minute or two
+#: cannot tell apart.
+REFINED = (("imu", "accel_vrw_mps_rth"), ("imu", "accel_bias_instability_mg"))
 #: Where each is evaluated over the whole run, from the windows' value [decades].
 REFINE_OFFSETS = (-1.0, -0.5, 0.0, 0.5)
 
@@ -447,6 +460,7 @@ def _refined(run, cfg, cfg_t, result, stationary, quality, init, filter_pass):
             init,
             init_scale=float(cfg["gnss"]["sigma_scale"]),
             filter_pass=filter_pass,
+            at_rest=result.from_stationary,
         )
         n += passes
         done[name] = {"windows": float(cfg_t[sec][key]), "refined": got, **profile}

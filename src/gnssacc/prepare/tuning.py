@@ -227,7 +227,9 @@ class TuneResult:
         win = self.from_stationary.get("windows")
         where = (
             f", on windows of {win['imu_seconds_per_pass']:.0f} s of the run's "
-            f"{win['run_seconds']:.0f} s, confirmed over the whole run"
+            f"{win['run_seconds']:.0f} s, "
+            + ("refined and " if win.get("refined_over_whole_run") else "")
+            + "confirmed over the whole run"
             if win
             else ""
         )
@@ -1083,6 +1085,7 @@ def refined_whole(
     *,
     init_scale: float,
     filter_pass: FilterPass,
+    at_rest: dict | None = None,
 ) -> tuple[float, int, dict]:
     """One noise parameter ``key`` of ``cfg`` (the others held) by a short line search over the
     whole run: the objective of step 2 of the module docstring (the EKF's innovation
@@ -1101,10 +1104,15 @@ def refined_whole(
     start : float
         The tuner's starting value of ``key`` (the centre of its prior).
     offsets : sequence of float
-        At least three offsets [decades] from ``cfg``'s value.
+        Offsets [decades] from ``cfg``'s value (three or more, for a parabola).
     init_scale : float
         ``gnss.sigma_scale`` the start ``init`` was made with.
     filter_pass : FilterPass
+    at_rest : dict, optional
+        What the stationary stretches measured (:attr:`TuneResult.from_stationary`): a density
+        measured there has the tighter prior and its floor (:data:`REST_FLOOR_DECADES`), as in
+        the search; the points below the floor, or more than two decades from ``start``, are
+        moved to it.
 
     Returns
     -------
@@ -1132,12 +1140,14 @@ def refined_whole(
         filter_pass,
     )
     obj.init_scale = init_scale
-    d = np.asarray(offsets, float)
-    width = float(_prior_widths(cfg, [key], {})[0])
-    obj.ahead([np.array([x]) for x in d])
+    info = at_rest or {}
+    width = float(_prior_widths(cfg, [key], info)[0])
     theta0 = np.log10(value / start)
+    lo = float(_lower_bounds([key], info)[0])
+    d = np.unique(np.clip(np.asarray(offsets, float) + theta0, lo, _BOUND_DECADES) - theta0)
+    obj.ahead([np.array([x]) for x in d])
     j = np.array([obj(np.array([x])) + 0.5 * ((theta0 + x) / width) ** 2 for x in d])
-    a, b, _ = np.polyfit(d, j, 2) if np.all(np.isfinite(j)) else (0.0, 0.0, 0.0)
+    a, b, _ = np.polyfit(d, j, 2) if np.all(np.isfinite(j)) and len(d) > 2 else (0, 0, 0)
     best = float(d[int(np.argmin(j))])
     if a > 0.0:
         best = float(np.clip(-b / (2.0 * a), d.min(), d.max()))
