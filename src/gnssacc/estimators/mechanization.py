@@ -25,6 +25,7 @@ times (GNSS epochs, outputs).
 from __future__ import annotations
 
 import math
+import weakref
 
 import numpy as np
 from numba import njit
@@ -710,19 +711,36 @@ def _cov_step(
         _step_phi(Phi, F, dt_acc, phi_order)
 
 
+#: The last :func:`turn_rates` computed: ``(weak references to t and omega_b, their fingerprint,
+#: window, rates)``. The tuner's ~90 passes over one run (and a windowed pass's windows) share it:
+#: computed afresh it cost 90 ms a pass on a 2,400 s run, whatever the span the pass covers.
+_LAST_TURN_RATES: list = []
+
+
 def turn_rates(t: np.ndarray, omega_b: np.ndarray, window_s: float = TURN_WINDOW_S) -> np.ndarray:
     """The rotation the body performs: each sample's rate averaged over the samples within
-    ``window_s / 2`` of it [rad/s, body], (N, 3), C-contiguous.
+    ``window_s / 2`` of it [rad/s, body], (N, 3), C-contiguous (not to be written to: the same
+    array is returned again for the same ``t`` and ``omega_b`` objects, unchanged).
 
     A constant gyro cross-axis or scale-factor error grows an attitude error with the angle turned;
     vibration and the sensor's own noise turn the body back and forth, and the error they make
     averages out. ``t`` [s] (N,), ``omega_b`` [rad/s] (N, 3).
     """
     t = np.asarray(t, float)
-    c = np.vstack([np.zeros(3), np.cumsum(np.asarray(omega_b, float), axis=0)])
+    omega_b = np.asarray(omega_b, float)
+    mark = (len(t), float(t[0]), float(t[-1]), float(omega_b.sum())) if len(t) else None
+    for t_ref, w_ref, was, window, rates in _LAST_TURN_RATES:
+        if t_ref() is t and w_ref() is omega_b and was == mark and window == window_s:
+            return rates
+    c = np.vstack([np.zeros(3), np.cumsum(omega_b, axis=0)])
     lo = np.searchsorted(t, t - 0.5 * window_s, side="left")
     hi = np.searchsorted(t, t + 0.5 * window_s, side="right")
-    return np.ascontiguousarray((c[hi] - c[lo]) / (hi - lo)[:, None])
+    rates = np.ascontiguousarray((c[hi] - c[lo]) / (hi - lo)[:, None])
+    try:
+        _LAST_TURN_RATES[:] = [(weakref.ref(t), weakref.ref(omega_b), mark, window_s, rates)]
+    except TypeError:  # an array that takes no weak reference: not kept
+        _LAST_TURN_RATES.clear()
+    return rates
 
 
 def kernel_array(x, dtype) -> np.ndarray:
