@@ -30,17 +30,21 @@ likelihood-ratio tests of its later steps (the Gauss-Markov fixes, the vehicle's
 on the scale of the whole run. The windows of a trial point are shared among the usable cores
 (:func:`gnssacc.core.parallel.usable_jobs`, forked workers: the same numbers as in one process).
 
-**The slow terms over the whole run.** Windows of a minute or two cannot tell a slow
-accelerometer error from white noise. On a 2,400 s simulated car (seed 0, the other values the
-whole run's) the whole run's log-likelihood falls by 14 and 11 from its peak at a quarter and at
-four times its tuned accelerometer bias instability; the windows' (weighted to the whole run's
-scale) rises by 0.3 at the quarter and falls by 3 at four times: they hardly tell it. Nor the
-white noise, which the whole run's likelihood hardly tells either (its prior, around the density
-measured at rest, holds it there), while the windows' weighted likelihood, noisier, moved it up
-to 6x away. So each parameter of :data:`REFINED` is refined over the whole run, in turn, from the
-windows' value: four passes at :data:`REFINE_OFFSETS` (side by side), the value at the vertex of
-the parabola through their objective (the tuner's: likelihood plus prior, within its bounds;
-:func:`gnssacc.prepare.tuning.refined_whole`).
+**The slow terms over the whole run.** Windows of a minute or two cannot tell a slow IMU error
+from white noise. On a 2,400 s simulated car (seed 0, the other values the whole run's) the whole
+run's log-likelihood falls by 14 and 11 from its peak at a quarter and at four times its tuned
+accelerometer bias instability; the windows' (weighted to the whole run's scale) rises by 0.3 at
+the quarter and falls by 3 at four times: they hardly tell it (the search left it 1.5-1.9x above
+the whole run's on three seeds of four), and the gyros' bias instability came out 0.4-0.8x the
+whole run's on all four. So each parameter of :data:`REFINED` is refined over the whole run, in
+turn, from the windows' value: four passes at :data:`REFINE_OFFSETS` (side by side), the value at
+the vertex of the parabola through their objective (the tuner's: likelihood plus prior, within
+its bounds; :func:`gnssacc.prepare.tuning.refined_whole`). On those runs the whole run's
+objective at the windows' gyro value was 30-100 worse than at the refined one. The
+accelerometer's white noise is left as the windows give it (up to 6x the whole run's): the whole
+run's likelihood hardly tells it either (within 2 over a decade and a half around the windows'
+value, its prior holding it), and refined the same way it moved the PRMSE by 0.5 % at most, for
+four passes more than the time target has room for.
 
 Then one more pass over the whole run, with the tuned noise, confirms it against the reference
 pass (the starting noise): the tuned noise must explain the whole run at least as well as the
@@ -55,7 +59,7 @@ and each later window is one car manoeuvre long (a turn, a stop and the speed ch
 it). What the windows cannot give is the whole run's precision: their estimate scatters as a
 600 s recording's does (``bench/bench_tuning_length.py --accuracy`` shows that scatter beside the
 whole run's). A run up to :data:`WINDOWED_FROM_S` long is tuned over its whole length exactly as
-before (the windows and the six whole-run passes would save little there).
+before (the windows and the ten whole-run passes would save little there).
 """
 
 from __future__ import annotations
@@ -74,9 +78,9 @@ from .tuning import run_white_stats, starting_config, ungated
 #: IMU seconds each trial pass covers on a windowed run [s].
 SPAN_S = 600.0
 #: A run longer than this is tuned on windows [s]: one and a half budgets. A trial point on
-#: windows costs :data:`SPAN_S` of IMU (and the windows' starts), and the windowed tuning six
-#: whole-run passes more (the reference, the slow terms' four, the confirming one): with ~80
-#: trial points the whole run costs no more below ~700 s, and up to 900 s the saving (a quarter
+#: windows costs :data:`SPAN_S` of IMU (and the windows' starts), and the windowed tuning ten
+#: whole-run passes more (the reference, the slow terms' eight, the confirming one): with ~80
+#: trial points the whole run costs no more below ~700 s, and up to 900 s the saving (a fifth
 #: at most) would be small against a change of method.
 WINDOWED_FROM_S = 900.0
 #: The first window, from the tuner's start [s].
@@ -89,11 +93,11 @@ TURN_RATE_DEG_S = 3.0
 #: Steps at which the placements within a stratum are compared [s].
 PLACEMENT_STEP_S = 10.0
 #: The parameters refined over the whole run after the search on windows, in turn (module
-#: notes): the accelerometer's white noise and bias instability, which windows of a minute or two
-#: cannot tell apart.
-REFINED = (("imu", "accel_vrw_mps_rth"), ("imu", "accel_bias_instability_mg"))
+#: notes): the slow terms, the accelerometer's and the gyros' bias instability, which windows of
+#: a minute or two cannot tell from white noise.
+REFINED = (("imu", "accel_bias_instability_mg"), ("imu", "gyro_bias_instability_deg_h"))
 #: Where each is evaluated over the whole run, from the windows' value [decades].
-REFINE_OFFSETS = (-1.0, -0.5, 0.0, 0.5)
+REFINE_OFFSETS = (-0.75, -0.25, 0.25, 0.75)
 
 
 @dataclass(frozen=True)
