@@ -14,6 +14,7 @@ import pytest
 import gnssacc
 import gnssacc.prepare.tune_windows as tw
 from gnssacc.core.config import load_config
+from gnssacc.core.parallel import JOBS_ENV
 from gnssacc.core.recording import InitialState
 from gnssacc.pipeline import prepare
 from gnssacc.prepare.passes import filter_pass
@@ -100,6 +101,7 @@ def test_a_windowed_pass_scores_each_window_after_its_lead(long_drive):
 def test_a_long_run_is_tuned_on_a_bounded_span_and_confirmed(long_drive, monkeypatch):
     run, prep = long_drive
     spans = []
+    monkeypatch.setenv(JOBS_ENV, "1")  # every pass in this process, where it is counted
 
     def counted(r, cfg, method="ekf", *, init=None, t_stop=None, **kw):
         spans.append(min(r.t_end, r.t_end if t_stop is None else t_stop) - init.t)
