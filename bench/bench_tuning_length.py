@@ -10,9 +10,8 @@ passes and the ratio to 600 s (target: 2,400 s at most 1.5x 600 s). Runs longer 
 
 Part 2 (``--accuracy``): at 2,400 s, seeds 0 .. ``--seeds``-1, the windowed tuning (the default)
 against the whole-run tuning (windows off): the tuned values, the EKF's and the smoother's PRMSE
-and position NEES;
-the difference between the two against their spread over the seeds (hold the accuracy, not the
-digits).
+and position NEES; the difference between the two against their spread over the seeds (hold the
+accuracy, not the digits).
 
     python bench/bench_tuning_length.py [--repeats 3] [--lengths 600,1200,2400,4800] [--accuracy]
         [--seeds 3] [--no-timing]
