@@ -77,9 +77,7 @@ def test_known_velocity_error_is_the_running_mean_of_the_fix_errors():
     t_fix = np.arange(5.0)
     err = np.array([[3.0, 0.0], [-1.0, 2.0], [1.0, 4.0], [-3.0, 2.0], [0.0, 2.0]])
     causal = known_velocity_error(t_fix, err, np.array([0.0, 0.5, 1.0, 2.9, 4.0]))
-    np.testing.assert_allclose(
-        causal, [[3.0, 0.0], [3.0, 0.0], [1.0, 1.0], [1.0, 2.0], [0.0, 2.0]]
-    )
+    np.testing.assert_allclose(causal, [[3.0, 0.0], [3.0, 0.0], [1.0, 1.0], [1.0, 2.0], [0.0, 2.0]])
     lagged = known_velocity_error(t_fix, err, np.array([0.0, 3.0]), lag_s=2.0)
     np.testing.assert_allclose(lagged, [[1.0, 2.0], [0.0, 2.0]])
     with pytest.raises(ValueError, match="before the first fix"):

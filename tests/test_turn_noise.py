@@ -155,3 +155,22 @@ def test_no_turn_no_extra_noise():
     pim = preintegrate(d, model, bias, 0.0, T, 1, len(d.t), (None, None), dt_all, w_turn)
     cov = np.diag(np.asarray(pim.preintMeasCov())[:3, :3])
     np.testing.assert_allclose(cov, imu.gyro_psd * T, rtol=1e-4)
+
+
+def test_turn_rates_are_the_window_means_and_follow_the_arrays_they_are_given():
+    """Each sample's rate averaged over the samples within half the window (by hand, in a loop);
+    reused for the same arrays (the tuner's passes), computed again for other ones or for the
+    same array changed in place."""
+    rng = np.random.default_rng(3)
+    t = np.arange(400) * 0.125  # exact in binary: the window's edges fall on samples
+    w = rng.normal(size=(len(t), 3))
+    by_hand = np.array([w[np.abs(t - tk) <= 0.25].mean(axis=0) for tk in t])
+    first = turn_rates(t, w, 0.5)
+    np.testing.assert_allclose(first, by_hand, rtol=1e-9, atol=1e-12)
+    assert turn_rates(t, w, 0.5) is first
+    other = w.copy()
+    other[100, 2] += 5.0
+    by_hand[np.abs(t - t[100]) <= 0.25, 2] += 5.0 / 5  # the five samples around it
+    np.testing.assert_allclose(turn_rates(t, other, 0.5), by_hand, rtol=1e-9, atol=1e-12)
+    w[100, 2] += 5.0  # the first array, changed in place
+    np.testing.assert_allclose(turn_rates(t, w, 0.5), by_hand, rtol=1e-9, atol=1e-12)

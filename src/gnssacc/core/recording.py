@@ -323,6 +323,11 @@ class InitialState:
         ``b_g`` was measured at rest as the mean gyro rate minus the earth rate at this attitude:
         its error is then tied to the attitude error, the yaw's above all (the estimators start
         with that correlation, so the earth rate tells them no more of the yaw than the data do).
+    cov : ndarray, shape (15, 15) or None
+        The full covariance of the navigation error states (position, velocity, attitude,
+        accelerometer and gyro bias; SI, NED, as the estimators order them), e.g. a filter's at
+        this time: it replaces the sigmas above and keeps their correlations (``None``: the
+        sigmas, uncorrelated but for ``levelled``).
     yaw_evidence : str
         What the yaw rests on: ``"given"`` (the source states the start, e.g. ``init.json``),
         ``"orientation"`` (an IMU's own orientation field: magnetometer-grade until the motion
@@ -348,6 +353,7 @@ class InitialState:
     levelled: bool = False
     yaw_evidence: str = "given"
     gyro_bias_at_rest: bool = False
+    cov: np.ndarray | None = None
 
     @property
     def yaw_determined(self) -> bool:

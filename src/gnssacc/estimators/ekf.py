@@ -96,12 +96,14 @@ def make_setup(
     variant: str | None = None,
     observed: bool = False,
     cov_every: int = 1,
+    t_stop: float | None = None,
 ) -> EkfSetup:
     """The pass's aids (:func:`gnssacc.estimators.aids.ekf_aids`), the state they make and its
     initial covariance, and the IMU propagator with the noise and the inflation of suspect spans
-    (``stationary``: a :class:`gnssacc.prepare.stationary.StationaryReport` or ``None``)."""
+    (``stationary``: a :class:`gnssacc.prepare.stationary.StationaryReport` or ``None``); the
+    aids may leave out their epochs after ``t_stop`` [s] (the pass stops there)."""
     segments = inflation_segments(run.imu, quality, settings.suspect)
-    ctx = EkfContext(run, settings, init, stationary, variant, observed, segments)
+    ctx = EkfContext(run, settings, init, stationary, variant, observed, segments, t_stop)
     aids = ekf_aids(ctx)
     layout = StateLayout.build(b for a in aids for b in a.states)
     imu = settings.imu
@@ -219,7 +221,15 @@ def run_ekf(
     init, quality = start_of_pass(run, settings, init, quality)
     settings = EkfSettings.of(settings)
     setup = make_setup(
-        run, settings, init, quality, stationary, METHODS[method], observer is not None, cov_every
+        run,
+        settings,
+        init,
+        quality,
+        stationary,
+        METHODS[method],
+        observer is not None,
+        cov_every,
+        t_stop,
     )
     s, prop, t0, k = setup.state, setup.prop, setup.t0, setup.k
     t_end = prop.t[-1] if t_stop is None else min(float(t_stop), prop.t[-1])

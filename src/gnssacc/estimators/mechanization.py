@@ -711,40 +711,36 @@ def _cov_step(
         _step_phi(Phi, F, dt_acc, phi_order)
 
 
-#: :func:`turn_rates` kept for the last few IMU arrays (weak references, checked on use).
-_TURN_RATES: dict = {}
+#: The last :func:`turn_rates` computed: ``(weak references to t and omega_b, their fingerprint,
+#: window, rates)``. The tuner's ~90 passes over one run (and a windowed pass's windows) share it:
+#: computed afresh it cost 90 ms a pass on a 2,400 s run, whatever the span the pass covers.
+_LAST_TURN_RATES: list = []
 
 
 def turn_rates(t: np.ndarray, omega_b: np.ndarray, window_s: float = TURN_WINDOW_S) -> np.ndarray:
     """The rotation the body performs: each sample's rate averaged over the samples within
-    ``window_s / 2`` of it [rad/s, body], (N, 3), C-contiguous (not to be written to).
+    ``window_s / 2`` of it [rad/s, body], (N, 3), C-contiguous (not to be written to: the same
+    array is returned again for the same ``t`` and ``omega_b`` objects, unchanged).
 
     A constant gyro cross-axis or scale-factor error grows an attitude error with the angle turned;
     vibration and the sensor's own noise turn the body back and forth, and the error they make
-    averages out. ``t`` [s] (N,), ``omega_b`` [rad/s] (N, 3). The same two array objects give
-    the array computed for them before (a tuner's passes share the recording's IMU arrays).
+    averages out. ``t`` [s] (N,), ``omega_b`` [rad/s] (N, 3).
     """
-    key = (id(t), id(omega_b), float(window_s))
-    hit = _TURN_RATES.get(key)
-    if hit is not None and hit[0]() is t and hit[1]() is omega_b:
-        return hit[2]
-    out = _turn_rates(t, omega_b, window_s)  # writable: numba would compile a read-only variant
-    try:
-        refs = (weakref.ref(t), weakref.ref(omega_b))
-    except TypeError:  # not arrays: nothing to key on
-        return out
-    while len(_TURN_RATES) >= 4:
-        _TURN_RATES.pop(next(iter(_TURN_RATES)))
-    _TURN_RATES[key] = (*refs, out)
-    return out
-
-
-def _turn_rates(t, omega_b, window_s: float) -> np.ndarray:
     t = np.asarray(t, float)
-    c = np.vstack([np.zeros(3), np.cumsum(np.asarray(omega_b, float), axis=0)])
+    omega_b = np.asarray(omega_b, float)
+    mark = (len(t), float(t[0]), float(t[-1]), float(omega_b.sum())) if len(t) else None
+    for t_ref, w_ref, was, window, rates in _LAST_TURN_RATES:
+        if t_ref() is t and w_ref() is omega_b and was == mark and window == window_s:
+            return rates
+    c = np.vstack([np.zeros(3), np.cumsum(omega_b, axis=0)])
     lo = np.searchsorted(t, t - 0.5 * window_s, side="left")
     hi = np.searchsorted(t, t + 0.5 * window_s, side="right")
-    return np.ascontiguousarray((c[hi] - c[lo]) / (hi - lo)[:, None])
+    rates = np.ascontiguousarray((c[hi] - c[lo]) / (hi - lo)[:, None])
+    try:
+        _LAST_TURN_RATES[:] = [(weakref.ref(t), weakref.ref(omega_b), mark, window_s, rates)]
+    except TypeError:  # an array that takes no weak reference: not kept
+        _LAST_TURN_RATES.clear()
+    return rates
 
 
 def kernel_array(x, dtype) -> np.ndarray:

@@ -128,7 +128,9 @@ def initial_state(init: InitialState, settings, layout: StateLayout | None = Non
         np.concatenate([sig_p, sig_v, sig_att, sig_ba, sig_bg] + [b.sigma for b in layout.markov])
         ** 2
     )
-    if init.levelled:
+    if init.cov is not None:  # a filter's covariance, correlations kept
+        P[: layout.nav, : layout.nav] = np.asarray(init.cov, float)
+    elif init.levelled:
         _tie_tilt_to_accel_bias(P, init)
     if init.gyro_bias_at_rest:
         P = _tie_gyro_bias_to_attitude(P, init)

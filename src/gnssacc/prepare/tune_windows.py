@@ -4,8 +4,7 @@ bounded, representative part of a long run, confirmed over the whole of it.
 The tuner (:mod:`gnssacc.prepare.tuning`) maximises the innovation likelihood of ~90 EKF passes;
 over the whole run each pass costs its length, so a one-hour drive spent most of a minute before
 its first estimate. A run longer than :data:`WINDOWED_FROM_S` is instead identified on windows
-that together span :data:`SPAN_S` of IMU data, whatever the run's length (off by default: see
-:data:`WINDOWED_FROM_S`):
+that together span :data:`SPAN_S` of IMU data, whatever the run's length:
 
 - the first :data:`FIRST_S` from the tuner's start, as the whole-run pass begins (the turn-on
   biases are learnt there: their sigmas are the start's);
@@ -13,43 +12,77 @@ that together span :data:`SPAN_S` of IMU data, whatever the run's length (off by
   each placed within its stratum where its share of rest (the stationary spans) and of turning
   (yaw rate above :data:`TURN_RATE_DEG_S`) is closest to the stratum's own: the motion, rests and
   turns of the run keep their weight. Each starts :data:`LEAD_S` before its scored part from the
-  state and covariance of one reference pass over the whole run (the configured noise); the
-  updates of the lead are not scored (the covariance settles to the trial noise there).
+  state and the full covariance (correlations kept: a start with the sigmas alone makes the first
+  innovations look larger than they are, and the search answers with more process noise) of one
+  reference pass over the whole run with the search's starting noise (every aid in use, the
+  covariance propagated as in the tuner's passes); the updates of the lead are not scored (the
+  covariance settles to the trial noise there).
 
 Each trial point is one pass per window (:class:`WindowedPass`, a
 :class:`~gnssacc.prepare.filter_pass.FilterPass` whose statistics add the windows' scored updates),
-so the search itself is unchanged; the windows of a trial point are shared among the usable cores
+so the search itself is unchanged. The windows' log-likelihoods are added as a **stratified
+estimate of the whole run's**: each later window's counts the length of its stratum over its
+scored seconds (:attr:`Window.weight`), the first window's once. Added as they are, the first
+window (where the filter converges from the start) would weigh 40 % of the objective instead of
+the tenth of a 2,400 s run it is, and the search would answer that transient with more process
+noise; weighted, the objective estimates the one the whole-run tuner maximises, and the
+likelihood-ratio tests of its later steps (the Gauss-Markov fixes, the vehicle's axes) are made
+on the scale of the whole run. The windows of a trial point are shared among the usable cores
 (:func:`gnssacc.core.parallel.usable_jobs`, forked workers: the same numbers as in one process).
-Then two passes over the whole run, with the starting and the
-tuned noise, confirm it: the tuned noise must explain the whole run at least as well as the
+
+**The slow terms over the whole run.** Windows of a minute or two cannot tell a slow IMU error
+from white noise. On a 2,400 s simulated car (seed 0, the other values the whole run's) the whole
+run's log-likelihood falls by 14 and 11 from its peak at a quarter and at four times its tuned
+accelerometer bias instability; the windows' (weighted to the whole run's scale) rises by 0.3 at
+the quarter and falls by 3 at four times: they hardly tell it (the search left it 1.5-1.9x above
+the whole run's on three seeds of four), and the gyros' bias instability came out 0.4-0.8x the
+whole run's on all four. So each parameter of :data:`REFINED` is refined over the whole run, in
+turn, from the windows' value: four passes at :data:`REFINE_OFFSETS` (side by side), the value at
+the vertex of the parabola through their objective (the tuner's: likelihood plus prior, within
+its bounds; :func:`gnssacc.prepare.tuning.refined_whole`). On those runs the whole run's
+objective at the windows' gyro value was 30-100 worse than at the refined one. The
+accelerometer's white noise is left as the windows give it (up to 6x the whole run's): the whole
+run's likelihood hardly tells it either (within 2 over a decade and a half around the windows'
+value, its prior holding it), and refined the same way it moved the PRMSE by 0.5 % at most, for
+four passes more than the time target has room for.
+
+Then one more pass over the whole run, with the tuned noise, confirms it against the reference
+pass (the starting noise): the tuned noise must explain the whole run at least as well as the
 starting noise (log-likelihood gain >= 0), else the run is tuned over its whole length as before
 (:func:`tuned_on_windows` returns ``None``). The NIS the tuner reports is the whole run's.
 
-A run up to :data:`WINDOWED_FROM_S` long is tuned over its whole length (windows would save little:
-the reference and the confirming passes cost three whole-run passes).
+**The budget.** :data:`SPAN_S` is set by what a noise estimate needs, not by any recording: the
+scored part (480 s: the first window and four of 60 s after their leads) holds ~1,400 components
+of 1 Hz fixes, a standard error of ~2 % on the fixes' sigma (``1 / sqrt(2 N)``); the first window
+is a few times the ~100 s over which metre-level fixes resolve a vehicle IMU's turn-on biases,
+and each later window is one car manoeuvre long (a turn, a stop and the speed changes around
+it). What the windows cannot give is the whole run's precision: their estimate scatters as a
+600 s recording's does (``bench/bench_tuning_length.py --accuracy`` shows that scatter beside the
+whole run's). A run up to :data:`WINDOWED_FROM_S` long is tuned over its whole length exactly as
+before (the windows and the ten whole-run passes would save little there).
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..core.parallel import usable_jobs
 from ..core.recording import InitialState, RecordedRun
-from ..core.states import ATT, BA, BG, POS, VEL
+from ..core.states import ATT, BA, BG, NAV, POS, VEL
 from .filter_pass import FilterPass
-from .tuning import run_white_stats, ungated, without_aids
+from .tuning import run_white_stats, starting_config, ungated
 
 #: IMU seconds each trial pass covers on a windowed run [s].
 SPAN_S = 600.0
-#: A run longer than this is tuned on windows [s]. Off (infinite) by default: on a simulated
-#: 2,400 s car the windows held the accuracy for two seeds of three (PRMSE +0.2 % and +2.8 %) but
-#: not for the third (+72 %: the windows, 90 s each, cannot tell the small accelerometer noise
-#: and bias instability the whole run shows; a longer first window or longer leads did not help),
-#: so a long run is still tuned whole (``bench/bench_tuning_length.py --accuracy``). 900 s is where
-#: windows would start to pay (below it the whole run costs about as much).
-WINDOWED_FROM_S = float("inf")
+#: A run longer than this is tuned on windows [s]: one and a half budgets. A trial point on
+#: windows costs :data:`SPAN_S` of IMU (and the windows' starts), and the windowed tuning ten
+#: whole-run passes more (the reference, the slow terms' eight, the confirming one): with ~80
+#: trial points the whole run costs no more below ~700 s, and up to 900 s the saving (a fifth
+#: at most) would be small against a change of method.
+WINDOWED_FROM_S = 900.0
 #: The first window, from the tuner's start [s].
 FIRST_S = 240.0
 #: Later windows (one per stratum of the rest of the run) and the unscored lead of each [s].
@@ -59,17 +92,25 @@ LEAD_S = 30.0
 TURN_RATE_DEG_S = 3.0
 #: Steps at which the placements within a stratum are compared [s].
 PLACEMENT_STEP_S = 10.0
+#: The parameters refined over the whole run after the search on windows, in turn (module
+#: notes): the slow terms, the accelerometer's and the gyros' bias instability, which windows of
+#: a minute or two cannot tell from white noise.
+REFINED = (("imu", "accel_bias_instability_mg"), ("imu", "gyro_bias_instability_deg_h"))
+#: Where each is evaluated over the whole run, from the windows' value [decades].
+REFINE_OFFSETS = (-0.75, -0.25, 0.25, 0.75)
 
 
 @dataclass(frozen=True)
 class Window:
     """One window: the pass runs from ``start`` (``None``: the tuner's own) over ``t_from`` ..
-    ``t_to`` and scores the updates from ``t_scored`` [s]."""
+    ``t_to`` and scores the updates from ``t_scored`` [s]; its log-likelihood counts ``weight``
+    times (the seconds of the run it stands for over its scored seconds)."""
 
     t_from: float
     t_scored: float
     t_to: float
     start: InitialState | None = None
+    weight: float = 1.0
 
 
 def _shares(run: RecordedRun, stationary, t: np.ndarray) -> np.ndarray:
@@ -103,17 +144,22 @@ def placements(run: RecordedRun, stationary, t0: float) -> list[tuple[float, flo
     return out
 
 
-def states_at(run, cfg, init, quality, times, filter_pass: FilterPass) -> list[InitialState]:
-    """The filter's state and sigmas at ``times`` [s] (one pass from ``init`` with ``cfg``'s noise,
-    the aids off and ungated), each as a start."""
+def states_at(
+    run, cfg, init, quality, times, filter_pass: FilterPass, stationary=None, method: str = "ekf"
+) -> tuple[list[InitialState], dict]:
+    """The filter's state and covariance at ``times`` [s], each as a start, and the statistics of
+    the pass that gave them: one ungated pass of ``method`` from ``init`` with ``cfg`` (its noise,
+    its aids), the covariance propagated as the tuner's passes propagate it."""
     sol = filter_pass(
         run,
-        ungated(without_aids(cfg)),
-        "ekf",
+        ungated(cfg),
+        method,
         init=init,
+        stationary=stationary,
         quality=quality,
         output_times=np.asarray(times, float),
         store_P=True,
+        cov_every=int(cfg["tune"]["cov_every"]),
     )
     out = []
     for k in range(len(sol.t)):
@@ -138,23 +184,41 @@ def states_at(run, cfg, init, quality, times, filter_pass: FilterPass) -> list[I
                 sigma_b_a=sig[BA].copy(),
                 sigma_b_g=sig[BG].copy(),
                 yaw_evidence=init.yaw_evidence,  # a yaw the run never told stays considered
+                cov=None if sol.P is None else np.array(sol.P[k][NAV, NAV]),
             )
         )
-    return out
+    return out, sol.stats
 
 
-def windows(run: RecordedRun, cfg, init, quality, stationary, filter_pass) -> list[Window]:
-    """The windows of a long run (module notes); empty when the run is tuned whole."""
+def windows(
+    run: RecordedRun, cfg, init, quality, stationary, filter_pass, noise=None
+) -> list[Window]:
+    """The windows of a long run (module notes); empty when the run is tuned whole. ``noise``
+    (:class:`~gnssacc.prepare.stationary.StationaryNoise`, optional): the densities measured at
+    rest, with which the reference pass runs (the search's start)."""
+    return windows_and_reference(run, cfg, init, quality, stationary, filter_pass, noise)[0]
+
+
+def windows_and_reference(
+    run: RecordedRun, cfg, init, quality, stationary, filter_pass, noise=None, method: str = "ekf"
+) -> tuple[list[Window], dict]:
+    """:func:`windows`, and the statistics of the reference pass over the whole run (``method``,
+    the search's starting noise, every aid ``cfg`` has: the whole run's likelihood before the
+    tuning, :func:`tuned_on_windows`); ``([], {})`` when the run is tuned whole."""
     t0 = float(init.t)
     if run.t_end - t0 <= WINDOWED_FROM_S:
-        return []
+        return [], {}
     first = Window(t0, t0, t0 + FIRST_S)
     spans = placements(run, stationary, first.t_to)
-    starts = states_at(run, cfg, init, quality, [a for a, _ in spans], filter_pass)
-    later = [
-        Window(s.t, min(s.t + LEAD_S, b), b, s) for s, (_, b) in zip(starts, spans, strict=False)
-    ]
-    return [first] + later
+    ref = starting_config(run, cfg, noise)
+    times = [a for a, _ in spans]
+    starts, before = states_at(run, ref, init, quality, times, filter_pass, stationary, method)
+    stratum = (float(run.t_end) - first.t_to) / N_LATER  # each later window stands for one
+    later = []
+    for s, (_, b) in zip(starts, spans, strict=False):
+        scored = min(s.t + LEAD_S, b)
+        later.append(Window(s.t, scored, b, s, stratum / max(b - scored, 1e-9)))
+    return [first] + later, before
 
 
 def _scored(stats: dict, t_scored: float) -> dict:
@@ -172,17 +236,22 @@ def _scored(stats: dict, t_scored: float) -> dict:
     return out
 
 
-def merged(parts: list[dict]) -> dict:
-    """The windows' statistics as one pass's: log-likelihoods and counts added, the mean NIS and
-    the lag-1 autocorrelation weighted by the updates."""
+def merged(parts: list[dict], weights=None) -> dict:
+    """The windows' statistics as one pass's over the run they stand for: the log-likelihoods
+    added, each times its window's weight (default 1: a stratified estimate of the whole run's),
+    the counts added as they are (the updates scored), the mean NIS and the lag-1 autocorrelation
+    weighted by the updates times the weights."""
     out: dict = {}
+    wts = np.ones(len(parts)) if weights is None else np.asarray(weights, float)
     kinds = {k[len("n_") : -len("_updates")] for p in parts for k in p if k.endswith("_updates")}
     for kind in kinds:
         n = np.array([p.get(f"n_{kind}_updates", 0) for p in parts], float)
         out[f"n_{kind}_updates"] = int(n.sum())
-        out[f"loglik_{kind}"] = float(sum(p.get(f"loglik_{kind}", 0.0) for p in parts))
+        out[f"loglik_{kind}"] = float(
+            sum(p.get(f"loglik_{kind}", 0.0) * w for p, w in zip(parts, wts, strict=True))
+        )
         for stat in (f"nis_{kind}_mean", f"acf1_{kind}"):
-            vals = [(p.get(stat), w) for p, w in zip(parts, n, strict=True) if w > 0]
+            vals = [(p.get(stat), w) for p, w in zip(parts, n * wts, strict=True) if w > 0]
             vals = [(v, w) for v, w in vals if v is not None]
             wsum = sum(w for _, w in vals)
             out[stat] = float(sum(v * w for v, w in vals) / wsum) if wsum > 0 else None
@@ -200,13 +269,16 @@ class WindowedPass:
     forked on the first call, which hold the recording as this process does; the windows of a
     share are every ``jobs``-th): the same passes, merged in the same order, so the same numbers
     as in one process. A worker that fails is replaced by this process (its windows run here).
-    :meth:`close` ends the workers.
+    A process forked from this one (the tuner's trial points side by side) runs all the windows
+    itself: it must not share the workers' pipes with this process. :meth:`close` ends the
+    workers.
     """
 
     def __init__(self, wins: list[Window], filter_pass: FilterPass, jobs: int = 1):
         self.wins, self.filter_pass, self.passes = wins, filter_pass, 0
         self.jobs = max(1, min(int(jobs), len(wins)))
         self.workers: list | None = None
+        self.owner = os.getpid()  # only the process that made it talks to its workers
 
     def _window(self, k: int, run, cfg, method, init, kw) -> tuple[dict, object]:
         w = self.wins[k]
@@ -239,11 +311,20 @@ class WindowedPass:
             for k in [k for k in self._share(j) if k not in parts]:
                 parts[k], _ = self._window(k, run, cfg, method, init, kw)
         self.passes += 1
-        return replace(first, stats=merged([parts[k] for k in range(len(self.wins))]))
+        return replace(
+            first,
+            stats=merged(
+                [parts[k] for k in range(len(self.wins))],
+                [w.weight for w in self.wins],
+            ),
+        )
 
     def _ask(self, run, job) -> list:
         """Send ``job`` to the workers (started on the first call); ``[(share, connection)]``."""
-        if self.jobs < 2:
+        if self.jobs < 2 or os.getpid() != self.owner:
+            # A process forked from the owner (the tuner evaluating trial points side by side,
+            # gnssacc.core.parallel) holds the owner's pipes: used from both, the workers' answers
+            # would go to either. It runs every window itself.
             return []
         if self.workers is None:
             self._start(run)
@@ -312,7 +393,10 @@ def tuned_on_windows(run, cfg, stationary, quality, init, noise, *, filter_pass:
     from .tuning import aids, tune
 
     t0 = time.perf_counter()
-    wins = windows(run, cfg, init, quality, stationary, filter_pass)
+    method = "ekf-acc" if cfg["tune"]["likelihood"] == "position+accel" else "ekf"
+    wins, before = windows_and_reference(
+        run, cfg, init, quality, stationary, filter_pass, noise, method
+    )
     if not wins:
         return None
     windowed = WindowedPass(wins, filter_pass, usable_jobs())
@@ -320,13 +404,12 @@ def tuned_on_windows(run, cfg, stationary, quality, init, noise, *, filter_pass:
         cfg_t, result = tune(run, cfg, stationary, quality, init, noise, filter_pass=windowed)
     finally:
         windowed.close()
+    cfg_t, result, refined = _refined(
+        run, cfg, cfg_t, result, stationary, quality, init, filter_pass
+    )
     kinds = ("pos", "zaru") + aids(run, cfg_t)[1]
-    method = "ekf-acc" if cfg["tune"]["likelihood"] == "position+accel" else "ekf"
     kinds += ("acc",) if method == "ekf-acc" else ()
     scale = float(cfg_t["gnss"]["sigma_scale"]) / float(cfg["gnss"]["sigma_scale"])
-    before = run_white_stats(
-        run, cfg, stationary, quality, init, filter_pass=filter_pass, method=method
-    )
     tuned_init = replace(init, sigma_pos_m=init.sigma_pos_m * scale)
     after = run_white_stats(
         run, cfg_t, stationary, quality, tuned_init, filter_pass=filter_pass, method=method
@@ -340,8 +423,9 @@ def tuned_on_windows(run, cfg, stationary, quality, init, noise, *, filter_pass:
         "run_seconds": float(run.duration_s),
         "whole_run_loglik_gain": float(gain),
         "confirmed": bool(gain >= 0.0),
+        "refined_over_whole_run": refined,
     }
-    if gain < 0.0:  # the windows' noise explains the whole run worse than the configured noise
+    if gain < 0.0:  # the windows' noise explains the whole run worse than the starting noise
         return None
     result = replace(
         result,
@@ -350,7 +434,40 @@ def tuned_on_windows(run, cfg, stationary, quality, init, noise, *, filter_pass:
         nis_after=after.get("nis_pos_mean"),
         loglik_before=float(sum(before[f"loglik_{k}"] for k in kinds)),
         loglik_after=float(sum(after[f"loglik_{k}"] for k in kinds)),
-        n_evaluations=result.n_evaluations + 3,  # the reference and the two confirming passes
+        n_evaluations=result.n_evaluations + 2,  # the reference (the start's) and the tuned one
         seconds=time.perf_counter() - t0,
     )
     return cfg_t, result
+
+
+def _refined(run, cfg, cfg_t, result, stationary, quality, init, filter_pass):
+    """``(cfg_t, result)`` with each free parameter of :data:`REFINED` refined over the whole run
+    (:func:`gnssacc.prepare.tuning.refined_whole`, from the windows' value), and what was done per
+    parameter (``section.key`` -> the windows' value, the refined one and the profile)."""
+    from .tuning import refined_whole
+
+    done: dict = {}
+    values = {sec: dict(vals) for sec, vals in result.values.items()}
+    n = 0
+    for sec, key in REFINED:
+        name = f"{sec}.{key}"
+        if key not in values.get(sec, {}) or np.size(cfg_t[sec][key]) != 1:
+            continue  # set by the user, not identified on this run, or per axis
+        got, passes, profile = refined_whole(
+            run,
+            cfg_t,
+            (sec, key),
+            float(np.asarray(result.start.get(name, cfg_t[sec][key])).ravel()[0]),
+            REFINE_OFFSETS,
+            stationary,
+            quality,
+            init,
+            init_scale=float(cfg["gnss"]["sigma_scale"]),
+            filter_pass=filter_pass,
+            at_rest=result.from_stationary,
+        )
+        n += passes
+        done[name] = {"windows": float(cfg_t[sec][key]), "refined": got, **profile}
+        values[sec][key] = float(f"{got:.4g}")
+        cfg_t = cfg_t.with_values({sec: {key: values[sec][key]}}, "tuned")
+    return cfg_t, replace(result, values=values, n_evaluations=result.n_evaluations + n), done

@@ -231,8 +231,17 @@ class TuneResult:
             else ""
         )
         back = [k.split(".")[-1] for k in self.from_stationary.get("drawn_back", [])]
+        win = self.from_stationary.get("windows")
+        where = (
+            f", on windows of {win['imu_seconds_per_pass']:.0f} s of the run's "
+            f"{win['run_seconds']:.0f} s, "
+            + ("refined and " if win.get("refined_over_whole_run") else "")
+            + "confirmed over the whole run"
+            if win
+            else ""
+        )
         return (
-            f"tuned noise ({self.n_evaluations} EKF passes, {self.seconds:.1f} s): "
+            f"tuned noise ({self.n_evaluations} EKF passes, {self.seconds:.1f} s{where}): "
             + ", ".join(parts)
             + nis
             + (
@@ -326,6 +335,17 @@ def _start_values(cfg: RunConfig, free: list, noise) -> tuple[dict, dict]:
                 info[p[1]] = _plain(start[p])
         info["stationary_s"] = float(noise.seconds)
     return start, info
+
+
+def starting_config(run, cfg: RunConfig, noise) -> RunConfig:
+    """``cfg`` with the free parameters of step 2 at :func:`tune`'s starting values (the white-noise
+    densities measured at rest, where ``noise`` has them), e.g. for a pass before the search."""
+    params, _ = measurement_stage(run, cfg)
+    start, _ = _start_values(cfg, [p for p in params if p not in cfg.explicit], noise)
+    upd: dict = {}
+    for (sec, key), v in start.items():
+        upd.setdefault(sec, {})[key] = v.tolist() if v.size > 1 else float(v[0])
+    return cfg.with_values(upd, "the tuner's start") if upd else cfg
 
 
 class _Objective:
@@ -1067,6 +1087,88 @@ def tune_gauss_markov(
         "run_scale": rel,
         "seconds": time.perf_counter() - t0,
     }
+
+
+def refined_whole(
+    run,
+    cfg: RunConfig,
+    key: tuple,
+    start: float,
+    offsets,
+    stationary=None,
+    quality=None,
+    init=None,
+    *,
+    init_scale: float,
+    filter_pass: FilterPass,
+    at_rest: dict | None = None,
+) -> tuple[float, int, dict]:
+    """One noise parameter ``key`` of ``cfg`` (the others held) by a short line search over the
+    whole run: the objective of step 2 of the module docstring (the EKF's innovation
+    log-likelihood, the ground vehicle's aids off, plus the log-normal prior around the tuner's
+    starting value ``start``) at ``cfg``'s value times ``10**d`` for each ``d`` in ``offsets``
+    [decades] (the passes side by side), then the vertex of the parabola through them (within
+    their span) or, where they show no maximum, the best of them.
+
+    Parameters
+    ----------
+    run, cfg, stationary, quality, init
+        As :func:`tune` takes them; ``cfg`` the tuned configuration (``key`` at the value the
+        line starts from).
+    key : tuple
+        ``(section, key)``, a positive scalar parameter of :data:`PARAMETERS`.
+    start : float
+        The tuner's starting value of ``key`` (the centre of its prior).
+    offsets : sequence of float
+        Offsets [decades] from ``cfg``'s value (three or more, for a parabola).
+    init_scale : float
+        ``gnss.sigma_scale`` the start ``init`` was made with.
+    filter_pass : FilterPass
+    at_rest : dict, optional
+        What the stationary stretches measured (:attr:`TuneResult.from_stationary`): a density
+        measured there has the tighter prior and its floor (:data:`REST_FLOOR_DECADES`), as in
+        the search; the points below the floor, or more than two decades from ``start``, are
+        moved to it.
+
+    Returns
+    -------
+    value : float
+        The refined value (configuration units).
+    passes : int
+    profile : dict
+        ``offsets`` and the objective at each (the negative log-likelihood plus the prior, less
+        its smallest), and the chosen offset ``d`` [decades].
+    """
+    _, measured = measurement_stage(run, cfg)
+    kinds = ("pos", "zaru") + measured
+    kinds += ("acc",) if cfg["tune"]["likelihood"] == "position+accel" else ()
+    value = float(cfg[key[0]][key[1]])
+    obj = _Objective(
+        run,
+        without_aids(cfg),
+        [key],
+        {key: np.atleast_1d(value)},
+        stationary,
+        quality,
+        init,
+        "ekf-acc" if "acc" in kinds else "ekf",
+        kinds,
+        filter_pass,
+    )
+    obj.init_scale = init_scale
+    info = at_rest or {}
+    width = float(_prior_widths(cfg, [key], info)[0])
+    theta0 = np.log10(value / start)
+    lo = float(_lower_bounds([key], info)[0])
+    d = np.unique(np.clip(np.asarray(offsets, float) + theta0, lo, _BOUND_DECADES) - theta0)
+    obj.ahead([np.array([x]) for x in d])
+    j = np.array([obj(np.array([x])) + 0.5 * ((theta0 + x) / width) ** 2 for x in d])
+    a, b, _ = np.polyfit(d, j, 2) if np.all(np.isfinite(j)) and len(d) > 2 else (0, 0, 0)
+    best = float(d[int(np.argmin(j))])
+    if a > 0.0:
+        best = float(np.clip(-b / (2.0 * a), d.min(), d.max()))
+    profile = {"offsets": d.tolist(), "objective": (j - np.nanmin(j)).tolist(), "d": best}
+    return value * 10.0**best, len(d), profile
 
 
 def run_white_stats(

@@ -271,8 +271,9 @@ class EkfContext:
     """What an EKF aid is built from: the run (fixes as read), the filter's settings, the start,
     the stationary spans (or ``None``), the method's variant of the aids (the acceleration form
     it applies, :data:`gnssacc.estimators.aids.EKF_METHODS`; ``None``: none), whether an
-    observer watches (then a form not applied is evaluated for it), and the inflation segments
-    of the suspect IMU spans."""
+    observer watches (then a form not applied is evaluated for it), the inflation segments
+    of the suspect IMU spans, and where the pass stops (``t_stop`` [s]; ``None``: at the run's
+    end)."""
 
     run: Any
     settings: Any
@@ -281,6 +282,7 @@ class EkfContext:
     variant: str | None
     observed: bool
     segments: Any
+    t_stop: float | None = None
 
     @property
     def t0(self) -> float:

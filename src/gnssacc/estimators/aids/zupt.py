@@ -28,7 +28,7 @@ fixes did not vet (:func:`vetted_by_fixes`) is gated there like the EKF's.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -132,14 +132,22 @@ def stationary_epochs(
     )
 
 
-def epochs_for(run, zupt, gyro_psd: np.ndarray, stationary) -> StationaryEpochs:
+def epochs_for(
+    run, zupt, gyro_psd: np.ndarray, stationary, t_from: float = -np.inf, t_to: float = np.inf
+) -> StationaryEpochs:
     """The stationary epochs of an estimator run: of ``stationary``'s spans (a
     :class:`gnssacc.prepare.stationary.StationaryReport`) when given and ``zupt.enabled``
     (:class:`gnssacc.estimators.settings.ZuptSettings`), else none; ``gyro_psd`` [rad^2/s] floors
-    the zero-rate variance."""
+    the zero-rate variance. Only the spans that reach into ``t_from`` .. ``t_to`` [s] (a pass's
+    start and stop): each span's epochs are its own, so those of the pass are the same (a pass
+    over a window of a long run then costs the window, not the run)."""
     if stationary is None or not zupt.enabled:
         return StationaryEpochs.empty()
-    return stationary_epochs(run.imu, stationary.spans, zupt.interval_s, gyro_psd)
+    keep = [i for i, sp in enumerate(stationary.spans) if sp.t_end >= t_from and sp.t_start <= t_to]
+    if len(keep) == len(stationary.spans):
+        return stationary_epochs(run.imu, stationary.spans, zupt.interval_s, gyro_psd)
+    ep = stationary_epochs(run.imu, [stationary.spans[i] for i in keep], zupt.interval_s, gyro_psd)
+    return replace(ep, span=np.asarray(keep, int)[ep.span]) if len(ep) else ep
 
 
 def zero_velocity(s, sigma_mps: float, gate: float = 0.0) -> Measurement:
@@ -185,7 +193,9 @@ class EkfZupt(EkfAid):
 
 
 def _ekf(ctx) -> EkfZupt | None:
-    ep = epochs_for(ctx.run, ctx.settings.zupt, ctx.settings.imu.gyro_psd, ctx.stationary)
+    t_to = np.inf if ctx.t_stop is None else float(ctx.t_stop)
+    z = ctx.settings.zupt
+    ep = epochs_for(ctx.run, z, ctx.settings.imu.gyro_psd, ctx.stationary, ctx.t0, t_to)
     return EkfZupt(ctx, ep) if len(ep) else None
 
 
