@@ -126,3 +126,39 @@ def test_attitude_nees_has_its_own_column_and_warning(tmp_path):
     cell = dict(zip(head, rows[0], strict=True))
     assert cell["NEES att"].endswith("!") and float(cell["NEES att"][:-2]) > 5
     assert not cell["NEES pos"].endswith("!")
+
+
+def test_a_tuned_odometry_below_its_band_is_no_false_alarm():
+    """The tuner inflates the odometry's white sigma for its errors' correlation (the fixes'
+    likelihood decides), so its one-step NIS lies below 1 by design: no "too large" warning then;
+    an odometry sigma the user set (not tuned) that low is still warned about. Too high is
+    warned about either way."""
+    from dataclasses import replace
+
+    from gnssacc.analysis.consistency import assess
+
+    run = simulate("car", duration_s=60.0, imu_grade="industrial", noise="white", seed=5)
+    tr = run.truth
+    k = len(tr.t)
+    lat, lon, h = run.origin.to_llh(run.origin.to_ned(tr.lat, tr.lon, tr.h))
+    sol = NavSolution(
+        "ekf",
+        tr.t,
+        lat,
+        lon,
+        h,
+        tr.v_n,
+        tr.rpy,
+        np.zeros((k, 3)),
+        np.zeros((k, 3)),
+        np.ones((k, 15)),
+    )
+    low = replace(sol, stats={"nis_odo_mean": 0.1, "n_odo_updates": 300})
+    high = replace(sol, stats={"nis_odo_mean": 9.0, "n_odo_updates": 300})
+
+    def odo_warned(s, tuned):
+        return any("odometry NIS" in w for w in assess(run, s, tuned=tuned).warnings)
+
+    assert not odo_warned(low, tuned=True)
+    assert odo_warned(low, tuned=False)
+    assert odo_warned(high, tuned=True) and odo_warned(high, tuned=False)

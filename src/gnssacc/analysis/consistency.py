@@ -450,7 +450,7 @@ def assess(
     nis = {k: st.get(f"nis_{k}_mean") for k in _DOF}
     n = {k: int(st.get(f"n_{k}_updates", 0) or 0) for k in _DOF}
     c = Consistency(sol.method, nis, n, fix_residual_ratio(run, sol, gm_sigma), st.get("acf1_pos"))
-    _nis_warnings(c, st, n, advice)
+    _nis_warnings(c, st, n, advice, tuned)
     _model_warnings(c, model)
     _fix_warnings(c, prmse_m, gnss_prmse_m, n_fixes)
     for text, column in nees_warnings(errors or {}):
@@ -458,15 +458,19 @@ def assess(
     return c
 
 
-def _nis_warnings(c: Consistency, st: dict, n: dict, advice: str) -> None:
+def _nis_warnings(c: Consistency, st: dict, n: dict, advice: str, tuned: bool = False) -> None:
     """Warnings into ``c`` for each update kind's NIS outside its band, correlated position
-    innovations and heavy tails (``st``: the solution's stats, ``n``: updates per kind)."""
+    innovations and heavy tails (``st``: the solution's stats, ``n``: updates per kind;
+    ``tuned``: the noise identified from the recording, the odometry's sigma inflated for its
+    errors' correlation by the fixes' likelihood, so its one-step NIS lies below 1 by design)."""
     for kind, value in c.nis.items():
         if value is None or n[kind] == 0:
             continue
         lo, hi = band(n[kind], _DOF[kind], st.get(f"acf1_{kind}"))
-        if kind in ("zupt", "zaru", "nhc"):
-            lo = 0.0  # pseudo-measurements: a conservative noise (the constraint's default) loses no trust
+        if kind in ("zupt", "zaru", "nhc") or (kind == "odo" and tuned):
+            # pseudo-measurements: a conservative noise (the constraint's default) loses no trust;
+            # a tuned odometry's white sigma states what the filter averages of correlated errors
+            lo = 0.0
         if not lo <= value <= hi:
             what = (
                 "its stated uncertainty is too small: its errors are larger than it thinks"
