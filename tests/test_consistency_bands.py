@@ -141,18 +141,8 @@ def test_a_tuned_odometry_below_its_band_is_no_false_alarm():
     tr = run.truth
     k = len(tr.t)
     lat, lon, h = run.origin.to_llh(run.origin.to_ned(tr.lat, tr.lon, tr.h))
-    sol = NavSolution(
-        "ekf",
-        tr.t,
-        lat,
-        lon,
-        h,
-        tr.v_n,
-        tr.rpy,
-        np.zeros((k, 3)),
-        np.zeros((k, 3)),
-        np.ones((k, 15)),
-    )
+    zero = np.zeros((k, 3))
+    sol = NavSolution("ekf", tr.t, lat, lon, h, tr.v_n, tr.rpy, zero, zero, np.ones((k, 15)))
     low = replace(sol, stats={"nis_odo_mean": 0.1, "n_odo_updates": 300})
     high = replace(sol, stats={"nis_odo_mean": 9.0, "n_odo_updates": 300})
 

@@ -107,15 +107,7 @@ def test_a_long_run_is_tuned_on_a_bounded_span_and_confirmed(long_drive, monkeyp
         spans.append(min(r.t_end, r.t_end if t_stop is None else t_stop) - init.t)
         return filter_pass(r, cfg, method, init=init, t_stop=t_stop, **kw)
 
-    got = tw.tuned_on_windows(
-        run,
-        load_config(),
-        prep.stationary,
-        prep.quality,
-        prep.init,
-        prep.rest_noise,
-        filter_pass=counted,
-    )
+    got = _on_windows(run, prep, counted)
     assert got is not None
     cfg, result = got
     info = result.from_stationary["windows"]
@@ -200,15 +192,7 @@ def test_a_subset_the_whole_run_refutes_is_not_used(long_drive, monkeypatch):
         return cfg.with_values(vals, "tuned"), tuning.TuneResult(vals, {}, [])
 
     monkeypatch.setattr(tuning, "tune", bad)
-    got = tw.tuned_on_windows(
-        run,
-        load_config(),
-        prep.stationary,
-        prep.quality,
-        prep.init,
-        prep.rest_noise,
-        filter_pass=filter_pass,
-    )
+    got = _on_windows(run, prep, filter_pass)
     assert got is None
 
 
@@ -326,3 +310,16 @@ def test_the_whole_run_line_search_finds_the_maximum_of_likelihood_and_prior(slo
     j = 8.0 * xs**2 - slope * xs + 0.5 * ((xs - u) / width) ** 2
     assert passes == 4 and profile["objective"] == pytest.approx(j - j.min())
     assert profile["d"] == pytest.approx(np.log10(got / 0.2))
+
+
+def _on_windows(run, prep, filter_pass):
+    """:func:`tune_windows.tuned_on_windows` of ``run`` from ``prep``'s pieces, default settings."""
+    return tw.tuned_on_windows(
+        run,
+        load_config(),
+        prep.stationary,
+        prep.quality,
+        prep.init,
+        prep.rest_noise,
+        filter_pass=filter_pass,
+    )
