@@ -481,8 +481,9 @@ def wrapped(*args, **kwargs):
     time.sleep(pause)
     return result if when == "after" else real(*args, **kwargs)
 setattr(module, name, wrapped)
-from gnssacc.cli import main
-sys.exit(main(sys.argv[4:]))
+sys.argv = ["gnssacc"] + sys.argv[4:]  # the installed command's own way out (cli.entry)
+from gnssacc.cli import entry
+entry()
 """
 HOOK_WHEN = {
     "pipeline.load_source": "before",  # the very start, the lock just taken

@@ -26,6 +26,7 @@ import threading
 import time
 
 from ..core.jit import KERNEL_DIR, PACKAGE_DIR, cache_folder, kernel_cached
+from ..core.interrupts import Terminated
 from ..core.parallel import hold_forks, release_forks
 
 #: The kernels Python calls, by group, as ``(module file in gnssacc/estimators, function names)``
@@ -158,6 +159,7 @@ class BackgroundWarmUp:
         self._children: dict = {}
         self._done = threading.Event()
         self._all_done = threading.Event()
+        self._stopping = threading.Event()
         self._thread = threading.Thread(target=self._run, name="gnssacc-jit", daemon=True)
         if notice is not None and self.compiling:
             print(
@@ -169,28 +171,42 @@ class BackgroundWarmUp:
             )
 
     def start(self) -> "BackgroundWarmUp":
-        if self._processes:
-            import atexit
+        import atexit
 
+        # A daemon thread inside numba's loader or LLVM when the interpreter finalises (a
+        # ``sys.exit`` right after Ctrl-C or SIGTERM) can abort the process ("Fatal Python
+        # error: PyThreadState_Get"); the command itself leaves by ``os._exit`` (cli.entry).
+        # Also ends the compiling children, which would go on after the process.
+        atexit.register(self._settle_at_exit)
+        if self._processes:
             first = [g for g in self.missing if g == "propagation"]
             rest = [g for g in self.missing if g != "propagation"]
             self._children = {tuple(part): _spawn(part) for part in (first, rest) if part}
-            atexit.register(self.stop)
         hold_forks()  # until the thread is done (released at the end of _run)
         self._thread.start()
         return self
 
     def stop(self) -> None:
-        """End compiling children still running (the process is exiting without their kernels)."""
+        """End compiling children still running (the process is exiting without their kernels);
+        the thread then compiles nothing more itself."""
+        self._stopping.set()
         for proc in self._children.values():
             if proc is not None and proc.poll() is None:
                 proc.terminate()
+
+    def _settle_at_exit(self) -> None:
+        """At the interpreter's exit: end the compiling children, then give the thread up to
+        :data:`EXIT_WAIT_S` to finish (loading cached kernels takes a second or two)."""
+        self.stop()
+        self._all_done.wait(EXIT_WAIT_S)
 
     def _wait_children(self, groups) -> None:
         """Wait for the children compiling any of ``groups``; compile here what a failed one
         left."""
         for part, proc in self._children.items():
             if set(part) & set(groups) and not _compiled_by(proc):
+                if self._stopping.is_set():
+                    raise Terminated()  # the process is leaving: nothing to compile for
                 compile_groups(part)
 
     def _run(self) -> None:
@@ -214,7 +230,7 @@ class BackgroundWarmUp:
                 others = [g for g in self.groups if g not in EKF_GROUPS]
                 self._wait_children(others)
                 compile_groups(others)
-        except Exception:  # an estimator compiles them itself when it first runs
+        except (Exception, Terminated):  # an estimator compiles them itself when it first runs
             pass
 
     def wait_all(self) -> float:
@@ -231,6 +247,9 @@ class BackgroundWarmUp:
         assert self.seconds is not None  # set before the event
         return float(self.seconds)
 
+
+#: Longest wait at the interpreter's exit for the background thread to finish [s].
+EXIT_WAIT_S = 5.0
 
 _background: BackgroundWarmUp | None = None
 _start_lock = threading.Lock()
