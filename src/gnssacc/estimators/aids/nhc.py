@@ -161,11 +161,15 @@ def decide(
     return APPLY
 
 
-def nhc_measurement(v_b: np.ndarray, H_v: np.ndarray, sigma_mps: np.ndarray) -> Measurement:
+def nhc_measurement(
+    v_b: np.ndarray, H_v: np.ndarray, sigma_mps: np.ndarray, R: np.ndarray | None = None
+) -> Measurement:
     """:func:`non_holonomic` from the vehicle velocity ``v_b`` and its Jacobian ``H_v`` of
     :func:`gnssacc.estimators.aids.vehicle.vehicle_velocity` (for a caller that looked at the
-    forward speed first)."""
-    return Measurement("nhc", v_b[1:3], H_v[1:3], np.diag(np.asarray(sigma_mps, float) ** 2))
+    forward speed first); ``R``: ``diag(sigma_mps^2)`` when the caller made it once."""
+    if R is None:
+        R = np.diag(np.asarray(sigma_mps, float) ** 2)
+    return Measurement("nhc", v_b[1:3], H_v[1:3], R)
 
 
 def non_holonomic(
@@ -217,7 +221,7 @@ class EkfNhc(EkfAid):
         if why != APPLY:
             stats[SKIPPED[why]] += 1
             return
-        yield Measurement("nhc", v_b[1:3], H[1:3], self.R), True  # nhc_measurement's
+        yield nhc_measurement(v_b, H, nhc.sigma_mps, self.R), True
 
 
 def _ekf(ctx) -> EkfNhc | None:
