@@ -51,9 +51,7 @@ WHERE = "simulator"
 #: Keys of an IMU grade known to the filter: ``gnssacc.core.config.DEFAULTS["imu"]`` but the
 #: filter's allowance for the gyro scale-factor and cross-axis errors (``gyro_turn_error_ppm``),
 #: which the simulator draws as unmodelled errors of its own (``gyro_scale_factor_ppm``,
-#: ``gyro_cross_axis_ppm``: :data:`IMU_EXTRA_ERRORS`), not as a grade's filter setting (a ``sim:``
-#: spec sets it to the grade's preset value, the datasheet's:
-#: :func:`gnssacc.sources.simspec.grade_allowance`).
+#: ``gyro_cross_axis_ppm``: :data:`IMU_EXTRA_ERRORS`), not as a grade's filter setting.
 GRADE_KEYS = tuple(k for k in DEFAULTS["imu"] if k != "gyro_turn_error_ppm")
 
 

@@ -24,11 +24,7 @@ Keys (each at most once):
     :mod:`gnssacc.sources.sim_odometry`: scale-factor error, noise, slip; skid steer for the UGV
     scenarios).
 
-The grade names the IMU's class as ``--preset`` would for what the noise tuner cannot identify:
-the gyro scale-factor and cross-axis allowance ``[imu] gyro_turn_error_ppm`` is the grade's
-preset value (datasheet-level: consumer 10000, industrial 1000, tactical 150 ppm) unless the user
-or a preset sets it (:func:`grade_allowance`). With ``--tune none`` such a run is estimated with
-the simulator's own filter-visible IMU
+With ``--tune none`` such a run is estimated with the simulator's own filter-visible IMU
 parameters (:attr:`gnssacc.core.recording.SimTruth.imu_params`) for every ``[imu]`` key the
 configuration does not set explicitly (:func:`known_noise_config`): the IMU noise is then known,
 not guessed from the defaults. With ``--tune auto`` the tuner identifies them as for any recording.
@@ -36,7 +32,7 @@ not guessed from the defaults. With ``--tune auto`` the tuner identifies them as
 
 from __future__ import annotations
 
-from ..core.config import PRESETS, RunConfig, load_config
+from ..core.config import RunConfig
 from ..core.config_check import Bound, number_problem
 from ..core.errors import InputError
 
@@ -185,47 +181,15 @@ def folder_name(spec: str) -> str:
     )
 
 
-#: ``[imu]`` keys the noise tuner does not identify (:mod:`gnssacc.prepare.tuning`): a ``sim:``
-#: run takes them from its grade's preset (the datasheet-level value of the configured grade)
-#: whatever the tuning mode, unless the user or a preset set them (:func:`grade_allowance`).
-UNTUNED_IMU_KEYS = ("gyro_turn_error_ppm",)
-
-
-def grade_allowance(cfg: RunConfig, run) -> RunConfig:
-    """``cfg`` with the :data:`UNTUNED_IMU_KEYS` of the simulated grade's preset, when ``run`` came
-    from a ``sim:`` spec whose ``imu`` grade has a preset (``consumer``, ``industrial``,
-    ``tactical``) and neither the user nor a preset set them; otherwise ``cfg`` itself.
-
-    The spec names the IMU's grade as ``--preset`` would: the gyro scale-factor and cross-axis
-    allowance (``gyro_turn_error_ppm``), which the tuner cannot identify from the innovations, is
-    then the grade's datasheet-level value (consumer 1 %) instead of the defaults' (an industrial
-    MEMS IMU's 0.1 %), recorded as set by ``simulator grade NAME``.
-    """
-    grade = run.meta.get("imu_grade") if run.sim is not None else None
-    if "source_spec" not in run.meta or grade not in PRESETS:
-        return cfg
-    keys = [k for k in UNTUNED_IMU_KEYS if ("imu", k) not in cfg.origin]
-    if not keys:
-        return cfg
-    preset = load_config(preset=grade)
-    return cfg.with_values(
-        {"imu": {k: preset["imu"][k] for k in keys}}, f"simulator grade {grade} (preset)"
-    )
-
-
 def known_noise_config(cfg: RunConfig, run, tune: str | None) -> RunConfig:
-    """``cfg`` with the simulated grade's allowance for what the tuner does not identify
-    (:func:`grade_allowance`) when ``run`` came from a ``sim:`` spec (:func:`load_sim`), and with
-    the simulator's filter-visible IMU parameters under the keys the user did not set when the
-    noise is not tuned either (``tune`` or ``[tune] mode`` is ``none``); otherwise ``cfg`` itself.
+    """``cfg`` with the simulator's filter-visible IMU parameters under the keys the user did not
+    set, when ``run`` came from a ``sim:`` spec (:func:`load_sim`) and the noise is not tuned
+    (``tune`` or ``[tune] mode`` is ``none``); otherwise ``cfg`` itself.
 
     The user's own keys stay as they are (and explicit); the simulator's are recorded as set by
     ``simulator`` in the configuration's sources.
     """
-    if run.sim is None or "source_spec" not in run.meta:
-        return cfg
-    cfg = grade_allowance(cfg, run)
-    if (tune or cfg["tune"]["mode"]) != "none":
+    if run.sim is None or "source_spec" not in run.meta or (tune or cfg["tune"]["mode"]) != "none":
         return cfg
     imu = {k: v for k, v in run.sim.imu_params.items() if ("imu", k) not in cfg.explicit}
     return cfg.with_values({"imu": imu}, "simulator") if imu else cfg
