@@ -62,6 +62,7 @@ def _probe(root: Path, cache_home: Path, **extra) -> subprocess.CompletedProcess
     )
 
 
+@pytest.mark.slow
 def test_read_only_install_caches_in_the_user_folder_and_says_so_once(tmp_path):
     root = _read_only_copy(tmp_path)
     cache_home = tmp_path / "cache"
@@ -96,6 +97,7 @@ def test_numba_cache_dir_set_by_the_user_is_kept(tmp_path):
     assert out.stdout.strip() == str(tmp_path / "mine")
 
 
+@pytest.mark.slow
 def test_failed_compiling_processes_fall_back_to_compiling_in_process(tmp_path):
     root = _read_only_copy(tmp_path)
     cache_home = tmp_path / "cache"
@@ -168,6 +170,7 @@ def _moved(compiled, tmp_path: Path) -> tuple[Path, Path]:
 
 
 @EKF_GROUP
+@pytest.mark.slow
 def test_compiled_is_decided_by_the_source_content_as_numba_decides(ekf_compiled, tmp_path):
     """numba (0.68) keeps a kernel whose source file only has a new modification time (a reinstall
     or ``touch`` of the same code) and compiles again one whose content changed: a touched source
@@ -192,6 +195,7 @@ def test_compiled_is_decided_by_the_source_content_as_numba_decides(ekf_compiled
 
 
 @EKF_GROUP
+@pytest.mark.slow
 def test_a_run_compiles_only_the_kernels_its_methods_need(ekf_compiled, tmp_path):
     """A first run of ``ekf,ekf-acc`` compiles only the EKF's kernels (:func:`ekf_compiled`); one
     that adds ``ekf-accw`` and ``smoother-accw`` then compiles only what those add."""
@@ -232,6 +236,7 @@ print(sorted(k[1] for k in new))
 """
 
 
+@pytest.mark.slow
 def test_the_group_warm_ups_compile_every_kernel_a_run_calls():
     """The warm-ups (also the install's) call each kernel with the types a real run gives it (a
     kernel compiled with other types, or not at all, is compiled again inside an estimator); a
@@ -243,6 +248,7 @@ def test_the_group_warm_ups_compile_every_kernel_a_run_calls():
     assert out.stdout.strip() == "[]"
 
 
+@pytest.mark.slow
 def test_the_install_compiles_the_kernels_into_the_package_and_a_first_run_loads_them(tmp_path):
     """``setup.py``'s build step: the package in the build folder carries every kernel group in
     numba's cache; installed elsewhere (copied, new modification times, as pip installs a wheel)
