@@ -236,6 +236,7 @@ def test_a_small_clock_offset_is_proven_where_the_fixes_allow():
     assert bound.details["unseen_s"] < 0.1
 
 
+@pytest.mark.slow
 def test_the_readme_example_prints_no_warning():
     """KITTI seed 3: its clock proposal (0.09 s) is not proven; recorded, not warned of."""
     with warnings.catch_warnings(record=True) as caught:
