@@ -21,3 +21,10 @@ def compiled_kernels():
     """
     kernels.warm_up()
     kernels.smoother_ready()
+
+
+def pytest_collection_modifyitems(config, items):
+    """The tests marked ``slow`` first, each group in its order: on several workers (handed out
+    one at a time, pyproject's addopts) the short ones then fill in at the end, instead of one
+    slow test running alone while the other workers have finished."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)

@@ -554,6 +554,7 @@ def test_interrupted_leaves_the_old_result_or_the_new(run_dir, tmp_path, capsys,
     assert _snapshot(out) == before
 
 
+@pytest.mark.slow
 def test_sigterm_at_random_moments_leaves_old_or_new(run_dir, tmp_path, capsys):
     """Whenever SIGTERM comes (computing, plotting, writing, swapping), the folder is the old
     complete result or the new one, the message says which, and nothing else is left."""

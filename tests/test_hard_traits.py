@@ -111,6 +111,7 @@ def test_slow_ugv_with_long_parks_and_pivots():
     assert m["ekf"]["prmse_m"] <= 0.75 * raw and m["smoother"]["prmse_m"] <= 0.5 * raw
 
 
+@pytest.mark.slow
 def test_slow_rover_with_high_rate_fixes_without_sigmas():
     """The fixes' own scatter replaces the 3 m default, so the rover is not taken for standing
     while it drives (zero-velocity updates then pulled it metres off); the estimate stays at the

@@ -17,7 +17,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 import gnssacc
+from gnssacc.core.jit import kernel_cache_folder
 
 PROBE = """
 import os, subprocess, sys
@@ -59,6 +62,7 @@ def _probe(root: Path, cache_home: Path, **extra) -> subprocess.CompletedProcess
     )
 
 
+@pytest.mark.slow
 def test_read_only_install_caches_in_the_user_folder_and_says_so_once(tmp_path):
     root = _read_only_copy(tmp_path)
     cache_home = tmp_path / "cache"
@@ -93,6 +97,7 @@ def test_numba_cache_dir_set_by_the_user_is_kept(tmp_path):
     assert out.stdout.strip() == str(tmp_path / "mine")
 
 
+@pytest.mark.slow
 def test_failed_compiling_processes_fall_back_to_compiling_in_process(tmp_path):
     root = _read_only_copy(tmp_path)
     cache_home = tmp_path / "cache"
@@ -125,14 +130,53 @@ def _writable(path: Path) -> Path:
     return path
 
 
-def test_compiled_is_decided_by_the_source_content_as_numba_decides(tmp_path):
+#: The tests that start from the EKF's kernels compiled by a first run share that compilation
+#: (one worker runs them: ``--dist loadgroup`` in pyproject's addopts).
+EKF_GROUP = pytest.mark.xdist_group("jit-ekf-compiled")
+
+
+@pytest.fixture(scope="module")
+def ekf_compiled(tmp_path_factory):
+    """A read-only copy and its empty user cache after a first run of ``ekf,ekf-acc``, which
+    says at once that it compiles, compiles the EKF's groups (propagation, update) in child
+    processes and nothing else."""
+    tmp = tmp_path_factory.mktemp("ekf-compiled")
+    root, cache_home = _read_only_copy(tmp), tmp / "cache"
+    first = _probe(root, cache_home, METHODS="ekf,ekf-acc")
+    assert len(_notice(first)) == 1 and _counts(first)[2] > 0
+    assert first.stdout.splitlines()[2].split()[1] == "propagation,update"
+    folder = cache_home / "gnssacc" / "numba"
+    assert list(folder.rglob("mechanization.propagate-*.nbi"))
+    assert not list(folder.rglob("window_marginals.*.nbi")) and not list(
+        folder.rglob("*kernel_force_integrals*")
+    )
+    return root, cache_home
+
+
+def _moved(compiled, tmp_path: Path) -> tuple[Path, Path]:
+    """A copy of ``compiled`` (a copy and its cache) in ``tmp_path``, as if the first run had
+    compiled there: numba names a cache folder by its source folder's path, which changed."""
+    root, cache_home = compiled
+    new_root, new_cache = tmp_path / "site", tmp_path / "cache"
+    shutil.copytree(root, new_root)
+    shutil.copytree(cache_home, new_cache)
+    with pytest.MonkeyPatch.context() as mp:  # where numba puts a kernel of each copy
+        mp.setenv("NUMBA_CACHE_DIR", str(cache_home / "gnssacc" / "numba"))
+        src = kernel_cache_folder(root / "gnssacc" / "estimators" / "mechanization.py")
+        mp.setenv("NUMBA_CACHE_DIR", str(new_cache / "gnssacc" / "numba"))
+        dst = kernel_cache_folder(new_root / "gnssacc" / "estimators" / "mechanization.py")
+    (new_cache / src.relative_to(cache_home)).rename(dst)
+    return new_root, new_cache
+
+
+@EKF_GROUP
+@pytest.mark.slow
+def test_compiled_is_decided_by_the_source_content_as_numba_decides(ekf_compiled, tmp_path):
     """numba (0.68) keeps a kernel whose source file only has a new modification time (a reinstall
     or ``touch`` of the same code) and compiles again one whose content changed: a touched source
-    must start no compilation and print no notice, an edited one must do both."""
-    root = _read_only_copy(tmp_path)
-    cache_home = tmp_path / "cache"
-    first = _probe(root, cache_home, METHODS="ekf")
-    assert len(_notice(first)) == 1 and _counts(first)[2] > 0
+    must start no compilation and print no notice, an edited one must do both. (After a first
+    run that compiled the EKF's kernels: :func:`ekf_compiled`.)"""
+    root, cache_home = _moved(ekf_compiled, tmp_path)
     source = root / "gnssacc" / "estimators" / "mechanization.py"
     st = source.stat()
     os.utime(source, ns=(st.st_atime_ns, st.st_mtime_ns + 10**10))  # 10 s newer, same content
@@ -150,15 +194,13 @@ def test_compiled_is_decided_by_the_source_content_as_numba_decides(tmp_path):
     assert not _notice(again) and _counts(again)[2] == 0
 
 
-def test_a_run_compiles_only_the_kernels_its_methods_need(tmp_path):
-    root = _read_only_copy(tmp_path)
-    cache_home = tmp_path / "cache"
+@EKF_GROUP
+@pytest.mark.slow
+def test_a_run_compiles_only_the_kernels_its_methods_need(ekf_compiled, tmp_path):
+    """A first run of ``ekf,ekf-acc`` compiles only the EKF's kernels (:func:`ekf_compiled`); one
+    that adds ``ekf-accw`` and ``smoother-accw`` then compiles only what those add."""
+    root, cache_home = _moved(ekf_compiled, tmp_path)
     folder = cache_home / "gnssacc" / "numba"
-    ekf = _probe(root, cache_home, METHODS="ekf,ekf-acc")
-    assert ekf.stdout.splitlines()[2].split()[1] == "propagation,update"
-    assert not list(folder.rglob("window_marginals.*.nbi")) and not list(
-        folder.rglob("*kernel_force_integrals*")
-    )
     more = _probe(root, cache_home, METHODS="ekf,ekf-accw,smoother-accw")
     hits, misses, children = _counts(more)
     assert len(_notice(more)) == 1 and children == 1  # one process for what is missing
@@ -194,6 +236,7 @@ print(sorted(k[1] for k in new))
 """
 
 
+@pytest.mark.slow
 def test_the_group_warm_ups_compile_every_kernel_a_run_calls():
     """The warm-ups (also the install's) call each kernel with the types a real run gives it (a
     kernel compiled with other types, or not at all, is compiled again inside an estimator); a
@@ -205,6 +248,7 @@ def test_the_group_warm_ups_compile_every_kernel_a_run_calls():
     assert out.stdout.strip() == "[]"
 
 
+@pytest.mark.slow
 def test_the_install_compiles_the_kernels_into_the_package_and_a_first_run_loads_them(tmp_path):
     """``setup.py``'s build step: the package in the build folder carries every kernel group in
     numba's cache; installed elsewhere (copied, new modification times, as pip installs a wheel)

@@ -50,6 +50,7 @@ def _text(cell) -> str:
 
 
 @pytest.mark.parametrize("name", NOTEBOOKS)
+@pytest.mark.slow
 def test_notebook_executes_and_answers(name):
     nb, runtime = _run(name)
     code = [c for c in nb.cells if c.cell_type == "code"]

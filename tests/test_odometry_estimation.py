@@ -31,6 +31,7 @@ def _process(run, methods, config, outages=OUTAGES):
         return gnssacc.process(run, methods=methods, config=config, outage_every=outages)
 
 
+@pytest.mark.slow
 def test_scale_factor_state_converges_to_the_simulated_scale_error(car):
     res = _process(car, ["ekf", "smoother"], None)
     for mid in ("ekf", "smoother"):
@@ -42,6 +43,7 @@ def test_scale_factor_state_converges_to_the_simulated_scale_error(car):
         assert st["n_odo_skipped_sign"] == 0  # the car never reverses
 
 
+@pytest.mark.slow
 def test_odometry_bridges_outages_at_a_quarter_of_the_imu_only_error():
     """A consumer IMU: its outage error is many times the error with GNSS up, which bounds the
     aided outage error from below (an industrial IMU on the same car drifts 4.1 m in the

@@ -57,6 +57,7 @@ CASES = {  # name: (source maker, extra arguments)
 
 
 @pytest.mark.parametrize("case", list(CASES))
+@pytest.mark.slow
 def test_report_is_written_for_every_kind_of_run(case, sim_run, run_dir, tmp_path, capsys):
     make, extra = CASES[case]
     out = tmp_path / "o"

@@ -268,6 +268,7 @@ def test_gnss_time_stamps_in_milliseconds(sims):
 
 
 @pytest.mark.parametrize("scenario", SCENARIOS)
+@pytest.mark.slow
 def test_unit_and_layout_errors_found_whatever_the_draw(scenario):
     """Six more seeds (IMU errors and fix noise) per vehicle: each corruption is found by its own
     check and none of the clean runs is flagged. (A slope-precision gate of 15 % missed the slow

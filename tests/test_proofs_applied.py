@@ -51,6 +51,7 @@ def robot():
 
 
 @pytest.mark.parametrize("kind", ["ros1-rooad", "ros2-sqlite3"])
+@pytest.mark.slow
 def test_sideways_imu_bag_without_tf_is_mounted_by_default(kind, robot, tmp_path):
     pytest.importorskip("rosbags")
     from gnssacc.sources.bagwrite import write_bag
@@ -87,6 +88,7 @@ def _on_gps_time(run, leap_s: float):
     )
 
 
+@pytest.mark.slow
 def test_imu_truth_and_odometry_on_gps_time_beside_a_gpst_pos(tmp_path):
     """Acceptance: a CSV run whose IMU, truth and odometry are GPS time on the UNIX epoch, beside
     its receiver's GPST .pos: it runs by default, the clock offset is the leap seconds to the
@@ -234,6 +236,7 @@ def test_a_small_clock_offset_is_proven_where_the_fixes_allow():
     assert bound.details["unseen_s"] < 0.1
 
 
+@pytest.mark.slow
 def test_the_readme_example_prints_no_warning():
     """KITTI seed 3: its clock proposal (0.09 s) is not proven; recorded, not warned of."""
     with warnings.catch_warnings(record=True) as caught:

@@ -413,6 +413,7 @@ def test_add_outliers_moves_only_the_chosen_fixes_by_the_stated_spread():
     assert np.array_equal(out.gnss.sigma_ned, run.gnss.sigma_ned)
 
 
+@pytest.mark.slow
 def test_fixes_with_outliers_are_reported_for_every_method_and_clean_ones_are_not():
     # 3-4 % of the fixes 20 m off: the tuner widens the fix sigma to cover them, so the NIS stays
     # near 1 and only the tails show them.

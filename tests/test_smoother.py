@@ -298,6 +298,7 @@ def _gm_exact_model_errors(seeds=range(12)):
     return out
 
 
+@pytest.mark.slow
 def test_fixed_lag_smoother_is_no_worse_than_the_ekf_under_gauss_markov_fixes():
     """Same models and tuning: the fixed-lag estimate uses 10 s more fixes than the filter, so on
     average it is at least as good, and the online estimate is the filter's. Under fixes whose

@@ -216,6 +216,7 @@ def test_one_hertz_fixes_keep_a_node_each_and_the_same_estimates():
     [("smoother", False), ("smoother-acc", False), ("smoother", True)],
     ids=["smoother", "smoother-acc", "gauss-markov"],
 )
+@pytest.mark.slow
 def test_twenty_hertz_fixes_folded_give_the_estimates_of_a_node_per_fix(method, gm):
     """Nodes every 0.5 s with the 9 fixes between them folded in, against a node at each of the
     fixes: at the common nodes every state within one sigma of the other's estimate (the same
@@ -253,6 +254,7 @@ def test_twenty_hertz_fixes_folded_give_the_estimates_of_a_node_per_fix(method, 
     assert np.all(np.abs(diff) <= b.sigma[ib])
 
 
+@pytest.mark.slow
 def test_folded_smoother_sigmas_are_consistent_with_its_errors():
     """With 20 Hz fixes folded into 2 Hz nodes, the normalised position errors of the fixed-lag
     estimate against the truth (after 30 s) have a mean square per axis near 1: the band and the
@@ -277,6 +279,7 @@ def test_folded_smoother_sigmas_are_consistent_with_its_errors():
 
 
 @pytest.mark.parametrize("gm", [False, True], ids=["white", "gauss-markov"])
+@pytest.mark.slow
 def test_folded_fixes_with_wheel_odometry_and_the_constraint_on_the_nodes(gm):
     """Wheel odometry and the non-holonomic constraint with 10 Hz fixes folded into 2 Hz nodes:
     the aids go on the folded layout's nodes, one odometry sample per node with its scale factor

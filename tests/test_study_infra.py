@@ -62,6 +62,7 @@ def _csv_rows(path):
         return list(csv.DictReader(fh))
 
 
+@pytest.mark.slow
 def test_sim_campaign_gives_the_rows_of_process_on_the_same_runs(tmp_path):
     specs = [
         "sim:car,imu=industrial,duration=60",

@@ -98,6 +98,7 @@ def test_a_windowed_pass_scores_each_window_after_its_lead(long_drive):
     assert got.stats["n_pos_updates"] == n and got.stats["loglik_pos"] == pytest.approx(total)
 
 
+@pytest.mark.slow
 def test_a_long_run_is_tuned_on_a_bounded_span_and_confirmed(long_drive, monkeypatch):
     run, prep = long_drive
     spans = []
@@ -125,6 +126,7 @@ def test_a_long_run_is_tuned_on_a_bounded_span_and_confirmed(long_drive, monkeyp
     assert result.nis_after == pytest.approx(1.0, abs=0.3)  # the whole run's, as tuned
 
 
+@pytest.mark.slow
 def test_a_run_up_to_the_threshold_is_tuned_whole_exactly_as_before(monkeypatch):
     """A run no longer than ``WINDOWED_FROM_S`` (with the default threshold) is prepared exactly
     as with the windows off: the same tuned values, likelihoods and passes."""
