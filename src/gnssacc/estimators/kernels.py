@@ -28,11 +28,16 @@ import time
 from ..core.jit import KERNEL_DIR, PACKAGE_DIR, cache_folder, kernel_cached
 from ..core.parallel import hold_forks, release_forks
 
-#: The kernels Python calls, by group, as ``(module file in gnssacc/estimators, function names)``
+#: The kernels Python calls, by group, as ``(module file under gnssacc/estimators, function names)``
 #: pairs (numba compiles and caches each kernel's callees with it).
 GROUPS = {
     "propagation": (("mechanization.py", ("propagate",)),),
-    "update": (("kalman.py", ("joseph_update",)), ("mechanization.py", ("apply_correction",))),
+    "update": (
+        ("kalman.py", ("joseph_update", "update_state")),
+        ("mechanization.py", ("apply_correction",)),
+        ("aids/gnss_position.py", ("position_model",)),
+        ("aids/vehicle.py", ("vehicle_model",)),
+    ),
     "window": (("mechanization.py", ("kernel_force_integrals",)),),
     "chain": (("window_marginals.py", ("_scatter", "_marginalize", "_node_covariances")),),
     "band": (

@@ -895,7 +895,23 @@ def warm_up(propagation: bool = True, update: bool = True) -> float:
         # ``consider`` passed as the EKF passes it (an omitted default is another signature).
         dx = joseph_update(s.P, H, np.eye(3), np.ones(3), 0.0, -1)[0]
         apply_correction(s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, np.zeros(0), dx)
+        _warm_up_models(s)
     return time.perf_counter() - t0
+
+
+def _warm_up_models(s) -> None:
+    """Compile (or load) the EKF's per-update kernels with the types the EKF calls them with: the
+    update with its feedback, and the aids' compiled models."""
+    from .aids.gnss_position import position_model
+    from .aids.vehicle import vehicle_model
+    from .kalman import update_state
+
+    z3, x_e = np.zeros(3), np.zeros(0)
+    H = np.zeros((2, N_NAV))
+    H[:, 3:5] = np.eye(2)
+    update_state(s.P, H, np.eye(2), np.ones(2), 0.0, -1, s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, x_e)
+    position_model(s.pos, s.R_nb, z3, 0.5, 0.1, 0.0, x_e, -1, N_NAV, N_NAV)
+    vehicle_model(s.R_nb, s.v_n, s.b_g, z3, z3, z3, np.eye(3), N_NAV)
 
 
 def warm_up_window() -> float:

@@ -27,12 +27,16 @@ to its nodes' fixes against their expectation (:func:`residual_chi2`), ``nis_pos
 
 from __future__ import annotations
 
-import numpy as np
+import math
 
-from ...core.earth import radii
+import numpy as np
+from numba import njit
+
+from ...core.earth import A, E2
 from ...core.rotations import skew
-from ..layout import ATT, GNSS_ERROR, POS, SYM_B, SYM_G, SYM_V, SYM_X, MarkovBlock
-from .base import AidSpec, EkfAid, Measurement, SmootherAid, zero_jacobian
+from ..layout import GNSS_ERROR, I_ATT, I_POS, SYM_B, SYM_G, SYM_V, SYM_X, MarkovBlock
+from ..small_linalg import matvec
+from .base import AidSpec, EkfAid, Measurement, SmootherAid
 
 #: Order at equal times: after the vehicle aids (their updates are in a GNSS epoch's prior).
 ORDER = 2
@@ -42,6 +46,35 @@ def gnss_error_states(settings) -> tuple[MarkovBlock, ...]:
     """The Gauss-Markov fix-error states of ``settings`` (either estimator's), when modelled."""
     g = settings.gnss
     return (MarkovBlock(GNSS_ERROR, g.gm_tau, g.gm_sigma),) if g.gauss_markov else ()
+
+
+@njit(cache=True)
+def position_model(pos, R_nb, lever_b, lat, lon, h, x_e, i_gm, nav, n):
+    """``dz`` (3,) [m, NED] and ``H`` (3, n) of :func:`position` for the state ``pos`` (lat, lon
+    [rad], h [m]), ``R_nb`` and the nominal values ``x_e`` of the states after the ``nav``
+    navigation ones, ``i_gm`` the index of the Gauss-Markov fix error's first state (-1: not
+    modelled), ``n`` states; compiled (the EKF's per-fix path), with numpy's arithmetic
+    (:mod:`gnssacc.estimators.small_linalg`).
+    The radii are :func:`gnssacc.core.earth.radii`'s."""
+    w = 1.0 - E2 * math.sin(pos[0]) ** 2
+    R_M, R_N = A * (1.0 - E2) / w**1.5, A / math.sqrt(w)
+    l_n = matvec(R_nb, lever_b)
+    dz = np.empty(3)
+    dz[0] = (pos[0] - lat) * (R_M + pos[2]) + l_n[0]
+    dz[1] = (pos[1] - lon) * (R_N + pos[2]) * math.cos(pos[0]) + l_n[1]
+    dz[2] = -(pos[2] - h) + l_n[2]
+    # H = [I, 0, -[l_n x], 0 ...]
+    H = np.zeros((3, n))
+    p, a = I_POS, I_ATT
+    H[0, p] = H[1, p + 1] = H[2, p + 2] = 1.0
+    H[0, a + 1], H[0, a + 2] = l_n[2], -l_n[1]
+    H[1, a], H[1, a + 2] = -l_n[2], l_n[0]
+    H[2, a], H[2, a + 1] = l_n[1], -l_n[0]
+    if i_gm >= 0:
+        for r in range(3):
+            dz[r] += x_e[i_gm - nav + r]
+            H[r, i_gm + r] = 1.0
+    return dz, H
 
 
 def position(
@@ -56,31 +89,11 @@ def position(
 ) -> Measurement:
     """GNSS antenna position fix (lat, lon [rad], h [m]) with 1-sigma ``sigma_ned`` [m], or with
     the full NED covariance ``cov_ned`` [m^2] (correlated axes, e.g. an RTKLIB solution's) when
-    given (module notes)."""
-    pos = s.pos
-    R_M, R_N = radii(pos[0])
-    l_n = s.R_nb @ lever_arm_b
-    dz = (
-        np.array(
-            [
-                (pos[0] - lat) * (R_M + pos[2]),
-                (pos[1] - lon) * (R_N + pos[2]) * np.cos(pos[0]),
-                -(pos[2] - h),
-            ]
-        )
-        + l_n
+    given (module notes; the model is :func:`position_model`)."""
+    lay = s.layout
+    dz, H = position_model(
+        s.pos, s.R_nb, lever_arm_b, lat, lon, h, s.x_e, lay.offset(GNSS_ERROR), lay.nav, s.P.shape[0]
     )
-    # H = [I, 0, -[l_n x], 0 ...], element by element (a per-fix path: no temporaries)
-    H = zero_jacobian(s, 3)
-    p, a = POS.start, ATT.start
-    H[0, p] = H[1, p + 1] = H[2, p + 2] = 1.0
-    H[0, a + 1], H[0, a + 2] = l_n[2], -l_n[1]
-    H[1, a], H[1, a + 2] = -l_n[2], l_n[0]
-    H[2, a], H[2, a + 1] = l_n[1], -l_n[0]
-    if s.layout.has(GNSS_ERROR):
-        dz += s.gm
-        g = s.layout.offset(GNSS_ERROR)
-        H[0, g] = H[1, g + 1] = H[2, g + 2] = 1.0
     if cov_ned is None:
         R = np.zeros((3, 3))
         R[0, 0], R[1, 1], R[2, 2] = sigma_ned[0] ** 2, sigma_ned[1] ** 2, sigma_ned[2] ** 2
