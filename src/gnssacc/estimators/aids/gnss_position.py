@@ -90,10 +90,9 @@ def position(
     """GNSS antenna position fix (lat, lon [rad], h [m]) with 1-sigma ``sigma_ned`` [m], or with
     the full NED covariance ``cov_ned`` [m^2] (correlated axes, e.g. an RTKLIB solution's) when
     given (module notes; the model is :func:`position_model`)."""
-    lay = s.layout
-    dz, H = position_model(
-        s.pos, s.R_nb, lever_arm_b, lat, lon, h, s.x_e, lay.offset(GNSS_ERROR), lay.nav, s.P.shape[0]
-    )
+    lay, n = s.layout, s.P.shape[0]
+    i_gm = lay.offset(GNSS_ERROR)
+    dz, H = position_model(s.pos, s.R_nb, lever_arm_b, lat, lon, h, s.x_e, i_gm, lay.nav, n)
     if cov_ned is None:
         R = np.zeros((3, 3))
         R[0, 0], R[1, 1], R[2, 2] = sigma_ned[0] ** 2, sigma_ned[1] ** 2, sigma_ned[2] ** 2
