@@ -717,6 +717,10 @@ def _cov_step(
 _LAST_TURN_RATES: list = []
 
 
+def _is_float64(x) -> bool:
+    return isinstance(x, np.ndarray) and x.dtype == np.float64
+
+
 def turn_rates(t: np.ndarray, omega_b: np.ndarray, window_s: float = TURN_WINDOW_S) -> np.ndarray:
     """The rotation the body performs: each sample's rate averaged over the samples within
     ``window_s / 2`` of it [rad/s, body], (N, 3), C-contiguous (not to be written to: the same
@@ -726,8 +730,8 @@ def turn_rates(t: np.ndarray, omega_b: np.ndarray, window_s: float = TURN_WINDOW
     vibration and the sensor's own noise turn the body back and forth, and the error they make
     averages out. ``t`` [s] (N,), ``omega_b`` [rad/s] (N, 3).
     """
-    t = np.asarray(t, float)
-    omega_b = np.asarray(omega_b, float)
+    # np.asarray of a view makes a new view each call: the arrays themselves, when they are ones
+    t, omega_b = (x if _is_float64(x) else np.asarray(x, float) for x in (t, omega_b))
     mark = (len(t), float(t[0]), float(t[-1]), float(omega_b.sum())) if len(t) else None
     for t_ref, w_ref, was, window, rates in _LAST_TURN_RATES:
         if t_ref() is t and w_ref() is omega_b and was == mark and window == window_s:
@@ -746,7 +750,16 @@ def turn_rates(t: np.ndarray, omega_b: np.ndarray, window_s: float = TURN_WINDOW
 def kernel_array(x, dtype) -> np.ndarray:
     """``x`` as the kernels take it: C-contiguous and writable. numba compiles a separate version
     of a kernel for read-only arrays (a broadcast, a memory map), which would cost a second full
-    compilation; the IMU arrays are copied only when they are read-only or not contiguous."""
+    compilation; the IMU arrays are copied only when they are read-only or not contiguous. An
+    array that already is what the kernels take is returned itself (not a new view of it: the
+    cache of :func:`turn_rates` recognises the IMU arrays of a run by their identity)."""
+    if (
+        isinstance(x, np.ndarray)
+        and x.dtype == dtype
+        and x.flags.c_contiguous
+        and x.flags.writeable
+    ):
+        return x
     a = np.ascontiguousarray(x, dtype)
     return a if a.flags.writeable else a.copy()
 
