@@ -305,7 +305,12 @@ class _Updates:
     def at(self, t_e: float, aid: EkfAid, j: int) -> None:
         """The updates of ``aid`` at its epoch ``j`` (time ``t_e``), each shown to the observer."""
         s, obs = self.setup.state, self.observer
-        if obs is not None and self.epoch is None:
+        if obs is None:  # the pass alone (the tuner's, a method's): no observer to tell
+            for m, apply in aid.updates(s, j, self.stats):
+                if apply:
+                    self.tally.add(t_e, m, *kalman_update(s, m))
+            return
+        if self.epoch is None:
             self.epoch = (t_e, aid.epoch, j)
             obs.before(t_e, aid.epoch, s, self.setup.prop)
         for m, apply in aid.updates(s, j, self.stats):
@@ -314,8 +319,7 @@ class _Updates:
                 self.tally.add(t_e, m, nis, loglik, used, wz)
             else:
                 nis, used = float("nan"), False
-            if obs is not None:
-                obs.update(t_e, m, nis, used, s)
+            obs.update(t_e, m, nis, used, s)
 
     def final_stats(self) -> dict:
         """The pass's ``stats`` (see :func:`run_ekf`)."""
