@@ -66,7 +66,7 @@ def test_products_within_rounding_of_exact(order):
         assert not out[:, :2].any()
 
 
-def _numpy_position_model(pos, R_nb, lever_b, lat, lon, h, x_e, i_gm, nav, n):
+def _numpy_position_model(pos, R_nb, lever_b, lat, lon, h, gm, i_gm, n):
     """gnss_position's module notes in numpy: ``dz = p_ant,est (+ x_g) - p_fix`` [m, NED],
     ``H = [I, 0, -[(R l) x], 0, 0 (, I)]``."""
     R_M, R_N = radii(pos[0])
@@ -85,7 +85,7 @@ def _numpy_position_model(pos, R_nb, lever_b, lat, lon, h, x_e, i_gm, nav, n):
     H[:, POS] = np.eye(3)
     H[:, ATT] = -skew(l_n)
     if i_gm >= 0:
-        dz = dz + x_e[i_gm - nav : i_gm - nav + 3]
+        dz = dz + gm
         H[:, i_gm : i_gm + 3] = np.eye(3)
     return dz, H
 
@@ -126,7 +126,7 @@ def test_models_match_their_formulas():
         lever = rng.normal(size=3) if i % 3 else np.zeros(3)
         lay = s.layout
         fix = (s.pos[0] + 1e-6 * rng.normal(), s.pos[1] + 1e-6 * rng.normal(), s.pos[2] + 3.0)
-        args = (s.pos, s.R_nb, lever, *fix, s.x_e, lay.offset(GNSS_ERROR), lay.nav, lay.n)
+        args = (s.pos, s.R_nb, lever, *fix, s.gm, lay.offset(GNSS_ERROR), lay.n)
         for got, ref in zip(gnss_position.position_model(*args), _numpy_position_model(*args)):
             assert np.allclose(got, ref, rtol=1e-12, atol=1e-9)
         R_vb = euler_to_dcm(0.0, 0.02, -0.01) if i % 4 else np.eye(3)

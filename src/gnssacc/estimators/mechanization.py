@@ -923,7 +923,7 @@ def _warm_up_models(s) -> None:
     H = np.zeros((2, N_NAV))
     H[:, 3:5] = np.eye(2)
     update_state(s.P, H, np.eye(2), np.ones(2), 0.0, -1, s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, x_e)
-    position_model(s.pos, s.R_nb, z3, 0.5, 0.1, 0.0, x_e, -1, N_NAV, N_NAV)
+    position_model(s.pos, s.R_nb, z3, 0.5, 0.1, 0.0, z3, -1, N_NAV)
     for R_vb in (np.eye(3), np.eye(3).T):  # the body's axes; a mounting rotation (a transpose)
         vehicle_model(s.R_nb, s.v_n, s.b_g, z3, z3, z3, R_vb, N_NAV)
 

@@ -40,6 +40,7 @@ from .base import AidSpec, EkfAid, Measurement, SmootherAid
 
 #: Order at equal times: after the vehicle aids (their updates are in a GNSS epoch's prior).
 ORDER = 2
+_NO_GM = np.zeros(3)
 
 
 def gnss_error_states(settings) -> tuple[MarkovBlock, ...]:
@@ -49,13 +50,12 @@ def gnss_error_states(settings) -> tuple[MarkovBlock, ...]:
 
 
 @njit(cache=True)
-def position_model(pos, R_nb, lever_b, lat, lon, h, x_e, i_gm, nav, n):
+def position_model(pos, R_nb, lever_b, lat, lon, h, gm, i_gm, n):
     """``dz`` (3,) [m, NED] and ``H`` (3, n) of :func:`position` for the state ``pos`` (lat, lon
-    [rad], h [m]), ``R_nb`` and the nominal values ``x_e`` of the states after the ``nav``
-    navigation ones, ``i_gm`` the index of the Gauss-Markov fix error's first state (-1: not
-    modelled), ``n`` states; compiled (the EKF's per-fix path), with numpy's arithmetic
-    (:mod:`gnssacc.estimators.small_linalg`).
-    The radii are :func:`gnssacc.core.earth.radii`'s."""
+    [rad], h [m]) and ``R_nb``, ``i_gm`` the index of the Gauss-Markov fix error's first state
+    (-1: not modelled) and ``gm`` (3,) its nominal value [m, NED], ``n`` states; compiled (the
+    EKF's per-fix path), with numpy's arithmetic (:mod:`gnssacc.estimators.small_linalg`). The
+    radii are :func:`gnssacc.core.earth.radii`'s."""
     w = 1.0 - E2 * math.sin(pos[0]) ** 2
     R_M, R_N = A * (1.0 - E2) / w**1.5, A / math.sqrt(w)
     l_n = matvec(R_nb, lever_b)
@@ -72,7 +72,7 @@ def position_model(pos, R_nb, lever_b, lat, lon, h, x_e, i_gm, nav, n):
     H[2, a], H[2, a + 1] = l_n[1], -l_n[0]
     if i_gm >= 0:
         for r in range(3):
-            dz[r] += x_e[i_gm - nav + r]
+            dz[r] += gm[r]
             H[r, i_gm + r] = 1.0
     return dz, H
 
@@ -90,9 +90,9 @@ def position(
     """GNSS antenna position fix (lat, lon [rad], h [m]) with 1-sigma ``sigma_ned`` [m], or with
     the full NED covariance ``cov_ned`` [m^2] (correlated axes, e.g. an RTKLIB solution's) when
     given (module notes; the model is :func:`position_model`)."""
-    lay, n = s.layout, s.P.shape[0]
-    i_gm = lay.offset(GNSS_ERROR)
-    dz, H = position_model(s.pos, s.R_nb, lever_arm_b, lat, lon, h, s.x_e, i_gm, lay.nav, n)
+    i_gm = s.layout.offset(GNSS_ERROR)
+    gm = s.gm if i_gm >= 0 else _NO_GM
+    dz, H = position_model(s.pos, s.R_nb, lever_arm_b, lat, lon, h, gm, i_gm, s.P.shape[0])
     if cov_ned is None:
         R = np.zeros((3, 3))
         R[0, 0], R[1, 1], R[2, 2] = sigma_ned[0] ** 2, sigma_ned[1] ** 2, sigma_ned[2] ** 2
