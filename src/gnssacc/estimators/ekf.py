@@ -32,9 +32,8 @@ from ..core.solution import NavSolution
 from .aids import EKF_METHODS, EkfAid, EkfContext, Measurement, ekf_aids, ekf_counts
 from .ekf_record import Recorder, Tally
 from .epochs import default_output_times
-from .kalman import update_state
 from .layout import StateLayout
-from .mechanization import Propagator
+from .mechanization import Propagator, update_state
 from .settings import EkfSettings
 from .state import FilterState, initial_state, start_of_pass
 

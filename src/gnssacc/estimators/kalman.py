@@ -13,8 +13,6 @@ import math
 import numpy as np
 from numba import njit
 
-from .mechanization import apply_correction
-
 
 @njit(cache=True)
 def _cholesky_inverse(S):
@@ -171,20 +169,3 @@ def joseph_update(P, H, R, dz, gate, consider=-1):
         dx[consider] = 0.0
     _joseph(P, K, H, R)
     return dx, nis, logdet, True, wz
-
-
-@njit(cache=True)
-def update_state(P, H, R, dz, gate, consider, pos, v_n, R_nb, b_a, b_g, x_e):
-    """:func:`joseph_update`, then, when applied, its estimated error fed back into the nominal
-    state (``pos, v_n, R_nb, b_a, b_g, x_e``, in place:
-    :func:`gnssacc.estimators.mechanization.apply_correction`): one call per update from Python.
-
-    Returns
-    -------
-    nis, logdet, used, wz
-        As :func:`joseph_update`'s.
-    """
-    dx, nis, logdet, used, wz = joseph_update(P, H, R, dz, gate, consider)
-    if used:
-        apply_correction(pos, v_n, R_nb, b_a, b_g, x_e, dx)
-    return nis, logdet, used, wz

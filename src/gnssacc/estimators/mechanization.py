@@ -32,6 +32,7 @@ from numba import njit
 
 from ..core import earth
 from ..checks.quality import InflationSegments
+from .kalman import joseph_update
 from .layout import I_ATT, I_BA, I_BG, I_POS, I_VEL, N_NAV, POS, StateLayout
 
 #: Window [s] over which the body rates are averaged into the rotation performed
@@ -246,6 +247,23 @@ def apply_correction(pos, v_n, R_nb, b_a, b_g, extra, dx):
             R_nb[i, j] = T[i, j]
     for i in range(dx.shape[0] - N_NAV):
         extra[i] -= dx[N_NAV + i]
+
+
+@njit(cache=True)
+def update_state(P, H, R, dz, gate, consider, pos, v_n, R_nb, b_a, b_g, x_e):
+    """:func:`gnssacc.estimators.kalman.joseph_update`, then, when applied, its estimated error
+    fed back into the nominal state (``pos, v_n, R_nb, b_a, b_g, x_e``, in place:
+    :func:`apply_correction`): one call per update from Python.
+
+    Returns
+    -------
+    nis, logdet, used, wz
+        As :func:`joseph_update`'s.
+    """
+    dx, nis, logdet, used, wz = joseph_update(P, H, R, dz, gate, consider)
+    if used:
+        apply_correction(pos, v_n, R_nb, b_a, b_g, x_e, dx)
+    return nis, logdet, used, wz
 
 
 @njit(cache=True)
@@ -877,8 +895,6 @@ def warm_up(propagation: bool = True, update: bool = True) -> float:
     import time
     from types import SimpleNamespace
 
-    from .kalman import joseph_update
-
     t0 = time.perf_counter()
     z3 = np.zeros(3)
     s = SimpleNamespace(
@@ -908,24 +924,7 @@ def warm_up(propagation: bool = True, update: bool = True) -> float:
         # ``consider`` passed as the EKF passes it (an omitted default is another signature).
         dx = joseph_update(s.P, H, np.eye(3), np.ones(3), 0.0, -1)[0]
         apply_correction(s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, np.zeros(0), dx)
-        _warm_up_models(s)
     return time.perf_counter() - t0
-
-
-def _warm_up_models(s) -> None:
-    """Compile (or load) the EKF's per-update kernels with the types the EKF calls them with: the
-    update with its feedback, and the aids' compiled models."""
-    from .aids.gnss_position import position_model
-    from .aids.vehicle import vehicle_model
-    from .kalman import update_state
-
-    z3, x_e = np.zeros(3), np.zeros(0)
-    H = np.zeros((2, N_NAV))
-    H[:, 3:5] = np.eye(2)
-    update_state(s.P, H, np.eye(2), np.ones(2), 0.0, -1, s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, x_e)
-    position_model(s.pos, s.R_nb, z3, 0.5, 0.1, 0.0, z3, -1, N_NAV)
-    for R_vb in (np.eye(3), np.eye(3).T):  # the body's axes; a mounting rotation (a transpose)
-        vehicle_model(s.R_nb, s.v_n, s.b_g, z3, z3, z3, R_vb, N_NAV)
 
 
 def warm_up_window() -> float:
