@@ -115,8 +115,7 @@ def _warm_up_models() -> None:
     H[:, 3:5] = np.eye(2)
     update_state(P, H, np.eye(2), np.ones(2), 0.0, -1, pos, v_n, R_nb, b_a, b_g, x_e)
     position_model(pos, R_nb, z3, 0.5, 0.1, 0.0, z3, -1, N_NAV)
-    for R_vb in (np.eye(3), np.eye(3).T):  # the body's axes; a mounting rotation (a transpose)
-        vehicle_model(R_nb, v_n, b_g, z3, z3, z3, R_vb, N_NAV)
+    vehicle_model(R_nb, v_n, b_g, z3, z3, z3, np.eye(3), True, N_NAV)
 
 
 def compile_groups(groups=tuple(GROUPS)) -> None:

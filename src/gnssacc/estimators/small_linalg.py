@@ -41,17 +41,23 @@ def matmul_into(A, B, out, j0):
 
 
 @njit(cache=True)
-def matvec(A, v):
-    """``A @ v`` for ``A`` (3, 3), summed as numpy's BLAS sums it for ``A``'s layout (module
-    notes)."""
+def matvec(A, v, rows: bool):
+    """``A @ v`` for ``A`` (3, 3), summed as numpy's BLAS sums it for a matrix whose rows are
+    contiguous (``rows``: C order) or not (F order, a transpose; module notes)."""
     out = np.empty(3)
-    if A.strides[1] < A.strides[0]:  # rows contiguous
+    if rows:
         for r in range(3):
             out[r] = fma(A[r, 2], v[2], fma(A[r, 0], v[0], A[r, 1] * v[1]))
     else:
         for r in range(3):
             out[r] = A[r, 0] * v[0] + A[r, 1] * v[1] + A[r, 2] * v[2]
     return out
+
+
+def rows_contiguous(A: np.ndarray) -> bool:
+    """Whether numpy takes ``A`` (3, 3) as a matrix in C order (its rows contiguous) when it
+    multiplies it with a vector (:func:`matvec`'s ``rows``)."""
+    return bool(A.strides[1] < A.strides[0])
 
 
 @njit(cache=True)

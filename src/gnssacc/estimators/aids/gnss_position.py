@@ -58,7 +58,7 @@ def position_model(pos, R_nb, lever_b, lat, lon, h, gm, i_gm, n):
     radii are :func:`gnssacc.core.earth.radii`'s."""
     w = 1.0 - E2 * math.sin(pos[0]) ** 2
     R_M, R_N = A * (1.0 - E2) / w**1.5, A / math.sqrt(w)
-    l_n = matvec(R_nb, lever_b)
+    l_n = matvec(R_nb, lever_b, R_nb.strides[1] < R_nb.strides[0])
     dz = np.empty(3)
     dz[0] = (pos[0] - lat) * (R_M + pos[2]) + l_n[0]
     dz[1] = (pos[1] - lon) * (R_N + pos[2]) * math.cos(pos[0]) + l_n[1]

@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 
 from ..layout import I_ATT, I_BG, I_VEL
-from ..small_linalg import matmul_into, matvec, skew_into
+from ..small_linalg import matmul_into, matvec, rows_contiguous, skew_into
 
 #: How many of its own 1-sigma an estimator's speed is taken wide in the aids' decisions.
 K_SIGMA = 3.0
@@ -34,13 +34,14 @@ def held_samples(imu_t: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def vehicle_model(R_nb, v_n, b_g, omega_meas_b, lever_b, w_ie_n, R_vb, n):
+def vehicle_model(R_nb, v_n, b_g, omega_meas_b, lever_b, w_ie_n, R_vb, vb_rows, n):
     """:func:`vehicle_velocity` compiled (the per-update path of both ground-vehicle aids), with
     numpy's arithmetic (:mod:`gnssacc.estimators.small_linalg`): the state's ``R_nb``, ``v_n``
-    [m/s, NED], ``b_g`` [rad/s], ``n`` states; ``R_vb`` (3, 3) the body to vehicle axes (the
-    identity: the body's own, applied all the same)."""
+    [m/s, NED], ``b_g`` [rad/s], ``n`` states; ``R_vb`` (3, 3, C order) the body to vehicle axes
+    (the identity: the body's own, applied all the same), ``vb_rows`` whether the caller's
+    ``R_vb`` was in C order (numpy sums otherwise: :mod:`gnssacc.estimators.small_linalg`)."""
     Rt = R_nb.T
-    u = matvec(Rt, v_n)
+    u = matvec(Rt, v_n, False)
     H = np.zeros((3, n))
     for r in range(3):
         for c in range(3):
@@ -49,7 +50,7 @@ def vehicle_model(R_nb, v_n, b_g, omega_meas_b, lever_b, w_ie_n, R_vb, n):
     skew_into(u, S)
     v_b = u.copy()
     if lever_b[0] != 0.0 or lever_b[1] != 0.0 or lever_b[2] != 0.0:
-        w_ie_b = matvec(Rt, w_ie_n)
+        w_ie_b = matvec(Rt, w_ie_n, False)
         w = omega_meas_b - b_g - w_ie_b
         v_b[0] += w[1] * lever_b[2] - w[2] * lever_b[1]
         v_b[1] += w[2] * lever_b[0] - w[0] * lever_b[2]
@@ -65,7 +66,7 @@ def vehicle_model(R_nb, v_n, b_g, omega_meas_b, lever_b, w_ie_n, R_vb, n):
     matmul_into(S, Rt, H, I_ATT)
     out_H = np.empty((3, n))
     matmul_into(R_vb, H, out_H, 0)
-    return matvec(R_vb, v_b), out_H
+    return matvec(R_vb, v_b, vb_rows), out_H
 
 
 def vehicle_velocity(
@@ -92,4 +93,6 @@ def vehicle_velocity(
         ``None``: the body's axes.
     """
     R = _IDENTITY if R_vb is None else R_vb
-    return vehicle_model(s.R_nb, s.v_n, s.b_g, omega_meas_b, lever_b, w_ie_n, R, s.P.shape[0])
+    rows = rows_contiguous(R)
+    R = R if rows else np.ascontiguousarray(R)  # one compiled version for either order
+    return vehicle_model(s.R_nb, s.v_n, s.b_g, omega_meas_b, lever_b, w_ie_n, R, rows, s.P.shape[0])
