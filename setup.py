@@ -4,7 +4,8 @@
 After setuptools' ``build_py`` has copied the package into the build folder, the kernels are
 compiled there, in two processes (the EKF's propagation, the biggest, and the rest), by the build
 environment's numba (``[build-system] requires``) with numba's own on-disk cache: its index and
-object files land in ``gnssacc/estimators/__pycache__`` and go into the wheel with the sources
+object files land in ``gnssacc/estimators/__pycache__`` (and ``estimators/aids/``'s, the aids'
+compiled models) and go into the wheel with the sources
 (``pip uninstall`` removes them too). numba validates them when it loads them, as it validates
 any cache: the numba version, the Python version, this CPU's model and features, and the
 source's content (numba 0.68's content stamps make the cache valid wherever the package is
@@ -43,9 +44,10 @@ class BuildPyWithKernels(build_py):
 
     def run(self) -> None:
         super().run()
-        cache = Path(self.build_lib) / "gnssacc" / "estimators" / "__pycache__"
-        for old in [*cache.glob("*.nbi"), *cache.glob("*.nbc")]:  # a previous build's, maybe stale
-            old.unlink()
+        kernels = Path(self.build_lib) / "gnssacc" / "estimators"
+        for cache in (kernels / "__pycache__", kernels / "aids" / "__pycache__"):
+            for old in [*cache.glob("*.nbi"), *cache.glob("*.nbc")]:  # a previous build's
+                old.unlink()
         if (
             getattr(self, "editable_mode", False)
             or os.environ.get("GNSSACC_BUILD_KERNELS", "1") == "0"

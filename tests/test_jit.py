@@ -213,11 +213,14 @@ def test_a_run_compiles_only_the_kernels_its_methods_need(ekf_compiled, tmp_path
 RUN_TYPES = """
 from gnssacc import pipeline
 from gnssacc.core.config import load_config
-from gnssacc.estimators import kalman, kernels, mechanization, window_marginals
+from gnssacc.estimators import kalman, kernels, mechanization, small_linalg, window_marginals
+from gnssacc.estimators.aids import gnss_position, vehicle
 from gnssacc.sources.sim import simulate
 
+MODULES = (mechanization, kalman, window_marginals, small_linalg, gnss_position, vehicle)
+
 def signatures():
-    return {(m.__name__, name): set(d.signatures) for m in (mechanization, kalman, window_marginals)
+    return {(m.__name__, name): set(d.signatures) for m in MODULES
             for name, d in vars(m).items() if hasattr(d, "signatures")}
 
 kernels.compile_groups()

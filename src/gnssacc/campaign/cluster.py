@@ -76,10 +76,9 @@ class WarmUp(WorkerPlugin):
 def _warm_up() -> None:
     """Import what a task needs (gtsam included) and load the numba kernels."""
     from .. import pipeline  # noqa: F401
-    from ..estimators import mechanization, smoother  # noqa: F401
+    from ..estimators import kernels, smoother  # noqa: F401
 
-    mechanization.warm_up()
-    mechanization.warm_up_window()  # ekf-accw's kernel
+    kernels.compile_groups(("propagation", "update", "window"))  # the EKFs' (ekf-accw's too)
 
 
 @contextlib.contextmanager

@@ -3,7 +3,8 @@
 The first run after an install compiles the kernels (several seconds) unless the install put them
 there already (``setup.py`` compiles them into the wheel); later runs load them from numba's
 on-disk cache in a fraction of a second. numba caches next to the sources
-(``gnssacc/estimators/__pycache__``) when it can write there. A system or container install
+(``gnssacc/estimators/__pycache__``, and ``estimators/aids/``'s for the aids' compiled models)
+when it can write there. A system or container install
 usually cannot, so :func:`configure_cache` (called by ``gnssacc/__init__`` before numba is
 imported) then points ``NUMBA_CACHE_DIR`` at a user cache folder; a ``NUMBA_CACHE_DIR`` set by the
 user is always kept. :func:`cache_folder` says where the kernels go, :func:`kernel_cached` whether
@@ -25,7 +26,8 @@ from pathlib import Path
 
 ENV = "NUMBA_CACHE_DIR"
 PACKAGE_DIR = Path(__file__).resolve().parent.parent
-#: The folder of the modules holding numba kernels: numba caches them in its ``__pycache__``.
+#: The folder of the modules holding numba kernels (and its ``aids`` folder): numba caches them in
+#: their ``__pycache__``.
 KERNEL_DIR = PACKAGE_DIR / "estimators"
 
 

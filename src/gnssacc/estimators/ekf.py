@@ -32,11 +32,10 @@ from ..core.solution import NavSolution
 from .aids import EKF_METHODS, EkfAid, EkfContext, Measurement, ekf_aids, ekf_counts
 from .ekf_record import Recorder, Tally
 from .epochs import default_output_times
-from .kalman import joseph_update
 from .layout import StateLayout
-from .mechanization import Propagator
+from .mechanization import Propagator, update_state
 from .settings import EkfSettings
-from .state import FilterState, correct, initial_state, start_of_pass
+from .state import FilterState, initial_state, start_of_pass
 
 #: Method ids and the acceleration form each applies (``None``: none).
 METHODS = EKF_METHODS
@@ -48,10 +47,10 @@ def kalman_update(s: FilterState, m: Measurement) -> tuple[float, float, bool, n
     returns the NIS, the Gaussian log-likelihood of the innovation, whether it was applied (a
     positive ``m.gate`` rejects it when NIS exceeds the gate) and the whitened innovation."""
     dz = np.asarray(m.dz, float)
-    dx, nis, logdet, used, wz = joseph_update(s.P, m.H, m.R, dz, float(m.gate), s.consider)
-    if used:
-        correct(s, dx)
-    return nis, -0.5 * (nis + logdet + len(m.dz) * _LOG_2PI), used, wz
+    nis, logdet, used, wz = update_state(
+        s.P, m.H, m.R, dz, float(m.gate), s.consider, s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, s.x_e
+    )
+    return nis, -0.5 * (nis + logdet + len(dz) * _LOG_2PI), used, wz
 
 
 class EkfObserver:
@@ -242,6 +241,7 @@ def run_ekf(
     if observer is not None:
         observer.start(setup)
     aids, t_cur = setup.aids, t0
+    ev_t, ev_src, ev_idx = ev_t.tolist(), ev_src.tolist(), ev_idx.tolist()  # Python scalars
     for e in progress(range(len(ev_t)), desc=method, enable=show_progress):
         t_e, src, j = ev_t[e], ev_src[e], ev_idx[e]
         if t_e > t_end:
@@ -304,7 +304,12 @@ class _Updates:
     def at(self, t_e: float, aid: EkfAid, j: int) -> None:
         """The updates of ``aid`` at its epoch ``j`` (time ``t_e``), each shown to the observer."""
         s, obs = self.setup.state, self.observer
-        if obs is not None and self.epoch is None:
+        if obs is None:  # the pass alone (the tuner's, a method's): no observer to tell
+            for m, apply in aid.updates(s, j, self.stats):
+                if apply:
+                    self.tally.add(t_e, m, *kalman_update(s, m))
+            return
+        if self.epoch is None:
             self.epoch = (t_e, aid.epoch, j)
             obs.before(t_e, aid.epoch, s, self.setup.prop)
         for m, apply in aid.updates(s, j, self.stats):
@@ -313,8 +318,7 @@ class _Updates:
                 self.tally.add(t_e, m, nis, loglik, used, wz)
             else:
                 nis, used = float("nan"), False
-            if obs is not None:
-                obs.update(t_e, m, nis, used, s)
+            obs.update(t_e, m, nis, used, s)
 
     def final_stats(self) -> dict:
         """The pass's ``stats`` (see :func:`run_ekf`)."""

@@ -64,62 +64,70 @@ class Recorder:
         )
 
 
+class _KindTally:
+    """The running figures of one update kind (:class:`Tally`)."""
+
+    __slots__ = ("n", "rejected", "nis_sum", "dof", "loglik", "beyond", "lag", "prev", "series")
+
+    def __init__(self):
+        self.n = self.rejected = self.dof = self.beyond = 0
+        self.nis_sum = self.loglik = 0.0
+        self.lag = [0.0, 0.0]  # sum w_k w_(k-1), sum w_k^2
+        self.prev: np.ndarray | None = None
+        self.series: tuple[list, list, list] = ([], [], [])  # t, NIS per dof, log-likelihood
+
+
 class Tally:
     """Per update kind: counts, NIS, log-likelihood (optionally every update's) and the lag-1
     autocorrelation of the whitened innovations (white for a correct model)."""
 
     def __init__(self, keep: bool):
         self.keep = keep
-        self.prev: dict[str, np.ndarray | None] = {k: None for k in KINDS}
-        self.lag1 = {k: [0.0, 0.0] for k in KINDS}  # sum w_k w_(k-1), sum w_k^2
-        self.n = {k: 0 for k in KINDS}
-        self.rejected = {k: 0 for k in KINDS}
-        self.nis_sum = {k: 0.0 for k in KINDS}
-        self.dof = {k: 0 for k in KINDS}
-        self.loglik = {k: 0.0 for k in KINDS}
-        self.beyond = {k: 0 for k in KINDS}  # NIS beyond the chi-square tail bound
-        # t, NIS per dof, log-likelihood
-        self.series: dict[str, tuple[list, list, list]] = {k: ([], [], []) for k in KINDS}
+        self.kinds = {k: _KindTally() for k in KINDS}
+
+    @property
+    def loglik(self) -> dict[str, float]:
+        """The log-likelihood per update kind."""
+        return {k: v.loglik for k, v in self.kinds.items()}
 
     def add(self, t: float, m: Measurement, nis: float, loglik: float, used: bool, wz) -> None:
-        k = m.kind
+        k = self.kinds[m.kind]
         if not used:
-            self.rejected[k] += 1
+            k.rejected += 1
             return
-        prev = self.prev[k]
+        prev = k.prev
         if prev is not None:
-            lag = self.lag1[k]
+            lag = k.lag
             lag[0] += float(wz @ prev)
             lag[1] += float(wz @ wz)
-        self.prev[k] = wz
-        self.n[k] += 1
-        self.nis_sum[k] += nis
-        self.dof[k] += len(m.dz)
-        self.loglik[k] += loglik
-        self.beyond[k] += nis > tail_bound(len(m.dz))
+        k.prev = wz
+        dof = len(m.dz)
+        k.n += 1
+        k.nis_sum += nis
+        k.dof += dof
+        k.loglik += loglik
+        k.beyond += nis > tail_bound(dof)
         if self.keep:
-            for lst, v in zip(self.series[k], (t, nis / len(m.dz), loglik), strict=True):
+            for lst, v in zip(k.series, (t, nis / dof, loglik), strict=True):
                 lst.append(v)
 
     def stats(self) -> dict:
         out: dict[str, Any] = {}
-        for k in KINDS:
-            out[f"n_{k}_updates"] = self.n[k]
-            out[f"n_{k}_rejected"] = self.rejected[k]
+        for name, k in self.kinds.items():
+            out[f"n_{name}_updates"] = k.n
+            out[f"n_{name}_rejected"] = k.rejected
             # Normalised innovation squared per degree of freedom: ~1 for a consistent filter.
-            out[f"nis_{k}_mean"] = self.nis_sum[k] / self.dof[k] if self.dof[k] else None
+            out[f"nis_{name}_mean"] = k.nis_sum / k.dof if k.dof else None
             # Updates beyond the chi-square bound of tail probability TAIL_P: ~TAIL_P of them for
             # Gaussian errors; far more when the errors have heavy tails (outliers, multipath).
-            out[f"n_{k}_beyond"] = self.beyond[k]
-            out[f"loglik_{k}"] = self.loglik[k]
+            out[f"n_{name}_beyond"] = k.beyond
+            out[f"loglik_{name}"] = k.loglik
             # Whitened innovations of a correct model are white: ~0 here; a slowly varying
             # error the model misses (too little IMU noise, correlated GNSS errors) makes it > 0.
-            out[f"acf1_{k}"] = (
-                float(self.lag1[k][0] / self.lag1[k][1]) if self.lag1[k][1] > 0 else None
-            )
+            out[f"acf1_{name}"] = float(k.lag[0] / k.lag[1]) if k.lag[1] > 0 else None
             if self.keep:
-                t, nis, ll = self.series[k]
-                out[f"nis_{k}_t"], out[f"nis_{k}"], out[f"loglik_{k}_series"] = (
+                t, nis, ll = k.series
+                out[f"nis_{name}_t"], out[f"nis_{name}"], out[f"loglik_{name}_series"] = (
                     np.asarray(t),
                     np.asarray(nis),
                     np.asarray(ll),

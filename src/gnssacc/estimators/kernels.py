@@ -29,11 +29,16 @@ from ..core.jit import KERNEL_DIR, PACKAGE_DIR, cache_folder, kernel_cached
 from ..core.interrupts import Terminated
 from ..core.parallel import hold_forks, release_forks
 
-#: The kernels Python calls, by group, as ``(module file in gnssacc/estimators, function names)``
+#: The kernels Python calls, by group, as ``(module file under gnssacc/estimators, function names)``
 #: pairs (numba compiles and caches each kernel's callees with it).
 GROUPS = {
     "propagation": (("mechanization.py", ("propagate",)),),
-    "update": (("kalman.py", ("joseph_update",)), ("mechanization.py", ("apply_correction",))),
+    "update": (
+        ("kalman.py", ("joseph_update",)),
+        ("mechanization.py", ("apply_correction", "update_state")),
+        ("aids/gnss_position.py", ("position_model",)),
+        ("aids/vehicle.py", ("vehicle_model",)),
+    ),
     "window": (("mechanization.py", ("kernel_force_integrals",)),),
     "chain": (("window_marginals.py", ("_scatter", "_marginalize", "_node_covariances")),),
     "band": (
@@ -82,7 +87,10 @@ def compile_group(group: str) -> float:
     if group == "propagation":
         return mechanization.warm_up(update=False)
     if group == "update":
-        return mechanization.warm_up(propagation=False)
+        t0 = time.perf_counter()
+        mechanization.warm_up(propagation=False)
+        _warm_up_models()
+        return time.perf_counter() - t0
     if group == "window":
         return mechanization.warm_up_window()
     if group in ("chain", "band"):
@@ -90,6 +98,25 @@ def compile_group(group: str) -> float:
 
         return warm_up(band=group == "band")
     raise ValueError(f"unknown kernel group {group!r}; expected one of {', '.join(GROUPS)}")
+
+
+def _warm_up_models() -> None:
+    """Compile (or load) the rest of the update group with the types the EKF calls them with: the
+    update with its feedback, and the aids' compiled models."""
+    import numpy as np
+
+    from .aids.gnss_position import position_model
+    from .aids.vehicle import vehicle_model
+    from .layout import N_NAV
+    from .mechanization import update_state
+
+    z3, x_e, P, R_nb = np.zeros(3), np.zeros(0), np.eye(N_NAV), np.eye(3)
+    pos, v_n, b_a, b_g = np.array([0.5, 0.1, 0.0]), z3.copy(), z3.copy(), z3.copy()
+    H = np.zeros((2, N_NAV))
+    H[:, 3:5] = np.eye(2)
+    update_state(P, H, np.eye(2), np.ones(2), 0.0, -1, pos, v_n, R_nb, b_a, b_g, x_e)
+    position_model(pos, R_nb, z3, 0.5, 0.1, 0.0, z3, -1, N_NAV)
+    vehicle_model(R_nb, v_n, b_g, z3, z3, z3, np.eye(3), True, N_NAV)
 
 
 def compile_groups(groups=tuple(GROUPS)) -> None:

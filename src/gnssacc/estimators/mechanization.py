@@ -32,6 +32,7 @@ from numba import njit
 
 from ..core import earth
 from ..checks.quality import InflationSegments
+from .kalman import joseph_update
 from .layout import I_ATT, I_BA, I_BG, I_POS, I_VEL, N_NAV, POS, StateLayout
 
 #: Window [s] over which the body rates are averaged into the rotation performed
@@ -246,6 +247,23 @@ def apply_correction(pos, v_n, R_nb, b_a, b_g, extra, dx):
             R_nb[i, j] = T[i, j]
     for i in range(dx.shape[0] - N_NAV):
         extra[i] -= dx[N_NAV + i]
+
+
+@njit(cache=True)
+def update_state(P, H, R, dz, gate, consider, pos, v_n, R_nb, b_a, b_g, x_e):
+    """:func:`gnssacc.estimators.kalman.joseph_update`, then, when applied, its estimated error
+    fed back into the nominal state (``pos, v_n, R_nb, b_a, b_g, x_e``, in place:
+    :func:`apply_correction`): one call per update from Python.
+
+    Returns
+    -------
+    nis, logdet, used, wz
+        As :func:`joseph_update`'s.
+    """
+    dx, nis, logdet, used, wz = joseph_update(P, H, R, dz, gate, consider)
+    if used:
+        apply_correction(pos, v_n, R_nb, b_a, b_g, x_e, dx)
+    return nis, logdet, used, wz
 
 
 @njit(cache=True)
@@ -717,6 +735,10 @@ def _cov_step(
 _LAST_TURN_RATES: list = []
 
 
+def _is_float64(x) -> bool:
+    return isinstance(x, np.ndarray) and x.dtype == np.float64
+
+
 def turn_rates(t: np.ndarray, omega_b: np.ndarray, window_s: float = TURN_WINDOW_S) -> np.ndarray:
     """The rotation the body performs: each sample's rate averaged over the samples within
     ``window_s / 2`` of it [rad/s, body], (N, 3), C-contiguous (not to be written to: the same
@@ -726,8 +748,8 @@ def turn_rates(t: np.ndarray, omega_b: np.ndarray, window_s: float = TURN_WINDOW
     vibration and the sensor's own noise turn the body back and forth, and the error they make
     averages out. ``t`` [s] (N,), ``omega_b`` [rad/s] (N, 3).
     """
-    t = np.asarray(t, float)
-    omega_b = np.asarray(omega_b, float)
+    # np.asarray of a view makes a new view each call: the arrays themselves, when they are ones
+    t, omega_b = (x if _is_float64(x) else np.asarray(x, float) for x in (t, omega_b))
     mark = (len(t), float(t[0]), float(t[-1]), float(omega_b.sum())) if len(t) else None
     for t_ref, w_ref, was, window, rates in _LAST_TURN_RATES:
         if t_ref() is t and w_ref() is omega_b and was == mark and window == window_s:
@@ -746,7 +768,16 @@ def turn_rates(t: np.ndarray, omega_b: np.ndarray, window_s: float = TURN_WINDOW
 def kernel_array(x, dtype) -> np.ndarray:
     """``x`` as the kernels take it: C-contiguous and writable. numba compiles a separate version
     of a kernel for read-only arrays (a broadcast, a memory map), which would cost a second full
-    compilation; the IMU arrays are copied only when they are read-only or not contiguous."""
+    compilation; the IMU arrays are copied only when they are read-only or not contiguous. An
+    array that already is what the kernels take is returned itself (not a new view of it: the
+    cache of :func:`turn_rates` recognises the IMU arrays of a run by their identity)."""
+    if (
+        isinstance(x, np.ndarray)
+        and x.dtype == dtype
+        and x.flags.c_contiguous
+        and x.flags.writeable
+    ):
+        return x
     a = np.ascontiguousarray(x, dtype)
     return a if a.flags.writeable else a.copy()
 
@@ -863,8 +894,6 @@ def warm_up(propagation: bool = True, update: bool = True) -> float:
     :mod:`gnssacc.estimators.kernels` for the background version."""
     import time
     from types import SimpleNamespace
-
-    from .kalman import joseph_update
 
     t0 = time.perf_counter()
     z3 = np.zeros(3)

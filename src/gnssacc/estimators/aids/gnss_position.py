@@ -27,21 +27,54 @@ to its nodes' fixes against their expectation (:func:`residual_chi2`), ``nis_pos
 
 from __future__ import annotations
 
-import numpy as np
+import math
 
-from ...core.earth import radii
+import numpy as np
+from numba import njit
+
+from ...core.earth import A, E2
 from ...core.rotations import skew
-from ..layout import ATT, GNSS_ERROR, POS, SYM_B, SYM_G, SYM_V, SYM_X, MarkovBlock
-from .base import AidSpec, EkfAid, Measurement, SmootherAid, zero_jacobian
+from ..layout import GNSS_ERROR, I_ATT, I_POS, SYM_B, SYM_G, SYM_V, SYM_X, MarkovBlock
+from ..small_linalg import matvec
+from .base import AidSpec, EkfAid, Measurement, SmootherAid
 
 #: Order at equal times: after the vehicle aids (their updates are in a GNSS epoch's prior).
 ORDER = 2
+_NO_GM = np.zeros(3)
 
 
 def gnss_error_states(settings) -> tuple[MarkovBlock, ...]:
     """The Gauss-Markov fix-error states of ``settings`` (either estimator's), when modelled."""
     g = settings.gnss
     return (MarkovBlock(GNSS_ERROR, g.gm_tau, g.gm_sigma),) if g.gauss_markov else ()
+
+
+@njit(cache=True)
+def position_model(pos, R_nb, lever_b, lat, lon, h, gm, i_gm, n):
+    """``dz`` (3,) [m, NED] and ``H`` (3, n) of :func:`position` for the state ``pos`` (lat, lon
+    [rad], h [m]) and ``R_nb``, ``i_gm`` the index of the Gauss-Markov fix error's first state
+    (-1: not modelled) and ``gm`` (3,) its nominal value [m, NED], ``n`` states; compiled (the
+    EKF's per-fix path), with numpy's arithmetic (:mod:`gnssacc.estimators.small_linalg`). The
+    radii are :func:`gnssacc.core.earth.radii`'s."""
+    w = 1.0 - E2 * math.sin(pos[0]) ** 2
+    R_M, R_N = A * (1.0 - E2) / w**1.5, A / math.sqrt(w)
+    l_n = matvec(R_nb, lever_b, R_nb.strides[1] < R_nb.strides[0])
+    dz = np.empty(3)
+    dz[0] = (pos[0] - lat) * (R_M + pos[2]) + l_n[0]
+    dz[1] = (pos[1] - lon) * (R_N + pos[2]) * math.cos(pos[0]) + l_n[1]
+    dz[2] = -(pos[2] - h) + l_n[2]
+    # H = [I, 0, -[l_n x], 0 ...]
+    H = np.zeros((3, n))
+    p, a = I_POS, I_ATT
+    H[0, p] = H[1, p + 1] = H[2, p + 2] = 1.0
+    H[0, a + 1], H[0, a + 2] = l_n[2], -l_n[1]
+    H[1, a], H[1, a + 2] = -l_n[2], l_n[0]
+    H[2, a], H[2, a + 1] = l_n[1], -l_n[0]
+    if i_gm >= 0:
+        for r in range(3):
+            dz[r] += gm[r]
+            H[r, i_gm + r] = 1.0
+    return dz, H
 
 
 def position(
@@ -56,31 +89,10 @@ def position(
 ) -> Measurement:
     """GNSS antenna position fix (lat, lon [rad], h [m]) with 1-sigma ``sigma_ned`` [m], or with
     the full NED covariance ``cov_ned`` [m^2] (correlated axes, e.g. an RTKLIB solution's) when
-    given (module notes)."""
-    pos = s.pos
-    R_M, R_N = radii(pos[0])
-    l_n = s.R_nb @ lever_arm_b
-    dz = (
-        np.array(
-            [
-                (pos[0] - lat) * (R_M + pos[2]),
-                (pos[1] - lon) * (R_N + pos[2]) * np.cos(pos[0]),
-                -(pos[2] - h),
-            ]
-        )
-        + l_n
-    )
-    # H = [I, 0, -[l_n x], 0 ...], element by element (a per-fix path: no temporaries)
-    H = zero_jacobian(s, 3)
-    p, a = POS.start, ATT.start
-    H[0, p] = H[1, p + 1] = H[2, p + 2] = 1.0
-    H[0, a + 1], H[0, a + 2] = l_n[2], -l_n[1]
-    H[1, a], H[1, a + 2] = -l_n[2], l_n[0]
-    H[2, a], H[2, a + 1] = l_n[1], -l_n[0]
-    if s.layout.has(GNSS_ERROR):
-        dz += s.gm
-        g = s.layout.offset(GNSS_ERROR)
-        H[0, g] = H[1, g + 1] = H[2, g + 2] = 1.0
+    given (module notes; the model is :func:`position_model`)."""
+    i_gm = s.layout.offset(GNSS_ERROR)
+    gm = s.gm if i_gm >= 0 else _NO_GM
+    dz, H = position_model(s.pos, s.R_nb, lever_arm_b, lat, lon, h, gm, i_gm, s.P.shape[0])
     if cov_ned is None:
         R = np.zeros((3, 3))
         R[0, 0], R[1, 1], R[2, 2] = sigma_ned[0] ** 2, sigma_ned[1] ** 2, sigma_ned[2] ** 2

@@ -17,19 +17,56 @@ The smoother's factors use the same model on GTSAM's variables
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
-from ...core.rotations import cross3, skew
-from ..layout import ATT, BG, VEL
-from .base import zero_jacobian
+from ..layout import I_ATT, I_BG, I_VEL
+from ..small_linalg import matmul_into, matvec, rows_contiguous, skew_into
 
 #: How many of its own 1-sigma an estimator's speed is taken wide in the aids' decisions.
 K_SIGMA = 3.0
+_IDENTITY = np.eye(3)
 
 
 def held_samples(imu_t: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Index of the IMU sample held at each time ``t`` (sample ``k`` holds over ``(t[k-1],
     t[k]]``)."""
     return np.minimum(np.searchsorted(imu_t, t, side="left"), len(imu_t) - 1)
+
+
+@njit(cache=True)
+def vehicle_model(R_nb, v_n, b_g, omega_meas_b, lever_b, w_ie_n, R_vb, vb_rows, n):
+    """:func:`vehicle_velocity` compiled (the per-update path of both ground-vehicle aids), with
+    numpy's arithmetic (:mod:`gnssacc.estimators.small_linalg`): the state's ``R_nb``, ``v_n``
+    [m/s, NED], ``b_g`` [rad/s], ``n`` states; ``R_vb`` (3, 3, C order) the body to vehicle axes
+    (the identity: the body's own, applied all the same), ``vb_rows`` whether the caller's
+    ``R_vb`` was in C order (numpy sums otherwise: :mod:`gnssacc.estimators.small_linalg`)."""
+    Rt = R_nb.T
+    u = matvec(Rt, v_n, False)
+    H = np.zeros((3, n))
+    for r in range(3):
+        for c in range(3):
+            H[r, I_VEL + c] = Rt[r, c]
+    S, L = np.empty((3, 3)), np.empty((3, 3))
+    skew_into(u, S)
+    v_b = u.copy()
+    if lever_b[0] != 0.0 or lever_b[1] != 0.0 or lever_b[2] != 0.0:
+        w_ie_b = matvec(Rt, w_ie_n, False)
+        w = omega_meas_b - b_g - w_ie_b
+        v_b[0] += w[1] * lever_b[2] - w[2] * lever_b[1]
+        v_b[1] += w[2] * lever_b[0] - w[0] * lever_b[2]
+        v_b[2] += w[0] * lever_b[1] - w[1] * lever_b[0]
+        W, LW = np.empty((3, 3)), np.empty((3, 3))
+        skew_into(lever_b, L)
+        skew_into(w_ie_b, W)
+        matmul_into(L, W, LW, 0)
+        S += LW
+        for r in range(3):
+            for c in range(3):
+                H[r, I_BG + c] = -L[r, c]
+    matmul_into(S, Rt, H, I_ATT)
+    out_H = np.empty((3, n))
+    matmul_into(R_vb, H, out_H, 0)
+    return matvec(R_vb, v_b, vb_rows), out_H
 
 
 def vehicle_velocity(
@@ -42,7 +79,7 @@ def vehicle_velocity(
     """Velocity of the point ``lever_b`` [m, body] from the IMU, relative to the earth, in the body
     frame [m/s], and its Jacobian ``H_v`` (3 x states) w.r.t. the error state (module notes);
     with ``R_vb`` (body to vehicle axes, a constant), in the vehicle's axes: ``R_vb v``, ``R_vb
-    H_v``.
+    H_v`` (the model is :func:`vehicle_model`).
 
     Parameters
     ----------
@@ -55,21 +92,7 @@ def vehicle_velocity(
     R_vb : ndarray (3, 3), optional
         ``None``: the body's axes.
     """
-    Rt = s.R_nb.T
-    u = Rt @ s.v_n
-    H = zero_jacobian(s, 3)
-    H[:, VEL] = Rt
-    # R^T [v x] = [(R^T v) x] R^T; the lever-arm terms only with a lever arm (the filter's
-    # per-update cost is mostly these small products).
-    if lever_b.any():
-        w_ie_b = Rt @ w_ie_n
-        L = skew(lever_b)
-        v_b = u + cross3(omega_meas_b - s.b_g - w_ie_b, lever_b)
-        H[:, ATT] = (skew(u) + L @ skew(w_ie_b)) @ Rt
-        H[:, BG] = -L
-    else:
-        v_b = u
-        H[:, ATT] = skew(u) @ Rt
-    if R_vb is None:
-        return v_b, H
-    return R_vb @ v_b, R_vb @ H
+    R = _IDENTITY if R_vb is None else R_vb
+    rows = rows_contiguous(R)
+    R = R if rows else np.ascontiguousarray(R)  # one compiled version for either order
+    return vehicle_model(s.R_nb, s.v_n, s.b_g, omega_meas_b, lever_b, w_ie_n, R, rows, s.P.shape[0])
