@@ -21,6 +21,7 @@ import pytest
 
 import gnssacc
 from gnssacc.core.jit import kernel_cache_folder
+from gnssacc.estimators import kernels
 
 PROBE = """
 import os, subprocess, sys
@@ -160,13 +161,22 @@ def _moved(compiled, tmp_path: Path) -> tuple[Path, Path]:
     new_root, new_cache = tmp_path / "site", tmp_path / "cache"
     shutil.copytree(root, new_root)
     shutil.copytree(cache_home, new_cache)
-    with pytest.MonkeyPatch.context() as mp:  # where numba puts a kernel of each copy
-        mp.setenv("NUMBA_CACHE_DIR", str(cache_home / "gnssacc" / "numba"))
-        src = kernel_cache_folder(root / "gnssacc" / "estimators" / "mechanization.py")
-        mp.setenv("NUMBA_CACHE_DIR", str(new_cache / "gnssacc" / "numba"))
-        dst = kernel_cache_folder(new_root / "gnssacc" / "estimators" / "mechanization.py")
-    (new_cache / src.relative_to(cache_home)).rename(dst)
+    for rel in _KERNEL_FOLDERS:  # where numba puts the kernels of each folder of each copy
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setenv("NUMBA_CACHE_DIR", str(cache_home / "gnssacc" / "numba"))
+            src = kernel_cache_folder(root / "gnssacc" / "estimators" / rel)
+            mp.setenv("NUMBA_CACHE_DIR", str(new_cache / "gnssacc" / "numba"))
+            dst = kernel_cache_folder(new_root / "gnssacc" / "estimators" / rel)
+        if (new_cache / src.relative_to(cache_home)).exists():
+            (new_cache / src.relative_to(cache_home)).rename(dst)
     return new_root, new_cache
+
+
+#: One kernel module of each folder the kernels live in (numba caches a folder's kernels
+#: together): the estimators' and the aids'.
+_KERNEL_FOLDERS = sorted(
+    {str(Path(f).parent / "x.py") for spec in kernels.GROUPS.values() for f, _ in spec}
+)
 
 
 @EKF_GROUP
