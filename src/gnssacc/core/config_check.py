@@ -117,7 +117,7 @@ BOUNDS: dict[tuple[str, str], Bound] = {
         "stationary",
         "floor_accel_mps2 floor_gyro_dps min_duration_s edge_trim_s gnss_speed_floor_mps "
         "gnss_corr_s gnss_margin_s excursion_floor_mps2 chain_max_gap_s chain_floor_mps "
-        "chain_cross_axis chain_margin",
+        "link_reach_s chain_cross_axis chain_margin",
         NON_NEGATIVE,
     ),
     ("stationary", "noise_spread"): Bound(1.0),

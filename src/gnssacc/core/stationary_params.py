@@ -78,6 +78,11 @@ class StationaryParams:
         Velocity change between two spans that is taken as real [m/s]: well above what noise
         (0.01 m/s over 10 s at 0.2 m/s/sqrt(h)) and vibration produce; a stop, a pull-away or
         a creep changes the velocity by more.
+    link_reach_s : float
+        How far before and after a span fixes are carried to it by the IMU [s] (step 4b). The
+        carried path's error bound grows as ``excursion_floor_mps2 tau^2 / 2`` (22 m at 30 s), so
+        farther fixes could not tell a stop from a crawl; nearer ones are the evidence inside a
+        GNSS outage.
     chain_cross_axis : float
         Gyro cross-axis coupling budgeted in the velocity chain [-]: a turn by psi fakes a tilt
         change of ``chain_cross_axis psi`` (1 %: uncalibrated consumer MEMS).
@@ -107,6 +112,7 @@ class StationaryParams:
     excursion_floor_mps2: float = 0.05
     chain_max_gap_s: float = 10.0
     chain_floor_mps: float = 0.3
+    link_reach_s: float = 30.0
     chain_cross_axis: float = 0.01
     chain_margin: float = 2.0
 

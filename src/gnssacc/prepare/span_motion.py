@@ -1,0 +1,237 @@
+"""Is an IMU-still span at rest or cruising? The fixes around it, linked to it by the IMU.
+
+An IMU cannot tell standing from a constant-speed cruise, and inside a GNSS outage the fixes
+in and just around a span (:mod:`gnssacc.prepare.stationary`, step 4) are missing or too few
+to tell. The fixes before and after the outage still can, once the IMU carries them to the
+span: relative to the span, the IMU measures the velocity change and the path outside it
+(biases and gravity cancel against the span's own mean readings). What it cannot measure is
+the heading of that path in the north/east plane, nor the span's own velocity ``v_n``, which is
+constant through the span (it is IMU-still). So every fix within ``link_reach_s`` of the
+span, with ``t_s`` the span's start and ``P(t)`` the IMU path in the span's level axes
+(:func:`level_path`), is modelled as::
+
+    p_n(t_k) = p_s + v_n (t_k - t_s) + R(psi) P(t_k)        (P = 0 inside the span)
+
+linear in the start position ``p_s`` and ``v_n`` for a given heading ``psi`` of the span's
+level axes, over which the fit is minimised (a dense grid: the heading is unknown in
+preparation). "At rest" is ``v_n = 0``; the generalised likelihood ratio of the two fits,
+``chi2_rest - chi2_moving``, is chi-square with 2 degrees of freedom at rest once divided by
+the residuals' correlation factor (:func:`correlation_inflation`). Each fix's sigma is
+widened by the IMU path's error bound at its time (the detector's ``excursion_floor_mps2``,
+second-order tilt and gyro cross-axis terms, integrated twice).
+
+Frames and units: body FRD for the IMU; north/east [m] for the fixes; SI inside.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.recording import GnssFixes, ImuData
+from ..core.stationary_params import StationaryParams
+
+#: Gravity for error budgets only [m/s^2].
+G_APPROX = 9.8
+
+
+@dataclass(frozen=True)
+class LinkedMotion:
+    """What the IMU-linked fixes say about a span's velocity.
+
+    Attributes
+    ----------
+    speed_mps : float
+        Fitted horizontal speed through the span, ``|v_n|`` [m/s].
+    speed_sigma_mps : float
+        Its 1-sigma per axis at the fitted heading, ``sqrt((var v_N + var v_E) / 2)`` [m/s].
+    glr : float
+        ``chi2_rest - chi2_moving`` (chi-square, 2 dof, at rest) [-].
+    n_fixes : int
+        Fixes used (inside the span and within ``link_reach_s`` around it).
+    """
+
+    speed_mps: float
+    speed_sigma_mps: float
+    glr: float
+    n_fixes: int
+
+    def shows_motion(self, p: StationaryParams) -> bool:
+        """True when "at rest" is refuted: the ratio beyond the two-dimensional ``gnss_k_sigma``
+        (its square is the chi-square-2 quantile of the same probability) and the speed above
+        ``gnss_speed_floor_mps`` (the fixes' own slow wander)."""
+        return self.glr > p.gnss_k_sigma**2 and self.speed_mps > p.gnss_speed_floor_mps
+
+
+def outward_samples(
+    t: np.ndarray, i_edge: int, before: bool, reach_s: float, gap_limit_s: float
+) -> np.ndarray:
+    """IMU sample indices from the span's edge outward over ``reach_s`` seconds, cut at the first
+    interval longer than ``gap_limit_s`` (nothing is known across an IMU gap).
+
+    ``i_edge`` is the span's first sample (``before``) or its last; the edge itself is excluded.
+    """
+    if before:
+        lo = int(np.searchsorted(t, t[i_edge] - reach_s, side="left"))
+        idx = np.arange(i_edge - 1, lo - 1, -1)
+    else:
+        hi = int(np.searchsorted(t, t[i_edge] + reach_s, side="right"))
+        idx = np.arange(i_edge + 1, hi)
+    steps = np.abs(np.diff(t[np.concatenate([[i_edge], idx])]))
+    gap = np.flatnonzero(steps > gap_limit_s)
+    return idx[: gap[0]] if gap.size else idx
+
+
+def level_path(
+    imu: ImuData,
+    idx: np.ndarray,
+    i_edge: int,
+    f_ref_b: np.ndarray,
+    omega_ref_b: np.ndarray,
+    p: StationaryParams,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The IMU path from a span's edge outward, in the span's level axes, and its error bound.
+
+    Parameters
+    ----------
+    idx : ndarray of int
+        Samples ordered outward from the edge sample ``i_edge`` (:func:`outward_samples`).
+    f_ref_b, omega_ref_b : ndarray, shape (3,)
+        The span's mean specific force [m/s^2] and angular rate [rad/s], body FRD: the rest
+        reference (gravity and both biases).
+
+    Returns
+    -------
+    t : ndarray, shape (n,)
+        Sample times [s].
+    P : ndarray, shape (n, 2)
+        ``p(t) - p_edge - v_edge (t - t_edge)`` in the span's level x/y axes [m].
+    bound : ndarray, shape (n,)
+        Error bound of ``|P|`` [m].
+    """
+    t = imu.t[idx]
+    sign = 1.0 if len(idx) and idx[0] > i_edge else -1.0
+    dt = np.abs(np.diff(np.concatenate([[imu.t[i_edge]], t])))
+    # Rotation from the span to each sample (small-angle in roll and pitch, yaw kept whole).
+    theta = sign * np.cumsum((imu.omega_ib_b[idx] - omega_ref_b) * dt[:, None], axis=0)
+    tilt = theta * np.array([1.0, 1.0, 0.0])  # a turn about body z leaves gravity in place
+    f = imu.f_b[idx] - f_ref_b + np.cross(tilt, f_ref_b)
+    c, s = np.cos(theta[:, 2]), np.sin(theta[:, 2])
+    a = np.column_stack([c * f[:, 0] - s * f[:, 1], s * f[:, 0] + c * f[:, 1]])
+    V = sign * np.cumsum(a * dt[:, None], axis=0)
+    P = sign * np.cumsum(V * dt[:, None], axis=0)
+    err = G_APPROX * (
+        0.5 * np.sum(theta[:, :2] ** 2, axis=1) + p.chain_cross_axis * np.abs(theta[:, 2])
+    )
+    err_v = np.cumsum((err + p.excursion_floor_mps2) * dt)
+    return t, P, np.cumsum(err_v * dt)
+
+
+def _rows(t_k, p_k, P_k, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Design rows (north then east per fix) for ``[p_N, p_E, v_N, v_E, cos, sin]``."""
+    m = len(t_k)
+    A = np.zeros((2 * m, 6))
+    A[0::2, 0], A[1::2, 1] = 1.0, 1.0
+    A[0::2, 2], A[1::2, 3] = t_k - t_s, t_k - t_s
+    A[0::2, 4], A[0::2, 5] = P_k[:, 0], -P_k[:, 1]
+    A[1::2, 4], A[1::2, 5] = P_k[:, 1], P_k[:, 0]
+    return A, p_k[:, :2].reshape(-1)
+
+
+def _side(imu, span, gnss, before: bool, p: StationaryParams, dt_med: float):
+    """Fix indices, IMU paths and path bounds at the fixes on one side of the span (maybe empty)."""
+    i_edge = span.i_start if before else span.i_end - 1
+    idx = outward_samples(imu.t, i_edge, before, p.link_reach_s, p.gap_factor * dt_med)
+    empty = np.zeros(0, int), np.zeros((0, 2)), np.zeros(0)
+    if len(idx) == 0:
+        return empty
+    t, P, bound = level_path(imu, idx, i_edge, span.f_mean_b, span.omega_mean_b, p)
+    lo, hi = min(t[0], t[-1]), max(t[0], t[-1])
+    k = np.flatnonzero((gnss.t >= lo) & (gnss.t <= hi))
+    if k.size == 0:
+        return empty
+    order = np.argsort(t)
+    t_sorted = t[order]
+    P_k = np.column_stack([np.interp(gnss.t[k], t_sorted, P[order, j]) for j in range(2)])
+    return k, P_k, np.interp(gnss.t[k], t_sorted, bound[order])
+
+
+def linked_motion(
+    imu: ImuData,
+    span,
+    gnss: GnssFixes,
+    p_n: np.ndarray,
+    p: StationaryParams,
+    dt_med: float,
+) -> LinkedMotion | None:
+    """Test "at rest" for a span against the fixes in it and within ``link_reach_s`` around
+    it, carried to it by the IMU (module notes). None when there are too few fixes to tell.
+
+    Parameters
+    ----------
+    span : gnssacc.prepare.stationary.StationarySpan
+        Its sample range and mean readings are used.
+    p_n : ndarray, shape (M, 3)
+        The fixes in the local NED frame [m].
+    dt_med : float
+        Median IMU interval [s].
+    """
+    k0 = int(np.searchsorted(gnss.t, span.t_start, side="left"))
+    k1 = int(np.searchsorted(gnss.t, span.t_end, side="right"))
+    parts = [_side(imu, span, gnss, True, p, dt_med)]
+    parts.append((np.arange(k0, k1), np.zeros((k1 - k0, 2)), np.zeros(k1 - k0)))
+    parts.append(_side(imu, span, gnss, False, p, dt_med))
+    k, P_k, bound = (np.concatenate(x) for x in zip(*parts))
+    t_k = gnss.t[k]
+    if len(t_k) < 3 or np.ptp(t_k) <= 0.0:
+        return None
+    A, y = _rows(t_k, p_n[k], P_k, span.t_start)
+    var = gnss.sigma_ned[k, :2] ** 2 + bound[:, None] ** 2
+    interval = float(np.median(np.diff(np.unique(t_k)))) if len(t_k) > 1 else p.gnss_corr_s
+    var = var * max(1.0, p.gnss_corr_s / max(interval, 1e-9))
+    w = 1.0 / np.sqrt(var.reshape(-1))
+    Aw, yw = A * w[:, None], y * w
+    chi_full, x_full, resid = _profiled_fit(Aw[:, :4], Aw[:, 4:], yw)
+    chi_rest = _profiled_fit(Aw[:, :2], Aw[:, 4:], yw)[0]
+    inflate = correlation_inflation(resid.reshape(-1, 2))
+    cov_v = np.linalg.pinv(Aw[:, :4].T @ Aw[:, :4])[2:, 2:] * inflate
+    return LinkedMotion(
+        float(np.hypot(*x_full[2:4])),
+        float(np.sqrt(max(np.trace(cov_v), 0.0) / 2.0)),
+        max(chi_rest - chi_full, 0.0) / inflate,
+        len(t_k),
+    )
+
+
+def correlation_inflation(r: np.ndarray) -> float:
+    """Variance factor for fix errors correlated from one fix to the next, learnt from the
+    normalised residuals ``r`` (n, 2) of the fit, in time order: ``(1 + rho) / (1 - rho)`` for
+    their lag-1 correlation ``rho`` (an AR(1) error's variance of a mean or slope, the factor
+    by which the fixes count less than independent ones); clipped to ``[1, n / 3]``.
+
+    A receiver's errors wander (multipath, atmosphere; tens of seconds), and over the tens of
+    seconds of fixes used here that wander would pass for a slow crawl."""
+    n = len(r)
+    power = float(np.sum(r**2))
+    if n < 4 or power <= 0.0:
+        return 1.0
+    rho = min(max(float(np.sum(r[1:] * r[:-1])) / power, 0.0), 0.99)
+    return float(min(max((1.0 + rho) / (1.0 - rho), 1.0), max(n / 3.0, 1.0)))
+
+
+def _profiled_fit(L: np.ndarray, G: np.ndarray, y: np.ndarray, n_psi: int = 3600):
+    """Least squares ``y ~ L x + G (cos psi, sin psi)`` minimised over the linear ``x`` and the
+    heading ``psi`` (a grid of ``n_psi``; the residual is a quadratic form in ``(cos, sin)``
+    once the linear part is projected out). Returns the minimum chi-square, ``x`` there and the
+    residuals."""
+    Q, _ = np.linalg.qr(L)
+    proj = lambda v: v - Q @ (Q.T @ v)  # noqa: E731 - the residual maker of L
+    r0, R = proj(y), np.column_stack([proj(G[:, 0]), proj(G[:, 1])])
+    psi = np.linspace(0.0, 2.0 * np.pi, n_psi, endpoint=False)
+    cs = np.vstack([np.cos(psi), np.sin(psi)])
+    M, b = R.T @ R, R.T @ r0
+    chi = r0 @ r0 - 2.0 * (b @ cs) + np.einsum("ik,ij,jk->k", cs, M, cs)
+    k = int(np.argmin(chi))
+    x = np.linalg.lstsq(L, y - G @ cs[:, k], rcond=None)[0]
+    return float(chi[k]), x, y - L @ x - G @ cs[:, k]
