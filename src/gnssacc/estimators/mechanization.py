@@ -45,7 +45,9 @@ _GE, _K, _M = earth.GAMMA_E, earth.SOMIGLIANA_K, earth.M_RATIO
 
 
 @njit(cache=True)
-def _radii(lat):
+def radii(lat):
+    """Meridian and prime-vertical radii of curvature ``R_M, R_N`` [m] at latitude ``lat`` [rad]
+    (WGS-84; compiled, the same as :func:`gnssacc.core.earth.radii`)."""
     s2 = np.sin(lat) ** 2
     w = 1.0 - _E2 * s2
     return _A * (1.0 - _E2) / w**1.5, _A / np.sqrt(w)
@@ -110,7 +112,7 @@ def _mm3_into(A, B, out):
 def _strapdown(pos, v_n, R_nb, f_b, omega_ib_b, dt, w_ie_sign, work):
     """:func:`strapdown_step` with a (3, 3, 3) work array: no allocation in the per-sample path."""
     lat, h = pos[0], pos[2]
-    R_M, R_N = _radii(lat)
+    R_M, R_N = radii(lat)
     W = _W * w_ie_sign
     wie0, wie2 = W * np.cos(lat), -W * np.sin(lat)
     wen0, wen1, wen2 = v_n[1] / (R_N + h), -v_n[0] / (R_M + h), -v_n[1] * np.tan(lat) / (R_N + h)
@@ -231,7 +233,7 @@ def apply_correction(pos, v_n, R_nb, b_a, b_g, extra, dx):
     (:class:`gnssacc.estimators.ekf.FilterState`: the GNSS Gauss-Markov error, the odometry scale
     factor), corrected as ``x_e <- x_e - dx_e``.
     """
-    R_M, R_N = _radii(pos[0])
+    R_M, R_N = radii(pos[0])
     pos[0] -= dx[0] / (R_M + pos[2])
     pos[1] -= dx[1] / ((R_N + pos[2]) * np.cos(pos[0]))
     pos[2] += dx[2]
@@ -312,7 +314,7 @@ def _system_matrix_into(F, pos, v_n, R_nb, f_b, w_ie_sign):
     caller) stays zero."""
     lat, h = pos[0], pos[2]
     vN, vE, vD = v_n[0], v_n[1], v_n[2]
-    R_M, R_N = _radii(lat)
+    R_M, R_N = radii(lat)
     W = _W * w_ie_sign
     g, dg_dh = _gravity(lat, h)
     rm, rn = R_M + h, R_N + h

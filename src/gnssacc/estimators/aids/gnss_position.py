@@ -32,8 +32,8 @@ import math
 import numpy as np
 from numba import njit
 
-from ...core.earth import A, E2
 from ...core.rotations import skew
+from ..mechanization import radii
 from ..layout import GNSS_ERROR, I_ATT, I_POS, SYM_B, SYM_G, SYM_V, SYM_X, MarkovBlock
 from ..small_linalg import matvec
 from .base import AidSpec, EkfAid, Measurement, SmootherAid
@@ -55,9 +55,8 @@ def position_model(pos, R_nb, lever_b, lat, lon, h, gm, i_gm, n):
     [rad], h [m]) and ``R_nb``, ``i_gm`` the index of the Gauss-Markov fix error's first state
     (-1: not modelled) and ``gm`` (3,) its nominal value [m, NED], ``n`` states; compiled (the
     EKF's per-fix path), with numpy's arithmetic (:mod:`gnssacc.estimators.small_linalg`). The
-    radii are :func:`gnssacc.core.earth.radii`'s."""
-    w = 1.0 - E2 * math.sin(pos[0]) ** 2
-    R_M, R_N = A * (1.0 - E2) / w**1.5, A / math.sqrt(w)
+    radii are :func:`gnssacc.estimators.mechanization.radii`'s."""
+    R_M, R_N = radii(pos[0])
     l_n = matvec(R_nb, lever_b, R_nb.strides[1] < R_nb.strides[0])
     dz = np.empty(3)
     dz[0] = (pos[0] - lat) * (R_M + pos[2]) + l_n[0]
