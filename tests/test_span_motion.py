@@ -74,6 +74,27 @@ def test_level_path_closed_form_both_sides():
     assert np.max(np.abs(P - circle)) < 0.01 * np.max(np.abs(circle)) + 1e-3
 
 
+def test_level_path_of_an_antenna_swinging_in_a_pivot():
+    # A pivot on the spot at yaw rate w with the IMU at the centre: the IMU does not move, the
+    # antenna at lever arm l swings on a circle, P = R_z(w tau) l_xy - l_xy.
+    t = np.arange(0.0, 10.0 + DT / 2, DT)
+    w, lever = 0.3, np.array([1.0, -0.5, -0.8])
+    f_b = np.tile([0.0, 0.0, -G], (len(t), 1))
+    imu = ImuData(t, f_b, np.tile([0.0, 0.0, w], (len(t), 1)))
+    p, i_edge = StationaryParams(), 200
+    for before in (True, False):
+        idx = outward_samples(t, i_edge, before, 5.0, 3 * DT)
+        tt, P, _ = level_path(imu, idx, i_edge, f_b[0], np.zeros(3), p, lever)
+        a = w * (tt - t[i_edge])
+        swing = np.column_stack(
+            [
+                np.cos(a) * lever[0] - np.sin(a) * lever[1],
+                np.sin(a) * lever[0] + np.cos(a) * lever[1],
+            ]
+        )
+        assert np.max(np.abs(P - (swing - lever[:2]))) < 0.01
+
+
 def test_outward_samples_stop_at_an_imu_gap():
     t = np.concatenate([np.arange(0.0, 5.0, DT), np.arange(5.5, 10.0, DT)])
     idx = outward_samples(t, 100, False, 8.0, 3 * DT)

@@ -200,6 +200,25 @@ def test_cruise_inside_a_gnss_outage_rejected_by_the_fixes_around_it():
     assert any(r["t_start"] > 25.0 and r["t_end"] < 60.0 for r in linked), report.rejected
 
 
+def test_antenna_swing_around_a_pivot_is_not_motion():
+    # Precise fixes of an antenna 1.2 m from the IMU: the UGV pivots on the spot next to its
+    # stops and the antenna swings by up to 2.3 m, which the fixes see. Told the lever arm, the
+    # detector keeps every stop; not told, it refuses those the swing contradicts.
+    lever = (1.0, 0.5, -1.0)
+    run = sim.simulate("ugv", 300.0, imu_grade="industrial", noise="rtk", seed=0, lever_arm_b=lever)
+    t, speed = run.truth.t, np.hypot(run.truth.v_n[:, 0], run.truth.v_n[:, 1])
+
+    def at_rest(t0, t1):
+        return speed[(t >= t0) & (t <= t1)].max() <= 0.05
+
+    told = detect_stationary(run.imu, run.gnss, run.origin, lever_arm_b=lever)
+    blind = detect_stationary(run.imu, run.gnss, run.origin)
+    assert all(at_rest(s.t_start, s.t_end) for s in told.spans)
+    assert not [r for r in told.rejected if at_rest(r["t_start"], r["t_end"])]
+    assert sum(at_rest(r["t_start"], r["t_end"]) for r in blind.rejected) >= 3
+    assert len(told.spans) >= len(blind.spans) + 3
+
+
 def test_slow_creep_rejected_by_gnss_stops_kept():
     scen = sim.Scenario("creep").hold(10).speed_to(0.5, 2.0).cruise(30).speed_to(0.0, 2.0).hold(10)
     run, truth = _sim(scen, scen.t_end)

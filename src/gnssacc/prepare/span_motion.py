@@ -90,8 +90,10 @@ def level_path(
     f_ref_b: np.ndarray,
     omega_ref_b: np.ndarray,
     p: StationaryParams,
+    lever_b: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The IMU path from a span's edge outward, in the span's level axes, and its error bound.
+    """The antenna's path from a span's edge outward, in the span's level axes, by the IMU, and
+    its error bound.
 
     Parameters
     ----------
@@ -100,13 +102,16 @@ def level_path(
     f_ref_b, omega_ref_b : ndarray, shape (3,)
         The span's mean specific force [m/s^2] and angular rate [rad/s], body FRD: the rest
         reference (gravity and both biases).
+    lever_b : ndarray, shape (3,), optional
+        The antenna from the IMU, body FRD [m]: it swings about the IMU as the vehicle turns
+        (the heading's swing is modelled, the tilt's ``|l| |theta_xy|`` bounded).
 
     Returns
     -------
     t : ndarray, shape (n,)
         Sample times [s].
     P : ndarray, shape (n, 2)
-        ``p(t) - p_edge - v_edge (t - t_edge)`` in the span's level x/y axes [m].
+        ``p(t) - p_edge - v_edge (t - t_edge)`` of the antenna in the span's level x/y axes [m].
     bound : ndarray, shape (n,)
         Error bound of ``|P|`` [m].
     """
@@ -125,7 +130,12 @@ def level_path(
         0.5 * np.sum(theta[:, :2] ** 2, axis=1) + p.chain_cross_axis * np.abs(theta[:, 2])
     )
     err_v = np.cumsum((err + p.excursion_floor_mps2) * dt)
-    return t, P, np.cumsum(err_v * dt)
+    bound = np.cumsum(err_v * dt)
+    if lever_b is not None and np.any(lever_b):
+        swung = np.column_stack([c * lever_b[0] - s * lever_b[1], s * lever_b[0] + c * lever_b[1]])
+        P = P + swung - lever_b[:2]
+        bound = bound + np.linalg.norm(lever_b) * np.linalg.norm(theta[:, :2], axis=1)
+    return t, P, bound
 
 
 def _rows(t_k, p_k, P_k, t_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -139,14 +149,14 @@ def _rows(t_k, p_k, P_k, t_s: float) -> tuple[np.ndarray, np.ndarray]:
     return A, p_k[:, :2].reshape(-1)
 
 
-def _side(imu, span, gnss, before: bool, p: StationaryParams, dt_med: float):
+def _side(imu, span, gnss, before: bool, p: StationaryParams, dt_med: float, lever_b=None):
     """Fix indices, IMU paths and path bounds at the fixes on one side of the span (maybe empty)."""
     i_edge = span.i_start if before else span.i_end - 1
     idx = outward_samples(imu.t, i_edge, before, p.link_reach_s, p.gap_factor * dt_med)
     empty = np.zeros(0, int), np.zeros((0, 2)), np.zeros(0)
     if len(idx) == 0:
         return empty
-    t, P, bound = level_path(imu, idx, i_edge, span.f_mean_b, span.omega_mean_b, p)
+    t, P, bound = level_path(imu, idx, i_edge, span.f_mean_b, span.omega_mean_b, p, lever_b)
     lo, hi = min(t[0], t[-1]), max(t[0], t[-1])
     k = np.flatnonzero((gnss.t >= lo) & (gnss.t <= hi))
     if k.size == 0:
@@ -164,6 +174,7 @@ def linked_motion(
     p_n: np.ndarray,
     p: StationaryParams,
     dt_med: float,
+    lever_b: np.ndarray | None = None,
 ) -> LinkedMotion | None:
     """Test "at rest" for a span against the fixes in it and within ``link_reach_s`` around
     it, carried to it by the IMU (module notes). None when there are too few fixes to tell.
@@ -176,12 +187,14 @@ def linked_motion(
         The fixes in the local NED frame [m].
     dt_med : float
         Median IMU interval [s].
+    lever_b : ndarray, shape (3,), optional
+        The GNSS antenna from the IMU, body FRD [m] (default: at the IMU).
     """
     k0 = int(np.searchsorted(gnss.t, span.t_start, side="left"))
     k1 = int(np.searchsorted(gnss.t, span.t_end, side="right"))
-    parts = [_side(imu, span, gnss, True, p, dt_med)]
+    parts = [_side(imu, span, gnss, True, p, dt_med, lever_b)]
     parts.append((np.arange(k0, k1), np.zeros((k1 - k0, 2)), np.zeros(k1 - k0)))
-    parts.append(_side(imu, span, gnss, False, p, dt_med))
+    parts.append(_side(imu, span, gnss, False, p, dt_med, lever_b))
     k, P_k, bound = (np.concatenate(x) for x in zip(*parts))
     t_k = gnss.t[k]
     if len(t_k) < 3 or np.ptp(t_k) <= 0.0:

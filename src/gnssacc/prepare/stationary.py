@@ -420,7 +420,12 @@ def gnss_speed(
 
 
 def _excursion_bound(
-    imu: ImuData, span: StationarySpan, idx: np.ndarray, p: StationaryParams, dt_med: float
+    imu: ImuData,
+    span: StationarySpan,
+    idx: np.ndarray,
+    p: StationaryParams,
+    dt_med: float,
+    lever_b: np.ndarray,
 ):
     """How far the vehicle can have got from its stationary position, as a function of the time
     since (or until) the span, given what the IMU measured on one side of it.
@@ -429,12 +434,16 @@ def _excursion_bound(
     change from the span's mean, ``|f - f_mean|`` (in cell means, so vibration averages out), plus
     gravity leaking through the tilt change ``g |theta_xy|`` (gyro x/y integrated from the span
     edge; a yaw change does not move gravity), plus ``excursion_floor_mps2``. Integrating twice
-    gives the displacement bound ``D(d) = int_0^d (d - u) alpha(u) du``.
+    gives the displacement bound ``D(d) = int_0^d (d - u) alpha(u) du``. The fixes are the
+    antenna's, which swings about the IMU as the vehicle turns (a pivot at a stop): the bound
+    adds that swing, ``2 |l_xy| |sin(psi / 2)| + |l| |theta_xy|`` for the heading change ``psi``.
 
     Parameters
     ----------
     idx : ndarray of int
         IMU sample indices ordered outward from the span edge (stopped at the first IMU gap).
+    lever_b : ndarray, shape (3,)
+        The antenna's position from the IMU, body FRD [m] (the configured GNSS lever arm).
 
     Returns
     -------
@@ -446,9 +455,11 @@ def _excursion_bound(
     n = len(idx) // c * c
     if n == 0:
         return np.zeros(1), np.zeros(1)
-    theta = np.cumsum((imu.omega_ib_b[idx[:n], :2] - span.omega_mean_b[:2]) * dt[:n, None], axis=0)
+    theta = np.cumsum((imu.omega_ib_b[idx[:n]] - span.omega_mean_b) * dt[:n, None], axis=0)
     f_cell = imu.f_b[idx[:n]].reshape(-1, c, 3).mean(axis=1)
-    tilt = np.linalg.norm(theta[c - 1 :: c], axis=1)
+    tilt = np.linalg.norm(theta[c - 1 :: c, :2], axis=1)
+    swing = 2.0 * np.hypot(*lever_b[:2]) * np.abs(np.sin(0.5 * theta[c - 1 :: c, 2]))
+    swing += np.linalg.norm(lever_b) * tilt
     alpha = (
         np.linalg.norm(f_cell - span.f_mean_b, axis=1) + G_APPROX * tilt + p.excursion_floor_mps2
     )
@@ -456,7 +467,7 @@ def _excursion_bound(
     d_end = np.cumsum(width)
     u = d_end - 0.5 * width
     s1, s2 = np.cumsum(alpha * width), np.cumsum(alpha * width * u)
-    return np.concatenate([[0.0], d_end]), np.concatenate([[0.0], d_end * s1 - s2])
+    return np.concatenate([[0.0], d_end]), np.concatenate([[0.0], d_end * s1 - s2 + swing])
 
 
 def _side_indices(
@@ -480,7 +491,12 @@ def _side_indices(
 
 
 def _margin_fixes(
-    imu: ImuData, span: StationarySpan, gnss: GnssFixes, p: StationaryParams, dt_med: float
+    imu: ImuData,
+    span: StationarySpan,
+    gnss: GnssFixes,
+    p: StationaryParams,
+    dt_med: float,
+    lever_b: np.ndarray,
 ):
     """Fixes within ``gnss_margin_s`` outside the span and the IMU-bounded excursion at each [m]."""
     ks, bounds = [], []
@@ -494,7 +510,7 @@ def _margin_fixes(
             (np.abs(gnss.t - edge) <= reach) & ((gnss.t < span.t_start) | (gnss.t > span.t_end))
         )
         if k.size:
-            d_grid, D = _excursion_bound(imu, span, idx, p, dt_med)
+            d_grid, D = _excursion_bound(imu, span, idx, p, dt_med, lever_b)
             ks.append(k)
             bounds.append(np.interp(np.abs(gnss.t[k] - edge), d_grid, D))
     if not ks:
@@ -509,6 +525,7 @@ def _gnss_verdict(
     p_n: np.ndarray,
     p: StationaryParams,
     dt_med: float,
+    lever_b: np.ndarray,
 ) -> bool:
     """Fill the span's GNSS fields; False when the fixes show it moving (module notes, step 4).
 
@@ -521,7 +538,7 @@ def _gnss_verdict(
     k0 = int(np.searchsorted(gnss.t, span.t_start, side="left"))
     k1 = int(np.searchsorted(gnss.t, span.t_end, side="right"))
     span.gnss_n_fixes = k1 - k0
-    k_out, bound = _margin_fixes(imu, span, gnss, p, dt_med)
+    k_out, bound = _margin_fixes(imu, span, gnss, p, dt_med, lever_b)
     # In the line fit only the outside fixes the vehicle cannot have left by more than half a
     # sigma: a real stop's approach and departure would otherwise pull the fit like motion.
     near = bound <= 0.5 * np.sqrt(np.mean(gnss.sigma_ned[k_out, :2] ** 2, axis=1))
@@ -724,10 +741,10 @@ def _resolve_chain(
     return [s for g, ok in zip(groups, alive) if ok for s in g]
 
 
-def _linked_motion(span, imu, gnss, p_n, p: StationaryParams, dt_med: float) -> bool:
+def _linked_motion(span, imu, gnss, p_n, p: StationaryParams, dt_med: float, lever_b) -> bool:
     """True when the fixes within ``link_reach_s`` around the span, carried to it by the IMU,
     refute "at rest" (module notes, step 4b); the fitted speed is kept on the span."""
-    linked = linked_motion(imu, span, gnss, p_n, p, dt_med) if len(gnss) else None
+    linked = linked_motion(imu, span, gnss, p_n, p, dt_med, lever_b) if len(gnss) else None
     if linked is None:
         return False
     span.linked_speed_mps, span.linked_glr = linked.speed_mps, linked.glr
@@ -747,7 +764,11 @@ def _rejection(span: StationarySpan, why: str) -> dict:
 
 
 def detect_stationary(
-    imu: ImuData, gnss: GnssFixes, origin: LocalTangentFrame, params: StationaryParams | None = None
+    imu: ImuData,
+    gnss: GnssFixes,
+    origin: LocalTangentFrame,
+    params: StationaryParams | None = None,
+    lever_arm_b=None,
 ) -> StationaryReport:
     """Stationary spans of a ground vehicle from its IMU, checked against its GNSS fixes.
 
@@ -760,6 +781,9 @@ def detect_stationary(
     origin : LocalTangentFrame
         Tangent plane for the fixes in metres.
     params : StationaryParams, optional
+    lever_arm_b : array_like, shape (3,), optional
+        The GNSS antenna's position from the IMU, body FRD [m] (default: at the IMU). The fixes
+        are the antenna's; as the vehicle turns it swings about the IMU.
 
     Returns
     -------
@@ -767,15 +791,16 @@ def detect_stationary(
         Disjoint spans in time order; see the module notes for the algorithm.
     """
     p = params or StationaryParams()
+    lever_b = np.zeros(3) if lever_arm_b is None else np.asarray(lever_arm_b, float)
     dt = _median_interval(imu.t) if len(imu) > 1 else 0.0
     block = max(int(round(p.block_s / dt)), 1) if dt > 0 else 1
     p_n = origin.to_ned(gnss.lat, gnss.lon, gnss.h) if len(gnss) else np.zeros((0, 3))
     spans, rejected = [], []
     for i0, i1 in imu_still_stretches(imu, p):
         span = _span(imu, i0, i1, block)
-        if not _gnss_verdict(span, imu, gnss, p_n, p, dt):
+        if not _gnss_verdict(span, imu, gnss, p_n, p, dt, lever_b):
             rejected.append(_rejection(span, "GNSS shows motion"))
-        elif _linked_motion(span, imu, gnss, p_n, p, dt):
+        elif _linked_motion(span, imu, gnss, p_n, p, dt, lever_b):
             rejected.append(_rejection(span, "GNSS around it, carried by the IMU, shows motion"))
         else:
             spans.append(span)
