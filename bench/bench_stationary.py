@@ -8,7 +8,10 @@ kept while moving (number, seconds, worst true speed), the true stops kept, and 
 refused and by which step. A span counts as moving when the true horizontal speed exceeds
 0.05 m/s anywhere in it.
 
-    python bench/bench_stationary.py [--seeds 2] [--quick]
+The simulator's receiver also gives Doppler velocities (0.05 m/s), which the detector uses as
+the pipeline does; ``--no-velocity`` withholds them.
+
+    python bench/bench_stationary.py [--seeds 2] [--quick] [--no-velocity]
 """
 
 from __future__ import annotations
@@ -26,11 +29,12 @@ from gnssacc.prepare.stationary import detect_stationary
 MOVING_MPS = 0.05
 
 
-def score(run) -> dict:
+def score(run, velocity=None) -> dict:
     """Counts for one run: ``false``/``false_s``/``false_speed`` (kept while moving), ``true``/
-    ``true_s`` (kept at rest), ``refused`` (a Counter of the reasons of true stops refused)."""
+    ``true_s`` (kept at rest), ``refused`` (a Counter of the reasons of true stops refused);
+    ``velocity``: the receiver's velocities given to the detector (None: fixes only)."""
     t0 = time.perf_counter()
-    report = detect_stationary(run.imu, run.gnss, run.origin)
+    report = detect_stationary(run.imu, run.gnss, run.origin, velocity=velocity)
     seconds = time.perf_counter() - t0
     tt, speed = run.truth.t, np.linalg.norm(run.truth.v_n[:, :2], axis=1)
 
@@ -58,6 +62,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--quick", action="store_true", help="ugv and car only, one seed")
+    ap.add_argument(
+        "--no-velocity", action="store_true", help="fixes only (as for a receiver without them)"
+    )
     a = ap.parse_args()
     scenarios = ("ugv", "car") if a.quick else ("ugv", "ugv-slow", "car", "car-city")
     seeds = range(1 if a.quick else a.seeds)
@@ -69,7 +76,7 @@ def main() -> None:
     for sc, grade, noise, outage, seed in grid:
         spec = f"sim:{sc},imu={grade},duration=300"
         run = gnssacc.load(spec, seed=seed, noise=noise, outage_every=outage)
-        r = score(run)
+        r = score(run, None if a.no_velocity else run.gnss_vel)
         times.append(r.pop("seconds"))
         key = (sc, "outages" if outage else "no outage")
         acc = rows.setdefault(

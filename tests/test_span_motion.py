@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gnssacc.core.recording import GnssFixes, ImuData
+from gnssacc.core.recording import GnssFixes, GnssVelocity, ImuData
 from gnssacc.core.stationary_params import StationaryParams
 from gnssacc.prepare.span_motion import level_path, linked_motion, outward_samples
 
@@ -27,6 +27,17 @@ class _Span:
         self.t_start, self.t_end = float(imu.t[self.i_start]), float(imu.t[self.i_end - 1])
         self.f_mean_b = imu.f_b[self.i_start : self.i_end].mean(axis=0)
         self.omega_mean_b = imu.omega_ib_b[self.i_start : self.i_end].mean(axis=0)
+
+
+def _velocities(t, v, yaw: float, rng, sigma=0.05, rate_hz=5.0) -> GnssVelocity:
+    """Receiver velocities (north, east; down not measured) at ``rate_hz`` of a level straight
+    drive with speed ``v`` [m/s] at times ``t``, heading ``yaw`` [rad], 1-sigma ``sigma``."""
+    t_v = np.arange(t[0], t[-1] + 1e-9, 1.0 / rate_hz)
+    speed = np.interp(t_v, t, v)
+    v_ned = np.column_stack([speed * np.cos(yaw), speed * np.sin(yaw), np.full_like(t_v, np.nan)])
+    v_ned[:, :2] += rng.normal(0.0, sigma, (len(t_v), 2))
+    sig = np.column_stack([np.full((len(t_v), 2), sigma), np.full(len(t_v), np.nan)])
+    return GnssVelocity(t_v, v_ned, sig)
 
 
 def _straight(speed_of_t, duration: float, yaw: float, rng, sigma=3.0, bias=(0.05, -0.08)):
@@ -59,7 +70,8 @@ def test_level_path_closed_form_both_sides():
     i_edge = 500
     for before in (True, False):
         idx = outward_samples(t, i_edge, before, 4.0, 3 * DT)
-        tt, P, bound = level_path(imu, idx, i_edge, f_ref, w_ref, p)
+        path = level_path(imu, idx, i_edge, f_ref, w_ref, p)
+        tt, P, bound = path.t, path.P, path.bound
         tau = tt - t[i_edge]
         assert np.allclose(P[:, 0], 0.5 * a * tau**2, rtol=2e-2, atol=1e-3)
         assert np.allclose(P[:, 1], 0.0) and np.all(np.diff(bound) > 0.0)
@@ -68,7 +80,8 @@ def test_level_path_closed_form_both_sides():
     f_turn = np.column_stack([np.zeros_like(t), np.full_like(t, u * w), np.full_like(t, -G)])
     imu = ImuData(t, f_turn, np.tile([0.0, 0.0, w], (len(t), 1)))
     idx = outward_samples(t, i_edge, False, 4.0, 3 * DT)
-    tt, P, _ = level_path(imu, idx, i_edge, f_ref, w_ref, p)
+    path = level_path(imu, idx, i_edge, f_ref, w_ref, p)
+    tt, P = path.t, path.P
     tau = tt - t[i_edge]
     circle = np.column_stack([u / w * np.sin(w * tau) - u * tau, u / w * (1 - np.cos(w * tau))])
     assert np.max(np.abs(P - circle)) < 0.01 * np.max(np.abs(circle)) + 1e-3
@@ -84,7 +97,8 @@ def test_level_path_of_an_antenna_swinging_in_a_pivot():
     p, i_edge = StationaryParams(), 200
     for before in (True, False):
         idx = outward_samples(t, i_edge, before, 5.0, 3 * DT)
-        tt, P, _ = level_path(imu, idx, i_edge, f_b[0], np.zeros(3), p, lever)
+        path = level_path(imu, idx, i_edge, f_b[0], np.zeros(3), p, lever)
+        tt, P = path.t, path.P
         a = w * (tt - t[i_edge])
         swing = np.column_stack(
             [
@@ -147,3 +161,41 @@ def test_slow_cruise_refuted_with_fixes_on_one_side_only(speed):
     p = StationaryParams()
     linked = linked_motion(imu, _Span(imu, 27.0, 33.0), fixes.select(keep), p_n[keep], p, DT)
     assert linked is not None and linked.shows_motion(p)
+
+
+def test_crawl_refuted_by_gnss_velocities_alone():
+    # A 0.5 m/s IMU-still crawl with no fixes at all, only the receiver's velocities up to 20 s
+    # before the span: carried by the IMU they show the crawl; without them there is no verdict.
+    rng = np.random.default_rng(3)
+    imu, _, _, t, v = _straight(lambda t: np.full_like(t, 0.5), 60.0, 2.0, rng)
+    vel = _velocities(t, v, 2.0, rng)
+    vel = vel.select(vel.t < 20.0)
+    none = GnssFixes(np.zeros(0), *(np.zeros(0),) * 3, np.zeros((0, 3)))
+    p, span = StationaryParams(), _Span(imu, 30.0, 36.0)
+    linked = linked_motion(imu, span, none, np.zeros((0, 3)), p, DT, velocity=vel)
+    assert linked is not None and linked.shows_motion(p)
+    assert abs(linked.speed_mps - 0.5) < 0.1
+    assert linked_motion(imu, span, none, np.zeros((0, 3)), p, DT) is None
+
+
+def test_stop_with_gnss_velocities_kept_at_the_stated_false_alarm_rate():
+    # As the braking test above, with 5 Hz velocities (0.05 m/s) as well, outside a 6 s outage.
+    def speed(t):
+        return np.clip(6.0 - 1.5 * (t - 20.0), 0.0, 6.0) * (t < 30.0) + np.clip(
+            1.5 * (t - 32.0), 0.0, 6.0
+        ) * (t >= 30.0)
+
+    p, refused = StationaryParams(), 0
+    for seed in range(200):
+        rng = np.random.default_rng(seed)
+        yaw = rng.uniform(0, 2 * np.pi)
+        imu, fixes, p_n, t, v = _straight(speed, 50.0, yaw, rng, sigma=2.0)
+        vel = _velocities(t, v, yaw, rng)
+        keep, keep_v = (fixes.t < 23.0) | (fixes.t > 29.0), (vel.t < 23.0) | (vel.t > 29.0)
+        span = _Span(imu, 24.5, 29.5)
+        linked = linked_motion(
+            imu, span, fixes.select(keep), p_n[keep], p, DT, velocity=vel.select(keep_v)
+        )
+        assert linked is not None and linked.n_fixes > 100
+        refused += linked.shows_motion(p)
+    assert refused <= 3  # binomial(200, 0.0027) exceeds 3 with probability < 2 %

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.recording import GnssFixes, ImuData
+from ..core.recording import GnssFixes, GnssVelocity, ImuData
 from ..core.stationary_params import StationaryParams
 
 #: Gravity for error budgets only [m/s^2].
@@ -49,7 +49,7 @@ class LinkedMotion:
     glr : float
         ``chi2_rest - chi2_moving`` (chi-square, 2 dof, at rest) [-].
     n_fixes : int
-        Fixes used (inside the span and within ``link_reach_s`` around it).
+        Fixes and GNSS velocities used (inside the span and within ``link_reach_s`` around it).
     """
 
     speed_mps: float
@@ -83,6 +83,40 @@ def outward_samples(
     return idx[: gap[0]] if gap.size else idx
 
 
+@dataclass(frozen=True)
+class LevelPath:
+    """The antenna's motion from a span's edge outward, by the IMU, in the span's level axes.
+
+    Attributes
+    ----------
+    t : ndarray, shape (n,)
+        Sample times [s], outward from the edge.
+    P : ndarray, shape (n, 2)
+        ``p(t) - p_edge - v_edge (t - t_edge)`` of the antenna, level x/y [m].
+    bound : ndarray, shape (n,)
+        Error bound of ``|P|`` [m].
+    V : ndarray, shape (n, 2)
+        ``v(t) - v_edge`` of the antenna, level x/y [m/s].
+    bound_v : ndarray, shape (n,)
+        Error bound of ``|V|`` [m/s].
+    """
+
+    t: np.ndarray
+    P: np.ndarray
+    bound: np.ndarray
+    V: np.ndarray
+    bound_v: np.ndarray
+
+    def at(self, t_q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``P, bound, V, bound_v`` interpolated at times ``t_q`` [s] within the path."""
+        o = np.argsort(self.t)
+        ts = self.t[o]
+        col = lambda x: np.interp(t_q, ts, x[o])  # noqa: E731
+        P = np.column_stack([col(self.P[:, 0]), col(self.P[:, 1])])
+        V = np.column_stack([col(self.V[:, 0]), col(self.V[:, 1])])
+        return P, col(self.bound), V, col(self.bound_v)
+
+
 def level_path(
     imu: ImuData,
     idx: np.ndarray,
@@ -91,7 +125,7 @@ def level_path(
     omega_ref_b: np.ndarray,
     p: StationaryParams,
     lever_b: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> LevelPath:
     """The antenna's path from a span's edge outward, in the span's level axes, by the IMU, and
     its error bound.
 
@@ -105,40 +139,34 @@ def level_path(
     lever_b : ndarray, shape (3,), optional
         The antenna from the IMU, body FRD [m]: it swings about the IMU as the vehicle turns
         (the heading's swing is modelled, the tilt's ``|l| |theta_xy|`` bounded).
-
-    Returns
-    -------
-    t : ndarray, shape (n,)
-        Sample times [s].
-    P : ndarray, shape (n, 2)
-        ``p(t) - p_edge - v_edge (t - t_edge)`` of the antenna in the span's level x/y axes [m].
-    bound : ndarray, shape (n,)
-        Error bound of ``|P|`` [m].
     """
     t = imu.t[idx]
     sign = 1.0 if len(idx) and idx[0] > i_edge else -1.0
     dt = np.abs(np.diff(np.concatenate([[imu.t[i_edge]], t])))
+    w = imu.omega_ib_b[idx] - omega_ref_b
     # Rotation from the span to each sample (small-angle in roll and pitch, yaw kept whole).
-    theta = sign * np.cumsum((imu.omega_ib_b[idx] - omega_ref_b) * dt[:, None], axis=0)
+    theta = sign * np.cumsum(w * dt[:, None], axis=0)
     tilt = theta * np.array([1.0, 1.0, 0.0])  # a turn about body z leaves gravity in place
     f = imu.f_b[idx] - f_ref_b + np.cross(tilt, f_ref_b)
     c, s = np.cos(theta[:, 2]), np.sin(theta[:, 2])
-    a = np.column_stack([c * f[:, 0] - s * f[:, 1], s * f[:, 0] + c * f[:, 1]])
-    V = sign * np.cumsum(a * dt[:, None], axis=0)
+    level = lambda x: np.column_stack([c * x[:, 0] - s * x[:, 1], s * x[:, 0] + c * x[:, 1]])  # noqa: E731
+    V = sign * np.cumsum(level(f) * dt[:, None], axis=0)
     P = sign * np.cumsum(V * dt[:, None], axis=0)
     err = G_APPROX * (
         0.5 * np.sum(theta[:, :2] ** 2, axis=1) + p.chain_cross_axis * np.abs(theta[:, 2])
     )
-    err_v = np.cumsum((err + p.excursion_floor_mps2) * dt)
-    bound = np.cumsum(err_v * dt)
+    bound_v = np.cumsum((err + p.excursion_floor_mps2) * dt)
+    bound = np.cumsum(bound_v * dt)
     if lever_b is not None and np.any(lever_b):
-        swung = np.column_stack([c * lever_b[0] - s * lever_b[1], s * lever_b[0] + c * lever_b[1]])
-        P = P + swung - lever_b[:2]
+        l_b = np.tile(lever_b, (len(idx), 1))
+        P = P + level(l_b) - lever_b[:2]
+        V = V + level(np.cross(w, l_b))
         bound = bound + np.linalg.norm(lever_b) * np.linalg.norm(theta[:, :2], axis=1)
-    return t, P, bound
+        bound_v = bound_v + np.linalg.norm(lever_b) * np.linalg.norm(w[:, :2], axis=1)
+    return LevelPath(t, P, bound, V, bound_v)
 
 
-def _rows(t_k, p_k, P_k, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+def _position_rows(t_k, p_k, P_k, t_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Design rows (north then east per fix) for ``[p_N, p_E, v_N, v_E, cos, sin]``."""
     m = len(t_k)
     A = np.zeros((2 * m, 6))
@@ -149,22 +177,81 @@ def _rows(t_k, p_k, P_k, t_s: float) -> tuple[np.ndarray, np.ndarray]:
     return A, p_k[:, :2].reshape(-1)
 
 
-def _side(imu, span, gnss, before: bool, p: StationaryParams, dt_med: float, lever_b=None):
-    """Fix indices, IMU paths and path bounds at the fixes on one side of the span (maybe empty)."""
-    i_edge = span.i_start if before else span.i_end - 1
-    idx = outward_samples(imu.t, i_edge, before, p.link_reach_s, p.gap_factor * dt_med)
-    empty = np.zeros(0, int), np.zeros((0, 2)), np.zeros(0)
-    if len(idx) == 0:
-        return empty
-    t, P, bound = level_path(imu, idx, i_edge, span.f_mean_b, span.omega_mean_b, p, lever_b)
-    lo, hi = min(t[0], t[-1]), max(t[0], t[-1])
-    k = np.flatnonzero((gnss.t >= lo) & (gnss.t <= hi))
-    if k.size == 0:
-        return empty
-    order = np.argsort(t)
-    t_sorted = t[order]
-    P_k = np.column_stack([np.interp(gnss.t[k], t_sorted, P[order, j]) for j in range(2)])
-    return k, P_k, np.interp(gnss.t[k], t_sorted, bound[order])
+def _velocity_rows(v_k, V_k) -> tuple[np.ndarray, np.ndarray]:
+    """Design rows (north then east per velocity) for ``[p_N, p_E, v_N, v_E, cos, sin]``."""
+    A = np.zeros((2 * len(v_k), 6))
+    A[0::2, 2], A[1::2, 3] = 1.0, 1.0
+    A[0::2, 4], A[0::2, 5] = V_k[:, 0], -V_k[:, 1]
+    A[1::2, 4], A[1::2, 5] = V_k[:, 1], V_k[:, 0]
+    return A, v_k[:, :2].reshape(-1)
+
+
+def _paths(imu, span, p: StationaryParams, dt_med: float, lever_b) -> list:
+    """The level paths before and after the span (None where the IMU has no samples)."""
+    out = []
+    for before in (True, False):
+        i_edge = span.i_start if before else span.i_end - 1
+        idx = outward_samples(imu.t, i_edge, before, p.link_reach_s, p.gap_factor * dt_med)
+        path = None
+        if len(idx):
+            path = level_path(imu, idx, i_edge, span.f_mean_b, span.omega_mean_b, p, lever_b)
+        out.append(path)
+    return out
+
+
+def _pieces(times: np.ndarray, span, paths: list) -> list:
+    """Index arrays of ``times`` before, inside and after the span, each with its path (None
+    inside: the span does not move relative to itself)."""
+    inside = np.flatnonzero((times >= span.t_start) & (times <= span.t_end))
+    out = [(inside, None)]
+    for path in paths:
+        if path is not None:
+            lo, hi = path.t.min(), path.t.max()
+            out.append((np.flatnonzero((times >= lo) & (times <= hi)), path))
+    return out
+
+
+def _fix_block(gnss: GnssFixes, p_n, span, paths, p: StationaryParams):
+    """Position rows, observations and variances of the fixes in and around the span."""
+    A, y, var, t = [np.zeros((0, 6))], [np.zeros(0)], [np.zeros(0)], [np.zeros(0)]
+    for k, path in _pieces(gnss.t, span, paths):
+        if k.size == 0:
+            continue
+        if path is None:
+            P, bound = np.zeros((len(k), 2)), np.zeros(len(k))
+        else:
+            P, bound = path.at(gnss.t[k])[:2]
+        a, obs = _position_rows(gnss.t[k], p_n[k], P, span.t_start)
+        A.append(a)
+        y.append(obs)
+        var.append((gnss.sigma_ned[k, :2] ** 2 + bound[:, None] ** 2).reshape(-1))
+        t.append(gnss.t[k])
+    t_k = np.unique(np.concatenate(t))
+    interval = float(np.median(np.diff(t_k))) if len(t_k) > 1 else p.gnss_corr_s
+    corr = max(1.0, p.gnss_corr_s / max(interval, 1e-9))
+    return np.vstack(A), np.concatenate(y), np.concatenate(var) * corr
+
+
+def _velocity_block(vel, span, paths):
+    """Velocity rows, observations and variances of the GNSS velocities in and around the span
+    (those with both horizontal axes measured)."""
+    A, y, var = [np.zeros((0, 6))], [np.zeros(0)], [np.zeros(0)]
+    if vel is None or len(vel) == 0:
+        return A[0], y[0], var[0]
+    both = np.all(np.isfinite(vel.v_ned[:, :2]) & np.isfinite(vel.sigma_ned[:, :2]), axis=1)
+    for k, path in _pieces(vel.t, span, paths):
+        k = k[both[k]]
+        if k.size == 0:
+            continue
+        if path is None:
+            V, bound_v = np.zeros((len(k), 2)), np.zeros(len(k))
+        else:
+            V, bound_v = path.at(vel.t[k])[2:]
+        a, obs = _velocity_rows(vel.v_ned[k], V)
+        A.append(a)
+        y.append(obs)
+        var.append((vel.sigma_ned[k, :2] ** 2 + bound_v[:, None] ** 2).reshape(-1))
+    return np.vstack(A), np.concatenate(y), np.concatenate(var)
 
 
 def linked_motion(
@@ -175,9 +262,11 @@ def linked_motion(
     p: StationaryParams,
     dt_med: float,
     lever_b: np.ndarray | None = None,
+    velocity: GnssVelocity | None = None,
 ) -> LinkedMotion | None:
-    """Test "at rest" for a span against the fixes in it and within ``link_reach_s`` around
-    it, carried to it by the IMU (module notes). None when there are too few fixes to tell.
+    """Test "at rest" for a span against the fixes (and GNSS velocities) in it and within
+    ``link_reach_s`` around it, carried to it by the IMU (module notes). None when there are
+    too few to tell.
 
     Parameters
     ----------
@@ -189,31 +278,35 @@ def linked_motion(
         Median IMU interval [s].
     lever_b : ndarray, shape (3,), optional
         The GNSS antenna from the IMU, body FRD [m] (default: at the IMU).
+    velocity : GnssVelocity, optional
+        The receiver's velocities of the antenna [m/s], NED: rows ``v_n + R(psi) V(t)``.
     """
-    k0 = int(np.searchsorted(gnss.t, span.t_start, side="left"))
-    k1 = int(np.searchsorted(gnss.t, span.t_end, side="right"))
-    parts = [_side(imu, span, gnss, True, p, dt_med, lever_b)]
-    parts.append((np.arange(k0, k1), np.zeros((k1 - k0, 2)), np.zeros(k1 - k0)))
-    parts.append(_side(imu, span, gnss, False, p, dt_med, lever_b))
-    k, P_k, bound = (np.concatenate(x) for x in zip(*parts))
-    t_k = gnss.t[k]
-    if len(t_k) < 3 or np.ptp(t_k) <= 0.0:
+    paths = _paths(imu, span, p, dt_med, lever_b)
+    blocks = [_fix_block(gnss, p_n, span, paths, p), _velocity_block(velocity, span, paths)]
+    n_obs = sum(len(b[1]) // 2 for b in blocks)
+    if n_obs < 3:
         return None
-    A, y = _rows(t_k, p_n[k], P_k, span.t_start)
-    var = gnss.sigma_ned[k, :2] ** 2 + bound[:, None] ** 2
-    interval = float(np.median(np.diff(np.unique(t_k)))) if len(t_k) > 1 else p.gnss_corr_s
-    var = var * max(1.0, p.gnss_corr_s / max(interval, 1e-9))
-    w = 1.0 / np.sqrt(var.reshape(-1))
-    Aw, yw = A * w[:, None], y * w
-    chi_full, x_full, resid = _profiled_fit(Aw[:, :4], Aw[:, 4:], yw)
+    # Two passes: the first fit's residuals tell how correlated each kind's errors are.
+    inflate = [1.0, 1.0]
+    for _ in range(2):
+        A = np.vstack([b[0] for b in blocks])
+        y = np.concatenate([b[1] for b in blocks])
+        var = np.concatenate([b[2] * f for b, f in zip(blocks, inflate)])
+        w = 1.0 / np.sqrt(var)
+        Aw, yw = A * w[:, None], y * w
+        chi_full, x_full, resid = _profiled_fit(Aw[:, :4], Aw[:, 4:], yw)
+        n_fix = len(blocks[0][1])
+        inflate = [
+            f * correlation_inflation(r.reshape(-1, 2))
+            for f, r in zip(inflate, (resid[:n_fix], resid[n_fix:]))
+        ]
     chi_rest = _profiled_fit(Aw[:, :2], Aw[:, 4:], yw)[0]
-    inflate = correlation_inflation(resid.reshape(-1, 2))
-    cov_v = np.linalg.pinv(Aw[:, :4].T @ Aw[:, :4])[2:, 2:] * inflate
+    cov_v = np.linalg.pinv(Aw[:, :4].T @ Aw[:, :4])[2:, 2:]
     return LinkedMotion(
         float(np.hypot(*x_full[2:4])),
         float(np.sqrt(max(np.trace(cov_v), 0.0) / 2.0)),
-        max(chi_rest - chi_full, 0.0) / inflate,
-        len(t_k),
+        max(chi_rest - chi_full, 0.0),
+        n_obs,
     )
 
 

@@ -100,7 +100,7 @@ def start_pieces(run: RecordedRun, cfg: RunConfig, filter_pass: FilterPass) -> S
     estimators model it: :mod:`gnssacc.prepare.initialise`)."""
     quality = check_imu(run.imu, cfg)
     stationary = detect_stationary(
-        run.imu, run.gnss, run.origin, params_from_config(cfg), cfg.lever_arm_b
+        run.imu, run.gnss, run.origin, params_from_config(cfg), cfg.lever_arm_b, run.gnss_vel
     )
     init, bank = start_of(run, cfg, stationary, quality, filter_pass)
     return StartPieces(quality, stationary, init, bank)

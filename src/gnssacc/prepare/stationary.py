@@ -44,7 +44,8 @@ Algorithm (thresholds in :class:`StationaryParams`; cost linear in the record, v
    (a GNSS outage) is kept on IMU evidence alone, flagged ``gnss_checked=False``.
 4b. **Fixes carried by the IMU.** Inside a GNSS outage step 4 has no fixes, or only a few
    widened by a large excursion bound, and an IMU-still cruise would pass. The fixes within
-   ``link_reach_s`` before and after the stretch still tell, carried to it by the IMU path
+   ``link_reach_s`` before and after the stretch (and the receiver's velocities, when the
+   recording has them) still tell, carried to it by the IMU path
    (velocity change and displacement in the stretch's level axes, heading unknown):
    :mod:`gnssacc.prepare.span_motion` fits "at rest" and "constant velocity through the
    stretch" and rejects it when the likelihood ratio exceeds ``gnss_k_sigma^2`` (the same
@@ -74,7 +75,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from ..core.earth import LocalTangentFrame
-from ..core.recording import GnssFixes, ImuData
+from ..core.recording import GnssFixes, GnssVelocity, ImuData
 from ..core.stationary_params import (  # noqa: F401 (this stage's API)
     StationaryParams,
     params_from_config,
@@ -741,10 +742,10 @@ def _resolve_chain(
     return [s for g, ok in zip(groups, alive) if ok for s in g]
 
 
-def _linked_motion(span, imu, gnss, p_n, p: StationaryParams, dt_med: float, lever_b) -> bool:
+def _linked_motion(span, imu, gnss, p_n, p: StationaryParams, dt_med: float, lever_b, vel) -> bool:
     """True when the fixes within ``link_reach_s`` around the span, carried to it by the IMU,
     refute "at rest" (module notes, step 4b); the fitted speed is kept on the span."""
-    linked = linked_motion(imu, span, gnss, p_n, p, dt_med, lever_b) if len(gnss) else None
+    linked = linked_motion(imu, span, gnss, p_n, p, dt_med, lever_b, vel)
     if linked is None:
         return False
     span.linked_speed_mps, span.linked_glr = linked.speed_mps, linked.glr
@@ -769,6 +770,7 @@ def detect_stationary(
     origin: LocalTangentFrame,
     params: StationaryParams | None = None,
     lever_arm_b=None,
+    velocity: GnssVelocity | None = None,
 ) -> StationaryReport:
     """Stationary spans of a ground vehicle from its IMU, checked against its GNSS fixes.
 
@@ -784,6 +786,9 @@ def detect_stationary(
     lever_arm_b : array_like, shape (3,), optional
         The GNSS antenna's position from the IMU, body FRD [m] (default: at the IMU). The fixes
         are the antenna's; as the vehicle turns it swings about the IMU.
+    velocity : GnssVelocity, optional
+        The receiver's (Doppler) velocities of the antenna, NED [m/s]: step 4b carries them to
+        each span as it carries the fixes (far more precise than a line through the fixes).
 
     Returns
     -------
@@ -800,7 +805,7 @@ def detect_stationary(
         span = _span(imu, i0, i1, block)
         if not _gnss_verdict(span, imu, gnss, p_n, p, dt, lever_b):
             rejected.append(_rejection(span, "GNSS shows motion"))
-        elif _linked_motion(span, imu, gnss, p_n, p, dt, lever_b):
+        elif _linked_motion(span, imu, gnss, p_n, p, dt, lever_b, velocity):
             rejected.append(_rejection(span, "GNSS around it, carried by the IMU, shows motion"))
         else:
             spans.append(span)
