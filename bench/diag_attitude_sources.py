@@ -63,8 +63,9 @@ def overrides(variant: str) -> dict:
         off = MAIN_GROUPS
     elif variant.startswith("-"):
         off = (variant[1:],)
-    else:
-        off = tuple(g for g in MAIN_GROUPS if g != variant[1:])
+    else:  # every main group off but the keys of the one named (a sub-group too: +accel-cross)
+        keep = set(GROUPS[variant[1:]])
+        return {k: 0.0 for g in MAIN_GROUPS for k in GROUPS[g] if k not in keep}
     return {k: 0.0 for g in off for k in GROUPS[g]}
 
 
