@@ -245,7 +245,7 @@ def run_ekf(
         observer.start(setup)
     compiled = None
     if observer is None and not show_progress and compiled_loop_ready():
-        compiled = CompiledLoop.of(setup, *ev, updates.tally, stats)
+        compiled = CompiledLoop.of(setup, ev, updates.tally, stats, loop.rec)
     if compiled is None:  # the reference: every event here
         for e in progress(range(len(ev[0])), desc=method, enable=show_progress):
             if not loop.step(e):

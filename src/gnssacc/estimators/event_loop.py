@@ -10,7 +10,8 @@ pass from a given one on in one call: the propagation to each
 (:func:`gnssacc.estimators.mechanization.propagate`, as
 :meth:`gnssacc.estimators.mechanization.Propagator.advance` calls it), the Gauss-Markov states'
 decay, each update and its feedback (:func:`gnssacc.estimators.mechanization.update_state`),
-until an event it has no step for (an output, another aid's epoch) or the pass's end. The EKF's
+until an event it has no step for (another aid's epoch) or the pass's end; it records the
+outputs too. The EKF's
 Python loop (:func:`gnssacc.estimators.ekf.run_ekf`, the reference) does that event and hands
 the next ones back (:class:`CompiledLoop`).
 
@@ -36,14 +37,14 @@ from numba import njit
 from .aids.gnss_position import position_model
 from .aids.nhc import REST, SKIPPED, TURN, decide_compiled
 from .aids.vehicle import vehicle_model
-from .ekf_record import Tally, innovation_loglik
-from .layout import GNSS_ERROR, N_NAV
+from .ekf_record import Recorder, Tally, innovation_loglik
+from .layout import GNSS_ERROR, I_ATT, N_NAV
 from .mechanization import Propagator, propagate, update_state
 from .state import FilterState
 
-#: Event codes: the Python loop's step (an output, an aid without a compiled step), the fix, the
-#: non-holonomic constraint.
-PYTHON, POSITION, NHC = 0, 1, 2
+#: Event codes: the Python loop's step (an aid without a compiled step), the fix, the
+#: non-holonomic constraint, an output.
+PYTHON, POSITION, NHC, OUTPUT = 0, 1, 2, 3
 #: The compiled steps by the name an aid gives (:meth:`gnssacc.estimators.aids.EkfAid.compiled`),
 #: with their update kind and its degrees of freedom.
 STEPS = {"position": (POSITION, "pos", 3), "nhc": (NHC, "nhc", 2)}
@@ -130,7 +131,25 @@ def _nhc(nhc, st, j, t_e, out, n, skipped):
 
 
 @njit(cache=True)
-def run_stretch(e, ev_t, ev_code, ev_idx, t0, t_end, k, t_cur, prop, st, fix, nhc, out, n, skipped):
+def _record(rec, i, t_e, st):
+    """Output row ``i`` at ``t_e`` [s], as :meth:`gnssacc.estimators.ekf_record.Recorder.add`."""
+    t, pos, v_n, R_nb, b_a, b_g, var, P_att, P_nav = rec
+    P = st[5]
+    t[i] = t_e
+    for r in range(3):
+        pos[i, r], v_n[i, r], b_a[i, r], b_g[i, r] = st[0][r], st[1][r], st[3][r], st[4][r]
+        for c in range(3):
+            R_nb[i, r, c] = st[2][r, c]
+            P_att[i, r, c] = P[I_ATT + r, I_ATT + c]
+    for r in range(N_NAV):
+        var[i, r] = P[r, r]
+        if P_nav.shape[0] > 0:
+            for c in range(N_NAV):
+                P_nav[i, r, c] = P[r, c]
+
+
+@njit(cache=True)
+def run_stretch(e, ev, t0, t_end, k, t_cur, prop, st, fix, nhc, out, rec, rows):
     """Run the events from ``e`` on until one whose code is :data:`PYTHON` or whose time is past
     ``t_end`` [s] (events before ``t0``, the filter's start, are passed over).
 
@@ -138,15 +157,15 @@ def run_stretch(e, ev_t, ev_code, ev_idx, t0, t_end, k, t_cur, prop, st, fix, nh
     ----------
     e : int
         The first event.
-    ev_t, ev_code, ev_idx : ndarray (E,)
-        The pass's events: times [s], codes (:data:`PYTHON`, :data:`POSITION`, :data:`NHC`) and
-        the epoch index in their aid.
+    ev : tuple of ndarray (E,)
+        The pass's events: times [s], codes (:data:`PYTHON`, :data:`POSITION`, :data:`NHC`,
+        :data:`OUTPUT`) and the epoch index in their aid.
     t0, t_end : float
         The filter's start and the pass's end [s].
     k, t_cur : int, float
         The IMU sample and the time the state is at (:func:`propagate`).
     prop : tuple
-        :func:`propagate`'s IMU and noise arguments (:meth:`CompiledLoop.propagation`).
+        :func:`propagate`'s IMU and noise arguments (:func:`propagation`).
     st : tuple
         ``(pos, v_n, R_nb, b_a, b_g, P, x_e, consider)``, updated in place
         (:class:`gnssacc.estimators.state.FilterState`).
@@ -154,18 +173,20 @@ def run_stretch(e, ev_t, ev_code, ev_idx, t0, t_end, k, t_cur, prop, st, fix, nh
         The compiled aids' arrays (:meth:`gnssacc.estimators.aids.EkfAid.compiled`; with the
         index of the Gauss-Markov fix error's first state, -1: none, after the fix's).
     out : tuple
-        ``(code, t, nis, logdet, used, wz)`` of the updates, written from row ``n`` on.
-    n : int
-        The first row of ``out`` to write.
-    skipped : ndarray (2,) of int
-        The constraint's epochs skipped at rest and turning, added to.
+        ``(code, t, nis, logdet, used, wz)`` of the updates, one row each.
+    rec : tuple
+        The output rows' arrays (:class:`gnssacc.estimators.ekf_record.Recorder`'s ``t, pos,
+        v_n, R_nb, b_a, b_g, var, P_att, P``; ``P`` empty when not kept).
+    rows : ndarray (4,) of int
+        The rows of ``out`` and ``rec`` written so far (the next ones to write), and the
+        constraint's epochs skipped at rest and turning; updated.
 
     Returns
     -------
-    e, k, t_cur, n : int, int, float, int
-        The event it stopped at (``E``: the end), the state's sample and time, and the rows of
-        ``out`` written so far.
+    e, k, t_cur : int, int, float
+        The event it stopped at (``E``: the end), and the state's sample and time.
     """
+    ev_t, ev_code, ev_idx = ev
     while e < ev_t.shape[0]:
         t_e, code = ev_t[e], ev_code[e]
         if code == PYTHON or t_e > t_end:
@@ -174,12 +195,15 @@ def run_stretch(e, ev_t, ev_code, ev_idx, t0, t_end, k, t_cur, prop, st, fix, nh
             if t_e > t_cur:
                 k, t_cur = _advance(prop, st, k, t_cur, t_e)
             if code == POSITION:
-                _position(fix, st, ev_idx[e], t_e, out, n)
-                n += 1
-            elif _nhc(nhc, st, ev_idx[e], t_e, out, n, skipped):
-                n += 1
+                _position(fix, st, ev_idx[e], t_e, out, rows[0])
+                rows[0] += 1
+            elif code == OUTPUT:
+                _record(rec, rows[1], t_e, st)
+                rows[1] += 1
+            elif _nhc(nhc, st, ev_idx[e], t_e, out, rows[0], rows[2:]):
+                rows[0] += 1
         e += 1
-    return e, k, t_cur, n
+    return e, k, t_cur
 
 
 #: The arrays of a pass without a fix or without the constraint (the kernel's types all the same).
@@ -200,26 +224,30 @@ def propagation(prop: Propagator) -> tuple:
 class CompiledLoop:
     """The compiled stretches of one EKF pass (:func:`run_stretch`): :meth:`of` builds it when
     some of the pass's events have compiled steps, :meth:`run` runs the events from one on and
-    hands their updates to the pass's tally and their counts to its ``stats``."""
+    hands their updates to the pass's tally, their outputs to its recorder and their counts to
+    its ``stats``."""
 
-    def __init__(self, s: FilterState, prop: Propagator, events: tuple, aids: tuple, tally, stats):
-        self.ev_t, self.ev_code, self.ev_idx = events
+    def __init__(self, s: FilterState, prop: Propagator, events: tuple, aids: tuple, record):
+        self.ev = events
         self.fix, self.nhc = aids
-        self.prop, self.tally, self.stats = propagation(prop), tally, stats
+        self.tally, self.stats, self.rec = record
+        self.prop = propagation(prop)
         self.st = (s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, s.P, s.x_e, int(s.consider))
-        m = len(self.ev_t)
+        m = len(self.ev[0])
         self.out = (
             np.zeros(m, np.int64), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m, bool),
             np.zeros((m, 3)),
         )  # fmt: skip
-        self.n = 0
-        self.skipped = np.zeros(2, np.int64)
+        r = self.rec
+        P_nav = r.P if r.P is not None else np.zeros((0, N_NAV, N_NAV))
+        self.rec_arrays = (r.t, r.pos, r.v_n, r.R_nb, r.b_a, r.b_g, r.var, r.P_att, P_nav)
+        self.rows = np.zeros(4, np.int64)  # updates, outputs, constraint at rest, turning
 
     @classmethod
-    def of(cls, setup, ev_t, ev_src, ev_idx, tally: Tally, stats: dict) -> "CompiledLoop | None":
+    def of(cls, setup, ev, tally: Tally, stats: dict, rec: Recorder) -> "CompiledLoop | None":
         """The compiled loop of the pass ``setup`` (:class:`gnssacc.estimators.ekf.EkfSetup`) over
-        its events (times [s], sources: an index into ``setup.aids``, or an output; epoch
-        indices), or ``None`` when none of them has a compiled step."""
+        its events ``ev`` (times [s], sources: an index into ``setup.aids``, or an output; epoch
+        indices), or ``None`` when none of its aids has a compiled step."""
         codes, fix, nhc = [], _NO_FIX, _NO_NHC
         for aid in setup.aids:
             step = aid.compiled()
@@ -229,24 +257,27 @@ class CompiledLoop:
                 fix = (*step[1], int(setup.state.layout.offset(GNSS_ERROR)))
             elif code == NHC:
                 nhc = step[1]
-        ev_code = np.array(codes + [PYTHON], np.int64)[np.asarray(ev_src, np.int64)]
-        if not np.any(ev_code != PYTHON):
+        if all(c == PYTHON for c in codes):
             return None
+        ev_t, ev_src, ev_idx = ev
+        ev_code = np.array(codes + [OUTPUT], np.int64)[np.asarray(ev_src, np.int64)]
         events = (np.ascontiguousarray(ev_t, float), ev_code, np.asarray(ev_idx, np.int64))
-        return cls(setup.state, setup.prop, events, (fix, nhc), tally, stats)
+        return cls(setup.state, setup.prop, events, (fix, nhc), (tally, stats, rec))
 
     def run(self, e: int, k: int, t_cur: float, t0: float, t_end: float) -> tuple[int, int, float]:
         """Run the events from ``e`` on (:func:`run_stretch`); the event it stopped at (the
         Python loop's, or the end), and the state's IMU sample and time."""
-        n0 = self.n
-        e, k, t_cur, self.n = run_stretch(
-            e, self.ev_t, self.ev_code, self.ev_idx, t0, t_end, k, t_cur, self.prop, self.st,
-            self.fix, self.nhc, self.out, n0, self.skipped,
+        rows = self.rows
+        n0, rows[1] = int(rows[0]), self.rec.n  # the Python loop may have recorded outputs
+        e, k, t_cur = run_stretch(
+            e, self.ev, t0, t_end, k, t_cur, self.prop, self.st, self.fix, self.nhc, self.out,
+            self.rec_arrays, rows,
         )  # fmt: skip
-        self._tally(n0, self.n)
-        for i, why in enumerate((REST, TURN)):
-            self.stats[SKIPPED[why]] += int(self.skipped[i])
-        self.skipped[:] = 0
+        self.rec.n = int(rows[1])
+        self._tally(n0, int(rows[0]))
+        for i, why in ((2, REST), (3, TURN)):
+            self.stats[SKIPPED[why]] += int(rows[i])
+            rows[i] = 0
         return e, k, t_cur
 
     def _tally(self, n0: int, n: int) -> None:

@@ -127,25 +127,28 @@ def _warm_up_models() -> None:
 
 def _warm_up_loop() -> float:
     """Compile (or load) the EKF's compiled event loop with the types a pass calls it with (the
-    fix with a Gauss-Markov error, the constraint); the seconds it took."""
+    fix with a Gauss-Markov error, the constraint, an output); the seconds it took."""
     import numpy as np
 
+    from .ekf_record import Recorder
     from .event_loop import run_stretch
     from .layout import N_NAV
 
     t0 = time.perf_counter()
     z3, n = np.zeros(3), N_NAV + 3
-    prop = (np.array([0.0, 0.01, 0.02]), np.zeros((3, 3)), np.zeros((3, 3)), z3, z3, z3, z3)
+    prop: tuple = (np.array([0.0, 0.01, 0.02]), np.zeros((3, 3)), np.zeros((3, 3)), z3, z3, z3, z3)
     prop += (np.zeros(1, np.int64), np.ones(1, np.int64), np.zeros((1, 3)), np.zeros((1, 3)))
     prop += (1, 10, np.eye(N_NAV), False, 1.0, np.full(3, 60.0), np.ones(3), 0.0, np.zeros((1, 3)))
-    st = (np.array([0.5, 0.1, 0.0]), z3.copy(), np.eye(3), z3.copy(), z3.copy(), np.eye(n))
+    st: tuple = (np.array([0.5, 0.1, 0.0]), z3.copy(), np.eye(3), z3.copy(), z3.copy(), np.eye(n))
     st += (np.zeros(3), -1)
     fix = (np.full(1, 0.5), np.full(1, 0.1), np.zeros(1), np.eye(3)[None].copy(), z3, 0.0, N_NAV)
     nhc = (np.zeros((1, 3)), np.zeros(1, bool), z3, np.eye(3), True, 0.1, 0.5, np.eye(2))
-    out = (np.zeros(2, np.int64), *(np.zeros(2) for _ in range(3)), np.zeros(2, bool))
-    out += (np.zeros((2, 3)),)
-    ev = (np.array([0.01, 0.015]), np.array([1, 2], np.int64), np.zeros(2, np.int64))
-    run_stretch(0, *ev, 0.0, 0.02, 1, 0.0, prop, st, fix, nhc, out, 0, np.zeros(2, np.int64))
+    out: tuple = (np.zeros(3, np.int64), *(np.zeros(3) for _ in range(3)), np.zeros(3, bool))
+    out += (np.zeros((3, 3)),)
+    r = Recorder(1, True)
+    rec = (r.t, r.pos, r.v_n, r.R_nb, r.b_a, r.b_g, r.var, r.P_att, r.P)
+    ev = (np.array([0.01, 0.012, 0.015]), np.array([1, 3, 2], np.int64), np.zeros(3, np.int64))
+    run_stretch(0, ev, 0.0, 0.02, 1, 0.0, prop, st, fix, nhc, out, rec, np.zeros(4, np.int64))
     return time.perf_counter() - t0
 
 
