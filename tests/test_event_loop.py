@@ -11,7 +11,7 @@ import pytest
 
 from gnssacc import pipeline
 from gnssacc.core.config import load_config
-from gnssacc.estimators import ekf, event_loop
+from gnssacc.estimators import ekf, event_loop, kernels
 from gnssacc.sources.sim import simulate
 
 #: Figures of a pass compared (the NIS and log-likelihood per kind, the decisions' counts).
@@ -90,3 +90,22 @@ def test_method_pass_with_outputs_compiled_equals_python_loop(prepared, monkeypa
     assert np.array_equal(fast.stats["nis_pos"], ref.stats["nis_pos"])
     assert np.allclose(fast.P, ref.P, rtol=1e-12, atol=1e-18)
     _assert_same(fast, ref)
+
+
+def test_a_pass_uses_the_python_loop_until_the_loop_kernel_is_loaded(prepared, monkeypatch):
+    """Left to the background compilation (``COMPILED_LOOP`` unset), a pass runs in Python while
+    the loop's group is not loaded, and in the compiled loop once it is, which the background
+    says for the groups it has loaded."""
+    prep, cfg = prepared
+    ran = []
+    run_stretch = event_loop.run_stretch
+    monkeypatch.setattr(event_loop, "run_stretch", lambda *a: ran.append(1) or run_stretch(*a))
+    opts = {"output_times": np.zeros(0), "cov_every": 10, "t_stop": float(prep.init.t) + 30.0}
+    for loaded, calls in ((False, 0), (True, 1)):
+        monkeypatch.setattr(kernels, "loaded", lambda group, yes=loaded: yes and group == "loop")
+        ran.clear()
+        ekf.estimate(prep, cfg, "ekf", **opts)
+        assert (len(ran) > 0) == bool(calls)
+    background = kernels.BackgroundWarmUp(("loop",), notice=None, processes=False).start()
+    background.wait_all()
+    assert {"propagation", "update", "loop"} <= background.loaded

@@ -246,17 +246,7 @@ def run_ekf(
     compiled = None
     if observer is None and not show_progress and compiled_loop_ready():
         compiled = CompiledLoop.of(setup, ev, updates.tally, stats, loop.rec)
-    if compiled is None:  # the reference: every event here
-        for e in progress(range(len(ev[0])), desc=method, enable=show_progress):
-            if not loop.step(e):
-                break
-    else:  # the stretches of events with compiled steps there, the others here
-        e = 0
-        while e < len(ev[0]):
-            e, loop.k, loop.t_cur = compiled.run(e, loop.k, loop.t_cur, t0, loop.t_end)
-            if e >= len(ev[0]) or not loop.step(e):
-                break
-            e += 1
+    loop.run(compiled, method, show_progress)
     updates.close_unless(np.inf, None, -1)
     return loop.rec.solution(method, time.perf_counter() - wall0, updates.final_stats())
 
@@ -277,6 +267,23 @@ class _EventLoop:
         self.s, self.prop, self.aids, self.t0 = setup.state, setup.prop, setup.aids, setup.t0
         self.ev_t, self.ev_src, self.ev_idx = (x.tolist() for x in ev)  # Python scalars
         self.k, self.t_cur = setup.k, self.t0
+
+    def run(self, compiled: CompiledLoop | None, desc: str, show_progress: bool) -> None:
+        """Every event of the pass: here (``compiled`` ``None``: the reference, with the progress
+        bar ``desc`` when shown), or the stretches of events with compiled steps in the compiled
+        loop and the others here."""
+        n = len(self.ev_t)
+        if compiled is None:
+            for e in progress(range(n), desc=desc, enable=show_progress):
+                if not self.step(e):
+                    return
+            return
+        e = 0
+        while e < n:
+            e, self.k, self.t_cur = compiled.run(e, self.k, self.t_cur, self.t0, self.t_end)
+            if e >= n or not self.step(e):
+                return
+            e += 1
 
     def step(self, e: int) -> bool:
         """Event ``e``; False when it is past the pass's end (the pass ends there)."""

@@ -9,18 +9,18 @@ non-holonomic constraint (:func:`gnssacc.estimators.aids.vehicle.vehicle_model`,
 pass from a given one on in one call: the propagation to each
 (:func:`gnssacc.estimators.mechanization.propagate`, as
 :meth:`gnssacc.estimators.mechanization.Propagator.advance` calls it), the Gauss-Markov states'
-decay, each update and its feedback (:func:`gnssacc.estimators.mechanization.update_state`),
-until an event it has no step for (another aid's epoch) or the pass's end; it records the
-outputs too. The EKF's
-Python loop (:func:`gnssacc.estimators.ekf.run_ekf`, the reference) does that event and hands
-the next ones back (:class:`CompiledLoop`).
+decay, each update and its feedback (:func:`gnssacc.estimators.mechanization.update_state`) and
+the outputs, until an event it has no step for (another aid's epoch) or the pass's end. The EKF's
+Python loop (:func:`gnssacc.estimators.ekf.run_ekf`, the reference) does that event and hands the
+next ones back (:class:`CompiledLoop`).
 
 The same numbers as the Python loop: the same kernels with the same arguments in the same order;
 the updates' NIS, ``log det S`` and whitened innovations come back as arrays, which the pass's
-tally takes in order as the Python loop would (:meth:`gnssacc.estimators.ekf_record.Tally.
-add_update`). What the kernel computes itself it computes as numpy does on this kind of machine:
-the decay ``exp`` and the earth rate's ``cos``, ``sin`` are the C library's (numpy's own on
-x86-64 without AVX-512), a fix's ``sigma^2`` is taken as numpy's scalar ``pow``
+tally takes in order as the Python loop would
+(:meth:`gnssacc.estimators.ekf_record.Tally.add_update`). What the kernel computes itself it
+computes as numpy does on this kind of machine: the decay's ``exp`` and the earth rate's ``cos``,
+``sin`` are the C library's (numpy's own on x86-64 without AVX-512; with it, numpy's may differ
+in the last bit), a fix's ``sigma^2`` is taken as numpy's scalar ``pow``
 (:func:`gnssacc.estimators.aids.gnss_position.fix_noise`). The constraint's decision inputs (the
 forward speed's sigma ``sqrt(h P h)``, the yaw rate) are summed in plain order where numpy's BLAS
 may fuse: they only enter comparisons, which a last-bit difference decides otherwise only at an
@@ -34,6 +34,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ..core.earth import OMEGA_IE
 from .aids.gnss_position import position_model
 from .aids.nhc import REST, SKIPPED, TURN, decide_compiled
 from .aids.vehicle import vehicle_model
@@ -48,7 +49,7 @@ PYTHON, POSITION, NHC, OUTPUT = 0, 1, 2, 3
 #: The compiled steps by the name an aid gives (:meth:`gnssacc.estimators.aids.EkfAid.compiled`),
 #: with their update kind and its degrees of freedom.
 STEPS = {"position": (POSITION, "pos", 3), "nhc": (NHC, "nhc", 2)}
-_OMEGA_IE = 7.292115e-5  # gnssacc.core.earth.OMEGA_IE (numba takes module constants as literals)
+_KINDS = {code: (kind, dof) for code, kind, dof in STEPS.values()}
 
 
 @njit(cache=True)
@@ -104,9 +105,9 @@ def _nhc(nhc, st, j, t_e, out, n, skipped):
         return False
     w_ie = np.empty(3)  # gnssacc.core.earth.earth_rate_n
     w_ie[0], w_ie[1], w_ie[2] = (
-        _OMEGA_IE * np.cos(pos[0]),
-        _OMEGA_IE * 0.0,
-        _OMEGA_IE * -np.sin(pos[0]),
+        OMEGA_IE * np.cos(pos[0]),
+        OMEGA_IE * 0.0,
+        OMEGA_IE * -np.sin(pos[0]),
     )
     v_b, H = vehicle_model(R_nb, v_n, b_g, omega_b[j], lever, w_ie, R_vb, vb_rows, P.shape[0])
     yaw_rate = (
@@ -273,19 +274,20 @@ class CompiledLoop:
             e, self.ev, t0, t_end, k, t_cur, self.prop, self.st, self.fix, self.nhc, self.out,
             self.rec_arrays, rows,
         )  # fmt: skip
-        self.rec.n = int(rows[1])
-        self._tally(n0, int(rows[0]))
-        for i, why in ((2, REST), (3, TURN)):
-            self.stats[SKIPPED[why]] += int(rows[i])
-            rows[i] = 0
+        n, self.rec.n, rest, turn = rows.tolist()
+        if n > n0:
+            self._tally(n0, n)
+        if rest or turn:
+            self.stats[SKIPPED[REST]] += rest
+            self.stats[SKIPPED[TURN]] += turn
+            rows[2:] = 0
         return e, k, t_cur
 
     def _tally(self, n0: int, n: int) -> None:
         """Rows ``n0:n`` of the updates to the tally, in order, as the Python loop adds them."""
         code, t, nis, logdet, used, wz = (x[n0:n] for x in self.out)
-        kinds = {c: (kind, dof) for c, kind, dof in STEPS.values()}
         rows = zip(code.tolist(), t.tolist(), nis.tolist(), logdet.tolist(), used.tolist(), wz)
         for c, t_u, nis_u, logdet_u, used_u, wz_u in rows:
-            kind, dof = kinds[c]
+            kind, dof = _KINDS[c]
             loglik = innovation_loglik(nis_u, logdet_u, dof)
             self.tally.add_update(t_u, kind, dof, nis_u, loglik, used_u, wz_u[:dof])
