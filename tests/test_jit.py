@@ -295,4 +295,4 @@ def test_the_install_compiles_the_kernels_into_the_package_and_a_first_run_loads
     probe = _probe(site, tmp_path / "cache", METHODS="ekf,ekf-accw,smoother,smoother-accw")
     hits, misses, children = _counts(probe)
     assert not _notice(probe) and children == 0 and misses == 0 and hits > 0
-    assert probe.stdout.splitlines()[2].split()[1] == "propagation,update,window,chain,band"
+    assert probe.stdout.splitlines()[2].split()[1] == "propagation,update,loop,window,chain,band"
