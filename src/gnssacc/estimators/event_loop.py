@@ -57,12 +57,13 @@ def _advance(prop, st, k, t_cur, t_to):
     """Propagate to ``t_to`` as :meth:`Propagator.advance` does, then decay the Gauss-Markov
     states over the time moved (as :func:`gnssacc.estimators.ekf.run_ekf`)."""
     t_imu, f_imu, w_imu, q_a, q_g, q_ba, q_bg, seg_i0, seg_i1, seg_qa, seg_qg = prop[:11]
-    phi_order, cov_every, Phi, with_phi, w_ie_sign, gm_tau, gm_var, q_turn, w_turn = prop[11:]
+    phi_order, with_cov, cov_every, Phi, with_phi, w_ie_sign, gm_tau, gm_var, q_turn = prop[11:20]
+    w_turn = prop[20]
     pos, v_n, R_nb, b_a, b_g, P, x_e = st[:7]
     t_prev = t_cur
     k, t_cur = propagate(
         t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P, q_a, q_g, q_ba, q_bg,
-        seg_i0, seg_i1, seg_qa, seg_qg, phi_order, True, cov_every, Phi, with_phi, w_ie_sign,
+        seg_i0, seg_i1, seg_qa, seg_qg, phi_order, with_cov, cov_every, Phi, with_phi, w_ie_sign,
         gm_tau, gm_var, q_turn, w_turn,
     )  # fmt: skip
     for i in range(x_e.shape[0]):
@@ -127,7 +128,12 @@ def _nhc(nhc, st, j, t_e, out, n, skipped):
     if why == TURN:
         skipped[1] += 1
         return False
-    _update(st, H[1:3], R, v_b[1:3], 0.0, out, n, NHC, t_e)
+    H_lv, dz = np.empty((2, H.shape[1])), np.empty(2)  # C order: update_state's own types
+    for r in range(2):
+        dz[r] = v_b[r + 1]
+        for c in range(H.shape[1]):
+            H_lv[r, c] = H[r + 1, c]
+    _update(st, H_lv, R, dz, 0.0, out, n, NHC, t_e)
     return True
 
 
@@ -216,7 +222,7 @@ def propagation(prop: Propagator) -> tuple:
     """:func:`propagate`'s arguments bound in ``prop`` (those :meth:`Propagator.advance` passes),
     in :func:`run_stretch`'s order."""
     return (
-        prop.t, prop.f, prop.w, *prop.q, *prop.segments, prop.phi_order, prop.cov_every,
+        prop.t, prop.f, prop.w, *prop.q, *prop.segments, prop.phi_order, True, prop.cov_every,
         prop.Phi, prop.with_phi, prop.w_ie_sign, prop.extra_tau, prop.extra_var, prop.q_turn,
         prop.w_turn,
     )  # fmt: skip

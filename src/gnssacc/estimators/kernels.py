@@ -138,7 +138,18 @@ def _warm_up_loop() -> float:
     z3, n = np.zeros(3), N_NAV + 3
     prop: tuple = (np.array([0.0, 0.01, 0.02]), np.zeros((3, 3)), np.zeros((3, 3)), z3, z3, z3, z3)
     prop += (np.zeros(1, np.int64), np.ones(1, np.int64), np.zeros((1, 3)), np.zeros((1, 3)))
-    prop += (1, 10, np.eye(N_NAV), False, 1.0, np.full(3, 60.0), np.ones(3), 0.0, np.zeros((1, 3)))
+    prop += (
+        1,
+        True,
+        10,
+        np.eye(N_NAV),
+        False,
+        1.0,
+        np.full(3, 60.0),
+        np.ones(3),
+        0.0,
+        np.zeros((1, 3)),
+    )
     st: tuple = (np.array([0.5, 0.1, 0.0]), z3.copy(), np.eye(3), z3.copy(), z3.copy(), np.eye(n))
     st += (np.zeros(3), -1)
     fix = (np.full(1, 0.5), np.full(1, 0.1), np.zeros(1), np.eye(3)[None].copy(), z3, 0.0, N_NAV)
