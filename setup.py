@@ -71,7 +71,7 @@ class BuildPyWithKernels(build_py):
             subprocess.Popen(
                 [sys.executable, "-c", code.format(groups)], env=env, cwd=self.build_lib
             )
-            for groups in (["propagation"], ["update", "window", "chain", "band"])
+            for groups in (["propagation"], ["update", "loop", "window", "chain", "band"])
         ]
         if any(p.wait() != 0 for p in procs):
             self.announce(

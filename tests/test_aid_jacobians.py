@@ -111,6 +111,9 @@ def test_every_ekf_aid_jacobian_matches_central_differences(prep, method, monkey
         return aids
 
     monkeypatch.setattr(ekf_module, "ekf_aids", checking)
+    # The Python loop, which asks every aid for its updates (the compiled loop runs the fix's and
+    # the constraint's steps itself: tests/test_event_loop.py holds it to this loop).
+    monkeypatch.setattr(ekf_module, "COMPILED_LOOP", False)
     sol = ekf_module.estimate(prep, EkfSettings.from_config(prep.cfg), method, output_times=[])
     assert sol.stats["n_odo_updates"] > 0 and sol.stats["n_zupt_updates"] > 0
     missing = {spec.name for spec in REGISTRY} - {n for n, c in checked.items() if c}

@@ -139,13 +139,13 @@ EKF_GROUP = pytest.mark.xdist_group("jit-ekf-compiled")
 @pytest.fixture(scope="module")
 def ekf_compiled(tmp_path_factory):
     """A read-only copy and its empty user cache after a first run of ``ekf,ekf-acc``, which
-    says at once that it compiles, compiles the EKF's groups (propagation, update) in child
-    processes and nothing else."""
+    says at once that it compiles, compiles the EKF's groups (propagation, update, and its
+    compiled event loop) in child processes and nothing else."""
     tmp = tmp_path_factory.mktemp("ekf-compiled")
     root, cache_home = _read_only_copy(tmp), tmp / "cache"
     first = _probe(root, cache_home, METHODS="ekf,ekf-acc")
     assert len(_notice(first)) == 1 and _counts(first)[2] > 0
-    assert first.stdout.splitlines()[2].split()[1] == "propagation,update"
+    assert first.stdout.splitlines()[2].split()[1] == "propagation,update,loop"
     folder = cache_home / "gnssacc" / "numba"
     assert list(folder.rglob("mechanization.propagate-*.nbi"))
     assert not list(folder.rglob("window_marginals.*.nbi")) and not list(
@@ -221,13 +221,18 @@ def test_a_run_compiles_only_the_kernels_its_methods_need(ekf_compiled, tmp_path
 
 
 RUN_TYPES = """
+import os
+os.environ["GNSSACC_JOBS"] = "1"  # the methods here, where their kernels' signatures are seen
 from gnssacc import pipeline
 from gnssacc.core.config import load_config
-from gnssacc.estimators import kalman, kernels, mechanization, small_linalg, window_marginals
-from gnssacc.estimators.aids import gnss_position, vehicle
+from gnssacc.estimators import ekf, event_loop, kalman, kernels, mechanization, small_linalg
+from gnssacc.estimators import window_marginals
+from gnssacc.estimators.aids import gnss_position, nhc, vehicle
 from gnssacc.sources.sim import simulate
 
-MODULES = (mechanization, kalman, window_marginals, small_linalg, gnss_position, vehicle)
+MODULES = (mechanization, kalman, window_marginals, small_linalg, gnss_position, vehicle, nhc,
+           event_loop)
+ekf.COMPILED_LOOP = True  # the passes run their fixes and constraints in the compiled loop
 
 def signatures():
     return {(m.__name__, name): set(d.signatures) for m in MODULES
@@ -290,4 +295,4 @@ def test_the_install_compiles_the_kernels_into_the_package_and_a_first_run_loads
     probe = _probe(site, tmp_path / "cache", METHODS="ekf,ekf-accw,smoother,smoother-accw")
     hits, misses, children = _counts(probe)
     assert not _notice(probe) and children == 0 and misses == 0 and hits > 0
-    assert probe.stdout.splitlines()[2].split()[1] == "propagation,update,window,chain,band"
+    assert probe.stdout.splitlines()[2].split()[1] == "propagation,update,loop,window,chain,band"

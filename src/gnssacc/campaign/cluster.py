@@ -78,7 +78,7 @@ def _warm_up() -> None:
     from .. import pipeline  # noqa: F401
     from ..estimators import kernels, smoother  # noqa: F401
 
-    kernels.compile_groups(("propagation", "update", "window"))  # the EKFs' (ekf-accw's too)
+    kernels.compile_groups(("propagation", "update", "loop", "window"))  # the EKFs (ekf-accw too)
 
 
 @contextlib.contextmanager

@@ -19,7 +19,6 @@ uses it instead of a copy of this loop.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 
@@ -30,8 +29,10 @@ from ..core.progress import progress
 from ..core.recording import InitialState, RecordedRun
 from ..core.solution import NavSolution
 from .aids import EKF_METHODS, EkfAid, EkfContext, Measurement, ekf_aids, ekf_counts
-from .ekf_record import Recorder, Tally
+from . import kernels
+from .ekf_record import Recorder, Tally, innovation_loglik
 from .epochs import default_output_times
+from .event_loop import CompiledLoop
 from .layout import StateLayout
 from .mechanization import Propagator, update_state
 from .settings import EkfSettings
@@ -39,7 +40,9 @@ from .state import FilterState, initial_state, start_of_pass
 
 #: Method ids and the acceleration form each applies (``None``: none).
 METHODS = EKF_METHODS
-_LOG_2PI = math.log(2.0 * math.pi)
+#: Whether a pass without an observer runs in the compiled loop (:func:`compiled_loop_ready`):
+#: ``None`` once its kernel is loaded, ``True`` always (compiling it when not), ``False`` never.
+COMPILED_LOOP: bool | None = None
 
 
 def kalman_update(s: FilterState, m: Measurement) -> tuple[float, float, bool, np.ndarray]:
@@ -50,7 +53,7 @@ def kalman_update(s: FilterState, m: Measurement) -> tuple[float, float, bool, n
     nis, logdet, used, wz = update_state(
         s.P, m.H, m.R, dz, float(m.gate), s.consider, s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, s.x_e
     )
-    return nis, -0.5 * (nis + logdet + len(dz) * _LOG_2PI), used, wz
+    return nis, innovation_loglik(nis, logdet, len(dz)), used, wz
 
 
 class EkfObserver:
@@ -230,39 +233,79 @@ def run_ekf(
         cov_every,
         t_stop,
     )
-    s, prop, t0, k = setup.state, setup.prop, setup.t0, setup.k
+    t0, prop = setup.t0, setup.prop
     t_end = prop.t[-1] if t_stop is None else min(float(t_stop), prop.t[-1])
     out_t = default_output_times(run) if output_times is None else np.asarray(output_times, float)
     out_t = out_t[(out_t >= t0) & (out_t <= t_end)]
-    ev_t, ev_src, ev_idx = _events(setup.aids, out_t)
-    rec = Recorder(len(out_t), store_P)
+    ev = _events(setup.aids, out_t)
     stats = {**ekf_counts(), "init": setup.init.how, "t_init": t0}
     updates = _Updates(setup, observer, Tally(record_innovations), stats)
+    loop = _EventLoop(setup, updates, Recorder(len(out_t), store_P), float(t_end), ev)
     if observer is not None:
         observer.start(setup)
-    aids, t_cur = setup.aids, t0
-    ev_t, ev_src, ev_idx = ev_t.tolist(), ev_src.tolist(), ev_idx.tolist()  # Python scalars
-    for e in progress(range(len(ev_t)), desc=method, enable=show_progress):
-        t_e, src, j = ev_t[e], ev_src[e], ev_idx[e]
-        if t_e > t_end:
-            break
+    compiled = None
+    if observer is None and not show_progress and compiled_loop_ready():
+        compiled = CompiledLoop.of(setup, ev, updates.tally, stats, loop.rec)
+    loop.run(compiled, method, show_progress)
+    updates.close_unless(np.inf, None, -1)
+    return loop.rec.solution(method, time.perf_counter() - wall0, updates.final_stats())
+
+
+def compiled_loop_ready() -> bool:
+    """Whether a pass without an observer runs its events with compiled steps in the compiled
+    loop (:mod:`gnssacc.estimators.event_loop`): :data:`COMPILED_LOOP` when set, else once its
+    kernel is loaded (:func:`gnssacc.estimators.kernels.loaded`; a first run's passes use the
+    Python loop while it compiles in the background)."""
+    return kernels.loaded("loop") if COMPILED_LOOP is None else COMPILED_LOOP
+
+
+class _EventLoop:
+    """The event loop of one pass in Python (the reference): :meth:`step` does one event."""
+
+    def __init__(self, setup: EkfSetup, updates: "_Updates", rec: Recorder, t_end: float, ev):
+        self.setup, self.updates, self.rec, self.t_end = setup, updates, rec, t_end
+        self.s, self.prop, self.aids, self.t0 = setup.state, setup.prop, setup.aids, setup.t0
+        self.ev_t, self.ev_src, self.ev_idx = (x.tolist() for x in ev)  # Python scalars
+        self.k, self.t_cur = setup.k, self.t0
+
+    def run(self, compiled: CompiledLoop | None, desc: str, show_progress: bool) -> None:
+        """Every event of the pass: here (``compiled`` ``None``: the reference, with the progress
+        bar ``desc`` when shown), or the stretches of events with compiled steps in the compiled
+        loop and the others here."""
+        n = len(self.ev_t)
+        if compiled is None:
+            for e in progress(range(n), desc=desc, enable=show_progress):
+                if not self.step(e):
+                    return
+            return
+        e = 0
+        while e < n:
+            e, self.k, self.t_cur = compiled.run(e, self.k, self.t_cur, self.t0, self.t_end)
+            if e >= n or not self.step(e):
+                return
+            e += 1
+
+    def step(self, e: int) -> bool:
+        """Event ``e``; False when it is past the pass's end (the pass ends there)."""
+        t_e, src, j, aids = self.ev_t[e], self.ev_src[e], self.ev_idx[e], self.aids
+        if t_e > self.t_end:
+            return False
         aid = aids[src] if src < len(aids) else None
         if aid is not None:
             aid.see(j)
-        if t_e < t0:
-            continue
-        updates.close_unless(t_e, aid, j)
-        if t_e > t_cur:
-            t_prev = t_cur
-            k, t_cur = prop.advance(s, k, t_cur, t_e)
+        if t_e < self.t0:
+            return True
+        self.updates.close_unless(t_e, aid, j)
+        if t_e > self.t_cur:
+            t_prev, s, prop = self.t_cur, self.s, self.prop
+            self.k, self.t_cur = prop.advance(s, self.k, t_prev, t_e)
             if len(s.x_e):  # the estimated Gauss-Markov states decay
-                s.x_e *= np.exp(-(t_cur - t_prev) / prop.extra_tau)
+                s.x_e *= np.exp(-(self.t_cur - t_prev) / prop.extra_tau)
         if aid is None:
-            rec.add(t_e, s)
+            self.rec.add(t_e, self.s)
         else:
-            updates.at(t_e, aid, j)
-    updates.close_unless(np.inf, None, -1)
-    return rec.solution(method, time.perf_counter() - wall0, updates.final_stats())
+            self.updates.at(t_e, aid, j)
+        return True
 
 
 def estimate(prep, settings: EkfSettings, method: str = "ekf", **options) -> NavSolution:

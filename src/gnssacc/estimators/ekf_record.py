@@ -3,6 +3,7 @@ update kind (:class:`Tally`)."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -12,6 +13,15 @@ from ..core.solution import NavSolution
 from .aids import KINDS, Measurement, tail_bound
 from .layout import ATT, N_NAV, NAV
 from .state import FilterState
+
+
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+def innovation_loglik(nis: float, logdet: float, dof: int) -> float:
+    """The Gaussian log-likelihood of an innovation of ``dof`` degrees of freedom from its NIS and
+    ``log det S`` (:func:`gnssacc.estimators.kalman.joseph_update`)."""
+    return -0.5 * (nis + logdet + dof * _LOG_2PI)
 
 
 class Recorder:
@@ -91,7 +101,15 @@ class Tally:
         return {k: v.loglik for k, v in self.kinds.items()}
 
     def add(self, t: float, m: Measurement, nis: float, loglik: float, used: bool, wz) -> None:
-        k = self.kinds[m.kind]
+        """The update ``m`` at ``t`` [s]: its NIS, log-likelihood, whether it was applied and its
+        whitened innovation (:func:`gnssacc.estimators.ekf.kalman_update`)."""
+        self.add_update(t, m.kind, len(m.dz), nis, loglik, used, wz)
+
+    def add_update(
+        self, t: float, kind: str, dof: int, nis: float, loglik: float, used: bool, wz
+    ) -> None:
+        """:meth:`add` for an update of ``kind`` with ``dof`` degrees of freedom."""
+        k = self.kinds[kind]
         if not used:
             k.rejected += 1
             return
@@ -101,7 +119,6 @@ class Tally:
             lag[0] += float(wz @ prev)
             lag[1] += float(wz @ wz)
         k.prev = wz
-        dof = len(m.dz)
         k.n += 1
         k.nis_sum += nis
         k.dof += dof

@@ -39,6 +39,7 @@ GROUPS = {
         ("aids/gnss_position.py", ("position_model",)),
         ("aids/vehicle.py", ("vehicle_model",)),
     ),
+    "loop": (("event_loop.py", ("run_stretch",)),),
     "window": (("mechanization.py", ("kernel_force_integrals",)),),
     "chain": (("window_marginals.py", ("_scatter", "_marginalize", "_node_covariances")),),
     "band": (
@@ -50,15 +51,18 @@ GROUPS = {
 }
 #: The EKF's groups: every run needs them, the preparation stage first.
 EKF_GROUPS = ("propagation", "update")
+#: The EKF's compiled event loop (:mod:`gnssacc.estimators.event_loop`): every run has it, but
+#: nothing waits for it (the passes use the Python loop until it is loaded: :func:`loaded`).
+LOOP_GROUP = "loop"
 #: The groups of a run of the default methods (``gnssacc.pipeline.DEFAULT_METHODS``, which the
 #: command line cannot import before the notice without importing numba).
-DEFAULT_GROUPS = ("propagation", "update", "chain")
+DEFAULT_GROUPS = ("propagation", "update", "loop", "chain")
 
 
 def groups_for(methods) -> tuple[str, ...]:
     """The kernel groups a run of ``methods`` (method ids) needs, in :data:`GROUPS` order."""
     methods = set(methods)
-    need = set(EKF_GROUPS)
+    need = {*EKF_GROUPS, LOOP_GROUP}
     if "ekf-accw" in methods:
         need.add("window")
     if any(m.startswith("smoother") for m in methods):
@@ -93,6 +97,8 @@ def compile_group(group: str) -> float:
         return time.perf_counter() - t0
     if group == "window":
         return mechanization.warm_up_window()
+    if group == LOOP_GROUP:
+        return _warm_up_loop()
     if group in ("chain", "band"):
         from .window_marginals import warm_up
 
@@ -117,6 +123,44 @@ def _warm_up_models() -> None:
     update_state(P, H, np.eye(2), np.ones(2), 0.0, -1, pos, v_n, R_nb, b_a, b_g, x_e)
     position_model(pos, R_nb, z3, 0.5, 0.1, 0.0, z3, -1, N_NAV)
     vehicle_model(R_nb, v_n, b_g, z3, z3, z3, np.eye(3), True, N_NAV)
+
+
+def _warm_up_loop() -> float:
+    """Compile (or load) the EKF's compiled event loop with the types a pass calls it with (the
+    fix with a Gauss-Markov error, the constraint, an output); the seconds it took."""
+    import numpy as np
+
+    from .ekf_record import Recorder
+    from .event_loop import run_stretch
+    from .layout import N_NAV
+
+    t0 = time.perf_counter()
+    z3, n = np.zeros(3), N_NAV + 3
+    prop: tuple = (np.array([0.0, 0.01, 0.02]), np.zeros((3, 3)), np.zeros((3, 3)), z3, z3, z3, z3)
+    prop += (np.zeros(1, np.int64), np.ones(1, np.int64), np.zeros((1, 3)), np.zeros((1, 3)))
+    prop += (
+        1,
+        True,
+        10,
+        np.eye(N_NAV),
+        False,
+        1.0,
+        np.full(3, 60.0),
+        np.ones(3),
+        0.0,
+        np.zeros((1, 3)),
+    )
+    st: tuple = (np.array([0.5, 0.1, 0.0]), z3.copy(), np.eye(3), z3.copy(), z3.copy(), np.eye(n))
+    st += (np.zeros(3), -1)
+    fix = (np.full(1, 0.5), np.full(1, 0.1), np.zeros(1), np.eye(3)[None].copy(), z3, 0.0, N_NAV)
+    nhc = (np.zeros((1, 3)), np.zeros(1, bool), z3, np.eye(3), True, 0.1, 0.5, np.eye(2))
+    out: tuple = (np.zeros(3, np.int64), *(np.zeros(3) for _ in range(3)), np.zeros(3, bool))
+    out += (np.zeros((3, 3)),)
+    r = Recorder(1, True)
+    rec = (r.t, r.pos, r.v_n, r.R_nb, r.b_a, r.b_g, r.var, r.P_att, r.P)
+    ev = (np.array([0.01, 0.012, 0.015]), np.array([1, 3, 2], np.int64), np.zeros(3, np.int64))
+    run_stretch(0, ev, 0.0, 0.02, 1, 0.0, prop, st, fix, nhc, out, rec, np.zeros(4, np.int64))
+    return time.perf_counter() - t0
 
 
 def compile_groups(groups=tuple(GROUPS)) -> None:
@@ -180,6 +224,8 @@ class BackgroundWarmUp:
         self.groups = tuple(dict.fromkeys((*EKF_GROUPS, *groups)))
         self.seconds: float | None = None
         self.error: BaseException | None = None
+        #: The groups loaded so far (:func:`loaded`).
+        self.loaded: set[str] = set()
         self.missing = [g for g in self.groups if not group_cached(g)]
         self.compiling = bool(self.missing)
         self._processes = processes and self.compiling
@@ -248,15 +294,17 @@ class BackgroundWarmUp:
         try:
             self._wait_children(["propagation"])
             compile_groups(EKF_GROUPS)  # loads what the children cached, or compiles
+            self.loaded.update(EKF_GROUPS)
         except BaseException as exc:  # re-raised in the waiting thread
             self.error = exc
         self.seconds = time.perf_counter() - t0
         self._done.set()  # the EKF's kernels: the preparation stage may start
         try:  # then the other groups', while the EKF and the tuner run
             if self.error is None:
-                others = [g for g in self.groups if g not in EKF_GROUPS]
-                self._wait_children(others)
-                compile_groups(others)
+                for group in (g for g in self.groups if g not in EKF_GROUPS):
+                    self._wait_children([group])
+                    compile_group(group)
+                    self.loaded.add(group)
         except (Exception, Terminated):  # an estimator compiles them itself when it first runs
             pass
 
@@ -299,6 +347,12 @@ def stop_background() -> None:
     handlers: they would go on compiling after the command ended)."""
     if _background is not None:
         _background.stop()
+
+
+def loaded(group: str) -> bool:
+    """Whether ``group`` is loaded in this process by the background compilation (without
+    waiting; ``False`` when none was started)."""
+    return _background is not None and group in _background.loaded
 
 
 def warm_up() -> float:

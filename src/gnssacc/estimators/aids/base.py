@@ -124,6 +124,12 @@ class EkfAid:
     def final_stats(self, s: "FilterState", stats: dict) -> None:
         """What it adds to the pass's ``stats`` at the end (``s``: the final state)."""
 
+    def compiled(self) -> tuple[str, tuple] | None:
+        """Its step in the EKF's compiled event loop (:mod:`gnssacc.estimators.event_loop`), when
+        it has one: the step's name and the arrays it takes there; ``None``: its epochs are the
+        Python loop's. An aid with a compiled step keeps nothing across epochs (:meth:`see`)."""
+        return None
+
 
 @dataclass
 class NodePrediction:

@@ -118,6 +118,31 @@ class EkfPosition(EkfAid):
         cov = None if g.corr_ned is None else g.cov_ned(j)  # correlated axes: the full covariance
         return [position(s, g.lat[j], g.lon[j], g.h[j], g.sigma_ned[j], self.lever, self.gate, cov)]
 
+    def compiled(self) -> tuple[str, tuple]:
+        """``("position", (lat, lon, h, R, lever, gate))``: the fixes [rad, rad, m], their noise
+        covariances (K, 3, 3) [m^2] as :func:`position` makes them, the lever arm [m, body] and
+        the gate."""
+        g = self.fixes
+        return "position", (
+            *(np.ascontiguousarray(x, float) for x in (g.lat, g.lon, g.h)),
+            fix_noise(g),
+            np.ascontiguousarray(self.lever, float),
+            float(self.gate),
+        )
+
+
+def fix_noise(fixes) -> np.ndarray:
+    """Every fix's noise covariance (K, 3, 3) [m^2, NED], to the bit as :func:`position` takes it:
+    ``diag(sigma^2)`` squared as a numpy scalar squares (the C library's ``pow``, which may round
+    otherwise than ``sigma * sigma``), or the stated covariance with correlated axes."""
+    k = len(fixes.t)
+    if fixes.corr_ned is not None:
+        return np.ascontiguousarray(fixes.cov_ned(np.arange(k)), float)
+    R = np.zeros((k, 3, 3))
+    for i in range(3):
+        R[:, i, i] = [v**2 for v in np.asarray(fixes.sigma_ned[:, i], float).tolist()]
+    return R
+
 
 def node_fixes(fix_t: np.ndarray, min_spacing: float) -> np.ndarray:
     """Which fixes are nodes (a mask): the first, then each fix at least ``min_spacing`` [s] after

@@ -56,12 +56,13 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from ...core.earth import earth_rate_n
 from ...core.rotations import cross3
 from ..layout import SYM_B, SYM_V, SYM_X
 from .base import AidSpec, EkfAid, Measurement, SmootherAid, nearest_nodes, row_sigma
-from .vehicle import K_SIGMA, held_samples, vehicle_velocity
+from .vehicle import K_SIGMA, held_samples, vehicle_axes, vehicle_velocity
 
 #: Decisions of :func:`decide`.
 APPLY, REST, TURN = 0, 1, 2
@@ -161,6 +162,10 @@ def decide(
     return APPLY
 
 
+#: :func:`decide` compiled, for the EKF's compiled event loop (Python calls the function itself).
+decide_compiled = njit(cache=True)(decide)
+
+
 def nhc_measurement(
     v_b: np.ndarray, H_v: np.ndarray, sigma_mps: np.ndarray, R: np.ndarray | None = None
 ) -> Measurement:
@@ -222,6 +227,22 @@ class EkfNhc(EkfAid):
             stats[SKIPPED[why]] += 1
             return
         yield nhc_measurement(v_b, H, nhc.sigma_mps, self.R), True
+
+    def compiled(self) -> tuple[str, tuple]:
+        """``("nhc", (omega_b, rest, lever, R_vb, vb_rows, sigma_lateral, pivot_offset, R))``:
+        the epochs' gyro readings [rad/s] and rest flags, the reference point [m, body], the
+        vehicle's axes (:func:`gnssacc.estimators.aids.vehicle.vehicle_axes`), the lateral sigma
+        [m/s], the pivot offset [m] and the constraint's noise covariance [m^2/s^2]."""
+        cfg, ep = self.cfg, self.ep
+        return "nhc", (
+            np.ascontiguousarray(ep.omega_b, float),
+            np.ascontiguousarray(ep.rest, bool),
+            np.ascontiguousarray(cfg.lever_arm_b, float),
+            *vehicle_axes(cfg.R_vb),
+            float(cfg.sigma_mps[0]),
+            float(cfg.pivot_offset_m),
+            np.ascontiguousarray(self.R, float),
+        )
 
 
 def _ekf(ctx) -> EkfNhc | None:

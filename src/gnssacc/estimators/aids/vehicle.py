@@ -92,7 +92,13 @@ def vehicle_velocity(
     R_vb : ndarray (3, 3), optional
         ``None``: the body's axes.
     """
+    R, rows = vehicle_axes(R_vb)
+    return vehicle_model(s.R_nb, s.v_n, s.b_g, omega_meas_b, lever_b, w_ie_n, R, rows, s.P.shape[0])
+
+
+def vehicle_axes(R_vb: np.ndarray | None) -> tuple[np.ndarray, bool]:
+    """:func:`vehicle_model`'s ``R_vb`` (C order: one compiled version for either order; the
+    identity for ``None``) and ``vb_rows`` for the body to vehicle axes ``R_vb``."""
     R = _IDENTITY if R_vb is None else R_vb
     rows = rows_contiguous(R)
-    R = R if rows else np.ascontiguousarray(R)  # one compiled version for either order
-    return vehicle_model(s.R_nb, s.v_n, s.b_g, omega_meas_b, lever_b, w_ie_n, R, rows, s.P.shape[0])
+    return (R if rows else np.ascontiguousarray(R)), rows

@@ -1,0 +1,111 @@
+"""The EKF's compiled event loop against the Python loop it stands in for: a simulated pass run
+both ways gives the same statistics and the same trajectory (a tuner's pass: no outputs, the
+covariance every tenth sample; a method's pass: outputs and their covariances), the stationary
+updates' epochs in the Python loop between the compiled stretches, with the compiled events
+counted so that the comparison cannot pass by running the Python loop twice."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gnssacc import pipeline
+from gnssacc.core.config import load_config
+from gnssacc.estimators import ekf, event_loop, kernels
+from gnssacc.sources.sim import simulate
+
+#: Figures of a pass compared (the NIS and log-likelihood per kind, the decisions' counts).
+KEYS = ("loglik", "loglik_pos", "loglik_nhc", "nis_pos_mean", "nis_nhc_mean", "acf1_pos")
+
+
+@pytest.fixture(scope="module")
+def prepared():
+    """A skid-steer vehicle with stops and turns on the spot, fixes with a lever arm and the
+    Gauss-Markov fix error, the constraint with a reference point off the IMU and a mounting
+    rotation; prepared without tuning."""
+    cfg = load_config(
+        overrides={
+            "gnss": {"lever_arm_b_m": [0.4, -0.2, -1.1], "gm_sigma_m": 0.5, "gm_tau_s": 60.0},
+            "nhc": {
+                "pitch_offset_deg": 1.0,
+                "yaw_offset_deg": -0.5,
+                "lever_arm_b_m": [-0.3, 0.1, 0.4],
+            },
+        }
+    )
+    run = simulate("ugv", 180.0, imu_grade="industrial", seed=4, lever_arm_b=(0.4, -0.2, -1.1))
+    return pipeline.prepare(run, cfg, tune="none"), cfg
+
+
+def _pass(prepared, compiled: bool, monkeypatch, **options):
+    """The pass with the compiled loop or the Python loop; the events the compiled one ran."""
+    prep, cfg = prepared
+    ran = []
+    run_stretch = event_loop.run_stretch
+
+    def counted(e, *args):
+        out = run_stretch(e, *args)
+        ran.append(out[0] - e)
+        return out
+
+    monkeypatch.setattr(event_loop, "run_stretch", counted)
+    monkeypatch.setattr(ekf, "COMPILED_LOOP", compiled)
+    sol = ekf.estimate(prep, cfg, "ekf", **options)
+    return sol, sum(ran)
+
+
+def _assert_same(a, b) -> None:
+    for key in KEYS:
+        assert a.stats[key] == pytest.approx(b.stats[key], rel=1e-12, abs=1e-12), key
+    for key, v in a.stats.items():
+        if key.startswith("n_"):
+            assert v == b.stats[key], key
+    for x, y in ((a.lat, b.lat), (a.lon, b.lon), (a.h, b.h), (a.v_n, b.v_n), (a.rpy, b.rpy)):
+        assert np.allclose(x, y, rtol=1e-12, atol=1e-12)
+    assert np.allclose(a.sigma, b.sigma, rtol=1e-12, atol=1e-15)
+
+
+def test_tuner_pass_compiled_equals_python_loop(prepared, monkeypatch):
+    """No outputs, the covariance every tenth sample: the fixes and the constraint's epochs run in
+    the compiled loop, the stationary updates' in Python, with the same figures."""
+    opts = {"output_times": np.zeros(0), "cov_every": 10}
+    fast, n_compiled = _pass(prepared, True, monkeypatch, **opts)
+    ref, n_none = _pass(prepared, False, monkeypatch, **opts)
+    assert n_none == 0 and n_compiled > 300
+    assert fast.stats["n_pos_updates"] > 150 and fast.stats["n_nhc_updates"] > 50
+    assert fast.stats["n_nhc_skipped_turn"] > 0 and fast.stats["n_nhc_skipped_rest"] > 0
+    assert fast.stats["n_zupt_updates"] > 0  # the Python loop's epochs between the stretches
+    _assert_same(fast, ref)
+
+
+def test_method_pass_with_outputs_compiled_equals_python_loop(prepared, monkeypatch):
+    """The default outputs with their covariances and the covariance at every sample, stopped
+    before the end: the same trajectory, covariances and figures both ways."""
+    prep = prepared[0]
+    opts = {"t_stop": float(prep.run.t_end) - 20.0, "record_innovations": True, "store_P": True}
+    fast, n_compiled = _pass(prepared, True, monkeypatch, **opts)
+    ref, _ = _pass(prepared, False, monkeypatch, **opts)
+    assert n_compiled > 400 and len(fast.t) == len(ref.t) > 100
+    assert fast.stats["n_zupt_updates"] > 0  # the Python loop's epochs between the stretches
+    assert np.array_equal(fast.stats["nis_pos"], ref.stats["nis_pos"])
+    assert np.allclose(fast.P, ref.P, rtol=1e-12, atol=1e-18)
+    _assert_same(fast, ref)
+
+
+def test_a_pass_uses_the_python_loop_until_the_loop_kernel_is_loaded(prepared, monkeypatch):
+    """Left to the background compilation (``COMPILED_LOOP`` unset), a pass runs in Python while
+    the loop's group is not loaded, and in the compiled loop once it is, which the background
+    says for the groups it has loaded."""
+    prep, cfg = prepared
+    ran = []
+    run_stretch = event_loop.run_stretch
+    monkeypatch.setattr(event_loop, "run_stretch", lambda *a: ran.append(1) or run_stretch(*a))
+    opts = {"output_times": np.zeros(0), "cov_every": 10, "t_stop": float(prep.init.t) + 30.0}
+    for loaded, calls in ((False, 0), (True, 1)):
+        monkeypatch.setattr(kernels, "loaded", lambda group, yes=loaded: yes and group == "loop")
+        ran.clear()
+        ekf.estimate(prep, cfg, "ekf", **opts)
+        assert (len(ran) > 0) == bool(calls)
+    background = kernels.BackgroundWarmUp(("loop",), notice=None, processes=False).start()
+    background.wait_all()
+    assert {"propagation", "update", "loop"} <= background.loaded
