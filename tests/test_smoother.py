@@ -233,21 +233,24 @@ def test_kitti_integration():
 
 
 def test_imu_still_cruise_in_an_outage_gets_no_zero_velocity_factor():
-    """KITTI with a 10 s outage from 90 s: the car cruises IMU-still there, and the stationary
-    detector, without fixes to check it, keeps the stretch. A zero-velocity factor on a car at
-    ~10 m/s dragged the smoother 100 m off (online) with a 1 m sigma; the velocity predicted for
-    the node rejects it, as the EKF's gate does."""
+    """KITTI with a 10 s outage from 90 s: the car cruises IMU-still there. The stationary
+    detector refuses the stretch by the fixes around the outage, carried to it by the IMU (step
+    4b). Without that step (``link_reach_s = 0``) it keeps it, unchecked, and a zero-velocity
+    factor on a car at ~10 m/s dragged the smoother 100 m off (online) with a 1 m sigma: the
+    velocity predicted for the node rejects it, as the EKF's gate does."""
     import gnssacc
 
     # IMU-only through the outage (no non-holonomic constraint), as the ratios below were measured.
-    res = gnssacc.process(
-        "kitti",
-        methods=["ekf", "smoother"],
-        tune="none",
-        outage="90:10",
-        seed=7,
-        config={"nhc": {"enabled": False}},
-    )
+    common = dict(methods=["ekf", "smoother"], tune="none", outage="90:10", seed=7)
+    no_nhc = {"nhc": {"enabled": False}}
+    res = gnssacc.process("kitti", **common, config=no_nhc)
+    t0, refused = res.run.imu.t[0], res.prepared.stationary.rejected
+    assert any(
+        "carried by the IMU" in r["why"] and 90.0 <= r["t_start"] - t0 and r["t_end"] - t0 <= 100.0
+        for r in refused
+    ), refused
+    assert res.solutions["smoother"].stats["n_zupt_factors"] == 0
+    res = gnssacc.process("kitti", **common, config={**no_nhc, "stationary": {"link_reach_s": 0}})
     stats = res.solutions["smoother"].stats
     assert stats["n_zupt_gated"] >= 1
     prmse = res.prmse()
