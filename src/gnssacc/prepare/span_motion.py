@@ -32,7 +32,7 @@ import numpy as np
 from ..core.recording import GnssFixes, GnssVelocity, ImuData
 from ..core.stationary_params import StationaryParams
 
-#: Gravity for error budgets only [m/s^2].
+#: Gravity for error budgets only [m/s^2] (2 % accuracy is plenty there).
 G_APPROX = 9.8
 
 
@@ -64,6 +64,40 @@ class LinkedMotion:
         return self.glr > p.gnss_k_sigma**2 and self.speed_mps > p.gnss_speed_floor_mps
 
 
+def level_acceleration(f_b: np.ndarray, theta: np.ndarray, f_ref_b: np.ndarray) -> np.ndarray:
+    """Horizontal acceleration (n, 2) [m/s^2] in a span's level x/y axes at samples with specific
+    force ``f_b`` (n, 3) [m/s^2, body FRD], rotated by ``theta`` (n, 3) [rad] from the span.
+
+    With the span's mean specific force ``f_ref_b`` as the rest reference (gravity and the
+    accelerometer bias), the body acceleration is ``f - f_ref + theta_xy x f_ref`` to first order
+    in the tilt change; a turn about body z leaves gravity in place, so the horizontal part is
+    rotated by the heading change ``theta_z`` only."""
+    tilt = theta * np.array([1.0, 1.0, 0.0])
+    return _turned(f_b - f_ref_b + np.cross(tilt, f_ref_b), theta[:, 2])
+
+
+def _turned(x_b: np.ndarray, psi: np.ndarray) -> np.ndarray:
+    """The x/y part of body vectors ``x_b`` (n, 3) in the span's level axes, for heading changes
+    ``psi`` (n,) [rad] from the span."""
+    c, s = np.cos(psi), np.sin(psi)
+    return np.column_stack([c * x_b[:, 0] - s * x_b[:, 1], s * x_b[:, 0] + c * x_b[:, 1]])
+
+
+def tilt_error(theta: np.ndarray, cross_axis: float, g: float = G_APPROX) -> np.ndarray:
+    """What :func:`level_acceleration` misses [m/s^2] (n,): the second-order tilt
+    ``0.5 g |theta_xy|^2``, and the tilt a turn fakes through gyro cross-axis coupling,
+    ``g cross_axis |theta_z|``."""
+    return g * (0.5 * np.sum(theta[:, :2] ** 2, axis=1) + cross_axis * np.abs(theta[:, 2]))
+
+
+def fix_rate_inflation(t: np.ndarray, corr_s: float) -> float:
+    """Variance factor for fixes at times ``t`` [s] faster than one per ``corr_s`` [s]: their
+    errors are taken as correlated over ``corr_s``, so they count ``corr_s / interval`` times
+    less (:class:`gnssacc.core.stationary_params.StationaryParams`, ``gnss_corr_s``)."""
+    interval = float(np.median(np.diff(t))) if len(t) > 1 else corr_s
+    return max(1.0, corr_s / max(interval, 1e-9))
+
+
 def outward_samples(
     t: np.ndarray, i_edge: int, before: bool, reach_s: float, gap_limit_s: float
 ) -> np.ndarray:
@@ -90,7 +124,7 @@ class LevelPath:
     Attributes
     ----------
     t : ndarray, shape (n,)
-        Sample times [s], outward from the edge.
+        Sample times [s], in time order (every array below in the same order).
     P : ndarray, shape (n, 2)
         ``p(t) - p_edge - v_edge (t - t_edge)`` of the antenna, level x/y [m].
     bound : ndarray, shape (n,)
@@ -109,9 +143,7 @@ class LevelPath:
 
     def at(self, t_q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``P, bound, V, bound_v`` interpolated at times ``t_q`` [s] within the path."""
-        o = np.argsort(self.t)
-        ts = self.t[o]
-        col = lambda x: np.interp(t_q, ts, x[o])  # noqa: E731
+        col = lambda x: np.interp(t_q, self.t, x)  # noqa: E731
         P = np.column_stack([col(self.P[:, 0]), col(self.P[:, 1])])
         V = np.column_stack([col(self.V[:, 0]), col(self.V[:, 1])])
         return P, col(self.bound), V, col(self.bound_v)
@@ -146,24 +178,19 @@ def level_path(
     w = imu.omega_ib_b[idx] - omega_ref_b
     # Rotation from the span to each sample (small-angle in roll and pitch, yaw kept whole).
     theta = sign * np.cumsum(w * dt[:, None], axis=0)
-    tilt = theta * np.array([1.0, 1.0, 0.0])  # a turn about body z leaves gravity in place
-    f = imu.f_b[idx] - f_ref_b + np.cross(tilt, f_ref_b)
-    c, s = np.cos(theta[:, 2]), np.sin(theta[:, 2])
-    level = lambda x: np.column_stack([c * x[:, 0] - s * x[:, 1], s * x[:, 0] + c * x[:, 1]])  # noqa: E731
-    V = sign * np.cumsum(level(f) * dt[:, None], axis=0)
+    V = sign * np.cumsum(level_acceleration(imu.f_b[idx], theta, f_ref_b) * dt[:, None], axis=0)
     P = sign * np.cumsum(V * dt[:, None], axis=0)
-    err = G_APPROX * (
-        0.5 * np.sum(theta[:, :2] ** 2, axis=1) + p.chain_cross_axis * np.abs(theta[:, 2])
-    )
+    err = tilt_error(theta, p.chain_cross_axis)
     bound_v = np.cumsum((err + p.excursion_floor_mps2) * dt)
     bound = np.cumsum(bound_v * dt)
     if lever_b is not None and np.any(lever_b):
         l_b = np.tile(lever_b, (len(idx), 1))
-        P = P + level(l_b) - lever_b[:2]
-        V = V + level(np.cross(w, l_b))
+        P = P + _turned(l_b, theta[:, 2]) - lever_b[:2]
+        V = V + _turned(np.cross(w, l_b), theta[:, 2])
         bound = bound + np.linalg.norm(lever_b) * np.linalg.norm(theta[:, :2], axis=1)
         bound_v = bound_v + np.linalg.norm(lever_b) * np.linalg.norm(w[:, :2], axis=1)
-    return LevelPath(t, P, bound, V, bound_v)
+    o = slice(None, None, int(sign))  # outward -> time order
+    return LevelPath(t[o], P[o], bound[o], V[o], bound_v[o])
 
 
 def _position_rows(t_k, p_k, P_k, t_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -206,9 +233,18 @@ def _pieces(times: np.ndarray, span, paths: list) -> list:
     out = [(inside, None)]
     for path in paths:
         if path is not None:
-            lo, hi = path.t.min(), path.t.max()
+            lo, hi = path.t[0], path.t[-1]
             out.append((np.flatnonzero((times >= lo) & (times <= hi)), path))
     return out
+
+
+def _carried(path, t_q: np.ndarray, velocity: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The carried path ``P`` (or its velocity ``V``) and its bound at times ``t_q`` [s]; zeros
+    inside the span (``path`` None: the span does not move relative to itself)."""
+    if path is None:
+        return np.zeros((len(t_q), 2)), np.zeros(len(t_q))
+    P, bound, V, bound_v = path.at(t_q)
+    return (V, bound_v) if velocity else (P, bound)
 
 
 def _fix_block(gnss: GnssFixes, p_n, span, paths, p: StationaryParams):
@@ -217,18 +253,13 @@ def _fix_block(gnss: GnssFixes, p_n, span, paths, p: StationaryParams):
     for k, path in _pieces(gnss.t, span, paths):
         if k.size == 0:
             continue
-        if path is None:
-            P, bound = np.zeros((len(k), 2)), np.zeros(len(k))
-        else:
-            P, bound = path.at(gnss.t[k])[:2]
+        P, bound = _carried(path, gnss.t[k], velocity=False)
         a, obs = _position_rows(gnss.t[k], p_n[k], P, span.t_start)
         A.append(a)
         y.append(obs)
         var.append((gnss.sigma_ned[k, :2] ** 2 + bound[:, None] ** 2).reshape(-1))
         t.append(gnss.t[k])
-    t_k = np.unique(np.concatenate(t))
-    interval = float(np.median(np.diff(t_k))) if len(t_k) > 1 else p.gnss_corr_s
-    corr = max(1.0, p.gnss_corr_s / max(interval, 1e-9))
+    corr = fix_rate_inflation(np.unique(np.concatenate(t)), p.gnss_corr_s)
     return np.vstack(A), np.concatenate(y), np.concatenate(var) * corr
 
 
@@ -243,10 +274,7 @@ def _velocity_block(vel, span, paths):
         k = k[both[k]]
         if k.size == 0:
             continue
-        if path is None:
-            V, bound_v = np.zeros((len(k), 2)), np.zeros(len(k))
-        else:
-            V, bound_v = path.at(vel.t[k])[2:]
+        V, bound_v = _carried(path, vel.t[k], velocity=True)
         a, obs = _velocity_rows(vel.v_ned[k], V)
         A.append(a)
         y.append(obs)
@@ -286,20 +314,20 @@ def linked_motion(
     n_obs = sum(len(b[1]) // 2 for b in blocks)
     if n_obs < 3:
         return None
-    # Two passes: the first fit's residuals tell how correlated each kind's errors are.
-    inflate = [1.0, 1.0]
-    for _ in range(2):
-        A = np.vstack([b[0] for b in blocks])
-        y = np.concatenate([b[1] for b in blocks])
+    A = np.vstack([b[0] for b in blocks])
+    y = np.concatenate([b[1] for b in blocks])
+    n_fix = len(blocks[0][1])
+
+    def fit(inflate: tuple):
         var = np.concatenate([b[2] * f for b, f in zip(blocks, inflate)])
         w = 1.0 / np.sqrt(var)
         Aw, yw = A * w[:, None], y * w
-        chi_full, x_full, resid = _profiled_fit(Aw[:, :4], Aw[:, 4:], yw)
-        n_fix = len(blocks[0][1])
-        inflate = [
-            f * correlation_inflation(r.reshape(-1, 2))
-            for f, r in zip(inflate, (resid[:n_fix], resid[n_fix:]))
-        ]
+        return Aw, yw, _profiled_fit(Aw[:, :4], Aw[:, 4:], yw)
+
+    # The first fit's residuals tell how correlated each kind's errors are; the second uses that.
+    resid = fit((1.0, 1.0))[2][2]
+    inflate = tuple(correlation_inflation(r.reshape(-1, 2)) for r in (resid[:n_fix], resid[n_fix:]))
+    Aw, yw, (chi_full, x_full, _) = fit(inflate)
     chi_rest = _profiled_fit(Aw[:, :2], Aw[:, 4:], yw)[0]
     cov_v = np.linalg.pinv(Aw[:, :4].T @ Aw[:, :4])[2:, 2:]
     return LinkedMotion(

@@ -81,7 +81,13 @@ from ..core.stationary_params import (  # noqa: F401 (this stage's API)
     params_from_config,
 )
 from ..core.units import DEG
-from .span_motion import linked_motion
+from .span_motion import (
+    G_APPROX,
+    fix_rate_inflation,
+    level_acceleration,
+    linked_motion,
+    tilt_error,
+)
 from .allan import (
     allan_deviation_pooled,
     fit_noise_terms,
@@ -91,8 +97,6 @@ from .allan import (
 
 CHANNELS = ("ax", "ay", "az", "gx", "gy", "gz")
 ACCEL_CHANNELS, GYRO_CHANNELS = slice(0, 3), slice(3, 6)
-#: Gravity for error budgets only [m/s^2] (2 % accuracy is plenty there).
-G_APPROX = 9.8
 
 
 @dataclass
@@ -415,8 +419,7 @@ def gnss_speed(
         stt = np.sum(w * (tc - tm) ** 2)
         v[i] = np.sum(w * (tc - tm) * p_n[:, i]) / stt
         var[i] = 1.0 / stt
-    interval = float(np.median(np.diff(t))) if len(t) > 1 else corr_s
-    inflate = max(1.0, corr_s / max(interval, 1e-9))
+    inflate = fix_rate_inflation(t, corr_s)
     return float(np.hypot(*v)), float(np.sqrt(inflate * var.mean()))
 
 
@@ -653,14 +656,9 @@ def velocity_change(
     w = (imu.omega_ib_b[i0 + 1 : i1 + 1] - ref.omega_mean_b) * dt[:, None]
     # Rotation from the span back to each sample (small-angle sum, yaw kept whole).
     theta = -np.cumsum(w[::-1], axis=0)[::-1]
-    tilt = theta * np.array([1.0, 1.0, 0.0])  # a turn about body z leaves gravity in place
-    f = imu.f_b[i0 + 1 : i1 + 1] - ref.f_mean_b + np.cross(tilt, ref.f_mean_b)
-    c, s_ = np.cos(theta[:, 2]), np.sin(theta[:, 2])
-    a_x, a_y = c * f[:, 0] - s_ * f[:, 1], s_ * f[:, 0] + c * f[:, 1]
-    dv = np.array([np.sum(a_x * dt), np.sum(a_y * dt)])
-    # Second-order tilt, and the tilt a turn fakes through gyro cross-axis coupling.
-    err = g * (0.5 * np.sum(theta[:, :2] ** 2, axis=1) + cross_axis * np.abs(theta[:, 2]))
-    return dv, float(np.sum(err * dt))
+    a = level_acceleration(imu.f_b[i0 + 1 : i1 + 1], theta, ref.f_mean_b)
+    dv = np.array([np.sum(a[:, 0] * dt), np.sum(a[:, 1] * dt)])
+    return dv, float(np.sum(tilt_error(theta, cross_axis, g) * dt))
 
 
 def _chain_link(
