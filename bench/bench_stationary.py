@@ -11,7 +11,11 @@ refused and by which step. A span counts as moving when the true horizontal spee
 The simulator's receiver also gives Doppler velocities (0.05 m/s), which the detector uses as
 the pipeline does; ``--no-velocity`` withholds them.
 
-    python bench/bench_stationary.py [--seeds 2] [--quick] [--no-velocity]
+``--lever-arm`` puts the antenna off the IMU (told to the detector unless ``--untold``);
+``--noises rtk,precise`` gives the precise fixes that see its swing in a pivot.
+
+    python bench/bench_stationary.py [--seeds 2] [--quick] [--no-velocity] [--scenarios LIST]
+        [--grades LIST] [--noises LIST] [--outages LIST] [--lever-arm X:Y:Z [--untold]]
 """
 
 from __future__ import annotations
@@ -29,12 +33,15 @@ from gnssacc.prepare.stationary import detect_stationary
 MOVING_MPS = 0.05
 
 
-def score(run, velocity=None) -> dict:
+def score(run, velocity=None, lever_arm_b=None) -> dict:
     """Counts for one run: ``false``/``false_s``/``false_speed`` (kept while moving), ``true``/
     ``true_s`` (kept at rest), ``refused`` (a Counter of the reasons of true stops refused);
-    ``velocity``: the receiver's velocities given to the detector (None: fixes only)."""
+    ``velocity``: the receiver's velocities given to the detector (None: fixes only);
+    ``lever_arm_b``: the antenna's lever arm told to the detector [m, body FRD]."""
     t0 = time.perf_counter()
-    report = detect_stationary(run.imu, run.gnss, run.origin, velocity=velocity)
+    report = detect_stationary(
+        run.imu, run.gnss, run.origin, lever_arm_b=lever_arm_b, velocity=velocity
+    )
     seconds = time.perf_counter() - t0
     tt, speed = run.truth.t, np.linalg.norm(run.truth.v_n[:, :2], axis=1)
 
@@ -65,18 +72,24 @@ def main() -> None:
     ap.add_argument(
         "--no-velocity", action="store_true", help="fixes only (as for a receiver without them)"
     )
+    ap.add_argument("--scenarios", default="ugv,ugv-slow,car,car-city")
+    ap.add_argument("--grades", default="consumer,industrial")
+    ap.add_argument("--noises", default="white,gm", help="the simulator's fix-noise profiles")
+    ap.add_argument("--outages", default="none,60:20", help="'none' or PERIOD:LEN, each a row")
+    ap.add_argument("--lever-arm", default="0:0:0", help="the antenna from the IMU, X:Y:Z [m]")
+    ap.add_argument("--untold", action="store_true", help="do not tell the detector the lever arm")
     a = ap.parse_args()
-    scenarios = ("ugv", "car") if a.quick else ("ugv", "ugv-slow", "car", "car-city")
+    lever = [float(x) for x in a.lever_arm.split(":")]
+    scenarios = ("ugv", "car") if a.quick else tuple(a.scenarios.split(","))
     seeds = range(1 if a.quick else a.seeds)
-    grid = itertools.product(
-        scenarios, ("consumer", "industrial"), ("white", "gm"), (None, "60:20"), seeds
-    )
+    outages = [None if o == "none" else o for o in a.outages.split(",")]
+    grid = itertools.product(scenarios, a.grades.split(","), a.noises.split(","), outages, seeds)
     rows: dict = {}
     times = []
     for sc, grade, noise, outage, seed in grid:
-        spec = f"sim:{sc},imu={grade},duration=300"
+        spec = f"sim:{sc},imu={grade},duration=300,lever_arm={a.lever_arm}"
         run = gnssacc.load(spec, seed=seed, noise=noise, outage_every=outage)
-        r = score(run, None if a.no_velocity else run.gnss_vel)
+        r = score(run, None if a.no_velocity else run.gnss_vel, None if a.untold else lever)
         times.append(r.pop("seconds"))
         key = (sc, "outages" if outage else "no outage")
         acc = rows.setdefault(
