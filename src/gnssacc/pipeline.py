@@ -463,6 +463,7 @@ def run_methods(
     failures: dict[str, str] | None = None,
     observers: dict | None = None,
     say: Callable[[str], None] | None = None,
+    beside: dict[str, Callable] | None = None,
 ) -> dict[str, NavSolution]:
     """Run each method on the same run, from the same identified start and noise.
 
@@ -486,6 +487,11 @@ def run_methods(
         :class:`gnssacc.analysis.observability.EpochCollector` of the report's observability section).
     say : callable, optional
         ``say(line)`` is told each method's end as it happens (``ekf: done in 0.12 s``, or its failure).
+    beside : dict, optional
+        ``{name: call}``, calls without arguments made beside the methods: in the process with
+        the lightest share when the methods run side by side (:func:`methods_side_by_side`), else
+        here after them. Each call is replaced in this dict by its result; one that raises
+        raises here.
 
     Returns
     -------
@@ -494,7 +500,8 @@ def run_methods(
     """
     prep = prep or prepare(run, cfg, tune, methods)
     out: dict[str, NavSolution] = {}
-    done = methods_side_by_side(prep, methods, show_progress, observers)
+    beside = {} if beside is None else beside
+    done = methods_side_by_side(prep, methods, show_progress, observers, beside)
     for m in methods:
         try:
             extra = {"observer": observers[m]} if observers and m in observers else {}
@@ -515,7 +522,23 @@ def run_methods(
             failures[m] = failure_reason(exc)
             if say:
                 say(f"{m}: failed ({failures[m]})")
+    for name, call in beside.items():  # made here those not made in a worker (or failed there)
+        beside[name] = call.value if isinstance(call, _Made) else call()
     return out
+
+
+class _Made:
+    """The result of a ``beside`` call of :func:`run_methods` made in a worker."""
+
+    def __init__(self, value):
+        self.value = value
+
+
+def timed_call(call: Callable, *args) -> tuple:
+    """``(call(*args), seconds it took)``."""
+    t = time.perf_counter()
+    value = call(*args)
+    return value, time.perf_counter() - t
 
 
 #: Relative cost of a method, to share the methods among processes (a smoother ~4 EKF passes).
@@ -532,27 +555,34 @@ def method_groups(methods, observers: dict | None, jobs: int) -> list[list[str]]
         groups[0].append(m)
         load[0] += 1.0
     rest = [m for m in methods if not (observers and m in observers)]
-    weight = {m: _SMOOTHER_WEIGHT if METHODS.get(m) is _smoother else 1.0 for m in rest}
-    for m in sorted(rest, key=lambda m: -weight[m]):
+    for m in sorted(rest, key=lambda m: -method_weight(m)):
         k = int(np.argmin(load))
         groups[k].append(m)
-        load[k] += weight[m]
+        load[k] += method_weight(m)
     return [g for k, g in enumerate(groups) if g or k == 0]
 
 
+def method_weight(method: str) -> float:
+    """A method's relative cost (an EKF pass 1, a smoother :data:`_SMOOTHER_WEIGHT`)."""
+    return _SMOOTHER_WEIGHT if METHODS.get(method) is _smoother else 1.0
+
+
 def methods_side_by_side(
-    prep: Prepared, methods, show_progress: bool, observers: dict | None
+    prep: Prepared, methods, show_progress: bool, observers: dict | None, beside: dict
 ) -> dict[str, dict[str, NavSolution]]:
     """The methods' solutions, ``{method: its solutions}``, run side by side in processes
     (:func:`gnssacc.core.parallel.side_by_side`, shared by :func:`method_groups`) when there are
     several processes and methods; empty when they run one after the other. A method that failed
     in a worker is absent (it is run again in this process, which raises or records its failure
-    as it would alone); progress bars only for this process's share."""
+    as it would alone); progress bars only for this process's share. The ``beside`` calls
+    (:func:`run_methods`) are made after the lightest share's methods; each made is replaced in
+    ``beside`` by its result wrapped in :class:`_Made`."""
     groups = method_groups(methods, observers, usable_jobs())
     if len(groups) < 2:
         return {}
+    lightest = int(np.argmin([sum(method_weight(m) for m in g) for g in groups]))
 
-    def share(k: int) -> dict:
+    def share(k: int) -> tuple[dict, dict]:
         got: dict = {}
         for m in groups[k]:
             extra = {"observer": observers[m]} if observers and m in observers else {}
@@ -561,11 +591,18 @@ def methods_side_by_side(
             except Exception:  # noqa: BLE001 (run again in this process, which says why)
                 continue
             release_free_memory()
-        return got
+        made: dict = {}
+        for name, call in beside.items() if k == lightest else ():
+            try:
+                made[name] = _Made(call())
+            except Exception:  # noqa: BLE001 (made again in this process, which raises)
+                continue
+        return got, made
 
     done: dict = {}
-    for got in side_by_side(share, [(k,) for k in range(len(groups))], jobs=len(groups)):
+    for got, made in side_by_side(share, [(k,) for k in range(len(groups))], jobs=len(groups)):
         done.update(got)
+        beside.update(made)
     return done
 
 
@@ -649,14 +686,13 @@ def compare(
         stages.close()
     for line in preparation_lines(prep) if say else ():
         say(line)
-    t = time.perf_counter()
-    models = {"": check_model(prep)}  # the final noise model against the recording
-    seconds = {**prep.seconds, "model_check_s": time.perf_counter() - t}
     # The kernels' compile (or load) time, in the background, and the wait for the kernels of
     # the methods (not inside their wall times).
     jit_s = kernels.warm_up() + kernels.ready(methods)
     run = prep.run  # as the input checks left it: repaired units, the measured clock offset applied
     failed: dict[str, str] = {}
+    # The final noise model against the recording: one EKF pass, made beside the methods.
+    beside: dict = {"model": lambda: timed_call(check_model, prep)}
     sols = run_methods(
         run,
         cfg,
@@ -666,7 +702,11 @@ def compare(
         failures=failed,
         observers=observers,
         say=say,
+        beside=beside,
     )
+    model, model_s = beside["model"]
+    models = {"": model}
+    seconds = {**prep.seconds, "model_check_s": model_s}
     window = scored_window(run, sols)
     raw = gnss_score(run, window)
     raw.errors = fix_statistics(run, window)
@@ -994,6 +1034,7 @@ def write_result(
             tuned_toml=tuned,
             replay=replay,
             jobs=jobs,
+            stationary=prep.stationary,
         )
         for name, text in (extra_files(metrics) if extra_files else {}).items():
             (folder / name).write_text(text)
@@ -1162,6 +1203,7 @@ def write_result_files(
     tuned_toml: str | None = None,
     replay=None,
     jobs: int | None = None,
+    stationary=None,
 ) -> None:
     """Write every output file into ``folder`` (a fresh folder; see :func:`write_outputs`).
 
@@ -1195,6 +1237,8 @@ def write_result_files(
     if report:
         from .outputs.htmlreport import write_html_report
 
-        write_html_report(folder, run, sols, metrics, cfg, replay=replay, figures=drawn)
+        write_html_report(
+            folder, run, sols, metrics, cfg, replay=replay, figures=drawn, stationary=stationary
+        )
     (folder / "table.txt").write_text(format_table(metrics) + "\n")
     write_json(metrics, folder / "metrics.json")

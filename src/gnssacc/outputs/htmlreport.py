@@ -18,17 +18,21 @@ from ..core.solution import NavSolution
 from .report import failed_methods, group_warnings, table_notes, table_rows, verdict_line
 
 
-def observability_html(run: RecordedRun, sols: dict[str, NavSolution], cfg, replay=None) -> str:
+def observability_html(
+    run: RecordedRun, sols: dict[str, NavSolution], cfg, replay=None, stationary=None
+) -> str:
     """Motion context and, per state, the share of predicted variance each aiding removes (EKF),
     from ``replay`` (the ``ekf-acc`` pass's own matrices), or from one more ``ekf-acc`` pass when
-    the run did not have one."""
+    the run did not have one. ``stationary``: the spans the estimators stood still in
+    (:class:`gnssacc.prepare.stationary.StationaryReport`; detected again, without the run's
+    configuration, when omitted)."""
     from ..analysis.motion import classify_motion
     from ..analysis.observability import STATE_NAMES, aiding_information, replay_ekf
 
     ref = next((sols[m] for m in ("smoother", "smoother-acc", "ekf", "ekf-acc") if m in sols), None)
     if ref is None:
         return ""
-    fractions = classify_motion(run, ref).fractions()
+    fractions = classify_motion(run, ref, stationary=stationary).fractions()
     motion = "".join(
         f"<tr><td>{html.escape(k)}</td><td>{100 * v:.1f}</td></tr>" for k, v in fractions.items()
     )
@@ -393,11 +397,13 @@ def write_html_report(
     cfg=None,
     replay=None,
     figures: dict | None = None,
+    stationary=None,
 ) -> Path:
     """Write ``report.html`` into ``folder``; returns the page's path.
 
     ``figures``: what :func:`gnssacc.outputs.figures.write_figures` drew (``{name: None or reason}``).
-    With ``cfg`` the page also gets the observability section (:func:`observability_html`).
+    With ``cfg`` the page also gets the observability section (:func:`observability_html`, with
+    the run's ``stationary`` spans).
     """
     folder = Path(folder)
     figures = figures or {}
@@ -413,7 +419,9 @@ def write_html_report(
         ("IMU data quality", lambda: _quality_html(metrics, run)),
     ]
     if cfg is not None:
-        sections.append(("Observability", lambda: observability_html(run, sols, cfg, replay)))
+        sections.append(
+            ("Observability", lambda: observability_html(run, sols, cfg, replay, stationary))
+        )
     body = "".join(_section(t, f, f"s{i}") for i, (t, f) in enumerate(sections))
     nav = "".join(
         f'<a href="#s{i}">{html.escape(t.split(":")[0])}</a>' for i, (t, _) in enumerate(sections)
