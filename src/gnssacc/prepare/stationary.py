@@ -86,6 +86,7 @@ from .span_motion import (
     fix_rate_inflation,
     level_acceleration,
     linked_motion,
+    outward_samples,
     tilt_error,
 )
 from .allan import (
@@ -477,21 +478,10 @@ def _excursion_bound(
 def _side_indices(
     imu: ImuData, span: StationarySpan, before: bool, p: StationaryParams, dt_med: float
 ) -> np.ndarray:
-    """IMU samples within ``gnss_margin_s`` of the span, outward from its edge, cut at an IMU gap."""
-    t = imu.t
-    if before:
-        idx = np.arange(
-            span.i_start - 1, int(np.searchsorted(t, span.t_start - p.gnss_margin_s)) - 1, -1
-        )
-    else:
-        idx = np.arange(
-            span.i_end, int(np.searchsorted(t, span.t_end + p.gnss_margin_s, side="right"))
-        )
-    idx = idx[(idx >= 0) & (idx < len(t))]
-    if len(idx) > 1:
-        gap = np.flatnonzero(np.abs(np.diff(t[idx])) > p.gap_factor * dt_med)
-        idx = idx[: gap[0] + 1] if gap.size else idx
-    return idx
+    """IMU samples within ``gnss_margin_s`` of the span, outward from its edge, cut at an IMU gap
+    (:func:`gnssacc.prepare.span_motion.outward_samples`)."""
+    edge = span.i_start if before else span.i_end - 1
+    return outward_samples(imu.t, edge, before, p.gnss_margin_s, p.gap_factor * dt_med)
 
 
 def _margin_fixes(
