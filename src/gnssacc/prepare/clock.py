@@ -110,6 +110,7 @@ def state_at(
         quality=pieces.quality,
         output_times=np.array([t]),
         store_P=True,
+        t_stop=t,  # nothing later moves the state at t: the pass ends there
     )
     sig = sol.sigma[-1]
     att = np.sqrt(np.maximum(np.diag(sol.P[-1][ATT, ATT]), 0.0)) if sol.P is not None else sig[ATT]
