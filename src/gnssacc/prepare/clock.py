@@ -210,8 +210,6 @@ def evaluate_offset(
     estimate : OffsetEstimate or None
         The best offset (total, relative to the stamps as given) and its 1-sigma.
     """
-    from scipy.optimize import minimize_scalar
-
     d1, s1 = float(finding.details["stage1_s"]), float(finding.details["stage1_sigma_s"])
     hw = float(np.clip(BRACKET_SIGMAS * s1, BRACKET_MIN_S, BRACKET_MAX_S))
     far = abs(d1) > LARGE_SHIFT_S
@@ -231,6 +229,8 @@ def evaluate_offset(
         if quick is not None:  # the first passes refute the proposal: no search
             verdict, d, sigma = quick
             return verdict, shifted(run, d), OffsetEstimate(d, sigma, True, method="EKF likelihood")
+    from scipy.optimize import minimize_scalar  # only for the search (0.2-0.5 s to import)
+
     res = minimize_scalar(shifts.cost, bounds=(lo, hi), method="bounded", options={"xatol": 0.002})
     d_free, f0 = float(res.x), float(res.fun)
     d, how = _known(shifts, known_offsets(run), centre, d_free, f0, (lo, hi))
