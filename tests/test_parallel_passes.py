@@ -148,6 +148,7 @@ def test_the_yaw_bank_side_by_side_chooses_as_alone(monkeypatch):
         monkeypatch.setenv(parallel.JOBS_ENV, jobs)
         banks[jobs] = select_yaw(run, cfg, report, filter_pass=run_ekf)
     alone, side = banks["1"], banks["2"]
+    assert parallel._POOL["executor"] is None  # the bank's workers ended with it
     np.testing.assert_array_equal(side.posterior, alone.posterior)
     np.testing.assert_array_equal(side.init.rpy, alone.init.rpy)
     np.testing.assert_array_equal(side.init.sigma_att_rad, alone.init.sigma_att_rad)

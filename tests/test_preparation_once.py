@@ -60,6 +60,7 @@ def test_the_estimator_is_asked_only_when_the_data_propose_something(monkeypatch
     import gnssacc.prepare.judge as judge
     import gnssacc.prepare.settle as settle
 
+    monkeypatch.setenv("GNSSACC_JOBS", "1")  # every pass made here, where it is counted
     calls = {"evaluate": 0, "innovations": 0}
     real_eval, real_inn = settle._evaluate, judge.innovations
 

@@ -26,7 +26,6 @@ from ..core.config import RunConfig
 from ..core.recording import RecordedRun
 from ..core.rotations import dcm_to_euler
 from .findings import Finding
-from .motionmatch import lateral_fit
 from .mountcheck import estimate_mounting
 from .mountcheck import rotation_angle_deg as rotation_angle
 from .timeoffset import OffsetEstimate, shifted
@@ -131,7 +130,7 @@ def mount_proposal(
     With ``auto`` the measured mounting is proposed unless it is the identity; otherwise only an
     implausible one. The repair rotates the run by the measured rotation (relative to the axes
     as loaded); ``details["rpy_deg"]`` is the configuration value to write (absolute)."""
-    lf = lateral_fit(m.lev, m.kin, m.fit_offset_s) if m.kin is not None else None
+    lf = m.lateral  # lateral_fit(m.lev, m.kin, m.fit_offset_s), made with the views
     me = estimate_mounting(m.lev, lf)
     text = describe_mounting(me, float(-m.lev.down[2] * m.lev.f_mean_norm))
     if (auto and rotation_angle(me.R_bi) <= 1e-6) or (not auto and not me.implausible):

@@ -72,7 +72,7 @@ from ..core.recording import ImuData, RecordedRun
 from . import gnsscheck, unitcheck, velcheck
 from .corrections import mount_proposal, mounting_rpy_deg, offset_proposal
 from .findings import Finding
-from .views import measure_motion, rest_rate
+from .views import Motion, measure_motion, rest_rate
 
 CHECKS = (
     "time_units",
@@ -185,12 +185,16 @@ class CheckResult:
         Warnings (one view alone) and what the ``"auto"`` keys settled.
     proposal : Finding or None
         The first correction the views propose, for the estimator to judge.
+    motion : Motion or None
+        The views of the run's motion (:func:`gnssacc.checks.views.measure_motion`), when the
+        checks came so far: a later call on the same run may take them.
     """
 
     run: RecordedRun
     cfg: RunConfig
     findings: list
     proposal: Finding | None = None
+    motion: Motion | None = None
 
 
 class _Proposed(Exception):
@@ -296,9 +300,9 @@ def _auto_offset_note(cfg: RunConfig, m, where: str, findings: list, settled: bo
     return cfg.with_values({"mounting": {"imu_time_offset_s": 0.0}}, "input checks")
 
 
-def _motion_steps(run, cfg, policy, findings, declined, imu_w, gnss_w) -> RunConfig:
-    """Steps 2-4 of the module notes (raise :class:`_Proposed` at a proposal)."""
-    m = measure_motion(run)
+def _motion_steps(run, cfg, m: Motion, policy, findings, declined, imu_w, gnss_w) -> RunConfig:
+    """Steps 2-4 of the module notes on the views ``m`` of the run (raise :class:`_Proposed` at a
+    proposal)."""
     consider(gnsscheck.latlon_radians(run, m.fit, gnss_w), policy, findings, declined)
     consider(unitcheck.gyro_units(m.turn, rest_rate(run, m), imu_w), policy, findings, declined)
     consider(
@@ -347,7 +351,9 @@ def _velocity_steps(run, cfg, policy, findings, declined, gnss_w) -> None:
             consider(step(run, cfg, gnss_w), policy, findings, declined)
 
 
-def check_run(run: RecordedRun, cfg: RunConfig, declined=frozenset()) -> CheckResult:
+def check_run(
+    run: RecordedRun, cfg: RunConfig, declined=frozenset(), motion: Motion | None = None
+) -> CheckResult:
     """Check a run against itself before estimation (module notes), up to the first proposal.
 
     Parameters
@@ -358,6 +364,9 @@ def check_run(run: RecordedRun, cfg: RunConfig, declined=frozenset()) -> CheckRe
         ``[checks]`` and ``[mounting]``.
     declined : set of str
         Keys of proposals the estimator did not confirm (:attr:`Finding.key`): not made again.
+    motion : Motion, optional
+        The views of this same run from an earlier call (:attr:`CheckResult.motion`; they depend
+        on the run alone), else measured here.
 
     Raises
     ------
@@ -376,9 +385,10 @@ def check_run(run: RecordedRun, cfg: RunConfig, declined=frozenset()) -> CheckRe
             lambda r: unitcheck.accel_units(r.imu, local_gravity(r), imu_w),
         ):
             consider(check(run), policy, findings, declined)
-        cfg = _motion_steps(run, cfg, policy, findings, declined, imu_w, gnss_w)
+        motion = motion if motion is not None else measure_motion(run)
+        cfg = _motion_steps(run, cfg, motion, policy, findings, declined, imu_w, gnss_w)
         consider(gnsscheck.init_position(run, init_w), policy, findings, declined)
         _velocity_steps(run, cfg, policy, findings, declined, gnss_w)
     except _Proposed as p:
-        return CheckResult(run, cfg, findings, p.finding)
-    return CheckResult(run, cfg, findings)
+        return CheckResult(run, cfg, findings, p.finding, motion)
+    return CheckResult(run, cfg, findings, motion=motion)

@@ -117,8 +117,11 @@ def side_by_side(
     return [value for _, value in results]
 
 
-def close_pool() -> None:
-    """End the kept pool's workers (:func:`side_by_side` with ``keep``), if any."""
+def close_pool(target: Callable | None = None) -> None:
+    """End the kept pool's workers (:func:`side_by_side` with ``keep``), if any (with ``target``:
+    only when they were kept for it)."""
+    if target is not None and _POOL["target"] != target:
+        return
     executor = _POOL["executor"]
     _POOL.update(target=None, executor=None)
     if executor is not None:

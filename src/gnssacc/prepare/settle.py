@@ -176,8 +176,10 @@ def settled(
     """
     policy = Policy.from_config(cfg)
     findings, seen, declined, base = [], set(), set(), None
+    motion = None  # the views of the run as it is: measured once, again only for a corrected run
     for _ in range(MAX_ROUNDS):
-        res = check_run(run, cfg, frozenset(declined))
+        res = check_run(run, cfg, frozenset(declined), motion)
+        motion = res.motion
         _note_once(findings, seen, res.findings)
         f = res.proposal
         if f is None:
@@ -190,7 +192,7 @@ def settled(
         verdict, corrected, pieces = _evaluate(run, cfg, f, start, filter_pass)
         base = start.pieces
         if _settle(f, verdict, policy):
-            run, cfg, base = corrected, _applied_cfg(cfg, f), pieces
+            run, cfg, base, motion = corrected, _applied_cfg(cfg, f), pieces, None
         findings.append(f)
     return _with_truth_checked(run, cfg, policy, findings) + (base,)
 

@@ -31,7 +31,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..core.config import RunConfig
-from ..core.parallel import side_by_side
+from ..core.parallel import close_pool, side_by_side
 from ..core.recording import InitialState, RecordedRun
 from ..core.rotations import wrap_angle
 from .filter_pass import FilterPass
@@ -70,20 +70,43 @@ class BankResult:
     t_horizon: float
 
 
-def _score(run, cfg, hyps, stationary, quality, t_h, filter_pass: FilterPass):
-    """Cumulative log-likelihood of each hypothesis on a common time grid up to ``t_h``; the
-    hypotheses' passes side by side (:func:`gnssacc.core.parallel.side_by_side`: forked, each
-    process holds the run; only the likelihood rows travel), the same as one after the other."""
-    grid = run.gnss.t[(run.gnss.t > hyps[0].t) & (run.gnss.t <= t_h)]
+@dataclass
+class _Rows:
+    """The hypotheses' passes of one bank: each hypothesis's cumulative log-likelihood on a time
+    grid (:meth:`score`), the passes side by side in workers kept for every round of the bank (the
+    first horizon, a doubled one, the refinement) and ended with the ``with`` block."""
 
-    def row(k: int) -> np.ndarray:
-        sol = filter_pass(
-            run,
+    run: RecordedRun
+    cfg: RunConfig
+    stationary: object
+    quality: object
+    filter_pass: FilterPass
+
+    def __enter__(self) -> "_Rows":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        close_pool(self.row)
+
+    def score(self, hyps, t_h: float):
+        """Cumulative log-likelihood of each hypothesis on a common time grid up to ``t_h``; the
+        hypotheses' passes side by side (:func:`gnssacc.core.parallel.side_by_side`: forked, each
+        process holds the run; only a start and the likelihood rows travel), the same as one after
+        the other."""
+        grid = self.run.gnss.t[(self.run.gnss.t > hyps[0].t) & (self.run.gnss.t <= t_h)]
+        rows = side_by_side(self.row, [(h, t_h, grid) for h in hyps], keep=True)
+        return grid, np.array(rows).reshape(len(hyps), len(grid))
+
+    def row(self, hyp: InitialState, t_h: float, grid: np.ndarray) -> np.ndarray:
+        """One hypothesis's cumulative log-likelihood at ``grid`` [s] (its pass to ``t_h``)."""
+        cfg = self.cfg
+        sol = self.filter_pass(
+            self.run,
             cfg,
             "ekf",
-            init=hyps[k],
-            stationary=stationary,
-            quality=quality,
+            init=hyp,
+            stationary=self.stationary,
+            quality=self.quality,
             output_times=np.zeros(0),
             record_innovations=True,
             t_stop=t_h,
@@ -95,9 +118,6 @@ def _score(run, cfg, hyps, stationary, quality, t_h, filter_pass: FilterPass):
         order = np.argsort(t, kind="stable")
         cum = np.concatenate([[0.0], np.cumsum(ll[order])])
         return cum[np.searchsorted(t[order], grid, side="right")]
-
-    rows = side_by_side(row, [(k,) for k in range(len(hyps))])
-    return grid, np.array(rows).reshape(len(hyps), len(grid))
 
 
 def _decide(L, yaws, level):
@@ -114,13 +134,13 @@ def _decide(L, yaws, level):
     return best, mass, first_ok, (P[:, -1] if L.shape[1] else np.full(len(L), 1.0 / len(L)))
 
 
-def _refine(run, cfg, start, stationary, quality, yaw, spacing, t_h, filter_pass):
+def _refine(rows: _Rows, start, yaw, spacing, t_h):
     """Seven hypotheses a quarter spacing apart around ``yaw``; the best one, with a yaw sigma
     covering the posterior spread (at least an eighth of the coarse spacing)."""
     step = spacing / 4.0
     yaws = yaw + step * np.arange(-3, 4)
-    hyps = [hypothesis(run, cfg, start, y, step / 2.0) for y in yaws]
-    _, L = _score(run, cfg, hyps, stationary, quality, t_h, filter_pass)
+    hyps = [hypothesis(rows.run, rows.cfg, start, y, step / 2.0) for y in yaws]
+    _, L = rows.score(hyps, t_h)
     P = np.exp(L[:, -1] - L[:, -1].max()) if L.shape[1] else np.ones(len(hyps))
     P /= P.sum()
     best = int(np.argmax(P))
@@ -172,21 +192,21 @@ def select_yaw(
         stationary = replace(stationary, spans=[s for s in stationary.spans if s.gnss_checked])
     t_move = start.t if start.static is None else float(run.imu.t[start.static.stop - 1])
     horizon, level = float(c["yaw_horizon_s"]), float(c["yaw_confidence"])
-    while True:
-        t_h = min(t_move + horizon, run.t_end)
-        grid, L = _score(run, ungated, hyps, stationary, quality, t_h, filter_pass)
-        best, mass, first_ok, post = _decide(L, yaws, level)
-        found = len(mass) > 0 and mass[-1] >= level
-        if found or t_h >= run.t_end:
-            break
-        horizon *= 2.0
-    if not found or t_move >= run.t_end - 1.0:
-        # A vehicle that never moves shows its yaw only through the earth rate (gyrocompassing),
-        # which takes a navigation-grade gyro and minutes of data: not attempted here.
-        return _undetermined(start, hyps, yaws, best, mass, post, t_h)
-    init, p_fine = _refine(
-        run, ungated, start, stationary, quality, yaws[best], 2.0 * np.pi / n, t_h, filter_pass
-    )
+    with _Rows(run, ungated, stationary, quality, filter_pass) as rows:
+        while True:
+            t_h = min(t_move + horizon, run.t_end)
+            grid, L = rows.score(hyps, t_h)
+            best, mass, first_ok, post = _decide(L, yaws, level)
+            found = len(mass) > 0 and mass[-1] >= level
+            if found or t_h >= run.t_end:
+                break
+            horizon *= 2.0
+        if not found or t_move >= run.t_end - 1.0:
+            # A vehicle that never moves shows its yaw only through the earth rate
+            # (gyrocompassing), which takes a navigation-grade gyro and minutes of data: not
+            # attempted here.
+            return _undetermined(start, hyps, yaws, best, mass, post, t_h)
+        init, p_fine = _refine(rows, start, yaws[best], 2.0 * np.pi / n, t_h)
     t_dec = float(grid[min(first_ok, len(grid) - 1)])
     how = (
         f"{start.how}; yaw from a bank of {n} hypotheses scored by innovation likelihood, "
