@@ -47,6 +47,7 @@ from .start import start_of, start_pieces
 from .stationary import StationaryNoise, StationaryReport, noise_from_stationary
 from .tune_windows import tuned_on_windows
 from .tuning import TuneResult, tune
+from .turn_allowance import at_rest_allowance
 from .yawbank import BankResult
 
 
@@ -195,6 +196,7 @@ def prepare(
     secs["start_s"] = time.perf_counter() - t
     result = None
     noise = noise_from_stationary(run.imu, stationary)
+    cfg = at_rest_allowance(cfg, noise)
     if tune_mode == "auto":
         t = time.perf_counter()
         stage("noise identification (EKF passes)")
