@@ -27,7 +27,11 @@ Cases:
 ``--seeds`` seeds of each simulated case (default 3, the median shown; ~25 min; KITTI always
 seeds 0-4).
 
+``--set SECTION.KEY=VALUE`` (repeatable) sets a configuration value for every case (e.g.
+``--set imu.gyro_turn_error_ppm=1000``, the turn allowance before ``"auto"``).
+
     python bench/bench_consistency.py [--quick] [--seeds 3] [--only car-city] [--json out.json]
+        [--set imu.gyro_turn_error_ppm=1000]
 """
 
 from __future__ import annotations
