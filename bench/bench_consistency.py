@@ -27,7 +27,11 @@ Cases:
 ``--seeds`` seeds of each simulated case (default 3, the median shown; ~25 min; KITTI always
 seeds 0-4).
 
+``--set SECTION.KEY=VALUE`` (repeatable) sets a configuration value for every case (e.g.
+``--set imu.gyro_turn_error_ppm=1000``, the turn allowance before ``"auto"``).
+
     python bench/bench_consistency.py [--quick] [--seeds 3] [--only car-city] [--json out.json]
+        [--set imu.gyro_turn_error_ppm=1000]
 """
 
 from __future__ import annotations
@@ -226,7 +230,10 @@ def run_case(case: Case, seed: int) -> dict:
             ref = None
             if callable(case.source):
                 source, options, ref = case.source(seed, Path(tmp))
-                options = {**case.options, **options}
+                config = {s: dict(v) for s, v in case.options.get("config", {}).items()}
+                for section, values in options.get("config", {}).items():
+                    config.setdefault(section, {}).update(values)
+                options = {**case.options, **options, **({"config": config} if config else {})}
             else:
                 source, options = case.source, {**case.options, "seed": seed}
             res = gnssacc.process(source, methods=METHODS, **options)
@@ -236,6 +243,31 @@ def run_case(case: Case, seed: int) -> dict:
     start = res.metrics.get("start") or {}
     out["yaw_determined"] = start.get("yaw_determined", True)
     return out
+
+
+def settings(items: list) -> dict:
+    """``{section: {key: value}}`` of ``--set SECTION.KEY=VALUE`` items (a number where it reads
+    as one, else the text)."""
+    out: dict = {}
+    for item in items:
+        name, _, text = item.partition("=")
+        section, _, key = name.partition(".")
+        try:
+            value: object = float(text)
+        except ValueError:
+            value = text
+        out.setdefault(section, {})[key] = value
+    return out
+
+
+def with_settings(case: Case, extra: dict) -> Case:
+    """``case`` with ``extra`` merged into its configuration (a case's own settings win)."""
+    if not extra:
+        return case
+    config = {s: dict(v) for s, v in extra.items()}
+    for section, values in case.options.get("config", {}).items():
+        config.setdefault(section, {}).update(values)
+    return replace(case, options={**case.options, "config": config})
 
 
 def _median(values):
@@ -305,7 +337,15 @@ def main(argv=None) -> None:
     p.add_argument("--only", default="", help="run only the cases whose name contains this")
     p.add_argument("--json", help="also write every seed's figures to this file")
     p.add_argument("--table", help="print the table of a file --json wrote, and run nothing")
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SECTION.KEY=VALUE",
+        help="a configuration value for every case (e.g. imu.gyro_turn_error_ppm=10000)",
+    )
     a = p.parse_args(argv)
+    extra = settings(a.set)
     warnings.simplefilter("ignore")  # the table carries the warnings as '!'
     results = json.loads(Path(a.table).read_text()) if a.table else {}
     t0 = time.perf_counter()
@@ -315,7 +355,7 @@ def main(argv=None) -> None:
         results[case.name] = []
         for seed in case.seeds:
             t = time.perf_counter()
-            results[case.name].append(run_case(case, seed))
+            results[case.name].append(run_case(with_settings(case, extra), seed))
             print(f"{case.name} seed {seed}: {time.perf_counter() - t:.0f} s", flush=True)
         if a.json:  # every case as it ends: a long run that stops keeps what it measured
             Path(a.json).write_text(json.dumps(results, indent=1) + "\n")

@@ -34,6 +34,10 @@ from .units import DEG, G0  # noqa: F401 (re-exported: the configuration's units
 #: ``0.92 sigma^2`` at one radian, at most ``4 sigma^2``). A random walk in the angle turned whose
 #: variance grows by ``sigma^2`` per radian matches it at one radian.
 TURN_DECORRELATION_RAD = 1.0
+#: The turn allowance [ppm] of ``gyro_turn_error_ppm = "auto"`` until the gyro noise at rest is
+#: known (:mod:`gnssacc.prepare.turn_allowance`), and on runs without a stationary span:
+#: industrial MEMS.
+FALLBACK_TURN_ERROR_PPM = 1000.0
 
 #: Built-in defaults. Comments double as the documentation of each key.
 DEFAULTS: dict[str, dict] = {
@@ -54,8 +58,11 @@ DEFAULTS: dict[str, dict] = {
         # scale-factor error, cross-axis sensitivity or misalignment). The 15-state model does not
         # carry them: every turn tilts the attitude by that fraction of the angle turned. Both
         # estimators cover it with gyro noise that grows with the rotation performed
-        # (gnssacc.estimators.settings.ImuNoise.gyro_turn_psd); 0: none.
-        "gyro_turn_error_ppm": 1000.0,
+        # (gnssacc.estimators.settings.ImuNoise.gyro_turn_psd); 0: none. "auto": from the gyro
+        # white noise measured at rest (stationary spans of 10 s or more) by the datasheet
+        # relation of gnssacc.prepare.turn_allowance (0.05 deg/sqrt(h): 150 ppm, 0.2: 1000, 0.6
+        # and above: 10000); 1000 on a run without such a span. A number is used as given.
+        "gyro_turn_error_ppm": "auto",
     },
     "mounting": {
         # Rotation from IMU axes to body (FRD) axes as roll, pitch, yaw [deg]:
@@ -432,8 +439,10 @@ class RunConfig:
     def gyro_turn_psd(self) -> float:
         """Gyro noise per unit rotation rate for the constant scale-factor and cross-axis errors
         [rad^2/s per rad/s = rad]: ``(gyro_turn_error_ppm 1e-6)^2`` times one radian
-        (:data:`TURN_DECORRELATION_RAD`), see :class:`gnssacc.estimators.settings.ImuNoise`."""
-        ppm = float(self["imu"]["gyro_turn_error_ppm"])
+        (:data:`TURN_DECORRELATION_RAD`), see :class:`gnssacc.estimators.settings.ImuNoise`;
+        ``"auto"`` not yet set from the recording: :data:`FALLBACK_TURN_ERROR_PPM`."""
+        value = self["imu"]["gyro_turn_error_ppm"]
+        ppm = FALLBACK_TURN_ERROR_PPM if value == "auto" else float(value)
         return (ppm * 1e-6) ** 2 * TURN_DECORRELATION_RAD
 
     @property

@@ -192,6 +192,7 @@ KINDS: dict[tuple[str, str], str] = {
     ),
     ("mounting", "imu_to_body_rpy_deg"): "vector or auto",
     ("mounting", "imu_time_offset_s"): "number or auto",
+    ("imu", "gyro_turn_error_ppm"): "number or auto",
     ("init", "roll_pitch_sigma_deg"): "number or empty",
     ("init", "yaw_sigma_deg"): "number or empty",
     ("gnss", "quality"): "quality map",

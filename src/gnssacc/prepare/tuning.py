@@ -92,7 +92,9 @@ grows with the angle turned) is not identified: the one-step likelihood cannot t
 a simulated consumer UGV (the tuned point, 0 to 7000 ppm) it falls by 56 with the errors in the data
 and by 58 without them (the larger noise costs its log-determinant; the innovations hardly see
 the error, which tilts the attitude along the combination ``g phi - R b_a`` the fixes cannot
-separate): the value is the configuration's (a preset's datasheet-typical one, or the user's).
+separate): the value is the configuration's (a preset's datasheet-typical one, or the user's),
+or with the default ``"auto"`` set before the tuning from the gyro noise measured at rest
+(:mod:`gnssacc.prepare.turn_allowance`).
 
 The result is a :class:`TuneResult`: the tuned values in configuration units (a reusable
 ``tuned.toml``), the NIS before and after, and the time it took.
@@ -287,6 +289,8 @@ class TuneResult:
 
 
 def _plain(v):
+    if isinstance(v, str):  # "auto"
+        return v
     if isinstance(v, (list, tuple, np.ndarray)):
         return [float(f"{float(x):.4g}") for x in v]
     return float(f"{float(v):.4g}")
