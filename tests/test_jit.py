@@ -266,6 +266,28 @@ def test_the_group_warm_ups_compile_every_kernel_a_run_calls():
     assert out.stdout.strip() == "[]"
 
 
+#: A process as pip's isolated build environment is: numba and numpy, no scipy
+#: (``[build-system] requires``), compiling (or loading) every kernel group as ``setup.py`` does.
+NO_SCIPY_BUILD = """
+import sys
+class NoScipy:
+    def find_spec(self, name, path=None, target=None):
+        if name == "scipy" or name.startswith("scipy."):
+            raise ModuleNotFoundError("No module named 'scipy'")
+sys.meta_path.insert(0, NoScipy())
+from gnssacc.estimators.kernels import GROUPS, compile_groups
+compile_groups(list(GROUPS))
+"""
+
+
+def test_the_kernels_compile_where_the_package_is_built_without_scipy():
+    """The build compiles the kernels with the build requirements only (numba, numpy): a kernel
+    module that imported scipy made every group but the propagation fail there, silently, and
+    the first run after ``pip install .`` compiled them for 24 s."""
+    out = subprocess.run([sys.executable, "-c", NO_SCIPY_BUILD], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr[-2000:]
+
+
 @pytest.mark.slow
 def test_the_install_compiles_the_kernels_into_the_package_and_a_first_run_loads_them(tmp_path):
     """``setup.py``'s build step: the package in the build folder carries every kernel group in
