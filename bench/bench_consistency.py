@@ -42,6 +42,7 @@ import math
 import sys
 import tempfile
 import time
+import tomllib
 import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -246,15 +247,15 @@ def run_case(case: Case, seed: int) -> dict:
 
 
 def settings(items: list) -> dict:
-    """``{section: {key: value}}`` of ``--set SECTION.KEY=VALUE`` items (a number where it reads
-    as one, else the text)."""
+    """``{section: {key: value}}`` of ``--set SECTION.KEY=VALUE`` items (the value read as TOML:
+    ``false``, ``1000``, ``[0.0, 0.5, 0.0]``; else the text)."""
     out: dict = {}
     for item in items:
         name, _, text = item.partition("=")
         section, _, key = name.partition(".")
         try:
-            value: object = float(text)
-        except ValueError:
+            value: object = tomllib.loads(f"v = {text}")["v"]
+        except tomllib.TOMLDecodeError:
             value = text
         out.setdefault(section, {})[key] = value
     return out

@@ -131,17 +131,10 @@ def _writable(path: Path) -> Path:
     return path
 
 
-#: The tests that start from the EKF's kernels compiled by a first run share that compilation
-#: (one worker runs them: ``--dist loadgroup`` in pyproject's addopts).
-EKF_GROUP = pytest.mark.xdist_group("jit-ekf-compiled")
-
-
-@pytest.fixture(scope="module")
-def ekf_compiled(tmp_path_factory):
+def _ekf_compiled(tmp: Path) -> tuple[Path, Path]:
     """A read-only copy and its empty user cache after a first run of ``ekf,ekf-acc``, which
     says at once that it compiles, compiles the EKF's groups (propagation, update, and its
     compiled event loop) in child processes and nothing else."""
-    tmp = tmp_path_factory.mktemp("ekf-compiled")
     root, cache_home = _read_only_copy(tmp), tmp / "cache"
     first = _probe(root, cache_home, METHODS="ekf,ekf-acc")
     assert len(_notice(first)) == 1 and _counts(first)[2] > 0
@@ -179,9 +172,7 @@ _KERNEL_FOLDERS = sorted(
 )
 
 
-@EKF_GROUP
-@pytest.mark.slow
-def test_compiled_is_decided_by_the_source_content_as_numba_decides(ekf_compiled, tmp_path):
+def _check_compiled_is_decided_by_the_source_content(ekf_compiled, tmp_path: Path) -> None:
     """numba (0.68) keeps a kernel whose source file only has a new modification time (a reinstall
     or ``touch`` of the same code) and compiles again one whose content changed: a touched source
     must start no compilation and print no notice, an edited one must do both. (After a first
@@ -204,9 +195,7 @@ def test_compiled_is_decided_by_the_source_content_as_numba_decides(ekf_compiled
     assert not _notice(again) and _counts(again)[2] == 0
 
 
-@EKF_GROUP
-@pytest.mark.slow
-def test_a_run_compiles_only_the_kernels_its_methods_need(ekf_compiled, tmp_path):
+def _check_a_run_compiles_only_the_kernels_its_methods_need(ekf_compiled, tmp_path: Path) -> None:
     """A first run of ``ekf,ekf-acc`` compiles only the EKF's kernels (:func:`ekf_compiled`); one
     that adds ``ekf-accw`` and ``smoother-accw`` then compiles only what those add."""
     root, cache_home = _moved(ekf_compiled, tmp_path)
@@ -218,6 +207,25 @@ def test_a_run_compiles_only_the_kernels_its_methods_need(ekf_compiled, tmp_path
     assert list(folder.rglob("window_marginals._band_covariances-*.nbi"))
     assert list(folder.rglob("mechanization.kernel_force_integrals-*.nbi"))
     assert not _notice(_probe(root, cache_home, METHODS="ekf-accw,smoother-accw"))
+
+
+@pytest.mark.slow
+def test_a_first_run_compiles_what_its_methods_need_and_an_edit_compiles_again(tmp_path):
+    """After a first run that compiled the EKF's kernels (:func:`_ekf_compiled`, shared by the two
+    checks: one compilation; a fixture shared by two tests would need them on one worker, which
+    ``--dist loadgroup`` no longer ensures on pytest 9.2, pytest-xdist issue 1386):
+    :func:`_check_compiled_is_decided_by_the_source_content` and
+    :func:`_check_a_run_compiles_only_the_kernels_its_methods_need`, each on its own copy."""
+    (tmp_path / "first").mkdir()
+    compiled = _ekf_compiled(tmp_path / "first")
+    for n, check in enumerate(
+        (
+            _check_compiled_is_decided_by_the_source_content,
+            _check_a_run_compiles_only_the_kernels_its_methods_need,
+        )
+    ):
+        (tmp_path / f"copy{n}").mkdir()
+        check(compiled, tmp_path / f"copy{n}")
 
 
 RUN_TYPES = """
