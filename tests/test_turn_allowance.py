@@ -74,3 +74,31 @@ def test_a_simulated_consumer_vehicle_states_its_attitude_truthfully_with_the_au
     _, nees_1000, prmse_1000 = _attitude(1000.0)
     assert 0.5 <= nees_auto <= 1.5 < 5.0 < nees_1000
     assert prmse_auto <= 1.03 * prmse_1000
+
+
+@pytest.mark.parametrize("grade", ["consumer", "industrial", "tactical"])
+def test_a_run_whose_stops_are_all_short_takes_its_allowance_from_them(grade):
+    """The simulated UGV stops for at most 8 s (detected spans of 2.3-7.9 s, none of 10 s): its
+    allowance comes from the spans of 4 s or more, near the datasheet pair of the simulator's own
+    gyro density (the truth; the anchors' log-log slope turns the density's error of short spans,
+    15 % at most, into 30 %), not the 1000 ppm fallback; a run that never stops keeps the
+    fallback."""
+    from gnssacc import pipeline
+    from gnssacc.sources.sim_imu_errors import IMU_GRADES
+    from gnssacc.sources.sim_scenarios import Scenario
+
+    run = gnssacc.simulate("ugv", 120.0, imu_grade=grade, seed=1)
+    prep = pipeline.prepare(run, load_config(), tune="none")
+    assert prep.stationary.spans and max(s.duration_s for s in prep.stationary.spans) < 10.0
+    assert not prep.rest_noise.n_spans  # no span for the tuner's starting values
+    truth = turn_error_ppm(IMU_GRADES[grade]["gyro_arw_deg_rth"])
+    got = prep.cfg["imu"]["gyro_turn_error_ppm"]
+    assert truth / 1.3 < got < truth * 1.3, (got, truth)
+    assert "spans of 4-10 s" in prep.cfg.origin[("imu", "gyro_turn_error_ppm")]
+
+    path = Scenario("never stops", 10.0).cruise(20.0).turn(90.0, radius_m=40.0).cruise(20.0)
+    moving = gnssacc.simulate(path, path.t_end, imu_grade=grade, seed=1, give_init=True)
+    prep = pipeline.prepare(moving, load_config(), tune="none")
+    assert not prep.stationary.spans
+    assert prep.cfg["imu"]["gyro_turn_error_ppm"] == "auto"  # the fallback applies
+    assert prep.cfg.gyro_turn_psd == pytest.approx((FALLBACK_TURN_ERROR_PPM * 1e-6) ** 2)

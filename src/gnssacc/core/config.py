@@ -59,9 +59,10 @@ DEFAULTS: dict[str, dict] = {
         # carry them: every turn tilts the attitude by that fraction of the angle turned. Both
         # estimators cover it with gyro noise that grows with the rotation performed
         # (gnssacc.estimators.settings.ImuNoise.gyro_turn_psd); 0: none. "auto": from the gyro
-        # white noise measured at rest (stationary spans of 10 s or more) by the datasheet
-        # relation of gnssacc.prepare.turn_allowance (0.05 deg/sqrt(h): 150 ppm, 0.2: 1000, 0.6
-        # and above: 10000); 1000 on a run without such a span. A number is used as given.
+        # white noise measured at rest (stationary spans of 10 s or more; without one, those of
+        # 4 s or more) by the datasheet relation of gnssacc.prepare.turn_allowance (0.05
+        # deg/sqrt(h): 150 ppm, 0.2: 1000, 0.6 and above: 10000); 1000 on a run without such a
+        # span. A number is used as given.
         "gyro_turn_error_ppm": "auto",
     },
     "mounting": {

@@ -47,7 +47,7 @@ from .start import start_of, start_pieces
 from .stationary import StationaryNoise, StationaryReport, noise_from_stationary
 from .tune_windows import tuned_on_windows
 from .tuning import TuneResult, tune
-from .turn_allowance import at_rest_allowance
+from .turn_allowance import rest_allowance
 from .yawbank import BankResult
 
 
@@ -117,11 +117,11 @@ def _other_heading(a: InitialState, b: InitialState) -> bool:
 
 def _with_turn_allowance(run, cfg, stationary, quality, init, bank, noise, filter_pass):
     """``(cfg, init, bank)`` with an ``"auto"`` gyro turn allowance set from the gyro noise at rest
-    (:func:`gnssacc.prepare.turn_allowance.at_rest_allowance`) and, when it was, the start found
+    (:func:`gnssacc.prepare.turn_allowance.rest_allowance`) and, when it was, the start found
     again under it: the yaw bank's passes weigh the heading hypotheses by their likelihood, which
     the allowance changes (a simulated consumer UGV started under the fallback 1000 ppm and run at
     9022 had an attitude NEES of 4.5, yaw 10.5; started under 9022, 1.2 and 0.7)."""
-    got = at_rest_allowance(cfg, noise)
+    got = rest_allowance(cfg, run.imu, stationary, noise)
     if got is cfg:
         return cfg, init, bank
     init, bank = start_of(run, got, stationary, quality, filter_pass)

@@ -6,9 +6,10 @@ model does not carry, with noise that grows with the angle turned
 (:attr:`gnssacc.core.config.RunConfig.gyro_turn_psd`). The fixes' likelihood cannot tell its size
 (:mod:`gnssacc.prepare.tuning`), and a recording does not state its IMU's grade, but its
 stationary spans show how noisy its gyros are: the white-noise density measured at rest
-(:func:`gnssacc.prepare.stationary.noise_from_stationary`, spans of 10 s or more). Datasheets tie
-the two loosely (:data:`ANCHORS`), which makes a prior: explicit values, a preset's included, are
-used as given. A run without such a span keeps :data:`gnssacc.core.config.FALLBACK_TURN_ERROR_PPM`:
+(:func:`gnssacc.prepare.stationary.noise_from_stationary`, spans of 10 s or more; on a run without
+one, the spans of :data:`SHORT_REST_S` or more: :func:`rest_allowance`). Datasheets tie the two
+loosely (:data:`ANCHORS`), which makes a prior: explicit values, a preset's included, are used as
+given. A run without such a span keeps :data:`gnssacc.core.config.FALLBACK_TURN_ERROR_PPM`:
 the density the tuner identifies in motion is no measurement of the gyros' white noise, as it
 trades against the very errors the allowance covers (on a simulated industrial car, true 0.2
 deg/sqrt(h) and 0.198 at rest on the same grade's city drive, the tuner gave 0.033; on a consumer
@@ -20,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.config import FALLBACK_TURN_ERROR_PPM, RunConfig
+from .stationary import noise_from_stationary
 
 #: Datasheet anchors, ``(gyro white-noise density [deg/sqrt(h)], 1-sigma gyro scale-factor and
 #: cross-axis error [ppm])`` by grade: tactical (fibre-optic and high-end MEMS of the KVH 1750 /
@@ -92,11 +94,41 @@ def resolved(cfg: RunConfig, arw_deg_rth: float, what: str) -> RunConfig:
 RAD_RTS_TO_DEG_RTH = float(np.degrees(1.0) * 60.0)
 
 
-def at_rest_allowance(cfg: RunConfig, noise) -> RunConfig:
+def at_rest_allowance(cfg: RunConfig, noise, what: str = "at rest") -> RunConfig:
     """``cfg`` with an ``"auto"`` turn allowance set from the gyro white-noise density measured
     at rest (:class:`gnssacc.prepare.stationary.StationaryNoise`; ``None`` or no span long enough:
-    ``cfg`` unchanged, the fallback applies)."""
+    ``cfg`` unchanged, the fallback applies); ``what`` says where (:func:`resolved`)."""
     if noise is None:
         return cfg
     arw = gyro_density_deg_rth(np.asarray(noise.gyro_density, float) * RAD_RTS_TO_DEG_RTH)
-    return resolved(cfg, arw, "at rest")
+    return resolved(cfg, arw, what)
+
+
+#: Shortest stationary span [s] whose gyro noise sets the allowance on a run without a span of
+#: 10 s (the tuner's starting values need those: their bias instability and the accelerometers'
+#: vibration leaks; the allowance needs only the gyros' white density, as a loose prior). The
+#: Allan deviation is read up to a quarter of a span: 1 s here, past the vibration lines a
+#: 100 Hz IMU removes. Short spans read the density low by up to 15 % on strong idle vibration
+#: (:func:`gnssacc.prepare.stationary.noise_from_stationary`), the allowance 30 % (the anchors'
+#: log-log slope is about 2), against a factor of 10 between the fallback and a consumer gyro's.
+#: Stops at lights or a UGV's pauses of 5-10 s: simulated consumer and industrial UGVs (spans of
+#: 4.3-7.9 s) read 0.573 and 0.197 deg/sqrt(h), truth 0.6 and 0.2.
+SHORT_REST_S = 4.0
+
+
+def rest_allowance(cfg: RunConfig, imu, stationary, noise) -> RunConfig:
+    """``cfg`` with an ``"auto"`` turn allowance from the gyro noise at rest: ``noise``'s (the
+    spans of 10 s or more) when it has a span, else the spans of :data:`SHORT_REST_S` or more in
+    ``stationary`` (:class:`gnssacc.prepare.stationary.StationaryReport` of ``imu``); ``cfg``
+    unchanged without either (the fallback applies)."""
+    if cfg["imu"]["gyro_turn_error_ppm"] != "auto":
+        return cfg
+    if noise is not None and noise.n_spans:
+        return at_rest_allowance(cfg, noise)
+    if stationary is None or not stationary.spans:
+        return cfg
+    short = noise_from_stationary(imu, stationary, min_span_s=SHORT_REST_S)
+    if not short.n_spans:
+        return cfg
+    what = f"at rest ({short.n_spans} spans of {SHORT_REST_S:g}-10 s, {short.total_s:.0f} s)"
+    return at_rest_allowance(cfg, short, what)
