@@ -94,16 +94,6 @@ def resolved(cfg: RunConfig, arw_deg_rth: float, what: str) -> RunConfig:
 RAD_RTS_TO_DEG_RTH = float(np.degrees(1.0) * 60.0)
 
 
-def at_rest_allowance(cfg: RunConfig, noise, what: str = "at rest") -> RunConfig:
-    """``cfg`` with an ``"auto"`` turn allowance set from the gyro white-noise density measured
-    at rest (:class:`gnssacc.prepare.stationary.StationaryNoise`; ``None`` or no span long enough:
-    ``cfg`` unchanged, the fallback applies); ``what`` says where (:func:`resolved`)."""
-    if noise is None:
-        return cfg
-    arw = gyro_density_deg_rth(np.asarray(noise.gyro_density, float) * RAD_RTS_TO_DEG_RTH)
-    return resolved(cfg, arw, what)
-
-
 #: Shortest stationary span [s] whose gyro noise sets the allowance on a run without a span of
 #: 10 s (the tuner's starting values need those: their bias instability and the accelerometers'
 #: vibration leaks; the allowance needs only the gyros' white density, as a loose prior). The
@@ -117,18 +107,20 @@ SHORT_REST_S = 4.0
 
 
 def rest_allowance(cfg: RunConfig, imu, stationary, noise) -> RunConfig:
-    """``cfg`` with an ``"auto"`` turn allowance from the gyro noise at rest: ``noise``'s (the
-    spans of 10 s or more) when it has a span, else the spans of :data:`SHORT_REST_S` or more in
+    """``cfg`` with an ``"auto"`` turn allowance from the gyros' white-noise density measured at
+    rest: ``noise``'s (:class:`gnssacc.prepare.stationary.StationaryNoise` of the spans of 10 s or
+    more) when it has a span, else that of the spans of :data:`SHORT_REST_S` or more in
     ``stationary`` (:class:`gnssacc.prepare.stationary.StationaryReport` of ``imu``); ``cfg``
-    unchanged without either (the fallback applies)."""
+    unchanged without either (the fallback applies), or when the value is not ``"auto"``."""
     if cfg["imu"]["gyro_turn_error_ppm"] != "auto":
         return cfg
-    if noise is not None and noise.n_spans:
-        return at_rest_allowance(cfg, noise)
-    if stationary is None or not stationary.spans:
-        return cfg
-    short = noise_from_stationary(imu, stationary, min_span_s=SHORT_REST_S)
-    if not short.n_spans:
-        return cfg
-    what = f"at rest ({short.n_spans} spans of {SHORT_REST_S:g}-10 s, {short.total_s:.0f} s)"
-    return at_rest_allowance(cfg, short, what)
+    what = "at rest"
+    if noise is None or not noise.n_spans:
+        if stationary is None or not stationary.spans:
+            return cfg
+        noise = noise_from_stationary(imu, stationary, min_span_s=SHORT_REST_S)
+        if not noise.n_spans:
+            return cfg
+        what = f"at rest ({noise.n_spans} spans of {SHORT_REST_S:g}-10 s, {noise.total_s:.0f} s)"
+    arw = gyro_density_deg_rth(np.asarray(noise.gyro_density, float) * RAD_RTS_TO_DEG_RTH)
+    return resolved(cfg, arw, what)
