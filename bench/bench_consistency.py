@@ -231,9 +231,7 @@ def run_case(case: Case, seed: int) -> dict:
             ref = None
             if callable(case.source):
                 source, options, ref = case.source(seed, Path(tmp))
-                config = {s: dict(v) for s, v in case.options.get("config", {}).items()}
-                for section, values in options.get("config", {}).items():
-                    config.setdefault(section, {}).update(values)
+                config = merged(case.options.get("config", {}), options.get("config", {}))
                 options = {**case.options, **options, **({"config": config} if config else {})}
             else:
                 source, options = case.source, {**case.options, "seed": seed}
@@ -261,13 +259,20 @@ def settings(items: list) -> dict:
     return out
 
 
+def merged(base: dict, over: dict) -> dict:
+    """Configuration ``{section: {key: value}}`` ``base`` with ``over``'s values on top, section
+    by section (new dicts; neither argument changes)."""
+    out = {s: dict(v) for s, v in base.items()}
+    for section, values in over.items():
+        out.setdefault(section, {}).update(values)
+    return out
+
+
 def with_settings(case: Case, extra: dict) -> Case:
     """``case`` with ``extra`` merged into its configuration (a case's own settings win)."""
     if not extra:
         return case
-    config = {s: dict(v) for s, v in extra.items()}
-    for section, values in case.options.get("config", {}).items():
-        config.setdefault(section, {}).update(values)
+    config = merged(extra, case.options.get("config", {}))
     return replace(case, options={**case.options, "config": config})
 
 
