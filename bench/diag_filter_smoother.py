@@ -15,7 +15,7 @@ parts:
   fixed-lag smoother against its online estimate (position, N/E/D pooled; the last window's
   nodes, whose two estimates are the same, left out), with its effective count and the
   likelihood-ratio statistic of kappa = 1, and the position NEES of the smoother, of the same
-  sigma calibrated, and of the online estimate.
+  sigma calibrated, of the online estimate, and the smoother's per axis.
 
     python bench/diag_filter_smoother.py [--toy] [--runs kitti@0 kitti@1 sim:car,imu=tactical@0]
 """
@@ -101,10 +101,11 @@ def run_row(spec: str) -> None:
     lr = terms * (kappa - 1 - np.log(kappa))
     cal = so[ok] ** 2 - kappa * dp[ok]
     nees_cal = np.mean(es[ok] ** 2 / cal)
+    axes = "/".join(f"{v:.2f}" for v in np.mean((es[ok] / ss[ok]) ** 2, axis=0))
     print(
         f"{spec:40s} kappa {kappa:.2f} ({terms:.0f} terms, 2 log LR {lr:5.1f})  position NEES "
         f"smoother {np.mean((es[ok] / ss[ok]) ** 2):.2f} calibrated {nees_cal:.2f}"
-        f"  online {np.mean((eo[ok] / so[ok]) ** 2):.2f}",
+        f"  online {np.mean((eo[ok] / so[ok]) ** 2):.2f}  smoother N/E/D {axes}",
         flush=True,
     )
 

@@ -3,7 +3,8 @@ tuner's identified gyro ARW and bias instability, per recording (issue 33, the t
 
 Per case: the rest density [deg/sqrt(h)] per gyro axis and their geometric mean, the stationary
 seconds it came from, the rest bias-instability floor [deg/h] where seen, and the tuned
-``gyro_arw_deg_rth`` / ``gyro_bias_instability_deg_h`` and ``gyro_turn_error_ppm`` in use.
+``gyro_arw_deg_rth`` / ``gyro_bias_instability_deg_h`` and ``gyro_turn_error_ppm`` in use, with
+where it came from (the rest spans it was read on, or the configuration).
 
     python bench/diag_gyro_grade.py [--only NAME] [--seed 0]
 """
@@ -21,7 +22,7 @@ import numpy as np
 import gnssacc
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_consistency import cases  # noqa: E402
+from bench_consistency import cases, merged  # noqa: E402
 
 RAD_S_RTHZ_TO_DEG_RTH = np.degrees(1.0) * 60.0  # rad/s/sqrt(Hz) -> deg/sqrt(h)
 
@@ -31,7 +32,8 @@ def gyro_grade(case, seed: int) -> str:
     with tempfile.TemporaryDirectory() as tmp:
         if callable(case.source):
             source, options, _ = case.source(seed, Path(tmp))
-            options = {**case.options, **options}
+            config = merged(case.options.get("config", {}), options.get("config", {}))
+            options = {**case.options, **options, **({"config": config} if config else {})}
         else:
             source, options = case.source, {**case.options, "seed": seed}
         res = gnssacc.process(source, methods=["ekf"], **options)
@@ -45,7 +47,8 @@ def gyro_grade(case, seed: int) -> str:
     return (
         f"{case.name:34s} rest {'/'.join(f'{d:.3f}' for d in dens)} (gm {gm:.3f}) "
         f"{rest.total_s if rest else 0:.0f} s bi {bi_s} | tuned arw {imu['gyro_arw_deg_rth']} "
-        f"bi {imu['gyro_bias_instability_deg_h']} turn {imu['gyro_turn_error_ppm']}"
+        f"bi {imu['gyro_bias_instability_deg_h']} turn {imu['gyro_turn_error_ppm']} "
+        f"({prep.cfg.origin.get(('imu', 'gyro_turn_error_ppm'), 'default')})"
     )
 
 
