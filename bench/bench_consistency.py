@@ -353,6 +353,8 @@ def main(argv=None) -> None:
     a = p.parse_args(argv)
     extra = settings(a.set)
     warnings.simplefilter("ignore")  # the table carries the warnings as '!'
+    if a.table and not Path(a.table).is_file():
+        p.error(f"--table {a.table}: no such file (it reads what --json wrote)")
     results = json.loads(Path(a.table).read_text()) if a.table else {}
     t0 = time.perf_counter()
     for case in cases(a.quick, a.seeds):

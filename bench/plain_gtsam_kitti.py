@@ -4,7 +4,7 @@ KITTI (the reference of ``bench/bench_whole_run.py``; it imports nothing of gnss
 Reads the KITTI sequence inside the gtsam wheel (``KittiEquivBiasedImu.txt``, 100 Hz IMU in a
 forward-left-up body frame; ``KittiGps_converted.txt``, 1 Hz positions in local east-north-up
 metres), makes fixes from the positions with white noise (3, 3, 5 m, gnssacc's ``white``
-profile), and runs GTSAM's ``IncrementalFixedLagSmoother`` (10 s lag) with a
+profile), and runs GTSAM's ``IncrementalFixedLagSmoother`` (20 s lag, gnssacc's default) with a
 ``CombinedImuFactor`` between 1 Hz nodes and a ``GPSFactor`` per fix, with the IMU noise of
 gnssacc's ``kitti`` preset (the gyro's raised: see the code). ``--sigmas`` also queries each
 node's pose and velocity marginal covariances before it leaves the window (gnssacc reports them
@@ -23,6 +23,8 @@ from pathlib import Path
 import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import B, V, X
+
+LAG_S = 20.0  # [s], gnssacc's [smoother] lag_s default
 
 
 def main() -> None:
@@ -50,7 +52,7 @@ def main() -> None:
     p.setIntegrationCovariance(np.eye(3) * 1e-8)
     params = gtsam.ISAM2Params()
     params.setFactorization("QR")
-    sm = gtsam.IncrementalFixedLagSmoother(10.0, params)
+    sm = gtsam.IncrementalFixedLagSmoother(LAG_S, params)
     gps_noise = gtsam.noiseModel.Diagonal.Sigmas(sigma)
 
     # The start: the first fix, the heading and speed over the first 50 m of fixes.
@@ -104,8 +106,8 @@ def main() -> None:
         pose, vel = sm.calculateEstimatePose3(X(n)), sm.calculateEstimateVector(V(n))
         bias = sm.calculateEstimateConstantBias(B(n))
         est[n] = pose.translation()
-        if args.sigmas:  # a node about to leave the window (1 Hz nodes, 10 s lag)
-            old = n - 8
+        if args.sigmas:  # a node about to leave the window (1 Hz nodes)
+            old = n - int(LAG_S) + 2
             if old >= 0:
                 isam = sm.getISAM2()
                 isam.marginalCovariance(X(old))

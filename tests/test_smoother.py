@@ -145,7 +145,7 @@ def test_smoother_beats_ekf_on_simulated_runs(sim_results):
 def test_smoothing_claims_less_uncertainty_than_the_online_estimate(sim_results):
     """Whether the marginals are right is tested where a band can be derived, with the smoother's
     model equal to the truth over 100 runs (test_consistency_mc.py); here only that the fixed-lag
-    estimate, which has seen 10 s more fixes, states a smaller sigma than the online one."""
+    estimate, which has seen a lag more of fixes, states a smaller sigma than the online one."""
     for _, sols in sim_results:
         assert np.median(sols["smoother"].sigma[:-20, 0]) < np.median(
             sols["smoother-online"].sigma[:-20, 0]
@@ -169,7 +169,9 @@ def test_ill_posed_updates_are_recovered_and_counted():
 @pytest.mark.parametrize("method, dropped", [("smoother", 0), ("smoother-accw", 2)])
 def test_injected_failure_mid_run_is_recovered(monkeypatch, method, dropped):
     """Two ill-posed updates are recovered by a restart; a restart keeps nodes i-1 and i only, so
-    ``smoother-accw`` drops (and counts) its window factor on node i-2 each time."""
+    ``smoother-accw`` drops (and counts) its window factor on node i-2 each time. The abandoned
+    window's nodes keep its smoothed estimates: 1.08-1.23x the uninterrupted PRMSE at lags 10
+    and 20 s (seeds 2, 3), where their online estimates gave 1.18-1.61x."""
     import gnssacc.estimators.smoother_graph as S
 
     cfg = load_config(overrides={"imu": grade_config("industrial")})
@@ -189,7 +191,7 @@ def test_injected_failure_mid_run_is_recovered(monkeypatch, method, dropped):
     assert sol.stats["n_ill_posed_recovered"] == 2
     assert sol.stats.get("n_factors_dropped_at_restart", 0) == dropped
     assert len(sol) == len(ref) and np.all(np.isfinite(sol.sigma))
-    assert score(run, sol).prmse_m < 1.5 * score(run, ref).prmse_m
+    assert score(run, sol).prmse_m < 1.35 * score(run, ref).prmse_m
 
 
 def test_long_outage_and_imu_gap_do_not_break_the_graph():

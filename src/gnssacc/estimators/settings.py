@@ -368,7 +368,7 @@ class SmootherSettings(_Common):
         Preintegration's integration 1-sigma.
     """
 
-    lag_s: float = 10.0
+    lag_s: float = 20.0
     max_node_spacing_s: float = 1.0
     min_node_spacing_s: float = 0.5
     factorization: str = "QR"

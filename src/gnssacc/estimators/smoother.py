@@ -409,12 +409,10 @@ def _reinitialise(loop: _Loop, i: int, graph, values) -> int:
     (IMU, the aids'), so no measurement is lost, except a factor on nodes older than ``i - 1``
     (they are gone). If the smoother used Cholesky factorization it switches to QR, which
     tolerates the poor conditioning that stiff bias random walks cause. Nodes of the abandoned
-    window keep their online estimate as their fixed-lag one.
+    window keep what it knew of them (:func:`_keep_window`).
     """
-    online, fixed, times = loop.online, loop.fixed, loop.times
-    for m in range(loop.window_start, i):
-        if not fixed.done[m] and online.done[m]:
-            fixed.copy_from(online, m)
+    online, times = loop.online, loop.times
+    _keep_window(loop, i)
     if loop.smoother.reset(robust=True):
         loop.stats["factorization_switched_to_qr"] = True
     p = i - 1
@@ -438,3 +436,24 @@ def _reinitialise(loop: _Loop, i: int, graph, values) -> int:
     ]
     loop.smoother.update(p_graph, p_values, stamps)
     return p
+
+
+def _keep_window(loop: _Loop, i: int) -> None:
+    """Record the nodes of a window abandoned at node ``i`` that have no fixed-lag estimate yet
+    with the window's estimate after its last update (smoothed over the fixes up to node
+    ``i - 1``: half the lag on average, where the online estimate has none); with the online
+    estimate where that window cannot be read any more (the failed update left it broken)."""
+    online, fixed = loop.online, loop.fixed
+    nodes = [m for m in range(loop.window_start, i) if not fixed.done[m] and online.done[m]]
+    if not nodes:
+        return
+    try:
+        covs = loop.smoother.covariances(nodes)
+        estimates = [loop.smoother.estimate(m) for m in nodes]
+    except RuntimeError:
+        covs, estimates = None, []
+    for k, m in enumerate(nodes):
+        if covs is not None and np.all(np.isfinite(covs[k])):
+            fixed.put(m, estimates[k], covs[k])
+        else:
+            fixed.copy_from(online, m)
