@@ -45,8 +45,9 @@ def main() -> None:
         pct = 100 * (c["prmse"] / b["prmse"] - 1) if b["prmse"] > 0 else np.nan
         if np.isfinite(pct):
             changes.append(pct)
+        change = f"{pct:+.1f}%" if np.isfinite(pct) else "-"
         print(
-            f"{case:36s} {pair(b, c, 'prmse'):>14s} {pct:+6.1f}% {pair(b, c, 'nees_pos'):>12s} "
+            f"{case:36s} {pair(b, c, 'prmse'):>14s} {change:>7s} {pair(b, c, 'nees_pos'):>12s} "
             f"{pair(b, c, 'nees_att'):>14s}"
         )
     if changes:
