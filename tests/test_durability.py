@@ -597,6 +597,35 @@ def test_sigterm_at_random_moments_leaves_old_or_new(run_dir, tmp_path, capsys):
     assert seen == {"old", "new"}
 
 
+#: The CLI with a worker pool cut off from its owner, as a signal arriving while a kept pool is
+#: being shut down leaves it: its forked worker alive and waiting for tasks.
+ORPHAN = """
+import multiprocessing, sys
+from concurrent.futures import ProcessPoolExecutor
+pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork"))
+pool.submit(abs, -1).result()   # the worker is forked now, and never shut down
+sys.argv = ["gnssacc"] + sys.argv[1:]
+from gnssacc.cli import entry
+entry()
+"""
+
+
+def test_a_worker_left_alive_by_an_interrupted_pool_does_not_hold_the_command(run_dir, tmp_path):
+    """The command ends its live workers before it leaves: a worker holds the command's stdout and
+    stderr, so a caller reading them to the end (``subprocess.run``, a shell pipe) would wait for
+    it for ever. (Once in CI, the command said "interrupted" after a SIGTERM during its start and
+    its output did not end within 60 s; whether a worker held it is not known.)"""
+    args = ["run", run_dir, "--methods", "ekf", "--tune", "none", "--no-plots", "--out"]
+    proc = subprocess.run(
+        [sys.executable, "-c", ORPHAN, *map(str, args), str(tmp_path / "res")],
+        capture_output=True,
+        text=True,
+        timeout=60,  # ~5 s; without the fix the worker holds the output until this runs out
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "results: " in proc.stdout
+
+
 # --- outputs cover the run ------------------------------------------------------------------------
 
 

@@ -828,6 +828,7 @@ def entry() -> None:
         from .estimators.kernels import stop_background
 
         stop_background()  # compiling children of a first run that ended early (bad input)
+        _end_workers()
         for stream in (sys.stdout, sys.stderr):
             try:
                 stream.flush()
@@ -835,6 +836,17 @@ def entry() -> None:
                 pass
         os._exit(code)
     sys.exit(code)
+
+
+def _end_workers() -> None:
+    """End the worker processes still alive (the ones a signal cut off from their pool while it
+    was being shut down). A worker forked from this process holds its stdout and stderr and both
+    ends of its task queue, so it would wait for tasks for ever after ``os._exit``, and whoever
+    reads the command's output would wait with it."""
+    multiprocessing = sys.modules.get("multiprocessing")
+    if multiprocessing is not None:
+        for child in multiprocessing.active_children():
+            child.terminate()
 
 
 def _stdout_gone() -> int:
