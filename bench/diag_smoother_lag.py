@@ -22,10 +22,9 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from bench_hard_traits import write_sideways_bag
+from bench_hard_traits import rover_run, write_sideways_bag
 
 import gnssacc
-from gnssacc.sources.sim import simulate
 
 RUNS = [f"kitti@{s}" for s in range(5)] + [
     "sim:car-city,imu=industrial,duration=300@0",
@@ -43,12 +42,8 @@ def recording(spec: str, folder: str):
     """(what ``gnssacc.process`` is given, seed) for one ``--runs`` entry."""
     if spec == "comma2k19":
         return str(COMMA), 0
-    if spec == "rover":  # bench_hard_traits.rover's run
-        run = simulate(
-            "rover", 367.0, imu_grade="consumer", gnss_rate_hz=20.0, noise="filtered", seed=0
-        )
-        sigma = np.tile([3.0, 3.0, 5.0], (len(run.gnss), 1))
-        return run.with_gnss(replace(run.gnss, sigma_ned=sigma, sigma_stated=False)), 0
+    if spec == "rover":
+        return rover_run(), 0
     if spec == "sideways":
         run, bag = write_sideways_bag(Path(folder))
         return replace(gnssacc.load(str(bag)), truth=run.truth), 0
