@@ -162,3 +162,29 @@ def test_the_folder_keeps_at_most_its_limit(tmp_path, monkeypatch):
     # A file that holds something else than a prepared recording is not trusted.
     with pytest.warns(DataWarning, match="holds something else"):
         assert c.load("c") is None
+
+
+def test_pruning_beside_another_process_pruning_the_same_folder_keeps_the_result(
+    tmp_path, monkeypatch
+):
+    """Two runs storing into one folder prune it at once: a file the other removed between this
+    one's listing and its look at the file is passed over, and the new file is stored."""
+    monkeypatch.setattr(cache_mod, "MAX_FILES", 2)
+    c = PreparationCache(tmp_path)
+    for key in "abc":
+        c.store(key, cache_mod.Stored(prepared=None, warnings=[]))
+    real_glob = type(c.folder).glob
+
+    def glob_then_other_prunes(self, pattern):
+        found = list(real_glob(self, pattern))
+        for p in found:
+            if p != c.path("d"):
+                p.unlink()  # the other process's prune, between the listing and the stat
+                break
+        return iter(found)
+
+    monkeypatch.setattr(type(c.folder), "glob", glob_then_other_prunes)
+    assert c.store("d", cache_mod.Stored(prepared=None, warnings=[])) == c.path("d")
+    monkeypatch.undo()
+    left = sorted(p.name for p in tmp_path.glob("*.prep"))
+    assert c.path("d").name in left and len(left) <= 2

@@ -236,9 +236,20 @@ class PreparationCache:
         return self.path(key)
 
     def _prune(self) -> None:
-        files = sorted(self.folder.glob("*.prep"), key=lambda p: p.stat().st_mtime, reverse=True)
-        for p in files[MAX_FILES:]:
-            p.unlink(missing_ok=True)
+        """Keep the :data:`MAX_FILES` most recently used files. Another process storing into the
+        same folder may prune it at the same moment: a file it removed first is passed over,
+        and one that cannot be removed is left (the run's own file is stored either way)."""
+        used = []
+        for p in self.folder.glob("*.prep"):
+            try:
+                used.append((p.stat().st_mtime, p))
+            except OSError:
+                continue  # removed meanwhile
+        for _, p in sorted(used, reverse=True)[MAX_FILES:]:
+            try:
+                p.unlink(missing_ok=True)
+            except OSError:
+                continue
 
 
 def _storable(prep: Prepared) -> Prepared:
