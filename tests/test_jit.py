@@ -15,6 +15,7 @@ import os
 import shutil
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import pytest
@@ -36,6 +37,7 @@ s = mechanization.propagate.stats
 print(os.environ.get("NUMBA_CACHE_DIR"))
 print(len(s.cache_hits), len(s.cache_misses))
 print(len(b._children), ",".join(b.groups))
+print(len(mechanization.update_state.stats.cache_misses))
 """
 
 
@@ -74,6 +76,7 @@ def test_read_only_install_caches_in_the_user_folder_and_says_so_once(tmp_path):
     assert len(notice) == 1 and "compiling" in notice[0] and str(folder) in notice[0]
     hits, misses = first.stdout.splitlines()[1].split()
     assert hits != "0" and misses == "0"  # compiled by the child processes, loaded from the cache
+    assert first.stdout.splitlines()[3] == "0"  # the EKF's update too, not compiled here again
     assert list(folder.rglob("mechanization.propagate-*.nbi"))  # ... written to the user folder
     assert list(folder.rglob("window_marginals.*.nbi"))  # the smoother's too
     assert not list(folder.rglob("mechanization.kernel_force_integrals-*.nbi"))  # only ekf-accw's
@@ -326,3 +329,55 @@ def test_the_install_compiles_the_kernels_into_the_package_and_a_first_run_loads
     hits, misses, children = _counts(probe)
     assert not _notice(probe) and children == 0 and misses == 0 and hits > 0
     assert probe.stdout.splitlines()[2].split()[1] == "propagation,update,loop,window,chain,band"
+
+
+class _Child:
+    """A compiling child process as :class:`kernels.BackgroundWarmUp` sees it (``poll``, ``wait``):
+    alive until ``ends`` is set, then its exit code."""
+
+    def __init__(self, code: int = 0):
+        self.code, self.ends = code, threading.Event()
+
+    def poll(self):
+        return self.code if self.ends.is_set() else None
+
+    def wait(self):
+        self.ends.wait()
+        return self.code
+
+
+def _waiting_for_the_ekf(monkeypatch, child: _Child, cached: set) -> tuple[threading.Thread, list]:
+    """A warm-up whose propagation is cached and whose other groups one ``child`` compiles,
+    waiting for the EKF's groups in a thread; the groups compiled in this process are listed."""
+    here: list = []
+    monkeypatch.setattr(kernels, "group_cached", lambda g: g in cached)
+    monkeypatch.setattr(kernels, "compile_groups", lambda groups: here.extend(groups))
+    warm = kernels.BackgroundWarmUp(groups=("loop", "chain"), processes=False)
+    warm._children = {("update", "loop", "chain"): child}
+    waiting = threading.Thread(target=warm._wait_children, args=(kernels.EKF_GROUPS,), daemon=True)
+    waiting.start()
+    return waiting, here
+
+
+def test_the_ekf_waits_for_the_child_compiling_its_update_not_for_all_it_compiles(monkeypatch):
+    """The EKF's update is compiled by the child that then compiles the other groups: the warm-up
+    waits until the child has cached it (compiling it here as well doubled a first run's
+    compile work), and not until the child's later groups are done."""
+    child, cached = _Child(), {"propagation"}
+    waiting, here = _waiting_for_the_ekf(monkeypatch, child, cached)
+    try:
+        waiting.join(0.3)
+        assert waiting.is_alive() and here == []  # the update is being compiled by the child
+        cached.add("update")
+        waiting.join(2.0)
+        assert not waiting.is_alive() and here == []  # cached by the child, still running
+    finally:
+        child.ends.set()
+
+
+def test_a_child_that_fails_leaves_the_ekf_update_to_this_process(monkeypatch):
+    child = _Child(code=3)
+    waiting, here = _waiting_for_the_ekf(monkeypatch, child, {"propagation"})
+    child.ends.set()
+    waiting.join(2.0)
+    assert not waiting.is_alive() and here == ["update"]  # only what the EKF waits for

@@ -274,13 +274,23 @@ class BackgroundWarmUp:
         self._all_done.wait(EXIT_WAIT_S)
 
     def _wait_children(self, groups) -> None:
-        """Wait for the children compiling any of ``groups``; compile here what a failed one
-        left."""
+        """Wait until each of ``groups`` that a child compiles is in the cache, or that child has
+        ended (a child compiles its groups in order: the EKF's update is cached long before the
+        smoother's groups after it); compile here what a failed one left."""
         for part, proc in self._children.items():
-            if set(part) & set(groups) and not _compiled_by(proc):
-                if self._stopping.is_set():
+            wanted = [g for g in groups if g in part]
+            if not wanted:
+                continue
+            while proc is not None and proc.poll() is None:
+                if all(group_cached(g) for g in wanted):
+                    break
+                if self._stopping.wait(CHILD_POLL_S):
                     raise Terminated()  # the process is leaving: nothing to compile for
-                compile_groups(part)
+            else:
+                if not _compiled_by(proc):
+                    if self._stopping.is_set():
+                        raise Terminated()
+                    compile_groups(wanted)
 
     def _run(self) -> None:
         try:
@@ -292,7 +302,7 @@ class BackgroundWarmUp:
     def _load_all(self) -> None:
         t0 = time.perf_counter()
         try:
-            self._wait_children(["propagation"])
+            self._wait_children(EKF_GROUPS)  # the propagation's child, the update in the other
             compile_groups(EKF_GROUPS)  # loads what the children cached, or compiles
             self.loaded.update(EKF_GROUPS)
         except BaseException as exc:  # re-raised in the waiting thread
@@ -325,6 +335,8 @@ class BackgroundWarmUp:
 
 #: Longest wait at the interpreter's exit for the background thread to finish [s].
 EXIT_WAIT_S = 5.0
+#: How often the thread looks whether a compiling child has cached a group it waits for [s].
+CHILD_POLL_S = 0.05
 
 _background: BackgroundWarmUp | None = None
 _start_lock = threading.Lock()
