@@ -59,6 +59,28 @@ def test_a_kept_pool_serves_the_same_function_again(monkeypatch):
     assert c[1][0] != a[1][0]  # a new one after the pool was ended
 
 
+class _Squares(parallel.KeptWorkers):
+    def __init__(self):
+        self.kept_for = self.square
+
+    def square(self, x):
+        return os.getpid(), x * x
+
+
+def test_workers_kept_for_a_method_end_with_its_with_block(monkeypatch):
+    monkeypatch.setenv(parallel.JOBS_ENV, "2")
+    other = parallel.side_by_side(_pid_and_square, [(1,), (2,)], keep=True)  # another's pool
+    with _Squares() as squares:
+        a = parallel.side_by_side(squares.square, [(1,), (2,)], keep=True)
+        b = parallel.side_by_side(squares.square, [(3,), (4,)], keep=True)
+        assert a[1][0] == b[1][0] != other[1][0]  # kept for the method, the other's ended
+        worker = a[1][0]
+    assert [v for _, v in b] == [9, 16]
+    with pytest.raises(ProcessLookupError):  # ended with the block (and reaped)
+        os.kill(worker, 0)
+    parallel.close_pool()
+
+
 class _Bowl:
     """A bumpy negative log-likelihood with ``ahead`` (evaluated side by side, as the tuner's
     objective does); counts what was evaluated where."""

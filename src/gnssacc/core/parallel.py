@@ -128,6 +128,20 @@ def close_pool(target: Callable | None = None) -> None:
         executor.shutdown(wait=True, cancel_futures=True)
 
 
+class KeptWorkers:
+    """A ``with`` block for an object whose method :attr:`kept_for` is called side by side with
+    ``keep=True`` again and again (a likelihood's passes): the workers kept for it end with the
+    block."""
+
+    kept_for: Callable  # the method the workers are kept for
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        close_pool(self.kept_for)
+
+
 def _executor(target: Callable, workers: int, keep: bool) -> ProcessPoolExecutor:
     """Workers forked now for ``target`` (or the kept ones for it)."""
     if keep and _POOL["target"] == target and _POOL["executor"] is not None:

@@ -52,7 +52,7 @@ import numpy as np
 from ..checks.findings import Finding
 from ..checks.timeoffset import OffsetEstimate, shifted
 from ..core.config import RunConfig
-from ..core.parallel import close_pool, side_by_side
+from ..core.parallel import KeptWorkers, side_by_side
 from ..core.recording import InitialState, RecordedRun
 from ..core.states import ATT, BA, BG, POS, VEL
 from ..sources.gnss_time import ABSOLUTE_CLOCK_MIN_S, gps_seconds_to_unix, leap_seconds_at_unix
@@ -137,7 +137,7 @@ def state_at(
 
 
 @dataclass
-class _Shifts:
+class _Shifts(KeptWorkers):
     """Innovations of the reference run shifted by ``d`` [s], from one start, cached by ``d``."""
 
     run: RecordedRun
@@ -150,12 +150,7 @@ class _Shifts:
 
     def __post_init__(self):
         self.cache: dict = {}
-
-    def __enter__(self) -> "_Shifts":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        close_pool(self._pass)  # the workers :meth:`ahead` kept, if any
+        self.kept_for = self._pass  # the workers :meth:`ahead` keeps, ended with the block
 
     def at(self, d: float) -> Innovations | None:
         key = round(float(d), 9)

@@ -31,7 +31,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..core.config import RunConfig
-from ..core.parallel import close_pool, side_by_side
+from ..core.parallel import KeptWorkers, side_by_side
 from ..core.recording import InitialState, RecordedRun
 from ..core.rotations import wrap_angle
 from .filter_pass import FilterPass
@@ -71,7 +71,7 @@ class BankResult:
 
 
 @dataclass
-class _Rows:
+class _Rows(KeptWorkers):
     """The hypotheses' passes of one bank: each hypothesis's cumulative log-likelihood on a time
     grid (:meth:`score`), the passes side by side in workers kept for every round of the bank (the
     first horizon, a doubled one, the refinement) and ended with the ``with`` block."""
@@ -82,11 +82,8 @@ class _Rows:
     quality: object
     filter_pass: FilterPass
 
-    def __enter__(self) -> "_Rows":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        close_pool(self.row)
+    def __post_init__(self):
+        self.kept_for = self.row  # the workers :meth:`score` keeps, ended with the block
 
     def score(self, hyps, t_h: float):
         """Cumulative log-likelihood of each hypothesis on a common time grid up to ``t_h``; the
