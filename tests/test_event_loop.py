@@ -109,3 +109,32 @@ def test_a_pass_uses_the_python_loop_until_the_loop_kernel_is_loaded(prepared, m
     background = kernels.BackgroundWarmUp(("loop",), notice=None, processes=False).start()
     background.wait_all()
     assert {"propagation", "update", "loop"} <= background.loaded
+
+
+@pytest.mark.parametrize("keep", [False, True])
+def test_a_tally_of_updates_at_once_equals_one_by_one(keep):
+    """:meth:`Tally.add_updates` (a compiled stretch's updates per kind) against
+    :meth:`Tally.add_update` one by one: the same figures to the last bit, the rejected updates
+    left out of the sums and the lag-1 products carried from one stretch into the next."""
+    from gnssacc.estimators.ekf_record import Tally, innovation_loglik
+
+    rng = np.random.default_rng(7)
+    m, dof = 400, 3
+    t = np.cumsum(rng.uniform(0.5, 1.5, m))
+    nis = rng.chisquare(dof, m) * rng.uniform(0.5, 10.0, m)
+    logdet = rng.normal(2.0, 3.0, m)
+    used = rng.uniform(size=m) > 0.1
+    wz = rng.standard_normal((m, dof))
+    one, batch = Tally(keep), Tally(keep)
+    for i in range(m):
+        loglik = innovation_loglik(float(nis[i]), float(logdet[i]), dof)
+        one.add_update(float(t[i]), "pos", dof, float(nis[i]), loglik, bool(used[i]), wz[i])
+    for a, b in ((0, 1), (1, 150), (150, 151), (151, m)):  # stretches, one of a single update
+        batch.add_updates("pos", dof, t[a:b], nis[a:b], logdet[a:b], used[a:b], wz[a:b])
+    s1, s2 = one.stats(), batch.stats()
+    assert s1["n_pos_rejected"] > 10 and s1["n_pos_beyond"] > 10 and s1["acf1_pos"] != 0
+    for key, v in s1.items():
+        if isinstance(v, np.ndarray):
+            assert np.array_equal(v, s2[key]), key
+        else:
+            assert v == s2[key], key

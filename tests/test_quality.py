@@ -8,7 +8,13 @@ import os
 import numpy as np
 import pytest
 
-from gnssacc.checks.quality import KINDS, SuspectNoise, check_imu, inflation_psd
+from gnssacc.checks.quality import (
+    KINDS,
+    SuspectNoise,
+    check_imu,
+    inflation_psd,
+    inflation_segments,
+)
 from gnssacc.core.config import DEG, load_config
 from gnssacc.core.recording import ImuData
 
@@ -165,6 +171,27 @@ def test_inflation_psd_integrates_to_sigma_T_squared(cfg, mode):
     gz = rep.of_kind("saturated")[0]
     assert q_accel[gz.i_start : gz.i_end].max() == 0.0 and q_gyro[4000:4008].max() == 0.0
     assert np.all(q_gyro[clean] == 0) and np.all(q_accel[clean] == 0)
+
+
+def test_inflation_segments_are_made_again_when_what_they_come_from_changes(cfg):
+    """The segments are kept for the same IMU data, report and settings (the tuner's passes ask
+    for them each), and made afresh, as a fresh report's, when the report's spans, the data or
+    the settings differ."""
+    imu, _ = _with_defects()
+    rep = check_imu(imu, cfg)
+    local = SuspectNoise.from_config(cfg)
+    first = inflation_segments(imu, rep, local)
+    assert len(first.i0) >= 4 and inflation_segments(imu, rep, local) is first
+    fixed = SuspectNoise.from_config(
+        load_config(overrides={"quality": {"suspect_sigma_mode": "fixed"}})
+    )
+    assert not np.array_equal(inflation_segments(imu, rep, fixed).q_gyro, first.q_gyro)
+    dropped = rep.spans.pop(0)  # the same report object, one span fewer
+    fewer = inflation_segments(imu, rep, local)
+    assert len(fewer.i0) < len(first.i0) and dropped.i_start not in fewer.i0
+    other = ImuData(imu.t, imu.f_b, imu.omega_ib_b * 2.0)  # other data, the same spans
+    doubled = inflation_segments(other, rep, local)
+    np.testing.assert_allclose(doubled.q_gyro, 4.0 * fewer.q_gyro, rtol=1e-12)
 
 
 # --- the real KITTI file shipped with gtsam --------------------------------------------------------

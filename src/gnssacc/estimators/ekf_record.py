@@ -24,6 +24,12 @@ def innovation_loglik(nis: float, logdet: float, dof: int) -> float:
     return -0.5 * (nis + logdet + dof * _LOG_2PI)
 
 
+def _added(total: float, values: np.ndarray) -> float:
+    """``total`` plus ``values`` one after the other (a running sum's order: ``np.sum`` adds
+    pairwise, which differs in the last bits)."""
+    return float(np.add.accumulate(np.concatenate(([total], values)))[-1])
+
+
 class Recorder:
     """Collects the output rows; memory grows with the outputs only. Each row keeps the attitude
     matrix and the covariance pieces it needs; Euler angles and their sigmas are computed for all
@@ -116,8 +122,8 @@ class Tally:
         prev = k.prev
         if prev is not None:
             lag = k.lag
-            lag[0] += float(wz @ prev)
-            lag[1] += float(wz @ wz)
+            lag[0] += float((wz * prev).sum())  # as add_updates sums (a BLAS dot may fuse)
+            lag[1] += float((wz * wz).sum())
         k.prev = wz
         k.n += 1
         k.nis_sum += nis
@@ -127,6 +133,32 @@ class Tally:
         if self.keep:
             for lst, v in zip(k.series, (t, nis / dof, loglik), strict=True):
                 lst.append(v)
+
+    def add_updates(self, kind: str, dof: int, t, nis, logdet, used, wz) -> None:
+        """:meth:`add_update` for consecutive updates of one ``kind`` (arrays in time order: ``t``
+        [s], NIS, ``log det S``, applied or not, whitened innovations (m, ``dof``)), their
+        log-likelihoods (:func:`innovation_loglik`) computed here: the same sums, added in the
+        same order (a pass's compiled stretch hands over hundreds at once)."""
+        k = self.kinds[kind]
+        used = np.asarray(used, bool)
+        k.rejected += int(used.size - np.count_nonzero(used))
+        t, nis, logdet, wz = t[used], nis[used], logdet[used], wz[used]
+        if nis.size == 0:
+            return
+        loglik = -0.5 * (nis + logdet + dof * _LOG_2PI)
+        w = wz if k.prev is None else np.vstack([k.prev[None, :], wz])
+        if len(w) > 1:
+            k.lag[0] = _added(k.lag[0], (w[1:] * w[:-1]).sum(axis=1))
+            k.lag[1] = _added(k.lag[1], (w[1:] * w[1:]).sum(axis=1))
+        k.prev = wz[-1]
+        k.n += nis.size
+        k.nis_sum = _added(k.nis_sum, nis)
+        k.dof += dof * nis.size
+        k.loglik = _added(k.loglik, loglik)
+        k.beyond += int(np.count_nonzero(nis > tail_bound(dof)))
+        if self.keep:
+            for lst, v in zip(k.series, (t, nis / dof, loglik), strict=True):
+                lst.extend(v.tolist())
 
     def stats(self) -> dict:
         out: dict[str, Any] = {}

@@ -50,6 +50,9 @@ PYTHON, POSITION, NHC, OUTPUT = 0, 1, 2, 3
 #: with their update kind and its degrees of freedom.
 STEPS = {"position": (POSITION, "pos", 3), "nhc": (NHC, "nhc", 2)}
 _KINDS = {code: (kind, dof) for code, kind, dof in STEPS.values()}
+#: Updates of a compiled stretch from which the tally takes them per kind at once (fewer: one by
+#: one, cheaper than the arrays' set-up).
+BATCH_FROM = 8
 
 
 @njit(cache=True)
@@ -290,8 +293,18 @@ class CompiledLoop:
         return e, k, t_cur
 
     def _tally(self, n0: int, n: int) -> None:
-        """Rows ``n0:n`` of the updates to the tally, in order, as the Python loop adds them."""
+        """Rows ``n0:n`` of the updates to the tally, in order, as the Python loop adds them: one
+        by one when few (a stretch between two Python events), else each kind's at once
+        (:meth:`Tally.add_updates`, the same sums)."""
         code, t, nis, logdet, used, wz = (x[n0:n] for x in self.out)
+        if n - n0 >= BATCH_FROM:
+            for c in np.unique(code).tolist():
+                kind, dof = _KINDS[c]
+                mine = code == c
+                self.tally.add_updates(
+                    kind, dof, t[mine], nis[mine], logdet[mine], used[mine], wz[mine, :dof]
+                )
+            return
         rows = zip(code.tolist(), t.tolist(), nis.tolist(), logdet.tolist(), used.tolist(), wz)
         for c, t_u, nis_u, logdet_u, used_u, wz_u in rows:
             kind, dof = _KINDS[c]
