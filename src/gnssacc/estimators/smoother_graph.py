@@ -46,6 +46,7 @@ from .layout import (
     NodeLayout,
     StateLayout,
 )
+from .mechanization import half_interval_rotations
 from .settings import SmootherSettings
 from .state import initial_state
 from .window_marginals import NotAChain, WindowMarginals
@@ -406,8 +407,16 @@ def mid_interval_force(f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray) -> 
     frame at the interval's start: ``Exp(omega dt / 2) f`` with the bias-corrected rate ``omega``
     [rad/s] held over ``dt`` [s]. Without it a vehicle turning at ``omega`` with speed ``v`` gets a
     spurious along-track acceleration ``v omega^2 dt / 2`` (5.5 mm/s^2 at 10 m/s on a 30 m circle
-    at 100 Hz)."""
-    return Rotation.from_rotvec(0.5 * omega_b * dt[:, None]).apply(f_b)
+    at 100 Hz).
+
+    The numbers of ``Rotation.from_rotvec(0.5 omega dt).apply(f_b)`` (scipy), at a third of its
+    cost: the rotations from :func:`gnssacc.estimators.mechanization.half_interval_rotations` (its
+    arithmetic), applied by the ``einsum`` scipy applies them with (one sample: scipy's own)."""
+    if len(dt) < 2:
+        return Rotation.from_rotvec(0.5 * omega_b * dt[:, None]).apply(f_b)
+    return np.einsum(
+        "ijk,ik->ij", half_interval_rotations(np.ascontiguousarray(omega_b), dt), f_b
+    )
 
 
 def touches(
