@@ -42,13 +42,19 @@ GROUPS = {
     "loop": (("event_loop.py", ("run_stretch",)),),
     "window": (("mechanization.py", ("kernel_force_integrals",)),),
     "chain": (
-        ("window_marginals.py", ("_scatter", "_marginalize", "_node_covariances")),
+        ("window_marginals.py", ("_scatter", "_scatter_all", "_marginalize", "_node_covariances")),
         ("mechanization.py", ("half_interval_rotations",)),
     ),
     "band": (
         (
             "window_marginals.py",
-            ("_scatter", "_band_marginalize", "_band_advance", "_band_covariances"),
+            (
+                "_scatter",
+                "_scatter_all",
+                "_band_marginalize",
+                "_band_advance",
+                "_band_covariances",
+            ),
         ),
     ),
 }
