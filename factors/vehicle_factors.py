@@ -61,7 +61,7 @@ def vehicle_velocity(
 
 
 def _keys_and_bias(pose_key, vel_key, bias_key, lever_b):
-    with_bias = bool(np.any(lever_b != 0))
+    with_bias = bool(lever_b.any())  # (a float array: any() is "any != 0")
     return [int(pose_key), int(vel_key)] + ([int(bias_key)] if with_bias else []), with_bias
 
 
@@ -84,12 +84,13 @@ def nhc_factor(
     """Zero lateral and vertical velocity at ``lever_b`` [m, body] in the vehicle's axes (``R_vb``,
     body to vehicle; ``None``: the body's), 1-sigma ``sigma_mps`` [m/s] (lateral, vertical);
     ``omega_b`` the raw gyro at the node [rad/s], ``w_ie_n`` the earth rate [rad/s, local NED]."""
-    omega_b, lever_b, w_ie_n = (np.asarray(a, float).copy() for a in (omega_b, lever_b, w_ie_n))
+    lever_b = np.asarray(lever_b, float).copy()
     keys, with_bias = _keys_and_bias(pose_key, vel_key, bias_key, lever_b)
     noise = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigma_mps, float))
-    if not with_bias:
+    if not with_bias:  # (the rate and the earth's do not enter)
         error = _plain_nhc_error(keys) if R_vb is None else _rotated_nhc_error(keys, R_vb)
         return gtsam.CustomFactor(noise, keys, error)
+    omega_b, w_ie_n = (np.asarray(a, float).copy() for a in (omega_b, w_ie_n))
     zero3 = np.zeros(3)
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
