@@ -642,9 +642,9 @@ def warm_up(band: bool = False) -> float:
         keys = np.array([symbol_key(c, i) for c in "xvb"], np.int64)
         window._scatter(np.asfortranarray(np.eye(window.b - 1)), keys)
         window._scatter(np.eye(1), np.array([symbol_key("k", i)], np.int64))
-    keys = [symbol_key(c, i) for i in range(3) for c in "xvb"]  # a rebuild's batch
-    infos = [np.asfortranarray(np.eye(window.b - 1)) for _ in range(3)]
-    window._scatter_many(infos, np.array(keys, np.int64), np.array([0, 3, 6, 9], np.int64))
+    batch = np.array([symbol_key(c, i) for i in range(3) for c in "xvb"], np.int64)
+    infos = [np.asfortranarray(np.eye(window.b - 1)) for _ in range(3)]  # a rebuild's batch
+    window._scatter_many(infos, batch, np.array([0, 3, 6, 9], np.int64))
     window.covariances([0, 1, 2])
     window.marginalize_first()
     return time.perf_counter() - t0
