@@ -29,6 +29,7 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
+from gnssacc.core.rotations import skew
 from gnssacc.estimators.aids.accel_model import H_a_blocks, predicted_acceleration
 from gnssacc.estimators.layout import B_ACC, X_ROT
 
@@ -103,13 +104,14 @@ def gnss_accel_factor(
         # iSAM2 calls this a few times per factor (insertion, relinearisations, marginalisation):
         # one lookup per variable and no temporaries beyond H_a_blocks'.
         R_nb = values.atPose3(pose_key).rotation().matrix()
-        f_corr = f_b - values.atConstantBias(bias_key).accelerometer()
+        f_n = R_nb @ (f_b - values.atConstantBias(bias_key).accelerometer())
         if H is not None:
-            H_phi, H_ba = H_a_blocks(R_nb, f_corr)  # smoother_jacobians_from_H_a, same numbers
-            np.matmul(H_phi, R_nb, out=J_pose[:, X_ROT])
-            np.negative(H_ba, out=J_bias[:, B_ACC])
+            # smoother_jacobians_from_H_a's numbers, H_a_blocks' (-[f_n x], R_nb) written out
+            # with the product f_n formed once.
+            np.matmul(-skew(f_n), R_nb, out=J_pose[:, X_ROT])
+            np.negative(R_nb, out=J_bias[:, B_ACC])
             H[0], H[1] = J_pose, J_bias
-        return R_nb @ f_corr + g_minus_a  # predicted_acceleration(R_nb, f_corr, g_n) - a_n
+        return f_n + g_minus_a  # predicted_acceleration(R_nb, f_corr, g_n) - a_n
 
     # The LS window's acceleration errors are uncorrelated across axes (diagonal covariance): a
     # Diagonal model whitens with three divisions instead of a 3x3 triangular solve.

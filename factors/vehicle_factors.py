@@ -61,7 +61,7 @@ def vehicle_velocity(
 
 
 def _keys_and_bias(pose_key, vel_key, bias_key, lever_b):
-    with_bias = bool(np.any(lever_b != 0))
+    with_bias = bool(lever_b.any())  # (a float array: any() is "any != 0")
     return [int(pose_key), int(vel_key)] + ([int(bias_key)] if with_bias else []), with_bias
 
 
@@ -84,11 +84,13 @@ def nhc_factor(
     """Zero lateral and vertical velocity at ``lever_b`` [m, body] in the vehicle's axes (``R_vb``,
     body to vehicle; ``None``: the body's), 1-sigma ``sigma_mps`` [m/s] (lateral, vertical);
     ``omega_b`` the raw gyro at the node [rad/s], ``w_ie_n`` the earth rate [rad/s, local NED]."""
-    omega_b, lever_b, w_ie_n = (np.asarray(a, float).copy() for a in (omega_b, lever_b, w_ie_n))
+    lever_b = np.asarray(lever_b, float).copy()
     keys, with_bias = _keys_and_bias(pose_key, vel_key, bias_key, lever_b)
     noise = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigma_mps, float))
-    if not with_bias and R_vb is None:
-        return gtsam.CustomFactor(noise, keys, _plain_nhc_error(keys))
+    if not with_bias:  # (the rate and the earth's do not enter)
+        error = _plain_nhc_error(keys) if R_vb is None else _rotated_nhc_error(keys, R_vb)
+        return gtsam.CustomFactor(noise, keys, error)
+    omega_b, w_ie_n = (np.asarray(a, float).copy() for a in (omega_b, w_ie_n))
     zero3 = np.zeros(3)
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
@@ -122,6 +124,26 @@ def _plain_nhc_error(keys: list):
             J_pose[0, 0], J_pose[0, 2], J_pose[1, 0], J_pose[1, 1] = u[2], -u[0], -u[1], u[0]
             H[0], H[1] = J_pose, Rt[1:3]
         return u[1:3]
+
+    return error
+
+
+def _rotated_nhc_error(keys: list, R_vb: np.ndarray):
+    """:func:`nhc_factor`'s error without a lever arm, in the vehicle's axes ``R_vb``: ``e = (R_vb
+    u)_{y,z}`` with ``u = R^T v``, ``de/dxi = (R_vb [u x])_{y,z}`` (translation columns zero),
+    ``de/dv = (R_vb R^T)_{y,z}``: the products :func:`vehicle_velocity` and
+    :func:`_in_vehicle_axes` form (the same numbers), without their general case's temporaries
+    (iSAM2 calls it a few times per factor; GTSAM copies the Jacobians out)."""
+    J_pose = np.zeros((3, 6))
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> np.ndarray:
+        Rt = values.atPose3(keys[0]).rotation().matrix().T
+        u = Rt @ values.atVector(keys[1])
+        if H is not None:  # J_pose[:, X_ROT] = [u x]
+            J_pose[0, 1], J_pose[0, 2], J_pose[1, 0] = -u[2], u[1], u[2]
+            J_pose[1, 2], J_pose[2, 0], J_pose[2, 1] = -u[0], -u[1], u[0]
+            H[0], H[1] = (R_vb @ J_pose)[1:3], (R_vb @ Rt)[1:3]
+        return (R_vb @ u)[1:3]
 
     return error
 

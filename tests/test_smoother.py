@@ -71,6 +71,41 @@ def test_factor_jacobians_equal_the_ekf_H_a_under_the_convention_mapping():
     np.testing.assert_allclose(smoother_jacobians_from_H_a(R, f)[0], J_pose, atol=1e-12)
 
 
+@pytest.mark.parametrize("rate", [0.05, 0.3, 40.0])  # half-angles below and above 1e-3 rad
+def test_half_interval_rotations_are_the_exponential_and_scipys(rate):
+    """The compiled rotations are ``Exp(omega dt / 2)`` (Rodrigues' formula, independently) and
+    the numbers scipy's ``Rotation`` gave the preintegration before them (its Taylor branch below
+    1e-3 rad, ``sin`` above); the specific force they turn, as scipy turned it."""
+    from scipy.spatial.transform import Rotation
+
+    from gnssacc.core.rotations import rotvec_to_dcm
+    from gnssacc.estimators.mechanization import half_interval_rotations
+    from gnssacc.estimators.smoother_graph import mid_interval_force
+
+    rng = np.random.default_rng(3)
+    omega = rate * rng.normal(size=(50, 3))
+    dt = rng.uniform(0.004, 0.012, 50)
+    R = half_interval_rotations(omega, dt)
+    for k in range(50):
+        np.testing.assert_allclose(R[k], rotvec_to_dcm(0.5 * omega[k] * dt[k]), atol=2e-16)
+    ref = Rotation.from_rotvec(0.5 * omega * dt[:, None])
+    np.testing.assert_allclose(R, ref.as_matrix(), rtol=0.0, atol=1e-16)
+    f = rng.normal(size=(50, 3)) * 10.0
+    np.testing.assert_allclose(mid_interval_force(f, omega, dt), ref.apply(f), rtol=0, atol=1e-14)
+    one = Rotation.from_rotvec(0.5 * omega[:1] * dt[:1, None]).apply(f[:1])  # scipy's own path
+    np.testing.assert_array_equal(mid_interval_force(f[:1], omega[:1], dt[:1]), one)
+
+
+def test_bias_inserted_by_name_reads_back():
+    from gnssacc.estimators.smoother_graph import insert_bias
+
+    values = gtsam.Values()
+    insert_bias(values, B(4), BIAS)
+    assert values.atConstantBias(B(4)).equals(BIAS, 0.0)
+    with pytest.raises(RuntimeError):  # a key already there, as a positional insert refuses it
+        insert_bias(values, B(4), BIAS)
+
+
 def test_preintegration_reproduces_a_perfect_imu_in_turns():
     """Each IMU sample is the interval's mean specific force in the body frame at the interval's
     middle (the simulator's and the EKF mechanization's convention). GTSAM rotates a sample with the

@@ -165,6 +165,37 @@ def test_band_marginals_equal_the_dense_inverse(w):
     assert worst(H, [2, 5, n - 1]) < 1e-9
 
 
+@pytest.mark.parametrize("w", [1, 2])
+def test_a_rebuilds_batch_scatters_as_its_factors_one_by_one(w):
+    """A rebuild's batch (:meth:`WindowMarginals._scatter_many`, one compiled call) leaves the
+    same blocks, to the bit, as the factors scattered one at a time in the same order, and the
+    same bookkeeping; a factor wider than the band in the batch is refused as alone."""
+    from gtsam.symbol_shorthand import B, V, X
+
+    rng = np.random.default_rng(11)
+    factors = []
+    for k in range(6):
+        for span in range(min(w, 5 - k) + 1):
+            keys = sorted(f(j) for j in range(k, k + span + 1) for f in (X, V, B))
+            d = 15 * len(keys) // 3
+            A = rng.normal(size=(d + 2, d)) * 10.0 ** rng.uniform(-4, 4, d)
+            factors.append((np.asfortranarray(A.T @ A), np.array(keys, np.int64)))
+    one, batch = (W.WindowMarginals(gm=False, bandwidth=w) for _ in range(2))
+    for wm in (one, batch):
+        wm.first = 0
+        wm._grow(5)
+    for info, keys in factors:
+        one._scatter(info, keys)
+    bounds = np.cumsum([0] + [len(k) for _, k in factors])
+    batch._scatter_many([i for i, _ in factors], np.concatenate([k for _, k in factors]), bounds)
+    for name in ("D", "O", "Ox"):
+        np.testing.assert_array_equal(getattr(batch, name), getattr(one, name))
+    assert (batch.reach, batch.f_valid, batch.n) == (one.reach, one.f_valid, one.n)
+    wide = np.array([X(1), X(1 + w + 1)], np.int64)
+    with pytest.raises(W.NotAChain):
+        batch._scatter_many([np.ones((12, 12))], wide, np.array([0, 2]))  # coupled
+
+
 def test_band_refuses_a_factor_wider_than_the_band():
     from gtsam.symbol_shorthand import X
 

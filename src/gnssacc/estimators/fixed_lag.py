@@ -123,13 +123,7 @@ class FixedLagISAM2:
         """
         if not self.guard or not self._skip or not self._nodes or self._nodes[0][0] >= t_cut:
             return False
-        keys = [
-            k
-            for t, ks in self._nodes
-            if t < t_cut
-            for k in ks
-            if gtsam.Symbol(k).chr() in self.guard
-        ]
+        keys = [k for t, ks in self._nodes if t < t_cut for k in ks if k >> 56 in self.guard]
         if not keys:
             return False
         delta = self.isam.getDelta()
@@ -208,10 +202,9 @@ def _groups(nodes: list, lo: int) -> gtsam.KeyGroupMap:
     """Ordering groups in time order from node ``lo`` of ``nodes`` on (older nodes: 0). Every
     variable is listed: iSAM2 puts unlisted ones in group 0."""
     groups = gtsam.KeyGroupMap()
-    for j, (_, keys) in enumerate(nodes):
-        g = max(0, j - lo)
-        for key in keys:
-            groups.insert2(key, g)
+    keys = [key for _, ks in nodes for key in ks]
+    numbers = [max(0, j - lo) for j, (_, ks) in enumerate(nodes) for _ in ks]
+    deque(map(groups.insert2, keys, numbers), maxlen=0)  # (no Python loop body per key)
     return groups
 
 

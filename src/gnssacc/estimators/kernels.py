@@ -41,11 +41,20 @@ GROUPS = {
     ),
     "loop": (("event_loop.py", ("run_stretch",)),),
     "window": (("mechanization.py", ("kernel_force_integrals",)),),
-    "chain": (("window_marginals.py", ("_scatter", "_marginalize", "_node_covariances")),),
+    "chain": (
+        ("window_marginals.py", ("_scatter", "_scatter_all", "_marginalize", "_node_covariances")),
+        ("mechanization.py", ("half_interval_rotations",)),
+    ),
     "band": (
         (
             "window_marginals.py",
-            ("_scatter", "_band_marginalize", "_band_advance", "_band_covariances"),
+            (
+                "_scatter",
+                "_scatter_all",
+                "_band_marginalize",
+                "_band_advance",
+                "_band_covariances",
+            ),
         ),
     ),
 }
@@ -102,7 +111,8 @@ def compile_group(group: str) -> float:
     if group in ("chain", "band"):
         from .window_marginals import warm_up
 
-        return warm_up(band=group == "band")
+        seconds = warm_up(band=group == "band")
+        return seconds + (mechanization.warm_up_intervals() if group == "chain" else 0.0)
     raise ValueError(f"unknown kernel group {group!r}; expected one of {', '.join(GROUPS)}")
 
 

@@ -929,6 +929,53 @@ def warm_up(propagation: bool = True, update: bool = True) -> float:
     return time.perf_counter() - t0
 
 
+@njit(cache=True)
+def half_interval_rotations(omega_b, dt):
+    """``Exp(omega dt / 2)`` per sample (n, 3, 3): the rotation of the body over the first half of
+    each sample's interval, with the rate ``omega_b`` [rad/s] (n, 3) held over ``dt`` [s] (n,).
+
+    The arithmetic of ``scipy.spatial.transform.Rotation.from_rotvec(0.5 * omega_b * dt[:, None])
+    .as_matrix()``, operation for operation (through the unit quaternion, a Taylor series of its
+    scale below 1e-3 rad), so that the preintegration's numbers did not change when it replaced
+    that call (a tenth of its cost)."""
+    n = omega_b.shape[0]
+    out = np.empty((n, 3, 3))
+    for i in range(n):
+        rx = 0.5 * omega_b[i, 0] * dt[i]
+        ry = 0.5 * omega_b[i, 1] * dt[i]
+        rz = 0.5 * omega_b[i, 2] * dt[i]
+        angle = math.sqrt(rx * rx + ry * ry + rz * rz)
+        if angle <= 1e-3:
+            angle2 = angle * angle
+            scale = 0.5 - angle2 / 48.0 + angle2 * angle2 / 3840.0
+        else:
+            scale = math.sin(angle / 2.0) / angle
+        x, y, z, w = scale * rx, scale * ry, scale * rz, math.cos(angle / 2.0)
+        x2, y2, z2, w2 = x * x, y * y, z * z, w * w
+        xy, zw, xz, yw, yz, xw = x * y, z * w, x * z, y * w, y * z, x * w
+        m = out[i]
+        m[0, 0] = x2 - y2 - z2 + w2
+        m[1, 0] = 2.0 * (xy + zw)
+        m[2, 0] = 2.0 * (xz - yw)
+        m[0, 1] = 2.0 * (xy - zw)
+        m[1, 1] = -x2 + y2 - z2 + w2
+        m[2, 1] = 2.0 * (yz + xw)
+        m[0, 2] = 2.0 * (xz + yw)
+        m[1, 2] = 2.0 * (yz - xw)
+        m[2, 2] = -x2 - y2 + z2 + w2
+    return out
+
+
+def warm_up_intervals() -> float:
+    """Compile (or load) :func:`half_interval_rotations` (the smoothers' preintegration); return
+    the seconds it took."""
+    import time
+
+    t0 = time.perf_counter()
+    half_interval_rotations(np.zeros((2, 3)), np.full(2, 0.01))
+    return time.perf_counter() - t0
+
+
 def warm_up_window() -> float:
     """Compile (or load) the window-consistent acceleration update's kernel
     (:func:`kernel_force_integrals`); return the seconds it took."""

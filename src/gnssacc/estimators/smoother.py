@@ -72,6 +72,7 @@ from .smoother_graph import (
     WindowSmoother,
     inflation_over,
     initial_prior,
+    insert_bias,
     is_ill_posed,
     node_times,
     preintegrate,
@@ -241,7 +242,7 @@ class _Loop:
         graph.add(gtsam.PriorFactorConstantBias(b, est.bias, cov(rec.cov_bias[p])))
         values.insert(x, est.pose)
         values.insert(v, est.v_n)
-        values.insert(b, est.bias)
+        insert_bias(values, b, est.bias)
         for c, _, blk in self.layout.markov_blocks():
             self._markov_prior(
                 graph, values, c, i, blk, est.markov[blk.name], rec.cov_markov[blk.name][p]
@@ -293,7 +294,7 @@ class _Loop:
         graph.add(gtsam.PriorFactorVector(v, prev.v_n, gtsam.noiseModel.Gaussian.Covariance(c_vel)))
         values.insert(x, prev.pose)
         values.insert(v, prev.v_n)
-        values.insert(b, prev.bias)
+        insert_bias(values, b, prev.bias)
         if g0 is not None:
             values.insert(g, g0)
         for c, _, blk in self.layout.markov_blocks():
@@ -375,7 +376,7 @@ class _Loop:
             graph.add(gtsam.CombinedImuFactor(x0, v0, x1, v1, b0, b1, pim))
             values.insert(x1, nav.pose())
             values.insert(v1, nav.velocity())
-            values.insert(b1, prev.bias)
+            insert_bias(values, b1, prev.bias)
             for c, _, blk in self.layout.markov_blocks():  # Gauss-Markov link to node i - 1
                 key0, key1 = gtsam.symbol(c, i - 1), gtsam.symbol(c, i)
                 graph.add(gauss_markov_factor(key0, key1, t - t_prev, blk.tau_s, blk.sigma))
