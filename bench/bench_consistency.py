@@ -14,6 +14,8 @@ Cases:
 * ``sim:...``: the simulator (:mod:`gnssacc.sources.sim`) with scenario, IMU grade, fix noise
   (``white`` or time-correlated ``gm``), outages (``--outage-every 60:20``), the non-holonomic
   constraint off (``nhc off``) and wheel odometry (``odo``).
+* ``rover 20 Hz no sigmas``: the slow consumer-IMU rover of ``bench_hard_traits.py`` (20 Hz
+  receiver-filtered fixes that state no sigma).
 * ``sideways``: the sideways-IMU ROS 1 bag of ``bench_hard_traits.py`` with automatic mounting
   (a consumer UGV, odometry; truth from the simulator).
 * ``comma``: comma2k19 example 1 against comma's own post-processed pose (position only), which
@@ -96,6 +98,14 @@ def sideways_bag(seed: int, folder: Path):
     return replace(loaded, truth=run.truth), {"config": auto}, None
 
 
+def rover_fixes(seed: int, folder: Path):
+    """The slow consumer-IMU rover of ``bench_hard_traits.py``: 20 Hz receiver-filtered fixes
+    (Gauss-Markov 0.6 / 1.0 m, 30 s) that state no sigma, 367 s."""
+    from bench_hard_traits import rover_run
+
+    return rover_run(seed), {}, None
+
+
 def vn310_case(log: str):
     """A VN-310E static log with the unit's own attitude as the reference (``t`` [s], rpy [rad]),
     where the log has it (``lckf``; ``tckf`` has no attitude)."""
@@ -170,6 +180,7 @@ def cases(quick: bool, n_seeds: int) -> list[Case]:
         sim_case("ugv-slow", "consumer", "gm", seeds=s),
         sim_case("ugv-slow", "consumer", odo=True, seeds=s),
         Case("sideways bag auto", sideways_bag, s),
+        Case("rover 20 Hz no sigmas", rover_fixes, s),
     ]
     if DATA.is_dir():
         out += [

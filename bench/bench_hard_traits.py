@@ -112,10 +112,10 @@ def sideways(folder: Path) -> list[str]:
     return rows
 
 
-def rover_run():
+def rover_run(seed: int = 0):
     """The slow rover: 20 Hz receiver-filtered fixes that state no sigma (367 s)."""
     run = simulate(
-        "rover", 367.0, imu_grade="consumer", gnss_rate_hz=20.0, noise="filtered", seed=0
+        "rover", 367.0, imu_grade="consumer", gnss_rate_hz=20.0, noise="filtered", seed=seed
     )
     return run.with_gnss(
         replace(
