@@ -25,7 +25,7 @@ import gnssacc.estimators.smoother  # noqa: F401  (gtsam: part of the fixed cost
 from gnssacc import pipeline
 from gnssacc.core.config import load_config
 from gnssacc.estimators import kernels as jit
-from gnssacc.prepare import prepared as prepared_module
+from gnssacc.prepare import preparation as prepared_module
 from gnssacc.sources.sim import simulate
 
 

@@ -58,6 +58,43 @@ def test_a_rerun_reuses_the_preparation_with_the_same_numbers(drive, tmp_path, p
     ]
 
 
+#: Modules only the preparation's steps need: the steps themselves, the input checks and the
+#: judges of their proposals, and the libraries they load (scipy's FFT: 0.2-0.6 s to import).
+PREPARATION_ONLY = (
+    "gnssacc.prepare.preparation",
+    "gnssacc.prepare.settle",
+    "gnssacc.prepare.judge",
+    "gnssacc.prepare.clock",
+    "gnssacc.prepare.fix_noise",
+    "gnssacc.checks.plausibility",
+    "gnssacc.checks.motionmatch",
+    "scipy.fft",
+)
+#: One run of the 60-s drive (the ``drive`` fixture's) in a fresh interpreter, with the cache in
+#: ``argv[1]``: prints whether it reused the preparation, then the modules of
+#: :data:`PREPARATION_ONLY` (and tqdm, which a run without a terminal does not show) it loaded.
+FRESH_RUN = """
+import sys, gnssacc
+res = gnssacc.process(gnssacc.simulate("car", 60.0, seed=4), methods=["ekf"], cache=sys.argv[1])
+print(res.prepared.cache["reused"], *[m for m in sys.argv[2:] if m in sys.modules])
+"""
+
+
+def test_a_rerun_does_not_import_what_only_the_preparation_needs(tmp_path):
+    """A rerun that reuses the kept preparation imports none of the preparation's steps, checks
+    and their libraries (issue 35: a second of imports in a rerun of three), where the first run,
+    which prepares, does; each in a fresh interpreter."""
+    import subprocess
+    import sys
+
+    def fresh_run() -> list[str]:
+        argv = [sys.executable, "-c", FRESH_RUN, str(tmp_path), *PREPARATION_ONLY, "tqdm"]
+        return subprocess.run(argv, capture_output=True, text=True, check=True).stdout.split()
+
+    assert fresh_run() == ["False", *PREPARATION_ONLY]
+    assert fresh_run() == ["True"]
+
+
 def test_a_setting_the_preparation_reads_makes_it_afresh(drive, tmp_path, passes):
     gnssacc.process(drive, methods=["ekf"], cache=tmp_path)
     made = passes["n"]

@@ -96,6 +96,25 @@ def test_half_interval_rotations_are_the_exponential_and_scipys(rate):
     np.testing.assert_array_equal(mid_interval_force(f[:1], omega[:1], dt[:1]), one)
 
 
+def test_turning_the_samples_does_not_import_scipy_spatial():
+    """The smoother turns its samples (one and several) without ``scipy.spatial``, which a run
+    would otherwise import for it (0.1-0.4 s with ``scipy.sparse`` and ``scipy.special``; issue
+    35); a fresh interpreter, so that no other test's import counts."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, numpy as np\n"
+        "import gnssacc.estimators.smoother\n"
+        "from gnssacc.estimators.smoother_graph import mid_interval_force\n"
+        "for n in (1, 2):\n"
+        "    mid_interval_force(np.ones((n, 3)), np.ones((n, 3)), np.full(n, 0.01))\n"
+        "print('scipy.spatial' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["False"]
+
+
 def test_bias_inserted_by_name_reads_back():
     from gnssacc.estimators.smoother_graph import insert_bias
 

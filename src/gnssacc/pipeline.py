@@ -47,8 +47,7 @@ from .outputs.report import (
 )
 from .prepare.cache import PreparationCache, prepared_once
 from .prepare.passes import filter_pass
-from .prepare.prepared import Prepared, checked
-from .prepare.prepared import prepare as prepare_recording
+from .prepare.prepared import Prepared
 from .sources.gnss_noise import apply_outages, parse_outages
 from .sources.simspec import is_sim_spec, load_sim
 
@@ -77,6 +76,16 @@ def _smoother(prep: Prepared, method: str, show_progress: bool) -> dict[str, Nav
     )
 
 
+def import_estimators(methods) -> None:
+    """Import the estimator modules ``methods`` run on that are imported only when used (the
+    smoother's, with scipy's rotations: a tenth to half a second) now, while the methods wait for
+    the kernels loading in the background (a rerun that reuses a kept preparation waits for them),
+    not after that wait when the first smoother starts; a worker forked for the methods
+    (:func:`methods_side_by_side`) finds them imported too."""
+    if any(m.startswith("smoother") for m in methods):  # the -gm variant's base too
+        from .estimators import smoother  # noqa: F401
+
+
 def _gm(prep: Prepared, method: str, show_progress: bool) -> dict[str, NavSolution]:
     from .estimators.gm_variant import BASE_OF, run_gm
 
@@ -86,7 +95,18 @@ def _gm(prep: Prepared, method: str, show_progress: bool) -> dict[str, NavSoluti
 def check_input(run: RecordedRun, cfg: RunConfig) -> tuple[RecordedRun, RunConfig, list]:
     """The input checks (:func:`gnssacc.checks.plausibility.check_run`) with the EKF as the clock
     offset's likelihood stage, as :func:`prepare` runs them first."""
+    from .prepare.preparation import checked
+
     return checked(run, cfg, filter_pass)
+
+
+def prepare_recording(run: RecordedRun, cfg: RunConfig, *args, **kwargs) -> Prepared:
+    """:func:`gnssacc.prepare.preparation.prepare`, its module imported when first called: a rerun
+    that reuses a kept preparation (:mod:`gnssacc.prepare.cache`) never loads the preparation's
+    steps (the input checks, the judges of their proposals, the tuner's windows; scipy's FFT)."""
+    from .prepare.preparation import prepare as prepare_steps
+
+    return prepare_steps(run, cfg, *args, **kwargs)
 
 
 def prepare(
@@ -98,8 +118,8 @@ def prepare(
     cache: PreparationCache | None = None,
     on_stage=None,
 ) -> Prepared:
-    """The prepared recording (:func:`gnssacc.prepare.prepared.prepare`) with the EKF as its filter
-    pass, and the ``-gm`` methods' setup when ``methods`` has one; ``on_checked(findings)`` is told
+    """The prepared recording (:func:`gnssacc.prepare.preparation.prepare`) with the EKF as its
+    filter pass, and the ``-gm`` methods' setup when ``methods`` has one; ``on_checked(findings)`` is told
     the input checks' findings once they are settled, ``on_stage(name)`` each stage as it starts. With ``cache``, a stored outcome for the same
     recording and settings is reused, else the fresh one stored
     (:func:`gnssacc.prepare.cache.prepared_once`; ``on_checked`` is then also told ``reused=``)."""
@@ -686,6 +706,7 @@ def compare(
         stages.close()
     for line in preparation_lines(prep) if say else ():
         say(line)
+    import_estimators(methods)  # while the kernels may still be loading
     # The kernels' compile (or load) time, in the background, and the wait for the kernels of
     # the methods (not inside their wall times).
     jit_s = kernels.warm_up() + kernels.ready(methods)

@@ -45,7 +45,7 @@ a NIS above the band is reported for them (the vehicle moved, or the filter is o
 The smoother's residuals cannot show a noise model that trusts the IMU too much (a smoothed
 estimate fits the fixes either way). Every method of a run shares one noise model, so the model is
 checked once, by the innovations of one EKF pass (:class:`ModelCheck`, made by
-:func:`gnssacc.prepare.prepared.prepare`), and a failed check is reported for the smoothers too.
+:func:`gnssacc.prepare.preparation.prepare`), and a failed check is reported for the smoothers too.
 """
 
 from __future__ import annotations

@@ -42,7 +42,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import fft as sp_fft
 
 #: Finest grid for the IMU signals [s]: the comparisons smooth over 2 s or more, so a 10 ms grid
 #: loses nothing and bounds the memory of kHz IMUs.
@@ -269,9 +268,12 @@ def _convolve_full(x: np.ndarray, k: np.ndarray) -> np.ndarray:
     """The full linear convolution of ``x`` (real or complex) with a real kernel ``k``, by FFT.
 
     What ``scipy.signal.fftconvolve(x, k, "full")`` does; ``scipy.signal`` itself is not imported
-    because it costs every run 0.4-0.8 s (it loads ``scipy.stats``), while ``scipy.fft`` comes
-    with ``scipy.optimize``, which the tuner loads anyway.
+    because it costs every run 0.4-0.8 s (it loads ``scipy.stats``). ``scipy.fft`` is imported
+    here, when first used, not with the module: it takes 0.2-0.6 s, and a run that reuses a kept
+    preparation (:mod:`gnssacc.prepare.cache`) never convolves.
     """
+    from scipy import fft as sp_fft
+
     n = len(x) + len(k) - 1
     if np.iscomplexobj(x):
         size = sp_fft.next_fast_len(n)

@@ -6,13 +6,21 @@ from __future__ import annotations
 import sys
 import time
 
-from tqdm import tqdm
+
+def _tqdm():
+    """tqdm's bar class, imported when a bar is first made: the import takes a twentieth of a
+    second, which a run whose stderr is not a terminal (no bar) does not pay."""
+    from tqdm import tqdm
+
+    return tqdm
 
 
 def progress(iterable, desc: str = "", enable: bool = True, total: int | None = None):
-    """Wrap ``iterable`` in a tqdm bar when ``enable`` and stderr is a terminal."""
-    show = enable and sys.stderr.isatty()
-    return tqdm(iterable, desc=desc, total=total, disable=not show, leave=False, dynamic_ncols=True)
+    """Wrap ``iterable`` in a tqdm bar when ``enable`` and stderr is a terminal; otherwise
+    ``iterable`` itself."""
+    if not (enable and sys.stderr.isatty()):
+        return iterable
+    return _tqdm()(iterable, desc=desc, total=total, leave=False, dynamic_ncols=True)
 
 
 class StageProgress:
@@ -35,7 +43,7 @@ class StageProgress:
         self.tty = sys.stderr.isatty()
         self.lines = enable and lines and not self.tty
         self.bar = (
-            tqdm(total=total, desc="preparing", leave=False, dynamic_ncols=True)
+            _tqdm()(total=total, desc="preparing", leave=False, dynamic_ncols=True)
             if enable and self.tty
             else None
         )
@@ -76,7 +84,7 @@ class CampaignProgress:
     def __init__(self, total: int, done: int = 0, failed: int = 0, lines: bool = True):
         self.total, self.done, self.failed, self.lines = total, done, failed, lines
         self.tty = sys.stderr.isatty()
-        self.bar = tqdm(
+        self.bar = _tqdm()(
             total=total,
             initial=done,
             desc="campaign",

@@ -190,7 +190,7 @@ def run_ekf(
         Data-quality findings (:func:`gnssacc.checks.quality.check_imu` when omitted); suspect IMU
         spans get inflated process noise.
     init : InitialState, optional
-        The start (what :func:`gnssacc.prepare.prepared.prepare` found, ``Prepared.init``); when
+        The start (what :func:`gnssacc.prepare.preparation.prepare` found, ``Prepared.init``); when
         omitted, the run's own (``run.init``), as it is. An estimator never looks for a start:
         :func:`gnssacc.prepare.passes.run_ekf` finds one for a run alone.
     stationary : gnssacc.prepare.stationary.StationaryReport, optional

@@ -1,9 +1,9 @@
 """The preparation's outcome kept on disk: a rerun of the same recording never pays it twice.
 
 The preparation (input checks and their verdicts, the start, the tuned noise:
-:func:`gnssacc.prepare.prepared.prepare`) depends only on the recording, the settings and the code.
-Its outcome, the :class:`~gnssacc.prepare.prepared.Prepared` itself with the warnings it gave, is
-stored in one file per recording and settings:
+:func:`gnssacc.prepare.preparation.prepare`) depends only on the recording, the settings and the
+code. Its outcome, the :class:`~gnssacc.prepare.prepared.Prepared` itself with the warnings it
+gave, is stored in one file per recording and settings:
 
 - the file's name is a digest of the recording's content (every array and field of the loaded
   :class:`~gnssacc.core.recording.RecordedRun`: :func:`recording_digest`), of the resolved
@@ -283,7 +283,7 @@ def prepared_once(
     add_gauss_markov : callable, optional
         Adds the ``-gm`` methods' setup to a prepared recording that lacks it (then stored with it).
     on_checked : callable, optional
-        As for :func:`gnssacc.prepare.prepared.prepare`; on reuse it is told the stored findings
+        As for :func:`gnssacc.prepare.preparation.prepare`; on reuse it is told the stored findings
         and ``reused=`` a phrase saying where they come from (for the run's header line).
 
     Returns
