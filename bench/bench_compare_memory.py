@@ -2,8 +2,9 @@
 
 Simulates a car run (industrial IMU 100 Hz, GNSS 1 Hz; or reads a CSV run directory with
 ``--csv DIR``), then runs ``compare`` with the four methods, each stage wrapped from outside:
-the identification's stages (input checks, IMU quality, stationary detection, start, tuning, the
-model-check EKF pass) and each method. Per stage it prints the wall time, the peak resident
+the preparation's stages (input checks and their verdicts, the start's pieces, the start found
+again under the turn allowance, tuning on windows or whole, the model-check EKF pass) and each
+method. Per stage it prints the wall time, the peak resident
 memory above the resident memory when the stage started (``VmHWM`` reset with
 ``/proc/self/clear_refs``) and the resident memory after it, both relative to the process after
 loading the run. Stages nest (a stage inside ``prepare`` is also inside it); a single run, so
@@ -84,7 +85,9 @@ def main():
         f"run: {len(run.imu)} IMU samples; RSS after loading it {base:.0f} MiB (peak so far {_status('VmHWM:'):.0f}); "
         f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores"
     )
-    for name in ("checked", "check_imu", "detect_stationary", "_start", "tune"):
+    # The preparation's stages, by the names its module calls them: the input checks and their
+    # verdicts, the start (IMU quality, stationary spans, start, yaw bank), the tuning.
+    for name in ("settled", "start_pieces", "start_of", "tuned_on_windows", "tune"):
         setattr(prepared_module, name, _watch(f"prepare.{name}", getattr(prepared_module, name)))
     pipeline.prepare_recording = _watch("prepare", pipeline.prepare_recording)
     pipeline.check_model = _watch("model check", pipeline.check_model)
