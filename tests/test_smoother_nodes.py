@@ -348,3 +348,112 @@ def test_folded_fixes_with_every_extra_state_and_window_factors_run():
     )
     assert out.returncode == 0, out.stderr[-2000:]
     assert all(int(c) > 0 for c in out.stdout.split())
+
+
+def test_bridge_covariance_is_the_conditional_of_the_stationary_process_at_several_times():
+    """The joint covariance of the Gauss-Markov error at the folded fixes' times given the two
+    nodes' values, against Gaussian conditioning of the stationary process's covariance
+    (Cov(g(a), g(b)) = sigma^2 exp(-|a - b| / tau)), per axis and across axes (independent)."""
+    from gnssacc.factors import bridge_covariance
+
+    tau, sigma, T = np.array([4.9, 47.0, 300.0]), np.array([0.28, 0.5, 0.0]), 0.5
+    s = np.array([0.05, 0.1, 0.25, 0.45])
+    got = bridge_covariance(s, tau, sigma, T)
+    times = np.concatenate([[0.0, T], s])
+    for ax in range(3):
+        C = sigma[ax] ** 2 * np.exp(-np.abs(times[:, None] - times[None, :]) / tau[ax])
+        cond = C[2:, 2:] - C[2:, :2] @ np.linalg.solve(C[:2, :2] + 1e-300 * np.eye(2), C[:2, 2:])
+        if sigma[ax] == 0.0:
+            cond = np.zeros_like(cond)
+        np.testing.assert_allclose(got[ax::3, ax::3], cond, rtol=1e-6, atol=1e-14)
+    off = got.copy()
+    for ax in range(3):
+        off[ax::3, ax::3] = 0.0
+    assert not off.any()  # the axes are independent
+
+
+def _joint_setup(m: int):
+    """A node's state, a bias and ``m`` fixes 0.05 s apart after it, each with its preintegration
+    (turning, accelerating samples)."""
+    rng = np.random.default_rng(9)
+    f_b = np.array([0.8, 0.3, -9.7]) + 0.3 * rng.normal(size=(10 * m, 3))
+    w_b = np.array([0.02, -0.01, 0.25]) + 0.05 * rng.normal(size=(10 * m, 3))
+    bias_hat = gtsam.imuBias.ConstantBias(np.array([0.02, 0.0, -0.01]), np.array([1e-3, 0, 0]))
+    pims = [_pim(f_b[: 5 * (k + 1)], w_b[: 5 * (k + 1)], 0.01, bias_hat) for k in range(m)]
+    pose = gtsam.Pose3(gtsam.Rot3(euler_to_dcm(0.05, -0.1, 2.0)), np.array([12.0, -3.0, 0.5]))
+    vel = np.array([6.0, -2.0, 0.1])
+    bias = gtsam.imuBias.ConstantBias(np.array([0.05, -0.03, 0.02]), np.array([2e-3, -1e-3, 5e-4]))
+    z = np.array([12.0, -3.0, 0.5]) + 0.3 * np.arange(1, m + 1)[:, None] * np.array(
+        [1.0, -0.3, 0.0]
+    )
+    covs = [np.diag([1e-4, 2e-4, 4e-4]) * (k + 1) for k in range(m)]
+    R_fs = [euler_to_dcm(0.05, -0.1, 2.0 + 0.01 * k) for k in range(m)]
+    gm = (np.array([4.9, 30.0, 5.0]), np.array([0.28, 0.3, 0.5]), 0.5)
+    values = gtsam.Values()
+    values.insert(X(0), pose)
+    values.insert(V(0), vel)
+    values.insert(B(0), bias)
+    values.insert(G(0), np.array([0.4, -0.7, 1.1]))
+    values.insert(G(1), np.array([0.5, -0.6, 0.9]))
+    return pims, z, covs, R_fs, gm, values
+
+
+def test_joint_folded_factor_stacks_the_single_ones_with_the_bridges_joint_covariance():
+    """The fixes of one interval in one factor: the error and the Jacobians of each fix are those
+    of its own factor, the covariance's diagonal blocks too, and between two fixes the bridge's
+    covariance; the Jacobians by finite differences on the manifold."""
+    from gnssacc.factors import bridge_covariance, preintegrated_positions_factor
+
+    m = 4
+    pims, z, covs, R_fs, gm, values = _joint_setup(m)
+    keys = (X(0), V(0), B(0), G(0), G(1))
+    joint = preintegrated_positions_factor(keys, pims, z, LEVER, covs, R_fs, gm)
+    singles = [
+        preintegrated_position_factor(keys, pims[k], z[k], LEVER, covs[k], R_fs[k], gm)
+        for k in range(m)
+    ]
+    np.testing.assert_allclose(
+        joint.unwhitenedError(values),
+        np.concatenate([f.unwhitenedError(values) for f in singles]),
+        atol=1e-12,
+    )
+    cov = joint.noiseModel().covariance()
+    s = np.array([p.deltaTij() for p in pims])
+    bridge = bridge_covariance(s, *gm)
+    for a in range(m):
+        for b in range(m):
+            block = cov[3 * a : 3 * a + 3, 3 * b : 3 * b + 3]
+            if a == b:
+                np.testing.assert_allclose(
+                    block, singles[a].noiseModel().covariance(), rtol=1e-9, atol=1e-15
+                )
+            else:
+                np.testing.assert_allclose(
+                    block, bridge[3 * a : 3 * a + 3, 3 * b : 3 * b + 3], rtol=1e-9, atol=1e-15
+                )
+    assert np.abs(bridge[0, 3]) > 0.5 * np.sqrt(bridge[0, 0] * bridge[3, 3])  # far from independent
+
+    def unwhitened_jacobian(factor):
+        A, _ = factor.linearize(values).jacobian()
+        L = np.linalg.cholesky(np.linalg.inv(factor.noiseModel().covariance()))
+        return np.linalg.solve(L.T, A)
+
+    J = unwhitened_jacobian(joint)
+    np.testing.assert_allclose(J, np.vstack([unwhitened_jacobian(f) for f in singles]), atol=1e-9)
+    pose, vel, bias = values.atPose3(X(0)), values.atVector(V(0)), values.atConstantBias(B(0))
+    g0, g1 = values.atVector(G(0)), values.atVector(G(1))
+
+    def err(d):
+        v = gtsam.Values()
+        v.insert(X(0), pose.retract(d[0:6]))
+        v.insert(V(0), vel + d[6:9])
+        v.insert(B(0), bias.retract(d[9:15]))
+        v.insert(G(0), g0 + d[15:18])
+        v.insert(G(1), g1 + d[18:21])
+        return joint.unwhitenedError(v)
+
+    eps = 1e-6
+    for k in range(21):
+        d = np.zeros(21)
+        d[k] = eps
+        np.testing.assert_allclose(J[:, k], (err(d) - err(-d)) / (2 * eps), atol=2e-6)

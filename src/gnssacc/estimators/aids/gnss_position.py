@@ -254,7 +254,11 @@ class SmootherPosition(SmootherAid):
 
         from ...factors import preintegrated_position_factor
 
-        for k in self.folded.get(i, ()):
+        folded = self.folded.get(i, ())
+        if self.gm and len(folded) > 1:  # one path of the wander between the nodes: one factor
+            self._interval_joint(graph, ctx, i, folded)
+            return
+        for k in folded:
             pim = ctx.preintegrate_to(i, float(self.fixes.t[k]))
             prev = ctx.prev
             R_f = pim.predict(gtsam.NavState(prev.pose, prev.v_n), prev.bias).attitude().matrix()
@@ -268,6 +272,34 @@ class SmootherPosition(SmootherAid):
                 )
             )
             self.stats["n_gps_folded"] += 1
+
+    def _interval_joint(self, graph, ctx, i: int, folded) -> None:
+        """The fixes ``folded`` between node ``i - 1`` and node ``i`` in one factor with the
+        Gauss-Markov bridge's joint covariance (``preintegrated_positions_factor``)."""
+        import gtsam
+
+        from ...factors import preintegrated_positions_factor
+
+        prev = ctx.prev
+        pims, R_fs = [], []
+        for k in folded:
+            pims.append(ctx.preintegrate_to(i, float(self.fixes.t[k])))
+            nav = pims[-1].predict(gtsam.NavState(prev.pose, prev.v_n), prev.bias)
+            R_fs.append(nav.attitude().matrix())
+        keys = tuple(gtsam.symbol(c, i - 1) for c in (SYM_X, SYM_V, SYM_B))
+        keys += (gtsam.symbol(SYM_G, i - 1), gtsam.symbol(SYM_G, i))
+        graph.add(
+            preintegrated_positions_factor(
+                keys,
+                pims,
+                self.p_fix[list(folded)],
+                self.lever,
+                [self.fixes.cov_ned(k) for k in folded],
+                R_fs,
+                (self.gm_tau, self.gm_sigma, ctx.times[i] - ctx.times[i - 1]),
+            )
+        )
+        self.stats["n_gps_folded"] += len(folded)
 
     def node(self, graph, ctx, i: int, t: float, pred) -> None:
         """The GPS factor on node ``i`` when a fix is at its time ``t``."""
