@@ -249,57 +249,45 @@ class SmootherPosition(SmootherAid):
     def interval(self, graph, ctx, i: int) -> None:
         """The fixes between node ``i - 1`` and node ``i`` on node ``i - 1``'s variables, through
         the IMU preintegrated from node ``i - 1`` to each (and with the GNSS error of both nodes
-        when modelled)."""
+        when modelled: then the fixes of the interval are one factor, their deviations from the
+        bridge between the nodes being one path of the wander)."""
+        folded = self.folded.get(i, ())
+        if len(folded) == 0:
+            return
         import gtsam
 
-        from ...factors import preintegrated_position_factor
+        from ...factors import preintegrated_position_factor, preintegrated_positions_factor
 
-        folded = self.folded.get(i, ())
-        if self.gm and len(folded) > 1:  # one path of the wander between the nodes: one factor
-            self._interval_joint(graph, ctx, i, folded)
-            return
-        for k in folded:
-            pim = ctx.preintegrate_to(i, float(self.fixes.t[k]))
-            prev = ctx.prev
-            R_f = pim.predict(gtsam.NavState(prev.pose, prev.v_n), prev.bias).attitude().matrix()
-            keys, gm = tuple(gtsam.symbol(c, i - 1) for c in (SYM_X, SYM_V, SYM_B)), None
-            if self.gm:
-                keys += (gtsam.symbol(SYM_G, i - 1), gtsam.symbol(SYM_G, i))
-                gm = (self.gm_tau, self.gm_sigma, ctx.times[i] - ctx.times[i - 1])
+        keys, gm = tuple(gtsam.symbol(c, i - 1) for c in (SYM_X, SYM_V, SYM_B)), None
+        if self.gm:
+            keys += (gtsam.symbol(SYM_G, i - 1), gtsam.symbol(SYM_G, i))
+            gm = (self.gm_tau, self.gm_sigma, ctx.times[i] - ctx.times[i - 1])
+        pims, R_fs = zip(*(self._carried(ctx, i, k) for k in folded))
+        covs = [self.fixes.cov_ned(k) for k in folded]
+        if gm is not None and len(folded) > 1:
             graph.add(
-                preintegrated_position_factor(
-                    keys, pim, self.p_fix[k], self.lever, self.fixes.cov_ned(k), R_f, gm
+                preintegrated_positions_factor(
+                    keys, list(pims), self.p_fix[list(folded)], self.lever, covs, list(R_fs), gm
                 )
             )
-            self.stats["n_gps_folded"] += 1
+        else:
+            for k, pim, R_f, cov in zip(folded, pims, R_fs, covs, strict=True):
+                graph.add(
+                    preintegrated_position_factor(
+                        keys, pim, self.p_fix[k], self.lever, cov, R_f, gm
+                    )
+                )
+        self.stats["n_gps_folded"] += len(folded)
 
-    def _interval_joint(self, graph, ctx, i: int, folded) -> None:
-        """The fixes ``folded`` between node ``i - 1`` and node ``i`` in one factor with the
-        Gauss-Markov bridge's joint covariance (``preintegrated_positions_factor``)."""
+    def _carried(self, ctx, i: int, k: int) -> tuple:
+        """The IMU preintegrated from node ``i - 1`` to fix ``k`` and the attitude it predicts
+        there from the node's estimate (for the factor's noise)."""
         import gtsam
 
-        from ...factors import preintegrated_positions_factor
-
+        pim = ctx.preintegrate_to(i, float(self.fixes.t[k]))
         prev = ctx.prev
-        pims, R_fs = [], []
-        for k in folded:
-            pims.append(ctx.preintegrate_to(i, float(self.fixes.t[k])))
-            nav = pims[-1].predict(gtsam.NavState(prev.pose, prev.v_n), prev.bias)
-            R_fs.append(nav.attitude().matrix())
-        keys = tuple(gtsam.symbol(c, i - 1) for c in (SYM_X, SYM_V, SYM_B))
-        keys += (gtsam.symbol(SYM_G, i - 1), gtsam.symbol(SYM_G, i))
-        graph.add(
-            preintegrated_positions_factor(
-                keys,
-                pims,
-                self.p_fix[list(folded)],
-                self.lever,
-                [self.fixes.cov_ned(k) for k in folded],
-                R_fs,
-                (self.gm_tau, self.gm_sigma, ctx.times[i] - ctx.times[i - 1]),
-            )
-        )
-        self.stats["n_gps_folded"] += len(folded)
+        nav = pim.predict(gtsam.NavState(prev.pose, prev.v_n), prev.bias)
+        return pim, nav.attitude().matrix()
 
     def node(self, graph, ctx, i: int, t: float, pred) -> None:
         """The GPS factor on node ``i`` when a fix is at its time ``t``."""
