@@ -29,13 +29,13 @@ Everything is vectorised over the samples: a 47k-sample file is checked in a few
 
 from __future__ import annotations
 
-import weakref
 from dataclasses import asdict, dataclass, field
 from typing import NamedTuple
 
 import numpy as np
 
 from ..core.config import DEG, RunConfig
+from ..core.memo import LastMade
 from ..core.recording import ImuData, gap_indices
 
 #: Channel names, in the column order of the stacked ``[f_b, omega_ib_b]`` array (as in imu.csv).
@@ -457,17 +457,15 @@ def inflation_segments(
     """
     mark = (len(imu), float(imu.t[0]), float(imu.t[-1])) if len(imu) else None
     spans = tuple((s.i_start, s.i_end, s.kind, s.channels) for s in report.spans)
-    for imu_ref, report_ref, was, segments in _LAST_SEGMENTS:
-        if imu_ref() is imu and report_ref() is report and was == (mark, spans, suspect):
-            return segments
-    segments = _segments(imu, report, suspect)
-    _LAST_SEGMENTS[:] = [(weakref.ref(imu), weakref.ref(report), (mark, spans, suspect), segments)]
+    key = (mark, spans, suspect)
+    segments = _LAST_SEGMENTS.get((imu, report), key)
+    if segments is None:
+        segments = _LAST_SEGMENTS.keep((imu, report), key, _segments(imu, report, suspect))
     return segments
 
 
-#: The last :func:`inflation_segments` made: weak references to its IMU data and report, what
-#: else it was made from, and the segments.
-_LAST_SEGMENTS: list = []
+#: The last :func:`inflation_segments` made, from its IMU data and report and what else.
+_LAST_SEGMENTS = LastMade()
 
 
 def _segments(imu: ImuData, report: QualityReport, suspect: SuspectNoise) -> InflationSegments:

@@ -25,12 +25,12 @@ times (GNSS epochs, outputs).
 from __future__ import annotations
 
 import math
-import weakref
 
 import numpy as np
 from numba import njit
 
 from ..core import earth
+from ..core.memo import LastMade
 from ..checks.quality import InflationSegments
 from .kalman import joseph_update
 from .layout import I_ATT, I_BA, I_BG, I_POS, I_VEL, N_NAV, POS, StateLayout
@@ -731,10 +731,11 @@ def _cov_step(
         _step_phi(Phi, F, dt_acc, phi_order)
 
 
-#: The last :func:`turn_rates` computed: ``(weak references to t and omega_b, their fingerprint,
-#: window, rates)``. The tuner's ~90 passes over one run (and a windowed pass's windows) share it:
-#: computed afresh it cost 90 ms a pass on a 2,400 s run, whatever the span the pass covers.
-_LAST_TURN_RATES: list = []
+#: The last :func:`turn_rates` computed, from ``t`` and ``omega_b`` (by identity), their
+#: fingerprint and the window. The tuner's ~90 passes over one run (and a windowed pass's
+#: windows) share it: computed afresh it cost 90 ms a pass on a 2,400 s run, whatever the span the
+#: pass covers.
+_LAST_TURN_RATES = LastMade()
 
 
 def _is_float64(x) -> bool:
@@ -753,18 +754,14 @@ def turn_rates(t: np.ndarray, omega_b: np.ndarray, window_s: float = TURN_WINDOW
     # np.asarray of a view makes a new view each call: the arrays themselves, when they are ones
     t, omega_b = (x if _is_float64(x) else np.asarray(x, float) for x in (t, omega_b))
     mark = (len(t), float(t[0]), float(t[-1]), float(omega_b.sum())) if len(t) else None
-    for t_ref, w_ref, was, window, rates in _LAST_TURN_RATES:
-        if t_ref() is t and w_ref() is omega_b and was == mark and window == window_s:
-            return rates
+    rates = _LAST_TURN_RATES.get((t, omega_b), (mark, window_s))
+    if rates is not None:
+        return rates
     c = np.vstack([np.zeros(3), np.cumsum(omega_b, axis=0)])
     lo = np.searchsorted(t, t - 0.5 * window_s, side="left")
     hi = np.searchsorted(t, t + 0.5 * window_s, side="right")
     rates = np.ascontiguousarray((c[hi] - c[lo]) / (hi - lo)[:, None])
-    try:
-        _LAST_TURN_RATES[:] = [(weakref.ref(t), weakref.ref(omega_b), mark, window_s, rates)]
-    except TypeError:  # an array that takes no weak reference: not kept
-        _LAST_TURN_RATES.clear()
-    return rates
+    return _LAST_TURN_RATES.keep((t, omega_b), (mark, window_s), rates)
 
 
 def kernel_array(x, dtype) -> np.ndarray:
