@@ -66,6 +66,19 @@ def test_smoothing_in_blocks_equals_one_convolution(monkeypatch, kernel):
         np.testing.assert_allclose(b, a, rtol=0, atol=1e-12)
 
 
+def test_fft_lengths_are_scipys():
+    # The transform lengths the convolution picks with numpy's FFT against scipy.fft's own
+    # choice (5-smooth for a real transform, 11-smooth for a complex one).
+    from scipy.fft import next_fast_len
+
+    import gnssacc.checks.motionmatch as mm
+
+    sizes = [*range(1, 3000), *np.random.default_rng(2).integers(3000, 2_000_000, 300).tolist()]
+    for n in sizes:
+        assert mm._good_size(n, (3, 5)) == next_fast_len(n, real=True), n
+        assert mm._good_size(n, (3, 5, 7, 11)) == next_fast_len(n), n
+
+
 @pytest.mark.parametrize("block", [37, 1 << 16])
 def test_fft_convolution_equals_the_direct_sum(monkeypatch, block):
     # The FFT convolution behind the smoothing against numpy's direct sum, real and complex,

@@ -264,22 +264,34 @@ def smooth(x: np.ndarray, step: float, window_s: float, kernel: str = "biweight"
 SMOOTH_BLOCK = 1 << 16
 
 
+def _good_size(n: int, primes: tuple[int, ...]) -> int:
+    """The smallest length at least ``n`` whose prime factors are 2 and ``primes`` (odd): the
+    lengths pocketfft transforms fastest, as ``scipy.fft.next_fast_len`` picks them (3, 5 for a
+    real transform; 3, 5, 7, 11 for a complex one)."""
+    odd = [1]
+    for p in primes:  # every product of the odd primes below 2 n
+        more = []
+        for q in odd:
+            while q < 2 * n:
+                more.append(q)
+                q *= p
+        odd = more
+    return min(q << max(0, (-(-n // q) - 1).bit_length()) for q in odd)
+
+
 def _convolve_full(x: np.ndarray, k: np.ndarray) -> np.ndarray:
     """The full linear convolution of ``x`` (real or complex) with a real kernel ``k``, by FFT.
 
-    What ``scipy.signal.fftconvolve(x, k, "full")`` does; ``scipy.signal`` itself is not imported
-    because it costs every run 0.4-0.8 s (it loads ``scipy.stats``). ``scipy.fft`` is imported
-    here, when first used, not with the module: it takes 0.2-0.6 s, and a run that reuses a kept
-    preparation (:mod:`gnssacc.prepare.cache`) never convolves.
+    What ``scipy.signal.fftconvolve(x, k, "full")`` does, with numpy's FFT (the same pocketfft
+    and transform lengths as ``scipy.fft``'s, the same numbers): ``scipy.signal`` costs a run
+    0.4-0.8 s of imports (it loads ``scipy.stats``), ``scipy.fft`` 0.3 s, ``numpy.fft`` nothing.
     """
-    from scipy import fft as sp_fft
-
     n = len(x) + len(k) - 1
     if np.iscomplexobj(x):
-        size = sp_fft.next_fast_len(n)
-        return sp_fft.ifft(sp_fft.fft(x, size) * sp_fft.fft(k, size))[:n]
-    size = sp_fft.next_fast_len(n, real=True)
-    return sp_fft.irfft(sp_fft.rfft(x, size) * sp_fft.rfft(k, size), size)[:n]
+        size = _good_size(n, (3, 5, 7, 11))
+        return np.fft.ifft(np.fft.fft(x, size) * np.fft.fft(k, size))[:n]
+    size = _good_size(n, (3, 5))
+    return np.fft.irfft(np.fft.rfft(x, size) * np.fft.rfft(k, size), size)[:n]
 
 
 def _blocks(n: int, half: int):
