@@ -1,7 +1,7 @@
 """The whole ``gnssacc run`` on KITTI against the plain GTSAM script doing the core of the same job.
 
 Fresh processes, interleaved rounds (so that a slow phase of the machine hits every case alike),
-warm numba cache: the plain script (``bench/plain_gtsam_kitti.py``: load, fixed-lag smoother,
+warm numba cache and bytecode (:func:`child_env`): the plain script (``bench/plain_gtsam_kitti.py``: load, fixed-lag smoother,
 print; with and without per-node sigmas), the default ``gnssacc run`` (four methods, input
 checks, noise tuning, files and figures), ``gnssacc run --methods ekf,smoother,smoother-acc
 --no-plots`` and the rerun ``--methods ekf,smoother --no-plots``. Prints per case the median
@@ -65,6 +65,16 @@ TARGETS = (
 PLAIN = {"plain gtsam script": [], "plain gtsam script + sigmas": ["--sigmas"]}
 
 
+def child_env() -> dict:
+    """The cases' environment: one BLAS thread, and Python's bytecode kept as a default Python
+    and ``pip install`` keep it (a shell with ``PYTHONDONTWRITEBYTECODE`` set would make every
+    gnssacc process compile its ~90 modules again, ~0.3 s that an installed gnssacc does not pay;
+    the warm-up run writes the bytecode of an editable install)."""
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    return env
+
+
 def timed(cmd: list[str]) -> dict:
     """Seconds to the table's header line (gnssacc) and to the exit of one process."""
     t0 = time.perf_counter()
@@ -73,7 +83,7 @@ def timed(cmd: list[str]) -> dict:
         stdout=subprocess.PIPE,
         stderr=subprocess.DEVNULL,
         text=True,
-        env={**os.environ, "OMP_NUM_THREADS": "1"},
+        env=child_env(),
     )
     table = None
     for line in p.stdout:
@@ -125,7 +135,7 @@ def breakdown(name: str, args: list[str], out_dir: str) -> None:
         [sys.executable, "-c", BREAKDOWN_CHILD, *args, "--out", out_dir],
         capture_output=True,
         text=True,
-        env={**os.environ, "OMP_NUM_THREADS": "1"},
+        env=child_env(),
     )
     end = time.perf_counter() - t0
     marks = dict(json.loads(p.stderr.strip().splitlines()[-1]))
@@ -190,7 +200,8 @@ def main() -> None:
         load1 = os.getloadavg()
         print(
             f"KITTI, fresh process each, median of {args.repeats} interleaved rounds; load average "
-            f"{load0[0]:.1f} at the start, {load1[0]:.1f} at the end, on {os.cpu_count()} cores"
+            f"{load0[0]:.1f} at the start, {load1[0]:.1f} at the end, on {os.cpu_count()} cores; "
+            "bytecode kept (PYTHONDONTWRITEBYTECODE of this shell not passed on)"
         )
         plain = {n: float(np.median([v["end"] for v in rows[n]])) for n in PLAIN}
         print(
