@@ -29,7 +29,7 @@ from .core.recording import RecordedRun
 from .core.solution import NavSolution
 from .estimators import kernels
 from .estimators.ekf import estimate as estimate_ekf
-from .estimators.settings import EkfSettings
+from .estimators.settings import EkfSettings, NhcSettings
 from .outputs.figures import PLOT_SETS, write_figures
 from .outputs.outdir import ResultDir
 from .outputs.report import (
@@ -516,9 +516,12 @@ def run_methods(
     Returns
     -------
     dict of NavSolution
-        By solution id (a smoother method adds ``<id>-online``); failed methods are absent.
+        By solution id (a smoother method adds ``<id>-online``); failed methods are absent. The
+        attitude is the vehicle's where ``[nhc]`` turns its axes against the body's
+        (:meth:`gnssacc.core.solution.NavSolution.in_vehicle_axes`, :func:`attitude_axes`).
     """
     prep = prep or prepare(run, cfg, tune, methods)
+    R_vb = NhcSettings.from_config(prep.cfg).R_vb  # the attitude reported: the vehicle's axes
     out: dict[str, NavSolution] = {}
     beside = {} if beside is None else beside
     done = methods_side_by_side(prep, methods, show_progress, observers, beside)
@@ -526,7 +529,7 @@ def run_methods(
         try:
             extra = {"observer": observers[m]} if observers and m in observers else {}
             got = done[m] if m in done else METHODS[m](prep, m, show_progress, **extra)
-            out.update(got)
+            out.update({k: s.in_vehicle_axes(R_vb) for k, s in got.items()})
             release_free_memory()  # one method's work arrays, before the next one's
             if say:
                 say(
@@ -796,7 +799,34 @@ def _run_facts(prep: Prepared, sols: dict, window, cons: dict, models: dict, on_
         "model_check_gm": models["gm"].to_dict() if "gm" in models else None,
         "tuning": prep.tuning.to_dict() if prep.tuning is not None else None,
         "preparation_cache": prep.cache,
+        "attitude_axes": attitude_axes(prep.cfg),
     }
+
+
+def attitude_axes(cfg: RunConfig) -> dict:
+    """Whose axes the solutions' attitude is of (``metrics.json`` ``attitude_axes``): the
+    vehicle's when ``[nhc] pitch_offset_deg`` or ``yaw_offset_deg`` turns them against the body's
+    (:meth:`gnssacc.core.solution.NavSolution.in_vehicle_axes`), with those angles [deg] and who
+    set them (``tuned``, a file, ``overrides``, ``defaults``); else the body's."""
+    keys = ("pitch_offset_deg", "yaw_offset_deg")
+    angles = {k: float(cfg["nhc"][k]) for k in keys}
+    return {
+        "axes": "vehicle" if any(angles.values()) else "body",
+        **angles,
+        "set_by": sorted({cfg.origin.get(("nhc", k), "defaults") for k in keys if angles[k]}),
+    }
+
+
+def attitude_line(cfg: RunConfig) -> str | None:
+    """The line that says the attitude is of the vehicle's axes (None for the body's)."""
+    axes = attitude_axes(cfg)
+    if axes["axes"] == "body":
+        return None
+    return (
+        f"attitude: of the vehicle's axes, the body's turned by pitch {axes['pitch_offset_deg']:+.2f}"
+        f" deg, yaw {axes['yaw_offset_deg']:+.2f} deg ({', '.join(axes['set_by'])}: the "
+        "constraint's axes); the biases stay in the body's"
+    )
 
 
 def start_dict(init) -> dict:
@@ -906,7 +936,8 @@ def preparation_lines(prep: Prepared) -> list[str]:
             f"confirmed over the whole run: log-likelihood {win['whole_run_loglik_gain']:+.0f} "
             "against the configured noise"
         )
-    return lines + tuned
+    axes = attitude_line(prep.cfg)
+    return lines + tuned + ([axes] if axes else [])
 
 
 def compare_and_write(

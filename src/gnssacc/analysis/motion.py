@@ -180,7 +180,8 @@ def classify_motion(
     ti, f_b, w_b = imu.t[keep], imu.f_b[keep], imu.omega_ib_b[keep]
     if len(ti) < 2:
         raise ValueError("the solution does not overlap the IMU data")
-    rpy = np.column_stack([np.interp(ti, sol.t, np.unwrap(sol.rpy[:, i])) for i in range(3)])
+    body = sol.body_rpy()  # the IMU's axes, in which f_b and w_b are
+    rpy = np.column_stack([np.interp(ti, sol.t, np.unwrap(body[:, i])) for i in range(3)])
     v_n = np.column_stack([np.interp(ti, sol.t, sol.v_n[:, i]) for i in range(3)])
     R = np.moveaxis(euler_to_dcm(rpy[:, 0], rpy[:, 1], rpy[:, 2]), -1, 0)  # (K, 3, 3)
     # Gravity varies by < 1e-3 m/s^2 over a ground-vehicle run: take it at the mean position.

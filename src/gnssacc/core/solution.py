@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .display import SIGMA_COLUMNS
+from .rotations import dcm_to_euler, euler_to_dcm
 
 
 @dataclass
@@ -26,7 +27,8 @@ class NavSolution:
     v_n : ndarray, shape (K, 3)
         NED velocity [m/s].
     rpy : ndarray, shape (K, 3)
-        Roll, pitch, yaw [rad].
+        Roll, pitch, yaw [rad] of the body's axes, or of the vehicle's
+        (:meth:`in_vehicle_axes`: what a run returns where the constraint's axes are turned).
     b_a, b_g : ndarray, shape (K, 3)
         Estimated accelerometer [m/s^2] and gyro [rad/s] biases, IMU axes after mounting (body).
     sigma : ndarray, shape (K, 15)
@@ -37,6 +39,9 @@ class NavSolution:
         Counters and diagnostics (updates made, normalised innovation statistics, ...).
     P : ndarray, shape (K, 15, 15), optional
         Full error-state covariance per epoch, when requested.
+    R_vb : ndarray, shape (3, 3), optional
+        Set when :attr:`rpy` is the vehicle's attitude (:meth:`in_vehicle_axes`): body to vehicle
+        axes; :meth:`body_rpy` gives the body's.
     """
 
     method: str
@@ -52,9 +57,39 @@ class NavSolution:
     runtime_s: float = 0.0
     stats: dict = field(default_factory=dict)
     P: np.ndarray | None = None
+    R_vb: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t)
 
+    def in_vehicle_axes(self, R_vb: np.ndarray | None) -> "NavSolution":
+        """This solution with :attr:`rpy` the attitude of the vehicle's axes, ``R_nv = R_nb R_vb^T``
+        (``R_vb`` maps body to vehicle axes: ``[nhc] pitch_offset_deg``, ``yaw_offset_deg``;
+        ``None``: the body's axes, this solution itself).
+
+        The estimators integrate the accelerometers' own axes, which a constant misalignment of
+        the triad (tenths of a degree on a consumer IMU) turns against the IMU's case; the
+        constraint's axes, where the tuner proved them turned against the body's, are the
+        vehicle's. The sigmas, biases and covariance stay the body's (the offsets are at most a
+        few degrees: the attitude sigma of either axes is the same to first order).
+        """
+        if R_vb is None or self.R_vb is not None:
+            return self
+        R_vb = np.asarray(R_vb, float)
+        return replace(self, rpy=_turned(self.rpy, R_vb.T), R_vb=R_vb)
+
+    def body_rpy(self) -> np.ndarray:
+        """Roll, pitch, yaw [rad] (K, 3) of the body's axes (:attr:`rpy` itself unless it is the
+        vehicle's: :meth:`in_vehicle_axes`)."""
+        return self.rpy if self.R_vb is None else _turned(self.rpy, self.R_vb)
+
     #: Column names of :attr:`sigma`.
     SIGMA_NAMES = SIGMA_COLUMNS
+
+
+def _turned(rpy: np.ndarray, R_ab: np.ndarray) -> np.ndarray:
+    """Roll, pitch, yaw [rad] (K, 3) of ``R_na R_ab`` for the attitudes ``R_na`` of ``rpy``."""
+    if not len(rpy):
+        return rpy
+    R_na = np.moveaxis(euler_to_dcm(*np.asarray(rpy, float).T), -1, 0)  # (K, 3, 3)
+    return np.column_stack(dcm_to_euler(R_na @ R_ab))
