@@ -76,6 +76,9 @@ def test_the_tuned_axes_make_a_consumer_cars_pitch_and_yaw_consistent():
     axes = res.metrics["attitude_axes"]
     assert axes["axes"] == "vehicle" and axes["set_by"] == ["tuned"]
     assert abs(axes["yaw_offset_deg"]) > 0.1
+    pitch = axes["pitch_offset_deg"]
+    said = f"attitude: of the vehicle's axes, the body's turned by pitch {pitch:+.2f}"
+    assert said in res.table()  # the table (and table.txt) says whose axes
     for m in ("ekf", "smoother"):
         per_axis = res.metrics["methods"][m]["errors"]["nees_attitude"]["per_axis"]
         for axis in ("pitch", "yaw"):

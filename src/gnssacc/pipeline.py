@@ -817,18 +817,6 @@ def attitude_axes(cfg: RunConfig) -> dict:
     }
 
 
-def attitude_line(cfg: RunConfig) -> str | None:
-    """The line that says the attitude is of the vehicle's axes (None for the body's)."""
-    axes = attitude_axes(cfg)
-    if axes["axes"] == "body":
-        return None
-    return (
-        f"attitude: of the vehicle's axes, the body's turned by pitch {axes['pitch_offset_deg']:+.2f}"
-        f" deg, yaw {axes['yaw_offset_deg']:+.2f} deg ({', '.join(axes['set_by'])}: the "
-        "constraint's axes); the biases stay in the body's"
-    )
-
-
 def start_dict(init) -> dict:
     """The start's yaw and what it rests on (``metrics.json`` ``start``; the table says when it is
     undetermined)."""
@@ -936,8 +924,7 @@ def preparation_lines(prep: Prepared) -> list[str]:
             f"confirmed over the whole run: log-likelihood {win['whole_run_loglik_gain']:+.0f} "
             "against the configured noise"
         )
-    axes = attitude_line(prep.cfg)
-    return lines + tuned + ([axes] if axes else [])
+    return lines + tuned
 
 
 def compare_and_write(

@@ -430,8 +430,8 @@ def table_rows(metrics: dict) -> tuple[list[str], list[list[str]]]:
 
 def table_notes(metrics: dict) -> tuple[list[str], list[str]]:
     """The lines above the comparison table (the scored window) and below it (the truth's gaps
-    and the legend)."""
-    return _window_lines(metrics), _truth_lines(metrics) + _legend(metrics)
+    and the legend, after whose axes the attitude is of when they are the vehicle's)."""
+    return _window_lines(metrics), _axes_lines(metrics) + _truth_lines(metrics) + _legend(metrics)
 
 
 def format_table(metrics: dict) -> str:
@@ -450,9 +450,23 @@ def format_table(metrics: dict) -> str:
         + lines
         + failed_rows
         + _start_lines(metrics)
+        + _axes_lines(metrics)
         + _truth_lines(metrics)
         + _legend(metrics)
     )
+
+
+def _axes_lines(metrics: dict) -> list[str]:
+    """Whose axes the attitude columns are of, when they are the vehicle's
+    (``metrics.json`` ``attitude_axes``: :func:`gnssacc.pipeline.attitude_axes`)."""
+    axes = metrics.get("attitude_axes") or {}
+    if axes.get("axes") != "vehicle":
+        return []
+    return [
+        f"attitude: of the vehicle's axes, the body's turned by pitch {axes['pitch_offset_deg']:+.2f}"
+        f" deg, yaw {axes['yaw_offset_deg']:+.2f} deg ({', '.join(axes['set_by'])}: the "
+        "constraint's axes); the biases stay in the body's"
+    ]
 
 
 def _truth_lines(metrics: dict) -> list[str]:
