@@ -521,7 +521,9 @@ def run_methods(
         (:meth:`gnssacc.core.solution.NavSolution.in_vehicle_axes`, :func:`attitude_axes`).
     """
     prep = prep or prepare(run, cfg, tune, methods)
-    R_vb = NhcSettings.from_config(prep.cfg).R_vb  # the attitude reported: the vehicle's axes
+    # The attitude reported: the vehicle's axes, with the roll's unknown offset in its sigma.
+    R_vb = NhcSettings.from_config(prep.cfg).R_vb
+    roll_sigma = np.radians(attitude_axes(prep.cfg)["roll_sigma_deg"])
     out: dict[str, NavSolution] = {}
     beside = {} if beside is None else beside
     done = methods_side_by_side(prep, methods, show_progress, observers, beside)
@@ -529,7 +531,7 @@ def run_methods(
         try:
             extra = {"observer": observers[m]} if observers and m in observers else {}
             got = done[m] if m in done else METHODS[m](prep, m, show_progress, **extra)
-            out.update({k: s.in_vehicle_axes(R_vb) for k, s in got.items()})
+            out.update({k: s.in_vehicle_axes(R_vb, roll_sigma) for k, s in got.items()})
             release_free_memory()  # one method's work arrays, before the next one's
             if say:
                 say(
@@ -806,14 +808,28 @@ def _run_facts(prep: Prepared, sols: dict, window, cons: dict, models: dict, on_
 def attitude_axes(cfg: RunConfig) -> dict:
     """Whose axes the solutions' attitude is of (``metrics.json`` ``attitude_axes``): the
     vehicle's when ``[nhc] pitch_offset_deg`` or ``yaw_offset_deg`` turns them against the body's
-    (:meth:`gnssacc.core.solution.NavSolution.in_vehicle_axes`), with those angles [deg] and who
-    set them (``tuned``, a file, ``overrides``, ``defaults``); else the body's."""
+    (:meth:`gnssacc.core.solution.NavSolution.in_vehicle_axes`), with those angles [deg], who set
+    them (``tuned``, a file, ``overrides``, ``defaults``) and ``roll_sigma_deg``; else the body's.
+
+    The vehicle's roll against the body's is in no measurement (the constraint's lateral and
+    vertical velocities are both zero whatever it is). Where the tuner found the other two
+    angles, they measure how far the body's axes (the accelerometer triad's, which the estimators
+    follow) are turned against the vehicle's; with the three angles alike a priori (a triad's
+    cross-axis errors are), the roll's 1-sigma is their root mean square, ``sqrt((p^2 + y^2) /
+    2)`` (the scale of the roll's predictive distribution given the two). Angles a user set are
+    taken as known (a user who knows the mounting sets its roll in ``[mounting]``): 0.
+    """
     keys = ("pitch_offset_deg", "yaw_offset_deg")
     angles = {k: float(cfg["nhc"][k]) for k in keys}
+    set_by = sorted({cfg.origin.get(("nhc", k), "defaults") for k in keys if angles[k]})
+    tuned = "tuned" in set_by
     return {
         "axes": "vehicle" if any(angles.values()) else "body",
         **angles,
-        "set_by": sorted({cfg.origin.get(("nhc", k), "defaults") for k in keys if angles[k]}),
+        "set_by": set_by,
+        "roll_sigma_deg": float(np.sqrt(np.mean(np.square(list(angles.values())))))
+        if tuned
+        else 0.0,
     }
 
 

@@ -8,6 +8,11 @@ import numpy as np
 
 from .display import SIGMA_COLUMNS
 from .rotations import dcm_to_euler, euler_to_dcm
+from .states import I_ATT
+
+
+#: The roll's column in :attr:`NavSolution.sigma`.
+ROLL = I_ATT
 
 
 @dataclass
@@ -62,21 +67,27 @@ class NavSolution:
     def __len__(self) -> int:
         return len(self.t)
 
-    def in_vehicle_axes(self, R_vb: np.ndarray | None) -> "NavSolution":
+    def in_vehicle_axes(self, R_vb: np.ndarray | None, roll_sigma: float = 0.0) -> "NavSolution":
         """This solution with :attr:`rpy` the attitude of the vehicle's axes, ``R_nv = R_nb R_vb^T``
         (``R_vb`` maps body to vehicle axes: ``[nhc] pitch_offset_deg``, ``yaw_offset_deg``;
-        ``None``: the body's axes, this solution itself).
+        ``None``: the body's axes, this solution itself), and ``roll_sigma`` [rad], the roll of
+        the vehicle's axes against the body's that no measurement tells, added to the roll's
+        sigma in quadrature.
 
         The estimators integrate the accelerometers' own axes, which a constant misalignment of
         the triad (tenths of a degree on a consumer IMU) turns against the IMU's case; the
         constraint's axes, where the tuner proved them turned against the body's, are the
-        vehicle's. The sigmas, biases and covariance stay the body's (the offsets are at most a
-        few degrees: the attitude sigma of either axes is the same to first order).
+        vehicle's. The other sigmas, the biases and :attr:`P` stay the body's (the offsets are at
+        most a few degrees: the attitude sigma of either axes is the same to first order).
         """
         if R_vb is None or self.R_vb is not None:
             return self
         R_vb = np.asarray(R_vb, float)
-        return replace(self, rpy=_turned(self.rpy, R_vb.T), R_vb=R_vb)
+        sigma = self.sigma
+        if roll_sigma > 0.0:
+            sigma = sigma.copy()
+            sigma[:, ROLL] = np.hypot(sigma[:, ROLL], roll_sigma)
+        return replace(self, rpy=_turned(self.rpy, R_vb.T), sigma=sigma, R_vb=R_vb)
 
     def body_rpy(self) -> np.ndarray:
         """Roll, pitch, yaw [rad] (K, 3) of the body's axes (:attr:`rpy` itself unless it is the

@@ -462,10 +462,12 @@ def _axes_lines(metrics: dict) -> list[str]:
     axes = metrics.get("attitude_axes") or {}
     if axes.get("axes") != "vehicle":
         return []
+    roll = axes.get("roll_sigma_deg") or 0.0
+    unknown = f"; their roll, which nothing measures: +-{roll:.2f} deg in its sigma" if roll else ""
     return [
         f"attitude: of the vehicle's axes, the body's turned by pitch {axes['pitch_offset_deg']:+.2f}"
         f" deg, yaw {axes['yaw_offset_deg']:+.2f} deg ({', '.join(axes['set_by'])}: the "
-        "constraint's axes); the biases stay in the body's"
+        f"constraint's axes{unknown}); the biases stay in the body's"
     ]
 
 
