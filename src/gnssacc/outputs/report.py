@@ -429,8 +429,8 @@ def table_rows(metrics: dict) -> tuple[list[str], list[list[str]]]:
 
 
 def table_notes(metrics: dict) -> tuple[list[str], list[str]]:
-    """The lines above the comparison table (the scored window) and below it (the truth's gaps
-    and the legend, after whose axes the attitude is of when they are the vehicle's)."""
+    """The lines above the comparison table (the scored window) and below it (whose axes the
+    attitude is of, when the vehicle's; the truth's gaps; the legend)."""
     return _window_lines(metrics), _axes_lines(metrics) + _truth_lines(metrics) + _legend(metrics)
 
 
