@@ -45,6 +45,7 @@ from .outputs.report import (
     write_json,
     write_trajectory_csv,
 )
+from .prepare.attitude_axes import AXES, attitude_axes
 from .prepare.cache import PreparationCache, prepared_once
 from .prepare.passes import filter_pass
 from .prepare.prepared import Prepared
@@ -521,9 +522,10 @@ def run_methods(
         (:meth:`gnssacc.core.solution.NavSolution.in_vehicle_axes`, :func:`attitude_axes`).
     """
     prep = prep or prepare(run, cfg, tune, methods)
-    # The attitude reported: the vehicle's axes, with the roll's unknown offset in its sigma.
+    # The attitude reported: the vehicle's axes, its sigma no less than what no measurement tells
+    # of them.
     R_vb = NhcSettings.from_config(prep.cfg).R_vb
-    roll_sigma = np.radians(attitude_axes(prep.cfg)["roll_sigma_deg"])
+    floor = np.radians([attitude_axes(prep.cfg)["sigma_floor_deg"][a] for a in AXES])
     out: dict[str, NavSolution] = {}
     beside = {} if beside is None else beside
     done = methods_side_by_side(prep, methods, show_progress, observers, beside)
@@ -531,7 +533,7 @@ def run_methods(
         try:
             extra = {"observer": observers[m]} if observers and m in observers else {}
             got = done[m] if m in done else METHODS[m](prep, m, show_progress, **extra)
-            out.update({k: s.in_vehicle_axes(R_vb, roll_sigma) for k, s in got.items()})
+            out.update({k: s.in_vehicle_axes(R_vb, floor) for k, s in got.items()})
             release_free_memory()  # one method's work arrays, before the next one's
             if say:
                 say(
@@ -802,34 +804,6 @@ def _run_facts(prep: Prepared, sols: dict, window, cons: dict, models: dict, on_
         "tuning": prep.tuning.to_dict() if prep.tuning is not None else None,
         "preparation_cache": prep.cache,
         "attitude_axes": attitude_axes(prep.cfg),
-    }
-
-
-def attitude_axes(cfg: RunConfig) -> dict:
-    """Whose axes the solutions' attitude is of (``metrics.json`` ``attitude_axes``): the
-    vehicle's when ``[nhc] pitch_offset_deg`` or ``yaw_offset_deg`` turns them against the body's
-    (:meth:`gnssacc.core.solution.NavSolution.in_vehicle_axes`), with those angles [deg], who set
-    them (``tuned``, a file, ``overrides``, ``defaults``) and ``roll_sigma_deg``; else the body's.
-
-    The vehicle's roll against the body's is in no measurement (the constraint's lateral and
-    vertical velocities are both zero whatever it is). Where the tuner found the other two
-    angles, they measure how far the body's axes (the accelerometer triad's, which the estimators
-    follow) are turned against the vehicle's; with the three angles alike a priori (a triad's
-    cross-axis errors are), the roll's 1-sigma is their root mean square, ``sqrt((p^2 + y^2) /
-    2)`` (the scale of the roll's predictive distribution given the two). Angles a user set are
-    taken as known (a user who knows the mounting sets its roll in ``[mounting]``): 0.
-    """
-    keys = ("pitch_offset_deg", "yaw_offset_deg")
-    angles = {k: float(cfg["nhc"][k]) for k in keys}
-    set_by = sorted({cfg.origin.get(("nhc", k), "defaults") for k in keys if angles[k]})
-    tuned = "tuned" in set_by
-    return {
-        "axes": "vehicle" if any(angles.values()) else "body",
-        **angles,
-        "set_by": set_by,
-        "roll_sigma_deg": float(np.sqrt(np.mean(np.square(list(angles.values())))))
-        if tuned
-        else 0.0,
     }
 
 

@@ -64,6 +64,13 @@ DEFAULTS: dict[str, dict] = {
         # deg/sqrt(h): 150 ppm, 0.2: 1000, 0.6 and above: 10000); 1000 on a run without such a
         # span. A number is used as given.
         "gyro_turn_error_ppm": "auto",
+        # 1-sigma of each accelerometer cross-axis error [ppm] (datasheet: cross-axis
+        # sensitivity, axis-to-axis misalignment). The estimators follow the accelerometers' axes,
+        # which these errors turn against the IMU's case by a rotation no measurement separates
+        # from the attitude: 1/sqrt(2) of it per axis is added to the reported attitude sigma
+        # (gnssacc.prepare.attitude_axes; not on the [nhc] angles the tuner searched). "auto":
+        # the gyro turn allowance's value (the same IMU's class); 0: a calibrated triad.
+        "accel_misalignment_ppm": "auto",
     },
     "mounting": {
         # Rotation from IMU axes to body (FRD) axes as roll, pitch, yaw [deg]:

@@ -8,11 +8,7 @@ import numpy as np
 
 from .display import SIGMA_COLUMNS
 from .rotations import dcm_to_euler, euler_to_dcm
-from .states import I_ATT
-
-
-#: The roll's column in :attr:`NavSolution.sigma`.
-ROLL = I_ATT
+from .states import ATT
 
 
 @dataclass
@@ -47,6 +43,8 @@ class NavSolution:
     R_vb : ndarray, shape (3, 3), optional
         Set when :attr:`rpy` is the vehicle's attitude (:meth:`in_vehicle_axes`): body to vehicle
         axes; :meth:`body_rpy` gives the body's.
+    attitude_floor : ndarray, shape (3,), optional
+        Set by :meth:`in_vehicle_axes`: the least roll, pitch and yaw sigma it let stand [rad].
     """
 
     method: str
@@ -63,16 +61,20 @@ class NavSolution:
     stats: dict = field(default_factory=dict)
     P: np.ndarray | None = None
     R_vb: np.ndarray | None = None
+    attitude_floor: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t)
 
-    def in_vehicle_axes(self, R_vb: np.ndarray | None, roll_sigma: float = 0.0) -> "NavSolution":
+    def in_vehicle_axes(
+        self, R_vb: np.ndarray | None, floor: np.ndarray | None = None
+    ) -> "NavSolution":
         """This solution with :attr:`rpy` the attitude of the vehicle's axes, ``R_nv = R_nb R_vb^T``
         (``R_vb`` maps body to vehicle axes: ``[nhc] pitch_offset_deg``, ``yaw_offset_deg``;
-        ``None``: the body's axes, this solution itself), and ``roll_sigma`` [rad], the roll of
-        the vehicle's axes against the body's that no measurement tells, added to the roll's
-        sigma in quadrature.
+        ``None``: the body's axes), and its attitude sigmas at least ``floor`` [rad] (roll, pitch,
+        yaw): what no measurement tells of those axes
+        (:func:`gnssacc.prepare.attitude_axes.attitude_axes`). Done once: a solution it made is
+        returned as it is.
 
         The estimators integrate the accelerometers' own axes, which a constant misalignment of
         the triad (tenths of a degree on a consumer IMU) turns against the IMU's case; the
@@ -80,14 +82,20 @@ class NavSolution:
         vehicle's. The other sigmas, the biases and :attr:`P` stay the body's (the offsets are at
         most a few degrees: the attitude sigma of either axes is the same to first order).
         """
-        if R_vb is None or self.R_vb is not None:
+        if self.R_vb is not None or self.attitude_floor is not None:
             return self
-        R_vb = np.asarray(R_vb, float)
+        least = np.zeros(3) if floor is None else np.asarray(floor, float)
+        if R_vb is None and not np.any(least > 0.0):
+            return self
         sigma = self.sigma
-        if roll_sigma > 0.0:
+        if np.any(least > 0.0):
             sigma = sigma.copy()
-            sigma[:, ROLL] = np.hypot(sigma[:, ROLL], roll_sigma)
-        return replace(self, rpy=_turned(self.rpy, R_vb.T), sigma=sigma, R_vb=R_vb)
+            sigma[:, ATT] = np.maximum(sigma[:, ATT], least)
+        rpy = self.rpy
+        if R_vb is not None:
+            R_vb = np.asarray(R_vb, float)
+            rpy = _turned(self.rpy, R_vb.T)
+        return replace(self, rpy=rpy, sigma=sigma, R_vb=R_vb, attitude_floor=least)
 
     def body_rpy(self) -> np.ndarray:
         """Roll, pitch, yaw [rad] (K, 3) of the body's axes (:attr:`rpy` itself unless it is the

@@ -457,18 +457,27 @@ def format_table(metrics: dict) -> str:
 
 
 def _axes_lines(metrics: dict) -> list[str]:
-    """Whose axes the attitude columns are of, when they are the vehicle's
-    (``metrics.json`` ``attitude_axes``: :func:`gnssacc.pipeline.attitude_axes`)."""
+    """Whose axes the attitude columns are of, and the least sigma of each angle, what no
+    measurement tells of them (``metrics.json`` ``attitude_axes``:
+    :func:`gnssacc.prepare.attitude_axes.attitude_axes`)."""
     axes = metrics.get("attitude_axes") or {}
-    if axes.get("axes") != "vehicle":
-        return []
-    roll = axes.get("roll_sigma_deg") or 0.0
-    unknown = f"; their roll, which nothing measures: +-{roll:.2f} deg in its sigma" if roll else ""
-    return [
-        f"attitude: of the vehicle's axes, the body's turned by pitch {axes['pitch_offset_deg']:+.2f}"
-        f" deg, yaw {axes['yaw_offset_deg']:+.2f} deg ({', '.join(axes['set_by'])}: the "
-        f"constraint's axes{unknown}); the biases stay in the body's"
-    ]
+    floor = axes.get("sigma_floor_deg") or {}
+    least = [f"{a} {v:.2f}" for a, v in floor.items() if v > 0.0]
+    unknown = (
+        f"; unmeasured, each sigma at least {', '.join(least)} deg (the accelerometer triad's "
+        f"turn against the IMU's case: {axes['misalignment_ppm']:.0f} ppm cross-axis, from "
+        f"{axes['misalignment_from']})"
+        if least
+        else ""
+    )
+    if axes.get("axes") == "vehicle":
+        return [
+            f"attitude: of the vehicle's axes, the body's turned by pitch "
+            f"{axes['pitch_offset_deg']:+.2f} deg, yaw {axes['yaw_offset_deg']:+.2f} deg "
+            f"({', '.join(axes['set_by'])}: the constraint's axes){unknown}; the biases stay in "
+            "the body's"
+        ]
+    return [f"attitude: of the body's axes{unknown}"] if unknown else []
 
 
 def _truth_lines(metrics: dict) -> list[str]:

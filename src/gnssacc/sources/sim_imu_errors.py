@@ -49,10 +49,13 @@ from ..core.errors import InputError
 WHERE = "simulator"
 
 #: Keys of an IMU grade known to the filter: ``gnssacc.core.config.DEFAULTS["imu"]`` but the
-#: filter's allowance for the gyro scale-factor and cross-axis errors (``gyro_turn_error_ppm``),
-#: which the simulator draws as unmodelled errors of its own (``gyro_scale_factor_ppm``,
-#: ``gyro_cross_axis_ppm``: :data:`IMU_EXTRA_ERRORS`), not as a grade's filter setting.
-GRADE_KEYS = tuple(k for k in DEFAULTS["imu"] if k != "gyro_turn_error_ppm")
+#: filter's allowances for the gyro scale-factor and cross-axis errors (``gyro_turn_error_ppm``)
+#: and the accelerometer triad's (``accel_misalignment_ppm``), which the simulator draws as
+#: unmodelled errors of its own (``gyro_scale_factor_ppm``, ``gyro_cross_axis_ppm``,
+#: ``accel_cross_axis_ppm``: :data:`IMU_EXTRA_ERRORS`), not as a grade's filter setting.
+GRADE_KEYS = tuple(
+    k for k in DEFAULTS["imu"] if k not in ("gyro_turn_error_ppm", "accel_misalignment_ppm")
+)
 
 
 def _grade(arw, vrw, gbi, abi, g0, a0, tau=300.0) -> dict:

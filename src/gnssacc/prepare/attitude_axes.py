@@ -1,0 +1,86 @@
+"""Whose axes a run's attitude is of, and the least attitude sigma no measurement can beat
+(``metrics.json`` ``attitude_axes``).
+
+The estimators integrate the accelerometer triad's own axes: gravity and the fixes' accelerations
+align the attitude with the axes the accelerometers sense along. A triad's cross-axis errors
+(non-orthogonality and misalignment, ``f_meas = (I + M) f``, each off-diagonal element of ``M``
+about ``[imu] accel_misalignment_ppm`` 1-sigma: tenths of a degree on a consumer IMU) turn those
+axes against the IMU's case, and so against the vehicle, by the antisymmetric part of ``M``: a
+rotation of ``(M_zy - M_yz) / 2``, ``(M_xz - M_zx) / 2``, ``(M_yx - M_xy) / 2`` about x, y, z,
+each of 1-sigma ``accel_misalignment_ppm / sqrt(2)`` for independent elements. No measurement of
+the 15-state model separates that rotation from the attitude, so no attitude sigma of the case's
+(or the vehicle's) axes can be below it: it is the reported sigma's floor, on every axis the tuner
+did not measure. A floor, not a term added in quadrature: the tuned noise covers some of what the
+model leaves out already, and the estimator's sigma then holds part of it.
+
+* Where the tuner searched the constraint's axes against the body's (``[nhc]
+  pitch_offset_deg``, ``yaw_offset_deg`` set by ``tuned``), those angles were measured against
+  the triad's axes: where it proved one (its likelihood-ratio test), the attitude is the
+  vehicle's (:meth:`gnssacc.core.solution.NavSolution.in_vehicle_axes`); where it did not, the
+  data showed no turn it could resolve. Either way that axis has no floor.
+* The roll against the vehicle's axes is in no measurement (the constraint's lateral and vertical
+  velocities are both zero whatever it is). Where the tuner found the other two angles, they
+  measure this IMU's triad; with the three angles alike a priori, their root mean square
+  ``sqrt((p^2 + y^2) / 2)`` is the roll's scale given the two. The roll's floor is the larger of
+  that and the triad's rotation.
+* Every other axis (all three without the constraint or its tuning; where a user set the angles,
+  those are the case's, not the triad's) has the triad's rotation as its floor.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ..core.config import FALLBACK_TURN_ERROR_PPM, RunConfig
+
+#: The axes of :attr:`gnssacc.core.solution.NavSolution.rpy`, in order.
+AXES = ("roll", "pitch", "yaw")
+
+
+def misalignment_ppm(cfg: RunConfig) -> tuple[float, str]:
+    """The accelerometer triad's cross-axis 1-sigma [ppm] and where it came from: ``[imu]
+    accel_misalignment_ppm``, or with ``"auto"`` the gyro turn allowance's value (the same IMU's
+    class: :mod:`gnssacc.prepare.turn_allowance`), its fallback where that is still ``"auto"``."""
+    value = cfg["imu"]["accel_misalignment_ppm"]
+    if value != "auto":
+        return float(value), cfg.origin.get(("imu", "accel_misalignment_ppm"), "defaults")
+    turn = cfg["imu"]["gyro_turn_error_ppm"]
+    if turn == "auto":
+        return FALLBACK_TURN_ERROR_PPM, "the fallback turn allowance"
+    return float(turn), "the gyro turn allowance"
+
+
+def attitude_axes(cfg: RunConfig) -> dict:
+    """Whose axes the solutions' attitude is of and the least sigma of each of its angles.
+
+    Returns
+    -------
+    dict
+        ``axes`` (``"vehicle"`` where ``[nhc]`` turns the constraint's axes against the body's,
+        else ``"body"``), ``pitch_offset_deg``, ``yaw_offset_deg`` [deg], ``set_by`` (who set the
+        nonzero angles: ``tuned``, a file, ``overrides``), ``misalignment_ppm`` with its
+        ``misalignment_from``, ``triad_deg`` (the triad's rotation per axis, 1-sigma [deg]) and
+        ``sigma_floor_deg`` ``{roll, pitch, yaw}`` [deg] (the module docstring).
+    """
+    keys = ("pitch_offset_deg", "yaw_offset_deg")
+    angles = {k: float(cfg["nhc"][k]) for k in keys}
+    origin = {k: cfg.origin.get(("nhc", k), "defaults") for k in keys}
+    ppm, source = misalignment_ppm(cfg)
+    triad = math.degrees(ppm * 1e-6) / math.sqrt(2.0)
+    measured = {k: origin[k] == "tuned" for k in keys}  # searched, kept or not
+    floor = {
+        "roll": triad,
+        "pitch": 0.0 if measured["pitch_offset_deg"] else triad,
+        "yaw": 0.0 if measured["yaw_offset_deg"] else triad,
+    }
+    if any(measured[k] and angles[k] for k in keys):
+        floor["roll"] = max(triad, math.sqrt((angles[keys[0]] ** 2 + angles[keys[1]] ** 2) / 2))
+    return {
+        "axes": "vehicle" if any(angles.values()) else "body",
+        **angles,
+        "set_by": sorted({origin[k] for k in keys if angles[k]}),
+        "misalignment_ppm": ppm,
+        "misalignment_from": source,
+        "triad_deg": triad,
+        "sigma_floor_deg": floor,
+    }
