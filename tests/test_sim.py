@@ -348,9 +348,11 @@ def test_perfect_grade_has_zero_bias_and_overrides_apply():
 def test_grade_config_builds_filter_config():
     for grade in sim.IMU_GRADES:
         values = sim.grade_config(grade)
-        # every filter key but the turn error, which the simulator draws as its own unmodelled
-        # cross-axis and scale-factor errors (a grade's filter setting is the user's choice)
-        assert set(values) == set(load_config()["imu"]) - {"gyro_turn_error_ppm"}
+        # every filter key but the turn error and the triad's misalignment, which the simulator
+        # draws as its own unmodelled cross-axis and scale-factor errors (a grade's filter
+        # setting is the user's choice)
+        allowances = {"gyro_turn_error_ppm", "accel_misalignment_ppm"}
+        assert set(values) == set(load_config()["imu"]) - allowances
         if grade == "perfect":  # zero white noise: no filter configuration (one clear error)
             with pytest.raises(InputError, match="gyro_arw_deg_rth"):
                 load_config(overrides={"imu": values})
