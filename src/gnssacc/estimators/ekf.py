@@ -122,9 +122,27 @@ def make_setup(
         cov_every,
         layout=layout,
         q_turn=imu.gyro_turn_psd,
+        rest=rest_samples(run, stationary, init),
     )
     k = int(np.searchsorted(prop.t, float(init.t), side="right"))
     return EkfSetup(init, initial_state(init, settings, layout), prop, aids, k)
+
+
+def rest_samples(run: RecordedRun, stationary, init: InitialState) -> np.ndarray | None:
+    """The IMU samples at which the error model is linearised about a vehicle at rest
+    (:func:`gnssacc.estimators.mechanization.propagate`'s ``rest``): those inside a stationary
+    span, on a run whose yaw the start found undetermined (``init.yaw_evidence``: it never turned
+    or accelerated enough to tell it, so its attitude is the one it stood at); else ``None``.
+
+    There the yaw is held as a consider state of about 100 deg, and linearised about each
+    sample's specific force and the attitude of the moment, the EKF found the tilt separable from
+    the horizontal accelerometer bias: a consumer IMU that never moved stated a tilt of 0.45 deg
+    with a 2.6 deg error (docs/consistency.md, "A still vehicle's tilt"). Runs whose yaw is
+    decided keep the samples' own specific force and attitude.
+    """
+    if stationary is None or not stationary.spans or init.yaw_evidence != "undetermined":
+        return None
+    return stationary.mask(run.imu.t)
 
 
 def _events(aids: list[EkfAid], out_t: np.ndarray):

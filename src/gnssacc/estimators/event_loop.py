@@ -61,13 +61,13 @@ def _advance(prop, st, k, t_cur, t_to):
     states over the time moved (as :func:`gnssacc.estimators.ekf.run_ekf`)."""
     t_imu, f_imu, w_imu, q_a, q_g, q_ba, q_bg, seg_i0, seg_i1, seg_qa, seg_qg = prop[:11]
     phi_order, with_cov, cov_every, Phi, with_phi, w_ie_sign, gm_tau, gm_var, q_turn = prop[11:20]
-    w_turn = prop[20]
+    w_turn, rest, rest_R = prop[20], prop[21], prop[22]
     pos, v_n, R_nb, b_a, b_g, P, x_e = st[:7]
     t_prev = t_cur
     k, t_cur = propagate(
         t_imu, f_imu, w_imu, k, t_cur, t_to, pos, v_n, R_nb, b_a, b_g, P, q_a, q_g, q_ba, q_bg,
         seg_i0, seg_i1, seg_qa, seg_qg, phi_order, with_cov, cov_every, Phi, with_phi, w_ie_sign,
-        gm_tau, gm_var, q_turn, w_turn,
+        gm_tau, gm_var, q_turn, w_turn, rest, rest_R,
     )  # fmt: skip
     for i in range(x_e.shape[0]):
         x_e[i] *= math.exp(-(t_cur - t_prev) / gm_tau[i])
@@ -227,7 +227,7 @@ def propagation(prop: Propagator) -> tuple:
     return (
         prop.t, prop.f, prop.w, *prop.q, *prop.segments, prop.phi_order, True, prop.cov_every,
         prop.Phi, prop.with_phi, prop.w_ie_sign, prop.extra_tau, prop.extra_var, prop.q_turn,
-        prop.w_turn,
+        prop.w_turn, prop.rest, prop.rest_R,
     )  # fmt: skip
 
 

@@ -159,6 +159,8 @@ def _warm_up_loop() -> float:
         np.ones(3),
         0.0,
         np.zeros((1, 3)),
+        np.zeros(0, bool),
+        np.zeros((4, 3)),
     )
     st: tuple = (np.array([0.5, 0.1, 0.0]), z3.copy(), np.eye(3), z3.copy(), z3.copy(), np.eye(n))
     st += (np.zeros(3), -1)

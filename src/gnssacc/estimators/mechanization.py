@@ -556,6 +556,8 @@ def propagate(
     gm_var,
     q_turn,
     w_turn,
+    rest,
+    rest_R,
 ):
     """Propagate nominal state and covariance from ``t_cur`` to ``t_to`` (in place).
 
@@ -599,6 +601,21 @@ def propagate(
     w_turn : ndarray (N, 3)
         The rotation the body performs: each sample's rate averaged over
         :data:`TURN_WINDOW_S` [rad/s, body] (:func:`turn_rates`).
+    rest : ndarray (N,) or (0,) of bool
+        Samples at rest (in a stationary span; empty: none). There the error model ``F`` is
+        linearised about what a vehicle at rest has and the updates cannot change: the specific
+        force ``f^n = -g^n`` (no horizontal part) and the attitude of the first sample at rest
+        (``rest_R``), instead of the sample's specific force (whose horizontal part at rest is
+        vibration, noise and the filter's own tilt-bias error) and the attitude of the moment
+        (which the updates move). With either, the directions a still IMU cannot observe (tilt
+        against horizontal accelerometer bias, yaw against gyro bias) turn from sample to sample
+        and the updates "measure" them; held, they stay unobservable (the first-estimates
+        Jacobian of an observability-consistent filter). The nominal state always integrates
+        ``f_imu``.
+    rest_R : ndarray (4, 3)
+        The attitude held at rest (rows 0-2, ``R_nb``) and, in ``rest_R[3, 0]``, 1 once it is
+        held (the pass's first sample at rest sets it): carried from one call to the next
+        (:class:`Propagator` keeps it, one per pass).
 
     Returns
     -------
@@ -609,6 +626,8 @@ def propagate(
     if with_phi and P.shape[0] > N_NAV:
         with_phi = False  # the transition-matrix accumulator covers the 15 navigation states only
     f = np.empty(3)
+    fl = np.empty(3)
+    at_rest = False
     w = np.empty(3)
     A = np.empty((_N_MOVING, N_NAV))
     F = np.zeros((N_NAV, N_NAV))
@@ -626,6 +645,19 @@ def propagate(
             for i in range(3):
                 f[i] = f_imu[k, i] - b_a[i]
                 w[i] = w_imu[k, i] - b_g[i]
+            at_rest = k < rest.shape[0] and rest[k]
+            if at_rest:
+                if rest_R[3, 0] == 0.0:  # the span's first sample: hold its attitude
+                    for i in range(3):
+                        for j in range(3):
+                            rest_R[i, j] = R_nb[i, j]
+                    rest_R[3, 0] = 1.0
+                g = _gravity(pos[0], pos[2])[0]
+                for i in range(3):
+                    fl[i] = -g * rest_R[2, i]  # R^T (0, 0, -g)
+            else:
+                for i in range(3):
+                    fl[i] = f[i]
             if with_cov:
                 j = _segment_index(k, seg_i0, seg_i1)
                 q_w = 0.0
@@ -648,8 +680,8 @@ def propagate(
                         with_phi,
                         pos,
                         v_n,
-                        R_nb,
-                        f,
+                        rest_R[:3] if at_rest else R_nb,
+                        fl,
                         w_ie_sign,
                         qa_int,
                         qg_int,
@@ -677,8 +709,8 @@ def propagate(
             with_phi,
             pos,
             v_n,
-            R_nb,
-            f,
+            rest_R[:3] if at_rest else R_nb,
+            fl,
             w_ie_sign,
             qa_int,
             qg_int,
@@ -803,6 +835,8 @@ class Propagator:
         propagated with their correlation times and variances (default: none).
     q_turn : float
         Gyro PSD per unit rotation rate [rad^2/s per rad/s] (see :func:`propagate`; default 0).
+    rest : ndarray (N,) of bool, optional
+        The samples at rest (see :func:`propagate`; default: none).
     """
 
     def __init__(
@@ -820,8 +854,14 @@ class Propagator:
         w_ie_sign: float = 1.0,
         layout: StateLayout | None = None,
         q_turn: float = 0.0,
+        rest=None,
     ):
         self.t, self.f, self.w = (kernel_array(x, float) for x in (t, f_b, omega_ib_b))
+        #: The samples at rest, about whose specific force the error model is linearised (see
+        #: :func:`propagate`); empty: none.
+        self.rest = np.zeros(0, bool) if rest is None else np.ascontiguousarray(rest, bool)
+        #: The attitude held at rest and whether it is held (see :func:`propagate`).
+        self.rest_R = np.zeros((4, 3))
         self.q = tuple(np.array(q, float) for q in (q_a, q_g, q_ba, q_bg))
         self.q_turn = float(q_turn)
         self.w_turn = turn_rates(self.t, self.w) if self.q_turn > 0.0 else np.zeros((1, 3))
@@ -884,6 +924,8 @@ class Propagator:
             self.extra_var,
             self.q_turn,
             self.w_turn,
+            self.rest,
+            self.rest_R,
         )
 
 
