@@ -159,7 +159,10 @@ AID_WORDS = {
 #: ``[init]`` position key).
 KIND_WORDS = {"acc", "zupt", "zaru", "nhc", "odo"}
 #: Literal slices that index no state (expression: why).
-NOT_STATES = {"FIGURES[:6]": "the first six figure names of the study table"}
+NOT_STATES = {
+    "FIGURES[:6]": "the first six figure names of the study table",
+    "rest_R[:3]": "the attitude held at rest, rows 0-2 of its carrier (mechanization.propagate)",
+}
 #: Modules that define the layouts (and may index by number).
 LAYOUT_MODULES = {ESTIMATORS / "layout.py", PACKAGE / "core" / "states.py"}
 #: Stages whose arrays hold states (sources, checks and core index other things by number).
