@@ -85,11 +85,7 @@ gyros
    log-likelihood by more than :data:`OFFSET_MIN_GAIN` (on a simulated UGV, exact axes and
    fixes with 2.3 m of correlated error, a fitted 0.33 deg of yaw made the EKF's position NEES
    12) (on KITTI, the white fit made the constraint cost the smoother 0.2 m of PRMSE
-   with GNSS up; inflated, it gains 0.3 m), each update kind's share of the gain counted at the
-   worth of its independent updates (:func:`discounted_gain`: innovations correlated in time
-   say less than their number; on a simulated 0.4 m/s rover with exact axes the constraint's
-   whitened innovations had a lag-1 autocorrelation of 0.92, and their 7.1 of a gain of 8.9 for
-   a 6 deg yaw, at the search's bound, made its yaw error 6 deg and its attitude NEES 12).
+   with GNSS up; inflated, it gains 0.3 m).
 
 ``[imu] gyro_turn_error_ppm`` (the gyro scale-factor and cross-axis errors, covered by noise that
 grows with the angle turned) is not identified: the one-step likelihood cannot tell its size. On
@@ -162,8 +158,7 @@ AIDS_EVALUATIONS = 25
 #: ... and of the search of the vehicle's axes again under the final (inflated) sigmas.
 OFFSET_EVALUATIONS = 12
 #: Log-likelihood gain an angle of the vehicle's axes must bring to be kept: half the 1e-4
-#: quantile of chi-square with 1 dof (a likelihood-ratio test; zero is the model without it),
-#: the gain discounted for the innovations' correlation in time (:func:`discounted_gain`).
+#: quantile of chi-square with 1 dof (a likelihood-ratio test; zero is the model without it).
 OFFSET_MIN_GAIN = 7.57
 #: Smallest white part of a fix's 1-sigma the tuner accepts [m]: no receiver's fix output is
 #: better than that (below it, the filter only becomes numerically stiff).
@@ -895,9 +890,9 @@ def _aids_stage(
 def _significant_offsets(obj: "_Objective", theta: np.ndarray) -> tuple[np.ndarray, int, list]:
     """``theta`` with each additive parameter (the vehicle's axes) at zero unless it raises the
     log-likelihood by more than :data:`OFFSET_MIN_GAIN` (a likelihood-ratio test per angle, in
-    turn, on the :func:`discounted_gain`); the passes made and the indices set to zero."""
+    turn); the passes made and the indices set to zero."""
     theta = np.array(theta, float)
-    obj(theta)
+    best = -float(obj(theta))
     n, dropped = 1, []
     for i, p in enumerate(obj.free):
         if p not in ADDITIVE:
@@ -907,34 +902,10 @@ def _significant_offsets(obj: "_Objective", theta: np.ndarray) -> tuple[np.ndarr
         if trial[i] == theta[i]:
             continue
         n += 1
-        obj(trial)
-        kept, without = (obj.stats[tuple(np.round(x, 12))] for x in (theta, trial))
-        if discounted_gain(kept, without, obj.kinds) <= OFFSET_MIN_GAIN:
+        if best - (-float(obj(trial))) <= OFFSET_MIN_GAIN:
             theta, dropped = trial, dropped + [i]
+            best = -float(obj(theta))
     return theta, n, dropped
-
-
-def discounted_gain(alternative: dict, null: dict, kinds) -> float:
-    """The log-likelihood gain of the EKF pass of statistics ``alternative`` over that of
-    ``null`` (:func:`gnssacc.prepare.filter_pass.FilterPass`'s ``stats``), each update kind of
-    ``kinds`` counted at the worth of its independent updates.
-
-    A likelihood-ratio test takes the updates' innovations as independent, which the model under
-    test makes them when it is right. A parameter's score is linear in the innovations, so when
-    the whitened innovations of a kind are correlated in time (an error the model misses, slow
-    against the update interval) the gain they bring is worth ``n_eff / n`` of what it says, with
-    ``n_eff = n (1 - r) / (1 + r)`` for an AR(1) sequence of lag-1 autocorrelation ``r``
-    (``acf1_KIND`` of ``alternative``, the model kept when the test passes; a negative ``r`` taken
-    as 0, and ``n_eff`` at least 1): each kind's share of the gain is multiplied by that.
-    """
-    total = 0.0
-    for kind in kinds:
-        gain = float(alternative[f"loglik_{kind}"]) - float(null[f"loglik_{kind}"])
-        n, r = alternative.get(f"n_{kind}_updates", 0), alternative.get(f"acf1_{kind}")
-        if n > 1 and r is not None and np.isfinite(r) and r > 0.0:
-            gain *= max(n * (1.0 - r) / (1.0 + r), 1.0) / n
-        total += gain
-    return total
 
 
 def _inflate(raw: dict, obj: "_Objective", theta: np.ndarray) -> int:
