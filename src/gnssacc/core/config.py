@@ -67,7 +67,7 @@ DEFAULTS: dict[str, dict] = {
         # 1-sigma of each accelerometer cross-axis error [ppm] (datasheet: cross-axis
         # sensitivity, axis-to-axis misalignment). The estimators follow the accelerometers' axes,
         # which these errors turn against the IMU's case by a rotation no measurement separates
-        # from the attitude: 1/sqrt(2) of it per axis is added to the reported attitude sigma
+        # from the attitude: 1/sqrt(2) of it per axis is the floor of the reported attitude sigma
         # (gnssacc.prepare.attitude_axes; not on the [nhc] angles the tuner searched). "auto":
         # the gyro turn allowance's value (the same IMU's class); 0: a calibrated triad.
         "accel_misalignment_ppm": "auto",

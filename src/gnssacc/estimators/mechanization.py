@@ -647,7 +647,7 @@ def propagate(
                 w[i] = w_imu[k, i] - b_g[i]
             at_rest = k < rest.shape[0] and rest[k]
             if at_rest:
-                if rest_R[3, 0] == 0.0:  # the span's first sample: hold its attitude
+                if rest_R[3, 0] == 0.0:  # the pass's first sample at rest: hold its attitude
                     for i in range(3):
                         for j in range(3):
                             rest_R[i, j] = R_nb[i, j]
