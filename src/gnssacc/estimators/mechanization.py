@@ -64,6 +64,21 @@ def _gravity(lat, h):
     return g, dg_dh
 
 
+@njit(cache=True)
+def _geodetic(lat, h):
+    """``R_M, R_N`` [m], ``sin(lat)``, ``cos(lat)`` and normal gravity [m/s^2] at ``lat`` [rad],
+    ``h`` [m]: :func:`radii` and :func:`_gravity` with one sine, one cosine and one root (the
+    strapdown needs them at every IMU sample)."""
+    s = math.sin(lat)
+    s2 = s * s
+    w = 1.0 - _E2 * s2
+    r = math.sqrt(w)
+    g0 = _GE * (1.0 + _K * s2) / r
+    c1 = 2.0 / _A * (1.0 + _F + _M - 2.0 * _F * s2)
+    g = g0 * (1.0 - c1 * h + 3.0 * h * h / (_A * _A))
+    return _A * (1.0 - _E2) / (w * r), _A / r, s, math.cos(lat), g
+
+
 # Small products are written out: numba's `@` goes through BLAS (and needs scipy), which costs
 # more than the arithmetic for 3x3 matrices.
 @njit(cache=True)
@@ -82,10 +97,13 @@ def _mm(A, B):
 @njit(cache=True)
 def _exp_so3_into(p0, p1, p2, out):
     """``out = Exp([p x])`` by Rodrigues' formula, ``I + a K + b (p p^T - |p|^2 I)``, no
-    allocation."""
+    allocation. Below ``|p|`` = 1 mrad (a sample's turn at 100 Hz, the earth's and the transport
+    rate's) ``a = sin(th)/th`` and ``b = (1 - cos th)/th^2`` by their series to ``th^4``: the
+    next terms are below 1e-21, and no sine, cosine or root is taken."""
     th2 = p0 * p0 + p1 * p1 + p2 * p2
-    if th2 < 1e-16:
-        a, b = 1.0, 0.5
+    if th2 < 1e-6:
+        a = 1.0 - th2 / 6.0 * (1.0 - th2 / 20.0)
+        b = 0.5 - th2 / 24.0 * (1.0 - th2 / 30.0)
     else:
         th = np.sqrt(th2)
         a = np.sin(th) / th
@@ -112,11 +130,11 @@ def _mm3_into(A, B, out):
 def _strapdown(pos, v_n, R_nb, f_b, omega_ib_b, dt, w_ie_sign, work):
     """:func:`strapdown_step` with a (3, 3, 3) work array: no allocation in the per-sample path."""
     lat, h = pos[0], pos[2]
-    R_M, R_N = radii(lat)
+    R_M, R_N, s_lat, c_lat, g = _geodetic(lat, h)
     W = _W * w_ie_sign
-    wie0, wie2 = W * np.cos(lat), -W * np.sin(lat)
-    wen0, wen1, wen2 = v_n[1] / (R_N + h), -v_n[0] / (R_M + h), -v_n[1] * np.tan(lat) / (R_N + h)
-    g, _ = _gravity(lat, h)
+    wie0, wie2 = W * c_lat, -W * s_lat
+    wen0, wen1 = v_n[1] / (R_N + h), -v_n[0] / (R_M + h)
+    wen2 = -v_n[1] * (s_lat / c_lat) / (R_N + h)
     E_n, E_b, T = work[0], work[1], work[2]
     _exp_so3_into(-(wie0 + wen0) * dt, -wen1 * dt, -(wie2 + wen2) * dt, E_n)
     _exp_so3_into(omega_ib_b[0] * dt, omega_ib_b[1] * dt, omega_ib_b[2] * dt, E_b)
@@ -145,7 +163,7 @@ def _strapdown(pos, v_n, R_nb, f_b, omega_ib_b, dt, w_ie_sign, work):
     nE = vE + (f1 - (c2 * vN - c0 * vD)) * dt
     nD = vD + (f2 - (c0 * vE - c1 * vN) + g) * dt
     pos[0] += 0.5 * (vN + nN) / (R_M + h) * dt
-    pos[1] += 0.5 * (vE + nE) / ((R_N + h) * np.cos(pos[0])) * dt
+    pos[1] += 0.5 * (vE + nE) / ((R_N + h) * math.cos(pos[0])) * dt
     pos[2] -= 0.5 * (vD + nD) * dt
     v_n[0], v_n[1], v_n[2] = nN, nE, nD
     for i in range(3):
