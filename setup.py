@@ -46,7 +46,11 @@ class BuildPyWithKernels(build_py):
         super().run()
         kernels = Path(self.build_lib) / "gnssacc" / "estimators"
         for cache in (kernels / "__pycache__", kernels / "aids" / "__pycache__"):
-            for old in [*cache.glob("*.nbi"), *cache.glob("*.nbc")]:  # a previous build's
+            for old in [
+                *cache.glob("*.nbi"),
+                *cache.glob("*.nbc"),
+                *cache.glob("*.sha1"),
+            ]:  # a previous build's
                 old.unlink()
         if (
             getattr(self, "editable_mode", False)

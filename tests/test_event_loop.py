@@ -1,10 +1,13 @@
 """The EKF's compiled event loop against the Python loop it stands in for: a simulated pass run
 both ways gives the same statistics and the same trajectory (a tuner's pass: no outputs, the
-covariance every tenth sample; a method's pass: outputs and their covariances), the stationary
-updates' epochs in the Python loop between the compiled stretches, with the compiled events
-counted so that the comparison cannot pass by running the Python loop twice."""
+covariance every tenth sample; a method's pass: outputs and their covariances), with the fixes,
+the Doppler velocities, the constraint and the stationary updates in the compiled loop, and the
+events each loop ran counted so that the comparison cannot pass by running the Python loop
+twice."""
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -16,13 +19,14 @@ from gnssacc.sources.sim import simulate
 
 #: Figures of a pass compared (the NIS and log-likelihood per kind, the decisions' counts).
 KEYS = ("loglik", "loglik_pos", "loglik_nhc", "nis_pos_mean", "nis_nhc_mean", "acf1_pos")
+KEYS += ("loglik_vel", "nis_vel_mean", "acf1_vel", "loglik_zupt", "loglik_zaru", "nis_zaru_mean")
 
 
 @pytest.fixture(scope="module")
 def prepared():
-    """A skid-steer vehicle with stops and turns on the spot, fixes with a lever arm and the
-    Gauss-Markov fix error, the constraint with a reference point off the IMU and a mounting
-    rotation; prepared without tuning."""
+    """A skid-steer vehicle with stops and turns on the spot, fixes and Doppler velocities with a
+    lever arm and the Gauss-Markov fix error, the constraint with a reference point off the IMU
+    and a mounting rotation; prepared without tuning."""
     cfg = load_config(
         overrides={
             "gnss": {"lever_arm_b_m": [0.4, -0.2, -1.1], "gm_sigma_m": 0.5, "gm_tau_s": 60.0},
@@ -33,25 +37,33 @@ def prepared():
             },
         }
     )
-    run = simulate("ugv", 180.0, imu_grade="industrial", seed=4, lever_arm_b=(0.4, -0.2, -1.1))
+    run = simulate(
+        "ugv", 180.0, imu_grade="industrial", seed=4, lever_arm_b=(0.4, -0.2, -1.1), velocity=True
+    )
     return pipeline.prepare(run, cfg, tune="none"), cfg
 
 
 def _pass(prepared, compiled: bool, monkeypatch, **options):
-    """The pass with the compiled loop or the Python loop; the events the compiled one ran."""
+    """The pass with the compiled loop or the Python loop; the events the compiled one ran, and
+    the update events (not outputs, not past the pass's end) the Python loop ran."""
     prep, cfg = prepared
-    ran = []
-    run_stretch = event_loop.run_stretch
+    ran, in_python = [], []
+    run_stretch, step = event_loop.run_stretch, ekf._EventLoop.step
 
     def counted(e, *args):
         out = run_stretch(e, *args)
         ran.append(out[0] - e)
         return out
 
+    def counted_step(loop, e):
+        in_python.append(loop.ev_src[e] < len(loop.aids) and loop.ev_t[e] <= loop.t_end)
+        return step(loop, e)
+
     monkeypatch.setattr(event_loop, "run_stretch", counted)
+    monkeypatch.setattr(ekf._EventLoop, "step", counted_step)
     monkeypatch.setattr(ekf, "COMPILED_LOOP", compiled)
     sol = ekf.estimate(prep, cfg, "ekf", **options)
-    return sol, sum(ran)
+    return sol, sum(ran), sum(in_python)
 
 
 def _assert_same(a, b) -> None:
@@ -66,15 +78,16 @@ def _assert_same(a, b) -> None:
 
 
 def test_tuner_pass_compiled_equals_python_loop(prepared, monkeypatch):
-    """No outputs, the covariance every tenth sample: the fixes and the constraint's epochs run in
-    the compiled loop, the stationary updates' in Python, with the same figures."""
+    """No outputs, the covariance every tenth sample: every update event runs in the compiled loop
+    (none in Python), with the same figures as the Python loop."""
     opts = {"output_times": np.zeros(0), "cov_every": 10}
-    fast, n_compiled = _pass(prepared, True, monkeypatch, **opts)
-    ref, n_none = _pass(prepared, False, monkeypatch, **opts)
-    assert n_none == 0 and n_compiled > 300
+    fast, n_compiled, n_python = _pass(prepared, True, monkeypatch, **opts)
+    ref, n_none, n_ref = _pass(prepared, False, monkeypatch, **opts)
+    assert n_none == 0 and n_python == 0 and n_compiled == n_ref > 500
     assert fast.stats["n_pos_updates"] > 150 and fast.stats["n_nhc_updates"] > 50
     assert fast.stats["n_nhc_skipped_turn"] > 0 and fast.stats["n_nhc_skipped_rest"] > 0
-    assert fast.stats["n_zupt_updates"] > 0  # the Python loop's epochs between the stretches
+    assert fast.stats["n_vel_updates"] > 150 and fast.stats["n_zupt_updates"] > 10
+    assert fast.stats["n_zaru_updates"] == fast.stats["n_zupt_updates"]
     _assert_same(fast, ref)
 
 
@@ -83,12 +96,33 @@ def test_method_pass_with_outputs_compiled_equals_python_loop(prepared, monkeypa
     before the end: the same trajectory, covariances and figures both ways."""
     prep = prepared[0]
     opts = {"t_stop": float(prep.run.t_end) - 20.0, "record_innovations": True, "store_P": True}
-    fast, n_compiled = _pass(prepared, True, monkeypatch, **opts)
-    ref, _ = _pass(prepared, False, monkeypatch, **opts)
-    assert n_compiled > 400 and len(fast.t) == len(ref.t) > 100
-    assert fast.stats["n_zupt_updates"] > 0  # the Python loop's epochs between the stretches
-    assert np.array_equal(fast.stats["nis_pos"], ref.stats["nis_pos"])
+    fast, n_compiled, n_python = _pass(prepared, True, monkeypatch, **opts)
+    ref, _, _ = _pass(prepared, False, monkeypatch, **opts)
+    assert n_compiled > 600 and n_python == 0 and len(fast.t) == len(ref.t) > 100
+    assert fast.stats["n_vel_updates"] > 150 and fast.stats["n_zupt_updates"] > 10
+    for kind in ("pos", "vel", "zupt", "zaru", "nhc"):  # every update, to the last bit
+        assert np.array_equal(fast.stats[f"nis_{kind}"], ref.stats[f"nis_{kind}"]), kind
     assert np.allclose(fast.P, ref.P, rtol=1e-12, atol=1e-18)
+    _assert_same(fast, ref)
+
+
+def test_velocities_whose_measured_axes_change_run_in_python_with_the_same_figures(monkeypatch):
+    """Doppler velocities with the vertical missing at every other epoch: the velocity's step is
+    the Python loop's (its degrees of freedom change), the pass runs both ways to the same
+    figures, and its innovations' lag-1 sums pair each update with the last of the same axes
+    (this crashed)."""
+    run = simulate("car", 60.0, imu_grade="industrial", seed=1, velocity=True)
+    v = run.gnss_vel.v_ned.copy()
+    v[::2, 2] = np.nan
+    run = replace(run, gnss_vel=replace(run.gnss_vel, v_ned=v))
+    cfg = load_config()
+    prep = pipeline.prepare(run, cfg, tune="none")
+    opts = {"output_times": np.zeros(0), "cov_every": 10}
+    fast, n_compiled, n_python = _pass((prep, cfg), True, monkeypatch, **opts)
+    ref, _, _ = _pass((prep, cfg), False, monkeypatch, **opts)
+    n_vel = fast.stats["n_vel_updates"]
+    assert n_compiled > 0 and n_python == n_vel > 50
+    assert ref.stats["n_vel_updates"] == n_vel and fast.stats["acf1_vel"] is not None
     _assert_same(fast, ref)
 
 

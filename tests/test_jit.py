@@ -238,12 +238,12 @@ from gnssacc import pipeline
 from gnssacc.core.config import load_config
 from gnssacc.estimators import ekf, event_loop, kalman, kernels, mechanization, small_linalg
 from gnssacc.estimators import window_marginals
-from gnssacc.estimators.aids import gnss_position, nhc, vehicle
+from gnssacc.estimators.aids import gnss_position, gnss_velocity, nhc, vehicle, zupt
 from gnssacc.sources.sim import simulate
 
 MODULES = (mechanization, kalman, window_marginals, small_linalg, gnss_position, vehicle, nhc,
-           event_loop)
-ekf.COMPILED_LOOP = True  # the passes run their fixes and constraints in the compiled loop
+           event_loop, gnss_velocity, zupt)
+ekf.COMPILED_LOOP = True  # the passes run their fixes, velocities, constraints, stops compiled
 
 def signatures():
     return {(m.__name__, name): set(d.signatures) for m in MODULES
@@ -260,6 +260,12 @@ run = simulate("car", 30.0, seed=3, odom_hz=10.0, gnss_rate_hz=5.0)
 _, sols, _ = pipeline.compare(run, load_config(None, overrides={"gnss": {"gm_sigma_m": 0.5, "gm_tau_s": 60.0}}),
                               ["ekf", "smoother", "smoother-accw", "ekf-gm", "smoother-gm"], tune="none")
 assert sols["smoother-gm"].stats["n_odo_factors"] > 0 and sols["smoother"].stats["n_gps_folded"] > 0
+# Doppler velocities and stops (the stationary updates), in both loops (the tuner's passes).
+run = simulate("ugv", 90.0, seed=3, velocity=True)
+_, sols, _ = pipeline.compare(run, load_config(), ["ekf"], tune="none")
+assert sols["ekf"].stats["n_vel_updates"] > 0 and sols["ekf"].stats["n_zupt_updates"] > 0
+ekf.COMPILED_LOOP = False
+pipeline.compare(run, load_config(), ["ekf"], tune="none")
 new = {k: v - warmed.get(k, set()) for k, v in signatures().items() if v - warmed.get(k, set())}
 print(sorted(k[1] for k in new))
 """
@@ -381,3 +387,50 @@ def test_a_child_that_fails_leaves_the_ekf_update_to_this_process(monkeypatch):
     child.ends.set()
     waiting.join(2.0)
     assert not waiting.is_alive() and here == ["update"]  # only what the EKF waits for
+
+
+def test_an_edit_of_any_kernel_source_drops_every_cached_kernel(tmp_path, monkeypatch):
+    """numba validates a cached kernel by its own module's source alone, yet stores with it the
+    code of the kernels it calls from other modules (the event loop holds the propagation): an
+    edit of ``mechanization.py`` left ``event_loop.run_stretch``'s old copy loaded, and the
+    compiled loop then differed from the Python loop (found on this repository). Each cache folder
+    is stamped with the digest of every kernel source; kernels beside another stamp, or none, are
+    deleted (compiled again on first use), a touched source keeps them."""
+    from gnssacc.core import jit
+
+    pkg = tmp_path / "gnssacc"
+    est, aids, core = pkg / "estimators", pkg / "estimators" / "aids", pkg / "core"
+    for folder in (aids, core):
+        folder.mkdir(parents=True)
+    for source in (est / "event_loop.py", est / "mechanization.py", aids / "zupt.py"):
+        source.write_text("def kernel():\n    return 1\n")
+    (core / "earth.py").write_text("A = 6378137.0\n")
+    monkeypatch.setattr(jit, "KERNEL_DIR", est)
+    monkeypatch.setattr(jit, "PACKAGE_DIR", pkg)
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    cached = [
+        est / "__pycache__" / "event_loop.run_stretch-1.py311.nbi",
+        est / "__pycache__" / "event_loop.run_stretch-1.py311.1.nbc",
+        aids / "__pycache__" / "zupt.zero_rate_model-1.py311.nbi",
+    ]
+
+    def compiled() -> None:
+        for path in cached:
+            path.parent.mkdir(exist_ok=True)
+            path.write_bytes(b"kernel")
+
+    compiled()
+    assert jit.drop_stale_kernels() == 3  # no stamp: compiled from sources nobody knows
+    compiled()
+    assert jit.drop_stale_kernels() == 0 and all(p.exists() for p in cached)
+    source = est / "mechanization.py"
+    st = source.stat()
+    os.utime(source, ns=(st.st_atime_ns, st.st_mtime_ns + 10**10))  # touched, the same content
+    assert jit.drop_stale_kernels() == 0 and all(p.exists() for p in cached)
+    source.write_text("def kernel():\n    return 2\n")  # a callee's module, not the kernels'
+    assert jit.drop_stale_kernels() == 3 and not any(p.exists() for p in cached)
+    compiled()
+    (core / "earth.py").write_text("A = 6378137.5\n")  # a constant the kernels take
+    assert jit.drop_stale_kernels() == 3
+    stamps = [p.read_text().strip() for p in pkg.rglob(jit.STAMP)]
+    assert len(stamps) == 2 and stamps[0] == stamps[1] == jit.kernels_digest()

@@ -53,15 +53,76 @@ def user_cache_dir() -> Path:
 
 
 def configure_cache() -> None:
-    """Set ``NUMBA_CACHE_DIR`` to :func:`user_cache_dir` when the package folder is read-only.
+    """Set ``NUMBA_CACHE_DIR`` to :func:`user_cache_dir` when the package folder is read-only, then
+    drop kernels compiled from other sources (:func:`drop_stale_kernels`).
 
-    Must run before numba is imported (numba reads the variable once); does nothing when the
-    variable is already set or numba already imported (numba then falls back to its own
-    user-wide cache folder).
+    Must run before numba is imported (numba reads the variable once); the variable is left alone
+    when it is already set or numba already imported (numba then falls back to its own user-wide
+    cache folder).
     """
-    if os.environ.get(ENV) or "numba" in sys.modules or _writable(KERNEL_DIR / "__pycache__"):
-        return
-    os.environ[ENV] = str(user_cache_dir())
+    if not (os.environ.get(ENV) or "numba" in sys.modules or _writable(KERNEL_DIR / "__pycache__")):
+        os.environ[ENV] = str(user_cache_dir())
+    if "numba" not in sys.modules:
+        drop_stale_kernels()
+
+
+#: The file in each kernel cache folder naming the sources its kernels were compiled from.
+STAMP = "gnssacc-kernels.sha1"
+
+
+def kernel_sources() -> list[Path]:
+    """The sources numba compiles into the kernels: the estimators' modules (with the aids') and
+    the earth model whose constants they take."""
+    found = [*KERNEL_DIR.glob("*.py"), *(KERNEL_DIR / "aids").glob("*.py")]
+    return sorted(found) + [PACKAGE_DIR / "core" / "earth.py"]
+
+
+def kernels_digest() -> str:
+    """SHA-1 of :func:`kernel_sources`' names and contents."""
+    h = hashlib.sha1()
+    for path in kernel_sources():
+        h.update(path.name.encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+def drop_stale_kernels() -> int:
+    """Delete the cached kernels of sources other than these; the files deleted.
+
+    numba stores a kernel with the code of the kernels it calls, but validates the cache by the
+    kernel's own module only: after an edit of ``mechanization.py``, the event loop of
+    ``event_loop.py`` would load its old copy of the propagation (a source checkout, an editable
+    install after ``git pull``). So each cache folder holds :data:`STAMP`, the
+    :func:`kernels_digest` its kernels were compiled from; when it differs (or is missing beside
+    cached kernels), the folder's kernels are deleted and compiled again on first use. ~2 ms.
+    """
+    try:
+        digest = kernels_digest()
+    except OSError:
+        return 0
+    dropped = 0
+    for folder in {
+        kernel_cache_folder(KERNEL_DIR / "kernels.py"),
+        kernel_cache_folder(KERNEL_DIR / "aids" / "base.py"),
+    }:
+        stamp = folder / STAMP
+        try:
+            if stamp.read_text().strip() == digest:
+                continue
+        except OSError:
+            pass
+        for old in [*folder.glob("*.nbi"), *folder.glob("*.nbc")]:
+            try:
+                old.unlink()
+                dropped += 1
+            except OSError:
+                pass
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            stamp.write_text(digest + "\n")
+        except OSError:
+            pass
+    return dropped
 
 
 def cache_folder() -> Path:

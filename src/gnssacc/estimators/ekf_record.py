@@ -89,7 +89,9 @@ class _KindTally:
         self.n = self.rejected = self.dof = self.beyond = 0
         self.nis_sum = self.loglik = 0.0
         self.lag = [0.0, 0.0]  # sum w_k w_(k-1), sum w_k^2
-        self.prev: np.ndarray | None = None
+        # The last whitened innovation per number of axes: a velocity's measured axes may change
+        # from one update to the next, and the lag-1 sums pair updates of the same axes.
+        self.prev: dict[int, np.ndarray] = {}
         self.series: tuple[list, list, list] = ([], [], [])  # t, NIS per dof, log-likelihood
 
 
@@ -119,12 +121,12 @@ class Tally:
         if not used:
             k.rejected += 1
             return
-        prev = k.prev
+        prev = k.prev.get(len(wz))
         if prev is not None:
             lag = k.lag
             lag[0] += float((wz * prev).sum())  # as add_updates sums (a BLAS dot may fuse)
             lag[1] += float((wz * wz).sum())
-        k.prev = wz
+        k.prev[len(wz)] = wz
         k.n += 1
         k.nis_sum += nis
         k.dof += dof
@@ -146,11 +148,12 @@ class Tally:
         if nis.size == 0:
             return
         loglik = -0.5 * (nis + logdet + dof * _LOG_2PI)
-        w = wz if k.prev is None else np.vstack([k.prev[None, :], wz])
+        prev = k.prev.get(wz.shape[1])
+        w = wz if prev is None else np.vstack([prev[None, :], wz])
         if len(w) > 1:
             k.lag[0] = _added(k.lag[0], (w[1:] * w[:-1]).sum(axis=1))
             k.lag[1] = _added(k.lag[1], (w[1:] * w[1:]).sum(axis=1))
-        k.prev = wz[-1]
+        k.prev[wz.shape[1]] = wz[-1]
         k.n += nis.size
         k.nis_sum = _added(k.nis_sum, nis)
         k.dof += dof * nis.size

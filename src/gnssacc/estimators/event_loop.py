@@ -3,9 +3,12 @@
 An EKF pass without an observer (the tuner's likelihood passes, a method's pass) spends ~20 us
 of Python per epoch around numba's propagation, and a numba call from Python costs ~4 us by
 itself. Aids with a compiled step say so (:meth:`gnssacc.estimators.aids.EkfAid.compiled`): the
-GNSS position fix (:func:`gnssacc.estimators.aids.gnss_position.position_model`) and the
+GNSS position fix (:func:`gnssacc.estimators.aids.gnss_position.position_model`), the
 non-holonomic constraint (:func:`gnssacc.estimators.aids.vehicle.vehicle_model`,
-:func:`gnssacc.estimators.aids.nhc.decide_compiled`). :func:`run_stretch` runs the events of a
+:func:`gnssacc.estimators.aids.nhc.decide_compiled`), the GNSS velocity
+(:func:`gnssacc.estimators.aids.gnss_velocity.velocity_model`, when its measured axes are the same
+at every epoch) and the stationary updates (zero velocity, then zero rate:
+:func:`gnssacc.estimators.aids.zupt.zero_rate_model`). :func:`run_stretch` runs the events of a
 pass from a given one on in one call: the propagation to each
 (:func:`gnssacc.estimators.mechanization.propagate`, as
 :meth:`gnssacc.estimators.mechanization.Propagator.advance` calls it), the Gauss-Markov states'
@@ -36,20 +39,26 @@ from numba import njit
 
 from ..core.earth import OMEGA_IE
 from .aids.gnss_position import position_model
+from .aids.gnss_velocity import velocity_model
 from .aids.nhc import REST, SKIPPED, TURN, decide_compiled
 from .aids.vehicle import vehicle_model
+from .aids.zupt import zero_rate_model
 from .ekf_record import Recorder, Tally, innovation_loglik
-from .layout import GNSS_ERROR, I_ATT, N_NAV
+from .layout import GNSS_ERROR, I_ATT, I_VEL, N_NAV
 from .mechanization import Propagator, propagate, update_state
 from .state import FilterState
 
 #: Event codes: the Python loop's step (an aid without a compiled step), the fix, the
-#: non-holonomic constraint, an output.
-PYTHON, POSITION, NHC, OUTPUT = 0, 1, 2, 3
+#: non-holonomic constraint, an output, the GNSS velocity, a stationary epoch.
+PYTHON, POSITION, NHC, OUTPUT, VELOCITY, STATIONARY = 0, 1, 2, 3, 4, 5
+#: The updates' codes (a row of ``out``): the events' that make one update, and a stationary
+#: epoch's two.
+ZUPT, ZARU = 5, 6
 #: The compiled steps by the name an aid gives (:meth:`gnssacc.estimators.aids.EkfAid.compiled`),
-#: with their update kind and its degrees of freedom.
-STEPS = {"position": (POSITION, "pos", 3), "nhc": (NHC, "nhc", 2)}
-_KINDS = {code: (kind, dof) for code, kind, dof in STEPS.values()}
+#: with their event code.
+STEPS = {"position": POSITION, "nhc": NHC, "velocity": VELOCITY, "stationary": STATIONARY}
+#: The updates' kinds and degrees of freedom by code (the velocity's: its measured axes).
+_KINDS = {POSITION: ("pos", 3), NHC: ("nhc", 2), ZUPT: ("zupt", 3), ZARU: ("zaru", 3)}
 #: Updates of a compiled stretch from which the tally takes them per kind at once (fewer: one by
 #: one, cheaper than the arrays' set-up).
 BATCH_FROM = 8
@@ -99,6 +108,39 @@ def _position(fix, st, j, t_e, out, n):
 
 
 @njit(cache=True)
+def _earth_rate(lat):
+    """:func:`gnssacc.core.earth.earth_rate_n` [rad/s, NED] at ``lat`` [rad], as numpy makes it."""
+    w_ie = np.empty(3)
+    w_ie[0], w_ie[1], w_ie[2] = OMEGA_IE * np.cos(lat), OMEGA_IE * 0.0, OMEGA_IE * -np.sin(lat)
+    return w_ie
+
+
+@njit(cache=True)
+def _velocity(vel, st, j, t_e, out, n):
+    """The velocity ``j`` (:meth:`gnssacc.estimators.aids.gnss_velocity.EkfVelocity.models`)."""
+    v, omega_b, R, rows, lever, gate = vel
+    pos, v_n, R_nb, b_g, P = st[0], st[1], st[2], st[4], st[5]
+    w_ie = _earth_rate(pos[0])
+    dz, H = velocity_model(R_nb, v_n, b_g, omega_b[j], lever, w_ie, v[j], rows, P.shape[0])
+    _update(st, H, R[j], dz, gate, out, n, VELOCITY, t_e)
+
+
+@njit(cache=True)
+def _stationary(zp, st, j, t_e, out, n):
+    """The stationary epoch ``j``'s zero velocity, then its zero rate at the state the first left
+    (:meth:`gnssacc.estimators.aids.zupt.EkfZupt.updates`)."""
+    omega_mean_b, R_rate, R_zero, gate = zp
+    v_n, R_nb, b_g, P = st[1], st[2], st[4], st[5]
+    H = np.zeros((3, P.shape[0]))
+    for r in range(3):
+        H[r, I_VEL + r] = 1.0
+    _update(st, H, R_zero, v_n.copy(), gate, out, n, ZUPT, t_e)
+    w_ie = _earth_rate(st[0][0])
+    dz, H = zero_rate_model(R_nb, b_g, omega_mean_b[j], w_ie, P.shape[0])
+    _update(st, H, R_rate[j], dz, gate, out, n + 1, ZARU, t_e)
+
+
+@njit(cache=True)
 def _nhc(nhc, st, j, t_e, out, n, skipped):
     """The constraint's epoch ``j`` (:meth:`gnssacc.estimators.aids.nhc.EkfNhc.updates`); whether
     it was applied (else counted in ``skipped``: at rest, turning)."""
@@ -107,12 +149,7 @@ def _nhc(nhc, st, j, t_e, out, n, skipped):
     if rest[j]:
         skipped[0] += 1
         return False
-    w_ie = np.empty(3)  # gnssacc.core.earth.earth_rate_n
-    w_ie[0], w_ie[1], w_ie[2] = (
-        OMEGA_IE * np.cos(pos[0]),
-        OMEGA_IE * 0.0,
-        OMEGA_IE * -np.sin(pos[0]),
-    )
+    w_ie = _earth_rate(pos[0])
     v_b, H = vehicle_model(R_nb, v_n, b_g, omega_b[j], lever, w_ie, R_vb, vb_rows, P.shape[0])
     yaw_rate = (
         omega_b[j, 2]
@@ -159,7 +196,7 @@ def _record(rec, i, t_e, st):
 
 
 @njit(cache=True)
-def run_stretch(e, ev, t0, t_end, k, t_cur, prop, st, fix, nhc, out, rec, rows):
+def run_stretch(e, ev, t0, t_end, k, t_cur, prop, st, steps, out, rec, rows):
     """Run the events from ``e`` on until one whose code is :data:`PYTHON` or whose time is past
     ``t_end`` [s] (events before ``t0``, the filter's start, are passed over).
 
@@ -169,7 +206,7 @@ def run_stretch(e, ev, t0, t_end, k, t_cur, prop, st, fix, nhc, out, rec, rows):
         The first event.
     ev : tuple of ndarray (E,)
         The pass's events: times [s], codes (:data:`PYTHON`, :data:`POSITION`, :data:`NHC`,
-        :data:`OUTPUT`) and the epoch index in their aid.
+        :data:`OUTPUT`, :data:`VELOCITY`, :data:`STATIONARY`) and the epoch index in their aid.
     t0, t_end : float
         The filter's start and the pass's end [s].
     k, t_cur : int, float
@@ -179,11 +216,13 @@ def run_stretch(e, ev, t0, t_end, k, t_cur, prop, st, fix, nhc, out, rec, rows):
     st : tuple
         ``(pos, v_n, R_nb, b_a, b_g, P, x_e, consider)``, updated in place
         (:class:`gnssacc.estimators.state.FilterState`).
-    fix, nhc : tuple
-        The compiled aids' arrays (:meth:`gnssacc.estimators.aids.EkfAid.compiled`; with the
-        index of the Gauss-Markov fix error's first state, -1: none, after the fix's).
+    steps : tuple
+        The compiled aids' arrays ``(fix, nhc, velocity, stationary)``
+        (:meth:`gnssacc.estimators.aids.EkfAid.compiled`; the fix's with the index of the
+        Gauss-Markov fix error's first state, -1: none, after its own).
     out : tuple
-        ``(code, t, nis, logdet, used, wz)`` of the updates, one row each.
+        ``(code, t, nis, logdet, used, wz)`` of the updates, one row each (codes
+        :data:`POSITION`, :data:`NHC`, :data:`VELOCITY`, :data:`ZUPT`, :data:`ZARU`).
     rec : tuple
         The output rows' arrays (:class:`gnssacc.estimators.ekf_record.Recorder`'s ``t, pos,
         v_n, R_nb, b_a, b_g, var, P_att, P``; ``P`` empty when not kept).
@@ -197,6 +236,7 @@ def run_stretch(e, ev, t0, t_end, k, t_cur, prop, st, fix, nhc, out, rec, rows):
         The event it stopped at (``E``: the end), and the state's sample and time.
     """
     ev_t, ev_code, ev_idx = ev
+    fix, nhc, vel, zp = steps
     while e < ev_t.shape[0]:
         t_e, code = ev_t[e], ev_code[e]
         if code == PYTHON or t_e > t_end:
@@ -210,15 +250,23 @@ def run_stretch(e, ev, t0, t_end, k, t_cur, prop, st, fix, nhc, out, rec, rows):
             elif code == OUTPUT:
                 _record(rec, rows[1], t_e, st)
                 rows[1] += 1
+            elif code == VELOCITY:
+                _velocity(vel, st, ev_idx[e], t_e, out, rows[0])
+                rows[0] += 1
+            elif code == STATIONARY:
+                _stationary(zp, st, ev_idx[e], t_e, out, rows[0])
+                rows[0] += 2
             elif _nhc(nhc, st, ev_idx[e], t_e, out, rows[0], rows[2:]):
                 rows[0] += 1
         e += 1
     return e, k, t_cur
 
 
-#: The arrays of a pass without a fix or without the constraint (the kernel's types all the same).
+#: The arrays of a pass without one of the compiled aids (the kernel's types all the same).
 _NO_FIX = (np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, 3, 3)), np.zeros(3), 0.0, -1)
 _NO_NHC = (np.zeros((0, 3)), np.zeros(0, bool), np.zeros(3), np.eye(3), True, 0.0, 0.0, np.eye(2))
+_NO_VEL = (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.arange(3), np.zeros(3), 0.0)
+_NO_ZUPT = (np.zeros((0, 3)), np.zeros((0, 3, 3)), np.eye(3), 0.0)
 
 
 def propagation(prop: Propagator) -> tuple:
@@ -237,13 +285,14 @@ class CompiledLoop:
     hands their updates to the pass's tally, their outputs to its recorder and their counts to
     its ``stats``."""
 
-    def __init__(self, s: FilterState, prop: Propagator, events: tuple, aids: tuple, record):
+    def __init__(self, s: FilterState, prop: Propagator, events: tuple, steps: tuple, record):
         self.ev = events
-        self.fix, self.nhc = aids
+        self.steps = steps  # (fix, nhc, velocity, stationary)
+        self.kinds = {**_KINDS, VELOCITY: ("vel", len(steps[2][3]))}
         self.tally, self.stats, self.rec = record
         self.prop = propagation(prop)
         self.st = (s.pos, s.v_n, s.R_nb, s.b_a, s.b_g, s.P, s.x_e, int(s.consider))
-        m = len(self.ev[0])
+        m = len(self.ev[0]) + int(np.count_nonzero(self.ev[1] == STATIONARY))  # two updates each
         self.out = (
             np.zeros(m, np.int64), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m, bool),
             np.zeros((m, 3)),
@@ -258,21 +307,27 @@ class CompiledLoop:
         """The compiled loop of the pass ``setup`` (:class:`gnssacc.estimators.ekf.EkfSetup`) over
         its events ``ev`` (times [s], sources: an index into ``setup.aids``, or an output; epoch
         indices), or ``None`` when none of its aids has a compiled step."""
-        codes, fix, nhc = [], _NO_FIX, _NO_NHC
+        codes, steps = (
+            [],
+            {POSITION: _NO_FIX, NHC: _NO_NHC, VELOCITY: _NO_VEL, STATIONARY: _NO_ZUPT},
+        )
         for aid in setup.aids:
             step = aid.compiled()
-            code = STEPS[step[0]][0] if step is not None and step[0] in STEPS else PYTHON
+            code = STEPS.get(step[0], PYTHON) if step is not None else PYTHON
             codes.append(code)
             if code == POSITION:
-                fix = (*step[1], int(setup.state.layout.offset(GNSS_ERROR)))
-            elif code == NHC:
-                nhc = step[1]
+                steps[code] = (*step[1], int(setup.state.layout.offset(GNSS_ERROR)))
+            elif code != PYTHON:
+                steps[code] = step[1]
         if all(c == PYTHON for c in codes):
             return None
         ev_t, ev_src, ev_idx = ev
         ev_code = np.array(codes + [OUTPUT], np.int64)[np.asarray(ev_src, np.int64)]
         events = (np.ascontiguousarray(ev_t, float), ev_code, np.asarray(ev_idx, np.int64))
-        return cls(setup.state, setup.prop, events, (fix, nhc), (tally, stats, rec))
+        order = (POSITION, NHC, VELOCITY, STATIONARY)
+        return cls(
+            setup.state, setup.prop, events, tuple(steps[c] for c in order), (tally, stats, rec)
+        )
 
     def run(self, e: int, k: int, t_cur: float, t0: float, t_end: float) -> tuple[int, int, float]:
         """Run the events from ``e`` on (:func:`run_stretch`); the event it stopped at (the
@@ -280,7 +335,7 @@ class CompiledLoop:
         rows = self.rows
         n0, rows[1] = int(rows[0]), self.rec.n  # the Python loop may have recorded outputs
         e, k, t_cur = run_stretch(
-            e, self.ev, t0, t_end, k, t_cur, self.prop, self.st, self.fix, self.nhc, self.out,
+            e, self.ev, t0, t_end, k, t_cur, self.prop, self.st, self.steps, self.out,
             self.rec_arrays, rows,
         )  # fmt: skip
         n, self.rec.n, rest, turn = rows.tolist()
@@ -299,7 +354,7 @@ class CompiledLoop:
         code, t, nis, logdet, used, wz = (x[n0:n] for x in self.out)
         if n - n0 >= BATCH_FROM:
             for c in np.unique(code).tolist():
-                kind, dof = _KINDS[c]
+                kind, dof = self.kinds[c]
                 mine = code == c
                 self.tally.add_updates(
                     kind, dof, t[mine], nis[mine], logdet[mine], used[mine], wz[mine, :dof]
@@ -307,6 +362,6 @@ class CompiledLoop:
             return
         rows = zip(code.tolist(), t.tolist(), nis.tolist(), logdet.tolist(), used.tolist(), wz)
         for c, t_u, nis_u, logdet_u, used_u, wz_u in rows:
-            kind, dof = _KINDS[c]
+            kind, dof = self.kinds[c]
             loglik = innovation_loglik(nis_u, logdet_u, dof)
             self.tally.add_update(t_u, kind, dof, nis_u, loglik, used_u, wz_u[:dof])

@@ -38,6 +38,8 @@ GROUPS = {
         ("mechanization.py", ("apply_correction", "update_state")),
         ("aids/gnss_position.py", ("position_model",)),
         ("aids/vehicle.py", ("vehicle_model",)),
+        ("aids/gnss_velocity.py", ("velocity_model",)),
+        ("aids/zupt.py", ("zero_rate_model",)),
     ),
     "loop": (("event_loop.py", ("run_stretch",)),),
     "window": (("mechanization.py", ("kernel_force_integrals",)),),
@@ -122,7 +124,9 @@ def _warm_up_models() -> None:
     import numpy as np
 
     from .aids.gnss_position import position_model
+    from .aids.gnss_velocity import velocity_model
     from .aids.vehicle import vehicle_model
+    from .aids.zupt import zero_rate_model
     from .layout import N_NAV
     from .mechanization import update_state
 
@@ -133,11 +137,14 @@ def _warm_up_models() -> None:
     update_state(P, H, np.eye(2), np.ones(2), 0.0, -1, pos, v_n, R_nb, b_a, b_g, x_e)
     position_model(pos, R_nb, z3, 0.5, 0.1, 0.0, z3, -1, N_NAV)
     vehicle_model(R_nb, v_n, b_g, z3, z3, z3, np.eye(3), True, N_NAV)
+    velocity_model(R_nb, v_n, b_g, z3, z3, z3, z3, np.arange(3), N_NAV)
+    zero_rate_model(R_nb, b_g, z3, z3, N_NAV)
 
 
 def _warm_up_loop() -> float:
     """Compile (or load) the EKF's compiled event loop with the types a pass calls it with (the
-    fix with a Gauss-Markov error, the constraint, an output); the seconds it took."""
+    fix with a Gauss-Markov error, the constraint, an output, a velocity, a stationary epoch);
+    the seconds it took."""
     import numpy as np
 
     from .ekf_record import Recorder
@@ -166,12 +173,16 @@ def _warm_up_loop() -> float:
     st += (np.zeros(3), -1)
     fix = (np.full(1, 0.5), np.full(1, 0.1), np.zeros(1), np.eye(3)[None].copy(), z3, 0.0, N_NAV)
     nhc = (np.zeros((1, 3)), np.zeros(1, bool), z3, np.eye(3), True, 0.1, 0.5, np.eye(2))
-    out: tuple = (np.zeros(3, np.int64), *(np.zeros(3) for _ in range(3)), np.zeros(3, bool))
-    out += (np.zeros((3, 3)),)
+    vel = (np.zeros((1, 3)), np.zeros((1, 3)), np.eye(3)[None].copy(), np.arange(3), z3, 0.0)
+    zp = (np.zeros((1, 3)), np.eye(3)[None].copy(), np.eye(3), 0.0)
+    out: tuple = (np.zeros(6, np.int64), *(np.zeros(6) for _ in range(3)), np.zeros(6, bool))
+    out += (np.zeros((6, 3)),)
     r = Recorder(1, True)
     rec = (r.t, r.pos, r.v_n, r.R_nb, r.b_a, r.b_g, r.var, r.P_att, r.P)
-    ev = (np.array([0.01, 0.012, 0.015]), np.array([1, 3, 2], np.int64), np.zeros(3, np.int64))
-    run_stretch(0, ev, 0.0, 0.02, 1, 0.0, prop, st, fix, nhc, out, rec, np.zeros(4, np.int64))
+    ev: tuple = (np.array([0.01, 0.012, 0.013, 0.014, 0.015]), np.array([1, 3, 4, 5, 2], np.int64))
+    ev += (np.zeros(5, np.int64),)
+    steps = (fix, nhc, vel, zp)
+    run_stretch(0, ev, 0.0, 0.02, 1, 0.0, prop, st, steps, out, rec, np.zeros(4, np.int64))
     return time.perf_counter() - t0
 
 

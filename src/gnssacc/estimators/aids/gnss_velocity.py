@@ -34,11 +34,13 @@ separate measurements; ``[velocity] enabled = false`` (``--velocity off``) leave
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from ...core.earth import earth_rate_n
 from ...core.rotations import cross3, skew
-from ..layout import ATT, B_GYRO, BG, SYM_B, SYM_V, SYM_X, VEL
-from .base import AidSpec, EkfAid, Measurement, SmootherAid, zero_jacobian
+from ..layout import B_GYRO, I_ATT, I_BG, I_VEL, SYM_B, SYM_V, SYM_X
+from ..small_linalg import matmul_into, matvec, skew_into
+from .base import AidSpec, EkfAid, Measurement, SmootherAid
 from .gnss_position import folded_by_node
 from .vehicle import held_samples
 
@@ -72,6 +74,48 @@ def antenna_velocity(
     return v, -skew(a_n) + skew(w_ie_n) @ skew(l_n), -R_nb @ skew(lever_b)
 
 
+@njit(cache=True)
+def velocity_model(R_nb, v_n, b_g, omega_meas_b, lever_b, w_ie_n, v_meas, rows, n):
+    """``dz`` (m,) [m/s, NED] and ``H`` (m, n) of the velocity update on the measured axes
+    ``rows`` (m,) of ``v_meas`` [m/s, NED], for the state's ``R_nb``, ``v_n`` [m/s], ``b_g``
+    [rad/s] and ``n`` states; ``omega_meas_b`` the raw gyro [rad/s], ``lever_b`` [m, body],
+    ``w_ie_n`` [rad/s, NED]. :func:`antenna_velocity` compiled (the EKF's per-update path in both
+    of its loops), with numpy's arithmetic (:mod:`gnssacc.estimators.small_linalg`)."""
+    v = v_n.copy()
+    d_phi, d_bg = np.zeros((3, 3)), np.zeros((3, 3))
+    if lever_b[0] != 0.0 or lever_b[1] != 0.0 or lever_b[2] != 0.0:
+        c_rows = R_nb.strides[1] < R_nb.strides[0]
+        w = omega_meas_b - b_g
+        c = np.empty(3)  # w x l
+        c[0], c[1], c[2] = (
+            w[1] * lever_b[2] - w[2] * lever_b[1],
+            w[2] * lever_b[0] - w[0] * lever_b[2],
+            w[0] * lever_b[1] - w[1] * lever_b[0],
+        )
+        l_n, a_n = matvec(R_nb, lever_b, c_rows), matvec(R_nb, c, c_rows)
+        v[0] = (v_n[0] + a_n[0]) - (w_ie_n[1] * l_n[2] - w_ie_n[2] * l_n[1])
+        v[1] = (v_n[1] + a_n[1]) - (w_ie_n[2] * l_n[0] - w_ie_n[0] * l_n[2])
+        v[2] = (v_n[2] + a_n[2]) - (w_ie_n[0] * l_n[1] - w_ie_n[1] * l_n[0])
+        S_w, S_l, S_a = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
+        skew_into(w_ie_n, S_w)
+        skew_into(l_n, S_l)
+        skew_into(a_n, S_a)
+        matmul_into(S_w, S_l, d_phi, 0)
+        d_phi -= S_a  # -[a x] + [w_ie x][l x], each element one rounding as numpy adds
+        skew_into(lever_b, S_l)
+        matmul_into(-R_nb, S_l, d_bg, 0)
+    m = rows.shape[0]
+    dz, H = np.empty(m), np.zeros((m, n))
+    for i in range(m):
+        r = rows[i]
+        dz[i] = v[r] - v_meas[r]
+        H[i, I_VEL + r] = 1.0
+        for j in range(3):
+            H[i, I_ATT + j] = d_phi[r, j]
+            H[i, I_BG + j] = d_bg[r, j]
+    return dz, H
+
+
 def velocity(
     s,
     v_meas: np.ndarray,
@@ -84,13 +128,13 @@ def velocity(
 ) -> Measurement:
     """The velocity update on the measured ``axes`` (boolean (3,)) of ``v_meas`` [m/s, NED] with
     covariance ``cov`` [m^2/s^2] (3 x 3; rows and columns of the measured axes used);
-    ``omega_meas_b`` the raw gyro [rad/s] (the state's bias is removed here)."""
-    v, d_phi, d_bg = antenna_velocity(s.R_nb, s.v_n, omega_meas_b - s.b_g, lever_b, w_ie_n)
-    H = zero_jacobian(s, 3)
-    H[:, VEL] = np.eye(3)
-    H[:, ATT] = d_phi
-    H[:, BG] = d_bg
-    return Measurement("vel", (v - v_meas)[axes], H[axes], cov[np.ix_(axes, axes)], gate)
+    ``omega_meas_b`` the raw gyro [rad/s] (the state's bias is removed here; the model is
+    :func:`velocity_model`)."""
+    rows = np.flatnonzero(axes)
+    dz, H = velocity_model(
+        s.R_nb, s.v_n, s.b_g, omega_meas_b, lever_b, w_ie_n, v_meas, rows, s.P.shape[0]
+    )
+    return Measurement("vel", dz, H, cov[np.ix_(axes, axes)], gate)
 
 
 class VelocityEpochs:
@@ -141,6 +185,26 @@ class EkfVelocity(EkfAid):
         return [
             velocity(s, ep.v[j], ep.cov(j), ep.axes[j], ep.omega_b[j], self.lever, w_ie, self.gate)
         ]
+
+    def compiled(self) -> tuple[str, tuple] | None:
+        """``("velocity", (v, omega_b, R, rows, lever, gate))``: the velocities [m/s, NED], the raw
+        gyro held at each [rad/s], their noise covariances on the measured axes (K, m, m)
+        [m^2/s^2] as :func:`velocity` takes them, the measured axes (m,), the lever arm [m, body]
+        and the gate; ``None`` when the measured axes change from one velocity to another (the
+        Python loop's then)."""
+        ep = self.ep
+        if len(ep) == 0 or not (ep.axes == ep.axes[0]).all():
+            return None
+        rows = np.flatnonzero(ep.axes[0])
+        R = np.nan_to_num(ep.vel.cov_ned(np.arange(len(ep))))[:, rows][:, :, rows]  # as cov(k)
+        return "velocity", (
+            np.ascontiguousarray(ep.v, float),
+            np.ascontiguousarray(ep.omega_b, float),
+            np.ascontiguousarray(R, float),
+            rows.astype(np.int64),
+            np.ascontiguousarray(self.lever, float),
+            float(self.gate),
+        )
 
 
 def _ekf(ctx) -> EkfVelocity | None:

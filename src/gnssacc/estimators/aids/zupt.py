@@ -31,11 +31,12 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numba import njit
 
 from ...core.earth import earth_rate_n
 from ...core.recording import ImuData
-from ...core.rotations import skew
-from ..layout import ATT, BG, SYM_B, SYM_V, SYM_X, VEL
+from ..layout import I_ATT, I_BG, SYM_B, SYM_V, SYM_X, VEL
+from ..small_linalg import matmul_into, matvec, skew_into
 from .base import AidSpec, EkfAid, Measurement, SmootherAid, zero_jacobian
 
 #: Order at equal times: after the GNSS epoch's updates.
@@ -157,16 +158,32 @@ def zero_velocity(s, sigma_mps: float, gate: float = 0.0) -> Measurement:
     return Measurement("zupt", s.v_n.copy(), H, np.eye(3) * sigma_mps**2, gate)
 
 
+@njit(cache=True)
+def zero_rate_model(R_nb, b_g, omega_mean_b, w_ie_n, n):
+    """``dz`` (3,) [rad/s, body] and ``H`` (3, n) of :func:`zero_rate` for the state's ``R_nb``
+    and ``b_g`` [rad/s], ``n`` states; compiled (the EKF's per-update path in both of its loops),
+    with numpy's arithmetic (:mod:`gnssacc.estimators.small_linalg`: ``R_nb^T`` is a transpose)."""
+    Rt = R_nb.T
+    w_b = matvec(Rt, w_ie_n, Rt.strides[1] < Rt.strides[0])
+    dz = np.empty(3)
+    for r in range(3):
+        dz[r] = (omega_mean_b[r] - b_g[r]) - w_b[r]
+    H = np.zeros((3, n))
+    S = np.empty((3, 3))
+    skew_into(w_ie_n, S)
+    matmul_into(-Rt, S, H, I_ATT)
+    for r in range(3):
+        H[r, I_BG + r] = 1.0
+    return dz, H
+
+
 def zero_rate(
     s, omega_mean_b: np.ndarray, var_b: np.ndarray, w_ie_n: np.ndarray, gate: float = 0.0
 ) -> Measurement:
     """The vehicle stands still: the mean raw gyro reading ``omega_mean_b`` [rad/s] over a block
     (variance of that mean ``var_b`` [(rad/s)^2] per axis) is the bias plus the earth rate
-    ``w_ie_n`` [rad/s, NED]."""
-    dz = (omega_mean_b - s.b_g) - s.R_nb.T @ w_ie_n
-    H = zero_jacobian(s, 3)
-    H[:, ATT] = -s.R_nb.T @ skew(w_ie_n)
-    H[:, BG] = np.eye(3)
+    ``w_ie_n`` [rad/s, NED] (the model is :func:`zero_rate_model`)."""
+    dz, H = zero_rate_model(s.R_nb, s.b_g, omega_mean_b, w_ie_n, s.P.shape[0])
     return Measurement("zaru", dz, H, np.diag(var_b), gate)
 
 
@@ -190,6 +207,19 @@ class EkfZupt(EkfAid):
     def updates(self, s, j: int, stats: dict):
         yield zero_velocity(s, self.sigma, self.gate), True
         yield self._zaru(s, j), True  # at the state the zero-velocity update left
+
+    def compiled(self) -> tuple[str, tuple]:
+        """``("stationary", (omega_mean_b, R_rate, R_zero, gate))``: each epoch's mean gyro
+        [rad/s, body] and the zero-rate noise (K, 3, 3) [(rad/s)^2], the zero-velocity noise
+        (3, 3) [m^2/s^2] and the gate, as :func:`zero_velocity` and :func:`zero_rate` take them."""
+        ep = self.ep
+        R_rate = np.stack([np.diag(v) for v in ep.omega_var_b]) if len(ep) else np.zeros((0, 3, 3))
+        return "stationary", (
+            np.ascontiguousarray(ep.omega_mean_b, float),
+            np.ascontiguousarray(R_rate, float),
+            np.eye(3) * self.sigma**2,
+            float(self.gate),
+        )
 
 
 def _ekf(ctx) -> EkfZupt | None:
