@@ -136,9 +136,6 @@ def innovations(
             stationary=pieces.stationary if stationary else None,
             output_times=run.gnss.t if vehicle else np.zeros(0),
             record_innovations=True,
-            # The tuner's step: both sides of a verdict are scored alike, and the likelihood moves
-            # by far less than its sampling noise (3-4x cheaper than at every sample).
-            cov_every=int(cfg["tune"]["cov_every"]),
         )
     except (ValueError, FloatingPointError, np.linalg.LinAlgError):
         return None
