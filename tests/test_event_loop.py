@@ -1,9 +1,9 @@
 """The EKF's compiled event loop against the Python loop it stands in for: a simulated pass run
 both ways gives the same statistics and the same trajectory (a tuner's pass: no outputs, the
 covariance every tenth sample; a method's pass: outputs and their covariances), with the fixes,
-the Doppler velocities, the constraint and the stationary updates in the compiled loop, and the
-events each loop ran counted so that the comparison cannot pass by running the Python loop
-twice."""
+the Doppler velocities, the constraint, the wheel odometry and the stationary updates in the
+compiled loop, and the events each loop ran counted so that the comparison cannot pass by running
+the Python loop twice."""
 
 from __future__ import annotations
 
@@ -20,13 +20,15 @@ from gnssacc.sources.sim import simulate
 #: Figures of a pass compared (the NIS and log-likelihood per kind, the decisions' counts).
 KEYS = ("loglik", "loglik_pos", "loglik_nhc", "nis_pos_mean", "nis_nhc_mean", "acf1_pos")
 KEYS += ("loglik_vel", "nis_vel_mean", "acf1_vel", "loglik_zupt", "loglik_zaru", "nis_zaru_mean")
+KEYS += ("loglik_odo", "nis_odo_mean", "odometry_scale", "odometry_scale_sigma")
 
 
 @pytest.fixture(scope="module")
 def prepared():
     """A skid-steer vehicle with stops and turns on the spot, fixes and Doppler velocities with a
-    lever arm and the Gauss-Markov fix error, the constraint with a reference point off the IMU
-    and a mounting rotation; prepared without tuning."""
+    lever arm and the Gauss-Markov fix error, wheel odometry (its scale-factor state), the
+    constraint with a reference point off the IMU and a mounting rotation; prepared without
+    tuning."""
     cfg = load_config(
         overrides={
             "gnss": {"lever_arm_b_m": [0.4, -0.2, -1.1], "gm_sigma_m": 0.5, "gm_tau_s": 60.0},
@@ -38,7 +40,13 @@ def prepared():
         }
     )
     run = simulate(
-        "ugv", 180.0, imu_grade="industrial", seed=4, lever_arm_b=(0.4, -0.2, -1.1), velocity=True
+        "ugv",
+        180.0,
+        imu_grade="industrial",
+        seed=4,
+        lever_arm_b=(0.4, -0.2, -1.1),
+        velocity=True,
+        odom_hz=10.0,
     )
     return pipeline.prepare(run, cfg, tune="none"), cfg
 
@@ -68,6 +76,9 @@ def _pass(prepared, compiled: bool, monkeypatch, **options):
 
 def _assert_same(a, b) -> None:
     for key in KEYS:
+        if a.stats.get(key) is None:  # an aid the pass does not have
+            assert b.stats.get(key) is None, key
+            continue
         assert a.stats[key] == pytest.approx(b.stats[key], rel=1e-12, abs=1e-12), key
     for key, v in a.stats.items():
         if key.startswith("n_"):
@@ -88,6 +99,7 @@ def test_tuner_pass_compiled_equals_python_loop(prepared, monkeypatch):
     assert fast.stats["n_nhc_skipped_turn"] > 0 and fast.stats["n_nhc_skipped_rest"] > 0
     assert fast.stats["n_vel_updates"] > 150 and fast.stats["n_zupt_updates"] > 10
     assert fast.stats["n_zaru_updates"] == fast.stats["n_zupt_updates"]
+    assert fast.stats["n_odo_updates"] > 500
     _assert_same(fast, ref)
 
 
@@ -100,7 +112,7 @@ def test_method_pass_with_outputs_compiled_equals_python_loop(prepared, monkeypa
     ref, _, _ = _pass(prepared, False, monkeypatch, **opts)
     assert n_compiled > 600 and n_python == 0 and len(fast.t) == len(ref.t) > 100
     assert fast.stats["n_vel_updates"] > 150 and fast.stats["n_zupt_updates"] > 10
-    for kind in ("pos", "vel", "zupt", "zaru", "nhc"):  # every update, to the last bit
+    for kind in ("pos", "vel", "zupt", "zaru", "nhc", "odo"):  # every update, to the last bit
         assert np.array_equal(fast.stats[f"nis_{kind}"], ref.stats[f"nis_{kind}"]), kind
     assert np.allclose(fast.P, ref.P, rtol=1e-12, atol=1e-18)
     _assert_same(fast, ref)

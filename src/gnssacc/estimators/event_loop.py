@@ -41,24 +41,40 @@ from ..core.earth import OMEGA_IE
 from .aids.gnss_position import position_model
 from .aids.gnss_velocity import velocity_model
 from .aids.nhc import REST, SKIPPED, TURN, decide_compiled
+from .aids.odometry import APPLY
+from .aids.odometry import SKIPPED as ODO_SKIPPED
+from .aids.odometry import SIGN, odometry_model
+from .aids.odometry import decide_compiled as odometry_decision
 from .aids.vehicle import vehicle_model
 from .aids.zupt import zero_rate_model
 from .ekf_record import Recorder, Tally, innovation_loglik
-from .layout import GNSS_ERROR, I_ATT, I_VEL, N_NAV
+from .layout import GNSS_ERROR, I_ATT, I_VEL, N_NAV, ODOMETRY_SCALE
 from .mechanization import Propagator, propagate, update_state
 from .state import FilterState
 
 #: Event codes: the Python loop's step (an aid without a compiled step), the fix, the
-#: non-holonomic constraint, an output, the GNSS velocity, a stationary epoch.
-PYTHON, POSITION, NHC, OUTPUT, VELOCITY, STATIONARY = 0, 1, 2, 3, 4, 5
+#: non-holonomic constraint, an output, the GNSS velocity, a stationary epoch, wheel odometry.
+PYTHON, POSITION, NHC, OUTPUT, VELOCITY, STATIONARY, ODOMETRY = 0, 1, 2, 3, 4, 5, 7
 #: The updates' codes (a row of ``out``): the events' that make one update, and a stationary
 #: epoch's two.
 ZUPT, ZARU = 5, 6
 #: The compiled steps by the name an aid gives (:meth:`gnssacc.estimators.aids.EkfAid.compiled`),
 #: with their event code.
-STEPS = {"position": POSITION, "nhc": NHC, "velocity": VELOCITY, "stationary": STATIONARY}
+STEPS = {
+    "position": POSITION,
+    "nhc": NHC,
+    "velocity": VELOCITY,
+    "stationary": STATIONARY,
+    "odometry": ODOMETRY,
+}
 #: The updates' kinds and degrees of freedom by code (the velocity's: its measured axes).
-_KINDS = {POSITION: ("pos", 3), NHC: ("nhc", 2), ZUPT: ("zupt", 3), ZARU: ("zaru", 3)}
+_KINDS = {
+    POSITION: ("pos", 3),
+    NHC: ("nhc", 2),
+    ZUPT: ("zupt", 3),
+    ZARU: ("zaru", 3),
+    ODOMETRY: ("odo", 1),
+}
 #: Updates of a compiled stretch from which the tally takes them per kind at once (fewer: one by
 #: one, cheaper than the arrays' set-up).
 BATCH_FROM = 8
@@ -141,6 +157,36 @@ def _stationary(zp, st, j, t_e, out, n):
 
 
 @njit(cache=True)
+def _row_sigma(P, H):
+    """``sqrt(h P h)`` of ``H``'s first row, summed in plain order (a decision's input)."""
+    var = 0.0
+    for c in range(P.shape[0]):
+        hp = 0.0
+        for r in range(P.shape[0]):
+            hp += H[0, r] * P[r, c]
+        var += hp * H[0, c]
+    return math.sqrt(max(var, 0.0))
+
+
+@njit(cache=True)
+def _odometry(odo, st, j, t_e, out, n, skipped):
+    """The odometry sample ``j`` (:meth:`gnssacc.estimators.aids.odometry.EkfOdometry.updates`);
+    whether it was applied (else counted in ``skipped``: its sign contradicts the estimate's)."""
+    v, sigma, omega_b, lever, R_vb, vb_rows, R, i_scale = odo
+    pos, v_n, R_nb, b_g, P, x_e = st[0], st[1], st[2], st[4], st[5], st[6]
+    w_ie = _earth_rate(pos[0])
+    dz, H = odometry_model(
+        R_nb, v_n, b_g, omega_b[j], lever, w_ie, R_vb, vb_rows, x_e[i_scale - N_NAV], i_scale,
+        v[j], P.shape[0],
+    )  # fmt: skip
+    if odometry_decision(v[j], sigma[j], dz[0] + v[j], _row_sigma(P, H)) != APPLY:
+        skipped[0] += 1
+        return False
+    _update(st, H, R[j], dz, 0.0, out, n, ODOMETRY, t_e)
+    return True
+
+
+@njit(cache=True)
 def _nhc(nhc, st, j, t_e, out, n, skipped):
     """The constraint's epoch ``j`` (:meth:`gnssacc.estimators.aids.nhc.EkfNhc.updates`); whether
     it was applied (else counted in ``skipped``: at rest, turning)."""
@@ -156,15 +202,7 @@ def _nhc(nhc, st, j, t_e, out, n, skipped):
         - b_g[2]
         - (R_nb[0, 2] * w_ie[0] + R_nb[1, 2] * w_ie[1] + R_nb[2, 2] * w_ie[2])
     )
-    var = 0.0  # h P h, h = H[0]
-    for c in range(P.shape[0]):
-        hp = 0.0
-        for r in range(P.shape[0]):
-            hp += H[0, r] * P[r, c]
-        var += hp * H[0, c]
-    why = decide_compiled(
-        False, v_b[0], math.sqrt(max(var, 0.0)), yaw_rate, sigma_lateral, pivot_offset
-    )
+    why = decide_compiled(False, v_b[0], _row_sigma(P, H), yaw_rate, sigma_lateral, pivot_offset)
     if why == TURN:
         skipped[1] += 1
         return False
@@ -217,18 +255,20 @@ def run_stretch(e, ev, t0, t_end, k, t_cur, prop, st, steps, out, rec, rows):
         ``(pos, v_n, R_nb, b_a, b_g, P, x_e, consider)``, updated in place
         (:class:`gnssacc.estimators.state.FilterState`).
     steps : tuple
-        The compiled aids' arrays ``(fix, nhc, velocity, stationary)``
+        The compiled aids' arrays ``(fix, nhc, velocity, stationary, odometry)``
         (:meth:`gnssacc.estimators.aids.EkfAid.compiled`; the fix's with the index of the
-        Gauss-Markov fix error's first state, -1: none, after its own).
+        Gauss-Markov fix error's first state, -1: none, after its own; the odometry's with its
+        scale factor's index).
     out : tuple
         ``(code, t, nis, logdet, used, wz)`` of the updates, one row each (codes
         :data:`POSITION`, :data:`NHC`, :data:`VELOCITY`, :data:`ZUPT`, :data:`ZARU`).
     rec : tuple
         The output rows' arrays (:class:`gnssacc.estimators.ekf_record.Recorder`'s ``t, pos,
         v_n, R_nb, b_a, b_g, var, P_att, P``; ``P`` empty when not kept).
-    rows : ndarray (4,) of int
-        The rows of ``out`` and ``rec`` written so far (the next ones to write), and the
-        constraint's epochs skipped at rest and turning; updated.
+    rows : ndarray (5,) of int
+        The rows of ``out`` and ``rec`` written so far (the next ones to write), the
+        constraint's epochs skipped at rest and turning, and the odometry's samples skipped for
+        their sign; updated.
 
     Returns
     -------
@@ -236,7 +276,7 @@ def run_stretch(e, ev, t0, t_end, k, t_cur, prop, st, steps, out, rec, rows):
         The event it stopped at (``E``: the end), and the state's sample and time.
     """
     ev_t, ev_code, ev_idx = ev
-    fix, nhc, vel, zp = steps
+    fix, nhc, vel, zp, odo = steps
     while e < ev_t.shape[0]:
         t_e, code = ev_t[e], ev_code[e]
         if code == PYTHON or t_e > t_end:
@@ -256,6 +296,9 @@ def run_stretch(e, ev, t0, t_end, k, t_cur, prop, st, steps, out, rec, rows):
             elif code == STATIONARY:
                 _stationary(zp, st, ev_idx[e], t_e, out, rows[0])
                 rows[0] += 2
+            elif code == ODOMETRY:
+                if _odometry(odo, st, ev_idx[e], t_e, out, rows[0], rows[4:]):
+                    rows[0] += 1
             elif _nhc(nhc, st, ev_idx[e], t_e, out, rows[0], rows[2:]):
                 rows[0] += 1
         e += 1
@@ -267,6 +310,8 @@ _NO_FIX = (np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, 3, 3)), np.zeros(
 _NO_NHC = (np.zeros((0, 3)), np.zeros(0, bool), np.zeros(3), np.eye(3), True, 0.0, 0.0, np.eye(2))
 _NO_VEL = (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.arange(3), np.zeros(3), 0.0)
 _NO_ZUPT = (np.zeros((0, 3)), np.zeros((0, 3, 3)), np.eye(3), 0.0)
+_NO_ODO: tuple = (np.zeros(0), np.zeros(0), np.zeros((0, 3)), np.zeros(3), np.eye(3), True)
+_NO_ODO += (np.zeros((0, 1, 1)), N_NAV)
 
 
 def propagation(prop: Propagator) -> tuple:
@@ -287,7 +332,7 @@ class CompiledLoop:
 
     def __init__(self, s: FilterState, prop: Propagator, events: tuple, steps: tuple, record):
         self.ev = events
-        self.steps = steps  # (fix, nhc, velocity, stationary)
+        self.steps = steps  # (fix, nhc, velocity, stationary, odometry)
         self.kinds = {**_KINDS, VELOCITY: ("vel", len(steps[2][3]))}
         self.tally, self.stats, self.rec = record
         self.prop = propagation(prop)
@@ -300,23 +345,24 @@ class CompiledLoop:
         r = self.rec
         P_nav = r.P if r.P is not None else np.zeros((0, N_NAV, N_NAV))
         self.rec_arrays = (r.t, r.pos, r.v_n, r.R_nb, r.b_a, r.b_g, r.var, r.P_att, P_nav)
-        self.rows = np.zeros(4, np.int64)  # updates, outputs, constraint at rest, turning
+        self.rows = np.zeros(5, np.int64)  # updates, outputs, skipped: at rest, turning, sign
 
     @classmethod
     def of(cls, setup, ev, tally: Tally, stats: dict, rec: Recorder) -> "CompiledLoop | None":
         """The compiled loop of the pass ``setup`` (:class:`gnssacc.estimators.ekf.EkfSetup`) over
         its events ``ev`` (times [s], sources: an index into ``setup.aids``, or an output; epoch
         indices), or ``None`` when none of its aids has a compiled step."""
-        codes, steps = (
-            [],
-            {POSITION: _NO_FIX, NHC: _NO_NHC, VELOCITY: _NO_VEL, STATIONARY: _NO_ZUPT},
-        )
+        codes: list[int] = []
+        steps = {POSITION: _NO_FIX, NHC: _NO_NHC, VELOCITY: _NO_VEL, STATIONARY: _NO_ZUPT}
+        steps[ODOMETRY] = _NO_ODO
         for aid in setup.aids:
             step = aid.compiled()
             code = STEPS.get(step[0], PYTHON) if step is not None else PYTHON
             codes.append(code)
             if code == POSITION:
                 steps[code] = (*step[1], int(setup.state.layout.offset(GNSS_ERROR)))
+            elif code == ODOMETRY:
+                steps[code] = (*step[1], int(setup.state.layout.offset(ODOMETRY_SCALE)))
             elif code != PYTHON:
                 steps[code] = step[1]
         if all(c == PYTHON for c in codes):
@@ -324,7 +370,7 @@ class CompiledLoop:
         ev_t, ev_src, ev_idx = ev
         ev_code = np.array(codes + [OUTPUT], np.int64)[np.asarray(ev_src, np.int64)]
         events = (np.ascontiguousarray(ev_t, float), ev_code, np.asarray(ev_idx, np.int64))
-        order = (POSITION, NHC, VELOCITY, STATIONARY)
+        order = (POSITION, NHC, VELOCITY, STATIONARY, ODOMETRY)
         return cls(
             setup.state, setup.prop, events, tuple(steps[c] for c in order), (tally, stats, rec)
         )
@@ -338,12 +384,14 @@ class CompiledLoop:
             e, self.ev, t0, t_end, k, t_cur, self.prop, self.st, self.steps, self.out,
             self.rec_arrays, rows,
         )  # fmt: skip
-        n, self.rec.n, rest, turn = rows.tolist()
+        n, self.rec.n, rest, turn, sign = rows.tolist()
         if n > n0:
             self._tally(n0, n)
-        if rest or turn:
+        if rest or turn or sign:
             self.stats[SKIPPED[REST]] += rest
             self.stats[SKIPPED[TURN]] += turn
+            if sign:
+                self.stats[ODO_SKIPPED[SIGN]] += sign
             rows[2:] = 0
         return e, k, t_cur
 

@@ -40,6 +40,7 @@ GROUPS = {
         ("aids/vehicle.py", ("vehicle_model",)),
         ("aids/gnss_velocity.py", ("velocity_model",)),
         ("aids/zupt.py", ("zero_rate_model",)),
+        ("aids/odometry.py", ("odometry_model",)),
     ),
     "loop": (("event_loop.py", ("run_stretch",)),),
     "window": (("mechanization.py", ("kernel_force_integrals",)),),
@@ -125,6 +126,7 @@ def _warm_up_models() -> None:
 
     from .aids.gnss_position import position_model
     from .aids.gnss_velocity import velocity_model
+    from .aids.odometry import odometry_model
     from .aids.vehicle import vehicle_model
     from .aids.zupt import zero_rate_model
     from .layout import N_NAV
@@ -139,12 +141,13 @@ def _warm_up_models() -> None:
     vehicle_model(R_nb, v_n, b_g, z3, z3, z3, np.eye(3), True, N_NAV)
     velocity_model(R_nb, v_n, b_g, z3, z3, z3, z3, np.arange(3), N_NAV)
     zero_rate_model(R_nb, b_g, z3, z3, N_NAV)
+    odometry_model(R_nb, v_n, b_g, z3, z3, z3, np.eye(3), True, 0.0, N_NAV, 1.0, N_NAV + 1)
 
 
 def _warm_up_loop() -> float:
     """Compile (or load) the EKF's compiled event loop with the types a pass calls it with (the
-    fix with a Gauss-Markov error, the constraint, an output, a velocity, a stationary epoch);
-    the seconds it took."""
+    fix with a Gauss-Markov error, the constraint, an output, a velocity, a stationary epoch, an
+    odometry sample); the seconds it took."""
     import numpy as np
 
     from .ekf_record import Recorder
@@ -175,14 +178,24 @@ def _warm_up_loop() -> float:
     nhc = (np.zeros((1, 3)), np.zeros(1, bool), z3, np.eye(3), True, 0.1, 0.5, np.eye(2))
     vel = (np.zeros((1, 3)), np.zeros((1, 3)), np.eye(3)[None].copy(), np.arange(3), z3, 0.0)
     zp = (np.zeros((1, 3)), np.eye(3)[None].copy(), np.eye(3), 0.0)
-    out: tuple = (np.zeros(6, np.int64), *(np.zeros(6) for _ in range(3)), np.zeros(6, bool))
-    out += (np.zeros((6, 3)),)
+    odo = (
+        np.zeros(1),
+        np.ones(1),
+        np.zeros((1, 3)),
+        z3,
+        np.eye(3),
+        True,
+        np.ones((1, 1, 1)),
+        N_NAV,
+    )
+    out: tuple = (np.zeros(8, np.int64), *(np.zeros(8) for _ in range(3)), np.zeros(8, bool))
+    out += (np.zeros((8, 3)),)
     r = Recorder(1, True)
     rec = (r.t, r.pos, r.v_n, r.R_nb, r.b_a, r.b_g, r.var, r.P_att, r.P)
-    ev: tuple = (np.array([0.01, 0.012, 0.013, 0.014, 0.015]), np.array([1, 3, 4, 5, 2], np.int64))
-    ev += (np.zeros(5, np.int64),)
-    steps = (fix, nhc, vel, zp)
-    run_stretch(0, ev, 0.0, 0.02, 1, 0.0, prop, st, steps, out, rec, np.zeros(4, np.int64))
+    ev: tuple = (np.array([0.01, 0.012, 0.013, 0.014, 0.015, 0.016]),)
+    ev += (np.array([1, 3, 4, 5, 7, 2], np.int64), np.zeros(6, np.int64))
+    steps = (fix, nhc, vel, zp, odo)
+    run_stretch(0, ev, 0.0, 0.02, 1, 0.0, prop, st, steps, out, rec, np.zeros(5, np.int64))
     return time.perf_counter() - t0
 
 

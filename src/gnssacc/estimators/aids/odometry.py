@@ -37,12 +37,13 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from ...core.earth import earth_rate_n
 from ...core.rotations import cross3
 from ..layout import ODOMETRY_SCALE, SYM_B, SYM_K, SYM_V, SYM_X, MarkovBlock
 from .base import AidSpec, EkfAid, Measurement, SmootherAid, nearest, nearest_nodes, row_sigma
-from .vehicle import K_SIGMA, held_samples, vehicle_velocity
+from .vehicle import K_SIGMA, held_samples, vehicle_axes, vehicle_model
 
 #: Decisions of :func:`decide`.
 APPLY, SIGN = 0, 1
@@ -135,10 +136,41 @@ def decide(v_odo: float, sigma_odo: float, v_pred: float, sigma_pred: float) -> 
     return APPLY
 
 
+@njit(cache=True)
+def decide_compiled(v_odo, sigma_odo, v_pred, sigma_pred):
+    """:func:`decide` compiled (the EKF's compiled event loop)."""
+    if (
+        v_odo * v_pred < 0
+        and abs(v_odo) > K_SIGMA * sigma_odo
+        and abs(v_pred) > K_SIGMA * sigma_pred
+    ):
+        return SIGN
+    return APPLY
+
+
 def scale_states(settings) -> tuple[MarkovBlock, ...]:
     """The scale-factor state of ``settings`` (either estimator's)."""
     o = settings.odometry
     return (MarkovBlock(ODOMETRY_SCALE, np.array([o.scale_tau_s]), np.array([o.scale_sigma])),)
+
+
+@njit(cache=True)
+def odometry_model(
+    R_nb, v_n, b_g, omega_meas_b, lever_b, w_ie_n, R_vb, vb_rows, scale, i_scale, v_odo, n
+):
+    """``dz`` (1,) [m/s] and ``H`` (1, n) of :func:`odometry` for the state's ``R_nb``, ``v_n``
+    [m/s, NED], ``b_g`` [rad/s], its scale-factor error ``scale`` (state ``i_scale``) and ``n``
+    states; ``R_vb``, ``vb_rows`` as :func:`gnssacc.estimators.aids.vehicle.vehicle_model` takes
+    them. Compiled (the EKF's per-update path in both of its loops), with numpy's arithmetic."""
+    v_b, H = vehicle_model(R_nb, v_n, b_g, omega_meas_b, lever_b, w_ie_n, R_vb, vb_rows, n)
+    k = 1.0 + scale
+    H_x = np.empty((1, n))
+    for c in range(n):
+        H_x[0, c] = H[0, c] * k
+    H_x[0, i_scale] = v_b[0]
+    dz = np.empty(1)
+    dz[0] = k * v_b[0] - v_odo
+    return dz, H_x
 
 
 def odometry(
@@ -152,12 +184,14 @@ def odometry(
 ) -> Measurement:
     """Wheel odometry's forward speed ``v_odo`` [m/s] (1-sigma ``sigma_mps``) of the point
     ``lever_b`` [m, body] along the vehicle's x axis (``R_vb``: body to vehicle axes), read with
-    the scale factor of the state's ``odometry_scale`` (module notes)."""
-    v_b, H = vehicle_velocity(s, omega_meas_b, lever_b, w_ie_n, R_vb)
-    k = 1.0 + s.scale
-    H_x = H[0:1] * k
-    H_x[0, s.i_scale] = v_b[0]
-    return Measurement("odo", np.array([k * v_b[0] - v_odo]), H_x, np.array([[sigma_mps**2]]))
+    the scale factor of the state's ``odometry_scale`` (module notes; the model is
+    :func:`odometry_model`)."""
+    R, rows = vehicle_axes(R_vb)
+    dz, H_x = odometry_model(
+        s.R_nb, s.v_n, s.b_g, omega_meas_b, lever_b, w_ie_n, R, rows, s.scale, s.i_scale,
+        float(v_odo), s.P.shape[0],
+    )  # fmt: skip
+    return Measurement("odo", dz, H_x, np.array([[sigma_mps**2]]))
 
 
 class EkfOdometry(EkfAid):
@@ -187,6 +221,21 @@ class EkfOdometry(EkfAid):
             stats[SKIPPED[why]] += 1
             return
         yield m, True
+
+    def compiled(self) -> tuple[str, tuple]:
+        """``("odometry", (v, sigma, omega_b, lever, R_vb, vb_rows, R))``: the samples' speeds and
+        1-sigmas [m/s], the gyro held at each [rad/s], the reference point [m, body], the
+        vehicle's axes (:func:`gnssacc.estimators.aids.vehicle.vehicle_axes`) and each sample's
+        noise (K, 1, 1) [m^2/s^2] as :func:`odometry` takes it."""
+        ep = self.ep
+        return "odometry", (
+            np.ascontiguousarray(ep.v, float),
+            np.ascontiguousarray(ep.sigma, float),
+            np.ascontiguousarray(ep.omega_b, float),
+            np.ascontiguousarray(self.cfg.lever_arm_b, float),
+            *vehicle_axes(self.R_vb),
+            np.array([[[x**2]] for x in np.asarray(ep.sigma, float)]).reshape(-1, 1, 1),
+        )
 
     def final_stats(self, s, stats: dict) -> None:
         """The scale factor at the end, and its 1-sigma."""
