@@ -136,16 +136,8 @@ def decide(v_odo: float, sigma_odo: float, v_pred: float, sigma_pred: float) -> 
     return APPLY
 
 
-@njit(cache=True)
-def decide_compiled(v_odo, sigma_odo, v_pred, sigma_pred):
-    """:func:`decide` compiled (the EKF's compiled event loop)."""
-    if (
-        v_odo * v_pred < 0
-        and abs(v_odo) > K_SIGMA * sigma_odo
-        and abs(v_pred) > K_SIGMA * sigma_pred
-    ):
-        return SIGN
-    return APPLY
+#: :func:`decide` compiled (the EKF's compiled event loop).
+decide_compiled = njit(cache=True)(decide)
 
 
 def scale_states(settings) -> tuple[MarkovBlock, ...]:
