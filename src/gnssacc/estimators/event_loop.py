@@ -7,8 +7,10 @@ GNSS position fix (:func:`gnssacc.estimators.aids.gnss_position.position_model`)
 non-holonomic constraint (:func:`gnssacc.estimators.aids.vehicle.vehicle_model`,
 :func:`gnssacc.estimators.aids.nhc.decide_compiled`), the GNSS velocity
 (:func:`gnssacc.estimators.aids.gnss_velocity.velocity_model`, when its measured axes are the same
-at every epoch) and the stationary updates (zero velocity, then zero rate:
-:func:`gnssacc.estimators.aids.zupt.zero_rate_model`). :func:`run_stretch` runs the events of a
+at every epoch), the stationary updates (zero velocity, then zero rate:
+:func:`gnssacc.estimators.aids.zupt.zero_rate_model`) and wheel odometry
+(:func:`gnssacc.estimators.aids.odometry.odometry_model`, its sign decision
+:func:`~gnssacc.estimators.aids.odometry.decide_compiled`). :func:`run_stretch` runs the events of a
 pass from a given one on in one call: the propagation to each
 (:func:`gnssacc.estimators.mechanization.propagate`, as
 :meth:`gnssacc.estimators.mechanization.Propagator.advance` calls it), the Gauss-Markov states'
@@ -244,7 +246,8 @@ def run_stretch(e, ev, t0, t_end, k, t_cur, prop, st, steps, out, rec, rows):
         The first event.
     ev : tuple of ndarray (E,)
         The pass's events: times [s], codes (:data:`PYTHON`, :data:`POSITION`, :data:`NHC`,
-        :data:`OUTPUT`, :data:`VELOCITY`, :data:`STATIONARY`) and the epoch index in their aid.
+        :data:`OUTPUT`, :data:`VELOCITY`, :data:`STATIONARY`, :data:`ODOMETRY`) and the epoch
+        index in their aid.
     t0, t_end : float
         The filter's start and the pass's end [s].
     k, t_cur : int, float
@@ -261,7 +264,8 @@ def run_stretch(e, ev, t0, t_end, k, t_cur, prop, st, steps, out, rec, rows):
         scale factor's index).
     out : tuple
         ``(code, t, nis, logdet, used, wz)`` of the updates, one row each (codes
-        :data:`POSITION`, :data:`NHC`, :data:`VELOCITY`, :data:`ZUPT`, :data:`ZARU`).
+        :data:`POSITION`, :data:`NHC`, :data:`VELOCITY`, :data:`ZUPT`, :data:`ZARU`,
+        :data:`ODOMETRY`).
     rec : tuple
         The output rows' arrays (:class:`gnssacc.estimators.ekf_record.Recorder`'s ``t, pos,
         v_n, R_nb, b_a, b_g, var, P_att, P``; ``P`` empty when not kept).
@@ -308,7 +312,13 @@ def run_stretch(e, ev, t0, t_end, k, t_cur, prop, st, steps, out, rec, rows):
 #: The arrays of a pass without one of the compiled aids (the kernel's types all the same).
 _NO_FIX = (np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, 3, 3)), np.zeros(3), 0.0, -1)
 _NO_NHC = (np.zeros((0, 3)), np.zeros(0, bool), np.zeros(3), np.eye(3), True, 0.0, 0.0, np.eye(2))
-_NO_VEL = (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.arange(3), np.zeros(3), 0.0)
+_NO_VEL: tuple = (
+    np.zeros((0, 3)),
+    np.zeros((0, 3)),
+    np.zeros((0, 3, 3)),
+    np.arange(3, dtype=np.int64),
+)
+_NO_VEL += (np.zeros(3), 0.0)
 _NO_ZUPT = (np.zeros((0, 3)), np.zeros((0, 3, 3)), np.eye(3), 0.0)
 _NO_ODO: tuple = (np.zeros(0), np.zeros(0), np.zeros((0, 3)), np.zeros(3), np.eye(3), True)
 _NO_ODO += (np.zeros((0, 1, 1)), N_NAV)

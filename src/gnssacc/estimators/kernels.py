@@ -139,7 +139,7 @@ def _warm_up_models() -> None:
     update_state(P, H, np.eye(2), np.ones(2), 0.0, -1, pos, v_n, R_nb, b_a, b_g, x_e)
     position_model(pos, R_nb, z3, 0.5, 0.1, 0.0, z3, -1, N_NAV)
     vehicle_model(R_nb, v_n, b_g, z3, z3, z3, np.eye(3), True, N_NAV)
-    velocity_model(R_nb, v_n, b_g, z3, z3, z3, z3, np.arange(3), N_NAV)
+    velocity_model(R_nb, v_n, b_g, z3, z3, z3, z3, np.arange(3, dtype=np.int64), N_NAV)
     zero_rate_model(R_nb, b_g, z3, z3, N_NAV)
     odometry_model(R_nb, v_n, b_g, z3, z3, z3, np.eye(3), True, 0.0, N_NAV, 1.0, N_NAV + 1)
 
@@ -176,7 +176,8 @@ def _warm_up_loop() -> float:
     st += (np.zeros(3), -1)
     fix = (np.full(1, 0.5), np.full(1, 0.1), np.zeros(1), np.eye(3)[None].copy(), z3, 0.0, N_NAV)
     nhc = (np.zeros((1, 3)), np.zeros(1, bool), z3, np.eye(3), True, 0.1, 0.5, np.eye(2))
-    vel = (np.zeros((1, 3)), np.zeros((1, 3)), np.eye(3)[None].copy(), np.arange(3), z3, 0.0)
+    vel: tuple = (np.zeros((1, 3)), np.zeros((1, 3)), np.eye(3)[None].copy(), np.arange(3, dtype=np.int64))
+    vel += (z3, 0.0)
     zp = (np.zeros((1, 3)), np.eye(3)[None].copy(), np.eye(3), 0.0)
     odo = (
         np.zeros(1),

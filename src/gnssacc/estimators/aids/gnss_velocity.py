@@ -130,7 +130,7 @@ def velocity(
     covariance ``cov`` [m^2/s^2] (3 x 3; rows and columns of the measured axes used);
     ``omega_meas_b`` the raw gyro [rad/s] (the state's bias is removed here; the model is
     :func:`velocity_model`)."""
-    rows = np.flatnonzero(axes)
+    rows = np.flatnonzero(axes).astype(np.int64)
     dz, H = velocity_model(
         s.R_nb, s.v_n, s.b_g, omega_meas_b, lever_b, w_ie_n, v_meas, rows, s.P.shape[0]
     )
