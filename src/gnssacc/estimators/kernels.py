@@ -176,7 +176,12 @@ def _warm_up_loop() -> float:
     st += (np.zeros(3), -1)
     fix = (np.full(1, 0.5), np.full(1, 0.1), np.zeros(1), np.eye(3)[None].copy(), z3, 0.0, N_NAV)
     nhc = (np.zeros((1, 3)), np.zeros(1, bool), z3, np.eye(3), True, 0.1, 0.5, np.eye(2))
-    vel: tuple = (np.zeros((1, 3)), np.zeros((1, 3)), np.eye(3)[None].copy(), np.arange(3, dtype=np.int64))
+    vel: tuple = (
+        np.zeros((1, 3)),
+        np.zeros((1, 3)),
+        np.eye(3)[None].copy(),
+        np.arange(3, dtype=np.int64),
+    )
     vel += (z3, 0.0)
     zp = (np.zeros((1, 3)), np.eye(3)[None].copy(), np.eye(3), 0.0)
     odo = (
