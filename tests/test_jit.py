@@ -238,11 +238,11 @@ from gnssacc import pipeline
 from gnssacc.core.config import load_config
 from gnssacc.estimators import ekf, event_loop, kalman, kernels, mechanization, small_linalg
 from gnssacc.estimators import window_marginals
-from gnssacc.estimators.aids import gnss_position, gnss_velocity, nhc, vehicle, zupt
+from gnssacc.estimators.aids import gnss_position, gnss_velocity, nhc, odometry, vehicle, zupt
 from gnssacc.sources.sim import simulate
 
 MODULES = (mechanization, kalman, window_marginals, small_linalg, gnss_position, vehicle, nhc,
-           event_loop, gnss_velocity, zupt)
+           event_loop, gnss_velocity, zupt, odometry)
 ekf.COMPILED_LOOP = True  # the passes run their fixes, velocities, constraints, stops compiled
 
 def signatures():
@@ -260,10 +260,11 @@ run = simulate("car", 30.0, seed=3, odom_hz=10.0, gnss_rate_hz=5.0)
 _, sols, _ = pipeline.compare(run, load_config(None, overrides={"gnss": {"gm_sigma_m": 0.5, "gm_tau_s": 60.0}}),
                               ["ekf", "smoother", "smoother-accw", "ekf-gm", "smoother-gm"], tune="none")
 assert sols["smoother-gm"].stats["n_odo_factors"] > 0 and sols["smoother"].stats["n_gps_folded"] > 0
-# Doppler velocities and stops (the stationary updates), in both loops (the tuner's passes).
-run = simulate("ugv", 90.0, seed=3, velocity=True)
+# Doppler velocities, stops (the stationary updates) and odometry, in both loops.
+run = simulate("ugv", 90.0, seed=3, velocity=True, odom_hz=10.0)
 _, sols, _ = pipeline.compare(run, load_config(), ["ekf"], tune="none")
 assert sols["ekf"].stats["n_vel_updates"] > 0 and sols["ekf"].stats["n_zupt_updates"] > 0
+assert sols["ekf"].stats["n_odo_updates"] > 0
 ekf.COMPILED_LOOP = False
 pipeline.compare(run, load_config(), ["ekf"], tune="none")
 new = {k: v - warmed.get(k, set()) for k, v in signatures().items() if v - warmed.get(k, set())}
