@@ -90,7 +90,7 @@ class _KindTally:
         self.nis_sum = self.loglik = 0.0
         self.lag = [0.0, 0.0]  # sum w_k w_(k-1), sum w_k^2
         # The last whitened innovation per number of axes: a velocity's measured axes may change
-        # from one update to the next, and the lag-1 sums pair updates of the same axes.
+        # from one update to the next, and the lag-1 sums pair updates with as many axes.
         self.prev: dict[int, np.ndarray] = {}
         self.series: tuple[list, list, list] = ([], [], [])  # t, NIS per dof, log-likelihood
 
