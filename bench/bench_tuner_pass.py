@@ -31,7 +31,6 @@ os.environ.setdefault("GNSSACC_CACHE_DIR", "none")
 
 from gnssacc import pipeline  # noqa: E402
 from gnssacc.estimators import ekf  # noqa: E402
-from gnssacc.prepare.passes import filter_pass  # noqa: E402
 
 CASES = {
     "kitti": "kitti",
@@ -52,16 +51,8 @@ def one_pass(prep):
     """A tuner's pass: the tuned noise, the covariance every ``[tune] cov_every`` samples, no
     outputs; its CPU seconds and its statistics."""
     t0 = time.process_time()
-    sol = filter_pass(
-        prep.run,
-        prep.cfg,
-        "ekf",
-        init=prep.init,
-        quality=prep.quality,
-        stationary=prep.stationary,
-        output_times=np.empty(0),
-        cov_every=int(prep.cfg["tune"]["cov_every"]),
-    )
+    every = int(prep.cfg["tune"]["cov_every"])
+    sol = ekf.estimate(prep, prep.cfg, "ekf", output_times=np.empty(0), cov_every=every)
     return time.process_time() - t0, sol.stats
 
 
