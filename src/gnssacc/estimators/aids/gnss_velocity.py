@@ -37,8 +37,7 @@ import numpy as np
 from numba import njit
 
 from ...core.earth import earth_rate_n
-from ...core.rotations import cross3, skew
-from ..layout import B_GYRO, I_ATT, I_BG, I_VEL, SYM_B, SYM_V, SYM_X
+from ..layout import B_GYRO, I_ATT, I_BG, I_VEL, N_NAV, SYM_B, SYM_V, SYM_X
 from ..small_linalg import matmul_into, matvec, skew_into
 from .base import AidSpec, EkfAid, Measurement, SmootherAid
 from .gnss_position import folded_by_node
@@ -48,39 +47,14 @@ from .vehicle import held_samples
 ORDER = 3
 
 
-def antenna_velocity(
-    R_nb: np.ndarray, v_n: np.ndarray, w_b: np.ndarray, lever_b: np.ndarray, w_ie_n: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The antenna's NED velocity [m/s] (module notes) and its Jacobians on the EKF's attitude
-    error ``phi`` (n frame) and bias-corrected gyro error ``db_g`` (3 x 3 each).
-
-    Parameters
-    ----------
-    R_nb : ndarray (3, 3)
-    v_n : ndarray (3,)
-        IMU velocity, NED [m/s].
-    w_b : ndarray (3,)
-        Bias-corrected inertial body rate [rad/s, body].
-    lever_b : ndarray (3,)
-        Antenna from the IMU, body FRD [m].
-    w_ie_n : ndarray (3,)
-        Earth rate, NED [rad/s].
-    """
-    if not lever_b.any():
-        return v_n.copy(), np.zeros((3, 3)), np.zeros((3, 3))
-    l_n = R_nb @ lever_b
-    a_n = R_nb @ cross3(w_b, lever_b)
-    v = v_n + a_n - cross3(w_ie_n, l_n)
-    return v, -skew(a_n) + skew(w_ie_n) @ skew(l_n), -R_nb @ skew(lever_b)
-
-
 @njit(cache=True)
 def velocity_model(R_nb, v_n, b_g, omega_meas_b, lever_b, w_ie_n, v_meas, rows, n):
     """``dz`` (m,) [m/s, NED] and ``H`` (m, n) of the velocity update on the measured axes
     ``rows`` (m,) of ``v_meas`` [m/s, NED], for the state's ``R_nb``, ``v_n`` [m/s], ``b_g``
     [rad/s] and ``n`` states; ``omega_meas_b`` the raw gyro [rad/s], ``lever_b`` [m, body],
-    ``w_ie_n`` [rad/s, NED]. :func:`antenna_velocity` compiled (the EKF's per-update path in both
-    of its loops), with numpy's arithmetic (:mod:`gnssacc.estimators.small_linalg`)."""
+    ``w_ie_n`` [rad/s, NED]: the antenna's velocity ``v_ant`` and its Jacobians (module notes).
+    Compiled (the EKF's per-update path in both of its loops, the smoother's residuals), with
+    numpy's arithmetic (:mod:`gnssacc.estimators.small_linalg`)."""
     v = v_n.copy()
     d_phi, d_bg = np.zeros((3, 3)), np.zeros((3, 3))
     if lever_b[0] != 0.0 or lever_b[1] != 0.0 or lever_b[2] != 0.0:
@@ -221,9 +195,11 @@ def residual_chi2(rec, idx: np.ndarray, ep: VelocityEpochs, k: np.ndarray, lever
     out = []
     for i, kk in zip(idx.tolist(), k.tolist(), strict=True):
         axes = ep.axes[kk]
-        R = rec.R[i]
-        v, _, _ = antenna_velocity(R, rec.v_n[i], ep.omega_b[kk] - b_g[i], lever_b, w_ie_n)
-        r = (v - ep.v[kk])[axes]
+        rows = np.flatnonzero(axes).astype(np.int64)
+        r, _ = velocity_model(
+            rec.R[i], rec.v_n[i], np.ascontiguousarray(b_g[i]), ep.omega_b[kk], lever_b, w_ie_n,
+            ep.v[kk], rows, N_NAV,
+        )  # fmt: skip
         C = ep.cov(kk)[np.ix_(axes, axes)]
         W = np.linalg.inv(C)
         JCJ = rec.cov_vel[i][np.ix_(axes, axes)]
