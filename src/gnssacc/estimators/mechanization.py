@@ -54,14 +54,19 @@ def radii(lat):
 
 
 @njit(cache=True)
+def _normal_gravity(s2, r, h):
+    """Normal gravity magnitude [m/s^2] and its height derivative [1/s^2] from ``s2 =
+    sin^2(lat)``, ``r = sqrt(1 - e^2 s2)`` and the height ``h`` [m]."""
+    g0 = _GE * (1.0 + _K * s2) / r
+    c1 = 2.0 / _A * (1.0 + _F + _M - 2.0 * _F * s2)
+    return g0 * (1.0 - c1 * h + 3.0 * h * h / (_A * _A)), g0 * (-c1 + 6.0 * h / (_A * _A))
+
+
+@njit(cache=True)
 def _gravity(lat, h):
     """Normal gravity magnitude [m/s^2] and its height derivative [1/s^2]."""
     s2 = np.sin(lat) ** 2
-    g0 = _GE * (1.0 + _K * s2) / np.sqrt(1.0 - _E2 * s2)
-    c1 = 2.0 / _A * (1.0 + _F + _M - 2.0 * _F * s2)
-    g = g0 * (1.0 - c1 * h + 3.0 * h * h / (_A * _A))
-    dg_dh = g0 * (-c1 + 6.0 * h / (_A * _A))
-    return g, dg_dh
+    return _normal_gravity(s2, np.sqrt(1.0 - _E2 * s2), h)
 
 
 @njit(cache=True)
@@ -73,9 +78,7 @@ def _geodetic(lat, h):
     s2 = s * s
     w = 1.0 - _E2 * s2
     r = math.sqrt(w)
-    g0 = _GE * (1.0 + _K * s2) / r
-    c1 = 2.0 / _A * (1.0 + _F + _M - 2.0 * _F * s2)
-    g = g0 * (1.0 - c1 * h + 3.0 * h * h / (_A * _A))
+    g = _normal_gravity(s2, r, h)[0]
     return _A * (1.0 - _E2) / (w * r), _A / r, s, math.cos(lat), g
 
 
@@ -644,7 +647,7 @@ def propagate(
     if with_phi and P.shape[0] > N_NAV:
         with_phi = False  # the transition-matrix accumulator covers the 15 navigation states only
     f = np.empty(3)
-    fl = np.empty(3)
+    fl = np.empty(3)  # the force the error model takes at rest (else the sample's own, f)
     at_rest = False
     w = np.empty(3)
     A = np.empty((_N_MOVING, N_NAV))
@@ -673,9 +676,6 @@ def propagate(
                 g = _gravity(pos[0], pos[2])[0]
                 for i in range(3):
                     fl[i] = -g * rest_R[2, i]  # R^T (0, 0, -g)
-            else:
-                for i in range(3):
-                    fl[i] = f[i]
             if with_cov:
                 j = _segment_index(k, seg_i0, seg_i1)
                 q_w = 0.0
@@ -699,7 +699,7 @@ def propagate(
                         pos,
                         v_n,
                         rest_R[:3] if at_rest else R_nb,
-                        fl,
+                        fl if at_rest else f,
                         w_ie_sign,
                         qa_int,
                         qg_int,
@@ -728,7 +728,7 @@ def propagate(
             pos,
             v_n,
             rest_R[:3] if at_rest else R_nb,
-            fl,
+            fl if at_rest else f,
             w_ie_sign,
             qa_int,
             qg_int,
