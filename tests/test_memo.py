@@ -31,3 +31,18 @@ def test_objects_are_not_kept_alive_and_unreferenceable_ones_are_not_kept():
     assert alive() is None  # the memo did not keep it
     memo.keep((3.0,), 0, "v")  # a float takes no weak reference
     assert memo.get((3.0,), 0) is None
+
+
+def test_several_slots_keep_each_objects_value_and_free_the_dead_and_the_least_used():
+    memo = LastMade(slots=2)
+    a, b, c = np.arange(3.0), np.arange(3.0), np.arange(3.0)
+    va, vb = memo.keep((a,), 0, "a"), memo.keep((b,), 0, "b")
+    assert memo.get((a,), 0) == va and memo.get((b,), 0) == vb  # b used last
+    memo.keep((a,), 1, "a1")  # the same objects, another key: replaces a's slot
+    assert memo.get((a,), 0) is None and memo.get((a,), 1) == "a1"
+    memo.keep((c,), 0, "c")  # full: b (the least recently used) goes
+    assert memo.get((b,), 0) is None and memo.get((a,), 1) == "a1" and memo.get((c,), 0) == "c"
+    del a
+    gc.collect()
+    memo.keep((b,), 0, "b")  # a's slot is free (its object is gone): c stays
+    assert memo.get((c,), 0) == "c" and memo.get((b,), 0) == "b"

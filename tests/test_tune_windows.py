@@ -245,6 +245,66 @@ def test_the_windows_noise_agrees_with_the_whole_runs_within_its_spread(long_dri
         assert np.all(np.abs(ratio) <= 3.0 * spread), (key, windowed["imu"][key], whole["imu"][key])
 
 
+def test_a_window_reads_whole_every_span_an_end_would_cut():
+    """The span a window's pass reads: its own and MARGIN_S on each side, the acceleration fit's
+    last fixes before it, widened to hold whole a stationary span and a suspect IMU span (with its
+    local window) that an end cuts, and again for a span the widening reaches."""
+    fixes = SimpleNamespace(t=np.arange(0.0, 1000.0, 2.0))
+    run = SimpleNamespace(t_start=0.0, t_end=999.99, gnss=fixes, gnss_vel=None)
+    cfg = {"accel": {"window": 3}, "quality": {"suspect_local_window_s": 2.0}}
+    w = tw.Window(500.0, 530.0, 590.0)
+    assert tw.reads(run, w, cfg, None, None) == (492.0, 595.0)  # 4 fixes 2 s apart before it
+    rest = SimpleNamespace(spans=[SimpleNamespace(t_start=480.0, t_end=494.0)])
+    suspect = SimpleNamespace(
+        spans=[
+            SimpleNamespace(t_start=477.0, t_end=481.0),
+            SimpleNamespace(t_start=594.0, t_end=600.0),
+        ]
+    )
+    assert tw.reads(run, w, cfg, rest, None) == (480.0, 595.0)
+    # the rest span reaches the first suspect span (with its 2 s): widened again
+    assert tw.reads(run, w, cfg, rest, suspect) == (475.0, 602.0)
+    far = SimpleNamespace(spans=[SimpleNamespace(t_start=100.0, t_end=200.0)])
+    assert tw.reads(run, w, cfg, far, far) == (492.0, 595.0)
+
+
+@pytest.mark.parametrize("method", ["ekf", "ekf-acc"])
+def test_a_windows_pass_over_the_span_it_reads_gives_the_whole_runs_numbers(long_drive, method):
+    """Each window's pass reads its span of the run (its setup costs the span, not the run) and
+    gives the numbers of a pass over the whole run (to rounding: running sums start elsewhere),
+    here with a suspect IMU span that the first later window's margin would cut: the inflation's
+    local sigma must see both sides of it. Cut there, the numbers differ."""
+    from dataclasses import replace
+
+    from gnssacc.checks.quality import QualityReport, Span
+
+    run, prep = long_drive
+    later = tw.windows(run, prep.cfg, prep.init, prep.quality, prep.stationary, filter_pass)[1]
+    i0, i1 = run.imu_range(later.t_from - 7.0, later.t_from + 1.0)
+    span = Span("interpolated", run.imu.t[i0], run.imu.t[i1 - 1], i0, i1, "all", "test")
+    quality = QualityReport([span], len(run.imu))
+    wins = tw.windows(run, prep.cfg, prep.init, quality, prep.stationary, filter_pass)
+    assert wins[1].reads[0] <= span.t_start - 2.0  # the local window before the span
+    assert all(w.reads[1] - w.reads[0] < 0.5 * run.duration_s for w in wins)
+    cfg = ungated(prep.cfg)
+    kw = dict(stationary=prep.stationary, quality=quality, output_times=np.zeros(0))
+    parts = tw.WindowedPass(wins, filter_pass)
+    whole = tw.WindowedPass([replace(w, reads=None) for w in wins], filter_pass)
+    for k in range(len(wins)):
+        got, _ = parts._window(k, run, cfg, method, prep.init, kw)
+        want, _ = whole._window(k, run, cfg, method, prep.init, kw)
+        assert got.keys() == want.keys()
+        for key, v in want.items():
+            if isinstance(v, float):
+                assert got[key] == pytest.approx(v, rel=1e-9, abs=1e-12), (k, key)
+            elif key not in ("wall_s", "seconds"):
+                assert got[key] == v, (k, key)
+    short = replace(wins[1], reads=(later.t_from - 5.0, wins[1].reads[1]))
+    got, _ = tw.WindowedPass([short], filter_pass)._window(0, run, cfg, method, prep.init, kw)
+    want, _ = whole._window(1, run, cfg, method, prep.init, kw)
+    assert abs(got["loglik_pos"] - want["loglik_pos"]) > 1e-6 * abs(want["loglik_pos"])
+
+
 def test_a_pass_over_a_window_makes_the_same_stationary_epochs_as_the_whole_run(long_drive):
     """A pass from t0 to t_stop computes the zero-velocity epochs of the rest spans that reach into
     it only (its cost the window's, not the run's): the same epochs, means, variances and span
@@ -325,3 +385,29 @@ def _on_windows(run, prep, filter_pass):
         prep.rest_noise,
         filter_pass=filter_pass,
     )
+
+
+def test_a_span_of_a_run_keeps_every_stream_in_it_and_its_quality_spans_point_at_the_same_samples():
+    """RecordedRun.between: each stream's samples stamped in the span (the IMU's to the one
+    holding at its end), the truth's too; QualityReport.between counts the span's suspect samples
+    from its first IMU sample, so they index the same samples of the part as of the whole."""
+    from gnssacc.checks.quality import QualityReport, Span
+
+    run = gnssacc.simulate("ugv", 120.0, seed=3, odom_hz=10, velocity=True)
+    t_a, t_b = run.t_start + 30.0, run.t_start + 70.005
+    part = run.between(t_a, t_b)
+    i0, i1 = run.imu_range(t_a, t_b)
+    np.testing.assert_array_equal(part.imu.f_b, run.imu.f_b[i0:i1])
+    assert part.imu.t[0] >= t_a and part.imu.t[-2] < t_b <= part.imu.t[-1]
+    for name in ("gnss", "gnss_vel", "odometry", "truth"):
+        whole, got = getattr(run, name).t, getattr(part, name).t
+        np.testing.assert_array_equal(got, whole[(whole >= t_a) & (whole <= t_b)])
+        assert len(got) > 0
+    assert part.init is None and part.sim is None
+    j0, j1 = i0 + 500, i0 + 600
+    span = Span("frozen", run.imu.t[j0], run.imu.t[j1 - 1], j0, j1, "gx", "test")
+    cut = QualityReport([span], len(run.imu)).between(i0, i1)
+    assert cut.n_samples == i1 - i0
+    (s,) = cut.spans
+    np.testing.assert_array_equal(part.imu.t[s.i_start : s.i_end], run.imu.t[j0:j1])
+    assert QualityReport([span], len(run.imu)).between(j1, j1 + 10).spans == []

@@ -29,7 +29,7 @@ Everything is vectorised over the samples: a 47k-sample file is checked in a few
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -140,6 +140,18 @@ class QualityReport:
                 for s in self.spans
             ],
         }
+
+    def between(self, i0: int, i1: int) -> "QualityReport":
+        """The report of samples ``i0 .. i1 - 1`` alone (:meth:`RecordedRun.between
+        <gnssacc.core.recording.RecordedRun.between>`): the spans that reach into them, their
+        sample indices counted from ``i0`` (those cut by an end run past it, as the inflation
+        clips them)."""
+        spans = [
+            replace(s, i_start=s.i_start - i0, i_end=s.i_end - i0)
+            for s in self.spans
+            if s.i_end > i0 and s.i_start < i1
+        ]
+        return replace(self, spans=spans, n_samples=max(0, i1 - i0))
 
     def suspect_mask(self, n: int) -> np.ndarray:
         """Boolean array of length ``n``, True on every sample inside any span."""
@@ -464,8 +476,9 @@ def inflation_segments(
     return segments
 
 
-#: The last :func:`inflation_segments` made, from its IMU data and report and what else.
-_LAST_SEGMENTS = LastMade()
+#: The last :func:`inflation_segments` made, from its IMU data and report and what else (one per
+#: run: a windowed tuning's windows are runs of their own, :meth:`QualityReport.between`).
+_LAST_SEGMENTS = LastMade(slots=8)
 
 
 def _segments(imu: ImuData, report: QualityReport, suspect: SuspectNoise) -> InflationSegments:

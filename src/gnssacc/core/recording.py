@@ -558,6 +558,50 @@ class RecordedRun:
             )
         return replace(self, imu=imu, init=init)
 
+    def imu_range(self, t_a: float, t_b: float) -> tuple[int, int]:
+        """IMU samples ``[i0, i1)`` that :meth:`between` keeps for ``t_a`` .. ``t_b`` [s]: those
+        stamped in it and the one holding at ``t_b`` (sample ``k`` holds over ``(t[k-1],
+        t[k]]``)."""
+        t = self.imu.t
+        i0 = int(np.searchsorted(t, t_a, side="left"))
+        i1 = min(int(np.searchsorted(t, t_b, side="left")) + 1, len(t))
+        return i0, max(i0, i1)
+
+    def between(self, t_a: float, t_b: float) -> "RecordedRun":
+        """The run from ``t_a`` to ``t_b`` [s]: every stream's samples stamped in that span (the
+        IMU's as views, :meth:`imu_range`), the truth too; the rest as it is but the start and
+        the simulator's draws (per sample of the whole run), which it does not have. An
+        estimator's pass over part of a long run reads this (the noise tuner's windows,
+        :mod:`gnssacc.prepare.tune_windows`): its setup then costs the span, not the run."""
+        i0, i1 = self.imu_range(t_a, t_b)
+        imu = ImuData(self.imu.t[i0:i1], self.imu.f_b[i0:i1], self.imu.omega_ib_b[i0:i1])
+
+        def inside(stream):
+            if stream is None:
+                return None
+            return stream.select((stream.t >= t_a) & (stream.t <= t_b))
+
+        truth = self.truth
+        if truth is not None:
+            keep = (truth.t >= t_a) & (truth.t <= t_b)
+            truth = replace(
+                truth,
+                **{
+                    k: None if getattr(truth, k) is None else getattr(truth, k)[keep]
+                    for k in ("t", "lat", "lon", "h", "v_n", "rpy")
+                },
+            )
+        return replace(
+            self,
+            imu=imu,
+            gnss=inside(self.gnss),
+            gnss_vel=inside(self.gnss_vel),
+            odometry=inside(self.odometry),
+            truth=truth,
+            init=None,
+            sim=None,
+        )
+
     def with_gnss(self, gnss: GnssFixes, **meta) -> "RecordedRun":
         """A copy with other GNSS fixes (e.g. noisy or with outages) and extra metadata."""
         return replace(self, gnss=gnss, meta={**self.meta, **meta})

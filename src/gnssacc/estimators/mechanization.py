@@ -782,10 +782,10 @@ def _cov_step(
 
 
 #: The last :func:`turn_rates` computed, from ``t`` and ``omega_b`` (by identity), their
-#: fingerprint and the window. The tuner's ~90 passes over one run (and a windowed pass's
-#: windows) share it: computed afresh it cost 90 ms a pass on a 2,400 s run, whatever the span the
-#: pass covers.
-_LAST_TURN_RATES = LastMade()
+#: fingerprint and the window, one per run (a windowed tuning passes over the whole run and
+#: its windows' stretches in turn). The tuner's ~90 passes over one run share it: computed
+#: afresh it cost 90 ms a pass on a 2,400 s run.
+_LAST_TURN_RATES = LastMade(slots=8)
 
 
 def _is_float64(x) -> bool:

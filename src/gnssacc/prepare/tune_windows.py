@@ -100,17 +100,51 @@ REFINED = (("imu", "accel_bias_instability_mg"), ("imu", "gyro_bias_instability_
 REFINE_OFFSETS = (-0.75, -0.25, 0.25, 0.75)
 
 
+#: Seconds of data a window's pass reads on each side of its span, at least [s] (its history:
+#: the acceleration fit's last fixes, :func:`reads`).
+MARGIN_S = 5.0
+
+
 @dataclass(frozen=True)
 class Window:
     """One window: the pass runs from ``start`` (``None``: the tuner's own) over ``t_from`` ..
     ``t_to`` and scores the updates from ``t_scored`` [s]; its log-likelihood counts ``weight``
-    times (the seconds of the run it stands for over its scored seconds)."""
+    times (the seconds of the run it stands for over its scored seconds). ``reads``: the span
+    of the run its pass reads (:func:`reads`; ``None``: the whole run)."""
 
     t_from: float
     t_scored: float
     t_to: float
     start: InitialState | None = None
     weight: float = 1.0
+    reads: tuple[float, float] | None = None
+
+
+def reads(run: RecordedRun, w: Window, cfg, stationary, quality) -> tuple[float, float]:
+    """The span ``(t_a, t_b)`` [s] of ``run`` that ``w``'s pass reads: the same numbers from
+    :meth:`RecordedRun.between <gnssacc.core.recording.RecordedRun.between>` as from the whole
+    run, at the cost of the span. :data:`MARGIN_S` beyond the window, the ``[accel] window``
+    fixes and velocities before it (what the acceleration fit holds when the pass starts), and
+    whole every stationary span (its gyro blocks and their scatter) and every suspect IMU span
+    with its ``[quality] suspect_local_window_s`` (its inflation's local sigma) that an end
+    would cut."""
+    a, b = w.t_from - MARGIN_S, w.t_to + MARGIN_S
+    held = int(cfg["accel"]["window"]) + 1
+    for stream in (run.gnss, run.gnss_vel):
+        if stream is not None and len(stream.t):
+            j = int(np.searchsorted(stream.t, w.t_from, side="left")) - held
+            a = min(a, float(stream.t[max(j, 0)]) if j >= 0 else -np.inf)
+    spans = [(s.t_start, s.t_end) for s in (stationary.spans if stationary is not None else [])]
+    if quality is not None:
+        lw = float(cfg["quality"]["suspect_local_window_s"])
+        spans += [(s.t_start - lw, s.t_end + lw) for s in quality.spans]
+    moved = True
+    while moved:  # a span reaching past an end widens it, which may reach another span
+        moved = False
+        for s0, s1 in spans:
+            if s0 < a <= s1 or s0 <= b < s1:
+                a, b, moved = min(a, s0), max(b, s1), True
+    return max(a, run.t_start), min(b, run.t_end)
 
 
 def _shares(run: RecordedRun, stationary, t: np.ndarray) -> np.ndarray:
@@ -218,7 +252,8 @@ def windows_and_reference(
     for s, (_, b) in zip(starts, spans, strict=False):
         scored = min(s.t + LEAD_S, b)
         later.append(Window(s.t, scored, b, s, stratum / max(b - scored, 1e-9)))
-    return [first] + later, before
+    wins = [first] + later
+    return [replace(w, reads=reads(run, w, cfg, stationary, quality)) for w in wins], before
 
 
 def _scored(stats: dict, t_scored: float) -> dict:
@@ -279,15 +314,32 @@ class WindowedPass:
         self.jobs = max(1, min(int(jobs), len(wins)))
         self.workers: list | None = None
         self.owner = os.getpid()  # only the process that made it talks to its workers
+        self.parts: dict = {}  # window -> (run, quality, the span of the run, of the report)
 
     def _window(self, k: int, run, cfg, method, init, kw) -> tuple[dict, object]:
         w = self.wins[k]
         start = init if w.start is None else w.start
         lead = w.t_scored > w.t_from  # a lead not scored: the series tell what is
+        run, kw = self._part(k, run, kw)
         sol = self.filter_pass(
             run, cfg, method, init=start, t_stop=w.t_to, **kw, record_innovations=lead
         )
         return (_scored(sol.stats, w.t_scored) if lead else sol.stats), sol
+
+    def _part(self, k: int, run, kw: dict) -> tuple[RecordedRun, dict]:
+        """Window ``k``'s span of ``run`` and of the quality report in ``kw`` (made once per run
+        and report: the turn rates and inflation kept per run are then found again)."""
+        w = self.wins[k]
+        if w.reads is None:
+            return run, kw
+        quality = kw.get("quality")
+        have = self.parts.get(k)
+        if have is None or have[0] is not run or have[1] is not quality:
+            sub = run.between(*w.reads) if have is None or have[0] is not run else have[2]
+            i0, i1 = run.imu_range(*w.reads)
+            part = None if quality is None else quality.between(i0, i1)
+            have = self.parts[k] = (run, quality, sub, part)
+        return have[2], {**kw, "quality": have[3]}
 
     def _share(self, j: int) -> list[int]:
         return list(range(j, len(self.wins), self.jobs))
