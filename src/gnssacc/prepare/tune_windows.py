@@ -20,7 +20,10 @@ that together span :data:`SPAN_S` of IMU data, whatever the run's length:
 
 Each trial point is one pass per window (:class:`WindowedPass`, a
 :class:`~gnssacc.prepare.filter_pass.FilterPass` whose statistics add the windows' scored updates),
-so the search itself is unchanged. The windows' log-likelihoods are added as a **stratified
+so the search itself is unchanged. A window's pass reads only its span of the run
+(:func:`reads`, :meth:`RecordedRun.between <gnssacc.core.recording.RecordedRun.between>`): its
+setup (the fixes' noise, the aids' epochs, the event list, the tally) then costs the window, not
+the run, with the same numbers to rounding. The windows' log-likelihoods are added as a **stratified
 estimate of the whole run's**: each later window's counts the length of its stratum over its
 scored seconds (:attr:`Window.weight`), the first window's once. Added as they are, the first
 window (where the filter converges from the start) would weigh 40 % of the objective instead of
