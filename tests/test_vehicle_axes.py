@@ -167,3 +167,32 @@ def test_without_the_constraint_a_consumer_cars_attitude_sigma_has_the_triads_fl
         for axis in ("roll", "pitch", "yaw"):
             assert nees["per_axis"][axis]["value"] < 2.0, (m, axis, nees["per_axis"][axis])
         assert 0.5 < nees["value"] < 1.5, (m, nees["value"])
+
+
+def test_a_run_that_never_showed_its_yaw_has_the_tilt_of_its_accelerometer_biases_as_floor():
+    """level_floor: on a start whose yaw is undetermined, roll from the body's y bias sigma and
+    pitch from its x bias sigma, atan(sigma / g) (the start's sigmas, else the configured turn-on
+    sigma); no floor once the motion told the yaw. attitude_axes takes the larger floor."""
+    from types import SimpleNamespace
+
+    from gnssacc.core.config import load_config
+    from gnssacc.prepare.attitude_axes import attitude_axes, level_floor
+
+    cfg = load_config(overrides={"imu": {"accel_bias_sigma0_mg": [5.0, 40.0, 9.0]}})
+    still = SimpleNamespace(yaw_evidence="undetermined", sigma_b_a=None)
+    got = level_floor(cfg, still)
+    assert got["roll"] == pytest.approx(np.degrees(np.arctan(0.040)))  # y: 40 mg
+    assert got["pitch"] == pytest.approx(np.degrees(np.arctan(0.005)))
+    assert got["bias_mg"] == pytest.approx([5.0, 40.0])
+    measured = SimpleNamespace(yaw_evidence="undetermined", sigma_b_a=np.array([0.1, 0.2, 0.3]))
+    assert level_floor(cfg, measured)["pitch"] == pytest.approx(
+        np.degrees(np.arctan(0.1 / 9.80665))
+    )
+    for told in ("bank", "given", "orientation"):
+        assert level_floor(cfg, SimpleNamespace(yaw_evidence=told, sigma_b_a=None)) is None
+    assert level_floor(cfg, None) is None
+    floor = attitude_axes(cfg, still)["sigma_floor_deg"]
+    triad = attitude_axes(cfg)["triad_deg"]
+    assert floor["roll"] == pytest.approx(max(got["roll"], triad))
+    assert floor["pitch"] == pytest.approx(max(got["pitch"], triad))
+    assert floor["yaw"] == pytest.approx(triad)

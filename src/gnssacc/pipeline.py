@@ -525,7 +525,7 @@ def run_methods(
     # The attitude reported: the vehicle's axes, its sigma no less than what no measurement tells
     # of them.
     R_vb = NhcSettings.from_config(prep.cfg).R_vb
-    floor = np.radians([attitude_axes(prep.cfg)["sigma_floor_deg"][a] for a in AXES])
+    floor = np.radians([attitude_axes(prep.cfg, prep.init)["sigma_floor_deg"][a] for a in AXES])
     out: dict[str, NavSolution] = {}
     beside = {} if beside is None else beside
     done = methods_side_by_side(prep, methods, show_progress, observers, beside)
@@ -803,7 +803,7 @@ def _run_facts(prep: Prepared, sols: dict, window, cons: dict, models: dict, on_
         "model_check_gm": models["gm"].to_dict() if "gm" in models else None,
         "tuning": prep.tuning.to_dict() if prep.tuning is not None else None,
         "preparation_cache": prep.cache,
-        "attitude_axes": attitude_axes(prep.cfg),
+        "attitude_axes": attitude_axes(prep.cfg, prep.init),
     }
 
 

@@ -463,10 +463,18 @@ def _axes_lines(metrics: dict) -> list[str]:
     axes = metrics.get("attitude_axes") or {}
     floor = axes.get("sigma_floor_deg") or {}
     least = [f"{a} {v:.2f}" for a, v in floor.items() if v > 0.0]
+    level = axes.get("level_deg")
+    tilt = (
+        "; roll and pitch: the tilt a vehicle that never showed its yaw cannot tell from its "
+        f"horizontal accelerometer biases, {level['bias_mg'][1]:.3g} / {level['bias_mg'][0]:.3g} "
+        "mg 1-sigma"
+        if level
+        else ""
+    )
     unknown = (
         f"; unmeasured, each sigma at least {', '.join(least)} deg (the accelerometer triad's "
         f"turn against the IMU's case: {axes['misalignment_ppm']:.0f} ppm cross-axis, from "
-        f"{axes['misalignment_from']})"
+        f"{axes['misalignment_from']}{tilt})"
         if least
         else ""
     )

@@ -25,13 +25,27 @@ model leaves out already, and the estimator's sigma then holds part of it.
   that and the triad's rotation.
 * Every other axis (all three without the constraint or its tuning; where a user set the angles,
   those are the case's, not the triad's) has the triad's rotation as its floor.
+
+**A vehicle that never moved enough to tell its yaw** (the start's ``yaw_evidence``
+``"undetermined"``) never separated its tilt from the horizontal accelerometer biases either: the
+fixes and the stationary updates measure ``g phi - R_nb b_a`` alone, which turning or accelerating
+would have split. The roll and pitch then cannot be known better than the biases' prior allows,
+``atan(sigma_b_a / g)`` per axis (the body's y bias tilts the roll, its x bias the pitch; the
+start's bias sigmas, else ``[imu] accel_bias_sigma0_mg``): the EKF's covariance holds that
+(linearised at rest, :func:`gnssacc.estimators.ekf.rest_samples`); the fixed-lag smoother's
+marginals, relinearised as the unobservable yaw wanders, claimed a third of it (a simulated
+consumer vehicle at rest: roll sigma 0.38 deg against 1.15 deg, its error 1.5 deg; roll NEES
+15). It is every solution's roll and pitch floor on such a run (``level_deg``).
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ..core.config import FALLBACK_TURN_ERROR_PPM, RunConfig
+from ..core.units import G0
 
 #: The axes of :attr:`gnssacc.core.solution.NavSolution.rpy`, in order.
 AXES = ("roll", "pitch", "yaw")
@@ -50,8 +64,33 @@ def misalignment_ppm(cfg: RunConfig) -> tuple[float, str]:
     return float(turn), "the gyro turn allowance"
 
 
-def attitude_axes(cfg: RunConfig) -> dict:
+def level_floor(cfg: RunConfig, init) -> dict | None:
+    """The roll and pitch no measurement of a run that never showed its yaw can beat [deg]
+    (module notes): ``{"roll", "pitch"}`` from the horizontal accelerometer biases' sigma
+    (``init.sigma_b_a``, else ``[imu] accel_bias_sigma0_mg``) and that sigma ``bias_mg`` (x, y);
+    ``None`` when ``init`` (an :class:`~gnssacc.core.recording.InitialState`) is missing or its
+    yaw was told."""
+    if init is None or getattr(init, "yaw_evidence", "") != "undetermined":
+        return None
+    sigma = cfg.accel_bias_sigma0 if init.sigma_b_a is None else np.asarray(init.sigma_b_a, float)
+    tilt = np.degrees(np.arctan(sigma[:2] / G0))
+    return {
+        "roll": float(tilt[1]),
+        "pitch": float(tilt[0]),
+        "bias_mg": [float(x) for x in sigma[:2] / G0 * 1e3],
+    }
+
+
+def attitude_axes(cfg: RunConfig, init=None) -> dict:
     """Whose axes the solutions' attitude is of and the least sigma of each of its angles.
+
+    Parameters
+    ----------
+    cfg : RunConfig
+        The run's configuration (tuned).
+    init : InitialState, optional
+        The run's start: on a run whose yaw it left undetermined, roll and pitch have the level
+        floor too (:func:`level_floor`).
 
     Returns
     -------
@@ -59,8 +98,9 @@ def attitude_axes(cfg: RunConfig) -> dict:
         ``axes`` (``"vehicle"`` where ``[nhc]`` turns the constraint's axes against the body's,
         else ``"body"``), ``pitch_offset_deg``, ``yaw_offset_deg`` [deg], ``set_by`` (who set the
         nonzero angles: ``tuned``, a file, ``overrides``), ``misalignment_ppm`` with its
-        ``misalignment_from``, ``triad_deg`` (the triad's rotation per axis, 1-sigma [deg]) and
-        ``sigma_floor_deg`` ``{roll, pitch, yaw}`` [deg] (the module docstring).
+        ``misalignment_from``, ``triad_deg`` (the triad's rotation per axis, 1-sigma [deg]),
+        ``level_deg`` (:func:`level_floor`, or ``None``) and ``sigma_floor_deg`` ``{roll, pitch,
+        yaw}`` [deg] (the module docstring).
     """
     keys = ("pitch_offset_deg", "yaw_offset_deg")
     angles = {k: float(cfg["nhc"][k]) for k in keys}
@@ -75,6 +115,10 @@ def attitude_axes(cfg: RunConfig) -> dict:
     }
     if any(measured[k] and angles[k] for k in keys):
         floor["roll"] = max(triad, math.sqrt((angles[keys[0]] ** 2 + angles[keys[1]] ** 2) / 2))
+    level = level_floor(cfg, init)
+    if level is not None:
+        floor["roll"] = max(floor["roll"], level["roll"])
+        floor["pitch"] = max(floor["pitch"], level["pitch"])
     return {
         "axes": "vehicle" if any(angles.values()) else "body",
         **angles,
@@ -82,5 +126,6 @@ def attitude_axes(cfg: RunConfig) -> dict:
         "misalignment_ppm": ppm,
         "misalignment_from": source,
         "triad_deg": triad,
+        "level_deg": level,
         "sigma_floor_deg": floor,
     }
