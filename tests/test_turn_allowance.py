@@ -102,3 +102,17 @@ def test_a_run_whose_stops_are_all_short_takes_its_allowance_from_them(grade):
     assert not prep.stationary.spans
     assert prep.cfg["imu"]["gyro_turn_error_ppm"] == "auto"  # the fallback applies
     assert prep.cfg.gyro_turn_psd == pytest.approx((FALLBACK_TURN_ERROR_PPM * 1e-6) ** 2)
+
+
+def test_the_accelerometer_turn_on_anchors_are_the_presets_and_rise_smoothly():
+    """accel_turn_on_mg at the anchors' gyro densities gives the packaged presets' turn-on sigmas
+    (their datasheet classes), rises between them and holds beyond; NaN without a density."""
+    from gnssacc.prepare.turn_allowance import TURN_ON_ANCHORS, accel_turn_on_mg
+
+    for (arw, mg), preset in zip(TURN_ON_ANCHORS, ("tactical", "industrial", "consumer")):
+        assert accel_turn_on_mg(arw) == pytest.approx(mg, rel=1e-12)
+        assert load_config(preset)["imu"]["accel_bias_sigma0_mg"] == pytest.approx(mg)
+    mg = np.array([accel_turn_on_mg(a) for a in np.geomspace(0.06, 0.55, 200)])
+    assert np.all(np.diff(mg) > 0.0)
+    assert accel_turn_on_mg(0.001) == pytest.approx(1.0) and accel_turn_on_mg(9.0) == 40.0
+    assert math.isnan(accel_turn_on_mg(float("nan")))

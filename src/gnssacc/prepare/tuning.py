@@ -87,6 +87,11 @@ gyros
    12) (on KITTI, the white fit made the constraint cost the smoother 0.2 m of PRMSE
    with GNSS up; inflated, it gains 0.3 m).
 
+On a run that never showed its yaw (the start's ``yaw_evidence`` ``"undetermined"``: it never
+turned or accelerated enough) the accelerometers' turn-on sigma is held, not searched: the tilt
+takes up the horizontal bias, so the likelihood is flat in it; the IMU class's value from the gyro
+noise at rest stands in (:func:`held_at_rest`).
+
 ``[imu] gyro_turn_error_ppm`` (the gyro scale-factor and cross-axis errors, covered by noise that
 grows with the angle turned) is not identified: the one-step likelihood cannot tell its size. On
 a simulated consumer UGV (the tuned point, 0 to 7000 ppm) it falls by 56 with the errors in the data
@@ -252,6 +257,12 @@ class TuneResult:
                 else ""
             )
             + (f"; kept from config: {', '.join(self.fixed)}" if self.fixed else "")
+            + (
+                "; held, not searched (the run never showed its yaw, so its tilt hides them): "
+                + ", ".join(k.split(".")[-1] for k in self.from_stationary["held_at_rest"])
+                if self.from_stationary.get("held_at_rest")
+                else ""
+            )
         )
 
     def to_toml(self, cfg: RunConfig) -> str:
@@ -706,6 +717,41 @@ def ungated(cfg: RunConfig) -> RunConfig:
     return cfg.with_values({"ekf": {"position_gate_nis": 0.0}}, "tuning passes, ungated")
 
 
+#: Held, not searched, on a run that never showed its yaw (:func:`held_at_rest`).
+HELD_AT_REST = (("imu", "accel_bias_sigma0_mg"),)
+
+
+def held_at_rest(cfg: RunConfig, init, noise) -> tuple[RunConfig, dict]:
+    """``(cfg, {(section, key): value})``: on a run whose start left its yaw undetermined (it
+    never turned or accelerated enough to tell it), the accelerometers' turn-on sigma is not
+    searched: the fixes and stationary updates see the tilt and the horizontal bias as one sum,
+    ``g phi - R_nb b_a``, so the likelihood is flat in it, and the search ended where its first
+    steps went (a simulated industrial IMU at rest, true 5 mg: 2 mg on one seed, its tilt error
+    3 stated sigma). It is held at the IMU class's value (:func:`gnssacc.prepare.turn_allowance.
+    accel_turn_on_mg` of the gyro noise at rest, ``noise``), else at the configured one; a value
+    the user set stays. ``cfg`` has the held value (its source says why); empty when nothing is
+    held."""
+    from .turn_allowance import RAD_RTS_TO_DEG_RTH, accel_turn_on_mg, gyro_density_deg_rth
+
+    if init is None or getattr(init, "yaw_evidence", "") != "undetermined":
+        return cfg, {}
+    sec, key = HELD_AT_REST[0]
+    if (sec, key) in cfg.explicit:
+        return cfg, {}
+    arw = float("nan")
+    if noise is not None and getattr(noise, "n_spans", 0):
+        arw = gyro_density_deg_rth(np.asarray(noise.gyro_density, float) * RAD_RTS_TO_DEG_RTH)
+    mg = accel_turn_on_mg(arw)
+    if not np.isfinite(mg):
+        return cfg, {(sec, key): _plain(cfg[sec][key])}
+    value = float(f"{mg:.3g}")
+    why = (
+        f"held at the IMU class's turn-on sigma (gyro noise at rest {arw:.3g} deg/sqrt(h)): a run "
+        "that never showed its yaw cannot tell it from its tilt"
+    )
+    return cfg.with_values({sec: {key: value}}, why), {(sec, key): value}
+
+
 def tune(
     run,
     cfg: RunConfig,
@@ -739,9 +785,10 @@ def tune(
     result : TuneResult
     """
     t0 = time.perf_counter()
+    cfg, held = held_at_rest(cfg, init, noise)
     aid_params, aid_kinds = aids(run, cfg)
     params, measured = measurement_stage(run, cfg)
-    free = [p for p in params if p not in cfg.explicit]
+    free = [p for p in params if p not in cfg.explicit and p not in held]
     fixed = [f"{s}.{k}" for s, k in params + list(aid_params) if (s, k) in cfg.explicit]
     start, info = _start_values(cfg, free, noise)
     kinds = ("pos", "zaru") + measured
@@ -779,10 +826,15 @@ def tune(
     )
     for sec, vals in aid_raw.items():
         raw.setdefault(sec, {}).update(vals)
+    kept = {sec: {key: v} for (sec, key), v in held.items()}  # in tuned.toml too
+    if held:
+        info["held_at_rest"] = {f"{s}.{k}": v for (s, k), v in held.items()}
     if not raw:
-        return cfg, TuneResult({}, {}, fixed, info, seconds=time.perf_counter() - t0)
+        return cfg, TuneResult(kept, {}, fixed, info, seconds=time.perf_counter() - t0)
     tuned = cfg.with_values(raw, "tuned")
     values = {sec: {key: _plain(v) for key, v in vals.items()} for sec, vals in raw.items()}
+    for sec, vals in kept.items():
+        values.setdefault(sec, {}).update(vals)
     result = TuneResult(
         values,
         {f"{s}.{k}": _plain(v) for (s, k), v in start.items()},

@@ -35,6 +35,30 @@ from .stationary import noise_from_stationary
 ANCHORS = ((0.05, 150.0), (0.2, 1000.0), (0.6, 10000.0))
 
 
+#: Datasheet anchors of the accelerometers' turn-on bias, ``(gyro white-noise density
+#: [deg/sqrt(h)], 1-sigma accelerometer turn-on bias [mg])`` by grade, the packaged presets'
+#: values: tactical (HG1700 class: ~1 mg), industrial MEMS (ADIS1647x, VN-100/300: a few mg),
+#: consumer MEMS (BMI088, ICM-42688 zero-g offsets of +-20-50 mg). As loose as :data:`ANCHORS`:
+#: the prior of a run that cannot measure it (:func:`accel_turn_on_mg`).
+TURN_ON_ANCHORS = ((0.05, 1.0), (0.2, 5.0), (0.6, 40.0))
+
+
+def _by_class(arw_deg_rth: float, anchors) -> float:
+    """``anchors``' second value at this gyro density: linear in log-log between them, held at
+    the end anchors' beyond them."""
+    x, y = np.log(np.array(anchors)).T
+    return float(np.exp(np.interp(np.log(arw_deg_rth), x, y)))
+
+
+def accel_turn_on_mg(arw_deg_rth: float) -> float:
+    """The accelerometer turn-on bias 1-sigma [mg] an IMU whose gyros have this white noise
+    [deg/sqrt(h)] typically has (:data:`TURN_ON_ANCHORS`, as :func:`turn_error_ppm`); NaN for a
+    density that is not a positive finite number."""
+    if not (np.isfinite(arw_deg_rth) and arw_deg_rth > 0.0):
+        return float("nan")
+    return _by_class(arw_deg_rth, TURN_ON_ANCHORS)
+
+
 def turn_error_ppm(arw_deg_rth: float) -> float:
     """The gyro scale-factor and cross-axis error a gyro of this white noise typically has.
 
@@ -54,8 +78,7 @@ def turn_error_ppm(arw_deg_rth: float) -> float:
     """
     if not (np.isfinite(arw_deg_rth) and arw_deg_rth > 0.0):
         return FALLBACK_TURN_ERROR_PPM
-    x, y = np.log(np.array(ANCHORS)).T
-    return float(np.exp(np.interp(np.log(arw_deg_rth), x, y)))
+    return _by_class(arw_deg_rth, ANCHORS)
 
 
 def gyro_density_deg_rth(values) -> float:
