@@ -88,9 +88,10 @@ gyros
    with GNSS up; inflated, it gains 0.3 m).
 
 On a run that never showed its yaw (the start's ``yaw_evidence`` ``"undetermined"``: it never
-turned or accelerated enough) the accelerometers' turn-on sigma is held, not searched: the tilt
-takes up the horizontal bias, so the likelihood is flat in it; the IMU class's value from the gyro
-noise at rest stands in (:func:`held_at_rest`).
+turned or accelerated enough) the accelerometers' turn-on sigma is searched from, and not below,
+the IMU class's value from the gyro noise at rest: the tilt takes up the horizontal bias, so the
+likelihood hardly tells it, and a search left free ended where its first steps went
+(:func:`rest_floor`).
 
 ``[imu] gyro_turn_error_ppm`` (the gyro scale-factor and cross-axis errors, covered by noise that
 grows with the angle turned) is not identified: the one-step likelihood cannot tell its size. On
@@ -257,11 +258,11 @@ class TuneResult:
                 else ""
             )
             + (f"; kept from config: {', '.join(self.fixed)}" if self.fixed else "")
-            + (
-                "; held, not searched (the run never showed its yaw, so its tilt hides them): "
-                + ", ".join(k.split(".")[-1] for k in self.from_stationary["held_at_rest"])
-                if self.from_stationary.get("held_at_rest")
-                else ""
+            + "".join(
+                f"; {k.split('.')[-1]} no lower than the IMU class's {v:g} "
+                f"{k.rsplit('_', 1)[-1]} (the run never showed "
+                "its yaw: its tilt hides the bias)"
+                for k, v in self.from_stationary.get("class_floor", {}).items()
             )
         )
 
@@ -325,8 +326,15 @@ def _prior_widths(cfg: RunConfig, params: list, info: dict) -> np.ndarray:
 
 def _lower_bounds(params: list, info: dict) -> np.ndarray:
     """Lower search bound per parameter [decades]: the at-rest floor where the stationary stretches
-    measured the density (:data:`REST_FLOOR_DECADES`)."""
-    return np.array([-REST_FLOOR_DECADES if key in info else -_BOUND_DECADES for _, key in params])
+    measured the density (:data:`REST_FLOOR_DECADES`), the class's floor of a run that never
+    showed its yaw (``info["class_floor_decades"]``, :func:`rest_floor`)."""
+    floors = info.get("class_floor_decades", {})
+    return np.array(
+        [
+            floors.get(key, -REST_FLOOR_DECADES if key in info else -_BOUND_DECADES)
+            for _, key in params
+        ]
+    )
 
 
 def _start_values(cfg: RunConfig, free: list, noise) -> tuple[dict, dict]:
@@ -717,39 +725,39 @@ def ungated(cfg: RunConfig) -> RunConfig:
     return cfg.with_values({"ekf": {"position_gate_nis": 0.0}}, "tuning passes, ungated")
 
 
-#: Held, not searched, on a run that never showed its yaw (:func:`held_at_rest`).
-HELD_AT_REST = (("imu", "accel_bias_sigma0_mg"),)
+#: The parameter whose search a run that never showed its yaw bounds below (:func:`rest_floor`).
+FLOORED_AT_REST = ("imu", "accel_bias_sigma0_mg")
 
 
-def held_at_rest(cfg: RunConfig, init, noise) -> tuple[RunConfig, dict]:
-    """``(cfg, {(section, key): value})``: on a run whose start left its yaw undetermined (it
-    never turned or accelerated enough to tell it), the accelerometers' turn-on sigma is not
-    searched: the fixes and stationary updates see the tilt and the horizontal bias as one sum,
-    ``g phi - R_nb b_a``, so the likelihood is flat in it, and the search ended where its first
-    steps went (a simulated industrial IMU at rest, true 5 mg: 2 mg on one seed, its tilt error
-    3 stated sigma). It is held at the IMU class's value (:func:`gnssacc.prepare.turn_allowance.
-    accel_turn_on_mg` of the gyro noise at rest, ``noise``), else at the configured one; a value
-    the user set stays. ``cfg`` has the held value (its source says why); empty when nothing is
-    held."""
+def rest_floor(cfg: RunConfig, init, noise) -> dict:
+    """``{(section, key): value}``: on a run whose start left its yaw undetermined (it never turned
+    or accelerated enough to tell it), the least accelerometer turn-on sigma the search may end at,
+    the IMU class's (:func:`gnssacc.prepare.turn_allowance.accel_turn_on_mg` of the gyro noise at
+    rest, ``noise``). There the fixes and stationary updates see the tilt and the horizontal bias
+    as one sum, ``g phi - R_nb b_a``, and on a simulated IMU at rest the likelihood barely told the
+    sigma: the search ended where its first steps went (an industrial IMU, true 5 mg, searched to
+    2 mg: its tilt error 3 stated sigma) or stayed at the default (20 mg on a consumer IMU whose
+    turn-on is 30). Empty when the yaw was told, the user set the value, or there is no gyro
+    noise at rest to tell the class."""
     from .turn_allowance import RAD_RTS_TO_DEG_RTH, accel_turn_on_mg, gyro_density_deg_rth
 
     if init is None or getattr(init, "yaw_evidence", "") != "undetermined":
-        return cfg, {}
-    sec, key = HELD_AT_REST[0]
-    if (sec, key) in cfg.explicit:
-        return cfg, {}
-    arw = float("nan")
-    if noise is not None and getattr(noise, "n_spans", 0):
-        arw = gyro_density_deg_rth(np.asarray(noise.gyro_density, float) * RAD_RTS_TO_DEG_RTH)
+        return {}
+    if FLOORED_AT_REST in cfg.explicit or noise is None or not getattr(noise, "n_spans", 0):
+        return {}
+    arw = gyro_density_deg_rth(np.asarray(noise.gyro_density, float) * RAD_RTS_TO_DEG_RTH)
     mg = accel_turn_on_mg(arw)
-    if not np.isfinite(mg):
-        return cfg, {(sec, key): _plain(cfg[sec][key])}
-    value = float(f"{mg:.3g}")
-    why = (
-        f"held at the IMU class's turn-on sigma (gyro noise at rest {arw:.3g} deg/sqrt(h)): a run "
-        "that never showed its yaw cannot tell it from its tilt"
-    )
-    return cfg.with_values({sec: {key: value}}, why), {(sec, key): value}
+    return {FLOORED_AT_REST: float(f"{mg:.3g}")} if np.isfinite(mg) else {}
+
+
+def _floored(start: dict, info: dict, floor: dict) -> None:
+    """Raise each floored parameter's start to its floor and bound its search there
+    (``info["class_floor_decades"]``, which :func:`_lower_bounds` reads)."""
+    for p, v in floor.items():
+        if p in start:
+            start[p] = np.maximum(start[p], v)
+            info.setdefault("class_floor_decades", {})[p[1]] = float(np.log10(v / start[p].max()))
+            info.setdefault("class_floor", {})[f"{p[0]}.{p[1]}"] = v
 
 
 def tune(
@@ -785,12 +793,12 @@ def tune(
     result : TuneResult
     """
     t0 = time.perf_counter()
-    cfg, held = held_at_rest(cfg, init, noise)
     aid_params, aid_kinds = aids(run, cfg)
     params, measured = measurement_stage(run, cfg)
-    free = [p for p in params if p not in cfg.explicit and p not in held]
+    free = [p for p in params if p not in cfg.explicit]
     fixed = [f"{s}.{k}" for s, k in params + list(aid_params) if (s, k) in cfg.explicit]
     start, info = _start_values(cfg, free, noise)
+    _floored(start, info, rest_floor(cfg, init, noise))
     kinds = ("pos", "zaru") + measured
     kinds += ("acc",) if cfg["tune"]["likelihood"] == "position+accel" else ()
     method = "ekf-acc" if "acc" in kinds else "ekf"
@@ -826,15 +834,10 @@ def tune(
     )
     for sec, vals in aid_raw.items():
         raw.setdefault(sec, {}).update(vals)
-    kept = {sec: {key: v} for (sec, key), v in held.items()}  # in tuned.toml too
-    if held:
-        info["held_at_rest"] = {f"{s}.{k}": v for (s, k), v in held.items()}
     if not raw:
-        return cfg, TuneResult(kept, {}, fixed, info, seconds=time.perf_counter() - t0)
+        return cfg, TuneResult({}, {}, fixed, info, seconds=time.perf_counter() - t0)
     tuned = cfg.with_values(raw, "tuned")
     values = {sec: {key: _plain(v) for key, v in vals.items()} for sec, vals in raw.items()}
-    for sec, vals in kept.items():
-        values.setdefault(sec, {}).update(vals)
     result = TuneResult(
         values,
         {f"{s}.{k}": _plain(v) for (s, k), v in start.items()},
