@@ -136,7 +136,7 @@ def reads(run: RecordedRun, w: Window, cfg, stationary, quality) -> tuple[float,
     for stream in (run.gnss, run.gnss_vel):
         if stream is not None and len(stream.t):
             j = int(np.searchsorted(stream.t, w.t_from, side="left")) - held
-            a = min(a, float(stream.t[max(j, 0)]) if j >= 0 else -np.inf)
+            a = min(a, float(stream.t[j]) if j >= 0 else -np.inf)
     spans = [(s.t_start, s.t_end) for s in (stationary.spans if stationary is not None else [])]
     if quality is not None:
         lw = float(cfg["quality"]["suspect_local_window_s"])
