@@ -22,7 +22,7 @@ from .analysis.metrics import gnss_score, score
 from .core.config import RunConfig, load_config
 from .core.config_docs import resolved_toml
 from .core.errors import InputError, warn_data
-from .core.interrupts import arrived, raise_if_arrived, raise_if_interrupted
+from .core.interrupts import arrived, hold_signals, raise_if_arrived, raise_if_interrupted
 from .core.memory import release_free_memory
 from .core.parallel import side_by_side, usable_jobs
 from .core.recording import RecordedRun
@@ -1150,6 +1150,8 @@ def _draw_share(queue, names, folder, run, sols, metrics, cfg=None) -> None:
         got = _figure_share(names, folder, run, sols, metrics, cfg)
     except BaseException as exc:  # noqa: BLE001 (reported by name, never raised in a child)
         got = {n: f"not drawn: {type(exc).__name__}" for n in names}
+    finally:
+        hold_signals()  # the answer goes out whole: a signal from here on is recorded, not raised
     queue.put({**got, _INTERRUPTED: arrived()} if arrived() is not None else got)
 
 

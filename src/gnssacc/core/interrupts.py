@@ -34,6 +34,22 @@ def _record_and_raise(signum, frame):
     raise _interruption(signum)
 
 
+def _record(signum, frame):
+    _ARRIVED.append(signum)
+
+
+def hold_signals() -> None:
+    """From here on SIGINT and SIGTERM are recorded (:func:`arrived`), not raised: for a child
+    process about to hand its answer over and end, which a signal must not cut in the middle of
+    a write (its ``Terminated`` would escape the process's target, and ``multiprocessing`` would
+    print it as a traceback). Outside the main thread this does nothing."""
+    for s in _RAISED:
+        try:
+            signal.signal(s, _record)
+        except ValueError:  # not the main thread
+            return
+
+
 def _quiet_unraisable(previous):
     """An ``sys.unraisablehook`` that drops our own interruptions: a signal landing in a
     weakref callback or a finaliser (the garbage collector's) cannot unwind from there, and
