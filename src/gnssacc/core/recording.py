@@ -288,6 +288,15 @@ class Truth:
     rpy: np.ndarray | None = None
     caveat: str = ""
 
+    def select(self, mask) -> "Truth":
+        def pick(a):
+            return None if a is None else a[mask]
+
+        return Truth(
+            self.t[mask], self.lat[mask], self.lon[mask], self.h[mask],
+            pick(self.v_n), pick(self.rpy), self.caveat,
+        )  # fmt: skip
+
 
 @dataclass
 class InitialState:
@@ -581,23 +590,13 @@ class RecordedRun:
                 return None
             return stream.select((stream.t >= t_a) & (stream.t <= t_b))
 
-        truth = self.truth
-        if truth is not None:
-            keep = (truth.t >= t_a) & (truth.t <= t_b)
-            truth = replace(
-                truth,
-                **{
-                    k: None if getattr(truth, k) is None else getattr(truth, k)[keep]
-                    for k in ("t", "lat", "lon", "h", "v_n", "rpy")
-                },
-            )
         return replace(
             self,
             imu=imu,
             gnss=inside(self.gnss),
             gnss_vel=inside(self.gnss_vel),
             odometry=inside(self.odometry),
-            truth=truth,
+            truth=inside(self.truth),
             init=None,
             sim=None,
         )

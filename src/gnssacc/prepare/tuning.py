@@ -739,14 +739,13 @@ def rest_floor(cfg: RunConfig, init, noise) -> dict:
     2 mg: its tilt error 3 stated sigma) or stayed at the default (20 mg on a consumer IMU whose
     turn-on is 30). Empty when the yaw was told, the user set the value, or there is no gyro
     noise at rest to tell the class."""
-    from .turn_allowance import RAD_RTS_TO_DEG_RTH, accel_turn_on_mg, gyro_density_deg_rth
+    from .turn_allowance import accel_turn_on_mg, rest_density_deg_rth
 
     if init is None or getattr(init, "yaw_evidence", "") != "undetermined":
         return {}
-    if FLOORED_AT_REST in cfg.explicit or noise is None or not getattr(noise, "n_spans", 0):
+    if FLOORED_AT_REST in cfg.explicit:
         return {}
-    arw = gyro_density_deg_rth(np.asarray(noise.gyro_density, float) * RAD_RTS_TO_DEG_RTH)
-    mg = accel_turn_on_mg(arw)
+    mg = accel_turn_on_mg(rest_density_deg_rth(noise))
     return {FLOORED_AT_REST: float(f"{mg:.3g}")} if np.isfinite(mg) else {}
 
 

@@ -145,5 +145,13 @@ def rest_allowance(cfg: RunConfig, imu, stationary, noise) -> RunConfig:
         if not noise.n_spans:
             return cfg
         what = f"at rest ({noise.n_spans} spans of {SHORT_REST_S:g}-10 s, {noise.total_s:.0f} s)"
-    arw = gyro_density_deg_rth(np.asarray(noise.gyro_density, float) * RAD_RTS_TO_DEG_RTH)
-    return resolved(cfg, arw, what)
+    return resolved(cfg, rest_density_deg_rth(noise), what)
+
+
+def rest_density_deg_rth(noise) -> float:
+    """The gyros' white-noise density measured at rest [deg/sqrt(h)] (:func:`gyro_density_deg_rth`
+    of ``noise``'s, a :class:`gnssacc.prepare.stationary.StationaryNoise`): the IMU's class for
+    the priors of this module; NaN without a span."""
+    if noise is None or not noise.n_spans:
+        return float("nan")
+    return gyro_density_deg_rth(np.asarray(noise.gyro_density, float) * RAD_RTS_TO_DEG_RTH)
