@@ -326,6 +326,47 @@ def test_an_axis_angle_is_kept_only_on_a_decisive_likelihood_gain():
     assert theta.tolist() == [1.0, 1.0, 0.0] and n == 3 and dropped == [2]
 
 
+class _Bowl:
+    """An objective over the vehicle's two angles (searched from zero, steps of ``ADDITIVE``):
+    a Gaussian negative log-likelihood, its maximum at ``mean_deg``, 1-sigma ``sigma_deg``; the
+    passes it made (as :class:`gnssacc.prepare.tuning._Objective` keeps them)."""
+
+    def __init__(self, mean_deg, sigma_deg):
+        from gnssacc.prepare import tuning
+
+        self.free = [("nhc", "pitch_offset_deg"), ("nhc", "yaw_offset_deg")]
+        self.start = {p: np.zeros(1) for p in self.free}
+        self.step = np.array([tuning.ADDITIVE[p] for p in self.free])
+        self.mean, self.sigma = np.asarray(mean_deg, float), np.asarray(sigma_deg, float)
+        self.passes: dict = {}
+
+    def __call__(self, theta):
+        theta = np.asarray(theta, float)
+        z = (theta * self.step - self.mean) / self.sigma
+        self.passes[theta.tobytes()] = None
+        return 0.5 * float(z @ z)
+
+    def ahead(self, thetas):
+        pass
+
+
+def test_the_tuner_records_how_well_the_likelihood_resolves_each_angle():
+    """Each angle's 1-sigma as the Gaussian's, found where the search stopped; kept only where in
+    use (not dropped, not zero); read from zero when zero is a sigma away, beyond otherwise."""
+    from gnssacc.prepare import tuning
+
+    obj = _Bowl([0.3, 0.02], [0.1, 0.25])
+    found = np.array([0.3, 0.02]) / obj.step
+    n, rec = tuning._axes_resolution(obj, found, dropped=[1])
+    assert rec["pitch_offset_deg"]["sigma_deg"] == pytest.approx(0.1, rel=1e-9)
+    assert rec["yaw_offset_deg"]["sigma_deg"] == pytest.approx(0.25, rel=1e-9)
+    assert rec["pitch_offset_deg"]["found_deg"] == pytest.approx(0.3)
+    assert [rec[k]["kept"] for k in rec] == [True, False]
+    assert n == 4  # the found point, each angle at zero, the yaw beyond (zero within a sigma)
+    _, at_zero = tuning._axes_resolution(_Bowl([0.0, 0.0], [0.1, 0.1]), np.zeros(2), dropped=[])
+    assert [v["kept"] for v in at_zero.values()] == [False, False]  # nothing proven at zero
+
+
 def test_the_clock_check_decides_without_the_aids():
     """The clock offset's likelihood stage runs the IMU and GNSS model alone: with the constraint
     (its axes not identified yet) KITTI seed 3 with outages measured a -0.148 s offset, decisively,

@@ -117,6 +117,74 @@ def test_the_floor_skips_the_measured_angles_and_takes_the_imus_class():
     assert fallback["misalignment_ppm"] == 1000.0  # "auto" before the recording sets the class
 
 
+def _bowl(mean_deg: float, sigma_deg: float):
+    """A log-likelihood along an angle, Gaussian: its maximum at ``mean_deg``, its 1-sigma
+    ``sigma_deg``; and the angles it was read at."""
+    seen: list = []
+
+    def loglik(a: float) -> float:
+        seen.append(a)
+        return -0.5 * ((a - mean_deg) / sigma_deg) ** 2
+
+    return loglik, seen
+
+
+@pytest.mark.parametrize("found", [-0.34, 0.05, 0.0])
+def test_the_likelihoods_resolution_of_an_angle_is_its_gaussians_sigma(found):
+    """Closed form: a Gaussian log-likelihood along the angle gives its own sigma, read from zero
+    when zero is a sigma or more away (no pass beyond), from a point beyond the angle otherwise."""
+    from gnssacc.prepare.attitude_axes import PROBE_DEG, likelihood_sigma
+
+    loglik, seen = _bowl(found, 0.107)
+    assert likelihood_sigma(loglik, found) == pytest.approx(0.107, rel=1e-9)
+    beyond = abs(found) < 0.107
+    assert (len(seen) == 3) == beyond
+    if beyond:
+        assert seen[-1] == pytest.approx(found + np.copysign(PROBE_DEG, found or 1.0))
+    assert likelihood_sigma(lambda a: -3.0, found) == np.inf  # flat: nothing resolved
+
+
+@pytest.mark.parametrize("found, sigma", [(-0.34, 0.107), (0.05, 0.3), (0.0, None)])
+def test_an_angle_left_at_zero_is_off_by_its_posterior_spread_from_the_triads_prior(found, sigma):
+    """Closed form: the prior N(0, t^2) (the triad's turn) and the likelihood N(found, s^2) give the
+    posterior variance 1 / (1/t^2 + 1/s^2) and mean found / s^2 times it; zero is off by their
+    root mean square. A kept angle is off by the likelihood's sigma alone."""
+    from gnssacc.prepare.attitude_axes import offset_floor
+
+    t = 0.32
+    info = 0.0 if sigma is None else 1.0 / sigma**2
+    var = 1.0 / (1.0 / t**2 + info)
+    want = np.hypot(found * info * var, np.sqrt(var))
+    assert offset_floor(found, sigma, False, t) == pytest.approx(want, rel=1e-12)
+    assert offset_floor(found, sigma, False, t) <= np.hypot(t, found)
+    if sigma is not None:
+        assert offset_floor(found, sigma, True, t) == sigma
+    assert offset_floor(found, sigma, False, 0.0) == 0.0  # a calibrated triad: nothing to turn
+
+
+def test_a_searched_angles_floor_is_the_tuners_record_of_it():
+    """An angle the tuner searched has the floor its record gives (``vehicle_axes``), kept or not;
+    one it did not search keeps the triad's."""
+    from gnssacc.core.config import load_config
+    from gnssacc.pipeline import attitude_axes
+    from gnssacc.prepare.attitude_axes import offset_floor
+
+    class_ = {"imu": {"gyro_turn_error_ppm": 8000.0}}
+    triad = np.degrees(8000e-6) / np.sqrt(2)
+    zero = {"nhc": {"pitch_offset_deg": 0.0, "yaw_offset_deg": 0.0}}
+    cfg = load_config(overrides=class_).with_values(zero, "tuned")
+    record = {
+        "pitch_offset_deg": {"found_deg": -0.34, "sigma_deg": 0.107, "kept": False},
+        "yaw_offset_deg": {"found_deg": 0.6, "sigma_deg": 0.1, "kept": True},
+    }
+    pitch = offset_floor(-0.34, 0.107, False, triad)
+    got = attitude_axes(cfg, None, record)
+    assert got["sigma_floor_deg"] == pytest.approx({"roll": triad, "pitch": pitch, "yaw": 0.1})
+    assert got["resolution_deg"] == pytest.approx({"pitch": pitch, "yaw": 0.1})
+    given = load_config(overrides=class_)  # not searched: the record does not apply
+    assert attitude_axes(given, None, record)["sigma_floor_deg"]["pitch"] == pytest.approx(triad)
+
+
 def test_without_offsets_the_solution_is_itself():
     sol = _solution(np.zeros((3, 3)))
     assert sol.in_vehicle_axes(None) is sol

@@ -525,7 +525,7 @@ def run_methods(
     # The attitude reported: the vehicle's axes, its sigma no less than what no measurement tells
     # of them.
     R_vb = NhcSettings.from_config(prep.cfg).R_vb
-    floor = np.radians([attitude_axes(prep.cfg, prep.init)["sigma_floor_deg"][a] for a in AXES])
+    floor = np.radians([axes_of(prep)["sigma_floor_deg"][a] for a in AXES])
     out: dict[str, NavSolution] = {}
     beside = {} if beside is None else beside
     done = methods_side_by_side(prep, methods, show_progress, observers, beside)
@@ -552,6 +552,13 @@ def run_methods(
     for name, call in beside.items():  # made here those not made in a worker (or failed there)
         beside[name] = call.value if isinstance(call, _Made) else call()
     return out
+
+
+def axes_of(prep: Prepared) -> dict:
+    """:func:`attitude_axes` of a prepared run: its start and the tuner's record of the vehicle's
+    axes (``vehicle_axes``, where it searched them)."""
+    tuned = prep.tuning.from_stationary.get("vehicle_axes") if prep.tuning else None
+    return attitude_axes(prep.cfg, prep.init, tuned)
 
 
 class _Made:
@@ -803,7 +810,7 @@ def _run_facts(prep: Prepared, sols: dict, window, cons: dict, models: dict, on_
         "model_check_gm": models["gm"].to_dict() if "gm" in models else None,
         "tuning": prep.tuning.to_dict() if prep.tuning is not None else None,
         "preparation_cache": prep.cache,
-        "attitude_axes": attitude_axes(prep.cfg, prep.init),
+        "attitude_axes": axes_of(prep),
     }
 
 

@@ -462,7 +462,8 @@ def _axes_lines(metrics: dict) -> list[str]:
     :func:`gnssacc.prepare.attitude_axes.attitude_axes`)."""
     axes = metrics.get("attitude_axes") or {}
     floor = axes.get("sigma_floor_deg") or {}
-    least = [f"{a} {v:.2f}" for a, v in floor.items() if v > 0.0]
+    resolved = axes.get("resolution_deg") or {}
+    least = [f"{a} {v:.2f}" for a, v in floor.items() if v > 0.0 and a not in resolved]
     level = axes.get("level_deg")
     tilt = (
         "; roll and pitch: the tilt a vehicle that never showed its yaw cannot tell from its "
@@ -478,14 +479,21 @@ def _axes_lines(metrics: dict) -> list[str]:
         if least
         else ""
     )
+    known = (
+        "; the constraint's axes known to "
+        + ", ".join(f"{a} {v:.2f}" for a, v in resolved.items())
+        + " deg (the tuner's likelihood), each sigma at least that"
+        if resolved
+        else ""
+    )
     if axes.get("axes") == "vehicle":
         return [
             f"attitude: of the vehicle's axes, the body's turned by pitch "
             f"{axes['pitch_offset_deg']:+.2f} deg, yaw {axes['yaw_offset_deg']:+.2f} deg "
-            f"({', '.join(axes['set_by'])}: the constraint's axes){unknown}; the biases stay in "
-            "the body's"
+            f"({', '.join(axes['set_by'])}: the constraint's axes){known}{unknown}; the biases "
+            "stay in the body's"
         ]
-    return [f"attitude: of the body's axes{unknown}"] if unknown else []
+    return [f"attitude: of the body's axes{known}{unknown}"] if known or unknown else []
 
 
 def _truth_lines(metrics: dict) -> list[str]:

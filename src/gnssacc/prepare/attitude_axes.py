@@ -16,8 +16,13 @@ model leaves out already, and the estimator's sigma then holds part of it.
 * Where the tuner searched the constraint's axes against the body's (``[nhc]
   pitch_offset_deg``, ``yaw_offset_deg`` set by ``tuned``), those angles were measured against
   the triad's axes: where it proved one (its likelihood-ratio test), the attitude is the
-  vehicle's (:meth:`gnssacc.core.solution.NavSolution.in_vehicle_axes`); where it did not, the
-  data showed no turn it could resolve. Either way that axis has no floor.
+  vehicle's (:meth:`gnssacc.core.solution.NavSolution.in_vehicle_axes`). The measurement has a
+  resolution (:func:`likelihood_sigma`), and a test that keeps an angle only on decisive evidence
+  leaves at zero angles of up to about four of it: the axis's floor is how far the angle in use
+  may be from the vehicle's (:func:`offset_floor`: a kept angle's resolution; for one left at
+  zero, the triad's turn as the IMU's class allows it, updated by the likelihood). A
+  sideways-mounted consumer IMU whose pitch test found -0.34 deg at 3.1 sigma, not decisive, and
+  kept zero stated a pitch sigma of 0.15 deg with an error of +0.34 (pitch NEES 3.5 / 4.4).
 * The roll against the vehicle's axes is in no measurement (the constraint's lateral and vertical
   velocities are both zero whatever it is). Where the tuner found the other two angles, they
   measure this IMU's triad; with the three angles alike a priori, their root mean square
@@ -81,7 +86,64 @@ def level_floor(cfg: RunConfig, init) -> dict | None:
     }
 
 
-def attitude_axes(cfg: RunConfig, init=None) -> dict:
+#: How far beyond the found angle the likelihood is read when zero is within a sigma of it [deg].
+PROBE_DEG = 0.5
+
+
+def needs_probe(found_deg: float, drop: float) -> bool:
+    """Whether :func:`likelihood_sigma` reads the likelihood at :func:`probe_at`: zero is within a
+    sigma of the found angle (``drop``, its log-likelihood below the found one's, under 0.5)."""
+    return drop < 0.5 or found_deg == 0.0
+
+
+def probe_at(found_deg: float) -> float:
+    """Where :func:`likelihood_sigma` reads the likelihood beyond the found angle, away from zero
+    [deg]."""
+    return found_deg + math.copysign(PROBE_DEG, found_deg or 1.0)
+
+
+def likelihood_sigma(loglik, found_deg: float) -> float:
+    """How well the likelihood resolves one angle of the vehicle's axes: its 1-sigma [deg] from
+    the curvature of the log-likelihood along the angle, by the secant between the found angle
+    and zero (where the tuner's test already read it) or, where zero is within a sigma of it,
+    between the found angle and :func:`probe_at`; ``inf`` where the likelihood is flat.
+
+    Parameters
+    ----------
+    loglik : callable
+        ``loglik(angle_deg)``: the log-likelihood with this angle at ``angle_deg``, the others as
+        found.
+    found_deg : float
+        The angle the search found (the likelihood's maximum along it) [deg].
+    """
+    best = loglik(found_deg)
+    drop, dist = best - loglik(0.0), abs(found_deg)
+    if needs_probe(found_deg, drop):
+        dist = PROBE_DEG
+        drop = best - loglik(probe_at(found_deg))
+    return dist / math.sqrt(2.0 * drop) if drop > 0.0 else math.inf
+
+
+def offset_floor(found_deg: float, sigma_deg: float | None, kept: bool, triad_deg: float) -> float:
+    """How far an angle of the vehicle's axes in use may be from the vehicle's [deg], 1-sigma.
+
+    A kept angle (its test decisive: the data overrule any prior) is off by what the likelihood
+    resolves, ``sigma_deg``. A dropped one is zero, and the angle is what the IMU's class allows,
+    ``N(0, triad_deg^2)`` (the triad's turn; the mounting is applied), updated by the likelihood
+    ``N(found_deg, sigma_deg^2)``: zero is off by the root mean square ``hypot(mean, sd)`` of that
+    posterior (no more than the triad, nearly the found angle where the likelihood is sharp).
+    ``sigma_deg`` ``None``: a flat likelihood.
+    """
+    if kept:
+        return float(sigma_deg)
+    if triad_deg <= 0.0:
+        return 0.0
+    info = 0.0 if sigma_deg is None or not math.isfinite(sigma_deg) else 1.0 / sigma_deg**2
+    var = 1.0 / (1.0 / triad_deg**2 + info)
+    return math.hypot(found_deg * info * var, math.sqrt(var))
+
+
+def attitude_axes(cfg: RunConfig, init=None, tuned_axes: dict | None = None) -> dict:
     """Whose axes the solutions' attitude is of and the least sigma of each of its angles.
 
     Parameters
@@ -91,6 +153,10 @@ def attitude_axes(cfg: RunConfig, init=None) -> dict:
     init : InitialState, optional
         The run's start: on a run whose yaw it left undetermined, roll and pitch have the level
         floor too (:func:`level_floor`).
+    tuned_axes : dict, optional
+        The tuner's record of the angles it searched (``TuneResult.from_stationary``
+        ``vehicle_axes``: ``{key: {"found_deg", "sigma_deg", "kept"}}``, :func:`likelihood_sigma`):
+        each such angle's floor (:func:`offset_floor`).
 
     Returns
     -------
@@ -100,7 +166,8 @@ def attitude_axes(cfg: RunConfig, init=None) -> dict:
         nonzero angles: ``tuned``, a file, ``overrides``), ``misalignment_ppm`` with its
         ``misalignment_from``, ``triad_deg`` (the triad's rotation per axis, 1-sigma [deg]),
         ``level_deg`` (:func:`level_floor`, or ``None``) and ``sigma_floor_deg`` ``{roll, pitch,
-        yaw}`` [deg] (the module docstring).
+        yaw}`` [deg] (the module docstring); ``resolution_deg`` ``{pitch, yaw}``, the floors of
+        the angles the tuner searched (:func:`offset_floor`; an axis not searched is absent).
     """
     keys = ("pitch_offset_deg", "yaw_offset_deg")
     angles = {k: float(cfg["nhc"][k]) for k in keys}
@@ -108,10 +175,15 @@ def attitude_axes(cfg: RunConfig, init=None) -> dict:
     ppm, source = misalignment_ppm(cfg)
     triad = math.degrees(ppm * 1e-6) / math.sqrt(2.0)
     measured = {k: origin[k] == "tuned" for k in keys}  # searched, kept or not
+    resolution = {
+        k.split("_")[0]: offset_floor(**tuned_axes[k], triad_deg=triad)
+        for k in keys
+        if measured[k] and tuned_axes and k in tuned_axes
+    }
     floor = {
         "roll": triad,
-        "pitch": 0.0 if measured["pitch_offset_deg"] else triad,
-        "yaw": 0.0 if measured["yaw_offset_deg"] else triad,
+        "pitch": resolution.get("pitch", 0.0) if measured["pitch_offset_deg"] else triad,
+        "yaw": resolution.get("yaw", 0.0) if measured["yaw_offset_deg"] else triad,
     }
     if any(measured[k] and angles[k] for k in keys):
         floor["roll"] = max(triad, math.sqrt((angles[keys[0]] ** 2 + angles[keys[1]] ** 2) / 2))
@@ -127,5 +199,6 @@ def attitude_axes(cfg: RunConfig, init=None) -> dict:
         "misalignment_from": source,
         "triad_deg": triad,
         "level_deg": level,
+        "resolution_deg": resolution,
         "sigma_floor_deg": floor,
     }

@@ -119,6 +119,7 @@ from ..core.parallel import forks_held, side_by_side, usable_jobs
 from ..estimators.aids import REGISTRY
 from ..estimators.settings import GnssModel
 from . import aid_inflation
+from .attitude_axes import likelihood_sigma, needs_probe, probe_at
 from .filter_pass import FilterPass
 from .nelder_mead import nelder_mead
 
@@ -830,6 +831,7 @@ def tune(
         kinds,
         filter_pass,
         start,
+        info,
     )
     for sec, vals in aid_raw.items():
         raw.setdefault(sec, {}).update(vals)
@@ -901,11 +903,13 @@ def _aids_stage(
     kinds,
     filter_pass,
     start: dict,
+    info: dict,
 ) -> tuple[dict, int]:
     """Step 5 of the module docstring: the free aid parameters by maximum likelihood with the
     tuned IMU and GNSS noise held (``tuned``); ``cfg`` the configuration the start was made with.
     Returns the values (section -> key -> value) and the passes made; adds the starting values
-    to ``start``."""
+    to ``start``, and to ``info`` what the likelihood tells of the vehicle's axes
+    (``vehicle_axes``: :func:`_settle_offsets`)."""
     free = [p for p in aid_params if p not in cfg.explicit]
     if not free:
         return {}, 0
@@ -937,7 +941,7 @@ def _aids_stage(
         raw.setdefault(sec, {})[key] = best[sec][key]
     n_eval += _inflate(raw, obj, theta)
     offsets = [p for p in free if p in ADDITIVE]
-    n_again = _settle_offsets(obj, raw, offsets, cfg) if offsets else 0
+    n_again = _settle_offsets(obj, raw, offsets, cfg, info) if offsets else 0
     return raw, n_eval + n_again
 
 
@@ -1026,27 +1030,58 @@ def _objective_at(obj: "_Objective", raw: dict, keys: list) -> "_Objective":
     return at
 
 
-def _settle_offsets(obj: "_Objective", raw: dict, offsets: list, cfg) -> int:
+def _settle_offsets(obj: "_Objective", raw: dict, offsets: list, cfg, info: dict) -> int:
     """The vehicle's axes ``offsets`` under the final sigmas (in ``raw``, held): searched again
     from their values in ``raw`` (inflated or not: the joint search's budget can leave them short,
     and a search only after an inflation would switch the axes with the inflation's decision),
-    then each kept only on :func:`_significant_offsets`' test; ``raw`` updated in place; returns
-    the passes made."""
+    then each kept only on :func:`_significant_offsets`' test; ``raw`` updated in place, and
+    ``info["vehicle_axes"]`` told what the likelihood says of each angle
+    (:func:`_axes_resolution`); returns the passes made."""
     obj2 = _objective_at(obj, raw, offsets)
+    prior = _prior_widths(cfg, offsets, {})
     found, j, n = ml_search(
-        obj2,
-        len(offsets),
-        OFFSET_EVALUATIONS,
-        _prior_widths(cfg, offsets, {}),
-        step_decades=0.2,
-        probe_decades=None,
+        obj2, len(offsets), OFFSET_EVALUATIONS, prior, step_decades=0.2, probe_decades=None
     )
-    theta = found if np.isfinite(j) else np.zeros(len(offsets))
-    theta, n_test, dropped = _significant_offsets(obj2, theta)
+    found = found if np.isfinite(j) else np.zeros(len(offsets))
+    theta, n_test, dropped = _significant_offsets(obj2, found)
     settled = obj2.config(theta)
     for i, (sec, key) in enumerate(offsets):
         raw[sec][key] = 0.0 if i in dropped else settled[sec][key]
-    return n + n_test
+    n_res, info["vehicle_axes"] = _axes_resolution(obj2, found, dropped)
+    return n + n_test + n_res
+
+
+def _axes_resolution(obj: "_Objective", found, dropped: list) -> tuple[int, dict]:
+    """Each angle of ``obj`` (the vehicle's axes alone) as the likelihood tells it around the
+    search's maximum ``found``: ``{key: {"found_deg", "sigma_deg", "kept"}}``
+    (:func:`gnssacc.prepare.attitude_axes.likelihood_sigma`; ``kept``: the angle is in use, not
+    zero and not ``dropped``), and the passes made (the points zero and beyond are read side by
+    side)."""
+    made, found = len(obj.passes), np.asarray(found, float)
+    angle0 = [float(obj.start[p][0]) for p in obj.free]
+    steps = [ADDITIVE[p] for p in obj.free]
+
+    def at(i: int, angle: float) -> np.ndarray:
+        theta = found.copy()  # zero as the test reads it (its pass is made)
+        theta[i] = -angle0[i] / steps[i] if angle == 0.0 else (angle - angle0[i]) / steps[i]
+        return theta
+
+    found_deg = [angle0[i] + found[i] * steps[i] for i in range(len(found))]
+    obj.ahead([at(i, 0.0) for i in range(len(found))])
+    best = -float(obj(found))
+    drops = [best + float(obj(at(i, 0.0))) for i in range(len(found))]
+    obj.ahead([at(i, probe_at(a)) for i, a in enumerate(found_deg) if needs_probe(a, drops[i])])
+    out = {}
+    for i, (_, key) in enumerate(obj.free):
+        sigma = likelihood_sigma(
+            lambda a, i=i: best if a == found_deg[i] else -float(obj(at(i, a))), found_deg[i]
+        )
+        out[key] = {
+            "found_deg": found_deg[i],
+            "sigma_deg": sigma if np.isfinite(sigma) else None,  # None: a flat likelihood
+            "kept": i not in dropped and found_deg[i] != 0.0,  # zero found: no angle proven
+        }
+    return len(obj.passes) - made, out
 
 
 def correlation_inflation(loglik) -> float:
