@@ -12,6 +12,9 @@ The gnssacc cases prepare afresh (``--retune``) but for the rerun, which reuses 
 kept by the others (``$GNSSACC_CACHE_DIR``, a folder of the bench's own). Then the acceptance of
 issue 35 (each against the plain script).
 
+The floor of any gnssacc run (:data:`FLOOR`, interleaved likewise): imports, the ekf and smoother
+kernels loaded from the cache, the KITTI files read; nothing estimated.
+
 ``--breakdown`` adds one instrumented run per gnssacc case: where the time goes, from the start
 of the process (interpreter and imports, data, each preparation stage, the methods, scoring,
 table, files, figures, exit).
@@ -63,6 +66,15 @@ TARGETS = (
     ("rerun ekf,smoother --no-plots (kept)", "end", 2.5),
 )
 PLAIN = {"plain gtsam script": [], "plain gtsam script + sigmas": ["--sigmas"]}
+#: The floor of any ``gnssacc run`` of ``ekf,smoother`` on KITTI: a process that imports gnssacc,
+#: loads the compiled kernels those methods need and reads the KITTI files, and estimates nothing.
+FLOOR = (
+    "from gnssacc import cli, pipeline\n"
+    "from gnssacc.estimators import kernels\n"
+    "for g in kernels.groups_for(['ekf', 'smoother']):\n"
+    "    kernels.compile_group(g)\n"
+    "pipeline.load('kitti')\n"
+)
 
 
 def child_env() -> dict:
@@ -196,6 +208,9 @@ def main() -> None:
                 rows.setdefault(name, []).append(
                     timed([sys.executable, "-m", "gnssacc.cli", *extra, "--out", out])
                 )
+            rows.setdefault("floor: imports, kernels, data", []).append(
+                timed([sys.executable, "-c", FLOOR])
+            )
             print(f"round {r + 1}/{args.repeats} done", file=sys.stderr)
         load1 = os.getloadavg()
         print(
