@@ -1077,9 +1077,9 @@ def _axes_resolution(obj: "_Objective", found, dropped: list) -> tuple[int, dict
             lambda a, i=i: best if a == found_deg[i] else -float(obj(at(i, a))), found_deg[i]
         )
         out[key] = {
-            "found_deg": found_deg[i],
-            "sigma_deg": sigma if np.isfinite(sigma) else None,  # None: a flat likelihood
-            "kept": i not in dropped and found_deg[i] != 0.0,  # zero found: no angle proven
+            "found_deg": float(found_deg[i]),
+            "sigma_deg": float(sigma) if np.isfinite(sigma) else None,  # None: a flat likelihood
+            "kept": bool(i not in dropped and found_deg[i] != 0.0),  # zero found: none proven
         }
     return len(obj.passes) - made, out
 
