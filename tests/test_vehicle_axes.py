@@ -160,6 +160,8 @@ def test_an_angle_left_at_zero_is_off_by_its_posterior_spread_from_the_triads_pr
     if sigma is not None:
         assert offset_floor(found, sigma, True, t) == sigma
     assert offset_floor(found, sigma, False, 0.0) == 0.0  # a calibrated triad: nothing to turn
+    if sigma is None:  # kept where the likelihood is flat: the prior's spread about the angle
+        assert offset_floor(0.4, None, True, t) == pytest.approx(np.hypot(0.4, t))
 
 
 def test_a_searched_angles_floor_is_the_tuners_record_of_it():

@@ -132,15 +132,18 @@ def offset_floor(found_deg: float, sigma_deg: float | None, kept: bool, triad_de
     ``N(0, triad_deg^2)`` (the triad's turn; the mounting is applied), updated by the likelihood
     ``N(found_deg, sigma_deg^2)``: zero is off by the root mean square ``hypot(mean, sd)`` of that
     posterior (no more than the triad, nearly the found angle where the likelihood is sharp).
-    ``sigma_deg`` ``None``: a flat likelihood.
+    ``sigma_deg`` ``None``: a flat likelihood (a kept angle is then off by the root mean square of
+    the prior about it).
     """
-    if kept:
+    flat = sigma_deg is None or not math.isfinite(sigma_deg)
+    if kept and not flat:
         return float(sigma_deg)
-    if triad_deg <= 0.0:
-        return 0.0
-    info = 0.0 if sigma_deg is None or not math.isfinite(sigma_deg) else 1.0 / sigma_deg**2
+    used = found_deg if kept else 0.0
+    if triad_deg <= 0.0:  # a calibrated triad: the vehicle's axes are the case's
+        return abs(used)
+    info = 0.0 if flat else 1.0 / sigma_deg**2
     var = 1.0 / (1.0 / triad_deg**2 + info)
-    return math.hypot(found_deg * info * var, math.sqrt(var))
+    return math.hypot(used - found_deg * info * var, math.sqrt(var))
 
 
 def attitude_axes(cfg: RunConfig, init=None, tuned_axes: dict | None = None) -> dict:
