@@ -945,6 +945,17 @@ def _aids_stage(
     return raw, n_eval + n_again
 
 
+def _with_angle(obj: "_Objective", theta, i: int, angle: float) -> np.ndarray:
+    """``theta`` with ``obj``'s additive parameter ``i`` (an angle of the vehicle's axes) at
+    ``angle`` [deg]; zero by one formula, so that the points the offsets' test and their record
+    read are the same passes of ``obj``."""
+    p = obj.free[i]
+    start, step = float(obj.start[p][0]), ADDITIVE[p]
+    out = np.array(theta, float)
+    out[i] = -start / step if angle == 0.0 else (angle - start) / step
+    return out
+
+
 def _significant_offsets(obj: "_Objective", theta: np.ndarray) -> tuple[np.ndarray, int, list]:
     """``theta`` with each additive parameter (the vehicle's axes) at zero unless it raises the
     log-likelihood by more than :data:`OFFSET_MIN_GAIN` (a likelihood-ratio test per angle, in
@@ -955,8 +966,7 @@ def _significant_offsets(obj: "_Objective", theta: np.ndarray) -> tuple[np.ndarr
     for i, p in enumerate(obj.free):
         if p not in ADDITIVE:
             continue
-        trial = theta.copy()
-        trial[i] = -float(obj.start[p][0]) / ADDITIVE[p]  # the angle at zero
+        trial = _with_angle(obj, theta, i, 0.0)
         if trial[i] == theta[i]:
             continue
         n += 1
@@ -1058,15 +1068,11 @@ def _axes_resolution(obj: "_Objective", found, dropped: list) -> tuple[int, dict
     zero and not ``dropped``), and the passes made (the points zero and beyond are read side by
     side)."""
     made, found = len(obj.passes), np.asarray(found, float)
-    angle0 = [float(obj.start[p][0]) for p in obj.free]
-    steps = [ADDITIVE[p] for p in obj.free]
 
     def at(i: int, angle: float) -> np.ndarray:
-        theta = found.copy()  # zero as the test reads it (its pass is made)
-        theta[i] = -angle0[i] / steps[i] if angle == 0.0 else (angle - angle0[i]) / steps[i]
-        return theta
+        return _with_angle(obj, found, i, angle)
 
-    found_deg = [angle0[i] + found[i] * steps[i] for i in range(len(found))]
+    found_deg = [float(obj.start[p][0]) + found[i] * ADDITIVE[p] for i, p in enumerate(obj.free)]
     obj.ahead([at(i, 0.0) for i in range(len(found))])
     best = -float(obj(found))
     drops = [best + float(obj(at(i, 0.0))) for i in range(len(found))]
