@@ -8,7 +8,8 @@ default is replaced by what the fixes show: their scatter about quadratics over 
 (:func:`gnssacc.checks.motionmatch.fix_scatter`), horizontal and vertical, floored at
 :data:`MIN_SIGMA_M`. That is the *white* part of their error; what varies slowly (a receiver's
 own filter, multipath) is the noise identification's business (its Gauss-Markov stage), and the
-stationary test allows for fixes correlated in time (``[stationary] gnss_corr_s``).
+stationary test allows for it as the fixes show it (:mod:`gnssacc.prepare.fix_wander`) and for
+fixes correlated from one to the next (``[stationary] gnss_corr_s``).
 """
 
 from __future__ import annotations

@@ -247,8 +247,10 @@ def _carried(path, t_q: np.ndarray, velocity: bool) -> tuple[np.ndarray, np.ndar
     return (V, bound_v) if velocity else (P, bound)
 
 
-def _fix_block(gnss: GnssFixes, p_n, span, paths, p: StationaryParams):
-    """Position rows, observations and variances of the fixes in and around the span."""
+def _fix_block(gnss: GnssFixes, p_n, span, paths, p: StationaryParams, wander: float = 0.0):
+    """Position rows, observations and variances of the fixes in and around the span; the fixes'
+    wander ``wander`` [m^2/s] adds ``wander (d + duration / 3)`` at ``d`` seconds from the span
+    (the random walk's spread from the span's fixes, taken per fix)."""
     A, y, var, t = [np.zeros((0, 6))], [np.zeros(0)], [np.zeros(0)], [np.zeros(0)]
     for k, path in _pieces(gnss.t, span, paths):
         if k.size == 0:
@@ -257,7 +259,9 @@ def _fix_block(gnss: GnssFixes, p_n, span, paths, p: StationaryParams):
         a, obs = _position_rows(gnss.t[k], p_n[k], P, span.t_start)
         A.append(a)
         y.append(obs)
-        var.append((gnss.sigma_ned[k, :2] ** 2 + bound[:, None] ** 2).reshape(-1))
+        away = np.maximum(span.t_start - gnss.t[k], 0.0) + np.maximum(gnss.t[k] - span.t_end, 0.0)
+        walk = wander * (away + (span.t_end - span.t_start) / 3.0)
+        var.append((gnss.sigma_ned[k, :2] ** 2 + (bound**2 + walk)[:, None]).reshape(-1))
         t.append(gnss.t[k])
     corr = fix_rate_inflation(np.unique(np.concatenate(t)), p.gnss_corr_s)
     return np.vstack(A), np.concatenate(y), np.concatenate(var) * corr
@@ -291,6 +295,7 @@ def linked_motion(
     dt_med: float,
     lever_b: np.ndarray | None = None,
     velocity: GnssVelocity | None = None,
+    wander: float = 0.0,
 ) -> LinkedMotion | None:
     """Test "at rest" for a span against the fixes (and GNSS velocities) in it and within
     ``link_reach_s`` around it, carried to it by the IMU (module notes). None when there are
@@ -308,9 +313,15 @@ def linked_motion(
         The GNSS antenna from the IMU, body FRD [m] (default: at the IMU).
     velocity : GnssVelocity, optional
         The receiver's velocities of the antenna [m/s], NED: rows ``v_n + R(psi) V(t)``.
+    wander : float
+        The fixes' random-walk rate per horizontal axis [m^2/s]
+        (:func:`gnssacc.prepare.fix_wander.fix_wander`).
     """
     paths = _paths(imu, span, p, dt_med, lever_b)
-    blocks = [_fix_block(gnss, p_n, span, paths, p), _velocity_block(velocity, span, paths)]
+    blocks = [
+        _fix_block(gnss, p_n, span, paths, p, wander),
+        _velocity_block(velocity, span, paths),
+    ]
     n_obs = sum(len(b[1]) // 2 for b in blocks)
     if n_obs < 3:
         return None

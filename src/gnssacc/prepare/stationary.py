@@ -41,7 +41,10 @@ Algorithm (thresholds in :class:`StationaryParams`; cost linear in the record, v
    within the margin is farther from the stretch's mean position than its excursion bound plus
    ``gnss_excursion_k`` sigma. It is rejected, not split: its parts would each have too few
    fixes to reject a creep. A stretch with fewer than ``gnss_min_fixes`` fixes in and around it
-   (a GNSS outage) is kept on IMU evidence alone, flagged ``gnss_checked=False``.
+   (a GNSS outage) is kept on IMU evidence alone, flagged ``gnss_checked=False``. Both tests
+   (and step 4b) allow for the fixes' slow wander, a random walk whose rate the fixes inside all
+   the IMU-still stretches show (:mod:`gnssacc.prepare.fix_wander`; zero unless they prove it): a
+   receiver-filtered fix wandering 0.6 m over 30 s moves 0.1 m/s over a stop of a few seconds.
 4b. **Fixes carried by the IMU.** Inside a GNSS outage step 4 has no fixes, or only a few
    widened by a large excursion bound, and an IMU-still cruise would pass. The fixes within
    ``link_reach_s`` before and after the stretch (and the receiver's velocities, when the
@@ -81,6 +84,7 @@ from ..core.stationary_params import (  # noqa: F401 (this stage's API)
     params_from_config,
 )
 from ..core.units import DEG
+from .fix_wander import fix_wander
 from .span_motion import (
     G_APPROX,
     fix_rate_inflation,
@@ -193,6 +197,9 @@ class StationaryReport:
         ``why`` ("GNSS shows motion", "GNSS around it, carried by the IMU, shows motion" or
         "velocity change to a neighbouring span"),
         ``gnss_speed_mps``, ``gnss_speed_sigma_mps`` (None when unchecked).
+    fix_wander_m2ps : float
+        The fixes' slow error the GNSS check allowed for, as a random-walk rate per horizontal
+        axis [m^2/s] (:mod:`gnssacc.prepare.fix_wander`; 0: the fixes showed none).
     """
 
     spans: list[StationarySpan]
@@ -200,6 +207,7 @@ class StationaryReport:
     t_last: float
     params: StationaryParams = field(default_factory=StationaryParams)
     rejected: list[dict] = field(default_factory=list)
+    fix_wander_m2ps: float = 0.0
 
     def mask(self, t) -> np.ndarray:
         """True where time ``t`` [s] (array) lies in a span (``t_start <= t <= t_end``)."""
@@ -235,6 +243,7 @@ class StationaryReport:
             "fraction": round(self.fraction, 5),
             "spans": [s.to_dict() for s in self.spans],
             "rejected": self.rejected,
+            "fix_wander_m2ps": self.fix_wander_m2ps,
             "params": {k: getattr(self.params, k) for k in self.params.__dataclass_fields__},
         }
 
@@ -392,7 +401,7 @@ def _drop_drift(still, mu, se2, B: int, J: int, p: StationaryParams, passes: int
 
 
 def gnss_speed(
-    t: np.ndarray, p_n: np.ndarray, sigma_ned: np.ndarray, corr_s: float
+    t: np.ndarray, p_n: np.ndarray, sigma_ned: np.ndarray, corr_s: float, wander: float = 0.0
 ) -> tuple[float, float]:
     """Horizontal speed of a weighted straight-line fit to fixes, and its 1-sigma per axis.
 
@@ -406,6 +415,10 @@ def gnss_speed(
         1-sigma of each fix [m].
     corr_s : float
         Fix errors closer than this [s] count as correlated (see :class:`StationaryParams`).
+    wander : float
+        The fix error's random-walk rate per axis [m^2/s] (:func:`gnssacc.prepare.fix_wander.fix_wander`):
+        it adds ``6 q / (5 T)`` to the slope's variance over the fixes' time span ``T`` (the
+        least-squares slope of a random walk).
 
     Returns
     -------
@@ -421,7 +434,8 @@ def gnss_speed(
         v[i] = np.sum(w * (tc - tm) * p_n[:, i]) / stt
         var[i] = 1.0 / stt
     inflate = fix_rate_inflation(t, corr_s)
-    return float(np.hypot(*v)), float(np.sqrt(inflate * var.mean()))
+    walk = 1.2 * wander / max(float(np.ptp(t)), 1e-9)
+    return float(np.hypot(*v)), float(np.sqrt(inflate * var.mean() + walk))
 
 
 def _excursion_bound(
@@ -520,6 +534,7 @@ def _gnss_verdict(
     p: StationaryParams,
     dt_med: float,
     lever_b: np.ndarray,
+    wander: float = 0.0,
 ) -> bool:
     """Fill the span's GNSS fields; False when the fixes show it moving (module notes, step 4).
 
@@ -527,7 +542,8 @@ def _gnss_verdict(
     ``gnss_margin_s`` around it that the vehicle can have left by at most half a sigma, by the
     IMU (:func:`_excursion_bound`), each with its sigma widened by that excursion. Any fix
     within the margin farther from the span's mean position than its excursion bound plus
-    ``gnss_excursion_k`` sigma rejects the span by itself.
+    ``gnss_excursion_k`` sigma rejects the span by itself. ``wander`` [m^2/s] is the fixes'
+    slow error (:mod:`gnssacc.prepare.fix_wander`), in both tests.
     """
     k0 = int(np.searchsorted(gnss.t, span.t_start, side="left"))
     k1 = int(np.searchsorted(gnss.t, span.t_end, side="right"))
@@ -538,25 +554,32 @@ def _gnss_verdict(
     near = bound <= 0.5 * np.sqrt(np.mean(gnss.sigma_ned[k_out, :2] ** 2, axis=1))
     k = np.concatenate([np.arange(k0, k1), k_out[near]])
     if len(k) < max(p.gnss_min_fixes, 2) or np.ptp(gnss.t[k]) <= 0.0:
-        return _outside_ok(span, gnss, p_n, k0, k1, k_out, bound, p)
+        return _outside_ok(span, gnss, p_n, k0, k1, k_out, bound, p, wander)
     extra = np.concatenate([np.zeros(k1 - k0), bound[near]])
     sigma = np.sqrt(gnss.sigma_ned[k] ** 2 + extra[:, None] ** 2)
     order = np.argsort(gnss.t[k])
-    speed, sig_v = gnss_speed(gnss.t[k][order], p_n[k][order], sigma[order], p.gnss_corr_s)
+    speed, sig_v = gnss_speed(gnss.t[k][order], p_n[k][order], sigma[order], p.gnss_corr_s, wander)
     span.gnss_checked, span.gnss_speed_mps, span.gnss_speed_sigma_mps = True, speed, sig_v
     if speed > max(p.gnss_k_sigma * sig_v, p.gnss_speed_floor_mps):
         return False
-    return _outside_ok(span, gnss, p_n, k0, k1, k_out, bound, p)
+    return _outside_ok(span, gnss, p_n, k0, k1, k_out, bound, p, wander)
 
 
-def _outside_ok(span, gnss, p_n, k0: int, k1: int, k_out, bound, p: StationaryParams) -> bool:
+def _outside_ok(
+    span, gnss, p_n, k0: int, k1: int, k_out, bound, p: StationaryParams, wander: float = 0.0
+) -> bool:
     """False if a fix outside the span is farther from the span's mean fix than the vehicle can
-    have moved (``bound`` [m]) plus ``gnss_excursion_k`` sigma."""
+    have moved (``bound`` [m]) plus ``gnss_excursion_k`` sigma; the sigma holds the fixes' wander
+    ``wander`` [m^2/s] from the nearer edge (and a third of the span, the mean's own)."""
     if k1 <= k0 or len(k_out) == 0:
         return True
     w = 1.0 / gnss.sigma_ned[k0:k1, :2] ** 2
     centre = (w * p_n[k0:k1, :2]).sum(axis=0) / w.sum(axis=0)
-    sig = np.sqrt(np.mean(gnss.sigma_ned[k_out, :2] ** 2, axis=1) + np.mean(1.0 / w.sum(axis=0)))
+    away = np.minimum(np.abs(gnss.t[k_out] - span.t_start), np.abs(gnss.t[k_out] - span.t_end))
+    walk = wander * (away + (span.t_end - span.t_start) / 3.0)
+    sig = np.sqrt(
+        np.mean(gnss.sigma_ned[k_out, :2] ** 2, axis=1) + np.mean(1.0 / w.sum(axis=0)) + walk
+    )
     if np.any(np.linalg.norm(p_n[k_out, :2] - centre, axis=1) > bound + p.gnss_excursion_k * sig):
         span.gnss_checked = True
         return False
@@ -730,10 +753,12 @@ def _resolve_chain(
     return [s for g, ok in zip(groups, alive) if ok for s in g]
 
 
-def _linked_motion(span, imu, gnss, p_n, p: StationaryParams, dt_med: float, lever_b, vel) -> bool:
+def _linked_motion(
+    span, imu, gnss, p_n, p: StationaryParams, dt_med: float, lever_b, vel, wander: float
+) -> bool:
     """True when the fixes within ``link_reach_s`` around the span, carried to it by the IMU,
     refute "at rest" (module notes, step 4b); the fitted speed is kept on the span."""
-    linked = linked_motion(imu, span, gnss, p_n, p, dt_med, lever_b, vel)
+    linked = linked_motion(imu, span, gnss, p_n, p, dt_med, lever_b, vel, wander)
     if linked is None:
         return False
     span.linked_speed_mps, span.linked_glr = linked.speed_mps, linked.glr
@@ -789,18 +814,24 @@ def detect_stationary(
     block = max(int(round(p.block_s / dt)), 1) if dt > 0 else 1
     p_n = origin.to_ned(gnss.lat, gnss.lon, gnss.h) if len(gnss) else np.zeros((0, 3))
     spans, rejected = [], []
-    for i0, i1 in imu_still_stretches(imu, p):
+    stretches = imu_still_stretches(imu, p)
+    wander = (
+        fix_wander(gnss.t, p_n[:, :2], [(imu.t[i0], imu.t[i1 - 1]) for i0, i1 in stretches])
+        if len(gnss)
+        else 0.0
+    )
+    for i0, i1 in stretches:
         span = _span(imu, i0, i1, block)
-        if not _gnss_verdict(span, imu, gnss, p_n, p, dt, lever_b):
+        if not _gnss_verdict(span, imu, gnss, p_n, p, dt, lever_b, wander):
             rejected.append(_rejection(span, "GNSS shows motion"))
-        elif _linked_motion(span, imu, gnss, p_n, p, dt, lever_b, velocity):
+        elif _linked_motion(span, imu, gnss, p_n, p, dt, lever_b, velocity, wander):
             rejected.append(_rejection(span, "GNSS around it, carried by the IMU, shows motion"))
         else:
             spans.append(span)
     spans = _resolve_chain(imu, spans, p, rejected, dt)
     rejected.sort(key=lambda r: r["t_start"])
     t_first, t_last = (float(imu.t[0]), float(imu.t[-1])) if len(imu) else (0.0, 0.0)
-    return StationaryReport(spans, t_first, t_last, p, rejected)
+    return StationaryReport(spans, t_first, t_last, p, rejected, wander)
 
 
 # --- noise identification from the stationary spans -------------------------------------------
