@@ -29,6 +29,11 @@ Cases:
 ``--seeds`` seeds of each simulated case (default 3, the median shown; ~25 min; KITTI always
 seeds 0-4).
 
+``--kitti-seeds N`` runs KITTI over the fix-noise seeds ``0 .. N-1`` (default 5); with five or more
+seeds of a case, a line per method says on how many seeds its NEES leaves the acceptance range
+[0.5, 1.5], how many a consistent estimator would leave at each run's effective count, and the
+NEES pooled over the seeds.
+
 ``--set SECTION.KEY=VALUE`` (repeatable) sets a configuration value for every case (e.g.
 ``--set imu.gyro_turn_error_ppm=1000``, the turn allowance before ``"auto"``).
 
@@ -160,11 +165,11 @@ def _csv_columns(path: Path) -> dict:
     return {name.strip(): data[:, i] for i, name in enumerate(head)}
 
 
-def cases(quick: bool, n_seeds: int) -> list[Case]:
-    """Every case: KITTI seeds 0-4; the simulated grid with one seed (``quick``) or ``n_seeds``;
-    the real recordings."""
+def cases(quick: bool, n_seeds: int, kitti_seeds: int = 5) -> list[Case]:
+    """Every case: KITTI seeds ``0 .. kitti_seeds - 1``; the simulated grid with one seed
+    (``quick``) or ``n_seeds``; the real recordings."""
     s = (0,) if quick else tuple(range(n_seeds))
-    out = [Case("kitti", "kitti", (0, 1, 2, 3, 4))]
+    out = [Case("kitti", "kitti", tuple(range(kitti_seeds)))]
     out += [sim_case(sc, g, seeds=s) for sc in SCENARIOS for g in GRADES]
     for sc in ("car-city", "ugv"):
         for g in GRADES:
@@ -228,8 +233,10 @@ def method_row(res, mid: str, ref) -> dict:
         **yaw,
         "nees_pos": pos["value"] if pos else None,
         "nees_pos_warn": _outside(pos),
+        "nees_pos_neff": pos["n_eff"] if pos else None,
         "nees_att": att["value"] if att else None,
         "nees_att_warn": _outside(att),
+        "nees_att_neff": att["n_eff"] if att else None,
         **{f"nees_{a}": (att["per_axis"][a]["value"] if att else None) for a in AXES_RPY},
         **{f"nis_{k}": (cons.get("nis") or {}).get(k) for k in KINDS},
     }
@@ -326,6 +333,37 @@ COLUMNS = (
 )
 
 
+#: The acceptance range of a run's mean NEES per dof (issue 33).
+ACCEPT = (0.5, 1.5)
+
+
+def spread_lines(results: dict, min_seeds: int = 5) -> list[str]:
+    """Per case with at least ``min_seeds`` seeds and per method and NEES: how many seeds fall
+    outside :data:`ACCEPT`, the NEES pooled over the seeds (weighted by each run's effective
+    count of independent epochs times dof), and how many a consistent estimator would leave
+    outside (the sum over seeds of the chi-square tail probability at each run's effective dof)."""
+    from scipy.stats import chi2
+
+    out = []
+    for name, per_seed in results.items():
+        ok = [r for r in per_seed if "error" not in r]
+        for mid in METHODS:
+            for key, dof in (("nees_pos", 3), ("nees_att", 3)):
+                rows = [r[mid] for r in ok if (r.get(mid) or {}).get(key) is not None]
+                if len(rows) < min_seeds or any(r.get(key + "_neff") is None for r in rows):
+                    continue
+                v = np.array([r[key] for r in rows])
+                k = dof * np.array([r[key + "_neff"] for r in rows])
+                chance = 1.0 - (chi2.cdf(ACCEPT[1] * k, k) - chi2.cdf(ACCEPT[0] * k, k))
+                out.append(
+                    f"{name} {mid} {key}: outside [{ACCEPT[0]}, {ACCEPT[1]}] on "
+                    f"{int(np.sum((v < ACCEPT[0]) | (v > ACCEPT[1])))} of {len(v)} seeds "
+                    f"(a consistent estimator: {chance.sum():.1f}); median {np.median(v):.2f}, "
+                    f"pooled {np.sum(v * k) / np.sum(k):.2f} over {k.sum():.0f} effective dof"
+                )
+    return out
+
+
 def table(results: dict) -> str:
     """The printed table: one row per case and method."""
     head = ["case", "method", "seeds"] + [h for h, _ in COLUMNS]
@@ -351,6 +389,7 @@ def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--quick", action="store_true", help="one seed per simulated case")
     p.add_argument("--seeds", type=int, default=3, help="seeds per simulated case (full mode)")
+    p.add_argument("--kitti-seeds", type=int, default=5, help="KITTI's fix-noise seeds 0..N-1")
     p.add_argument("--only", default="", help="run only the cases whose name contains this")
     p.add_argument("--json", help="also write every seed's figures to this file")
     p.add_argument("--table", help="print the table of a file --json wrote, and run nothing")
@@ -368,7 +407,7 @@ def main(argv=None) -> None:
         p.error(f"--table {a.table}: no such file (it reads what --json wrote)")
     results = json.loads(Path(a.table).read_text()) if a.table else {}
     t0 = time.perf_counter()
-    for case in cases(a.quick, a.seeds):
+    for case in cases(a.quick, a.seeds, a.kitti_seeds):
         if a.table or (a.only and a.only not in case.name):
             continue
         results[case.name] = []
@@ -380,6 +419,7 @@ def main(argv=None) -> None:
             Path(a.json).write_text(json.dumps(results, indent=1) + "\n")
     print(f"\n{len(results)} cases in {time.perf_counter() - t0:.0f} s\n")
     print(table(results))
+    print("\n".join(spread_lines(results)))
     print(
         "\nNEES: mean (error / stated sigma)^2 per dof, 1 = consistent; '!' = outside its "
         "chi-square band (a run's warning); (a-b) = range over seeds. yaw>3s: share of epochs with "
