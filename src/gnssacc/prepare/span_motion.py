@@ -250,8 +250,10 @@ def _carried(path, t_q: np.ndarray, velocity: bool) -> tuple[np.ndarray, np.ndar
 def _fix_block(gnss: GnssFixes, p_n, span, paths, p: StationaryParams, wander: float = 0.0):
     """Position rows, observations and variances of the fixes in and around the span; the fixes'
     wander ``wander`` [m^2/s] adds ``wander (d + duration / 3)`` at ``d`` seconds from the span
-    (the random walk's spread from the span's fixes, taken per fix)."""
+    (the random walk's spread from the span's fixes, taken per fix; not scaled for the fix rate,
+    which is about the white part)."""
     A, y, var, t = [np.zeros((0, 6))], [np.zeros(0)], [np.zeros(0)], [np.zeros(0)]
+    walks = [np.zeros(0)]
     for k, path in _pieces(gnss.t, span, paths):
         if k.size == 0:
             continue
@@ -260,11 +262,11 @@ def _fix_block(gnss: GnssFixes, p_n, span, paths, p: StationaryParams, wander: f
         A.append(a)
         y.append(obs)
         away = np.maximum(span.t_start - gnss.t[k], 0.0) + np.maximum(gnss.t[k] - span.t_end, 0.0)
-        walk = wander * (away + (span.t_end - span.t_start) / 3.0)
-        var.append((gnss.sigma_ned[k, :2] ** 2 + (bound**2 + walk)[:, None]).reshape(-1))
+        walks.append(np.repeat(wander * (away + (span.t_end - span.t_start) / 3.0), 2))
+        var.append((gnss.sigma_ned[k, :2] ** 2 + bound[:, None] ** 2).reshape(-1))
         t.append(gnss.t[k])
     corr = fix_rate_inflation(np.unique(np.concatenate(t)), p.gnss_corr_s)
-    return np.vstack(A), np.concatenate(y), np.concatenate(var) * corr
+    return np.vstack(A), np.concatenate(y), np.concatenate(var) * corr + np.concatenate(walks)
 
 
 def _velocity_block(vel, span, paths):
