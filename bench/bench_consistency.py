@@ -364,6 +364,40 @@ def spread_lines(results: dict, min_seeds: int = 5) -> list[str]:
     return out
 
 
+#: Cases left out of :func:`population_lines`: references that are no independent truth.
+NOT_TRUTH = ("comma", "vn310")
+
+
+def population_lines(results: dict) -> list[str]:
+    """Over every run with a truth (``NOT_TRUTH`` left out) and both methods, per NEES: the runs
+    above and below :data:`ACCEPT` against the number consistent estimators would leave there at
+    each run's effective count (the chi-square tail at ``effective_count`` times 3 dof; where the
+    bench's NEES scatter less than their chi-square, as over KITTI's seeds, fewer)."""
+    from scipy.stats import chi2
+
+    out = []
+    for key in ("nees_pos", "nees_att"):
+        v, k = [], []
+        for name, per_seed in results.items():
+            if name.startswith(NOT_TRUTH):
+                continue
+            for r in per_seed:
+                for mid in METHODS:
+                    x = r.get(mid) or {}
+                    if x.get(key) is not None and x.get(key + "_neff") is not None:
+                        v.append(x[key])
+                        k.append(3.0 * x[key + "_neff"])
+        if not v:
+            continue
+        va, ka = np.array(v), np.array(k)
+        out.append(
+            f"all runs, {key}: above {ACCEPT[1]} {int(np.sum(va > ACCEPT[1]))} of {len(va)} "
+            f"(consistent: about {np.sum(chi2.sf(ACCEPT[1] * ka, ka)):.1f}), below {ACCEPT[0]} "
+            f"{int(np.sum(va < ACCEPT[0]))} (about {np.sum(chi2.cdf(ACCEPT[0] * ka, ka)):.1f})"
+        )
+    return out
+
+
 def table(results: dict) -> str:
     """The printed table: one row per case and method."""
     head = ["case", "method", "seeds"] + [h for h, _ in COLUMNS]
@@ -419,7 +453,7 @@ def main(argv=None) -> None:
             Path(a.json).write_text(json.dumps(results, indent=1) + "\n")
     print(f"\n{len(results)} cases in {time.perf_counter() - t0:.0f} s\n")
     print(table(results))
-    print("\n".join(spread_lines(results)))
+    print("\n".join(spread_lines(results) + population_lines(results)))
     print(
         "\nNEES: mean (error / stated sigma)^2 per dof, 1 = consistent; '!' = outside its "
         "chi-square band (a run's warning); (a-b) = range over seeds. yaw>3s: share of epochs with "
