@@ -372,7 +372,7 @@ def population_lines(results: dict) -> list[str]:
     """Over every run with a truth (``NOT_TRUTH`` left out) and both methods, per NEES: the runs
     above and below :data:`ACCEPT` against the number consistent estimators would leave there at
     each run's effective count (the chi-square tail at ``effective_count`` times 3 dof; where the
-    bench's NEES scatter less than their chi-square, as over KITTI's seeds, fewer)."""
+    bench's NEES scatter less than their chi-square, as its position NEES do, fewer)."""
     from scipy.stats import chi2
 
     out = []
