@@ -1,9 +1,11 @@
 """The smoother's start: the joint prior factor's Jacobians on the manifold (finite differences), and
 the EKF-to-GTSAM mapping of the initial covariance (``smoother.initial_prior``) against a sampled
 transform: EKF error states drawn from the EKF's own initial covariance, each turned into the true
-state by the EKF's documented error convention and then into the prior factor's error by GTSAM's
-own ``Pose3.Logmap``; the sample covariance must equal the mapped one within a likelihood-ratio
-(Wishart) bound."""
+state by the EKF's documented error convention and then into the prior factor's error (GTSAM's
+``Rot3.Logmap`` of the rotation, the translation in the prior's body axes); the sample covariance
+must equal the mapped one within a likelihood-ratio (Wishart) bound. And the reason the error is
+not ``Pose3.Logmap``: a position that moves from the prior's along a direction the prior ties to
+the GNSS error must not tell the heading."""
 
 from __future__ import annotations
 
@@ -53,9 +55,11 @@ def test_joint_prior_jacobians_by_finite_differences_on_the_manifold(with_gm):
     bias = BIAS0 + np.array([0.01, 0.02, -0.01, 1e-4, 2e-4, -3e-4])
     g = G0_PRIOR + np.array([0.5, -0.2, 0.1]) if with_gm else None
     values = _values(pose, bias, g)
-    # The error at a known offset: Logmap(Expmap(xi)) = xi, and the bias and GNSS offsets.
+    # The error at a known offset: the rotation vector and the translation of Expmap(xi) in the
+    # prior's axes, and the bias and GNSS offsets.
     e = f.unwhitenedError(values)
-    np.testing.assert_allclose(e[0:6], xi, atol=1e-12)
+    np.testing.assert_allclose(e[0:3], xi[0:3], atol=1e-12)
+    np.testing.assert_allclose(e[3:6], gtsam.Pose3.Expmap(xi).translation(), atol=1e-12)
     np.testing.assert_allclose(e[6:12], bias - BIAS0, atol=1e-15)
     if with_gm:
         np.testing.assert_allclose(e[12:15], g - G0_PRIOR, atol=1e-15)
@@ -124,7 +128,8 @@ def _smoother_error(init, origin, pose0, dx):
     h = init.h + dx[2]
     R_true = rotvec_to_dcm(-dx[6:9]) @ init.R_nb
     truth = gtsam.Pose3(gtsam.Rot3(R_true), origin.to_ned(lat, lon, h))
-    e = [gtsam.Pose3.Logmap(pose0.between(truth)), dx[9:15]]  # b_true - b0 = db
+    rel = pose0.between(truth)
+    e = [gtsam.Rot3.Logmap(rel.rotation()), rel.translation(), dx[9:15]]  # b_true - b0 = db
     if len(dx) > 15:
         e.append(-dx[15:18])  # g_true - g0, g0 = 0
     e.append(-dx[3:6])  # v_true - v0
@@ -167,3 +172,27 @@ def test_initial_prior_covariance_matches_the_sampled_nonlinear_transform(with_g
     assert np.max(np.abs(corr[0:3, 6:9])) > 0.8
     if with_gm:
         assert np.max(np.abs(corr[3:6, 12:15])) > 0.8
+
+
+def test_a_position_off_the_prior_does_not_tell_the_heading():
+    """A still start: the position known to a metre, its sum with the GNSS error to a centimetre.
+    With the pose 1 m from the prior's position (the GNSS error the opposite way) and fixes that
+    pin that sum, the heading stays as free as the prior says: the marginal information on yaw of
+    the linearised prior and fixes equals the prior's. (``Pose3.Logmap``'s translation turns with
+    the rotation by ``-w x t / 2``: there, the fixes and the prior together "measured" the yaw.)"""
+    sig_p, sig_sum, sig_yaw = 1.0, 0.01, np.radians(6.0)
+    cov = np.diag(
+        np.r_[1e-6, 1e-6, sig_yaw**2, np.full(3, sig_p**2), np.full(6, 1e-4), np.zeros(3)]
+    )
+    cov[12:15, 12:15] = np.eye(3) * (sig_p**2 + sig_sum**2)
+    cov[3:6, 12:15] = cov[12:15, 3:6] = -np.eye(3) * sig_p**2  # R0 = I: body = NED
+    pose0 = gtsam.Pose3(gtsam.Rot3(), np.zeros(3))
+    f = joint_prior_factor(X(0), B(0), G(0), pose0, np.zeros(6), np.zeros(3), cov)
+    shift = np.array([1.0, 0.0, 0.0])
+    values = _values(gtsam.Pose3(gtsam.Rot3(), shift), np.zeros(6), -shift)
+    A, _ = f.linearize(values).jacobian()  # columns: rotation, translation, bias, GNSS error
+    fix = np.zeros((3, 15))  # the fixes: position + GNSS error, to 1 cm (R = I)
+    fix[:, 3:6], fix[:, 12:15] = np.eye(3) / 0.01, np.eye(3) / 0.01
+    info = A.T @ A + fix.T @ fix
+    marginal_yaw = 1.0 / np.linalg.inv(info + 1e-9 * np.eye(15))[2, 2]
+    assert marginal_yaw == pytest.approx(1.0 / sig_yaw**2, rel=1e-3)
