@@ -24,7 +24,7 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from gnssacc.estimators.layout import PRIOR_BIAS, PRIOR_G, PRIOR_POSE
+from gnssacc.estimators.layout import PRIOR_BIAS, PRIOR_G, PRIOR_POSE, X_ROT, X_TRANS
 
 
 def joint_prior_factor(
@@ -69,8 +69,10 @@ def joint_prior_factor(
             e[PRIOR_G] = values.atVector(keys[2]) - g0
         if H is not None:
             H[0] = np.zeros((m, 6))
-            H[0][PRIOR_POSE.start : PRIOR_POSE.start + 3, 0:3] = gtsam.Rot3.LogmapDerivative(w)
-            H[0][PRIOR_POSE.start + 3 : PRIOR_POSE.stop, 3:6] = R0_T @ R
+            pose_block = np.zeros((6, 6))  # rows and columns: Pose3 tangent (rotation, translation)
+            pose_block[X_ROT, X_ROT] = gtsam.Rot3.LogmapDerivative(w)
+            pose_block[X_TRANS, X_TRANS] = R0_T @ R
+            H[0][PRIOR_POSE] = pose_block
             H[1] = np.zeros((m, 6))
             H[1][PRIOR_BIAS] = np.eye(6)
             if gm_key is not None:
