@@ -22,6 +22,8 @@ the check), without overlap, so that each ``d^2`` is an independent ``E[d^2] chi
 weighted least-squares line through them gives ``q`` and its standard error. ``q`` is kept only
 where it exceeds :data:`MIN_Z` standard errors (and is zero otherwise, the white model): the
 check then allows for a wander the fixes prove, never for one that a few triples might suggest.
+What the wander adds to the check's variances is here too (:func:`slope_variance`,
+:func:`spread_from_span`), so that its tests share one model of it.
 """
 
 from __future__ import annotations
@@ -92,3 +94,18 @@ def fix_wander(t: np.ndarray, p_h: np.ndarray, stretches: list[tuple[float, floa
     beta, cov = _line(x, y)
     q, se = float(beta[1]), float(np.sqrt(max(cov[1, 1], 0.0)))
     return q if q > MIN_Z * se else 0.0
+
+
+def slope_variance(wander: float, duration_s: float) -> float:
+    """What a random walk of rate ``wander`` [m^2/s] adds to the variance of a least-squares
+    slope through fixes spanning ``duration_s`` [s]: ``6 q / (5 T)`` [(m/s)^2]."""
+    return 1.2 * wander / max(float(duration_s), 1e-9)
+
+
+def spread_from_span(wander: float, t: np.ndarray, t_start: float, t_end: float) -> np.ndarray:
+    """What a random walk of rate ``wander`` [m^2/s] adds to the variance of fixes at times ``t``
+    [s] about a span's mean fix: ``q (d + duration / 3)`` [m^2], ``d`` the time outside the span
+    (zero inside), ``duration / 3`` the spread of the walk over the span about its mean."""
+    t = np.asarray(t, float)
+    away = np.maximum(t_start - t, 0.0) + np.maximum(t - t_end, 0.0)
+    return wander * (away + (t_end - t_start) / 3.0)

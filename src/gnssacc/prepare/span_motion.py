@@ -31,6 +31,7 @@ import numpy as np
 
 from ..core.recording import GnssFixes, GnssVelocity, ImuData
 from ..core.stationary_params import StationaryParams
+from .fix_wander import spread_from_span
 
 #: Gravity for error budgets only [m/s^2] (2 % accuracy is plenty there).
 G_APPROX = 9.8
@@ -249,9 +250,9 @@ def _carried(path, t_q: np.ndarray, velocity: bool) -> tuple[np.ndarray, np.ndar
 
 def _fix_block(gnss: GnssFixes, p_n, span, paths, p: StationaryParams, wander: float = 0.0):
     """Position rows, observations and variances of the fixes in and around the span; the fixes'
-    wander ``wander`` [m^2/s] adds ``wander (d + duration / 3)`` at ``d`` seconds from the span
-    (the random walk's spread from the span's fixes, taken per fix; not scaled for the fix rate,
-    which is about the white part)."""
+    wander ``wander`` [m^2/s] adds :func:`gnssacc.prepare.fix_wander.spread_from_span` (the random
+    walk's spread from the span's fixes, taken per fix; not scaled for the fix rate, which is about
+    the white part)."""
     A, y, var, t = [np.zeros((0, 6))], [np.zeros(0)], [np.zeros(0)], [np.zeros(0)]
     walks = [np.zeros(0)]
     for k, path in _pieces(gnss.t, span, paths):
@@ -261,8 +262,7 @@ def _fix_block(gnss: GnssFixes, p_n, span, paths, p: StationaryParams, wander: f
         a, obs = _position_rows(gnss.t[k], p_n[k], P, span.t_start)
         A.append(a)
         y.append(obs)
-        away = np.maximum(span.t_start - gnss.t[k], 0.0) + np.maximum(gnss.t[k] - span.t_end, 0.0)
-        walks.append(np.repeat(wander * (away + (span.t_end - span.t_start) / 3.0), 2))
+        walks.append(np.repeat(spread_from_span(wander, gnss.t[k], span.t_start, span.t_end), 2))
         var.append((gnss.sigma_ned[k, :2] ** 2 + bound[:, None] ** 2).reshape(-1))
         t.append(gnss.t[k])
     corr = fix_rate_inflation(np.unique(np.concatenate(t)), p.gnss_corr_s)

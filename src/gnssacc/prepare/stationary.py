@@ -84,7 +84,7 @@ from ..core.stationary_params import (  # noqa: F401 (this stage's API)
     params_from_config,
 )
 from ..core.units import DEG
-from .fix_wander import fix_wander
+from .fix_wander import fix_wander, slope_variance, spread_from_span
 from .span_motion import (
     G_APPROX,
     fix_rate_inflation,
@@ -434,7 +434,7 @@ def gnss_speed(
         v[i] = np.sum(w * (tc - tm) * p_n[:, i]) / stt
         var[i] = 1.0 / stt
     inflate = fix_rate_inflation(t, corr_s)
-    walk = 1.2 * wander / max(float(np.ptp(t)), 1e-9)
+    walk = slope_variance(wander, float(np.ptp(t)))
     return float(np.hypot(*v)), float(np.sqrt(inflate * var.mean() + walk))
 
 
@@ -575,8 +575,7 @@ def _outside_ok(
         return True
     w = 1.0 / gnss.sigma_ned[k0:k1, :2] ** 2
     centre = (w * p_n[k0:k1, :2]).sum(axis=0) / w.sum(axis=0)
-    away = np.minimum(np.abs(gnss.t[k_out] - span.t_start), np.abs(gnss.t[k_out] - span.t_end))
-    walk = wander * (away + (span.t_end - span.t_start) / 3.0)
+    walk = spread_from_span(wander, gnss.t[k_out], span.t_start, span.t_end)
     sig = np.sqrt(
         np.mean(gnss.sigma_ned[k_out, :2] ** 2, axis=1) + np.mean(1.0 / w.sum(axis=0)) + walk
     )
@@ -815,11 +814,7 @@ def detect_stationary(
     p_n = origin.to_ned(gnss.lat, gnss.lon, gnss.h) if len(gnss) else np.zeros((0, 3))
     spans, rejected = [], []
     stretches = imu_still_stretches(imu, p)
-    wander = (
-        fix_wander(gnss.t, p_n[:, :2], [(imu.t[i0], imu.t[i1 - 1]) for i0, i1 in stretches])
-        if len(gnss)
-        else 0.0
-    )
+    wander = fix_wander(gnss.t, p_n[:, :2], [(imu.t[i0], imu.t[i1 - 1]) for i0, i1 in stretches])
     for i0, i1 in stretches:
         span = _span(imu, i0, i1, block)
         if not _gnss_verdict(span, imu, gnss, p_n, p, dt, lever_b, wander):
