@@ -337,6 +337,13 @@ COLUMNS = (
 ACCEPT = (0.5, 1.5)
 
 
+def _nees_dof(rows: list, key: str) -> tuple[np.ndarray, np.ndarray]:
+    """A NEES of method rows (``key``: ``nees_pos`` or ``nees_att``) and each run's effective
+    chi-square dof (its effective count times 3 axes), over the rows that have both."""
+    have = [r for r in rows if r.get(key) is not None and r.get(key + "_neff") is not None]
+    return np.array([r[key] for r in have]), 3.0 * np.array([r[key + "_neff"] for r in have])
+
+
 def spread_lines(results: dict, min_seeds: int = 5) -> list[str]:
     """Per case with at least ``min_seeds`` seeds and per method and NEES: how many seeds fall
     outside :data:`ACCEPT`, the NEES pooled over the seeds (weighted by each run's effective
@@ -348,12 +355,11 @@ def spread_lines(results: dict, min_seeds: int = 5) -> list[str]:
     for name, per_seed in results.items():
         ok = [r for r in per_seed if "error" not in r]
         for mid in METHODS:
-            for key, dof in (("nees_pos", 3), ("nees_att", 3)):
+            for key in ("nees_pos", "nees_att"):
                 rows = [r[mid] for r in ok if (r.get(mid) or {}).get(key) is not None]
-                if len(rows) < min_seeds or any(r.get(key + "_neff") is None for r in rows):
+                v, k = _nees_dof(rows, key)
+                if len(rows) < min_seeds or len(v) < len(rows):
                     continue
-                v = np.array([r[key] for r in rows])
-                k = dof * np.array([r[key + "_neff"] for r in rows])
                 chance = 1.0 - (chi2.cdf(ACCEPT[1] * k, k) - chi2.cdf(ACCEPT[0] * k, k))
                 out.append(
                     f"{name} {mid} {key}: outside [{ACCEPT[0]}, {ACCEPT[1]}] on "
@@ -376,20 +382,17 @@ def population_lines(results: dict) -> list[str]:
     from scipy.stats import chi2
 
     out = []
+    rows = [
+        r.get(mid) or {}
+        for name, per_seed in results.items()
+        if not name.startswith(NOT_TRUTH)
+        for r in per_seed
+        for mid in METHODS
+    ]
     for key in ("nees_pos", "nees_att"):
-        v, k = [], []
-        for name, per_seed in results.items():
-            if name.startswith(NOT_TRUTH):
-                continue
-            for r in per_seed:
-                for mid in METHODS:
-                    x = r.get(mid) or {}
-                    if x.get(key) is not None and x.get(key + "_neff") is not None:
-                        v.append(x[key])
-                        k.append(3.0 * x[key + "_neff"])
-        if not v:
+        va, ka = _nees_dof(rows, key)
+        if not len(va):
             continue
-        va, ka = np.array(v), np.array(k)
         out.append(
             f"all runs, {key}: above {ACCEPT[1]} {int(np.sum(va > ACCEPT[1]))} of {len(va)} "
             f"(consistent: about {np.sum(chi2.sf(ACCEPT[1] * ka, ka)):.1f}), below {ACCEPT[0]} "
