@@ -12,8 +12,9 @@ Cases:
 * ``kitti``: the gtsam KITTI sequence (1 Hz RTK-grade truth with simulated fix noise of the seed;
   its truth has no attitude).
 * ``sim:...``: the simulator (:mod:`gnssacc.sources.sim`) with scenario, IMU grade, fix noise
-  (``white`` or time-correlated ``gm``), outages (``--outage-every 60:20``), the non-holonomic
-  constraint off (``nhc off``) and wheel odometry (``odo``).
+  (``white``, time-correlated ``gm``, or receiver-filtered at 10 Hz, ``filtered 10 Hz``), outages
+  (``--outage-every 60:20``), the non-holonomic constraint off (``nhc off``) and wheel odometry
+  (``odo``).
 * ``rover 20 Hz no sigmas``: the slow consumer-IMU rover of ``bench_hard_traits.py`` (20 Hz
   receiver-filtered fixes that state no sigma).
 * ``sideways``: the sideways-IMU ROS 1 bag of ``bench_hard_traits.py`` with automatic mounting
@@ -81,9 +82,11 @@ class Case:
 
 
 def sim_case(scenario, grade, noise="white", outages=False, nhc=True, odo=False, seeds=(0,)):
-    """A simulated case (300 s; odometry at 10 Hz; outages 20 s every 60 s)."""
+    """A simulated case (300 s; odometry at 10 Hz; outages 20 s every 60 s; receiver-filtered
+    fixes, ``noise="filtered"``, at 10 Hz)."""
     spec = f"sim:{scenario},imu={grade},duration=300" + (",odom_hz=10" if odo else "")
-    name = f"{scenario} {grade}" + (" gm" if noise == "gm" else "")
+    spec += ",gnss_hz=10" if noise == "filtered" else ""
+    name = f"{scenario} {grade}" + {"gm": " gm", "filtered": " filtered 10 Hz"}.get(noise, "")
     name += (" outages" if outages else "") + ("" if nhc else " nhc-off") + (" odo" if odo else "")
     options = {"noise": noise}
     if outages:
@@ -184,6 +187,7 @@ def cases(quick: bool, n_seeds: int, kitti_seeds: int = 5) -> list[Case]:
         sim_case("car", "consumer", "gm", outages=True, seeds=s),
         sim_case("ugv-slow", "consumer", "gm", seeds=s),
         sim_case("ugv-slow", "consumer", odo=True, seeds=s),
+        sim_case("ugv-slow", "consumer", "filtered", seeds=s),
         Case("sideways bag auto", sideways_bag, s),
         Case("rover 20 Hz no sigmas", rover_fixes, s),
     ]
